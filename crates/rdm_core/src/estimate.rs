@@ -1,0 +1,1 @@
+//! Attitude estimation as the Spinal firmware runs it (complementary filter).

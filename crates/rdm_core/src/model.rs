@@ -1,0 +1,1 @@
+//! Robot description and the quasi-steady model of Sec. III (kinematics, allocation, ZMP).

@@ -1,0 +1,1 @@
+//! Thrust to PWM conversion as the Spinal firmware performs it.

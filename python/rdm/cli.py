@@ -1,0 +1,53 @@
+"""The ``rdm`` command line.
+
+Each sub-command lives in its own module under :mod:`rdm.commands` and is imported only
+when it runs, so ``rdm --help`` stays fast and a command's heavy dependencies (MuJoCo,
+scipy) load only for the commands that need them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+# name -> (module under rdm.commands, one-line help). Keep sorted by name.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "model": ("model", "load a robot and print its mass properties, allocation and aerial ZMP"),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the top-level parser; sub-command modules add their own arguments."""
+    from rdm import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="rdm",
+        description="Control, planning and HIL stack for rotor-distributed aerial manipulators.",
+    )
+    parser.add_argument("--version", action="version", version=f"rdm {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (_module, help_text) in COMMANDS.items():
+        sub.add_parser(name, help=help_text, add_help=False)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``rdm`` console script; returns the process exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    if not argv or argv[0] not in COMMANDS:
+        args = parser.parse_args(argv)
+        if args.command is None:
+            parser.print_help()
+            return 2
+    name = argv[0]
+    module = importlib.import_module(f"rdm.commands.{COMMANDS[name][0]}")
+    cmd_parser = argparse.ArgumentParser(prog=f"rdm {name}", description=COMMANDS[name][1])
+    module.add_arguments(cmd_parser)
+    return int(module.run(cmd_parser.parse_args(argv[1:])) or 0)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

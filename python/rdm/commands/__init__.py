@@ -1,0 +1,1 @@
+"""Sub-commands of the ``rdm`` command line, one module each."""

@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# The whole test suite, Rust and Python: `bash scripts/test.sh`.
+# Installs what it needs (the package with its test extras), then runs lint, cargo tests
+# and pytest. Exits non-zero on any failure.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+PY=${PYTHON:-python3}
+
+echo "== install rdm with test extras (builds the Rust extension)"
+"$PY" -m pip install --quiet --disable-pip-version-check ".[test]"
+
+echo "== rust: fmt, clippy, tests"
+cargo fmt --all -- --check
+cargo clippy --workspace --all-targets --quiet -- -D warnings
+cargo test --workspace --exclude rdm_py --quiet
+
+echo "== python: ruff"
+"$PY" -m ruff check python tests
+"$PY" -m ruff format --check python tests
+
+echo "== python: pytest"
+# Run from tests/ against the installed wheel, not the source tree.
+"$PY" -m pytest tests -q -p no:cacheprovider --import-mode=importlib
