@@ -10,3 +10,11 @@ pub mod control;
 pub mod estimate;
 pub mod model;
 pub mod pwm;
+
+/// Number of rotors the real-time controllers are built for.
+///
+/// Assumption: the paper's RDM and its RCM comparison robot both have four rotors
+/// (two dual-rotor vectoring apparatuses), so the 200 Hz and 40 Hz steps use fixed-size
+/// matrices of this size. The model itself reads any number of rotors from the
+/// description; building a controller for a robot with another count is a setup error.
+pub const N_ROTORS: usize = 4;

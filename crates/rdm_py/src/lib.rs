@@ -3,10 +3,13 @@
 
 use pyo3::prelude::*;
 
-mod control;
+mod attitude;
 mod errors;
 mod estimate;
+mod lqi;
 mod model;
+mod perch;
+mod position;
 
 #[pymodule]
 fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -14,6 +17,9 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
     model::register(m)?;
     estimate::register(m)?;
-    control::register(m)?;
+    attitude::register(m)?;
+    lqi::register(m)?;
+    position::register(m)?;
+    perch::register(m)?;
     Ok(())
 }

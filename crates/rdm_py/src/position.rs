@@ -1,4 +1,4 @@
-//! Bindings of `rdm_core::control`.
+//! Bindings of `rdm_core::control::position`.
 
 use pyo3::prelude::*;
 

@@ -1,1 +1,0 @@
-//! Flight and perching control of Sec. IV: LQI attitude/altitude, position, perching QP.

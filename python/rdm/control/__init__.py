@@ -1,0 +1,1 @@
+"""Control: Python faces of the core's attitude, LQI, position and perching controllers."""

@@ -1,0 +1,1 @@
+"""Nodes: onboard node, Spinal mirror, Neuron mirror, plant node and their scheduler."""

@@ -1,0 +1,1 @@
+"""Wire codecs: rosserial frames and Spinal messages, Neuron CAN frames, Leptrino sensor frames."""
