@@ -130,7 +130,7 @@ def dbc_view(f: nr.NeuronFrame) -> tuple[str, str, dict[str, int]]:
         a = isinstance(f, nr.ServoTargetAngles)
         value, flag = ("GoalPosition", "GoalAck") if a else ("GoalCurrent", "TorqueEnable")
         sigs = {}
-        for i, (v, fl) in enumerate(zip(f.values, f.flags)):
+        for i, (v, fl) in enumerate(zip(f.values, f.flags, strict=True)):
             sigs[f"Servo{i}{value}"] = v
             sigs[f"Servo{i}{flag}"] = int(fl)
         return "s2n", f"{'ServoTargetAngle' if a else 'ServoTargetCurrent'}_S{s:02d}", sigs

@@ -93,7 +93,7 @@ class StructFrame(NeuronFrame):
 
     def __post_init__(self) -> None:
         self._check_slave()
-        for name, code in zip(self._payload_fields(), self.CODES):
+        for name, code in zip(self._payload_fields(), self.CODES, strict=True):
             value = getattr(self, name)
             if code == "?":
                 check_bool(name, value)
@@ -120,7 +120,7 @@ class StructFrame(NeuronFrame):
             )
         raw = struct.unpack("<" + cls.CODES.replace("?", "B"), data[len(cls.PREFIX) :])
         kwargs: dict[str, Any] = {"slave": slave} if "slave" in cls.__dataclass_fields__ else {}  # type: ignore[attr-defined]
-        for name, code, value in zip(cls._payload_fields(), cls.CODES, raw):
+        for name, code, value in zip(cls._payload_fields(), cls.CODES, raw, strict=True):
             if code == "?":
                 if value > 1:
                     raise NeuronFrameError("range", f"{cls.KIND}: flag {name}={value} not 0/1")

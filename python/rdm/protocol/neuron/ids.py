@@ -99,7 +99,10 @@ class CanId:
         return cls((can_id >> 8) & 0x7, (can_id >> 4) & 0xF, can_id & 0xF)
 
     def __repr__(self) -> str:
-        return f"CanId(0x{self.value:03X}: device={self.device}, message={self.message}, slave={self.slave})"
+        return (
+            f"CanId(0x{self.value:03X}: device={self.device}, message={self.message}, "
+            f"slave={self.slave})"
+        )
 
 
 def make_id(device: int, message: int, slave: int) -> int:

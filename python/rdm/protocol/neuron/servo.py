@@ -49,12 +49,12 @@ class _ServoWords(NeuronFrame):
                 f"{self.KIND}: need 1..{MAX_SERVO_NUM} values and as many flags, got "
                 f"{len(self.values)} values, {len(self.flags)} flags",
             )
-        for i, (value, flag) in enumerate(zip(self.values, self.flags)):
+        for i, (value, flag) in enumerate(zip(self.values, self.flags, strict=True)):
             check_int(f"values[{i}]", value, WORD_VALUE_MIN, WORD_VALUE_MAX)
             check_bool(f"flags[{i}]", flag)
 
     def encode(self) -> bytes:
-        words = [pack_word(v, f) for v, f in zip(self.values, self.flags)]
+        words = [pack_word(v, f) for v, f in zip(self.values, self.flags, strict=True)]
         return struct.pack(f"<{len(words)}H", *words)
 
     @classmethod
