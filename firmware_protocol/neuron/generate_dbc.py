@@ -245,7 +245,7 @@ def neuron_tx(merge_config_request: bool = False):
                 sig("Moving", 25, 1),
                 sig("GoalReported", 26, 1),
                 sig("Current", 32, 16, signed=True),
-                sig("Error", 48, 8),
+                sig("ServoError", 48, 8),
             ]
             out.append(
                 Msg(

@@ -120,7 +120,7 @@ def vectors() -> list[dict]:
             moving=True,
             goal_reported=True,
             current=-300,
-            error=2,
+            servo_error=2,
         )
     )
     v.append(
@@ -138,7 +138,7 @@ def vectors() -> list[dict]:
             moving=False,
             goal_reported=False,
             current=0,
-            error=0,
+            servo_error=0,
         )
     )
     # Initializer.

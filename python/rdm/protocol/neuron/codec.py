@@ -168,7 +168,8 @@ class NeuronDecoder:
     """Stateful, counting decoder for a stream of frames (a bus capture or live bus).
 
     Ambiguities are resolved by ``direction`` if given, else by the servo counts learned from
-    INITIAL_CONFIG_0 (a target-angle frame has DLC 2*servo_num), else in favour of the
+    INITIAL_CONFIG_0 (a target frame has DLC 2*servo_num, a servo index is below servo_num),
+    else in favour of the
     Neuron->Spinal reading (which is then flagged through ``alternatives``).
     """
 
@@ -203,9 +204,13 @@ class NeuronDecoder:
 
     def _resolve(self, found: list[NeuronFrame]) -> list[NeuronFrame]:
         def plausible(f: NeuronFrame) -> bool:
+            n = self.servo_num.get(f.slave)  # type: ignore[attr-defined]
+            if n is None:
+                return True
             if isinstance(f, (ServoTargetAngles, ServoTargetCurrents)):
-                n = self.servo_num.get(f.slave)
-                return n is None or n == len(f.values)
+                return n == len(f.values)
+            if isinstance(f, (ServoState, InitialConfig1, InitialConfig2, InitialConfig3)):
+                return f.index < n
             return True
 
         kept = [f for f in found if plausible(f)] or found

@@ -106,7 +106,7 @@ class ServoState(NeuronFrame):
     moving: bool
     goal_reported: bool
     current: int
-    error: int
+    servo_error: int
 
     KIND: ClassVar[str] = "servo_state"
     DIRECTION: ClassVar[Direction] = Direction.NEURON_TO_SPINAL
@@ -120,7 +120,7 @@ class ServoState(NeuronFrame):
         for name in ("force_servo_off", "moving", "goal_reported"):
             check_bool(name, getattr(self, name))
         check_int("current", self.current, -0x8000, 0x7FFF)
-        check_int("error", self.error, 0, 0xFF)
+        check_int("servo_error", self.servo_error, 0, 0xFF)
 
     def _message_id(self) -> int:
         return self.index
@@ -135,13 +135,13 @@ class ServoState(NeuronFrame):
 
     def encode(self) -> bytes:
         return struct.pack(
-            "<hBBhBx", self.angle, self.temperature, self.status, self.current, self.error
+            "<hBBhBx", self.angle, self.temperature, self.status, self.current, self.servo_error
         )
 
     @classmethod
     def decode_payload(cls, slave: int, index: int, data: bytes) -> ServoState:
         check_dlc(cls.KIND, data, (8,))
-        angle, temperature, status, current, error = struct.unpack("<hBBhBx", data)
+        angle, temperature, status, current, servo_error = struct.unpack("<hBBhBx", data)
         if status & ~0b111:
             raise NeuronFrameError(
                 "reserved_bits", f"servo_state: status 0x{status:02X} has bits other than 0..2"
@@ -155,5 +155,5 @@ class ServoState(NeuronFrame):
             bool(status & STATUS_MOVING),
             bool(status & STATUS_GOAL_REPORTED),
             current,
-            error,
+            servo_error,
         )
