@@ -230,3 +230,24 @@ def test_fuzz_random_frames_never_crash(can_id, data, extended, remote):
     else:
         assert isinstance(res.error, nr.NeuronFrameError)
         assert dec.total_errors == 1
+
+
+def test_initial_config_reply_order_and_checks():
+    c0 = nr.InitialConfig0(5, 2, False, True, 100)
+    servos = [
+        (
+            nr.InitialConfig1(5, i, 10 + i, 1, 2, 3),
+            nr.InitialConfig2(5, i, 0, 1, 2, True, False),
+            nr.InitialConfig3(5, i, 0, 0, 1, 1),
+        )
+        for i in range(2)
+    ]
+    frames = nr.initial_config_reply(c0, servos)
+    assert [f.can_id for f in frames] == [0x715, 0x725, 0x735, 0x745, 0x725, 0x735, 0x745]
+    # Spinal's side decodes the whole reply unambiguously once CONFIG_0 is known
+    dec = nr.NeuronDecoder(direction=nr.Direction.NEURON_TO_SPINAL)
+    assert [dec.feed(f.can_id, f.encode()).frame for f in frames] == frames
+    with pytest.raises(nr.NeuronFrameError, match="servo_num=2 but 1"):
+        nr.initial_config_reply(c0, servos[:1])
+    with pytest.raises(nr.NeuronFrameError, match="index 0"):
+        nr.initial_config_reply(c0, servos[::-1])

@@ -41,6 +41,7 @@ from .initializer import (
     SetServoPulleySkipThresh,
     SetServoRoundOffset,
     SetSlaveId,
+    initial_config_reply,
     initialization_sequence,
 )
 from .pwm import PwmFrame, duty_to_pwm_value, pack_pwm, pwm_for_slave
@@ -96,6 +97,7 @@ __all__ = [
     "decode_frame",
     "duty_to_pwm_value",
     "encode_frame",
+    "initial_config_reply",
     "initialization_sequence",
     "make_id",
     "pack_pwm",

@@ -36,24 +36,30 @@ def _need_slave(cid: CanId) -> None:
         )
 
 
+def _unknown(can_id: int) -> NeuronFrameError:
+    return NeuronFrameError(
+        "unknown_id",
+        f"id 0x{can_id:03X} (device {can_id >> 8}, message {(can_id >> 4) & 15}, "
+        f"slave {can_id & 15}) is not a Neuron frame",
+    )
+
+
 def _attempts(cid: CanId, data: bytes) -> list[Callable[[], NeuronFrame]]:
     """Every decoder that could apply to this id; each raises on mismatch."""
     dev, msg, slave = cid.device, cid.message, cid.slave
-    unknown = NeuronFrameError(
-        "unknown_id", f"id 0x{cid.value:03X} (device {dev}, message {msg}, slave {slave})"
-    )
+    can_id = (dev << 8) | (msg << 4) | slave
     if dev == Device.MOTOR:
         if msg in (0, 1) and slave == BROADCAST_ID:
             return [lambda: PwmFrame.decode_payload(msg, data)]
-        raise unknown
+        raise _unknown(can_id)
     if dev == Device.IMU:
         if msg > 2:
-            raise unknown
+            raise _unknown(can_id)
         _need_slave(cid)
         return [lambda: ImuFrame.decode_payload(slave, msg, data)]
     if dev == Device.SERVO:
         if msg >= MAX_SERVO_NUM:
-            raise unknown
+            raise _unknown(can_id)
         _need_slave(cid)
         out: list[Callable[[], NeuronFrame]] = [lambda: ServoState.decode_payload(slave, msg, data)]
         if msg == 0:
@@ -89,8 +95,8 @@ def _attempts(cid: CanId, data: bytes) -> list[Callable[[], NeuronFrame]]:
             return [lambda: InitialConfig2.decode_payload(slave, data)]
         if msg == InitializerMessage.CONFIG_3:
             return [lambda: InitialConfig3.decode_payload(slave, data)]
-        raise unknown
-    raise unknown
+        raise _unknown(can_id)
+    raise _unknown(can_id)
 
 
 def decode_candidates(

@@ -343,3 +343,30 @@ def initialization_sequence(slaves: list[int]) -> list[NeuronFrame]:
     for s in slaves:
         check_slave(s)
     return [EnumRequest(), *(InitialConfigRequest(s) for s in sorted(set(slaves)))]
+
+
+def initial_config_reply(
+    config0: InitialConfig0,
+    servos: list[tuple[InitialConfig1, InitialConfig2, InitialConfig3]],
+) -> list[NeuronFrame]:
+    """A Neuron's answer to INITIAL_CONFIG_REQUEST (or to any board-config sub-command):
+    INITIAL_CONFIG_0, then INITIAL_CONFIG_1, _2, _3 for each servo in index order.
+
+    The per-servo order (1, 2, 3 for servo 0, then servo 1, ...) is an assumption; Spinal
+    keys every frame by its servo index, so it accepts any order.
+    """
+    from .errors import NeuronFrameError
+
+    if len(servos) != config0.servo_num:
+        raise NeuronFrameError(
+            "range", f"servo_num={config0.servo_num} but {len(servos)} servo configs given"
+        )
+    out: list[NeuronFrame] = [config0]
+    for index, triple in enumerate(servos):
+        for frame in triple:
+            if frame.slave != config0.slave or frame.index != index:
+                raise NeuronFrameError(
+                    "range", f"{frame.KIND}: expected slave {config0.slave} index {index}"
+                )
+        out.extend(triple)
+    return out
