@@ -155,9 +155,7 @@ def dbc_view(f: nr.NeuronFrame) -> tuple[str, str, dict[str, int]]:
             f"ServoState{f.index}_S{s:02d}",
             {k: v for k, v in sigs.items() if k != "Index"},
         )
-    name = type(f).__name__
-    renames = {"ImuSendFlag": "ImuSendFlag", "TtlRs485Mixed": "TtlRs485Mixed"}
-    return "n2s", f"{name}_S{s:02d}", {renames.get(k, k): v for k, v in sigs.items()}
+    return "n2s", f"{type(f).__name__}_S{s:02d}", sigs
 
 
 @settings(max_examples=1500, deadline=None)
