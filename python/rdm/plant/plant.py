@@ -144,6 +144,7 @@ class Plant:
         self._wrench_noise = wrench_noise or WrenchNoise()
         self.rejected_commands = 0
         self._thrusts = np.zeros(len(self.rotor_names))
+        self._external: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._seed_sensors()
         self.reset()
 
@@ -191,6 +192,7 @@ class Plant:
         for esc, value in zip(self.escs, t, strict=True):
             esc.reset(float(value))
         self._tracker.reset()
+        self._external.clear()
         self._seed_sensors()
         mujoco.mj_forward(m, d)
         self._apply_rotor_thrusts()
@@ -224,16 +226,31 @@ class Plant:
         body: str,
         force: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0),
         torque: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0),
+        point: Sequence[float] | np.ndarray | None = None,
     ) -> None:
-        """Hold an external world-frame force/torque on a body (at its frame origin) until
-        changed; e.g. a push on ``end_effector`` (the end-effector sensor then reads it)."""
+        """Hold an external world-frame force/torque on a body until changed (zero force and
+        torque remove it). The force acts at ``point`` (world, default the body frame
+        origin), a point that then moves with the body; e.g. a push on ``end_effector``
+        (the end-effector sensor then reads it)."""
         bid = self.model.body(body).id
         f = _vector(force, 3, "force")
         t = _vector(torque, 3, "torque")
-        # xfrc_applied acts at the body's centre of mass: shift the torque accordingly.
-        lever = self.data.xipos[bid] - self.data.xpos[bid]
-        self.data.xfrc_applied[bid, :3] = f
-        self.data.xfrc_applied[bid, 3:] = t - np.cross(lever, f)
+        rot = self.data.xmat[bid].reshape(3, 3)
+        origin = self.data.xpos[bid]
+        at = origin if point is None else _vector(point, 3, "point")
+        self._external[bid] = (f, t, rot.T @ (at - origin))
+        if not (f.any() or t.any()):
+            del self._external[bid]
+            self.data.xfrc_applied[bid] = 0.0
+        self._apply_external()
+
+    def _apply_external(self) -> None:
+        d = self.data
+        for bid, (f, t, local) in self._external.items():
+            at = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ local
+            # xfrc_applied acts at the body's centre of mass: carry the force's moment over.
+            d.xfrc_applied[bid, :3] = f
+            d.xfrc_applied[bid, 3:] = t - np.cross(d.xipos[bid] - at, f)
 
     # -------------------------------------------------------------------------- physics
     def _rotor_distances(self) -> np.ndarray:
@@ -262,7 +279,13 @@ class Plant:
             for esc in self.escs:
                 esc.update(dt)
             self._apply_rotor_thrusts()
+            if self._external:
+                self._apply_external()
             mujoco.mj_step2(m, d)
+        if self._external:  # re-aim held forces at the bodies' new poses before reading
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            self._apply_external()
         mujoco.mj_forward(m, d)
 
     @property

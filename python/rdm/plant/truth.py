@@ -38,6 +38,7 @@ class GroundTruth:
     foot_contact_torque: np.ndarray  # foot frame, about the plate centre [N m]
     foot_zmp: np.ndarray  # centre of pressure (x, y) in the foot frame; NaN off contact
     foot_slip: np.ndarray  # (x, y) world displacement of the foot since first contact [m]
+    # (kept through contact gaps < 0.1 s; zero when there is no contact anchor)
     foot_slip_yaw: float  # rotation about the ceiling normal since first contact [rad]
 
 
@@ -49,10 +50,23 @@ def _yaw_about(normal: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> float:
 
 
 class FootContactTracker:
-    """Sums the foot plate's contact forces and remembers where contact started."""
+    """Sums the foot plate's contact forces and remembers where contact started.
 
-    def __init__(self, model: mujoco.MjModel, plate_body: int, env_geoms: set[int]) -> None:
+    The first-contact anchor survives contact gaps shorter than ``release_time`` (a sliding
+    or vibrating foot chatters on and off the surface); after a longer gap the next
+    contact starts a new anchor.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        plate_body: int,
+        env_geoms: set[int],
+        release_time: float = 0.1,
+    ) -> None:
         self._model = model
+        self.release_time = release_time
+        self._last_contact_time = -math.inf
         self._plate_body = plate_body
         self._env_geoms = env_geoms
         self._anchor_pos: np.ndarray | None = None
@@ -61,6 +75,7 @@ class FootContactTracker:
 
     def reset(self) -> None:
         """Forget the first-contact anchor."""
+        self._last_contact_time = -math.inf
         self._anchor_pos = None
         self._anchor_rot = None
 
@@ -98,14 +113,17 @@ class FootContactTracker:
         # Report what the robot applies to the environment, in the foot frame.
         force = -(rot.T @ force_w)
         torque = -(rot.T @ torque_w)
-        if points == 0:
+        if points > 0:
+            self._last_contact_time = float(data.time)
+            if self._anchor_pos is None:
+                self._anchor_pos = origin.copy()
+                self._anchor_rot = rot.copy()
+        elif float(data.time) - self._last_contact_time > self.release_time:
             self.reset()
-            return 0, force, torque, np.full(2, np.nan), np.zeros(2), 0.0
         zmp = (rot.T @ (cop_num / normal_sum))[:2] if normal_sum > 0 else np.full(2, np.nan)
-        if self._anchor_pos is None:
-            self._anchor_pos = origin.copy()
-            self._anchor_rot = rot.copy()
-        anchor_rot = rot if self._anchor_rot is None else self._anchor_rot
+        if self._anchor_pos is None or self._anchor_rot is None:
+            return points, force, torque, zmp, np.zeros(2), 0.0
+        anchor_rot = self._anchor_rot
         slip = (origin - self._anchor_pos)[:2]
         yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
         return points, force, torque, zmp, slip.copy(), yaw
