@@ -172,3 +172,30 @@ def test_tangential_push_slips_only_above_mu_n(fraction: float, slips: bool) -> 
         assert moved < 1e-4
         assert max(tracked) < 1e-4
         assert plant.ground_truth().foot_in_contact
+
+
+@pytest.mark.parametrize(("fraction", "turns"), [(0.5, False), (1.5, True)])
+def test_yaw_torque_turns_the_foot_only_above_the_torsional_limit(
+    fraction: float, turns: bool
+) -> None:
+    """Per contact point the elliptic cone allows N_i sqrt((mu r)^2 + mu_z^2) of yaw
+    moment (r = distance of the plate corner, where box-box contacts sit); the plate's limit
+    is that times N (Table VII mu = 0.9, mu_z = 0.5; plate 0.10 x 0.15 m)."""
+    normal = 4.0
+    desc = load_robot("rdm")
+    r = np.hypot(0.05, 0.075)
+    limit = normal * np.hypot(desc.friction_xy * r, desc.friction_z)
+    thrust = _perch_thrusts(normal)
+    plant = _perch_plant(NoCeilingEffect())
+    plant.reset(base_position=(0.0, 0.0, 2.0 - 5e-4), thrusts=thrust)
+    plant.set_rotor_thrusts(thrust)
+    plant.step(200)
+    plant.apply_body_wrench("foot_plate", torque=(0.0, 0.0, fraction * limit))
+    yaws = []
+    for _ in range(8):
+        plant.step(50)
+        yaws.append(abs(plant.ground_truth().foot_slip_yaw))
+    if turns:
+        assert max(yaws) > 0.02
+    else:
+        assert max(yaws) < 1e-3

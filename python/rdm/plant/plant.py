@@ -282,6 +282,7 @@ class Plant:
             if self._external:
                 self._apply_external()
             mujoco.mj_step2(m, d)
+            self._tracker.update(d)  # contacts of this step's start: keep the slip anchor
         if self._external:  # re-aim held forces at the bodies' new poses before reading
             mujoco.mj_kinematics(m, d)
             mujoco.mj_comPos(m, d)

@@ -73,6 +73,23 @@ class FootContactTracker:
         self._anchor_rot: np.ndarray | None = None
         self._buf = np.zeros(6)
 
+    def update(self, data: mujoco.MjData) -> None:
+        """Per-step bookkeeping of the first-contact anchor (cheap: no contact forces)."""
+        in_contact = False
+        if data.ncon:
+            bodies = self._model.geom_bodyid[data.contact.geom]  # (ncon, 2)
+            in_contact = bool(np.any(bodies == self._plate_body))
+        self._track(data, in_contact)
+
+    def _track(self, data: mujoco.MjData, in_contact: bool) -> None:
+        if in_contact:
+            self._last_contact_time = float(data.time)
+            if self._anchor_pos is None:
+                self._anchor_pos = data.xpos[self._plate_body].copy()
+                self._anchor_rot = data.xmat[self._plate_body].reshape(3, 3).copy()
+        elif float(data.time) - self._last_contact_time > self.release_time:
+            self.reset()
+
     def reset(self) -> None:
         """Forget the first-contact anchor."""
         self._last_contact_time = -math.inf
@@ -113,13 +130,7 @@ class FootContactTracker:
         # Report what the robot applies to the environment, in the foot frame.
         force = -(rot.T @ force_w)
         torque = -(rot.T @ torque_w)
-        if points > 0:
-            self._last_contact_time = float(data.time)
-            if self._anchor_pos is None:
-                self._anchor_pos = origin.copy()
-                self._anchor_rot = rot.copy()
-        elif float(data.time) - self._last_contact_time > self.release_time:
-            self.reset()
+        self._track(data, points > 0)
         zmp = (rot.T @ (cop_num / normal_sum))[:2] if normal_sum > 0 else np.full(2, np.nan)
         if self._anchor_pos is None or self._anchor_rot is None:
             return points, force, torque, zmp, np.zeros(2), 0.0
