@@ -309,9 +309,14 @@ def _compile_time(base: str, where: str) -> tuple[Encoder, Decoder, int]:
 
     def enc(value: Any, out: bytearray) -> None:
         try:
-            sec, nsec = (value.sec, value.nsec) if hasattr(value, "sec") else value
+            if isinstance(value, dict):
+                sec, nsec = value["sec"], value["nsec"]
+            elif hasattr(value, "sec"):
+                sec, nsec = value.sec, value.nsec
+            else:
+                sec, nsec = value
             out += st.pack(sec, nsec)
-        except (struct.error, TypeError, ValueError) as exc:
+        except (struct.error, TypeError, ValueError, KeyError) as exc:
             raise EncodeError(f"{where}: bad {base} value {value!r}: {exc}") from exc
 
     def dec(buf: bytes, pos: int) -> tuple[Any, int]:
