@@ -144,7 +144,8 @@ def run(args: argparse.Namespace) -> int:
         for rec in FORMATS[name].decode(path, args):
             counts["ok" if rec.get("ok") else "bad"] += 1
             if not rec.get("ok"):
-                counts[f"bad:{rec.get('error')}"] += 1
+                key = rec.get("error") if rec.get("kind") == "bad_frame" else rec.get("kind")
+                counts[f"bad:{key}"] += 1
             if args.json:
                 print(json.dumps(rec, default=str))
             else:

@@ -5,8 +5,10 @@ ids 100+ are PC -> Spinal, 150+ Spinal -> PC). Ids seen before, or without, a ha
 back to a slot layout (default: Spinal on stm32H7_v2, sec. 1.7). A TopicInfo whose md5 differs
 from our ``.msg`` definition is reported as an error and frames on its id are not decoded.
 
-Each record is a dict with ``offset`` (byte offset of the frame), ``kind``, ``ok``, ``error`` and,
-for frames, ``topic_id``, ``topic``, ``type`` and ``fields``.
+Bytes skipped while re-scanning a rejected frame are not reported again (they belong to that
+frame); a valid frame found inside it is. Each record is a dict with ``offset`` (byte offset of
+the frame), ``kind``, ``ok``, ``error`` and, for frames, ``topic_id``, ``topic``, ``type`` and
+``fields``.
 """
 
 from __future__ import annotations
@@ -85,16 +87,21 @@ def decode_uart(
     table = _TopicTable(registry, layout)
     topic_info = registry.msg("rosserial_msgs/TopicInfo")
     parser = FrameParser(max_payload)
+    covered = 0  # end of the last rejected frame: bytes skipped inside it belong to it
     for item in parser.feed(bytes(data)):
         if isinstance(item, SkippedBytes):
-            yield {
-                "offset": item.offset,
-                "kind": "skipped",
-                "ok": False,
-                "error": f"{len(item.data)} bytes outside any frame",
-                "length": len(item.data),
-            }
+            start = max(item.offset, covered)
+            length = item.offset + len(item.data) - start
+            if length > 0:
+                yield {
+                    "offset": start,
+                    "kind": "skipped",
+                    "ok": False,
+                    "error": f"{length} bytes outside any frame",
+                    "length": length,
+                }
         elif isinstance(item, BadFrame):
+            covered = max(covered, item.offset + len(item.data))
             yield {
                 "offset": item.offset,
                 "kind": "bad_frame",
@@ -106,12 +113,13 @@ def decode_uart(
             yield _frame_record(item, table, topic_info)
     # a frame cut off at the end of the capture
     if parser.in_frame:
+        offset, rest = parser.pending
         yield {
-            "offset": parser._base,
+            "offset": offset,
             "kind": "bad_frame",
             "ok": False,
             "error": "truncated",
-            "bytes": bytes(parser._buf).hex(),
+            "bytes": rest.hex(),
         }
 
 

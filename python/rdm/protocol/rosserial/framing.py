@@ -108,6 +108,11 @@ class FrameParser:
         return self._started is not None
 
     @property
+    def pending(self) -> tuple[int, bytes]:
+        """Stream offset and bytes of the incomplete frame candidate (``b""`` if none)."""
+        return self._base, bytes(self._buf)
+
+    @property
     def bad_frames(self) -> int:
         return sum(self.counts[r] for r in BAD_FRAME_REASONS)
 
