@@ -250,6 +250,16 @@ def test_services_round_trip(link):
         link.server.call_service("no_such_service", req, 1.1)
 
 
+def test_faulty_service_handler_is_contained(link):
+    link.client = ClientSession.from_layout(handlers={"imu_calib": lambda req: 1 / 0})
+    handshake(link)
+    link.server.call_service("imu_calib", REG.srv("spinal/ImuCalib").request.new(), 1.03)
+    link.step(1040)
+    (_, dropped) = link.events("client", DroppedMessage)[0]
+    assert dropped.topic_id == 100 and "ZeroDivisionError" in dropped.reason
+    assert link.client.counts["rx_dropped"] == 1 and link.client.configured
+
+
 def test_service_timeout_after_10s(link):
     handshake(link)
     req = REG.srv("spinal/ImuCalib").request.new(command=0)

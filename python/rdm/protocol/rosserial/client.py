@@ -336,8 +336,12 @@ class ClientSession:
         except DecodeError as exc:
             return self._drop(frame, f"payload does not decode as {slot.codec.full_name}: {exc}")
         if slot.service is not None:
-            response = slot.service.handler(msg)
-            self._send(slot.service.response_id, slot.service.type.response.encode(response))
+            try:
+                response = slot.service.handler(msg)
+                payload = slot.service.type.response.encode(response)
+            except Exception as exc:  # a faulty handler must not stop the link
+                return self._drop(frame, f"service handler of {slot.name!r} failed: {exc!r}")
+            self._send(slot.service.response_id, payload)
             return [ServiceHandled(slot.name, msg, response)]
         return [MessageReceived(slot.name, slot.type, tid, msg)]
 
