@@ -196,3 +196,9 @@ def test_registry_from_another_directory(tmp_path):
     reg = TypeRegistry.from_directory(tmp_path)
     codec = reg.msg("demo/Pair")
     assert codec.encode(codec.new(a=-2, b=0.5)) == bytes.fromhex("feff000000000000e03f")
+
+
+def test_golden_file_is_what_rosbags_generates_from_the_msg_tree():
+    import generate_vectors
+
+    assert generate_vectors.build() == GOLDEN

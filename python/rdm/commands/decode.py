@@ -154,5 +154,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"rdm decode: {name}: {exc}", file=sys.stderr)
         return 2
     bad = {k[4:]: v for k, v in counts.items() if k.startswith("bad:")}
+    sys.stdout.flush()  # keep the summary after the records when both go to one terminal
     print(f"{name}: {counts['ok']} records decoded, {counts['bad']} bad {bad}", file=sys.stderr)
     return 0
