@@ -67,6 +67,7 @@ class Lockstep:
         self.to_client: list[tuple[int, bytes]] = []  # (tick, bytes) the client received
         self.to_server: list[tuple[int, bytes]] = []
         self.cut = False  # True: the wire is broken, nothing arrives
+        self.tick_offset = 0  # the MCU tick = (now_ms + tick_offset) mod 2**32
 
     def _cross(self, data: bytes, toward_client: bool) -> bytes:
         if self.cut:
@@ -81,7 +82,8 @@ class Lockstep:
     def step(self, now_ms: int) -> None:
         down = self._cross(self.server.take_output(), toward_client=True)
         self.to_client.append((now_ms, down))
-        self.client_events += [(now_ms, e) for e in self.client.spin(down, now_ms)]
+        tick = (now_ms + self.tick_offset) & 0xFFFFFFFF
+        self.client_events += [(now_ms, e) for e in self.client.spin(down, tick)]
         up = self._cross(self.client.take_output(), toward_client=False)
         self.to_server.append((now_ms, up))
         self.server_events += [(now_ms, e) for e in self.server.feed(up, now_ms / 1000)]
@@ -151,6 +153,21 @@ def test_time_sync_over_pty(link):
     # the client's ROS time follows the PC's to the millisecond from then on
     for t in (t_sync, t_sync + 1, t_sync + 777, t_sync + 5000):
         assert abs(link.client.now(t).to_ns() - pc_time(t / 1000).to_ns()) <= 1_000_000
+
+
+def test_time_sync_with_an_mcu_tick_that_wraps(link):
+    # the MCU booted long ago: its uint32 ms tick wraps 3 s after the handshake
+    link.tick_offset = 2**32 - 4000
+    handshake(link)
+    link.run(1030, 9000, 50)
+    ups = frames_of(link.to_server)
+    requests = [t for t, f in ups if f.topic_id == C.TopicId.TIME]
+    gaps = [b - a for a, b in itertools.pairwise(requests[1:])]
+    assert gaps and all(2500 < g <= 2550 for g in gaps), gaps
+    assert not link.events("client", SyncLost) and link.client.configured
+    for t in (3000, 3999, 4000, 5000, 8999):  # before and after the wrap
+        tick = (t + link.tick_offset) & 0xFFFFFFFF
+        assert abs(link.client.now(tick).to_ns() - pc_time(t / 1000).to_ns()) <= 1_000_000
 
 
 def test_time_requests_every_2500ms_and_loss_after_11s(link):

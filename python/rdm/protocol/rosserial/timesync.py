@@ -18,11 +18,17 @@ def tick_diff(now_ms: int, then_ms: int) -> int:
     return (now_ms - then_ms) & _MASK
 
 
+def signed_tick_diff(now_ms: int, then_ms: int) -> int:
+    """``now - then`` as a signed 32-bit value (ticks up to 24.8 days apart either way)."""
+    return ((now_ms - then_ms + 2**31) & _MASK) - 2**31
+
+
 class ClientClock:
     """ROS time kept by the client; unsynchronised it counts from zero like the firmware."""
 
     def __init__(self) -> None:
-        self._offset_ns = 0  # ros_time_ns - tick_ms * 1e6
+        self._sync_tick = 0  # tick of the last time answer
+        self._sync_ns = 0  # ROS time at that tick
         self._request_tick: int | None = None
         self.synced = False
 
@@ -33,11 +39,15 @@ class ClientClock:
     def answer_received(self, answer: RosTime, now_ms: int) -> int:
         """Apply a time answer received at ``now_ms``; returns the round trip in ms."""
         rtt = 0 if self._request_tick is None else tick_diff(now_ms, self._request_tick)
-        ros_ns = answer.to_ns() + rtt * 1_000_000
-        self._offset_ns = ros_ns - (now_ms & _MASK) * 1_000_000
+        self._sync_ns = answer.to_ns() + rtt * 1_000_000
+        self._sync_tick = now_ms & _MASK
         self.synced = True
         return rtt
 
     def now(self, now_ms: int) -> RosTime:
-        """ROS time at tick ``now_ms``."""
-        return RosTime.from_ns(max(0, (now_ms & _MASK) * 1_000_000 + self._offset_ns))
+        """ROS time at tick ``now_ms``, counted from the last sync with a signed wrap-safe tick
+        difference (the firmware's uint32 arithmetic would jump back 49.7 days at a wrap)."""
+        if not self.synced:
+            return RosTime.from_ns((now_ms & _MASK) * 1_000_000)
+        elapsed = signed_tick_diff(now_ms, self._sync_tick)
+        return RosTime.from_ns(max(0, self._sync_ns + elapsed * 1_000_000))
