@@ -15,6 +15,7 @@ from collections.abc import Sequence
 # name -> (module under rdm.commands, one-line help). Keep sorted by name.
 COMMANDS: dict[str, tuple[str, str]] = {
     "model": ("model", "load a robot and print its mass properties, allocation and aerial ZMP"),
+    "neuron": ("neuron", "run a Neuron board mirror on a CAN bus"),
 }
 
 
