@@ -412,7 +412,9 @@ class CanMaster:
             neuron.pulley_skip_thresh = frame.pulley_skip_thresh
             neuron.configured = True
             old = {s.index: s for s in neuron.servos}
-            neuron.servos = [old.get(i) or ServoEntry(neuron.slave, i) for i in range(frame.servo_num)]
+            neuron.servos = [
+                old.get(i) or ServoEntry(neuron.slave, i) for i in range(frame.servo_num)
+            ]
             return
         index = getattr(frame, "index", None)
         if isinstance(frame, nr.ImuFrame):

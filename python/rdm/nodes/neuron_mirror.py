@@ -243,11 +243,10 @@ class NeuronMirror:
             for servo, value, ack in zip(self.servos, frame.values, frame.flags, strict=True):
                 servo.command_goal(value, ack)
             return True
-        elif isinstance(frame, nr.ServoTargetCurrents):
-            if self._servo_words_fit(frame):
-                for servo, value, torque in zip(self.servos, frame.values, frame.flags, strict=True):
-                    servo.goal_current = value
-                    servo.set_torque(torque)
+        elif isinstance(frame, nr.ServoTargetCurrents) and self._servo_words_fit(frame):
+            for servo, value, torque in zip(self.servos, frame.values, frame.flags, strict=True):
+                servo.goal_current = value
+                servo.set_torque(torque)
         return False
 
     def _servo_words_fit(self, frame: nr.ServoTargetAngles | nr.ServoTargetCurrents) -> bool:
