@@ -62,7 +62,8 @@ class RealtimeStats:
     ticks: dict[str, int] = field(default_factory=dict)
     #: Ticks that came more than one period late (the schedule was re-phased, not caught up).
     overruns: dict[str, int] = field(default_factory=dict)
-    elapsed: float = 0.0
+    #: Node time of the last loop pass (``start_time`` + wall seconds run).
+    end_time: float = 0.0
 
 
 def run_realtime(
@@ -71,9 +72,11 @@ def run_realtime(
     stop: threading.Event | None = None,
     clock: Callable[[], float] = time.monotonic,
     sleep: Callable[[float], None] = time.sleep,
+    start_time: float = 0.0,
 ) -> RealtimeStats:
     """Tick ``nodes`` on the wall clock, each at its own ``period``, until ``duration`` seconds
-    have passed or ``stop`` is set. Times passed to ``tick`` start at 0.
+    have passed or ``stop`` is set. Times passed to ``tick`` start at ``start_time`` (node
+    time must never go back: to resume nodes, pass the previous run's ``end_time``).
 
     A node that falls more than one period behind is re-phased (its missed ticks are dropped,
     counted in ``overruns``) rather than ticked in a burst. Nodes due at the same instant tick
@@ -97,7 +100,7 @@ def run_realtime(
             break
         for i, node in enumerate(nodes):
             if now >= due[i]:
-                node.tick(now)
+                node.tick(start_time + now)
                 stats.ticks[node.name] += 1
                 due[i] += node.period
                 if now - due[i] > node.period:
@@ -108,5 +111,5 @@ def run_realtime(
             wait = min(wait, duration - (clock() - start))
         if wait > 0:
             sleep(wait)
-    stats.elapsed = now
+    stats.end_time = start_time + now
     return stats
