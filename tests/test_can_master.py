@@ -454,3 +454,53 @@ def test_candump_capture_of_boot_and_run_decodes_cleanly(sim_factory, tmp_path):
     ):
         assert kinds[kind] > 0, kind
     assert sim.master.uav_model == UavModel.HYDRUS_XI
+
+
+# ---------------------------------------------------------------- real-time runner
+
+
+class FakeClock:
+    """A clock that only moves when ``sleep`` is called (or a tick burns time)."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+    def sleep(self, dt: float) -> None:
+        assert dt > 0
+        self.now += dt
+
+
+def test_run_realtime_ticks_nodes_at_their_periods_and_rephases_late_ones(sim_factory):
+    from rdm.nodes.base import Node, run_realtime
+
+    sim = sim_factory({1: {"servos": servos(1)}, 2: {"servos": servos(1)}})
+    clock = FakeClock()
+    nodes = [sim.master, *sim.neurons.values()]
+    assert all(isinstance(n, Node) for n in nodes)
+    stats = run_realtime(nodes, duration=1.0, clock=clock, sleep=clock.sleep)
+    assert stats.ticks == {"can_master": 1000, "neuron1": 1000, "neuron2": 1000}
+    assert sum(stats.overruns.values()) == 0
+    assert sim.master.state is MasterState.RUNNING and sim.master.slaves == [1, 2]
+    # Resuming continues node time; a slow node (5 ms per tick) is re-phased, not bursted.
+    seen: list[float] = []
+
+    class Slow:
+        name, period = "slow", 0.001
+
+        def tick(self, now: float) -> None:
+            seen.append(now)
+            clock.now += 0.005
+
+    again = run_realtime(
+        [Slow()], duration=0.1, clock=clock, sleep=clock.sleep, start_time=stats.end_time
+    )
+    assert seen[0] == pytest.approx(stats.end_time)
+    assert again.ticks["slow"] == pytest.approx(0.1 / 0.005, abs=1)
+    assert again.overruns["slow"] >= again.ticks["slow"] - 2
+    assert all(b - a == pytest.approx(0.005) for a, b in itertools.pairwise(seen))
+    with pytest.raises(ValueError, match="period"):
+        Slow.period = 0.0
+        run_realtime([Slow()], duration=0.1)
