@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import random
 from collections import Counter
 from pathlib import Path
 
@@ -378,6 +379,18 @@ def test_garbage_frames_are_counted_and_ignored_by_both_sides(sim_factory):
     sim.master.set_motor_duties([0.75, 0.75])
     sim.run_until(sim.t + 10)
     assert [n.esc.value for n in sim.neurons.values()] == [500, 500]
+    # Random standard frames of any id and DLC: both sides count or handle each, never raise.
+    rng = random.Random(11)
+    master_rx, neuron_rx = sim.master.rx_count, [n.rx_count for n in sim.neurons.values()]
+    for _ in range(3000):
+        data = bytes(rng.randrange(256) for _ in range(rng.randrange(9)))
+        noise.send(
+            can.Message(arbitration_id=rng.randrange(0x800), data=data, is_extended_id=False)
+        )
+    sim.run_until(sim.t + 5)
+    assert sim.master.rx_count - master_rx >= 3000
+    assert sim.master.state is MasterState.RUNNING and sim.master.slaves == [1, 2]
+    assert all(n.rx_count > r for n, r in zip(sim.neurons.values(), neuron_rx, strict=True))
 
 
 def test_board_config_pauses_tx_for_2s_and_updates_table(sim_factory):
