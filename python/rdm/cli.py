@@ -16,6 +16,7 @@ from collections.abc import Sequence
 COMMANDS: dict[str, tuple[str, str]] = {
     "decode": ("decode", "decode a UART capture, candump log or Leptrino capture"),
     "model": ("model", "load a robot and print its mass properties, allocation and aerial ZMP"),
+    "neuron": ("neuron", "run a Neuron board mirror on a CAN bus"),
     "plant": ("plant", "build the MuJoCo model of a robot; export it for MuJoCo's viewer"),
 }
 
