@@ -17,6 +17,7 @@ from pathlib import Path
 import can
 import cantools
 import pytest
+
 from rdm.link.can import candump_logger, open_can
 from rdm.nodes.base import drain
 from rdm.nodes.can_master import CanMaster, MasterState, UavModel

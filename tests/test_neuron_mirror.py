@@ -15,6 +15,7 @@ from pathlib import Path
 import can
 import cantools
 import pytest
+
 from rdm.link.can import open_can
 from rdm.nodes.base import drain
 from rdm.nodes.neuron_mirror import NeuronMirror

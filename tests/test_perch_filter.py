@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 pytest.importorskip("rdm._rdm")
-from scipy import signal  # noqa: E402
+from scipy import signal
 
-from rdm.control.perch import PerchError, WrenchFilter  # noqa: E402
+from rdm.control.perch import PerchError, WrenchFilter
 
 
 @pytest.mark.parametrize(("cutoff", "rate"), [(1.0, 40.0), (1.0, 100.0), (2.5, 40.0)])

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import can
 import pytest
+
 from rdm.link.can import open_can
 from rdm.nodes.base import drain, run_realtime
 from rdm.nodes.can_master import CanMaster, MasterState, UavModel

@@ -25,6 +25,9 @@ fn random_feasible_instances_all_solve_and_satisfy_constraints() {
     let mut rng = ChaCha8Rng::seed_from_u64(0x5EED_0001);
     let wanted = instance_count();
     let (mut feasible, mut infeasible, mut max_iter) = (0usize, 0usize, 0u32);
+    // Instances within 1e-3 N of the feasibility boundary may go either way; their failures
+    // are still counted by the controller, so track them to reconcile the counters.
+    let mut boundary_failures = 0usize;
     let mut wrong_infeasible = Vec::new();
     let started = std::time::Instant::now();
     while feasible < wanted {
@@ -34,9 +37,9 @@ fn random_feasible_instances_all_solve_and_satisfy_constraints() {
         };
         let sol = qp.solve(&input);
         let lmax = thrust_max(&input, &params).unwrap();
-        for i in 0..4 {
-            assert!(sol.thrust[i].is_finite());
-            assert!(sol.thrust[i] >= 0.0 && sol.thrust[i] <= lmax[i].max(0.0) + 1e-9);
+        for (thrust, bound) in sol.thrust.iter().zip(lmax) {
+            assert!(thrust.is_finite());
+            assert!(*thrust >= 0.0 && *thrust <= bound.max(0.0) + 1e-9);
         }
         if margin > 1e-3 {
             feasible += 1;
@@ -71,7 +74,9 @@ fn random_feasible_instances_all_solve_and_satisfy_constraints() {
                 // (48)
                 assert!((sol.thrust[i] - input.previous_thrust[i]).abs() <= 5.0 + 1e-9);
             }
-        } else if margin < -1e-3 {
+        } else if margin >= -1e-3 {
+            boundary_failures += usize::from(!sol.status.is_solution());
+        } else {
             infeasible += 1;
             // Never "solved"; clearly infeasible ones carry Clarabel's certificate. Within a
             // few 0.01 N of feasibility the IPM may hit max_iter instead (still a safe command).
@@ -87,7 +92,7 @@ fn random_feasible_instances_all_solve_and_satisfy_constraints() {
         "infeasible instances not reported: {wrong_infeasible:?}"
     );
     let counters = qp.counters();
-    assert_eq!(counters.failures() as usize, infeasible);
+    assert_eq!(counters.failures() as usize, infeasible + boundary_failures);
     eprintln!(
         "perch_random: {feasible} feasible solved, {infeasible} infeasible detected, \
          max {max_iter} iterations, {:.1} s",

@@ -14,9 +14,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from rdm._rdm import PerchController as _Controller
-from rdm._rdm import PerchError
+from rdm._rdm import PerchError, WrenchFilter
 from rdm._rdm import PerchQp as _Qp
-from rdm._rdm import WrenchFilter
 
 __all__ = [
     "PerchController",

@@ -81,6 +81,7 @@ pub fn random_instance(rng: &mut ChaCha8Rng, params: &PerchParams) -> PerchInput
 }
 
 /// Hover thrust `Q̄⁻¹ [m g, 0, 0, 0]` (so `λ_max = λ_rotor_max − hover`, eq. 47).
+#[allow(dead_code)] // shared test module: not every test binary uses every helper
 pub fn thrust_max(input: &PerchInput, params: &PerchParams) -> Option<[f64; 4]> {
     let inv = input.allocation.try_inverse()?;
     let w = params.gravity * input.mass;
@@ -90,6 +91,7 @@ pub fn thrust_max(input: &PerchInput, params: &PerchParams) -> Option<[f64; 4]> 
 /// Feasibility of eq. (49) under Table VII's masks, as the signed margin of the only coupling
 /// constraint: `max over the thrust box of Q̄_perch,z λ − (F_req + e)`; `None` if the box
 /// itself is empty by more than `tol`. Positive = feasible.
+#[allow(dead_code)] // shared test module: not every test binary uses every helper
 pub fn feasibility_margin(input: &PerchInput, params: &PerchParams) -> Option<f64> {
     let lmax = thrust_max(input, params)?;
     let [fx, fy, fz, mx, my, mz] = input.foot_wrench;
@@ -104,9 +106,9 @@ pub fn feasibility_margin(input: &PerchInput, params: &PerchParams) -> Option<f6
     let e = params.feedback_gain * (input.previous_foot_wrench[0] - fz);
     let mut best = 0.0;
     let mut box_gap = f64::INFINITY;
-    for i in 0..4 {
+    for (i, &lmax_i) in lmax.iter().enumerate() {
         let lo = (input.previous_thrust[i] - params.thrust_rate_limit[i]).max(0.0);
-        let hi = (input.previous_thrust[i] + params.thrust_rate_limit[i]).min(lmax[i]);
+        let hi = (input.previous_thrust[i] + params.thrust_rate_limit[i]).min(lmax_i);
         box_gap = box_gap.min(hi - lo);
         let q = if params.perch_rotors[i] {
             input.foot_allocation[(0, i)]

@@ -604,8 +604,8 @@ fn input_is_finite(input: &PerchInput) -> bool {
 fn controlled_rows_independent(perch_allocation: &Matrix4<f64>, mask: &[bool; 4]) -> bool {
     let mut rows = Matrix4::<f64>::identity();
     let mut largest = 0.0_f64;
-    for k in 0..4 {
-        if mask[k] {
+    for (k, &controlled) in mask.iter().enumerate() {
+        if controlled {
             let row = perch_allocation.row(k);
             largest = largest.max(row.norm());
             rows.set_row(k, &row);
@@ -616,8 +616,8 @@ fn controlled_rows_independent(perch_allocation: &Matrix4<f64>, mask: &[bool; 4]
     }
     // Rows of the unmasked slots are unit vectors scaled to the same size, so the Gram
     // matrix only degenerates when the controlled rows do.
-    for k in 0..4 {
-        if !mask[k] {
+    for (k, &controlled) in mask.iter().enumerate() {
+        if !controlled {
             rows.set_row(k, &(Matrix4::<f64>::identity().row(k) * largest));
         }
     }
