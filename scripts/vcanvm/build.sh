@@ -55,7 +55,20 @@ resolve_abi() {
   apt-cache depends linux-image-amd64 2>/dev/null \
     | awk '/Depends: linux-image-[0-9]/ {sub("linux-image-", "", $2); print $2; exit}'
 }
-ABI=${RDM_VCANVM_KERNEL:-$(resolve_abi)}
+# apt-cache takes seconds on a busy host: remember its answer until apt's lists change.
+resolve_abi_cached() {
+  local stamp memo=$CACHE/.resolved
+  stamp=$(stat -c %Y /var/lib/apt/lists 2>/dev/null) || { resolve_abi; return; }
+  if [ -f "$memo" ] && [ "$(cut -d' ' -f1 "$memo")" = "$stamp" ]; then
+    cut -d' ' -f2 "$memo"
+    return
+  fi
+  local abi
+  abi=$(resolve_abi)
+  if [ -n "$abi" ]; then mkdir -p "$CACHE" && echo "$stamp $abi" > "$memo"; fi
+  echo "$abi"
+}
+ABI=${RDM_VCANVM_KERNEL:-$(resolve_abi_cached)}
 if [ -z "$ABI" ]; then
   # No package lists: reuse the newest cached kernel if there is one (no network needed).
   ABI=$(ls -1 "$CACHE" 2>/dev/null | grep -E -- '-amd64$' | sort -V | tail -1 || true)

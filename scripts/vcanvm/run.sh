@@ -36,7 +36,7 @@ INITRD=$(sed -n 2p <<<"$ARTIFACTS")
 echo "vcanvm: booting $(basename "$(dirname "$KERNEL")") (${RDM_VCANVM_ACCEL:-tcg}, timeout ${TIMEOUT}s): $*" >&2
 
 case "${RDM_VCANVM_ACCEL:-tcg}" in
-  tcg) ACCEL=(-accel tcg -cpu max) ;;
+  tcg) ACCEL=(-accel tcg -cpu "${RDM_VCANVM_CPU:-max}") ;;
   kvm) ACCEL=(-enable-kvm -cpu host) ;;
   *) echo "vcanvm: RDM_VCANVM_ACCEL must be tcg or kvm" >&2; exit 2 ;;
 esac
@@ -84,7 +84,7 @@ if [ "${RDM_VCANVM_VERBOSE:-0}" = 1 ]; then FILTER=(cat); else
 
 # -no-reboot: a guest panic ends qemu instead of looping. `timeout` bounds the run even when
 # the guest hangs; qemu runs in the background so a signal to this script can stop it.
-timeout -k 5 "$TIMEOUT" qemu-system-x86_64 "${ACCEL[@]}" -m "${RDM_VCANVM_MEM:-1024}" -smp 2 \
+timeout -k 5 "$TIMEOUT" qemu-system-x86_64 "${ACCEL[@]}" -m "${RDM_VCANVM_MEM:-1024}" -smp "${RDM_VCANVM_SMP:-2}" \
   -nographic -no-reboot -nodefaults -serial stdio -monitor none "${BIOS[@]}" \
   -pidfile "$RUN/qemu.pid" -kernel "$KERNEL" -initrd "$INITRD" -append "$APPEND" \
   -virtfs "local,path=/,mount_tag=hostroot,security_model=$SECURITY,multidevs=remap,id=hostroot" \
