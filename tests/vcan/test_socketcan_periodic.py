@@ -2,8 +2,12 @@
 task keeps producing frames with no Python in the loop.
 
 These are functional checks with generous bounds: under the VM harness the guest runs in
-software emulation (TCG), where kernel timers overshoot by ~0.1-0.2 ms per period (measured
-~450 frames/s). Speed targets belong in benchmarks, not here.
+software emulation (TCG), where kernel timers overshoot by ~0.1-0.2 ms per period (~450
+frames/s on a quiet host), and on a host loaded far beyond its cores the guest CPU is
+descheduled now and then, which leaves long gaps (down to ~240 frames/s seen at load 14 on
+2 cores). The BCM re-arms relative to the late expiry, so lost time is not caught up.
+The count therefore has a low floor, and the period itself is checked on the shortest gaps,
+which are the ones where the guest was running. Speed targets belong in benchmarks.
 """
 
 from __future__ import annotations
@@ -16,8 +20,8 @@ import can
 
 PERIOD = 0.002  # 500 Hz, the rate the Spinal/Neuron links run at
 WINDOW = 1.0  # seconds of kernel timestamps counted
-# frames/s: never faster than 500; slow down to half allowed for a TCG guest on a loaded host
-RATE_BOUNDS = (250.0, 550.0)
+# frames/s: never faster than 500 (+10 %); far slower only when the guest CPU is starved
+RATE_BOUNDS = (100.0, 550.0)
 
 
 def _collect(bus: can.BusABC, seconds: float) -> list[can.Message]:
@@ -50,8 +54,10 @@ def test_bcm_task_sends_at_500_hz(vcan_bus):
     assert all(m.arbitration_id == 0x0A0 and bytes(m.data) == b"\x01\x02\x03\x04" for m in frames)
     rate = _rate_in_window(frames)
     assert RATE_BOUNDS[0] <= rate <= RATE_BOUNDS[1], f"{rate:.0f} frames/s"
-    gaps = [b.timestamp - a.timestamp for a, b in itertools.pairwise(frames)]
-    assert 0.9 * PERIOD <= statistics.median(gaps) <= 2.0 * PERIOD, f"{statistics.median(gaps)} s"
+    gaps = sorted(b.timestamp - a.timestamp for a, b in itertools.pairwise(frames))
+    # The fastest tenth of the gaps: the BCM period itself (never early, at most 50 % late).
+    fast = statistics.quantiles(gaps, n=10)[0]
+    assert 0.9 * PERIOD <= fast <= 1.5 * PERIOD, f"10th-percentile gap {fast * 1e3:.3f} ms"
 
 
 def test_stopped_task_sends_nothing_more(vcan_bus):
