@@ -50,9 +50,10 @@ SECURITY=passthrough
 # The job directory must be visible to the guest, i.e. anywhere under the host's /.
 RUN=$(mktemp -d "${TMPDIR:-/tmp}/rdm-vcanvm-run.XXXXXX")
 QEMU_PID=
+# On a signal to this script (e.g. from an outer `timeout`), stop qemu and the filter.
 cleanup() {
-  [ -n "$QEMU_PID" ] && kill "$QEMU_PID" 2>/dev/null
-  [ -f "$RUN/qemu.pid" ] && kill "$(cat "$RUN/qemu.pid")" 2>/dev/null
+  if [ -f "$RUN/qemu.pid" ]; then kill "$(cat "$RUN/qemu.pid")" 2>/dev/null; fi
+  if [ -n "$QEMU_PID" ]; then kill "$QEMU_PID" 2>/dev/null; fi
   rm -rf "$RUN"
 }
 trap cleanup EXIT
@@ -91,7 +92,9 @@ timeout -k 5 "$TIMEOUT" qemu-system-x86_64 "${ACCEL[@]}" -m "${RDM_VCANVM_MEM:-1
   </dev/null | "${FILTER[@]}" &
 QEMU_PID=$!
 wait "$QEMU_PID"
+# qemu has exited: forget its pid so cleanup never signals a reused pid.
 QEMU_PID=
+rm -f "$RUN/qemu.pid"
 if [ -f "$RUN/rc" ]; then
   exit "$(cat "$RUN/rc")"
 fi
