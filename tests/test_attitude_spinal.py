@@ -338,7 +338,7 @@ def test_wrong_length_and_non_finite_commands_are_rejected_and_counted() -> None
         c.four_axis_command([0, 0, 0], np.full(3, 5.0), 0.0)
     with pytest.raises(CommandRejectedError, match="pseudo_inverse: length 2"):
         c.set_pinv_inertia(np.zeros((2, 3)), [0.1] * 6)
-    with pytest.raises(CommandRejectedError, match="rpy/gain.motors: length 3"):
+    with pytest.raises(CommandRejectedError, match=r"rpy/gain\.motors: length 3"):
         c.set_gains_wire(np.zeros((3, 7), dtype=np.int64))
     with pytest.raises(CommandRejectedError, match="not finite"):
         c.four_axis_command([np.nan, 0, 0], np.full(4, 5.0), 0.0)
@@ -419,7 +419,7 @@ def test_gain_wire_conversion_and_clamp_gain() -> None:
         if m > 32.767:
             ref[:, axis, term] *= 32.767 / m
     np.testing.assert_allclose(clamped, ref, rtol=1e-15)
-    with pytest.raises(Exception, match="roll.p"):
+    with pytest.raises(Exception, match=r"roll\.p"):
         bad = g.copy()
         bad[1, 0, 0] = np.nan
         gains_to_wire_terms(bad)

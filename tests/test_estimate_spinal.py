@@ -211,7 +211,8 @@ def test_tracks_simulated_attitude(rate_hz: float, time_matched: bool) -> None:
     yaw_err = np.degrees(np.angle(np.exp(1j * (out["euler"][sel, 2] - true_ypr[sel, 0]))))
     yaw_rmse = float(np.sqrt(np.mean(yaw_err**2)))
     print(
-        f"rate {rate_hz} Hz time_matched={time_matched}: roll/pitch RMSE {rmse} deg, yaw {yaw_rmse:.2f} deg"
+        f"rate {rate_hz} Hz time_matched={time_matched}: "
+        f"roll/pitch RMSE {rmse} deg, yaw {yaw_rmse:.2f} deg"
     )
     assert np.all(rmse < 1.5), rmse
     assert yaw_rmse < 5.0

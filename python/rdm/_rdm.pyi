@@ -6,10 +6,10 @@ class RdmError(ValueError):
     """Base class of every error raised by rdm's core."""
 
 # --- spinal ---
-from typing import Any
+from typing import Any  # noqa: E402
 
-import numpy as np
-import numpy.typing as npt
+import numpy as np  # noqa: E402
+import numpy.typing as npt  # noqa: E402
 
 N_ROTORS: int
 

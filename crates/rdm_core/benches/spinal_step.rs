@@ -47,7 +47,7 @@ fn bench(c: &mut Criterion) {
             k += 1;
             let now = k as f64 * 0.005;
             let t = now.sin();
-            if k % 5 == 0 {
+            if k.is_multiple_of(5) {
                 let _ =
                     spinal
                         .controller_mut()

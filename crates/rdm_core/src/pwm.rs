@@ -302,11 +302,13 @@ impl PwmConverter {
     /// that is not finite and positive is ignored and counted.
     pub fn update_voltage(&mut self, voltage: f64, now_s: f64) -> bool {
         if let Some(last) = self.last_voltage_update_s {
-            if !(now_s - last > VOLTAGE_UPDATE_INTERVAL_S) {
+            // NaN time never triggers an update.
+            let due = now_s - last > VOLTAGE_UPDATE_INTERVAL_S;
+            if !due {
                 return false;
             }
         }
-        if !(voltage.is_finite() && voltage > 0.0) || !now_s.is_finite() {
+        if !(voltage.is_finite() && voltage > 0.0 && now_s.is_finite()) {
             self.rejected_voltages += 1;
             return false;
         }

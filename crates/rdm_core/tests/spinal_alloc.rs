@@ -89,7 +89,7 @@ fn estimator_step_allocates_nothing() {
     let mut estimator = AttitudeEstimator::new(EstimatorConfig::default()).unwrap();
     assert_no_allocations("estimator", |k| {
         let mut s = sample(k);
-        if k % 100 == 0 {
+        if k.is_multiple_of(100) {
             s.gyro[0] = f64::NAN; // the error path too
         }
         std::hint::black_box(estimator.step(&s));
@@ -102,7 +102,7 @@ fn attitude_step_and_messages_allocate_nothing() {
     let rotation = nalgebra::Matrix3::identity();
     assert_no_allocations("attitude controller", |k| {
         let now = k as f64 * 0.005;
-        if k % 5 == 0 {
+        if k.is_multiple_of(5) {
             let _ = controller.four_axis_command([0.01, -0.02, 0.1], &[5.0, 5.0, 5.0, 5.0], now);
             let _ = controller.four_axis_command([0.0, 0.0, 0.0], &[5.0, 5.0], now); // rejected
             let _ = controller.set_gains(&gains());
@@ -117,7 +117,7 @@ fn spinal_step_allocates_nothing() {
     arm(spinal.controller_mut());
     assert_no_allocations("SpinalStep", |k| {
         let now = k as f64 * 0.005;
-        if k % 5 == 0 {
+        if k.is_multiple_of(5) {
             let _ = spinal
                 .controller_mut()
                 .four_axis_command([0.0, 0.0, 0.0], &[6.0; 4], now);

@@ -51,7 +51,7 @@ pub(crate) fn gain_array<'py>(
             flat.extend_from_slice(&[pid.p, pid.i, pid.d]);
         }
     }
-    Ok(PyArray1::from_vec(py, flat).reshape([N_ROTORS, 4, 3])?)
+    PyArray1::from_vec(py, flat).reshape([N_ROTORS, 4, 3])
 }
 
 /// An (n, 7) integer array into wire terms.
@@ -84,7 +84,7 @@ fn gains_to_wire_terms<'py>(
     let set = gain_set(&gains)?;
     let wire = gains_to_wire(&set).map_err(|e| RdmError::new_err(format!("gains.{e}")))?;
     let flat: Vec<i16> = wire.iter().flat_map(|w| w.to_array()).collect();
-    Ok(PyArray1::from_vec(py, flat).reshape([N_ROTORS, 7])?)
+    PyArray1::from_vec(py, flat).reshape([N_ROTORS, 7])
 }
 
 /// `rpy/gain` int16 (N_ROTORS, 7) -> the gain set Spinal applies (x 0.001; yaw P/I and z 0).

@@ -130,6 +130,9 @@ pub struct AttitudeOutput {
     pub events: EventList,
 }
 
+/// Per-rotor gains, one `[roll, pitch, yaw]` row per rotor.
+pub type RotorAxisGains = [[f64; 3]; N_ROTORS];
+
 /// Counters of rejected or ignored messages and fail-safe triggers.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ControlCounters {
@@ -280,13 +283,7 @@ impl AttitudeController {
         &self.counters
     }
     /// The per-rotor thrust gains Spinal applies: (P, I, D) for roll, pitch, yaw.
-    pub fn thrust_gains(
-        &self,
-    ) -> (
-        [[f64; 3]; N_ROTORS],
-        [[f64; 3]; N_ROTORS],
-        [[f64; 3]; N_ROTORS],
-    ) {
+    pub fn thrust_gains(&self) -> (RotorAxisGains, RotorAxisGains, RotorAxisGains) {
         (self.p_gain, self.i_gain, self.d_gain)
     }
 
@@ -581,10 +578,10 @@ impl AttitudeController {
     fn thrust_gain_mapping(&mut self) {
         for i in 0..self.motor_number.min(N_ROTORS) {
             let t = self.torque_allocation_inv[i];
-            for axis in 0..3 {
-                self.p_gain[i][axis] = t[axis] * self.torque_gain[0][axis];
-                self.i_gain[i][axis] = t[axis] * self.torque_gain[1][axis];
-                self.d_gain[i][axis] = t[axis] * self.torque_gain[2][axis];
+            for (axis, &t_axis) in t.iter().enumerate() {
+                self.p_gain[i][axis] = t_axis * self.torque_gain[0][axis];
+                self.i_gain[i][axis] = t_axis * self.torque_gain[1][axis];
+                self.d_gain[i][axis] = t_axis * self.torque_gain[2][axis];
             }
         }
     }
@@ -699,11 +696,13 @@ impl AttitudeController {
         }
 
         // Roll/pitch errors and their integral.
-        let mut error = [0.0; 2];
-        for axis in 0..2 {
-            error[axis] = self.target_angle[axis] - self.euler[axis];
-            if self.integrate {
-                self.integrate_axis(axis, error[axis]);
+        let error = [
+            self.target_angle[0] - self.euler[0],
+            self.target_angle[1] - self.euler[1],
+        ];
+        if self.integrate {
+            for (axis, &e) in error.iter().enumerate() {
+                self.integrate_axis(axis, e);
             }
         }
 

@@ -11,7 +11,7 @@ pub mod wire;
 
 pub use controller::{
     AntiWindup, AttitudeControlConfig, AttitudeController, AttitudeOutput, ControlCounters,
-    ControlStatus, FIRMWARE_FORCE_LANDING_STEP, UAV_MODEL_DRAGON,
+    ControlStatus, RotorAxisGains, FIRMWARE_FORCE_LANDING_STEP, UAV_MODEL_DRAGON,
 };
 pub use events::{CommandError, EventList, FlightConfigCmd, SpinalEvent};
 pub use spinal_step::{SpinalConfig, SpinalOutput, SpinalStep};
