@@ -338,7 +338,7 @@ impl LqiSynthesizer {
         let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
         let allocation: Allocation = to_matrix(&allocation, "allocation")?;
         let inner = &mut self.inner;
-        let result = py.detach(move || inner.synthesize(mass, &inertia, &allocation).map(|g| *g));
+        let result = py.detach(move || inner.synthesize(mass, &inertia, &allocation).copied());
         gains_dict(py, &result.map_err(lqi_error)?)
     }
 
