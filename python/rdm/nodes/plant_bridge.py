@@ -5,9 +5,10 @@ nodes), in this order:
 
 1. plant joint positions -> every Neuron's present positions (raw Dynamixel ticks);
 2. Neuron servo goals (servos with torque on) -> plant servo targets (rad);
-3. Neuron ESC outputs (duty 0.5..1, 0.5 while the watchdog stops the motor) -> plant rotor duties;
-4. battery voltage -> plant ESCs and the battery sinks (the Spinal mirror's
-   ``set_battery_voltage``);
+3. battery voltage -> plant ESCs and the battery sinks (the Spinal mirror's
+   ``set_battery_voltage``); a change re-commands the duties (the plant converts a duty at the
+   voltage of the moment it is commanded);
+4. Neuron ESC outputs (duty 0.5..1, 0.5 while the watchdog stops the motor) -> plant rotor duties;
 5. every ``imu_period``: one noisy plant IMU sample -> ``imu_sink(gyro, acc, mag)`` (the Spinal
    mirror's ``set_imu_sample``) and to Neurons that have an IMU;
 6. every ``wrench_period``: one noisy sample per wrench sensor -> ``wrench_sinks[key](force,
@@ -296,8 +297,17 @@ class PlantBridge:
                         changed = True
         if changed:
             plant.set_servo_targets(targets)
+        # The plant's ESCs convert a duty at the voltage they hold when commanded: a new
+        # voltage is applied first and re-commands the duties.
+        volts = self._battery(now) if callable(self._battery) else self._battery
         duties = self._duties
         changed = False
+        if volts != self._voltage:
+            self._voltage = volts
+            plant.set_battery_voltage(volts)
+            for sink in self._battery_sinks:
+                sink(volts)
+            changed = True
         for r, neuron in self._rotor_map:
             d = neuron.esc.duty
             if d != duties[r]:
@@ -305,12 +315,6 @@ class PlantBridge:
                 changed = True
         if changed:
             plant.set_rotor_duties(duties)
-        volts = self._battery(now) if callable(self._battery) else self._battery
-        if volts != self._voltage:
-            self._voltage = volts
-            plant.set_battery_voltage(volts)
-            for sink in self._battery_sinks:
-                sink(volts)
         if self._imu_on and self._imu_every():
             r = plant.imu()
             if self._imu_sink is not None:
