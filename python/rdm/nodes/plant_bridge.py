@@ -88,12 +88,10 @@ class BusLayout:
                 raise ValueError(f"BusLayout: Neuron {n.slave} has {len(n.joints)} servos > 4")
 
     def to_ticks(self, joint: str, q: float) -> float:
-        scale = self.ticks_per_rev / (2.0 * math.pi) * self.signs.get(joint, 1.0)
-        return self.center_ticks + q * scale
+        return self.center_ticks + q * layout_scale(self, joint)
 
     def to_rad(self, joint: str, ticks: float) -> float:
-        scale = self.ticks_per_rev / (2.0 * math.pi) * self.signs.get(joint, 1.0)
-        return (ticks - self.center_ticks) / scale
+        return (ticks - self.center_ticks) / layout_scale(self, joint)
 
     def servo_configs(self, slave: int, q0: dict[str, float] | None = None) -> list[ServoConfig]:
         """``ServoConfig`` list of one Neuron, starting at ``q0`` (rad, default 0)."""
@@ -160,6 +158,11 @@ def default_layout(desc: RobotDescription) -> BusLayout:
             NeuronLayout(slave, rotor, tuple(joints[slave])) for rotor, slave in rotor_slave.items()
         )
     )
+
+
+def layout_scale(layout: BusLayout, joint: str) -> float:
+    """Ticks per radian of ``joint`` (sign included)."""
+    return layout.ticks_per_rev / (2.0 * math.pi) * layout.signs.get(joint, 1.0)
 
 
 class _Every:
@@ -269,6 +272,10 @@ class PlantBridge:
         self._mocap_on = mocap_period is not None and mocap_sink is not None
         self._truth_on = truth_period is not None and truth_sink is not None
         self._targets = plant.servo_positions()
+        # Vectorised tick <-> rad map over joint_order (one numpy expression per tick).
+        scale = np.array([layout_scale(self.layout, j) for j in plant.joint_names], dtype=float)
+        self._tick_scale = scale
+        self._last_goal: dict[tuple[int, int], int] = {}
         self._duties = np.full(len(plant.rotor_names), 0.5)
         self._voltage: float | None = None
         self._foot_body = plant.model.body(plant.description.foot_frame).id
@@ -282,16 +289,19 @@ class PlantBridge:
         if abs(plant.time - now) > 0.5 * self.period:
             self.time_mismatches += 1
         layout = self.layout
-        q = plant.servo_positions()
+        center = layout.center_ticks
+        ticks = (center + plant.servo_positions() * self._tick_scale).tolist()
         targets = self._targets
         changed = False
         for neuron, servos in self._servo_map:
-            neuron.set_present_positions([layout.to_ticks(j, q[k]) for _, k, j in servos])
             models = neuron.servos
-            for i, k, j in servos:
+            for i, k, _ in servos:
+                models[i].set_present_position(ticks[k])
+            for i, k, _ in servos:
                 servo = models[i]
-                if servo.torque_enable:
-                    goal = layout.to_rad(j, servo.goal)
+                if servo.torque_enable and servo.goal != self._last_goal.get((k, i)):
+                    self._last_goal[(k, i)] = servo.goal
+                    goal = (servo.goal - center) / self._tick_scale[k]
                     if goal != targets[k]:
                         targets[k] = goal
                         changed = True

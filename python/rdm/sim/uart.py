@@ -11,6 +11,11 @@ here: most writes are not visible immediately, some only after tens of ms on a l
 That would make the tick at which a node sees a byte depend on the kernel scheduler. ``settle()``
 blocks until every byte written so far on either end is readable on the other, so the byte
 timeline is a function of simulated time only.
+
+:func:`open_inproc_uart` is the fast alternative when both ends live in the lockstep process: an
+in-process byte pipe with the same link API (bytes are readable as soon as written, no kernel,
+no barrier). Measured here a pty write costs 6 us on an idle machine but up to ~1 ms under load
+(the tty flush work queue), which dominated a lockstep chain; see docs/lockstep.md.
 """
 
 from __future__ import annotations
@@ -60,8 +65,9 @@ class TappedLink:
 
     @property
     def in_waiting(self) -> int:
-        """Bytes the kernel holds for this end now."""
-        return int(self.link.port.in_waiting)
+        """Bytes waiting to be read at this end now."""
+        own = getattr(self.link, "in_waiting", None)
+        return int(own if own is not None else self.link.port.in_waiting)
 
     def fileno(self) -> int:
         return self.link.port.fileno()
@@ -134,3 +140,53 @@ def open_tapped_pty(
     hst = TappedLink(host)
     device.peer = None  # each TappedLink closes its own end
     return dev, hst, PtyPair(dev, hst)
+
+
+class InProcessUartEnd:
+    """One end of an in-process byte pipe (``read_available``/``write``/``close``)."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self._inbox = bytearray()
+        self.peer: InProcessUartEnd | None = None
+        self.closed = False
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self._inbox)
+
+    def read_available(self) -> bytes:
+        if not self._inbox:
+            return b""
+        data = bytes(self._inbox)
+        self._inbox.clear()
+        return data
+
+    def write(self, data: bytes) -> int:
+        if self.closed:
+            raise OSError(f"{self.name}: write on a closed in-process UART")
+        peer = self.peer
+        if peer is None or peer.closed:
+            return 0  # nobody listening: the bytes are lost, as on an unplugged line
+        peer._inbox += data
+        return len(data)
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def open_inproc_uart(
+    capture_dir: str | os.PathLike[str] | None = None, stem: str = "uart", ext: str = ".bin"
+) -> tuple[TappedLink, TappedLink]:
+    """An in-process byte pipe as (device end, host end), captured like :func:`open_tapped_pty`
+    (``<stem>.device_tx<ext>``, ``<stem>.host_tx<ext>``). No barrier is needed."""
+    dev, host = InProcessUartEnd("device"), InProcessUartEnd("host")
+    dev.peer, host.peer = host, dev
+    if capture_dir is None:
+        return TappedLink(dev), TappedLink(host)
+    d = Path(capture_dir)
+    d.mkdir(parents=True, exist_ok=True)
+    return (
+        TappedLink(dev, d / f"{stem}.device_tx{ext}", d / f"{stem}.host_tx{ext}"),
+        TappedLink(host),
+    )
