@@ -544,6 +544,7 @@ def main(argv: list[str]) -> None:
         )
         try:
             t0 = time.perf_counter()
+            c0 = time.process_time()
             if "--profile" in argv:
                 prof = cProfile.Profile()
                 prof.enable()
@@ -552,12 +553,14 @@ def main(argv: list[str]) -> None:
             else:
                 chain.loop.run(seconds)
             wall = time.perf_counter() - t0
+            cpu = time.process_time() - c0
         finally:
             chain.close()
         waits = sum(b.waits for b in chain.loop.barriers)
         print(
             f"open-loop chain: {seconds:.1f} simulated s in {wall:.2f} wall s = "
-            f"{seconds / wall:.2f}x real time; pty settles that waited: {waits}"
+            f"{seconds / wall:.2f}x real time ({seconds / cpu:.2f} simulated s per CPU s); "
+            f"pty settles that waited: {waits}"
         )
         if "--nodes" in argv:
             print(chain.loop.profile_table())
