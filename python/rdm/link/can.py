@@ -1,12 +1,14 @@
 """CAN transport via python-can, chosen by one configuration string.
 
 Spec grammar: ``<interface>:<channel>[,key=value...]`` with interface ``socketcan`` (kernel
-SocketCAN: ``can0``, ``vcan0``) or ``virtual`` (python-can's in-process bus; every
-``virtual:<name>`` bus in one process with the same name shares traffic). Options:
+SocketCAN: ``can0``, ``vcan0``), ``virtual`` (python-can's in-process bus; every
+``virtual:<name>`` bus in one process with the same name shares traffic) or ``inproc`` (the
+fast lockstep bus :class:`rdm.link.inproc_can.InProcessBus`: same sharing, timestamps from a
+simulated clock, no deep copies). Options:
 ``bitrate=<int>`` (virtual only: SocketCAN rates are set with ``ip link``),
 ``receive_own_messages=0|1``.
 
-Examples: ``"socketcan:vcan0"``, ``"socketcan:can0"``, ``"virtual:neuron_bus"``,
+Examples: ``"socketcan:vcan0"``, ``"socketcan:can0"``, ``"virtual:neuron_bus"``, ``"inproc:hil"``,
 ``"virtual:hil,bitrate=1000000"``.
 """
 
@@ -20,12 +22,13 @@ from typing import Any
 
 import can
 
-INTERFACES = ("socketcan", "virtual")
+INTERFACES = ("socketcan", "virtual", "inproc")
 #: Neuron link: classic CAN, 1 Mbit/s, 11-bit ids (fact sheet sec. 2.1).
 NEURON_BITRATE = 1_000_000
 _CHANNEL = {
     "socketcan": re.compile(r"^[A-Za-z0-9_.\-]{1,15}$"),  # a kernel name: IFNAMSIZ - 1 chars
     "virtual": re.compile(r"^[A-Za-z0-9_.\-]{1,64}$"),
+    "inproc": re.compile(r"^[A-Za-z0-9_.\-]{1,64}$"),
 }
 
 
@@ -61,7 +64,8 @@ def parse_can_spec(spec: str) -> CanSpec:
     if not isinstance(spec, str) or ":" not in spec:
         raise CanSpecError(
             f"CAN spec {spec!r}: expected '<interface>:<channel>[,bitrate=N]', "
-            f"interface one of {', '.join(INTERFACES)} (e.g. 'socketcan:can0', 'virtual:bus')"
+            f"interface one of {', '.join(INTERFACES)} "
+            "(e.g. 'socketcan:can0', 'virtual:bus', 'inproc:hil')"
         )
     interface, _, rest = spec.strip().partition(":")
     interface = interface.lower()
@@ -124,6 +128,10 @@ def open_can(spec: str) -> can.BusABC:
     the kernel has no SocketCAN or the interface does not exist.
     """
     parsed = parse_can_spec(spec)
+    if parsed.interface == "inproc":
+        from rdm.link.inproc_can import InProcessBus
+
+        return InProcessBus(parsed.channel, receive_own_messages=parsed.receive_own_messages)
     try:
         return can.Bus(**parsed.bus_kwargs())
     except OSError as exc:

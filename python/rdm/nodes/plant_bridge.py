@@ -1,0 +1,347 @@
+"""Plant bridge: couples the MuJoCo plant to the firmware mirrors once per millisecond.
+
+Each ``tick(now)`` (the plant must be at ``now``; the lockstep scheduler steps it after the
+nodes), in this order:
+
+1. plant joint positions -> every Neuron's present positions (raw Dynamixel ticks);
+2. Neuron servo goals (servos with torque on) -> plant servo targets (rad);
+3. battery voltage -> plant ESCs and the battery sinks (the Spinal mirror's
+   ``set_battery_voltage``); a change re-commands the duties (the plant converts a duty at the
+   voltage of the moment it is commanded);
+4. Neuron ESC outputs (duty 0.5..1, 0.5 while the watchdog stops the motor) -> plant rotor duties;
+5. every ``imu_period``: one noisy plant IMU sample -> ``imu_sink(gyro, acc, mag)`` (the Spinal
+   mirror's ``set_imu_sample``) and to Neurons that have an IMU;
+6. every ``wrench_period``: one noisy sample per wrench sensor -> ``wrench_sinks[key](force,
+   torque)`` (the Leptrino sensor node's ``set_wrench``);
+7. every ``mocap_period``: foot pose -> ``mocap_sink(now, position, quaternion_wxyz)``;
+   every ``truth_period``: ``truth_sink(GroundTruth)`` (the logger).
+
+Commands flow mirror -> plant with one tick of delay (the mirrors tick after the bridge), as a
+real PWM/servo update lands on the next control period.
+
+The rotor <-> Neuron and joint <-> (Neuron, servo index) mapping is a :class:`BusLayout`;
+:func:`default_layout` gives the RDM's (see docs/lockstep.md).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rdm.plant.description import RobotDescription
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+from .servo_model import ServoConfig
+
+#: Dynamixel X: 4096 ticks per revolution, 2048 = the centre (0 rad).
+TICKS_PER_REV = 4096
+CENTER_TICKS = 2048
+MAX_SERVOS_PER_NEURON = 4
+
+
+@dataclass(frozen=True)
+class NeuronLayout:
+    """One Neuron board: its CAN slave id, the rotor its ESC drives, its servos in index order."""
+
+    slave: int
+    rotor: str | None
+    joints: tuple[str, ...] = ()
+    imu: bool = False
+
+
+@dataclass(frozen=True)
+class BusLayout:
+    """Which Neuron drives which rotor and which joint servos, and the tick <-> rad map.
+
+    ``ticks = center + sign * q * 4096 / (2 pi)`` per joint (``signs`` default +1).
+    ``send_data_flag`` False marks a joint as a Spinal "gimbal" servo (no state on CAN).
+    """
+
+    neurons: tuple[NeuronLayout, ...]
+    center_ticks: int = CENTER_TICKS
+    ticks_per_rev: int = TICKS_PER_REV
+    signs: dict[str, float] = field(default_factory=dict)
+    no_state_joints: frozenset[str] = frozenset()
+
+    def __post_init__(self) -> None:
+        slaves = [n.slave for n in self.neurons]
+        if len(set(slaves)) != len(slaves):
+            raise ValueError(f"BusLayout: duplicate slave ids {slaves}")
+        joints = [j for n in self.neurons for j in n.joints]
+        if len(set(joints)) != len(joints):
+            raise ValueError(f"BusLayout: a joint is mapped twice: {joints}")
+        rotors = [n.rotor for n in self.neurons if n.rotor is not None]
+        if len(set(rotors)) != len(rotors):
+            raise ValueError(f"BusLayout: a rotor is mapped twice: {rotors}")
+        for n in self.neurons:
+            if not 1 <= n.slave <= 14:
+                raise ValueError(f"BusLayout: slave id {n.slave} not in 1..14")
+            if len(n.joints) > MAX_SERVOS_PER_NEURON:
+                raise ValueError(f"BusLayout: Neuron {n.slave} has {len(n.joints)} servos > 4")
+
+    def to_ticks(self, joint: str, q: float) -> float:
+        return self.center_ticks + q * layout_scale(self, joint)
+
+    def to_rad(self, joint: str, ticks: float) -> float:
+        return (ticks - self.center_ticks) / layout_scale(self, joint)
+
+    def servo_configs(self, slave: int, q0: dict[str, float] | None = None) -> list[ServoConfig]:
+        """``ServoConfig`` list of one Neuron, starting at ``q0`` (rad, default 0)."""
+        q0 = q0 or {}
+        layout = next((n for n in self.neurons if n.slave == slave), None)
+        if layout is None:
+            raise KeyError(f"BusLayout: no Neuron {slave}")
+        return [
+            ServoConfig(
+                dynamixel_id=i + 1,
+                send_data_flag=joint not in self.no_state_joints,
+                initial_position=min(
+                    max(round(self.to_ticks(joint, q0.get(joint, 0.0))), 0), TICKS_PER_REV - 1
+                ),
+            )
+            for i, joint in enumerate(layout.joints)
+        ]
+
+
+def _vectoring_units(desc: RobotDescription) -> list[dict]:
+    with open(desc.toml_path, "rb") as f:
+        return list(tomllib.load(f).get("vectoring_units", []))
+
+
+def default_layout(desc: RobotDescription) -> BusLayout:
+    """The default bus layout of a multilink robot description (the RDM's, documented).
+
+    * One Neuron per rotor (Spinal counts one motor per Neuron), slave ids 1.. in rotor order.
+    * Each vectoring unit's roll and pitch servos sit on the Neuron of the unit's first rotor.
+    * The link joints (the rest of ``joint_order``, in order) are split evenly, contiguously,
+      over the Neurons that carry no vectoring servo, in slave order (RDM: q1-q3 on Neuron 2,
+      q4-q6 on Neuron 4); what does not fit goes to the spare slots of the others.
+    * Every servo reports its state (``send_data_flag``), so Spinal infers HYDRUS (16).
+    """
+    rotor_slave = {r.name: i + 1 for i, r in enumerate(desc.rotors)}
+    if len(rotor_slave) > 14:
+        raise ValueError(f"default_layout: {len(rotor_slave)} rotors > 14 Neurons")
+    joints: dict[int, list[str]] = {s: [] for s in rotor_slave.values()}
+    vectoring: set[str] = set()
+    for unit in _vectoring_units(desc):
+        rotors = unit.get("rotors", [])
+        if not rotors or rotors[0] not in rotor_slave:
+            raise ValueError(f"default_layout: vectoring unit {unit.get('name')!r} has no rotor")
+        for key in ("roll_joint", "pitch_joint"):
+            if key in unit:
+                joints[rotor_slave[rotors[0]]].append(unit[key])
+                vectoring.add(unit[key])
+    links = [j for j in desc.joint_order if j not in vectoring]
+    free = [s for s, js in joints.items() if not js] or list(joints)
+    at = 0
+    for i, slave in enumerate(free):
+        share = math.ceil((len(links) - at) / (len(free) - i))
+        take = min(share, MAX_SERVOS_PER_NEURON - len(joints[slave]))
+        joints[slave].extend(links[at : at + take])
+        at += take
+    for slave in joints:  # spill-over into spare slots
+        while at < len(links) and len(joints[slave]) < MAX_SERVOS_PER_NEURON:
+            joints[slave].append(links[at])
+            at += 1
+    if at < len(links):
+        raise ValueError(f"default_layout: {len(links) - at} joints do not fit on the Neurons")
+    return BusLayout(
+        tuple(
+            NeuronLayout(slave, rotor, tuple(joints[slave])) for rotor, slave in rotor_slave.items()
+        )
+    )
+
+
+def layout_scale(layout: BusLayout, joint: str) -> float:
+    """Ticks per radian of ``joint`` (sign included)."""
+    return layout.ticks_per_rev / (2.0 * math.pi) * layout.signs.get(joint, 1.0)
+
+
+class _Every:
+    """Fires every ``n``-th call, starting with the first."""
+
+    __slots__ = ("count", "n")
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.count = 0
+
+    def __call__(self) -> bool:
+        fire = self.count % self.n == 0
+        self.count += 1
+        return fire
+
+
+def _ratio(period: float | None, base: float, what: str) -> int:
+    if period is None:
+        return 0
+    n = round(period / base)
+    if n < 1 or abs(n * base - period) > 1e-9:
+        raise ValueError(f"PlantBridge: {what} {period!r} is not a whole multiple of {base}")
+    return n
+
+
+class PlantBridge:
+    """The 1 kHz coupling node between a :class:`rdm.plant.Plant` and the mirrors.
+
+    Args:
+        plant: the plant (stepped by the scheduler, not by the bridge).
+        neurons: the Neuron mirrors (``plant_driven=True``), any order; matched by slave id.
+        layout: the bus layout (default: :func:`default_layout` of the plant's description).
+        battery_voltage: volts, constant or a function of simulated time.
+        battery_sinks: called with the voltage when it changes.
+        imu_sink: ``f(gyro, acc, mag)`` (rad/s, m/s^2, uT; IMU frame = Spinal's body frame).
+        wrench_sinks: ``{sensor_key: f(force, torque)}``.
+        mocap_sink: ``f(now, position, quaternion_wxyz)`` of the foot frame.
+        truth_sink: ``f(GroundTruth)``.
+        *_period: seconds between calls (whole multiples of ``period``; None disables).
+    """
+
+    def __init__(
+        self,
+        plant,
+        neurons: Sequence = (),
+        layout: BusLayout | None = None,
+        *,
+        name: str = "plant_bridge",
+        period: float = 0.001,
+        battery_voltage: float | Callable[[float], float] = 23.0,
+        battery_sinks: Sequence[Callable[[float], None]] = (),
+        imu_sink: Callable[[np.ndarray, np.ndarray, np.ndarray], None] | None = None,
+        imu_period: float | None = 0.005,
+        wrench_sinks: dict[str, Callable[[np.ndarray, np.ndarray], None]] | None = None,
+        wrench_period: float | None = 0.001,
+        mocap_sink: Callable[[float, np.ndarray, np.ndarray], None] | None = None,
+        mocap_period: float | None = 0.01,
+        truth_sink: Callable[[object], None] | None = None,
+        truth_period: float | None = 0.01,
+    ) -> None:
+        self.plant = plant
+        self.name = name
+        self.period = period
+        self.layout = layout or default_layout(plant.description)
+        by_slave = {n.slave_id: n for n in neurons}
+        joint_index = {j: i for i, j in enumerate(plant.joint_names)}
+        rotor_index = {r: i for i, r in enumerate(plant.rotor_names)}
+        # (neuron, [(servo index, joint index, joint name)])
+        self._servo_map: list[tuple[object, list[tuple[int, int, str]]]] = []
+        self._rotor_map: list[tuple[int, object]] = []
+        for nl in self.layout.neurons:
+            neuron = by_slave.get(nl.slave)
+            if neuron is None:
+                raise ValueError(f"PlantBridge: no Neuron mirror with slave id {nl.slave}")
+            if len(neuron.servos) != len(nl.joints):
+                raise ValueError(
+                    f"PlantBridge: Neuron {nl.slave} has {len(neuron.servos)} servos, layout "
+                    f"maps {len(nl.joints)}"
+                )
+            for joint in nl.joints:
+                if joint not in joint_index:
+                    raise ValueError(f"PlantBridge: layout joint {joint!r} not in the plant")
+            self._servo_map.append(
+                (neuron, [(i, joint_index[j], j) for i, j in enumerate(nl.joints)])
+            )
+            if nl.rotor is not None:
+                if nl.rotor not in rotor_index:
+                    raise ValueError(f"PlantBridge: layout rotor {nl.rotor!r} not in the plant")
+                self._rotor_map.append((rotor_index[nl.rotor], neuron))
+        self._imu_neurons = [by_slave[n.slave] for n in self.layout.neurons if n.imu]
+        self._battery = battery_voltage
+        self._battery_sinks = list(battery_sinks)
+        self._imu_sink = imu_sink
+        self._wrench_sinks = dict(wrench_sinks or {})
+        for key in self._wrench_sinks:
+            if key not in plant.wrench_models:
+                raise ValueError(f"PlantBridge: plant has no wrench sensor {key!r}")
+        self._mocap_sink = mocap_sink
+        self._truth_sink = truth_sink
+        self._imu_every = _Every(_ratio(imu_period, period, "imu_period") or 1)
+        self._wrench_every = _Every(_ratio(wrench_period, period, "wrench_period") or 1)
+        self._mocap_every = _Every(_ratio(mocap_period, period, "mocap_period") or 1)
+        self._truth_every = _Every(_ratio(truth_period, period, "truth_period") or 1)
+        self._imu_on = imu_period is not None and (imu_sink is not None or self._imu_neurons)
+        self._wrench_on = wrench_period is not None and bool(self._wrench_sinks)
+        self._mocap_on = mocap_period is not None and mocap_sink is not None
+        self._truth_on = truth_period is not None and truth_sink is not None
+        self._targets = plant.servo_positions()
+        # Vectorised tick <-> rad map over joint_order (one numpy expression per tick).
+        scale = np.array([layout_scale(self.layout, j) for j in plant.joint_names], dtype=float)
+        self._tick_scale = scale
+        self._last_goal: dict[tuple[int, int], int] = {}
+        self._duties = np.full(len(plant.rotor_names), 0.5)
+        self._voltage: float | None = None
+        self._foot_body = plant.model.body(plant.description.foot_frame).id
+        self.time_mismatches = 0
+        self.ticks = 0
+
+    def tick(self, now: float) -> None:
+        """Couple plant and mirrors at ``now`` (see the module doc)."""
+        plant = self.plant
+        self.ticks += 1
+        if abs(plant.time - now) > 0.5 * self.period:
+            self.time_mismatches += 1
+        layout = self.layout
+        center = layout.center_ticks
+        ticks = (center + plant.servo_positions() * self._tick_scale).tolist()
+        targets = self._targets
+        changed = False
+        for neuron, servos in self._servo_map:
+            models = neuron.servos
+            for i, k, _ in servos:
+                models[i].set_present_position(ticks[k])
+            for i, k, _ in servos:
+                servo = models[i]
+                if servo.torque_enable and servo.goal != self._last_goal.get((k, i)):
+                    self._last_goal[(k, i)] = servo.goal
+                    goal = (servo.goal - center) / self._tick_scale[k]
+                    if goal != targets[k]:
+                        targets[k] = goal
+                        changed = True
+        if changed:
+            plant.set_servo_targets(targets)
+        # The plant's ESCs convert a duty at the voltage they hold when commanded: a new
+        # voltage is applied first and re-commands the duties.
+        volts = self._battery(now) if callable(self._battery) else self._battery
+        duties = self._duties
+        changed = False
+        if volts != self._voltage:
+            self._voltage = volts
+            plant.set_battery_voltage(volts)
+            for sink in self._battery_sinks:
+                sink(volts)
+            changed = True
+        for r, neuron in self._rotor_map:
+            d = neuron.esc.duty
+            if d != duties[r]:
+                duties[r] = d
+                changed = True
+        if changed:
+            plant.set_rotor_duties(duties)
+        if self._imu_on and self._imu_every():
+            r = plant.imu()
+            if self._imu_sink is not None:
+                self._imu_sink(r.gyro, r.accel, r.mag)
+            for neuron in self._imu_neurons:
+                neuron.set_imu(r.gyro, r.accel, r.mag)
+        if self._wrench_on and self._wrench_every():
+            for key, sink in self._wrench_sinks.items():
+                w = plant.wrench(key)
+                sink(w.force, w.torque)
+        if self._mocap_on and self._mocap_every():
+            d = plant.data
+            self._mocap_sink(now, d.xpos[self._foot_body].copy(), d.xquat[self._foot_body].copy())
+        if self._truth_on and self._truth_every():
+            self._truth_sink(plant.ground_truth())
+
+    @property
+    def battery_voltage(self) -> float | None:
+        """The last voltage applied."""
+        return self._voltage
