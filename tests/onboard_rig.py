@@ -75,7 +75,7 @@ class Rig:
             if isinstance(e, MessageReceived):
                 self.received.append((t, e.topic, e.message))
                 self.by_topic[e.topic].append((t, e.message))
-                if e.topic == "flight_config_cmd" and self.auto_ack:
+                if e.topic == "flight_config_cmd" and self.auto_ack and e.message.cmd <= 2:
                     ack = REG.msg("std_msgs/UInt8").new(data=e.message.cmd)
                     self.publish("flight_config_ack", ack)
         if self.spinal.configured:

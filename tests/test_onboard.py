@@ -200,6 +200,30 @@ def test_force_landing_on_demand_and_spinal_failsafe(rig: Rig) -> None:
     assert rig.node.arming.counts["spinal_force_landing"] == 1
 
 
+def test_integration_on_after_take_off_height(rig: Rig) -> None:
+    rig.servo_q = np.zeros(10)
+    t = rig.run(0.0, 0.3)
+    rig.node.set_target([0.0, 0.0, 1.0], 0.0)
+    rig.node.arm()
+    z = {"v": 0.0}
+    z_at: dict[float, float] = {}
+
+    def each(tt):
+        z["v"] += 0.002  # climbing 8 cm/s
+        z_at[round(tt, 6)] = z["v"]
+        rig.node.set_mocap([0.0, 0.0, z["v"]], [0.0, 0.0, 0.08], 0.0)
+
+    rig.run(t, t + 1.5, each=each)
+    cmds = [(tt, m.cmd) for tt, m in rig.by_topic["flight_config_cmd"]]
+    on = [tt for tt, c in cmds if c == 160]
+    armed_at = next(tt for tt, c in cmds if c == 0)
+    assert len(on) == 1 and on[0] > armed_at
+    # z at the first armed tick (ack arrives one tick after ARM_ON)
+    z_arm = z_at[round(armed_at + DT, 6)]
+    assert z_at[round(on[0], 6)] - z_arm >= 0.05 - 1e-9
+    assert z_at[round(on[0] - DT, 6)] - z_arm < 0.05
+
+
 @pytest.mark.parametrize("q", [np.zeros(10), Q_BENT])
 def test_gains_equal_scipy_at_present_q(rig: Rig, q: np.ndarray) -> None:
     rig.servo_q = q

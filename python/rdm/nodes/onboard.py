@@ -42,6 +42,8 @@ from rdm.protocol.rosserial.events import MessageReceived, SyncLost
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 from rdm.protocol.rosserial.server import PayloadTooLarge, ServerSession, TopicNotNegotiated
 
+#: ``spinal/FlightConfigCmd`` INTEGRATION_CONTROL_ON_CMD.
+INTEGRATION_CONTROL_ON = 160
 #: Topics the node publishes (Spinal subscribes).
 PUBLISHED_TOPICS = (
     "uav_info",
@@ -153,6 +155,8 @@ class OnboardNode:
         self._started = False
         self._now = 0.0
         self._last_control: float | None = None
+        self._arm_z: float | None = None
+        self.integration_on_sent = False
 
     # ------------------------------------------------------------------ inputs from outside
     def set_mocap(
@@ -255,6 +259,7 @@ class OnboardNode:
             getattr(self.arming, req)(now)
             if req == "arm":
                 self.control.reset_integrators()
+                self._arm_z, self.integration_on_sent = None, False
         self._requests.clear()
         if self.session.outbound:  # Spinal's subscribers are known: the handshake is done
             self._arming_messages(now)
@@ -438,6 +443,7 @@ class OnboardNode:
         self._mocap_lost_since = None
         assert self._mocap is not None
         p, v, yaw = self._mocap
+        self._rp_integration(float(p[2]))
         if yaw is None:
             if self.imu_euler is None:
                 self.counts["no_yaw"] += 1
@@ -450,6 +456,17 @@ class OnboardNode:
         except ValueError:
             self.counts["control_error"] += 1
             return None
+
+    def _rp_integration(self, z: float) -> None:
+        """Spinal integrates roll/pitch only after INTEGRATION_CONTROL_ON (160), which JSK
+        sends once the robot is ``start_rp_integration_height`` above its take-off height."""
+        if self.arming.state is not FlightState.ARMED or self.integration_on_sent:
+            return
+        if self._arm_z is None:
+            self._arm_z = z
+        elif z - self._arm_z >= self.config.rp_integration_height:
+            msg = self._msg["flight_config_cmd"].new(cmd=INTEGRATION_CONTROL_ON)
+            self.integration_on_sent = self._publish("flight_config_cmd", msg)
 
     def _send_gains(self) -> None:
         wire = self.control.gains_wire

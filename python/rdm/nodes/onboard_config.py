@@ -96,6 +96,9 @@ class OnboardConfig:
     info_period_s: float = 0.1
     #: ARM_ON/ARM_OFF/FORCE_LANDING re-sent this often until acked. ASSUMPTION.
     command_retry_s: float = 0.5
+    #: INTEGRATION_CONTROL_ON (160) once the mocap z is this far above the z at arming
+    #: (JSK ``start_rp_integration_height``; value an ASSUMPTION).
+    rp_integration_height: float = 0.05
     #: Mocap older than this is not used. ASSUMPTION.
     mocap_timeout_s: float = 0.2
     #: Armed without usable mocap for this long -> FORCE_LANDING. ASSUMPTION.
