@@ -247,6 +247,26 @@ def test_gains_follow_servo_states(rig: Rig) -> None:
     assert np.abs(after - before).max() > 100  # the model really moved
 
 
+def test_lqi_failure_keeps_last_good_gains(rig: Rig) -> None:
+    """In the straight vertical posture Q̄ loses rank (docs/model.md: ρ = 0), the LQI problem
+    is not stabilisable: the last good gains stay on the wire, counted; commands stay finite."""
+    from rdm.model import VERTICAL_Q
+
+    t = arm_and_fly(rig, 0.0, np.zeros(10), 0.5)
+    good = gains_of(rig.by_topic["rpy/gain"][-1][1])
+    n = len(rig.by_topic["rpy/gain"])
+    rig.servo_q = np.asarray(VERTICAL_Q, dtype=float)
+    rig.run(t, t + 0.5, each=lambda _t: rig.node.set_mocap([0, 0, 1], [0, 0, 0], 0.0))
+    o = model_at(quantized(rig.servo_q))
+    assert np.linalg.matrix_rank(o["allocation_bar"], tol=1e-9) < 4
+    assert rig.node.control.counts["lqi_failed"] >= 15
+    assert rig.node.counts["gains_kept"] == rig.node.control.counts["lqi_failed"]
+    later = rig.by_topic["rpy/gain"][n + 2 :]
+    assert len(later) >= 15 and all(np.array_equal(gains_of(m), good) for _, m in later)
+    for _, m in rig.by_topic["four_axes/command"]:
+        assert np.all(np.isfinite(m.base_thrust)) and np.all(np.isfinite(m.angles))
+
+
 def test_p_matrix_equals_numpy_pinv(rig: Rig) -> None:
     rig.servo_q = Q_BENT
     rig.run(0.0, 0.5)

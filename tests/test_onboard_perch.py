@@ -144,11 +144,14 @@ def test_bad_input_counted_never_nan_on_wire() -> None:
         node = rig.node
         # wrong-size / bad inputs from outside
         assert not node.set_joint_targets([0.1] * 4)
+        assert not node.set_joint_targets("abcdef")
         assert not node.set_target([0.0, np.nan, 1.0])
+        assert not node.set_target([0.0, 0.0, 1.0], yaw="north")
+        assert not node.set_mocap([0, 0, 1], [0, 0, 0], yaw=float("inf"))
         assert not node.set_trajectory([(1.0, np.zeros(10)), (0.5, np.zeros(10))])
         assert not node.set_trajectory([(1.0, np.zeros(7))])
-        assert node.counts["joint_targets_invalid"] == 1
-        assert node.counts["target_invalid"] == 1
+        assert node.counts["joint_targets_invalid"] == 2
+        assert node.counts["target_invalid"] == 2
         assert node.counts["trajectory_invalid"] == 2
         # servo states: an unknown index and a partial message
         rig.servo_extra = [(42, 100)]
@@ -178,7 +181,7 @@ def test_bad_input_counted_never_nan_on_wire() -> None:
         # NaN mocap: counted, command held, then FORCE_LANDING after 1 s without mocap
         held_from = len(rig.by_topic["four_axes/command"])
         t = fly(rig, t, t + 1.3, mocap=lambda _t: node.set_mocap([np.nan, 0, 1], [0, 0, 0], 0.0))
-        assert node.counts["mocap_invalid"] == 52
+        assert node.counts["mocap_invalid"] == 52 + 1
         assert node.counts["command_held"] > 30
         cmds = [m for _, m in rig.by_topic["four_axes/command"][held_from + 9 :]]
         assert all(list(c.base_thrust) == list(cmds[0].base_thrust) for c in cmds)

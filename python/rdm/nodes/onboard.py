@@ -74,6 +74,14 @@ def _vector(value: Any, n: int) -> np.ndarray | None:
     return v
 
 
+def _scalar(value: Any) -> float | None:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
+
+
 class OnboardNode:
     """The onboard PC (see the module doc). ``uart``/``foot_sensor``: byte links with
     ``read_available()`` and ``write()`` (e.g. :func:`rdm.link.serial.open_serial`)."""
@@ -166,8 +174,8 @@ class OnboardNode:
         and optionally yaw [rad]; stamped with the node's current time. Invalid -> counted,
         ignored (the last command is held)."""
         p, v = _vector(position, 3), _vector(velocity, 3)
-        y = None if yaw is None else float(yaw)
-        if p is None or v is None or (y is not None and not math.isfinite(y)):
+        y = None if yaw is None else _scalar(yaw)
+        if p is None or v is None or (yaw is not None and y is None):
             self.counts["mocap_invalid"] += 1
             return False
         self._mocap = (p, v, y)
@@ -183,17 +191,18 @@ class OnboardNode:
         """World target position [m], yaw [rad], optional velocity [m/s]."""
         p = _vector(position, 3)
         v = np.zeros(3) if velocity is None else _vector(velocity, 3)
-        if p is None or v is None or not math.isfinite(float(yaw)):
+        y = _scalar(yaw)
+        if p is None or v is None or y is None:
             self.counts["target_invalid"] += 1
             return False
-        self.setpoint = Setpoint(p, v, float(yaw))
+        self.setpoint = Setpoint(p, v, y)
         return True
 
     def set_joint_targets(self, q: Sequence[float]) -> bool:
         """Joint targets: q1..q6 (vectoring targets kept) or the full joint_order vector."""
         n_q = self.robot.n_q
-        arr = np.asarray(q, dtype=float).reshape(-1) if np.size(q) else np.zeros(0)
-        if arr.size not in (6, n_q) or not np.all(np.isfinite(arr)):
+        arr = _vector(q, 6 if np.size(q) == 6 else n_q)
+        if arr is None:
             self.counts["joint_targets_invalid"] += 1
             return False
         base = self.joint_targets if self.joint_targets is not None else self.present_q.copy()
@@ -387,8 +396,12 @@ class OnboardNode:
         ctl = self.control
         ctl.update_model(self.present_q)
         ctl.set_perching(self._perch_request)
-        if ctl.synthesize_due() and ctl.synthesize():
-            self._send_gains()
+        if ctl.synthesize_due():
+            ok = ctl.synthesize()
+            if ctl.gains_wire is not None:  # on failure the last good gains go out again
+                self._send_gains()
+            if not ok:
+                self.counts["gains_kept"] += 1
         pm = ctl.p_matrix_wire()
         if pm is not None:
             rows, inertia = pm
