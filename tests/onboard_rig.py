@@ -51,6 +51,9 @@ class Rig:
         self.foot_sent: list[tuple[float, tuple[int, ...]]] = []
         self._foot_parser = lp.LeptrinoStreamParser()
         self.t = 0.0
+        #: optional hooks: on_message(t, topic, msg) per received message; after_spin(t)
+        self.on_message = None
+        self.after_spin = None
 
     def close(self) -> None:
         self.node_link.close()
@@ -75,9 +78,13 @@ class Rig:
             if isinstance(e, MessageReceived):
                 self.received.append((t, e.topic, e.message))
                 self.by_topic[e.topic].append((t, e.message))
+                if self.on_message is not None:
+                    self.on_message(t, e.topic, e.message)
                 if e.topic == "flight_config_cmd" and self.auto_ack and e.message.cmd <= 2:
                     ack = REG.msg("std_msgs/UInt8").new(data=e.message.cmd)
                     self.publish("flight_config_ack", ack)
+        if self.after_spin is not None:
+            self.after_spin(t)
         if self.spinal.configured:
             imu = REG.msg("spinal/Imu").new(quaternion=list(self.imu_quaternion), acc=[0, 0, 9.8])
             self.publish("imu", imu)

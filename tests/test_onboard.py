@@ -153,13 +153,17 @@ def test_handshake_rates_types_md5(rig: Rig) -> None:
 
 def test_arming_waits_for_infos_and_ack(rig: Rig) -> None:
     t = rig.run(0.0, 0.3)
+    # one announcement after the handshake (so Spinal accepts gains before arming)
+    assert len(rig.by_topic["uav_info"]) == len(rig.by_topic["motor_info"]) == 1
     rig.auto_ack = False
+    t_arm = t
     rig.node.arm()
     t = rig.run(t, 1.6)
     cmds = rig.by_topic["flight_config_cmd"]
     assert cmds and all(m.cmd == 0 for _, m in cmds)
-    first_info = min(rig.by_topic["uav_info"][0][0], rig.by_topic["motor_info"][0][0])
-    assert cmds[0][0] >= first_info  # never ARM_ON before the infos
+    infos = [tt for topic in ("uav_info", "motor_info") for tt, _ in rig.by_topic[topic]]
+    after_arm = [tt for tt in infos if tt >= t_arm]
+    assert len(after_arm) >= 2 and cmds[0][0] > min(after_arm)  # ARM_ON after the infos
     assert len(cmds) >= 2  # re-sent without an ack
     assert rig.node.state.value == "starting" and not rig.by_topic["four_axes/command"]
     rig.node.set_mocap([0, 0, 0], [0, 0, 0], 0.0)

@@ -164,6 +164,7 @@ class OnboardNode:
         self._now = 0.0
         self._last_control: float | None = None
         self._arm_z: float | None = None
+        self._announced = False
         self.integration_on_sent = False
 
     # ------------------------------------------------------------------ inputs from outside
@@ -271,6 +272,13 @@ class OnboardNode:
                 self._arm_z, self.integration_on_sent = None, False
         self._requests.clear()
         if self.session.outbound:  # Spinal's subscribers are known: the handshake is done
+            if not self._announced:
+                # uav_info/motor_info once per handshake, so Spinal (motor_number > 0) accepts
+                # the gains and the pinv message before arming (assumption, docs/onboard.md)
+                self._announced = all(
+                    self._publish(topic, self._info_message(topic))
+                    for topic in ("uav_info", "motor_info")
+                )
             self._arming_messages(now)
             self._control(now)
         else:
@@ -293,6 +301,7 @@ class OnboardNode:
         if isinstance(event, SyncLost):
             self.counts["sync_lost"] += 1
             self.arming.link_lost()
+            self._announced = False
             return
         if not isinstance(event, MessageReceived):
             return
@@ -351,29 +360,33 @@ class OnboardNode:
         self.published[topic] += 1
         return True
 
+    def _info_message(self, topic: str) -> Any:
+        """``uav_info`` or ``motor_info`` from the configuration."""
+        c = self.config
+        if topic == "uav_info":
+            return self._msg[topic].new(motor_num=c.motor_num, uav_model=c.uav_model)
+        p = c.pwm_info
+        units = [
+            self._msg["motor_unit"].new(
+                voltage=float(r[0]),
+                max_thrust=float(r[1]),
+                polynominal=[float(v) for v in r[2:7]],
+            )
+            for r in p.motor_info
+        ]
+        return self._msg[topic].new(
+            min_pwm=p.min_pwm,
+            max_pwm=p.max_pwm,
+            min_thrust=p.min_thrust,
+            force_landing_thrust=p.force_landing_thrust,
+            pwm_conversion_mode=p.mode,
+            motor_info=units,
+        )
+
     def _arming_messages(self, now: float) -> None:
         for topic, cmd in self.arming.due(now):
-            if topic == "uav_info":
-                c = self.config
-                msg = self._msg[topic].new(motor_num=c.motor_num, uav_model=c.uav_model)
-            elif topic == "motor_info":
-                p = self.config.pwm_info
-                units = [
-                    self._msg["motor_unit"].new(
-                        voltage=float(r[0]),
-                        max_thrust=float(r[1]),
-                        polynominal=[float(v) for v in r[2:7]],
-                    )
-                    for r in p.motor_info
-                ]
-                msg = self._msg[topic].new(
-                    min_pwm=p.min_pwm,
-                    max_pwm=p.max_pwm,
-                    min_thrust=p.min_thrust,
-                    force_landing_thrust=p.force_landing_thrust,
-                    pwm_conversion_mode=p.mode,
-                    motor_info=units,
-                )
+            if topic in ("uav_info", "motor_info"):
+                msg = self._info_message(topic)
             else:
                 msg = self._msg[topic].new(cmd=int(cmd))
             if self._publish(topic, msg):
