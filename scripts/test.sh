@@ -20,8 +20,8 @@ echo "== python: ruff"
 "$PY" -m ruff format --check python tests
 
 echo "== python: pytest"
-# Run from tests/ against the installed wheel, not the source tree.
-"$PY" -m pytest tests -q -p no:cacheprovider --import-mode=importlib
+# Against the installed wheel: python/ is not on sys.path, tests/ is (shared test helpers).
+"$PY" -m pytest tests -q -p no:cacheprovider
 
 echo "== python: SocketCAN tests on vcan0 (VM harness)"
 # tests/vcan on a real kernel vcan0: here if the host has one, else in a small qemu VM

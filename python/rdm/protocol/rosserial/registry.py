@@ -1,7 +1,7 @@
 """Message and service types loaded from a tree of ROS package folders (``pkg/msg/*.msg``,
 ``pkg/srv/*.srv``), each with its compiled codec and its ROS md5 sum.
 
-The default tree is ``firmware_protocol/spinal/`` of the source checkout; the environment
+The default tree is ``rdm/firmware_protocol/spinal/`` inside the package; the environment
 variable ``RDM_SPINAL_MSGS`` points elsewhere (e.g. for an installed wheel).
 """
 
@@ -121,7 +121,9 @@ def spinal_msgs_dir() -> Path:
     env = os.environ.get("RDM_SPINAL_MSGS")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parents[4] / "firmware_protocol" / "spinal"
+    # firmware_protocol/ ships inside the package (the repository's top-level
+    # firmware_protocol is a link to it), so source checkouts and wheels agree.
+    return Path(__file__).resolve().parents[2] / "firmware_protocol" / "spinal"
 
 
 @lru_cache(maxsize=1)
