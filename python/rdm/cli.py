@@ -18,6 +18,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "model": ("model", "load a robot and print its mass properties, allocation and aerial ZMP"),
     "neuron": ("neuron", "run a Neuron board mirror on a CAN bus"),
     "plant": ("plant", "build the MuJoCo model of a robot; export it for MuJoCo's viewer"),
+    "spinal": ("spinal", "run a Spinal flight-controller mirror on a UART and a CAN bus"),
 }
 
 
