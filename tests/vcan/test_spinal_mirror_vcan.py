@@ -95,7 +95,7 @@ class Pc:
             self.events += [(t, e) for e in self.server.feed(data, t)]
             if until is not None and until():
                 return True
-            time.sleep(0.002)
+            time.sleep(0.005)
         return until is None
 
     def received(self, topic: str, since: float = 0.0) -> list[tuple[float, Any]]:
@@ -107,13 +107,35 @@ class Pc:
 
 
 def test_spinal_process_with_neuron_process_on_vcan0(vcan_bus):
+    # One emulated vCPU for three Python processes: the nodes tick every 5 ms (the CAN master
+    # still runs its schedule for every elapsed ms, the Neurons drain everything per tick).
+    t0 = time.monotonic()
     neuron, neuron_out = _start(
-        ["neuron", "--can", SPEC, "--slave-id", "1", "2", "3", "4", "--servos", "1"]
+        [
+            "neuron",
+            "--can",
+            SPEC,
+            "--slave-id",
+            "1",
+            "2",
+            "3",
+            "4",
+            "--servos",
+            "1",
+            "--period",
+            "0.005",
+        ]
     )
     # firmware default boot delay: the Neurons start in parallel, as on the robot
     spinal, spinal_out = _start(
-        ["spinal", "--uart", "pty", "--can", SPEC, "--boot-delay-ms", "5000"]
+        ["spinal", "--uart", "pty", "--can", SPEC, "--boot-delay-ms", "5000", "--period", "0.005"]
     )
+    phases: list[tuple[str, float]] = []
+
+    def phase(name: str) -> None:
+        phases.append((name, time.monotonic() - t0))
+        print(f"vcan spinal test: {name} at {phases[-1][1]:.1f} s", flush=True)
+
     pc = None
     frames: list[can.Message] = []
     stop_listening = threading.Event()
@@ -121,8 +143,10 @@ def test_spinal_process_with_neuron_process_on_vcan0(vcan_bus):
         t_spinal, ready = _wait_line(spinal_out, "rdm spinal: ready", 90)
         t_neuron, _ = _wait_line(neuron_out, "rdm neuron: ready", 90)
         assert t_neuron < t_spinal + 4.0, "Neurons not up before the Spinal enumerates"
+        phase("both processes ready")
         pc = Pc(f"serial:{ready.split('uart=')[1].split()[0]}")
         assert pc.run(20, until=lambda: "four_axes/command" in pc.server.outbound)
+        phase("handshake")
 
         # enumeration: servo/states for the 4 Neurons' servos, and get_board_info
         def four_servos() -> bool:
@@ -136,6 +160,7 @@ def test_spinal_process_with_neuron_process_on_vcan0(vcan_bus):
         assert pc.run(10, until=lambda: any(isinstance(e, ServiceResponse) for _, e in pc.events))
         response = next(e for _, e in pc.events if isinstance(e, ServiceResponse)).response
         assert [b.slave_id for b in response.boards] == [1, 2, 3, 4]
+        phase("enumerated")
 
         # PWM broadcast, counted on a listening socket while the PC keeps serving the UART
         listen = vcan_bus(can_filters=[{"can_id": PWM_ID, "can_mask": 0x7FF}])
@@ -153,7 +178,7 @@ def test_spinal_process_with_neuron_process_on_vcan0(vcan_bus):
         n_1s = sum(1 for m in frames if m.timestamp - frames[0].timestamp < 1.0)
         # 500 Hz nominal; the emulated guest starves the 1 kHz Python loop: generous
         assert 100 <= n_1s <= 560, n_1s
-        print(f"PWM frames in 1 s on vcan0: {n_1s}")
+        phase(f"PWM frames in 1 s on vcan0: {n_1s}")
 
         # a servo goal through the handshake: torque on, then target 2900 for servo index 0
         pc.server.publish(
@@ -169,6 +194,7 @@ def test_spinal_process_with_neuron_process_on_vcan0(vcan_bus):
             return bool(states) and abs(states[-1][1].servos[0].angle - 2900) <= 2
 
         assert pc.run(15, until=reached), pc.received("servo/states")[-1:]
+        phase("servo goal reached")
 
         # arm, fly a command stream at 40 Hz, stop it: the Spinal forces landing (ack 2)
         pwm_info = msg(
@@ -216,6 +242,7 @@ def test_spinal_process_with_neuron_process_on_vcan0(vcan_bus):
         assert pc.run(10, until=lambda: acks() == [0, 2]), acks()
         t_ack = pc.received("flight_config_ack")[-1][0]
         assert t_ack - t_stop > 0.45  # not before the 500 ms timeout (± loop jitter)
+        phase(f"force landing ack {t_ack - t_stop:.3f} s after the last command")
     finally:
         stop_listening.set()
         for proc in (spinal, neuron):

@@ -52,6 +52,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="rescale the estimator filters to the firmware's 1 kHz time constants",
     )
+    parser.add_argument(
+        "--period",
+        type=float,
+        default=0.001,
+        help="tick period, s (1 ms = the firmware's core task; longer on slow hosts: the CAN "
+        "schedule still covers every ms, in bursts)",
+    )
     parser.add_argument("--duration", type=float, default=None, help="stop after this many s")
 
 
@@ -69,6 +76,9 @@ def _open_uart(spec: str):
 def run(args: argparse.Namespace) -> int:
     if not 0 < args.rate <= MAX_RATE_HZ:
         print(f"rdm spinal: --rate must be in (0, {MAX_RATE_HZ:g}]", file=sys.stderr)
+        return 2
+    if not 0 < args.period <= 0.1:
+        print("rdm spinal: --period must be in (0, 0.1] s", file=sys.stderr)
         return 2
     if args.boot_delay_ms < 0:
         print("rdm spinal: --boot-delay-ms must be >= 0", file=sys.stderr)
@@ -88,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
         uart,
         bus,
         args.rate,
+        period=args.period,
         boot_delay_ms=args.boot_delay_ms,
         time_matched=args.time_matched,
     )

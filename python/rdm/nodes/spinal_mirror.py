@@ -138,6 +138,7 @@ class SpinalMirror:
         rate_hz: float = 200.0,
         *,
         name: str = "spinal",
+        period: float = 0.001,
         boot_delay_ms: int = BOOT_DELAY_MS,
         registry: TypeRegistry | None = None,
         layout: Any = None,
@@ -145,8 +146,12 @@ class SpinalMirror:
     ) -> None:
         if not (isinstance(rate_hz, (int, float)) and 0 < rate_hz <= MAX_RATE_HZ):
             raise ValueError(f"SpinalMirror: rate_hz {rate_hz!r} not in (0, {MAX_RATE_HZ:g}]")
+        if not (isinstance(period, (int, float)) and 0 < period <= 0.1):
+            raise ValueError(f"SpinalMirror: period {period!r} not in (0, 0.1] s")
         self.name = name
-        self.period = 0.001  # the 1 kHz core task (CAN schedule); control runs at rate_hz
+        # Wanted tick period: 1 ms is the firmware's core task. A longer one (slow hosts) still
+        # runs the CAN schedule for every elapsed ms and the control at rate_hz.
+        self.period = float(period)
         self.rate_hz = float(rate_hz)
         self.uart = UartPump(uart)
         self.master = CanMaster(can_bus, boot_delay_ms=boot_delay_ms)
