@@ -176,8 +176,16 @@ def test_spinal_process_with_neuron_process_on_vcan0(vcan_bus):
         pc.run(1.3)
         assert frames, "no PWM frame on vcan0"
         n_1s = sum(1 for m in frames if m.timestamp - frames[0].timestamp < 1.0)
-        # 500 Hz nominal; the emulated guest starves the 1 kHz Python loop: generous
-        assert 100 <= n_1s <= 560, n_1s
+        # 500 Hz nominal. One emulated vCPU (~16x slower than the host) shared by three Python
+        # processes starves the mirror's loop; the CAN schedule replays at most 50 ms per tick,
+        # so the count measures the guest's CPU more than the mirror: only a broad check here
+        # (the exact 500 Hz schedule is tested in lockstep, tests/test_spinal_mirror.py).
+        assert 25 <= n_1s <= 560, n_1s
+        decoded = [
+            nr.decode_frame(m.arbitration_id, bytes(m.data), nr.Direction.SPINAL_TO_NEURON)
+            for m in frames
+        ]
+        assert all(isinstance(f, nr.PwmFrame) and f.values[:4] == (0, 0, 0, 0) for f in decoded)
         phase(f"PWM frames in 1 s on vcan0: {n_1s}")
 
         # a servo goal through the handshake: torque on, then target 2900 for servo index 0
