@@ -192,16 +192,21 @@ def test_spinal_process_with_neuron_process_on_vcan0(vcan_bus):
         pc.server.publish(
             "servo/torque_enable", msg("spinal/ServoTorqueCmd", index=[0], torque_enable=[1])
         )
-        pc.run(1.0)
-        pc.server.publish(
-            "servo/target_states", msg("spinal/ServoControlCmd", index=[0], angles=[2900])
-        )
+        # Like servo_bridge, the PC repeats the target (every 100 ms): a target that arrives
+        # while the Neuron's goal report is pending is overwritten by that report (sec. 2.4).
+        last_target = [-1.0]
+
+        def target(now: float) -> None:
+            if now - last_target[0] >= 0.1:
+                cmd = msg("spinal/ServoControlCmd", index=[0], angles=[2900])
+                pc.server.publish("servo/target_states", cmd)
+                last_target[0] = now
 
         def reached() -> bool:
             states = pc.received("servo/states")
             return bool(states) and abs(states[-1][1].servos[0].angle - 2900) <= 2
 
-        assert pc.run(15, until=reached), pc.received("servo/states")[-1:]
+        assert pc.run(15, until=reached, every=target), pc.received("servo/states")[-1:]
         phase("servo goal reached")
 
         # arm, fly a command stream at 40 Hz, stop it: the Spinal forces landing (ack 2)
