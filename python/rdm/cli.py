@@ -17,7 +17,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "decode": ("decode", "decode a UART capture, candump log or Leptrino capture"),
     "model": ("model", "load a robot and print its mass properties, allocation and aerial ZMP"),
     "neuron": ("neuron", "run a Neuron board mirror on a CAN bus"),
+    "onboard": (
+        "onboard",
+        "run the onboard-PC node: rosserial server, 40 Hz position/perching control, LQI",
+    ),
     "plant": ("plant", "build the MuJoCo model of a robot; export it for MuJoCo's viewer"),
+    "spinal": ("spinal", "run a Spinal flight-controller mirror on a UART and a CAN bus"),
 }
 
 

@@ -1,0 +1,550 @@
+"""The onboard-PC node: rosserial server to Spinal, 40 Hz position/perching control, LQI.
+
+Paper Sec. VI-A (Fig. 6) and VII-A: the onboard processor runs the position controller and
+the perching QP at 40 Hz and talks to Spinal over a UART; Spinal runs the 200 Hz attitude
+loop with the gains the PC synthesizes. Wire facts: ``jsk-wire-protocols.md`` sec. 1, 3.7, 4, 5.
+
+Node pattern (:mod:`rdm.nodes.base`): ``tick(now)`` with the time passed in, no wall clock,
+ports drained without blocking. Per tick:
+
+1. UART bytes -> :class:`~rdm.protocol.rosserial.ServerSession` (handshake, time sync);
+   ``imu``, ``servo/states``, ``flight_config_ack``, ``battery_voltage_status`` are taken in.
+2. Foot sensor bytes -> :class:`~rdm.nodes.onboard_foot.FootSensorReader`.
+3. Arming sequence (:class:`~rdm.nodes.onboard_arming.ArmingSequencer`): ``uav_info`` /
+   ``motor_info`` every 0.1 s while starting, ARM_ON after them until ack 0, ARM_OFF,
+   FORCE_LANDING.
+4. Control (:class:`~rdm.nodes.onboard_control.ControlPipeline`) at the present q:
+   ``rpy/gain`` after each synthesis, ``p_matrix_pseudo_inverse_inertia`` every tick,
+   ``four_axes/command`` every tick while Spinal is armed, ``servo/target_states`` every tick
+   once joint targets are known.
+
+Inputs from outside (any thread-free caller between ticks): :meth:`OnboardNode.set_mocap`,
+:meth:`set_target`, :meth:`set_joint_targets`, :meth:`set_trajectory`, :meth:`request_perch`,
+:meth:`arm`, :meth:`disarm`, :meth:`force_landing`. Every input is validated; bad ones are
+counted in :attr:`OnboardNode.counts` and ignored.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from rdm.nodes.onboard_arming import ArmingSequencer, FlightState
+from rdm.nodes.onboard_config import OnboardConfig
+from rdm.nodes.onboard_control import ControlCommand, ControlPipeline, Setpoint, State
+from rdm.nodes.onboard_foot import ByteLink, FootSensorReader
+from rdm.protocol.rosserial.codec import RosTime
+from rdm.protocol.rosserial.events import MessageReceived, SyncLost
+from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
+from rdm.protocol.rosserial.server import PayloadTooLarge, ServerSession, TopicNotNegotiated
+
+#: ``spinal/FlightConfigCmd`` INTEGRATION_CONTROL_ON_CMD.
+INTEGRATION_CONTROL_ON = 160
+#: Topics the node publishes (Spinal subscribes).
+PUBLISHED_TOPICS = (
+    "uav_info",
+    "motor_info",
+    "flight_config_cmd",
+    "four_axes/command",
+    "rpy/gain",
+    "p_matrix_pseudo_inverse_inertia",
+    "servo/target_states",
+)
+
+
+def quaternion_to_euler(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (ZYX) of a unit quaternion."""
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def _vector(value: Any, n: int) -> np.ndarray | None:
+    try:
+        v = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        return None
+    if v.shape != (n,) or not np.all(np.isfinite(v)):
+        return None
+    return v
+
+
+def _scalar(value: Any) -> float | None:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
+
+
+class OnboardNode:
+    """The onboard PC (see the module doc). ``uart``/``foot_sensor``: byte links with
+    ``read_available()`` and ``write()`` (e.g. :func:`rdm.link.serial.open_serial`)."""
+
+    name = "onboard"
+
+    def __init__(
+        self,
+        uart: ByteLink,
+        foot_sensor: ByteLink | None = None,
+        robot: Any = None,
+        rate_hz: float | None = None,
+        *,
+        config: OnboardConfig | None = None,
+        time_source: Callable[[float], RosTime] | None = None,
+        registry: TypeRegistry | None = None,
+    ) -> None:
+        if robot is None:
+            from rdm.model import Robot
+
+            robot = Robot.default()
+        if config is None:
+            config = OnboardConfig() if rate_hz is None else OnboardConfig(rate_hz=rate_hz)
+        elif rate_hz is not None and rate_hz != config.rate_hz:
+            raise ValueError("rate_hz given twice (argument and config) with different values")
+        self.config = config
+        self.period = 1.0 / config.rate_hz
+        self.robot = robot
+        self.uart = uart
+        reg = registry or spinal_registry()
+        kwargs = {} if time_source is None else {"time_source": time_source}
+        self.session = ServerSession(reg, **kwargs)
+        self._msg = {
+            t: reg.msg(n)
+            for t, n in (
+                ("uav_info", "spinal/UavInfo"),
+                ("motor_info", "spinal/PwmInfo"),
+                ("motor_unit", "spinal/MotorInfo"),
+                ("flight_config_cmd", "spinal/FlightConfigCmd"),
+                ("four_axes/command", "spinal/FourAxisCommand"),
+                ("rpy/gain", "spinal/RollPitchYawTerms"),
+                ("rpy_term", "spinal/RollPitchYawTerm"),
+                ("p_matrix_pseudo_inverse_inertia", "spinal/PMatrixPseudoInverseWithInertia"),
+                ("pinv_unit", "spinal/PMatrixPseudoInverseUnit"),
+                ("servo/target_states", "spinal/ServoControlCmd"),
+            )
+        }
+        self.arming = ArmingSequencer(config.info_period_s, config.command_retry_s)
+        self.control = ControlPipeline(robot, config)
+        self.foot = (
+            None
+            if foot_sensor is None
+            else FootSensorReader(
+                foot_sensor,
+                config.foot_sensor_model,
+                config.foot_sensor_offset,
+                config.foot_restart_s,
+            )
+        )
+        self.counts: Counter[str] = Counter()
+        self.published: Counter[str] = Counter()
+        self.bytes_written = 0
+        n_q = robot.n_q
+        self.present_q = config.initial_joint_vector(n_q)
+        self._seen = np.zeros(n_q, dtype=bool)
+        self.joint_targets: np.ndarray | None = None
+        self._trajectory: tuple[np.ndarray, np.ndarray] | None = None
+        self.setpoint = Setpoint(np.zeros(3), np.zeros(3), 0.0)
+        self._mocap: tuple[np.ndarray, np.ndarray, float | None] | None = None
+        self._mocap_stamp: float | None = None
+        self._mocap_lost_since: float | None = None
+        self.imu_euler: tuple[float, float, float] | None = None
+        self.imu_gyro: np.ndarray | None = None
+        self.battery_voltage: float | None = None
+        self.last_command: ControlCommand | None = None
+        self.last_alpha_beta: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+        self._requests: list[str] = []
+        self._perch_request = False
+        self._started = False
+        self._now = 0.0
+        self._last_control: float | None = None
+        self._arm_z: float | None = None
+        self._announced = False
+        self.integration_on_sent = False
+
+    # ------------------------------------------------------------------ inputs from outside
+    def set_mocap(
+        self, position: Sequence[float], velocity: Sequence[float], yaw: float | None = None
+    ) -> bool:
+        """Motion-capture (or ground-truth) world position/velocity of the controlled point
+        and optionally yaw [rad]; stamped with the node's current time. Invalid -> counted,
+        ignored (the last command is held)."""
+        p, v = _vector(position, 3), _vector(velocity, 3)
+        y = None if yaw is None else _scalar(yaw)
+        if p is None or v is None or (yaw is not None and y is None):
+            self.counts["mocap_invalid"] += 1
+            return False
+        self._mocap = (p, v, y)
+        self._mocap_stamp = self._now
+        return True
+
+    def set_target(
+        self,
+        position: Sequence[float],
+        yaw: float = 0.0,
+        velocity: Sequence[float] | None = None,
+    ) -> bool:
+        """World target position [m], yaw [rad], optional velocity [m/s]."""
+        p = _vector(position, 3)
+        v = np.zeros(3) if velocity is None else _vector(velocity, 3)
+        y = _scalar(yaw)
+        if p is None or v is None or y is None:
+            self.counts["target_invalid"] += 1
+            return False
+        self.setpoint = Setpoint(p, v, y)
+        return True
+
+    def set_joint_targets(self, q: Sequence[float]) -> bool:
+        """Joint targets: q1..q6 (vectoring targets kept) or the full joint_order vector."""
+        n_q = self.robot.n_q
+        arr = _vector(q, 6 if np.size(q) == 6 else n_q)
+        if arr is None:
+            self.counts["joint_targets_invalid"] += 1
+            return False
+        base = self.joint_targets if self.joint_targets is not None else self.present_q.copy()
+        base = base.copy()
+        base[: arr.size] = arr
+        self.joint_targets = base
+        self._trajectory = None
+        return True
+
+    def set_trajectory(self, points: Sequence[tuple[float, Sequence[float]]]) -> bool:
+        """Planner output: (node time [s], full joint_order q) pairs, strictly increasing
+        times; targets are interpolated linearly and held after the last point."""
+        try:
+            times = np.array([float(t) for t, _ in points])
+            qs = np.array([np.asarray(q, dtype=float).reshape(-1) for _, q in points])
+        except (TypeError, ValueError):
+            self.counts["trajectory_invalid"] += 1
+            return False
+        if (
+            times.size == 0
+            or qs.shape != (times.size, self.robot.n_q)
+            or not (np.all(np.isfinite(times)) and np.all(np.isfinite(qs)))
+            or np.any(np.diff(times) <= 0)
+        ):
+            self.counts["trajectory_invalid"] += 1
+            return False
+        self._trajectory = (times, qs)
+        return True
+
+    def request_perch(self, on: bool = True) -> None:
+        """Switch between flight mode and perching mode (eq. 20's λ_perch on/off)."""
+        self._perch_request = bool(on)
+
+    def arm(self) -> None:
+        self._requests.append("arm")
+
+    def disarm(self) -> None:
+        self._requests.append("disarm")
+
+    def force_landing(self) -> None:
+        self._requests.append("force_landing")
+
+    # ---------------------------------------------------------------------------- tick
+    def tick(self, now: float) -> None:
+        """Advance to ``now`` (s): UART in, foot sensor, arming, control, UART out."""
+        if not math.isfinite(now) or (self._started and now < self._now):
+            self.counts["bad_time"] += 1
+            return
+        self._now = now
+        if not self._started:
+            self.session.start(now)
+            self._started = True
+        try:
+            data = self.uart.read_available()
+        except OSError:
+            self.counts["uart_read_error"] += 1
+            data = b""
+        for event in self.session.feed(data, now):
+            self._on_event(event)
+        if self.foot is not None:
+            self.foot.poll(now)
+        for req in self._requests:
+            getattr(self.arming, req)(now)
+            if req == "arm":
+                self.control.reset_integrators()
+                self._arm_z, self.integration_on_sent = None, False
+        self._requests.clear()
+        if self.session.outbound:  # Spinal's subscribers are known: the handshake is done
+            if not self._announced:
+                # uav_info/motor_info once per handshake, so Spinal (motor_number > 0) accepts
+                # the gains and the pinv message before arming (assumption, docs/onboard.md)
+                self._announced = all(
+                    self._publish(topic, self._info_message(topic))
+                    for topic in ("uav_info", "motor_info")
+                )
+            self._arming_messages(now)
+            self._control(now)
+        else:
+            self.counts["waiting_for_handshake"] += 1
+        self.session.poll(now)
+        out = self.session.take_output()
+        if out:
+            try:
+                self.bytes_written += self.uart.write(out)
+            except OSError:
+                self.counts["uart_write_error"] += 1
+
+    def close(self) -> None:
+        """Stop the foot sensor stream (the ports belong to the caller)."""
+        if self.foot is not None:
+            self.foot.stop()
+
+    # ------------------------------------------------------------------------ receiving
+    def _on_event(self, event: Any) -> None:
+        if isinstance(event, SyncLost):
+            self.counts["sync_lost"] += 1
+            self.arming.link_lost()
+            self._announced = False
+            return
+        if not isinstance(event, MessageReceived):
+            return
+        msg = event.message
+        self.counts[f"rx:{event.topic}"] += 1
+        if event.topic == "imu":
+            q = [float(v) for v in msg.quaternion]
+            if not all(math.isfinite(v) for v in q) or abs(math.fsum(v * v for v in q) - 1) > 0.1:
+                self.counts["imu_invalid"] += 1
+                return
+            x, y, z, w = q
+            self.imu_euler = quaternion_to_euler(x, y, z, w)
+            g = _vector(msg.gyro, 3)
+            if g is not None:
+                self.imu_gyro = g
+        elif event.topic == "servo/states":
+            self._on_servo_states(msg)
+        elif event.topic == "flight_config_ack":
+            before = self.arming.state
+            self.arming.on_ack(int(msg.data))
+            if before is not FlightState.ARMED and self.arming.state is FlightState.ARMED:
+                self.control.reset_integrators()
+        elif event.topic == "battery_voltage_status":
+            v = float(msg.data)
+            if math.isfinite(v):
+                self.battery_voltage = v
+            else:
+                self.counts["battery_invalid"] += 1
+
+    def _on_servo_states(self, msg: Any) -> None:
+        smap = self.config.servo_map
+        covered = set()
+        for s in msg.servos:
+            joint = smap.joint_of(int(s.index))
+            if joint is None or joint >= self.robot.n_q:
+                self.counts["servo_unknown_index"] += 1
+                continue
+            self.present_q[joint] = smap.to_rad(joint, int(s.angle))
+            self._seen[joint] = True
+            covered.add(joint)
+        if len(covered) != self.robot.n_q:
+            self.counts["servo_states_partial"] += 1
+        if self.joint_targets is None and self._trajectory is None and self._seen.all():
+            self.joint_targets = self.present_q.copy()  # hold where the arm is
+
+    # ------------------------------------------------------------------------- sending
+    def _publish(self, topic: str, msg: Any) -> bool:
+        try:
+            self.session.publish(topic, msg)
+        except TopicNotNegotiated:
+            self.counts[f"not_negotiated:{topic}"] += 1
+            return False
+        except PayloadTooLarge:
+            self.counts[f"too_large:{topic}"] += 1
+            return False
+        self.published[topic] += 1
+        return True
+
+    def _info_message(self, topic: str) -> Any:
+        """``uav_info`` or ``motor_info`` from the configuration."""
+        c = self.config
+        if topic == "uav_info":
+            return self._msg[topic].new(motor_num=c.motor_num, uav_model=c.uav_model)
+        p = c.pwm_info
+        units = [
+            self._msg["motor_unit"].new(
+                voltage=float(r[0]),
+                max_thrust=float(r[1]),
+                polynominal=[float(v) for v in r[2:7]],
+            )
+            for r in p.motor_info
+        ]
+        return self._msg[topic].new(
+            min_pwm=p.min_pwm,
+            max_pwm=p.max_pwm,
+            min_thrust=p.min_thrust,
+            force_landing_thrust=p.force_landing_thrust,
+            pwm_conversion_mode=p.mode,
+            motor_info=units,
+        )
+
+    def _arming_messages(self, now: float) -> None:
+        for topic, cmd in self.arming.due(now):
+            if topic in ("uav_info", "motor_info"):
+                msg = self._info_message(topic)
+            else:
+                msg = self._msg[topic].new(cmd=int(cmd))
+            if self._publish(topic, msg):
+                self.arming.sent(topic, now)
+
+    def _current_joint_targets(self, now: float) -> np.ndarray | None:
+        if self._trajectory is not None:
+            times, qs = self._trajectory
+            return np.array([np.interp(now, times, qs[:, j]) for j in range(qs.shape[1])])
+        return self.joint_targets
+
+    def _mocap_usable(self, now: float) -> bool:
+        return (
+            self._mocap is not None
+            and self._mocap_stamp is not None
+            and now - self._mocap_stamp <= self.config.mocap_timeout_s
+        )
+
+    def _control(self, now: float) -> None:
+        ctl = self.control
+        ctl.update_model(self.present_q)
+        ctl.set_perching(self._perch_request)
+        if ctl.synthesize_due():
+            ok = ctl.synthesize()
+            if ctl.gains_wire is not None:  # on failure the last good gains go out again
+                self._send_gains()
+            if not ok:
+                self.counts["gains_kept"] += 1
+        pm = ctl.p_matrix_wire()
+        if pm is not None:
+            rows, inertia = pm
+            unit = self._msg["pinv_unit"]
+            self._publish(
+                "p_matrix_pseudo_inverse_inertia",
+                self._msg["p_matrix_pseudo_inverse_inertia"].new(
+                    pseudo_inverse=[unit.new(r=r, p=p, y=y) for r, p, y in rows],
+                    inertia=inertia,
+                ),
+            )
+        targets = self._current_joint_targets(now)
+        dt = self.period
+        if self._last_control is not None:
+            measured = now - self._last_control
+            if 0 < measured <= 3 * self.period:
+                dt = measured
+            else:
+                self.counts["dt_irregular"] += 1
+        self._last_control = now
+        command = None
+        if self.arming.flying:
+            command = self._flight_step(now, targets, dt)
+        if command is not None:
+            self.last_command = command
+            self.last_alpha_beta = (command.alpha, command.beta)
+        if self.arming.flying and self.last_command is not None:
+            c = self.last_command
+            self._publish(
+                "four_axes/command",
+                self._msg["four_axes/command"].new(
+                    angles=list(c.angles), base_thrust=[float(v) for v in c.base_thrust]
+                ),
+            )
+        if targets is not None:
+            self._send_servo_targets(targets)
+
+    def _flight_step(
+        self, now: float, targets: np.ndarray | None, dt: float
+    ) -> ControlCommand | None:
+        if not self._mocap_usable(now):
+            self.counts["command_held"] += 1
+            if self._mocap_lost_since is None:
+                self._mocap_lost_since = now
+            elif (
+                now - self._mocap_lost_since >= self.config.mocap_loss_force_landing_s
+                and self.arming.state is FlightState.ARMED
+            ):
+                self.counts["mocap_lost_force_landing"] += 1
+                self.arming.force_landing(now)
+            return None
+        self._mocap_lost_since = None
+        assert self._mocap is not None
+        p, v, yaw = self._mocap
+        self._rp_integration(float(p[2]))
+        if yaw is None:
+            if self.imu_euler is None:
+                self.counts["no_yaw"] += 1
+                return None
+            yaw = self.imu_euler[2]
+        jt = targets if targets is not None else self.present_q
+        foot = None if self.foot is None else self.foot.latest(now, self.config.foot_timeout_s)
+        try:
+            return self.control.step(State(p, v, yaw), self.setpoint, jt, foot, dt)
+        except ValueError:
+            self.counts["control_error"] += 1
+            return None
+
+    def _rp_integration(self, z: float) -> None:
+        """Spinal integrates roll/pitch only after INTEGRATION_CONTROL_ON (160), which JSK
+        sends once the robot is ``start_rp_integration_height`` above its take-off height."""
+        if self.arming.state is not FlightState.ARMED or self.integration_on_sent:
+            return
+        if self._arm_z is None:
+            self._arm_z = z
+        elif z - self._arm_z >= self.config.rp_integration_height:
+            msg = self._msg["flight_config_cmd"].new(cmd=INTEGRATION_CONTROL_ON)
+            self.integration_on_sent = self._publish("flight_config_cmd", msg)
+
+    def _send_gains(self) -> None:
+        wire = self.control.gains_wire
+        assert wire is not None
+        term = self._msg["rpy_term"]
+        names = ("roll_p", "roll_i", "roll_d", "pitch_p", "pitch_i", "pitch_d", "yaw_d")
+        motors = [term.new(**{k: int(v) for k, v in zip(names, row, strict=True)}) for row in wire]
+        self._publish("rpy/gain", self._msg["rpy/gain"].new(motors=motors))
+
+    def _send_servo_targets(self, targets: np.ndarray) -> None:
+        q = np.array(targets, dtype=float)
+        if self.arming.flying and self.last_alpha_beta is not None:
+            alpha, beta = self.last_alpha_beta
+            for i, (ja, jb) in enumerate(self.control.vectoring_joints):
+                q[ja], q[jb] = alpha[i], beta[i]
+        smap = self.config.servo_map
+        n = min(smap.n_joints, q.size)
+        self._publish(
+            "servo/target_states",
+            self._msg["servo/target_states"].new(
+                index=[smap.servo_index[j] for j in range(n)],
+                angles=[smap.to_raw(j, float(q[j])) for j in range(n)],
+            ),
+        )
+
+    # ---------------------------------------------------------------------- diagnostics
+    @property
+    def state(self) -> FlightState:
+        return self.arming.state
+
+    def status(self) -> dict[str, Any]:
+        """Counters and the latest values, JSON-friendly."""
+        c = self.last_command
+        return {
+            "time": self._now,
+            "flight_state": self.arming.state.value,
+            "perching": self.control.perching,
+            "negotiated": sorted(self.session.outbound),
+            "published": dict(self.published),
+            "counts": dict(self.counts),
+            "session": dict(self.session.counts),
+            "arming": dict(self.arming.counts),
+            "control": dict(self.control.counts),
+            "foot": {} if self.foot is None else dict(self.foot.counts),
+            "present_q": self.present_q.tolist(),
+            "battery_voltage": self.battery_voltage,
+            "command": None
+            if c is None
+            else {
+                "angles": list(c.angles),
+                "base_thrust": c.base_thrust.tolist(),
+                "perch_thrust": c.perch_thrust.tolist(),
+                "perch_status": None if c.perch is None else c.perch.status,
+            },
+        }

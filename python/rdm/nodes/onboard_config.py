@@ -1,0 +1,162 @@
+# ruff: noqa: RUF003  (paper notation: Greek letters, minus and times signs)
+"""Parameters of the onboard-PC node (:mod:`rdm.nodes.onboard`) and the servo index/unit map.
+
+Everything the paper does not give is an ASSUMPTION named in ``docs/onboard.md``; every field
+is configurable here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rdm.pwm import HYDRUS_MOTOR_INFO, SQRT_MODE
+
+#: Dynamixel X: 4096 ticks per turn, centre 2048 (``JointProfile.angle_scale`` /
+#: ``zero_point_offset`` of JSK's servo_bridge).
+DYNAMIXEL_RAD_PER_TICK = 2.0 * math.pi / 4096.0
+DYNAMIXEL_ZERO = 2048
+
+
+@dataclass(frozen=True)
+class ServoMap:
+    """Joint (model ``joint_order`` index) <-> servo index and raw ticks.
+
+    ``q = angle_sign * (raw - zero_point) * angle_scale`` (JSK ``servo_bridge`` convention).
+    ASSUMPTION: joint j is servo index ``servo_index[j]`` (default j), all servos Dynamixel X.
+    """
+
+    servo_index: tuple[int, ...] = tuple(range(10))
+    zero_point: tuple[int, ...] = (DYNAMIXEL_ZERO,) * 10
+    angle_scale: tuple[float, ...] = (DYNAMIXEL_RAD_PER_TICK,) * 10
+    angle_sign: tuple[int, ...] = (1,) * 10
+
+    def __post_init__(self) -> None:
+        n = len(self.servo_index)
+        if not (len(self.zero_point) == len(self.angle_scale) == len(self.angle_sign) == n):
+            raise ValueError("ServoMap: servo_index, zero_point, angle_scale, angle_sign differ")
+        if len(set(self.servo_index)) != n:
+            raise ValueError("ServoMap: servo_index has duplicates")
+        if any(s not in (-1, 1) for s in self.angle_sign):
+            raise ValueError("ServoMap: angle_sign must be +1 or -1")
+        if any(not (math.isfinite(k) and k > 0) for k in self.angle_scale):
+            raise ValueError("ServoMap: angle_scale must be finite and > 0")
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.servo_index)
+
+    def joint_of(self, servo_index: int) -> int | None:
+        """The joint a servo index drives, or None."""
+        try:
+            return self.servo_index.index(servo_index)
+        except ValueError:
+            return None
+
+    def to_rad(self, joint: int, raw: int) -> float:
+        return self.angle_sign[joint] * (raw - self.zero_point[joint]) * self.angle_scale[joint]
+
+    def to_raw(self, joint: int, q: float) -> int:
+        """Nearest tick, saturated to int16 (the wire type)."""
+        raw = round(self.zero_point[joint] + self.angle_sign[joint] * q / self.angle_scale[joint])
+        return max(-32768, min(32767, raw))
+
+
+@dataclass(frozen=True)
+class PwmInfoParams:
+    """``spinal/PwmInfo`` sent on ``motor_info``: the Hydrus quad example (fact sheet 3.6)."""
+
+    min_pwm: float = 0.59
+    max_pwm: float = 0.9375
+    min_thrust: float = 1.0
+    force_landing_thrust: float = 6.5
+    mode: int = SQRT_MODE
+    #: rows: voltage, max_thrust, p0..p4
+    motor_info: tuple[tuple[float, ...], ...] = tuple(tuple(r) for r in HYDRUS_MOTOR_INFO)
+
+
+@dataclass(frozen=True)
+class OnboardConfig:
+    """All tunables of the onboard node (defaults: paper where it says, else assumptions)."""
+
+    #: Position/perching control rate (paper Sec. VII-A: 40 Hz).
+    rate_hz: float = 40.0
+    #: LQI synthesis every ``lqi_every`` control ticks (1 = every tick; JSK uses 15 Hz).
+    lqi_every: int = 1
+    #: Table V weights (None = the core's defaults, JSK order; see docs/lqi.md).
+    lqi_q_weights: tuple[float, ...] | None = None
+    lqi_r_weights: tuple[float, ...] | None = None
+    #: ``spinal/UavInfo``: 4 motors, HYDRUS (under-actuated multilink) model. ASSUMPTION.
+    motor_num: int = 4
+    uav_model: int = 16
+    pwm_info: PwmInfoParams = field(default_factory=PwmInfoParams)
+    #: ``uav_info``/``motor_info`` period while starting (JSK ``activate()``: 0.1 s).
+    info_period_s: float = 0.1
+    #: ARM_ON/ARM_OFF/FORCE_LANDING re-sent this often until acked. ASSUMPTION.
+    command_retry_s: float = 0.5
+    #: INTEGRATION_CONTROL_ON (160) once the mocap z is this far above the z at arming
+    #: (JSK ``start_rp_integration_height``; value an ASSUMPTION).
+    rp_integration_height: float = 0.05
+    #: Mocap older than this is not used. ASSUMPTION.
+    mocap_timeout_s: float = 0.2
+    #: Armed without usable mocap for this long -> FORCE_LANDING. ASSUMPTION.
+    mocap_loss_force_landing_s: float = 1.0
+    #: Altitude feed-forward: "hover" = least-squares thrust for m g (pinv(Q̄)[m g,0,0,0]),
+    #: "none" = the paper's eq. (29) (integral takes gravity). ASSUMPTION: hover.
+    feed_forward: str = "hover"
+    #: base_thrust clipped to [0, thrust_max of the robot's rotors]. ASSUMPTION.
+    clip_base_thrust: bool = True
+    #: Vectoring angles from eqs. (33)-(36) (True) or the joint targets only (False).
+    vectoring: bool = True
+    #: Eqs. (33)-(34) are singular when the thrust direction is near the parent link's x axis
+    #: (|n_z| in the link frame below this): fall back to the α/β targets. ASSUMPTION.
+    vectoring_min_nz: float = 0.2
+    #: Position-controller keyword overrides (rdm.control.position.PositionController).
+    position_gains: dict = field(default_factory=dict)
+    #: Perching QP parameters over Table VII (rdm.control.perch.PerchController).
+    perch_params: dict = field(default_factory=dict)
+    #: Foot wrench IIR cut-off (Sec. VII-B: 1 Hz).
+    perch_cutoff_hz: float = 1.0
+    #: Foot samples older than this are not used (perching gets the safe command). ASSUMPTION.
+    foot_timeout_s: float = 0.1
+    #: DATA_START re-sent if no sample for this long. ASSUMPTION.
+    foot_restart_s: float = 1.0
+    #: Leptrino model of the foot sensor (Sec. VI-B: CFS034CA301U).
+    foot_sensor_model: str = "CFS034CA301U"
+    #: Raw offset subtracted before conversion (tare). ASSUMPTION: zero (calibrated sensor).
+    foot_sensor_offset: tuple[float, ...] = (0.0,) * 6
+    servo_map: ServoMap = field(default_factory=ServoMap)
+    #: q before the first servo/states (joint_order). ASSUMPTION: zeros (arm straight).
+    initial_q: tuple[float, ...] | None = None
+    gravity: float = 9.80665
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise ValueError(f"rate_hz={self.rate_hz!r} must be finite and > 0")
+        if not (isinstance(self.lqi_every, int) and self.lqi_every >= 1):
+            raise ValueError(f"lqi_every={self.lqi_every!r} must be an int >= 1")
+        if self.feed_forward not in ("hover", "none"):
+            raise ValueError(f"feed_forward={self.feed_forward!r}: 'hover' or 'none'")
+        for name in (
+            "info_period_s",
+            "command_retry_s",
+            "mocap_timeout_s",
+            "mocap_loss_force_landing_s",
+            "foot_timeout_s",
+            "foot_restart_s",
+        ):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name}={v!r} must be finite and > 0")
+        if len(self.foot_sensor_offset) != 6:
+            raise ValueError("foot_sensor_offset needs 6 values")
+
+    def initial_joint_vector(self, n_q: int) -> np.ndarray:
+        if self.initial_q is None:
+            return np.zeros(n_q)
+        q = np.asarray(self.initial_q, dtype=float)
+        if q.shape != (n_q,) or not np.all(np.isfinite(q)):
+            raise ValueError(f"initial_q must be {n_q} finite values")
+        return q

@@ -1,0 +1,299 @@
+# ruff: noqa: RUF002  (paper notation: Greek letters, minus and times signs)
+"""The 40 Hz control pipeline of the onboard node, without any I/O (paper Sec. IV, Fig. 6).
+
+Per tick, at the PRESENT joint angles q (from ``servo/states``):
+
+1. model: m, I(q), Q̄(q) (rows f_z, m_x, m_y, m_z, CoG frame), Q̄_foot(q) (same rows about the
+   foot origin), the vectoring units' parent rotations, the hover thrust;
+2. LQI synthesis (eqs. 21-27, warm-started) every ``lqi_every`` ticks -> per-rotor gains (the
+   last good ones are kept when it fails);
+3. position control (eqs. 30-36) -> φ_d, θ_d and the vectoring angles α_i, β_i;
+4. PC-side axes (JSK sec. 4): base thrust = z P/I/D + feed-forward, yaw P/I -> ``angles[2]``;
+5. perching (eqs. 37-49, Sec. VII-B filter) -> λ_perch added to the base thrust (eq. 20).
+
+Every failure is counted in :attr:`ControlPipeline.counts`; outputs are always finite.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from rdm.control.attitude import gains_to_wire_terms
+from rdm.control.lqi import LqiSynthesizer, PcAxisController, gyro_compensation
+from rdm.control.perch import PerchController, PerchResult
+from rdm.control.position import PositionController
+from rdm.nodes.onboard_config import OnboardConfig
+
+INT16_MIN, INT16_MAX = -32768, 32767
+
+
+def to_wire(value: float) -> tuple[int, bool]:
+    """Spinal's ``x * 1000`` int16 (truncated toward zero as the C++ cast, saturated);
+    returns (value, saturated)."""
+    scaled = math.trunc(value * 1000.0)
+    clipped = max(INT16_MIN, min(INT16_MAX, scaled))
+    return clipped, clipped != scaled
+
+
+def wrap_angle(a: float) -> float:
+    """To (-π, π]."""
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+def foot_allocation(allocation: np.ndarray, foot_in_cog: np.ndarray) -> np.ndarray:
+    """Q̄_foot (4 x N): rows f_z, m_x, m_y, m_z of the wrench unit thrusts produce about the
+    foot origin, foot axes (= CoG axes, Sec. III). ``allocation`` is the full 6 x N Q(q);
+    M_foot = M_C − p_foot × F with p_foot the foot origin in the CoG frame."""
+    full = np.asarray(allocation, dtype=float)
+    p_foot = np.asarray(foot_in_cog, dtype=float)[:3, 3]
+    moments = full[3:6] - np.cross(p_foot, full[0:3].T).T
+    return np.vstack([full[2], moments])
+
+
+@dataclass(frozen=True)
+class ModelTerms:
+    """Model quantities at one q."""
+
+    q: np.ndarray
+    mass: float
+    inertia: np.ndarray
+    allocation: np.ndarray  # 6 x N, CoG frame
+    allocation_bar: np.ndarray  # 4 x N
+    foot_allocation: np.ndarray  # 4 x N about the foot origin
+    link_rotations: np.ndarray  # (N_VECTORING, 3, 3): eq. (36)'s R_i = (C<-L_i)^T
+    hover_thrust: np.ndarray
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    position: np.ndarray  # world x, y, z
+    velocity: np.ndarray
+    yaw: float
+
+
+@dataclass(frozen=True)
+class State:
+    position: np.ndarray
+    velocity: np.ndarray
+    yaw: float
+
+
+@dataclass(frozen=True)
+class ControlCommand:
+    """Everything one tick sends."""
+
+    angles: tuple[float, float, float]  # roll target, pitch target, yaw term
+    base_thrust: np.ndarray
+    flight_thrust: np.ndarray  # z P/I/D + feed-forward (before eq. 20's λ_perch)
+    perch_thrust: np.ndarray
+    perch: PerchResult | None
+    alpha: tuple[float, ...]
+    beta: tuple[float, ...]
+    vectoring_applied: tuple[bool, ...]
+    yaw_rotor: int | None
+
+
+class ControlPipeline:
+    """Model, LQI, position, PC axes and perching for one robot (no I/O)."""
+
+    def __init__(self, robot, config: OnboardConfig) -> None:
+        self.robot = robot
+        self.config = config
+        self.counts: Counter[str] = Counter()
+        names = list(robot.joint_names)
+        units = robot.vectoring_units
+        self.vectoring_joints = [
+            (names.index(u["roll_joint"]), names.index(u["pitch_joint"])) for u in units
+        ]
+        self.thrust_max = np.array([r["thrust_max"] for r in robot.rotors], dtype=float)
+        self.lqi = LqiSynthesizer(
+            None if config.lqi_q_weights is None else np.array(config.lqi_q_weights),
+            None if config.lqi_r_weights is None else np.array(config.lqi_r_weights),
+            clamp_gain=True,
+        )
+        self.position = PositionController(**config.position_gains)
+        self.pc_axes = PcAxisController()
+        # λ_rotor_max of eq. (47) defaults to the robot's rotor limit (assumption)
+        perch_params = {"rotor_thrust_max": list(self.thrust_max), **config.perch_params}
+        self.perch = PerchController(config.rate_hz, config.perch_cutoff_hz, **perch_params)
+        self._delta_perch = np.asarray(self.perch.params()["thrust_rate_limit"], dtype=float)
+        self.terms: ModelTerms | None = None
+        self.gains: np.ndarray | None = None  # (N, 4, 3)
+        self.gains_wire: np.ndarray | None = None  # (N, 7) int16
+        self.lqi_result = None
+        self.perching = False
+        self.perch_thrust = np.zeros(robot.n_rotors)
+        self._ticks = 0
+
+    # -- 1. model ------------------------------------------------------------------------
+    def update_model(self, q: np.ndarray) -> bool:
+        """Evaluate the model at q; on failure keep the last terms (counted)."""
+        try:
+            o = self.robot.evaluate(q)
+        except ValueError:
+            self.counts["model_error"] += 1
+            return False
+        qbar = np.asarray(o["allocation_bar"], dtype=float)
+        full = np.asarray(o["allocation"], dtype=float)
+        qfoot = foot_allocation(full, np.asarray(o["foot_in_cog"], dtype=float))
+        rotations = np.array([np.asarray(r).T for r in o["unit_parent_rotations"]])
+        g = self.config.gravity
+        hover = np.linalg.lstsq(qbar, [o["mass"] * g, 0.0, 0.0, 0.0], rcond=None)[0]
+        if not (np.all(np.isfinite(qbar)) and np.all(np.isfinite(hover))):
+            self.counts["model_non_finite"] += 1
+            return False
+        self.terms = ModelTerms(
+            np.array(q, dtype=float),
+            float(o["mass"]),
+            np.asarray(o["inertia"], dtype=float),
+            full,
+            qbar,
+            qfoot,
+            rotations,
+            hover,
+        )
+        return True
+
+    # -- 2. LQI --------------------------------------------------------------------------
+    def synthesize_due(self) -> bool:
+        return self._ticks % self.config.lqi_every == 0
+
+    def synthesize(self) -> bool:
+        """LQI gains at the current model; on failure keep the last good ones (counted)."""
+        t = self.terms
+        if t is None:
+            return False
+        try:
+            res = self.lqi.synthesize(t.mass, t.inertia, t.allocation_bar)
+            wire = np.asarray(gains_to_wire_terms(res.gains), dtype=np.int16)
+        except ValueError:
+            self.counts["lqi_failed"] += 1
+            self.lqi.reset()  # next attempt is cold
+            return False
+        if not np.all(np.isfinite(res.gains)):
+            self.counts["lqi_failed"] += 1
+            return False
+        self.counts["lqi_ok"] += 1
+        if res.fell_back:
+            self.counts["lqi_fell_back"] += 1
+        if any(s != 1.0 for s in res.clamp_scales):
+            self.counts["gain_clamped"] += 1
+        self.lqi_result = res
+        self.gains = np.asarray(res.gains, dtype=float)
+        self.gains_wire = wire
+        return True
+
+    def p_matrix_wire(self) -> tuple[list[tuple[int, int, int]], list[int]] | None:
+        """``p_matrix_pseudo_inverse_inertia``: pinv(Q̄) columns r, p, y per rotor and the
+        inertia xx, yy, zz, xy, yz, xz, all x1000 int16."""
+        t = self.terms
+        if t is None:
+            return None
+        try:
+            g = gyro_compensation(t.allocation_bar, t.inertia)
+        except ValueError:
+            self.counts["pinv_failed"] += 1
+            return None
+        sat = False
+        rows = []
+        for r, p, y in zip(g["pinv_roll"], g["pinv_pitch"], g["pinv_yaw"], strict=True):
+            w = [to_wire(float(v)) for v in (r, p, y)]
+            sat |= any(s for _, s in w)
+            rows.append(tuple(v for v, _ in w))
+        i = np.asarray(g["inertia"], dtype=float)
+        comps = [i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[1, 2], i[0, 2]]
+        inertia = []
+        for v in comps:
+            w, s = to_wire(float(v))
+            sat |= s
+            inertia.append(w)
+        if sat:
+            self.counts["pinv_saturated"] += 1
+        return rows, inertia
+
+    # -- 3-5. one control step -------------------------------------------------------------
+    def set_perching(self, on: bool) -> None:
+        if on and not self.perching:
+            self.perch.reset(np.zeros(self.robot.n_rotors))
+            self.counts["perch_entered"] += 1
+        self.perching = on
+
+    def reset_integrators(self) -> None:
+        self.position.reset()
+        self.pc_axes = PcAxisController()
+
+    def step(
+        self,
+        state: State,
+        setpoint: Setpoint,
+        joint_targets: np.ndarray,
+        foot_wrench: np.ndarray | None,
+        dt: float,
+    ) -> ControlCommand | None:
+        """One tick; None if there is no model or no gains yet (nothing to command)."""
+        self._ticks += 1
+        t, gains = self.terms, self.gains
+        if t is None or gains is None:
+            self.counts["not_ready"] += 1
+            return None
+        n_rot = self.robot.n_rotors
+        pos = self.position.step(
+            state.position[:2],
+            state.velocity[:2],
+            setpoint.position[:2],
+            setpoint.velocity[:2],
+            setpoint.yaw,
+            t.link_rotations,
+            dt,
+        )
+        alpha, beta, applied = [], [], []
+        for i, (ja, jb) in enumerate(self.vectoring_joints):
+            n = np.asarray(pos.direction)[i]
+            ok = self.config.vectoring and abs(float(n[2])) >= self.config.vectoring_min_nz
+            if not ok and self.config.vectoring:
+                self.counts["vectoring_singular"] += 1
+            alpha.append(float(pos.alpha[i]) if ok else float(joint_targets[ja]))
+            beta.append(float(pos.beta[i]) if ok else float(joint_targets[jb]))
+            applied.append(ok)
+        ff = t.hover_thrust if self.config.feed_forward == "hover" else np.zeros(n_rot)
+        base, yaw_term, yaw_rotor = self.pc_axes.step(
+            gains,
+            float(setpoint.position[2] - state.position[2]),
+            float(setpoint.velocity[2] - state.velocity[2]),
+            wrap_angle(setpoint.yaw - state.yaw),
+            np.ascontiguousarray(ff, dtype=float),
+            dt,
+        )
+        flight = np.asarray(base, dtype=float)
+        result = None
+        if self.perching:
+            w = foot_wrench if foot_wrench is not None else np.full(6, np.nan)
+            if foot_wrench is None:
+                self.counts["perch_no_foot_sample"] += 1
+            result = self.perch.tick(w, t.foot_allocation, t.allocation_bar, t.mass)
+            self.counts[f"perch_{result.status}"] += 1
+            self.perch_thrust = np.asarray(result.thrust, dtype=float)
+        else:
+            # eq. (48)'s rate limit also on the way out of perching (assumption)
+            self.perch_thrust = np.maximum(self.perch_thrust - self._delta_perch, 0.0)
+        total = flight + self.perch_thrust
+        if self.config.clip_base_thrust:
+            total = np.clip(total, 0.0, self.thrust_max)
+        if not np.all(np.isfinite(total)):  # cannot happen with finite inputs; never send NaN
+            self.counts["non_finite_command"] += 1
+            return None
+        return ControlCommand(
+            (float(pos.roll), float(pos.pitch), float(yaw_term)),
+            total,
+            flight,
+            self.perch_thrust.copy(),
+            result,
+            tuple(alpha),
+            tuple(beta),
+            tuple(applied),
+            yaw_rotor,
+        )

@@ -1,0 +1,103 @@
+"""Foot force/torque sensor reader of the onboard node (Leptrino over a UART, fact sheet sec. 5).
+
+Sends DATA_START, de-frames the continuous output with
+:class:`rdm.protocol.leptrino.LeptrinoStreamParser`, converts each sample with the sensor's
+rated values (raw 10000 = rated; CFS034CA301U: 150/150/300 N, 4/4/4 N m) and keeps the newest
+wrench ``[Fx, Fy, Fz, Mx, My, Mz]`` in the sensor frame (= foot frame, see docs/onboard.md).
+DATA_START is re-sent when no sample arrived for ``restart_s``. Bad bytes are counted, never
+raised.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Sequence
+from typing import Protocol
+
+import numpy as np
+
+from rdm.protocol import leptrino as lp
+
+
+class ByteLink(Protocol):
+    def read_available(self) -> bytes: ...
+    def write(self, data: bytes) -> int: ...
+
+
+class FootSensorReader:
+    """Non-blocking Leptrino host: call :meth:`poll` every tick."""
+
+    def __init__(
+        self,
+        link: ByteLink,
+        model: str = "CFS034CA301U",
+        offset: Sequence[float] = (0.0,) * 6,
+        restart_s: float = 1.0,
+    ) -> None:
+        self.link = link
+        self.model = lp.MODELS[model]
+        self.offset = tuple(float(v) for v in offset)
+        self.restart_s = restart_s
+        self.parser = lp.LeptrinoStreamParser()
+        self.counts: Counter[str] = Counter()
+        self.wrench: np.ndarray | None = None
+        self.stamp: float | None = None
+        self._last_start: float | None = None
+
+    def poll(self, now: float) -> None:
+        """Read what arrived, keep the newest sample, (re-)send DATA_START when due."""
+        try:
+            data = self.link.read_available()
+        except OSError:
+            self.counts["read_error"] += 1
+            data = b""
+        if data:
+            self.counts["bytes"] += len(data)
+        for event in self.parser.feed(data):
+            if event.error is not None:
+                self.counts[f"frame_{event.error.reason}"] += 1
+                continue
+            try:
+                resp = lp.parse_response(event.payload or b"")
+            except lp.LeptrinoError as exc:
+                self.counts[f"payload_{exc.reason}"] += 1
+                continue
+            if resp.result != lp.Result.OK:
+                self.counts["result_error"] += 1
+                continue
+            if isinstance(resp, lp.ForceData):
+                w = lp.to_wrench(resp.raw, self.model, self.offset)
+                if not all(math.isfinite(v) for v in w):
+                    self.counts["non_finite"] += 1
+                    continue
+                self.wrench = np.array(w, dtype=float)
+                self.stamp = now
+                self.counts["samples"] += 1
+            else:
+                self.counts["other_responses"] += 1
+        quiet_since = self.stamp if self.stamp is not None else self._last_start
+        if self._last_start is None or (
+            now - max(quiet_since or 0.0, self._last_start) >= self.restart_s
+        ):
+            self._start(now)
+
+    def _start(self, now: float) -> None:
+        try:
+            self.link.write(lp.start_continuous_output())
+            self.counts["start_sent"] += 1
+        except OSError:
+            self.counts["write_error"] += 1
+        self._last_start = now
+
+    def latest(self, now: float, timeout: float) -> np.ndarray | None:
+        """The newest wrench if it is at most ``timeout`` old, else None."""
+        if self.wrench is None or self.stamp is None or now - self.stamp > timeout:
+            return None
+        return self.wrench
+
+    def stop(self) -> None:
+        try:
+            self.link.write(lp.stop_continuous_output())
+        except OSError:
+            self.counts["write_error"] += 1

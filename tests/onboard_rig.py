@@ -1,0 +1,130 @@
+"""Lockstep rig for the onboard-node tests: OnboardNode on one end of a pty pair, a real rosserial
+ClientSession with Spinal's H7_v2 slot layout on the other (scripted Spinal), optionally a
+Leptrino sensor-side encoder on a second pty pair. Simulated time only."""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+
+import numpy as np
+
+from rdm.link.serial import open_pty_pair
+from rdm.protocol import leptrino as lp
+from rdm.protocol.rosserial import spinal_registry
+from rdm.protocol.rosserial.client import ClientSession
+from rdm.protocol.rosserial.events import MessageReceived
+
+REG = spinal_registry()
+TICK = 4096 / (2 * np.pi)
+
+
+def raw_ticks(q: np.ndarray) -> list[int]:
+    """Independent Dynamixel conversion (centre 2048, 4096 per turn)."""
+    return [round(2048 + v * TICK) for v in q]
+
+
+def wait_in(port, n: int, timeout: float = 2.0) -> None:
+    deadline = time.monotonic() + timeout
+    while port.in_waiting < n and time.monotonic() < deadline:
+        time.sleep(0.0002)
+
+
+class Rig:
+    def __init__(self, node_factory, foot: bool = False) -> None:
+        self.node_link, self.peer_link = open_pty_pair()
+        self.foot_node_link = self.foot_peer_link = None
+        if foot:
+            self.foot_node_link, self.foot_peer_link = open_pty_pair()
+        self.node = node_factory(self.node_link, self.foot_node_link)
+        self.spinal = ClientSession.from_layout()
+        self.received: list[tuple[float, str, object]] = []
+        self.by_topic: dict[str, list[tuple[float, object]]] = defaultdict(list)
+        self._read = 0
+        self.auto_ack = True
+        self.imu_quaternion = [0.0, 0.0, 0.0, 1.0]
+        self.servo_q: np.ndarray | None = None
+        self.servo_extra: list[tuple[int, int]] = []
+        self.foot_raw: tuple[int, ...] | None = None
+        self.foot_garbage = b""
+        self.foot_commands: list[lp.CommandFrame] = []
+        self.foot_sent: list[tuple[float, tuple[int, ...]]] = []
+        self._foot_parser = lp.LeptrinoStreamParser()
+        self.t = 0.0
+        #: optional hooks: on_message(t, topic, msg) per received message; after_spin(t)
+        self.on_message = None
+        self.after_spin = None
+
+    def close(self) -> None:
+        self.node_link.close()
+        if self.foot_node_link is not None:
+            self.foot_node_link.close()
+
+    def publish(self, topic: str, msg) -> None:
+        self.spinal.publish(topic, msg)
+
+    def step(self, t: float) -> None:
+        """One 25 ms lockstep: node tick, Spinal spins on what it got, answers."""
+        self.t = t
+        self.node.tick(t)
+        data = b""
+        deadline = time.monotonic() + 2
+        while self._read + len(data) < self.node.bytes_written and time.monotonic() < deadline:
+            data += self.peer_link.read_available()
+        assert self._read + len(data) == self.node.bytes_written
+        self._read += len(data)
+        ms = round(t * 1000)
+        for e in self.spinal.spin(data, ms):
+            if isinstance(e, MessageReceived):
+                self.received.append((t, e.topic, e.message))
+                self.by_topic[e.topic].append((t, e.message))
+                if self.on_message is not None:
+                    self.on_message(t, e.topic, e.message)
+                if e.topic == "flight_config_cmd" and self.auto_ack and e.message.cmd <= 2:
+                    ack = REG.msg("std_msgs/UInt8").new(data=e.message.cmd)
+                    self.publish("flight_config_ack", ack)
+        if self.after_spin is not None:
+            self.after_spin(t)
+        if self.spinal.configured:
+            imu = REG.msg("spinal/Imu").new(quaternion=list(self.imu_quaternion), acc=[0, 0, 9.8])
+            self.publish("imu", imu)
+            if self.servo_q is not None:
+                st = REG.msg("spinal/ServoState")
+                servos = [st.new(index=i, angle=a) for i, a in enumerate(raw_ticks(self.servo_q))]
+                servos += [st.new(index=i, angle=a) for i, a in self.servo_extra]
+                self.publish("servo/states", REG.msg("spinal/ServoStates").new(servos=servos))
+            self.publish("battery_voltage_status", REG.msg("std_msgs/Float32").new(data=24.5))
+        out = self.spinal.take_output()
+        if out:
+            self.peer_link.write(out)
+            wait_in(self.node_link.port, len(out))
+        if self.foot_peer_link is not None:
+            self._foot_side(t)
+
+    def _foot_side(self, t: float) -> None:
+        """Sensor role: read host commands, stream one data frame per step after DATA_START."""
+        for ev in self._foot_parser.feed(self.foot_peer_link.read_available()):
+            if ev.payload is not None:
+                self.foot_commands.append(lp.parse_command(ev.payload))
+        started = any(c.command == lp.Command.DATA_START for c in self.foot_commands)
+        out = self.foot_garbage
+        self.foot_garbage = b""
+        if started and self.foot_raw is not None:
+            out += lp.encode_response(lp.ForceData(tuple(self.foot_raw), 25, 0))
+            self.foot_sent.append((t, tuple(self.foot_raw)))
+        if out:
+            self.foot_peer_link.write(out)
+            wait_in(self.foot_node_link.port, len(out))
+
+    def run(self, t0: float, t1: float, dt: float = 0.025, each=None) -> float:
+        n = round((t1 - t0) / dt)
+        t = t0
+        for k in range(n):
+            t = t0 + k * dt
+            if each is not None:
+                each(t)
+            self.step(t)
+        return t0 + n * dt
+
+    def count(self, topic: str, t0: float, t1: float) -> int:
+        return sum(1 for t, _ in self.by_topic[topic] if t0 <= t < t1)
