@@ -181,11 +181,16 @@ def test_spinal_process_with_neuron_process_on_vcan0(vcan_bus):
         # so the count measures the guest's CPU more than the mirror: only a broad check here
         # (the exact 500 Hz schedule is tested in lockstep, tests/test_spinal_mirror.py).
         assert 25 <= n_1s <= 560, n_1s
-        decoded = [
-            nr.decode_frame(m.arbitration_id, bytes(m.data), nr.Direction.SPINAL_TO_NEURON)
-            for m in frames
-        ]
-        assert all(isinstance(f, nr.PwmFrame) and f.values[:4] == (0, 0, 0, 0) for f in decoded)
+        idle = list(frames)
+        decoded = {
+            (
+                m.arbitration_id,
+                nr.decode_frame(m.arbitration_id, bytes(m.data), nr.Direction.SPINAL_TO_NEURON),
+            )
+            for m in idle
+        }
+        # not armed: every motor at duty 0.5, i.e. CAN value 0 in all six slots
+        assert decoded == {(PWM_ID, nr.PwmFrame(0, (0,) * 6))}, decoded
         phase(f"PWM frames in 1 s on vcan0: {n_1s}")
 
         # a servo goal through the handshake: torque on, then target 2900 for servo index 0
