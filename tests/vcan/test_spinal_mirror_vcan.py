@@ -144,6 +144,9 @@ def test_spinal_process_with_neuron_process_on_vcan0(vcan_bus):
         t_neuron, _ = _wait_line(neuron_out, "rdm neuron: ready", 90)
         assert t_neuron < t_spinal + 4.0, "Neurons not up before the Spinal enumerates"
         phase("both processes ready")
+        # Stay off the single vCPU while the Spinal enumerates (boot delay 5 s after its ready
+        # line, then a 200 ms ENUM window): a starved Neuron process would miss the window.
+        time.sleep(max(0.0, t_spinal + 5.0 + 1.5 - time.monotonic()))
         pc = Pc(f"serial:{ready.split('uart=')[1].split()[0]}")
         assert pc.run(20, until=lambda: "four_axes/command" in pc.server.outbound)
         phase("handshake")
