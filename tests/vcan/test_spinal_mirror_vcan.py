@@ -171,7 +171,8 @@ def test_spinal_process_with_neuron_process_on_vcan0(vcan_bus):
         def listen_loop() -> None:
             while not stop_listening.is_set():
                 m = listen.recv(timeout=0.1)
-                if m is not None:
+                # the kernel filter is set after bind: frames of that instant can slip through
+                if m is not None and m.arbitration_id == PWM_ID:
                     frames.append(m)
 
         listener = threading.Thread(target=listen_loop, daemon=True)
