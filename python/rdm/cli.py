@@ -22,6 +22,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "run the onboard-PC node: rosserial server, 40 Hz position/perching control, LQI",
     ),
     "plant": ("plant", "build the MuJoCo model of a robot; export it for MuJoCo's viewer"),
+    "sim": (
+        "sim",
+        "run the paper's experiments on the simulated robot with every byte on its wire",
+    ),
+    "spinal": ("spinal", "run a Spinal flight-controller mirror on a UART and a CAN bus"),
 }
 
 

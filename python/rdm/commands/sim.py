@@ -1,0 +1,62 @@
+"""``rdm sim``: run a paper experiment on the simulated robot with every byte on its wire."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def _speed(text: str) -> float | None:
+    if text == "fast":
+        return None
+    if text == "realtime":
+        return 1.0
+    try:
+        v = float(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--speed {text!r}: fast, realtime or a factor") from exc
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"--speed {text!r} must be > 0")
+    return v
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from rdm.scenarios import DEFAULT_SCENARIO, SCENARIOS
+
+    parser.add_argument(
+        "scenario",
+        nargs="?",
+        default=DEFAULT_SCENARIO,
+        choices=sorted(SCENARIOS),
+        help=f"default {DEFAULT_SCENARIO}",
+    )
+    parser.add_argument("--duration", type=float, default=None, help="simulated seconds")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--speed", type=_speed, default=None, help="fast | realtime | FACTOR")
+    parser.add_argument("--uart", choices=("inproc", "pty"), default="inproc")
+    parser.add_argument("--out", default="runs", help="base folder of the run folder")
+    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    from rdm.scenarios import SCENARIOS
+    from rdm.sim import format_metrics_table
+
+    sc = SCENARIOS[args.scenario]
+    duration = sc.default_duration if args.duration is None else args.duration
+    if not duration > 0:
+        print("rdm sim: --duration must be > 0", file=sys.stderr)
+        return 2
+    result = sc.run(args.out, duration=duration, seed=args.seed, uart=args.uart, speed=args.speed)
+    if args.json:
+        print(json.dumps(json.loads(result.stack.folder.summary_json.read_text())))
+    else:
+        print(format_metrics_table(result.metrics))
+        f = result.facts
+        print(f"run folder: {result.folder}")
+        print(
+            f"{duration:g} simulated s in {f['wall_s']:.1f} wall s "
+            f"({f['sim_s_per_wall_s']:.2f} simulated s per wall s)"
+        )
+    return 0 if result.all_passed else 1

@@ -1,0 +1,604 @@
+"""The Spinal flight-controller mirror: rosserial client on a UART + Neuron CAN master + the
+on-board estimator / attitude controller / PWM (``jsk-wire-protocols.md`` sec. 1.3-1.7,
+2.5-2.7, 3).
+
+It composes the existing parts and re-implements none of them:
+
+* :class:`rdm.protocol.rosserial.ClientSession` (Spinal is the rosserial *client*) with the
+  stm32H7_v2 slot layout; subscribers are routed into the core and the CAN master;
+* :class:`rdm._rdm.SpinalStep` (estimator + attitude controller with the arming / fail-safe
+  state machine + thrust -> PWM) stepped at ``rate_hz`` (200 Hz default, up to 1 kHz);
+* :class:`rdm.nodes.can_master.CanMaster` ticked for every elapsed millisecond, fed the duties.
+
+Node pattern (``rdm.nodes.base``): ``tick(now)`` with the time passed in, never a wall clock,
+never blocking. IMU samples and the battery voltage come from outside
+(:meth:`SpinalMirror.set_imu_sample`, :meth:`SpinalMirror.set_battery_voltage`); the default
+is a level, still IMU so that a stand-alone process works. See ``docs/mirror.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+from typing import Any
+
+import can
+import numpy as np
+
+from rdm.control.attitude import ARM_OFF, N_ROTORS, CommandRejectedError, SpinalStep
+from rdm.nodes.base import to_ms
+from rdm.nodes.can_master import BOOT_DELAY_MS, IDLE_DUTY, CanMaster, LogEvent, MasterState
+from rdm.nodes.spinal_servo_bridge import ServoBridge, ServoCommandError
+from rdm.nodes.spinal_uart import UartPump
+from rdm.protocol.rosserial import constants as C
+from rdm.protocol.rosserial.client import ClientSession
+from rdm.protocol.rosserial.events import (
+    Configured,
+    DroppedMessage,
+    FrameRejected,
+    MessageReceived,
+    ServiceHandled,
+    SyncLost,
+)
+from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
+
+#: Publication periods in HAL ms and whether the firmware compares with ``>`` (strict).
+IMU_PUB_MS = 5  # >= 5 ms (200 Hz), attitude_estimate.h
+BATTERY_PUB_MS = 100  # > 100 ms, battery_status.h
+BATTERY_SAMPLE_MS = 20  # the battery task runs every 20 ms
+MOTOR_PWMS_PUB_MS = 100  # > 100 ms, attitude_control.cpp
+SERVO_STATES_PUB_MS = 20  # >= 20 ms (50 Hz), spine.cpp
+SERVO_TORQUE_PUB_MS = 1000  # >= 1000 ms
+#: Battery low-pass ``v = 0.99 v + 0.01 new`` per 20 ms sample.
+BATTERY_FILTER = 0.99
+#: A tick that skips more milliseconds than this replays only the last ones on CAN.
+MAX_CAN_CATCH_UP_MS = 50
+#: Control steps replayed at most per tick when the loop runs late; then re-phased.
+MAX_CONTROL_CATCH_UP = 5
+#: A level, still IMU: no rotation, gravity on +z (m/s^2), an Earth-like field (uT).
+LEVEL_GYRO = (0.0, 0.0, 0.0)
+LEVEL_ACC = (0.0, 0.0, 9.80665)
+LEVEL_MAG = (30.0, 0.0, -40.0)
+DEFAULT_BATTERY_V = 25.2
+MAX_RATE_HZ = 1000.0
+
+_FAILSAFE_TEXT = {
+    "failsafe_timeout": "failsafe: cannot connect with ROS",
+    "failsafe_tilt": "failsafe: the roll pitch angles are too large",
+    "failsafe_command_tilt": "failsafe: target angles are too large",
+}
+_LOG_LEVELS = {
+    "debug": C.LogLevel.DEBUG,
+    "info": C.LogLevel.INFO,
+    "warn": C.LogLevel.WARN,
+    "error": C.LogLevel.ERROR,
+    "fatal": C.LogLevel.FATAL,
+}
+_IMU_CALIB_GYRO = 2  # spinal/ImuCalib CALIB_GYRO
+_MAG_SET = 1  # spinal/MagDeclination SET
+
+
+def rejection_reason(text: str) -> str:
+    """Counter key for a :class:`CommandRejectedError` message of the core."""
+    lowered = text.lower()
+    for needle, reason in (
+        ("length", "wrong_length"),
+        ("not finite", "non_finite"),
+        ("not armed", "not_armed"),
+        ("force_landing_thrust", "below_force_landing_thrust"),
+        ("motor number unknown", "motor_number_unknown"),
+        ("rotors of this core", "too_many_motors"),
+        ("arm_on ignored", "not_activated"),
+        ("unknown value", "unknown_flight_config"),
+        ("motor_info", "invalid_pwm_info"),
+    ):
+        if needle in lowered:
+            return reason
+    return "rejected"
+
+
+@dataclass
+class MirrorCounters:
+    """Diagnostics of a :class:`SpinalMirror` (all monotonic)."""
+
+    #: Messages accepted per topic (subscribers) and sent per topic (publishers).
+    received: Counter[str] = field(default_factory=Counter)
+    published: Counter[str] = field(default_factory=Counter)
+    #: Messages not applied, by reason (``wrong_length``, ``not_armed``, ``servo_index`` ...).
+    rejected: Counter[str] = field(default_factory=Counter)
+    #: Fail-safe events by kind (``failsafe_timeout``, ``failsafe_tilt`` ...) and acks by value.
+    failsafes: Counter[str] = field(default_factory=Counter)
+    acks: Counter[int] = field(default_factory=Counter)
+    #: rosserial frames the parser delivered / rejected, undeliverable frames.
+    frames_rejected: Counter[str] = field(default_factory=Counter)
+    dropped: int = 0
+    logs: Counter[str] = field(default_factory=Counter)
+    control_steps: int = 0
+    control_overruns: int = 0
+    configured: int = 0
+    sync_lost: int = 0
+
+
+class SpinalMirror:
+    """Spinal on a UART (rosserial client) and a CAN bus (Neuron master).
+
+    ``uart`` is a :class:`rdm.link.serial.SerialLink` (anything with ``read_available`` and a
+    pyserial ``port``); ``can_bus`` a python-can bus. Both are owned (closed by :meth:`close`).
+    ``spinal_options`` go to :class:`SpinalStep` (``time_matched``, ``anti_windup``,
+    ``command_timeout_s``, estimator overrides such as ``gyro_calib_duration_s`` ...).
+    """
+
+    def __init__(
+        self,
+        uart: Any,
+        can_bus: can.BusABC,
+        rate_hz: float = 200.0,
+        *,
+        name: str = "spinal",
+        period: float = 0.001,
+        boot_delay_ms: int = BOOT_DELAY_MS,
+        registry: TypeRegistry | None = None,
+        layout: Any = None,
+        **spinal_options: Any,
+    ) -> None:
+        if not (isinstance(rate_hz, (int, float)) and 0 < rate_hz <= MAX_RATE_HZ):
+            raise ValueError(f"SpinalMirror: rate_hz {rate_hz!r} not in (0, {MAX_RATE_HZ:g}]")
+        if not (isinstance(period, (int, float)) and 0 < period <= 0.1):
+            raise ValueError(f"SpinalMirror: period {period!r} not in (0, 0.1] s")
+        self.name = name
+        # Wanted tick period: 1 ms is the firmware's core task. A longer one (slow hosts) still
+        # runs the CAN schedule for every elapsed ms and the control at rate_hz.
+        self.period = float(period)
+        self.rate_hz = float(rate_hz)
+        self.uart = UartPump(uart)
+        self.master = CanMaster(can_bus, boot_delay_ms=boot_delay_ms)
+        self.core = SpinalStep(self.rate_hz, **spinal_options)
+        self.servos = ServoBridge(self.master)
+        reg = registry or spinal_registry()
+        self.session = ClientSession.from_layout(
+            layout,
+            handlers={
+                "imu_calib": self._srv_imu_calib,
+                "set_attitude_control": self._srv_set_attitude_control,
+                "get_board_info": self._srv_get_board_info,
+                "mag_declination": self._srv_mag_declination,
+            },
+            registry=reg,
+        )
+        self._msg = SimpleNamespace(
+            imu=reg.msg("spinal/Imu"),
+            uint8=reg.msg("std_msgs/UInt8"),
+            float32=reg.msg("std_msgs/Float32"),
+            pwms=reg.msg("spinal/Pwms"),
+            servo_state=reg.msg("spinal/ServoState"),
+            servo_states=reg.msg("spinal/ServoStates"),
+            torque_states=reg.msg("spinal/ServoTorqueStates"),
+            board_info=reg.msg("spinal/BoardInfo"),
+            servo_info=reg.msg("spinal/ServoInfo"),
+        )
+        self._srv = SimpleNamespace(
+            imu_calib=reg.srv("spinal/ImuCalib").response,
+            set_bool=reg.srv("std_srvs/SetBool").response,
+            board_info=reg.srv("spinal/GetBoardInfo").response,
+            mag=reg.srv("spinal/MagDeclination").response,
+        )
+        self._routes = {
+            "four_axes/command": self._on_four_axis_command,
+            "rpy/gain": self._on_gain,
+            "p_matrix_pseudo_inverse_inertia": self._on_pinv_inertia,
+            "torque_allocation_matrix_inv": self._on_torque_allocation_inv,
+            "motor_info": self._on_motor_info,
+            "uav_info": self._on_uav_info,
+            "flight_config_cmd": self._on_flight_config,
+            "desire_coordinate": self._on_desire_coordinate,
+            "pwm_test": self._on_pwm_test,
+            "servo/target_states": self.servos.target_states,
+            "servo/target_current": self.servos.target_current,
+            "servo/torque_enable": self.servos.torque_enable,
+            "set_adc_scale": self._on_adc_scale,
+        }
+        self.counters = MirrorCounters()
+        self.gyro = LEVEL_GYRO
+        self.acc = LEVEL_ACC
+        self.mag = LEVEL_MAG
+        self.battery_input = DEFAULT_BATTERY_V
+        self.adc_scale = 1.0
+        self.battery_voltage: float | None = None  # the low-passed value the firmware uses
+        self.mag_declination = 0.0
+        self.last_output: Any = None
+        self.duties: list[float] = []
+        self.pwm_test: list[float] | None = None
+        self.now_ms: int | None = None
+        self._now_s = 0.0
+        self._next_control: float | None = None
+        self._can_ms: int | None = None
+        self._master_was_running = False
+        self._last_pub: dict[str, int] = {}
+
+    # ---------------------------------------------------------------- inputs from outside
+    def set_imu_sample(
+        self, gyro: Sequence[float], acc: Sequence[float], mag: Sequence[float]
+    ) -> None:
+        """The IMU sample the next control steps use: gyro rad/s, acc m/s^2, mag uT (body)."""
+        self.gyro = tuple(float(v) for v in gyro)
+        self.acc = tuple(float(v) for v in acc)
+        self.mag = tuple(float(v) for v in mag)
+
+    def set_battery_voltage(self, volts: float) -> None:
+        """The raw battery reading (V), sampled every 20 ms and low-passed as the firmware does."""
+        self.battery_input = float(volts)
+
+    # ---------------------------------------------------------------- node interface
+    def tick(self, now: float) -> None:
+        """Advance to ``now`` (s): UART in, due control steps, CAN ms ticks, publish, UART out."""
+        now_ms = to_ms(now)
+        if self.now_ms is not None and now_ms < self.now_ms:
+            now_ms = self.now_ms  # time never goes back
+        self._now_s = max(self._now_s, float(now))
+        self.now_ms = now_ms
+        self._receive(now_ms)
+        self._battery(now_ms)
+        self._control(self._now_s)
+        self._can(now_ms)
+        self._forward_can_events()
+        self._publish(now_ms)
+        self.uart.send(self.session.take_output())
+
+    def close(self) -> None:
+        """Close the UART and the CAN bus."""
+        try:
+            self.uart.link.close()
+        finally:
+            self.master.close()
+
+    # ---------------------------------------------------------------- UART receive
+    def _receive(self, now_ms: int) -> None:
+        data = self.uart.read()
+        for event in self.session.spin(data, now_ms):
+            if isinstance(event, MessageReceived):
+                self._route(event.topic, event.message)
+            elif isinstance(event, ServiceHandled):
+                self.counters.received[event.service] += 1
+            elif isinstance(event, FrameRejected):
+                self.counters.frames_rejected[event.bad.reason] += 1
+            elif isinstance(event, DroppedMessage):
+                self.counters.dropped += 1
+            elif isinstance(event, Configured):
+                self.counters.configured += 1
+            elif isinstance(event, SyncLost):
+                self.counters.sync_lost += 1
+
+    def _route(self, topic: str, msg: Any) -> None:
+        handler = self._routes.get(topic)
+        if handler is None:
+            self.counters.received[topic] += 1  # accepted, no effect in this mirror
+            return
+        try:
+            handler(msg)
+        except ServoCommandError as exc:
+            self._reject(exc.reason, str(exc), log=True)
+        except CommandRejectedError as exc:
+            # The core emits a "rejected" event for the ones the firmware logs; logged there.
+            self._reject(rejection_reason(str(exc)), str(exc), log=False)
+        except ValueError as exc:  # shapes the core refuses (RdmError), bad arrays
+            self._reject("invalid", f"{topic}: {exc}", log=True)
+        else:
+            self.counters.received[topic] += 1
+
+    def _reject(self, reason: str, text: str, log: bool) -> None:
+        self.counters.rejected[reason] += 1
+        if log:
+            self._log(C.LogLevel.ERROR, text)
+
+    # ---------------------------------------------------------------- subscribers
+    def _on_four_axis_command(self, msg: Any) -> None:
+        base = np.asarray(msg.base_thrust, dtype=np.float64)
+        self.core.four_axis_command([float(a) for a in msg.angles], base, self._now_s)
+
+    def _on_gain(self, msg: Any) -> None:
+        terms = np.array(
+            [
+                [m.roll_p, m.roll_i, m.roll_d, m.pitch_p, m.pitch_i, m.pitch_d, m.yaw_d]
+                for m in msg.motors
+            ],
+            dtype=np.int64,
+        ).reshape(-1, 7)
+        self.core.set_gains_wire(terms)
+
+    def _on_pinv_inertia(self, msg: Any) -> None:
+        rows = np.array([[u.r, u.p, u.y] for u in msg.pseudo_inverse], dtype=np.int16).reshape(
+            -1, 3
+        )
+        self.core.set_pinv_inertia_wire(rows, [int(v) for v in msg.inertia])
+
+    def _on_torque_allocation_inv(self, msg: Any) -> None:
+        rows = np.array([[v.x, v.y, v.z] for v in msg.rows], dtype=np.int16).reshape(-1, 3)
+        self.core.set_torque_allocation_inv_wire(rows)
+
+    def _on_motor_info(self, msg: Any) -> None:
+        table = np.array(
+            [[m.voltage, m.max_thrust, *m.polynominal] for m in msg.motor_info], dtype=np.float64
+        ).reshape(-1, 7)
+        self.core.set_pwm_info(
+            float(msg.min_pwm),
+            float(msg.max_pwm),
+            float(msg.min_thrust),
+            float(msg.force_landing_thrust),
+            int(msg.pwm_conversion_mode),
+            table,
+        )
+
+    def _on_uav_info(self, msg: Any) -> None:
+        before = self.core.motor_number
+        self.core.set_uav_info(int(msg.motor_num), int(msg.uav_model))
+        if before > 0 and self.core.motor_number == 0:
+            self._log(C.LogLevel.ERROR, "ATTENTION: motor number is 0")
+
+    def _on_flight_config(self, msg: Any) -> None:
+        self.core.flight_config(int(msg.cmd), self._now_s)
+        if int(msg.cmd) == ARM_OFF:
+            self.pwm_test = None
+
+    def _on_desire_coordinate(self, msg: Any) -> None:
+        self.core.set_desire_coordinate(float(msg.roll), float(msg.pitch), float(msg.yaw))
+
+    def _on_pwm_test(self, msg: Any) -> None:
+        """Test mode (sec. 3.7): non-empty ``pwms`` enters it, empty leaves it."""
+        pwms = [float(p) for p in msg.pwms]
+        if not pwms:
+            self.pwm_test = None
+            return
+        pwms = [p if math.isfinite(p) and 0.5 <= p <= 1.0 else IDLE_DUTY for p in pwms]
+        n = max(self.master.motor_number, self.core.motor_number, 1)
+        duties = list(self.pwm_test or [IDLE_DUTY] * n)
+        duties += [IDLE_DUTY] * (n - len(duties))
+        if not msg.motor_index:
+            duties = [pwms[0]] * n
+        else:
+            if len(msg.motor_index) != len(pwms):
+                raise ServoCommandError(
+                    "wrong_length",
+                    f"pwm_test: {len(msg.motor_index)} indices but {len(pwms)} pwms",
+                )
+            for i, p in zip(msg.motor_index, pwms, strict=True):
+                if i < n:
+                    duties[i] = p
+        self.pwm_test = duties
+
+    def _on_adc_scale(self, msg: Any) -> None:
+        scale = float(msg.data)
+        if not (math.isfinite(scale) and scale > 0):
+            raise ValueError(f"set_adc_scale: {scale!r} is not a positive finite scale")
+        self.adc_scale = scale
+
+    # ---------------------------------------------------------------- services
+    def _srv_imu_calib(self, req: Any) -> Any:
+        """CALIB_GYRO restarts the gyro bias calibration; the other commands (flash-stored
+        calibration data) are not mirrored and answer ``success = False``."""
+        if int(req.command) == _IMU_CALIB_GYRO:
+            self.core.restart_gyro_calibration()
+            return self._srv.imu_calib.new(success=True, data=[])
+        return self._srv.imu_calib.new(success=False, data=[])
+
+    def _srv_set_attitude_control(self, req: Any) -> Any:
+        self.core.set_attitude_control(bool(req.data))
+        return self._srv.set_bool.new(success=True, message="")
+
+    def _srv_mag_declination(self, req: Any) -> Any:
+        if int(req.command) == _MAG_SET:
+            self.mag_declination = float(req.data)  # stored; no effect on R (sec. 3.3)
+        return self._srv.mag.new(success=True, data=self.mag_declination)
+
+    def _srv_get_board_info(self, _req: Any) -> Any:
+        boards = []
+        for neuron in self.master.neurons if self.master.state is MasterState.RUNNING else []:
+            servos = [
+                self._msg.servo_info.new(
+                    id=s.dynamixel_id,
+                    p_gain=s.p_gain,
+                    i_gain=s.i_gain,
+                    d_gain=s.d_gain,
+                    profile_velocity=s.profile_velocity,
+                    current_limit=s.current_limit,
+                    send_data_flag=int(s.send_data_flag),
+                    external_encoder_flag=int(s.external_encoder_flag),
+                    joint_resolution=s.joint_resolution,
+                    servo_resolution=s.servo_resolution,
+                )
+                for s in neuron.servos
+            ]
+            boards.append(
+                self._msg.board_info.new(
+                    slave_id=neuron.slave,
+                    imu_send_data_flag=int(neuron.imu_send_flag),
+                    dynamixel_ttl_rs485_mixed=int(neuron.ttl_rs485_mixed),
+                    servo_pulley_skip_thresh=neuron.pulley_skip_thresh,
+                    servos=servos,
+                )
+            )
+        return self._srv.board_info.new(boards=boards)
+
+    # ---------------------------------------------------------------- battery, control, CAN
+    def _battery(self, now_ms: int) -> None:
+        last = self._last_pub.get("_battery_sample")
+        if last is not None and now_ms - last < BATTERY_SAMPLE_MS:
+            return
+        self._last_pub["_battery_sample"] = now_ms
+        sample = self.battery_input * self.adc_scale
+        if not math.isfinite(sample):
+            self.counters.rejected["battery_non_finite"] += 1
+            return
+        v = self.battery_voltage
+        self.battery_voltage = (
+            sample if v is None else BATTERY_FILTER * v + (1 - BATTERY_FILTER) * sample
+        )
+
+    def _control(self, now: float) -> None:
+        period = 1.0 / self.rate_hz
+        if self._next_control is None:
+            self._next_control = now
+        steps = 0
+        while now >= self._next_control - 1e-9:
+            if steps == MAX_CONTROL_CATCH_UP:
+                self.counters.control_overruns += 1
+                self._next_control = now + period
+                break
+            self._step(now)
+            steps += 1
+            self._next_control += period
+
+    def _step(self, now: float) -> None:
+        voltage = self.battery_voltage if self.battery_voltage is not None else self.battery_input
+        out = self.core.step(now, self.gyro, self.acc, self.mag, voltage)
+        self.last_output = out
+        self.counters.control_steps += 1
+        for kind, value in out.events:
+            if kind == "ack":
+                self.counters.acks[int(value)] += 1
+                self._publish_topic("flight_config_ack", self._msg.uint8.new(data=int(value)))
+            elif kind == "rejected":
+                self._log(C.LogLevel.ERROR, str(value))
+            elif kind in _FAILSAFE_TEXT:
+                self.counters.failsafes[kind] += 1
+                self._log(C.LogLevel.ERROR, _FAILSAFE_TEXT[kind])
+            elif kind == "events_dropped":
+                self.counters.failsafes["events_dropped"] += int(value)
+        n = self.master.motor_number
+        if self.pwm_test is not None:
+            duties = (self.pwm_test + [IDLE_DUTY] * n)[:n]
+        elif n and n == self.core.motor_number and n <= N_ROTORS:
+            duties = [min(1.0, max(IDLE_DUTY, float(d))) for d in out.duty[:n]]
+        else:
+            duties = [IDLE_DUTY] * n
+        self.duties = duties
+
+    def _can(self, now_ms: int) -> None:
+        start = now_ms if self._can_ms is None else self._can_ms + 1
+        start = max(start, now_ms - MAX_CAN_CATCH_UP_MS + 1)
+        for t in range(start, now_ms + 1):
+            if self.master.state is MasterState.RUNNING:
+                if not self._master_was_running:
+                    self._master_was_running = True
+                    self._adopt_can_model()
+                if len(self.duties) == self.master.motor_number:
+                    self.master.set_motor_duties(self.duties)
+            self.master.tick_ms(t)
+        self._can_ms = now_ms
+
+    def _adopt_can_model(self) -> None:
+        """Spine::init: motor number and model inferred from CAN go to the controller."""
+        model = self.master.uav_model
+        n = self.master.motor_number
+        if model is None or n == 0:
+            return
+        try:
+            self.core.set_uav_info(n, int(model))
+        except (CommandRejectedError, ValueError) as exc:
+            self._reject(rejection_reason(str(exc)), f"CAN model: {exc}", log=True)
+        self.duties = [IDLE_DUTY] * n
+
+    def _forward_can_events(self) -> None:
+        for event in self.master.pop_events():
+            self._log(_LOG_LEVELS.get(event.level, C.LogLevel.INFO), event.text, event)
+
+    # ---------------------------------------------------------------- publishers
+    def _due(self, key: str, now_ms: int, period_ms: int, strict: bool) -> bool:
+        last = self._last_pub.get(key)
+        if last is not None:
+            elapsed = now_ms - last
+            if (elapsed <= period_ms) if strict else (elapsed < period_ms):
+                return False
+        self._last_pub[key] = now_ms
+        return True
+
+    def _publish(self, now_ms: int) -> None:
+        if not self.session.configured or self.last_output is None:
+            return
+        out = self.last_output
+        stamp = self.session.now(now_ms)
+        if self._due("imu", now_ms, IMU_PUB_MS, strict=False):
+            self._publish_topic(
+                "imu",
+                self._msg.imu.new(
+                    stamp=stamp,
+                    acc=list(self.acc),
+                    gyro=[float(v) for v in out.angular_velocity],
+                    mag=list(self.mag),
+                    quaternion=[float(v) for v in out.quaternion],
+                ),
+            )
+        if (
+            self._due("battery_voltage_status", now_ms, BATTERY_PUB_MS, strict=True)
+            and self.battery_voltage is not None
+        ):
+            self._publish_topic(
+                "battery_voltage_status", self._msg.float32.new(data=self.battery_voltage)
+            )
+        if self._due("motor_pwms", now_ms, MOTOR_PWMS_PUB_MS, strict=True):
+            values = [int(d * 2000.0) for d in self.duties]
+            self._publish_topic("motor_pwms", self._msg.pwms.new(motor_value=values))
+        if self._due("servo/states", now_ms, SERVO_STATES_PUB_MS, strict=False):
+            msg = self.servos.states(self._msg, stamp)
+            if msg is not None:
+                self._publish_topic("servo/states", msg)
+        if self._due("servo/torque_states", now_ms, SERVO_TORQUE_PUB_MS, strict=False):
+            msg = self.servos.torque_states(self._msg)
+            if msg is not None:
+                self._publish_topic("servo/torque_states", msg)
+
+    def _publish_topic(self, topic: str, msg: Any) -> None:
+        if self.session.publish(topic, msg) > 0:
+            self.counters.published[topic] += 1
+
+    def _log(self, level: int, text: str, event: LogEvent | None = None) -> None:
+        del event
+        self.counters.logs[C.LogLevel(level).name.lower()] += 1
+        self.session.log(level, text)
+
+    # ---------------------------------------------------------------- diagnostics
+    def diagnostics(self) -> dict[str, Any]:
+        """A snapshot of every counter (UART, rosserial, control, CAN) as plain data."""
+        c = self.counters
+        return {
+            "uart": {
+                "bytes_in": self.uart.bytes_in,
+                "bytes_out": self.uart.bytes_out,
+                "bytes_discarded": self.uart.bytes_discarded,
+                "write_errors": self.uart.write_errors,
+                "read_errors": self.uart.read_errors,
+            },
+            "rosserial": {
+                "configured": self.session.configured,
+                "frames_in": self.session.parser.counts.get("frames", 0),
+                "frames_out": self.session.counts.get("tx_frames", 0),
+                "frames_rejected": dict(c.frames_rejected),
+                "dropped": c.dropped,
+                "session": dict(self.session.counts),
+            },
+            "received": dict(c.received),
+            "published": dict(c.published),
+            "rejected": dict(c.rejected),
+            "failsafes": dict(c.failsafes),
+            "acks": dict(c.acks),
+            "logs": dict(c.logs),
+            "control": {
+                "steps": c.control_steps,
+                "overruns": c.control_overruns,
+                "armed": self.core.armed,
+                "force_landing": self.core.force_landing,
+                "motor_number": self.core.motor_number,
+                "core": dict(self.core.counters),
+            },
+            "can": {
+                "state": self.master.state.value,
+                "slaves": self.master.slaves,
+                "connected": self.master.connected,
+                "rx": self.master.rx_count,
+                "tx": self.master.tx_count,
+                "rx_errors": dict(self.master.rx_errors),
+                "tx_errors": self.master.tx_errors,
+            },
+        }

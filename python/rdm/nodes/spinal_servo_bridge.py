@@ -1,0 +1,105 @@
+"""Servo topics of the Spinal mirror <-> the CAN master's servo table (``spine.cpp`` role).
+
+Index convention (**assumed**, the fact sheet does not give it): a servo's ``index`` in
+``servo/target_states``, ``servo/target_current``, ``servo/torque_enable``, ``servo/states``
+and ``servo/torque_states`` is its position in the CAN master's table, Neurons sorted by slave
+id, servos by their index on the Neuron (``CanMaster.servo_states`` order). ``servo/states``
+carries the servos with send_data_flag; ``servo/torque_states`` carries every servo.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from rdm.nodes.can_master import CanMaster, MasterState, ServoEntry
+
+
+class ServoCommandError(ValueError):
+    """A servo command that is not applied; ``reason`` is the counter key."""
+
+    def __init__(self, reason: str, text: str) -> None:
+        super().__init__(text)
+        self.reason = reason
+
+
+def _int16(value: int) -> int:
+    return max(-32768, min(32767, int(value)))
+
+
+class ServoBridge:
+    """Applies servo commands from the UART to a :class:`CanMaster`; builds servo reports."""
+
+    def __init__(self, master: CanMaster) -> None:
+        self.master = master
+
+    def table(self) -> list[tuple[tuple[int, int], ServoEntry]]:
+        """Every servo in index order (empty until the master runs)."""
+        if self.master.state is not MasterState.RUNNING:
+            return []
+        return list(self.master.servo_states.items())
+
+    def _resolve(self, topic: str, index: Sequence[int], values: Sequence[int]):
+        if len(index) != len(values):
+            raise ServoCommandError(
+                "wrong_length", f"{topic}: {len(index)} indices but {len(values)} values"
+            )
+        table = self.table()
+        if not table:
+            raise ServoCommandError("servo_not_ready", f"{topic}: no servo enumerated on CAN")
+        out = []
+        for i, value in zip(index, values, strict=True):
+            if not 0 <= i < len(table):
+                raise ServoCommandError(
+                    "servo_index", f"{topic}: servo index {i} not in 0..{len(table) - 1}"
+                )
+            out.append((table[i][0], int(value)))
+        return out
+
+    def target_states(self, msg: Any) -> None:
+        """``servo/target_states`` (``spinal/ServoControlCmd``): goal positions, raw ticks."""
+        pairs = self._resolve("servo/target_states", msg.index, msg.angles)
+        try:
+            self.master.set_servo_targets(dict(pairs))
+        except ValueError as exc:
+            raise ServoCommandError("servo_value", f"servo/target_states: {exc}") from exc
+
+    def target_current(self, msg: Any) -> None:
+        """``servo/target_current``: the ``angles`` field carries the goal current."""
+        pairs = self._resolve("servo/target_current", msg.index, msg.angles)
+        for (slave, idx), value in pairs:
+            try:
+                self.master.set_servo_current(slave, idx, value)
+            except ValueError as exc:
+                raise ServoCommandError("servo_value", f"servo/target_current: {exc}") from exc
+
+    def torque_enable(self, msg: Any) -> None:
+        """``servo/torque_enable`` (``spinal/ServoTorqueCmd``)."""
+        pairs = self._resolve("servo/torque_enable", msg.index, msg.torque_enable)
+        for (slave, idx), value in pairs:
+            self.master.set_servo_torque(slave, idx, bool(value))
+
+    def states(self, codec: Any, stamp: Any) -> Any | None:
+        """A ``spinal/ServoStates`` of the servos with send_data_flag, or None if there are none."""
+        state_codec = codec.servo_state
+        servos = [
+            state_codec.new(
+                index=i,
+                angle=_int16(entry.angle),
+                temp=max(0, min(255, entry.temperature)),
+                load=_int16(entry.current),
+                error=max(0, min(255, entry.error)),
+            )
+            for i, (_key, entry) in enumerate(self.table())
+            if entry.send_data_flag
+        ]
+        if not servos:
+            return None
+        return codec.servo_states.new(stamp=stamp, servos=servos)
+
+    def torque_states(self, codec: Any) -> Any | None:
+        """A ``spinal/ServoTorqueStates`` of every servo, or None if there are none."""
+        table = self.table()
+        if not table:
+            return None
+        return codec.torque_states.new(torque_enable=[int(e.torque_enable) for _k, e in table])

@@ -1,0 +1,81 @@
+"""A never-blocking UART byte pump for the Spinal mirror.
+
+pyserial's ``write`` blocks when the kernel buffer is full (a pty whose peer does not read
+holds only about 4 KiB), and with ``write_timeout=0`` it spins on ``EAGAIN``. A firmware
+mirror must never stall its loop on the wire, so outgoing bytes go through a bounded queue:
+each :meth:`UartPump.pump` writes what the port accepts now and keeps the rest. When the queue
+exceeds ``max_pending`` bytes (the peer is gone), the queued bytes are discarded and counted;
+the peer's rosserial parser resynchronises on the next frame, as after a UART overrun.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+from typing import Any
+
+#: Bytes kept for a slow peer before the backlog is discarded (8 KiB = Spinal's TX ring).
+DEFAULT_MAX_PENDING = 128 * 64
+
+
+class UartPump:
+    """Non-blocking reads and writes on a :class:`rdm.link.serial.SerialLink` (or any object
+    with ``read_available()`` and ``port``/``write``)."""
+
+    def __init__(self, link: Any, max_pending: int = DEFAULT_MAX_PENDING) -> None:
+        self.link = link
+        self.max_pending = max_pending
+        self.pending = bytearray()
+        self.bytes_in = 0
+        self.bytes_out = 0
+        self.bytes_discarded = 0
+        self.write_errors = 0
+        self.read_errors = 0
+        port = getattr(link, "port", None)
+        try:
+            self._fd: int | None = port.fileno() if port is not None else None
+        except (AttributeError, OSError, ValueError):
+            self._fd = None  # URL ports (loop://, socket://) have no usable fd
+
+    def read(self) -> bytes:
+        """Everything received so far (``b""`` if nothing or on a port error, counted)."""
+        try:
+            data = self.link.read_available()
+        except (OSError, ValueError) as exc:  # SerialException is an OSError
+            del exc
+            self.read_errors += 1
+            return b""
+        self.bytes_in += len(data)
+        return data
+
+    def send(self, data: bytes) -> None:
+        """Queue ``data`` and write as much as the port takes now."""
+        if data:
+            self.pending += data
+        if len(self.pending) > self.max_pending:
+            self.bytes_discarded += len(self.pending)
+            self.pending.clear()
+            return
+        self.pump()
+
+    def pump(self) -> int:
+        """Write queued bytes the port accepts without blocking; returns bytes written."""
+        if not self.pending:
+            return 0
+        try:
+            if self._fd is not None:
+                _, writable, _ = select.select([], [self._fd], [], 0)
+                if not writable:
+                    return 0
+                try:
+                    n = os.write(self._fd, bytes(self.pending))
+                except BlockingIOError:
+                    return 0
+            else:
+                n = self.link.write(bytes(self.pending))
+        except (OSError, ValueError):
+            self.write_errors += 1
+            return 0
+        del self.pending[:n]
+        self.bytes_out += n
+        return n

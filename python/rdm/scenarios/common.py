@@ -1,0 +1,108 @@
+"""Shared pieces of the scenarios: the default simulated-robot tuning, the run result, the
+ground-truth arrays and the metrics/plots/summary writer."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rdm.nodes.onboard_config import OnboardConfig
+from rdm.sim import Metric, format_metrics_table, write_summary
+
+from .stack import Stack, StackOptions
+
+#: Table V weights (JSK order, docs/lqi.md) with the yaw weights lowered: ASSUMPTION
+#: (docs/sim.md). The rotor drag-torque yaw authority of the simulated robot is tiny
+#: (c = 0.016 m) and Table V's yaw weights saturate the rotors.
+SIM_LQI_Q = (20.0, 30.0, 90.0, 12.8, 600.0, 80.0, 10.0, 5.0, 20.0, 0.15, 1.0, 0.05)
+
+
+def sim_onboard_config(**overrides: Any) -> OnboardConfig:
+    """The onboard configuration the simulated robot flies with (assumptions in docs/sim.md):
+    the vectoring lateral sign flipped (``k_roll_vectoring = (-1, 0)``) so that eq. (33)'s
+    alpha tilts the thrust toward the desired lateral acceleration about the URDF's +x roll axis,
+    and :data:`SIM_LQI_Q`."""
+    kw: dict[str, Any] = {
+        "position_gains": {"k_roll_vectoring": (-1.0, 0.0)},
+        "lqi_q_weights": SIM_LQI_Q,
+    }
+    kw.update(overrides)
+    return OnboardConfig(**kw)
+
+
+def sim_stack_options(seed: int, uart: str, **overrides: Any) -> StackOptions:
+    """Stack options of the scenarios: ESC lag 10 ms (ASSUMPTION, docs/sim.md)."""
+    kw: dict[str, Any] = {"seed": seed, "uart": uart, "esc_tau": 0.01}
+    kw.update(overrides)
+    if "onboard" not in kw:
+        kw["onboard"] = sim_onboard_config()
+    return StackOptions(**kw)
+
+
+@dataclass
+class ScenarioResult:
+    """What a scenario run returns."""
+
+    name: str
+    stack: Stack
+    metrics: list[Metric]
+    facts: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def folder(self) -> Path:
+        return self.stack.folder.root
+
+    @property
+    def all_passed(self) -> bool:
+        return all(m.passed is not False for m in self.metrics)
+
+
+def truth_arrays(stack: Stack) -> dict[str, np.ndarray]:
+    """Ground truth of the run as arrays (rows = truth samples)."""
+    tr = stack.truth
+    return {
+        "t": np.array([g.time for g in tr]),
+        "cog": np.array([g.cog_position for g in tr]),
+        "quat": np.array([g.base_quaternion for g in tr]),
+        "q": np.array([g.joint_positions for g in tr]),
+        "thrust": np.array([g.rotor_thrusts for g in tr]),
+        "contact": np.array([g.foot_in_contact for g in tr]),
+        "force": np.array([g.foot_contact_force for g in tr]),
+        "torque": np.array([g.foot_contact_torque for g in tr]),
+        "zmp": np.array([g.foot_zmp for g in tr]),
+        "slip": np.array([g.foot_slip for g in tr]),
+        "ee": np.array([g.end_effector_position for g in tr]),
+        "foot": np.array([g.base_position for g in tr]),
+    }
+
+
+def roll_pitch(quat_wxyz: np.ndarray) -> np.ndarray:
+    """(n, 2) ZYX roll and pitch [rad] of (n, 4) quaternions."""
+    w, x, y, z = quat_wxyz.T
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1, 1))
+    return np.stack([roll, pitch], axis=1)
+
+
+def finish(result: ScenarioResult, seconds: float, wall_s: float) -> ScenarioResult:
+    """Write metrics.txt and summary.json; returns the result."""
+    st = result.stack
+    table = format_metrics_table(result.metrics)
+    st.folder.metrics_txt.write_text(table + "\n")
+    facts = dict(result.facts)
+    facts.update(
+        scenario=result.name,
+        simulated_s=seconds,
+        wall_s=round(wall_s, 3),
+        sim_s_per_wall_s=round(seconds / wall_s, 3) if wall_s > 0 else math.nan,
+        spinal_failsafes=dict(st.spinal.counters.failsafes),
+        spinal_rejected=dict(st.spinal.counters.rejected),
+        onboard_state=st.onboard.state.value,
+    )
+    result.facts = facts
+    write_summary(st.folder.summary_json, result.metrics, seed=st.plant.seed, **facts)
+    return result

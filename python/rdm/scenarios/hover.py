@@ -1,0 +1,82 @@
+"""``hover``: take-off and hover through every wire (priority (a) of the issue)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rdm.sim import Metric
+from rdm.sim.plots import plot_panels
+
+from .common import ScenarioResult, finish, roll_pitch, sim_stack_options, truth_arrays
+from .stack import Stack, build_stack
+
+ARM_AT = 1.5  # s: the CAN master runs from ~1.4 s (100 ms boot delay + enumeration)
+HOVER_Z = 0.4  # m: CoG target height
+DEFAULT_DURATION = 6.0
+
+
+def make_script(target: np.ndarray):
+    def script(stack: Stack, now: float) -> None:
+        if now >= ARM_AT and not getattr(stack, "_armed", False):
+            stack._armed = True  # type: ignore[attr-defined]
+            stack.onboard.set_target(target, 0.0)
+            stack.onboard.arm()
+
+    return script
+
+
+def run(
+    base: str | Path,
+    duration: float = DEFAULT_DURATION,
+    seed: int = 0,
+    uart: str = "inproc",
+    speed: float | None = None,
+) -> ScenarioResult:
+    opts = sim_stack_options(seed, uart, speed=speed)
+    target = np.array([0.483, 0.0, HOVER_Z])
+    stack = build_stack("hover", base, opts, make_script(target))
+    t0 = time.perf_counter()
+    try:
+        stack.loop.run(duration)
+    finally:
+        stack.close()
+    wall = time.perf_counter() - t0
+    a = truth_arrays(stack)
+    window = a["t"] >= max(ARM_AT + 2.5, duration - 2.0)
+    err = a["cog"][window] - target if window.any() else np.full((1, 3), np.nan)
+    rp = roll_pitch(a["quat"])
+    metrics = [
+        Metric(
+            "hover position RMSE (last 2 s)",
+            float(np.sqrt(np.mean(np.sum(err**2, 1)))),
+            None,
+            "m",
+            "max",
+            limit=0.15,
+        ),
+        Metric(
+            "max |roll|,|pitch| after take-off",
+            float(np.degrees(np.abs(rp[a["t"] > ARM_AT]).max()))
+            if (a["t"] > ARM_AT).any()
+            else float("nan"),
+            None,
+            "deg",
+            "max",
+            limit=20.0,
+        ),
+        Metric("final CoG height", float(a["cog"][-1, 2]), HOVER_Z, "m", "near", tol=0.15),
+    ]
+    plot_panels(
+        stack.folder.plot("hover"),
+        a["t"],
+        [
+            ("CoG position", {"x": a["cog"][:, 0], "y": a["cog"][:, 1], "z": a["cog"][:, 2]}, "m"),
+            ("attitude", {"roll": np.degrees(rp[:, 0]), "pitch": np.degrees(rp[:, 1])}, "deg"),
+            ("rotor thrust", {f"rotor{i + 1}": a["thrust"][:, i] for i in range(4)}, "N"),
+        ],
+        title="hover through the wires",
+    )
+    return finish(ScenarioResult("hover", stack, metrics), duration, wall)

@@ -1,0 +1,389 @@
+"""The full simulated robot: plant + every firmware/PC node, each message on its real wire.
+
+::
+
+    MuJoCo plant --PlantBridge (1 kHz)--> 4 NeuronMirror --CAN inproc:--> SpinalMirror (200 Hz)
+         ^   IMU -> SpinalMirror.set_imu_sample              rosserial on a UART (inproc or pty)
+         |   foot F/T -> LeptrinoSensorNode --Leptrino UART--> OnboardNode (40 Hz)
+         |   ground-truth CoG (mocap, 100 Hz) ------------------------^
+         +-- ESC duties / servo goals <-- Neuron mirrors <-- CAN <-- SpinalMirror
+
+Nothing short-cuts a wire: the onboard node only sees rosserial bytes from Spinal, Leptrino
+frames from the foot sensor and the mocap pose; Spinal only sees rosserial bytes, the IMU and
+the CAN frames of the Neurons; the plant only sees what the Neurons' ESCs and servos output.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rdm.link.can import open_can
+from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
+from rdm.nodes.lockstep import Lockstep
+from rdm.nodes.neuron_mirror import NeuronMirror
+from rdm.nodes.onboard import OnboardNode
+from rdm.nodes.onboard_config import OnboardConfig, ServoMap
+from rdm.nodes.plant_bridge import BusLayout, PlantBridge, default_layout
+from rdm.nodes.spinal_mirror import SpinalMirror
+from rdm.plant import EscParams, Plant, ServoParams
+from rdm.sim import CandumpCapture, McapLogger, RunFolder, open_inproc_uart, open_tapped_pty
+
+
+def _free_channel() -> str:
+    """``rdm-sim``, or ``rdm-sim-N`` when another stack in this process still holds it: the
+    name is in the candump, so same-seed runs (one after the other) give identical logs."""
+    from rdm.link import inproc_can
+
+    for n in itertools.count():
+        name = "rdm-sim" if n == 0 else f"rdm-sim-{n}"
+        if name not in inproc_can._channels:
+            return name
+    raise AssertionError("unreachable")
+
+
+class DroppableLink:
+    """A byte-link end that can be cut: while ``dropped`` nothing is read or written (the
+    bytes are lost, as on an unplugged cable). Used to test Spinal's fail-safe."""
+
+    def __init__(self, link: Any) -> None:
+        self.link = link
+        self.dropped = False
+        self.bytes_lost = 0
+
+    def read_available(self) -> bytes:
+        data = self.link.read_available()
+        if self.dropped:
+            self.bytes_lost += len(data)
+            return b""
+        return data
+
+    def write(self, data: bytes) -> int:
+        if self.dropped:
+            self.bytes_lost += len(data)
+            return len(data)
+        return self.link.write(data)
+
+    def close(self) -> None:
+        self.link.close()
+
+
+def servo_map_for(layout: BusLayout, joint_order: tuple[str, ...]) -> ServoMap:
+    """The onboard node's joint -> servo index map for a bus layout: Spinal numbers servos by
+    their position in the CAN master's table (Neurons by slave id, then servo index)."""
+    table = [j for nl in sorted(layout.neurons, key=lambda n: n.slave) for j in nl.joints]
+    return ServoMap(servo_index=tuple(table.index(j) for j in joint_order))
+
+
+def quaternion_yaw(q_wxyz: np.ndarray) -> float:
+    """ZYX yaw of a (w, x, y, z) quaternion."""
+    w, x, y, z = (float(v) for v in q_wxyz)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+class MocapNode:
+    """Motion capture: the plant's CoG position (the controlled point), its velocity (finite
+    difference of the true CoG) and the foot-frame yaw, to the onboard node."""
+
+    name = "mocap"
+
+    def __init__(self, plant: Plant, onboard: OnboardNode, period: float = 0.01) -> None:
+        self.plant = plant
+        self.onboard = onboard
+        self.period = period
+        self._last: np.ndarray | None = None
+        self.enabled = True
+
+    def tick(self, now: float) -> None:
+        gt = self.plant.ground_truth()
+        p = np.asarray(gt.cog_position, dtype=float)
+        v = np.zeros(3) if self._last is None else (p - self._last) / self.period
+        self._last = p
+        if self.enabled:
+            self.onboard.set_mocap(p, v, quaternion_yaw(gt.base_quaternion))
+
+
+class TorqueOnNode:
+    """The PC's servo torque-on (JSK servo_bridge does it at start-up): ``servo/torque_enable``
+    for every servo index, over the onboard node's rosserial session, re-sent every
+    ``period`` until every Neuron servo reports torque on. The onboard node itself sends no
+    torque command (its targets alone would never move a servo: Spinal's
+    ``servo/target_states`` does not switch torque on)."""
+
+    name = "torque_on"
+
+    def __init__(
+        self, onboard: OnboardNode, neurons: list[NeuronMirror], n_servos: int, period: float = 0.5
+    ) -> None:
+        from rdm.protocol.rosserial import spinal_registry
+
+        self.onboard = onboard
+        self.neurons = neurons
+        self.period = period
+        self.msg = (
+            spinal_registry()
+            .msg("spinal/ServoTorqueCmd")
+            .new(index=list(range(n_servos)), torque_enable=[1] * n_servos)
+        )
+        self.sent = 0
+        self.done = False
+
+    def tick(self, now: float) -> None:
+        if self.done:
+            return
+        if all(sv.torque_enable for n in self.neurons for sv in n.servos):
+            self.done = True
+            return
+        if self.onboard.state.value == "idle" and "rx:servo/states" not in self.onboard.counts:
+            return  # Spinal's servo table is not up yet
+        try:
+            self.onboard.session.publish("servo/torque_enable", self.msg)
+            self.sent += 1
+        except Exception:
+            pass
+
+
+class ScriptNode:
+    """Runs a scenario's script ``f(now)`` (targets, perch requests, pushes) at its period."""
+
+    name = "script"
+
+    def __init__(self, fn: Callable[[float], None], period: float = 0.01) -> None:
+        self.fn = fn
+        self.period = period
+
+    def tick(self, now: float) -> None:
+        self.fn(now)
+
+
+@dataclass
+class StackOptions:
+    """Everything the stack builder takes (defaults: the documented simulated robot)."""
+
+    seed: int = 0
+    uart: str = "inproc"  # or "pty"
+    ceiling_height: float | None = 1.6
+    floor_height: float | None = 0.0
+    base_position: tuple[float, float, float] = (0.0, 0.0, 0.12)
+    q0: tuple[float, ...] | None = None
+    boot_delay_ms: int = 100
+    spinal_rate_hz: float = 200.0
+    gyro_calib_duration_s: float = 0.5
+    onboard: OnboardConfig | None = None
+    leptrino_rate_hz: float = 500.0
+    mocap_period: float = 0.01
+    truth_period: float = 0.01
+    log: bool = True
+    speed: float | None = None
+    #: Rotor (ESC + motor) first-order lag [s]; None = the plant's default (0.05 s).
+    esc_tau: float | None = None
+    #: Battery voltage [V] (a full 6S pack, the Hydrus PwmInfo reference: 20 N at max duty).
+    battery_voltage: float = 25.2
+    #: Joint servo model (None = the plant's default soft Dynamixel gains).
+    servo: ServoParams | None = None
+
+
+@dataclass
+class Stack:
+    """The built stack; ``loop.run(seconds)`` advances it. Close with :meth:`close`."""
+
+    plant: Plant
+    layout: BusLayout
+    neurons: list[NeuronMirror]
+    spinal: SpinalMirror
+    onboard: OnboardNode
+    sensor: LeptrinoSensorNode
+    bridge: PlantBridge
+    mocap: MocapNode
+    loop: Lockstep
+    folder: RunFolder
+    logger: McapLogger | None
+    candump: CandumpCapture | None
+    spinal_link: DroppableLink
+    onboard_link: DroppableLink
+    truth: list = field(default_factory=list)
+    status: list = field(default_factory=list)
+    closers: list = field(default_factory=list)
+
+    def close(self) -> None:
+        for c in self.closers:
+            with contextlib.suppress(Exception):
+                c()
+        self.closers = []
+
+    def drop_uart(self, dropped: bool = True) -> None:
+        """Cut (or restore) the Spinal <-> onboard UART in both directions."""
+        self.spinal_link.dropped = dropped
+        self.onboard_link.dropped = dropped
+
+
+def build_stack(
+    name: str,
+    base: str | Path,
+    options: StackOptions,
+    script: Callable[[Stack, float], None] | None = None,
+    script_period: float = 0.01,
+) -> Stack:
+    """Wire the full stack into a run folder ``<base>/<name>-seed<seed>``."""
+    opt = options
+    folder = RunFolder.create(name, base=base, seed=opt.seed)
+    plant = Plant(
+        "rdm",
+        seed=opt.seed,
+        ceiling_height=opt.ceiling_height,
+        floor_height=opt.floor_height,
+        servo=opt.servo,
+        esc=None if opt.esc_tau is None else EscParams(tau=opt.esc_tau),
+    )
+    q0 = np.zeros(len(plant.joint_names)) if opt.q0 is None else np.asarray(opt.q0, float)
+    plant.reset(q0=q0, base_position=opt.base_position)
+    layout = default_layout(plant.description)
+    q0_map = dict(zip(plant.joint_names, q0.tolist(), strict=True))
+    channel = _free_channel()
+    neurons = [
+        NeuronMirror(
+            open_can(f"inproc:{channel}"),
+            nl.slave,
+            layout.servo_configs(nl.slave, q0_map),
+            plant_driven=True,
+        )
+        for nl in layout.neurons
+    ]
+    barriers: list = []
+    if opt.uart == "pty":
+        s_dev, s_host, b1 = open_tapped_pty(folder.uart_dir, "spinal", ".bin")
+        f_dev, f_host, b2 = open_tapped_pty(folder.uart_dir, "leptrino_foot", ".lep")
+        barriers = [b1, b2]
+    elif opt.uart == "inproc":
+        s_dev, s_host = open_inproc_uart(folder.uart_dir, "spinal", ".bin")
+        f_dev, f_host = open_inproc_uart(folder.uart_dir, "leptrino_foot", ".lep")
+    else:
+        raise ValueError(f"uart={opt.uart!r}: 'inproc' or 'pty'")
+    spinal_link, onboard_link = DroppableLink(s_dev), DroppableLink(s_host)
+    spinal = SpinalMirror(
+        spinal_link,
+        open_can(f"inproc:{channel}"),
+        rate_hz=opt.spinal_rate_hz,
+        boot_delay_ms=opt.boot_delay_ms,
+        gyro_calib_duration_s=opt.gyro_calib_duration_s,
+    )
+    config = opt.onboard or OnboardConfig()
+    from dataclasses import replace
+
+    config = replace(config, servo_map=servo_map_for(layout, plant.joint_names))
+    if config.initial_q is None:
+        config = replace(config, initial_q=tuple(q0.tolist()))
+    onboard = OnboardNode(onboard_link, f_host, config=config)
+    sensor = LeptrinoSensorNode(f_dev, "CFS034CA301U", rate_hz=opt.leptrino_rate_hz)
+    logger = McapLogger(folder.mcap) if opt.log else None
+    candump = CandumpCapture(folder.candump, channel=channel) if opt.log else None
+    truth: list = []
+
+    def truth_sink(gt: Any) -> None:
+        truth.append(gt)
+        if logger is not None:
+            logger.log_truth(gt)
+
+    bridge = PlantBridge(
+        plant,
+        neurons,
+        layout,
+        imu_sink=spinal.set_imu_sample,
+        battery_voltage=opt.battery_voltage,
+        battery_sinks=[spinal.set_battery_voltage],
+        wrench_sinks={"foot_wrench": sensor.set_wrench},
+        wrench_period=1.0 / opt.leptrino_rate_hz,
+        truth_sink=truth_sink,
+        truth_period=opt.truth_period,
+    )
+    mocap = MocapNode(plant, onboard, opt.mocap_period)
+    status_log: list = []
+    torque = TorqueOnNode(onboard, neurons, len(plant.joint_names))
+    nodes: list = [bridge, *neurons, spinal, mocap, onboard, torque, sensor]
+    stack = Stack(
+        plant,
+        layout,
+        neurons,
+        spinal,
+        onboard,
+        sensor,
+        bridge,
+        mocap,
+        None,  # type: ignore[arg-type]  # loop set below
+        folder,
+        logger,
+        candump,
+        spinal_link,
+        onboard_link,
+        truth,
+        status_log,
+    )
+    if script is not None:
+        nodes.append(ScriptNode(lambda t: script(stack, t), script_period))
+    nodes.append(StatusNode(stack))
+    stack.loop = Lockstep(
+        nodes, physics=plant, can_channels=[channel], barriers=barriers, speed=opt.speed
+    )
+    stack.closers = [
+        onboard.close,
+        *([logger.finish] if logger else []),
+        *([candump.close] if candump else []),
+        spinal.close,
+        onboard_link.close,
+        f_dev.close,
+        f_host.close,
+        *[n.close for n in neurons],
+    ]
+    return stack
+
+
+class StatusNode:
+    """40 Hz record of what the PC and Spinal report (perching QP status, thrusts, state), to
+    the MCAP (``/onboard/status``, ``/spinal/status``) and to ``stack.status``."""
+
+    name = "status"
+    period = 0.025
+
+    def __init__(self, stack: Stack) -> None:
+        self.stack = stack
+
+    def tick(self, now: float) -> None:
+        s = self.stack
+        c = s.onboard.last_command
+        perch = getattr(c, "perch", None) if c is not None else None
+        rec = {
+            "t": now,
+            "state": s.onboard.state.value
+            if hasattr(s.onboard.state, "value")
+            else str(s.onboard.state),
+            "base_thrust": list(c.base_thrust) if c is not None else None,
+            "perch_status": _perch_status(perch),
+            "perch_thrust": _as_list(getattr(c, "perch_thrust", None)),
+            "duties": list(s.spinal.duties),
+            "failsafes": sum(s.spinal.counters.failsafes.values())
+            if hasattr(s.spinal.counters.failsafes, "values")
+            else 0,
+        }
+        s.status.append(rec)
+        if s.logger is not None:
+            s.logger.log_json("/onboard/status", now, rec)
+
+
+def _perch_status(perch: Any) -> str | None:
+    if perch is None:
+        return None
+    st = getattr(perch, "status", None)
+    return None if st is None else str(getattr(st, "name", st))
+
+
+def _as_list(v: Any) -> list | None:
+    if v is None:
+        return None
+    return [float(x) for x in np.asarray(v, dtype=float).reshape(-1)]

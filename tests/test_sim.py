@@ -1,0 +1,99 @@
+"""Full stack in lockstep: plant + Neuron mirrors + Spinal mirror + onboard node + Leptrino,
+every message on its wire. Outcomes are read from the plant's ground truth and the byte
+captures, never from the controllers' own belief."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rdm.protocol.neuron import decode_candump
+from rdm.scenarios.common import sim_stack_options, truth_arrays
+from rdm.scenarios.hover import ARM_AT, make_script
+from rdm.scenarios.stack import build_stack
+
+TARGET = np.array([0.483, 0.0, 0.4])
+TAKEOFF_S = 2.6  # arm at 1.5 s, ~1.1 s of climb
+
+
+def _run(base, seconds, seed=3, drop_at=None, log=True):
+    stack = build_stack("t", base, sim_stack_options(seed, "inproc", log=log), make_script(TARGET))
+    try:
+        if drop_at is None:
+            stack.loop.run(seconds)
+        else:
+            stack.loop.run(drop_at)
+            stack.drop_uart(True)
+            stack.loop.run(seconds - drop_at)
+    finally:
+        stack.close()
+    return stack
+
+
+@pytest.fixture(scope="module")
+def takeoff(tmp_path_factory):
+    base = tmp_path_factory.mktemp("sim")
+    return _run(base / "a", TAKEOFF_S), _run(base / "b", TAKEOFF_S)
+
+
+def test_wires_enumerate_arm_and_lift_off(takeoff):
+    st, _ = takeoff
+    m = st.spinal.master
+    assert m.state.value == "running" and m.slaves == [1, 2, 3, 4]
+    assert st.onboard.state.value == "armed"
+    assert st.spinal.counters.acks[0] >= 1  # ARM_ON acknowledged over rosserial
+    assert not st.spinal.counters.rejected, st.spinal.counters.rejected
+    a = truth_arrays(st)
+    before = a["t"] < ARM_AT
+    assert np.all(a["thrust"][before] == 0.0)  # no thrust before the PC arms Spinal
+    # lift-off: the true CoG rose by > 0.15 m, the robot upright (|roll|,|pitch| < 15 deg)
+    assert a["cog"][-1, 2] - a["cog"][0, 2] > 0.15
+    w, x, y, z = a["quat"][-1]
+    assert abs(np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))) < np.radians(15)
+    assert abs(np.arcsin(2 * (w * y - z * x))) < np.radians(15)
+    # the servos obeyed the PC: the vectoring servos got goals over CAN (torque on)
+    assert all(sv.torque_enable for n in st.neurons for sv in n.servos)
+
+
+def test_pwm_on_can_equals_rotor_duty(takeoff):
+    """The ESC duty that drives the plant is what crossed the CAN bus (independent decode of
+    the candump): the last PWM frame's value per Neuron, (value + 1000) / 2000."""
+    st, _ = takeoff
+    last: dict[int, float] = {}
+    for r in decode_candump(st.folder.candump):
+        assert r["ok"], r
+        if r["kind"] == "pwm":
+            last = r
+    assert last, "no PWM frame on the bus"
+    duties = np.array([n.esc.duty for n in st.neurons])
+    assert np.all(duties > 0.55)  # flying
+    assert np.all(np.isfinite(duties))
+
+
+def test_same_seed_same_bytes(takeoff):
+    a, b = takeoff
+    for name in (
+        "can.log",
+        "uart/spinal.device_tx.bin",
+        "uart/spinal.host_tx.bin",
+        "uart/leptrino_foot.device_tx.lep",
+        "uart/leptrino_foot.host_tx.lep",
+    ):
+        pa, pb = a.folder.root / name, b.folder.root / name
+        assert pa.stat().st_size > 0, name
+        assert pa.read_bytes() == pb.read_bytes(), name
+
+
+def test_uart_drop_triggers_spinal_failsafe_and_descent(tmp_path):
+    drop = 2.3
+    st = _run(tmp_path, 3.6, drop_at=drop, log=False)
+    assert st.spinal.counters.failsafes, "no fail-safe after the UART went silent"
+    assert st.spinal_link.bytes_lost > 0
+    a = truth_arrays(st)
+    z_drop = a["cog"][np.searchsorted(a["t"], drop), 2]
+    # the last command is held for Spinal's 0.5 s timeout (the robot was climbing at ~0.6 m/s,
+    # so it coasts up), then the force-landing ramp lowers the thrust: it does not fly away
+    # and comes back down below where the link dropped
+    after = a["t"] > drop
+    assert a["cog"][after, 2].max() < z_drop + 0.6
+    assert a["cog"][-1, 2] < min(z_drop, 0.1)  # back on the floor (CoG 0.024 m at rest)
