@@ -238,7 +238,7 @@ def test_spinal_process_with_neuron_process_on_vcan0(vcan_bus):
             states = pc.received("servo/states")
             return bool(states) and abs(states[-1][1].servos[0].angle - 2900) <= 2
 
-        assert pc.run(20, until=reached, every=servo_commands), pc.received("servo/states")[-1:]
+        assert pc.run(40, until=reached, every=servo_commands), pc.received("servo/states")[-1:]
         phase("servo goal reached")
 
         # arm, fly a command stream at 40 Hz, stop it: the Spinal forces landing (ack 2)
