@@ -38,6 +38,7 @@ from rdm.protocol.rosserial.events import LogReceived, MessageReceived
 from rdm.protocol.rosserial.server import ServerSession
 
 REG = spinal_registry()
+PWM_ID = 15  # MOTOR broadcast, message 0 (DBC: MotorPwmSlaves1To6)
 DBC_DIR = Path(__file__).resolve().parents[1] / "firmware_protocol" / "neuron"
 EPOCH_NS = 1_767_225_600 * 10**9
 _channels = itertools.count()
@@ -99,6 +100,7 @@ class Rig:
         self.can_log: list[tuple[int, can.Message]] = []
         self.t = 0
         self._seen_out = 0
+        self.neurons_on = True  # False: the Neurons stop (power cut on the CAN side)
         self.before_tick = None  # callable(t) run before the mirror's tick (IMU feed ...)
 
     # -- lockstep ---------------------------------------------------------------------------
@@ -119,8 +121,9 @@ class Rig:
         up = self._read_exact(n)
         self._seen_out += n
         self.server_events += [(t, e) for e in self.server.feed(up, t / 1000)]
-        for neuron in self.neurons.values():
-            neuron.tick(t / 1000)
+        if self.neurons_on:
+            for neuron in self.neurons.values():
+                neuron.tick(t / 1000)
         self.can_log += [(t, m) for m in drain(self.listener)]
         self.t += 1
 
@@ -173,10 +176,11 @@ class Rig:
         ]
 
     def pwm_frames(self, since: int = 0) -> list[tuple[int, tuple[int, ...]]]:
-        """(ms, slot values) of every PWM frame 0 on the bus, decoded with the Neuron codec."""
+        """(ms, slot values) of every PWM frame 0 on the bus, decoded with the Neuron codec
+        (id 15 is only ever sent Spinal -> Neuron)."""
         out = []
         for t, m in self.can_log:
-            if t < since:
+            if t < since or m.arbitration_id != PWM_ID:
                 continue
             frame = nr.decode_frame(m.arbitration_id, bytes(m.data), nr.Direction.SPINAL_TO_NEURON)
             if isinstance(frame, nr.PwmFrame) and frame.frame_index == 0:
@@ -613,3 +617,39 @@ def test_services_and_battery_voltage(rig: Rig):
     for t, m in volts:
         assert m.data == pytest.approx(f32(filtered(t)), abs=1e-5)
     assert volts[-1][1].data < 25.2 - 0.5
+
+
+def test_pwm_test_mode_overrides_and_leaves(rig: Rig):
+    """pwm_test (sec. 3.7): empty motor_index -> pwms[0] for all; per-index values, outside
+    [0.5, 1] -> 0.5; empty pwms leaves test mode (back to the controller's idle 0.5)."""
+    rig.handshake()
+    rig.wait_can_running()
+    rig.publish("pwm_test", msg("spinal/PwmTest", motor_index=[], pwms=[0.6]))
+    rig.run_for(12)
+    t1 = rig.t
+    rig.publish("pwm_test", msg("spinal/PwmTest", motor_index=[1, 3], pwms=[0.7, 1.5]))
+    rig.run_for(12)
+    t2 = rig.t
+    rig.publish("pwm_test", msg("spinal/PwmTest", motor_index=[], pwms=[]))
+    rig.run_for(12)
+    value = lambda d: int(f32(d) * 2000.0 - 1000.0)  # noqa: E731
+    assert {v[:4] for t, v in rig.pwm_frames() if t1 - 4 <= t < t1} == {(value(0.6),) * 4}
+    assert {v[:4] for t, v in rig.pwm_frames() if t2 - 4 <= t < t2} == {
+        (value(0.6), value(0.7), value(0.6), 0)
+    }
+    assert {v[:4] for t, v in rig.pwm_frames() if rig.t - 4 <= t} == {(0, 0, 0, 0)}
+
+
+def test_can_disconnect_is_logged_over_rosserial(rig: Rig):
+    rig.handshake()
+    rig.wait_can_running()
+    rig.run_for(50)
+    t_cut = rig.t
+    rig.neurons_on = False
+    rig.run_for(1250)
+    errors = [(t, e.text) for t, e in rig.logs(level=C.LogLevel.ERROR, since=t_cut)]
+    texts = [text for _t, text in errors]
+    assert texts == ["CAN disconnected!!", "CAN disconnected!!"]  # at most once per second
+    # the last frame came in at about t_cut; "no frame for more than 100 ms" (sec. 2.6)
+    assert t_cut + 100 <= errors[0][0] <= t_cut + 103
+    assert errors[1][0] - errors[0][0] == 1000

@@ -30,8 +30,8 @@ import numpy as np
 
 from rdm.control.attitude import ARM_OFF, N_ROTORS, CommandRejectedError, SpinalStep
 from rdm.nodes.base import to_ms
-from rdm.nodes.can_master import BOOT_DELAY_MS, IDLE_DUTY, CanMaster, LogEvent, MasterState
-from rdm.nodes.spinal_servo_bridge import ServoBridge, ServoCommandError
+from rdm.nodes.can_master import BOOT_DELAY_MS, IDLE_DUTY, CanMaster, MasterState
+from rdm.nodes.spinal_servo_bridge import MirrorRejection, ServoBridge
 from rdm.nodes.spinal_uart import UartPump
 from rdm.protocol.rosserial import constants as C
 from rdm.protocol.rosserial.client import ClientSession
@@ -54,8 +54,9 @@ SERVO_STATES_PUB_MS = 20  # >= 20 ms (50 Hz), spine.cpp
 SERVO_TORQUE_PUB_MS = 1000  # >= 1000 ms
 #: Battery low-pass ``v = 0.99 v + 0.01 new`` per 20 ms sample.
 BATTERY_FILTER = 0.99
-#: A tick that skips more milliseconds than this replays only the last ones on CAN.
-MAX_CAN_CATCH_UP_MS = 50
+#: A tick that skips more milliseconds than this replays only the last ones on CAN (as
+#: ``CanMaster``'s own cap): on a starved host a bigger replay makes every tick slower still.
+MAX_CAN_CATCH_UP_MS = 10
 #: Control steps replayed at most per tick when the loop runs late; then re-phased.
 MAX_CONTROL_CATCH_UP = 5
 #: A level, still IMU: no rotation, gravity on +z (m/s^2), an Earth-like field (uT).
@@ -278,7 +279,7 @@ class SpinalMirror:
             return
         try:
             handler(msg)
-        except ServoCommandError as exc:
+        except MirrorRejection as exc:
             self._reject(exc.reason, str(exc), log=True)
         except CommandRejectedError as exc:
             # The core emits a "rejected" event for the ones the firmware logs; logged there.
@@ -359,7 +360,7 @@ class SpinalMirror:
             duties = [pwms[0]] * n
         else:
             if len(msg.motor_index) != len(pwms):
-                raise ServoCommandError(
+                raise MirrorRejection(
                     "wrong_length",
                     f"pwm_test: {len(msg.motor_index)} indices but {len(pwms)} pwms",
                 )
@@ -502,7 +503,7 @@ class SpinalMirror:
 
     def _forward_can_events(self) -> None:
         for event in self.master.pop_events():
-            self._log(_LOG_LEVELS.get(event.level, C.LogLevel.INFO), event.text, event)
+            self._log(_LOG_LEVELS.get(event.level, C.LogLevel.INFO), event.text)
 
     # ---------------------------------------------------------------- publishers
     def _due(self, key: str, now_ms: int, period_ms: int, strict: bool) -> bool:
@@ -553,8 +554,7 @@ class SpinalMirror:
         if self.session.publish(topic, msg) > 0:
             self.counters.published[topic] += 1
 
-    def _log(self, level: int, text: str, event: LogEvent | None = None) -> None:
-        del event
+    def _log(self, level: int, text: str) -> None:
         self.counters.logs[C.LogLevel(level).name.lower()] += 1
         self.session.log(level, text)
 

@@ -15,8 +15,9 @@ from typing import Any
 from rdm.nodes.can_master import CanMaster, MasterState, ServoEntry
 
 
-class ServoCommandError(ValueError):
-    """A servo command that is not applied; ``reason`` is the counter key."""
+class MirrorRejection(ValueError):
+    """A command the mirror itself refuses (servo topics, pwm_test); ``reason`` is the counter
+    key in ``MirrorCounters.rejected``."""
 
     def __init__(self, reason: str, text: str) -> None:
         super().__init__(text)
@@ -41,16 +42,16 @@ class ServoBridge:
 
     def _resolve(self, topic: str, index: Sequence[int], values: Sequence[int]):
         if len(index) != len(values):
-            raise ServoCommandError(
+            raise MirrorRejection(
                 "wrong_length", f"{topic}: {len(index)} indices but {len(values)} values"
             )
         table = self.table()
         if not table:
-            raise ServoCommandError("servo_not_ready", f"{topic}: no servo enumerated on CAN")
+            raise MirrorRejection("servo_not_ready", f"{topic}: no servo enumerated on CAN")
         out = []
         for i, value in zip(index, values, strict=True):
             if not 0 <= i < len(table):
-                raise ServoCommandError(
+                raise MirrorRejection(
                     "servo_index", f"{topic}: servo index {i} not in 0..{len(table) - 1}"
                 )
             out.append((table[i][0], int(value)))
@@ -62,7 +63,7 @@ class ServoBridge:
         try:
             self.master.set_servo_targets(dict(pairs))
         except ValueError as exc:
-            raise ServoCommandError("servo_value", f"servo/target_states: {exc}") from exc
+            raise MirrorRejection("servo_value", f"servo/target_states: {exc}") from exc
 
     def target_current(self, msg: Any) -> None:
         """``servo/target_current``: the ``angles`` field carries the goal current."""
@@ -71,7 +72,7 @@ class ServoBridge:
             try:
                 self.master.set_servo_current(slave, idx, value)
             except ValueError as exc:
-                raise ServoCommandError("servo_value", f"servo/target_current: {exc}") from exc
+                raise MirrorRejection("servo_value", f"servo/target_current: {exc}") from exc
 
     def torque_enable(self, msg: Any) -> None:
         """``servo/torque_enable`` (``spinal/ServoTorqueCmd``)."""
