@@ -45,6 +45,8 @@ def test_quick_run_writes_every_case_peer_and_field(
         assert c["failures"] == 0, name
         assert c["median_us"] <= c["p99_us"] <= c["p999_us"] <= c["max_us"]
         assert c["fraction_of_budget"] == pytest.approx(c["median_us"] / c["budget_us"])
+        for stat, frac in c["fractions_of_budget"].items():
+            assert frac == pytest.approx(c[f"{stat}_us"] / c["budget_us"])
         assert c["target"], name
         for kind, t in c["target"].items():
             assert finite(t["limit"]) and finite(t["value"]), (name, kind)
@@ -57,6 +59,7 @@ def test_quick_run_writes_every_case_peer_and_field(
                 assert finite(p[f]), (name, peer, f)
             assert p["n"] == 200
             assert p["speedup"] == pytest.approx(p["median_us"] / c["median_us"])
+            assert p["failures"] == sum(p["failure_statuses"].values())
     assert doc["failed_solves_ours"] == 0
     # Peers solving the same problems agree with us where they claim success.
     lqi_peer = doc["cases"]["lqi_warm_rust"]["peers"]["scipy_care"]

@@ -36,6 +36,7 @@ class PeerResult:
     max_error: float = 0.0
     error_kind: str = ""
     settings: dict[str, Any] = field(default_factory=dict)
+    failure_statuses: dict[str, int] = field(default_factory=dict)
     skipped: str | None = None
 
 
@@ -157,6 +158,7 @@ def peer_result(name: str, run: peer_mod.PeerRun) -> PeerResult:
         max_error=run.max_error,
         error_kind=run.error_kind,
         settings=run.settings,
+        failure_statuses=dict(run.failure_statuses),
     )
 
 

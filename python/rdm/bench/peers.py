@@ -46,6 +46,12 @@ class PeerRun:
     max_error: float
     error_kind: str
     settings: dict[str, Any] = field(default_factory=dict)
+    failure_statuses: dict[str, int] = field(default_factory=dict)
+
+    def record_failure(self, status: str) -> None:
+        """Count one failed call under the solver's own status name."""
+        self.failures += 1
+        self.failure_statuses[status] = self.failure_statuses.get(status, 0) + 1
 
 
 def _timed(call: Callable[[], Any]) -> tuple[int, Any]:
@@ -66,7 +72,7 @@ def run_scipy_care(
     from scipy.linalg import solve_continuous_are
 
     ns = np.zeros(len(problems), dtype=np.int64)
-    failures, worst = 0, 0.0
+    run = PeerRun(ns, 0, 0.0, "max |K - K_rdm| / max |K_rdm|", {"balanced": True})
     for i, (a, b, q, r) in enumerate(problems):
 
         def solve(a=a, b=b, q=q, r=r) -> np.ndarray:
@@ -75,14 +81,15 @@ def run_scipy_care(
 
         try:
             ns[i], k = _timed(solve)
-        except (np.linalg.LinAlgError, ValueError):
-            failures += 1
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            run.record_failure(type(exc).__name__)
             ns[i] = 0
             continue
         ref = reference_k[i]
         if np.all(np.isfinite(ref)):
-            worst = max(worst, float(np.max(np.abs(k - ref)) / max(np.max(np.abs(ref)), 1e-300)))
-    return PeerRun(ns, failures, worst, "max |K - K_rdm| / max |K_rdm|", {"balanced": True})
+            err = float(np.max(np.abs(k - ref)) / max(np.max(np.abs(ref)), 1e-300))
+            run.max_error = max(run.max_error, err)
+    return run
 
 
 # --- perching QP --------------------------------------------------------------------------
@@ -124,7 +131,7 @@ def run_osqp(problems: list[QpData], settings: dict[str, Any], update: bool) -> 
     import osqp
 
     ns = np.zeros(len(problems), dtype=np.int64)
-    failures, worst = 0, 0.0
+    run = PeerRun(ns, 0, 0.0, "max |thrust - thrust_rdm| [N]", dict(settings))
     solver = None
     for i, d in enumerate(problems):
         lower, upper = d.bounds()
@@ -143,10 +150,10 @@ def run_osqp(problems: list[QpData], settings: dict[str, Any], update: bool) -> 
 
         ns[i], res = _timed(call)
         if res.info.status != "solved":
-            failures += 1
+            run.record_failure(str(res.info.status))
         else:
-            worst = max(worst, _thrust_error(res.x, d))
-    return PeerRun(ns, failures, worst, "max |thrust - thrust_rdm| [N]", dict(settings))
+            run.max_error = max(run.max_error, _thrust_error(res.x, d))
+    return run
 
 
 def clarabel_settings() -> Any:
@@ -170,7 +177,13 @@ def run_clarabel(problems: list[QpData], update: bool) -> PeerRun:
 
     settings = clarabel_settings()
     ns = np.zeros(len(problems), dtype=np.int64)
-    failures, worst = 0, 0.0
+    run = PeerRun(
+        ns,
+        0,
+        0.0,
+        "max |thrust - thrust_rdm| [N]",
+        {"presolve": False, "equilibrate": False, "max_iter": 50, "tol": 1e-8},
+    )
     solver = None
     for i, d in enumerate(problems):
         if update and solver is not None:
@@ -191,13 +204,7 @@ def run_clarabel(problems: list[QpData], update: bool) -> PeerRun:
 
         ns[i], sol = _timed(call)
         if str(sol.status) not in ("Solved", "AlmostSolved"):
-            failures += 1
+            run.record_failure(str(sol.status))
         else:
-            worst = max(worst, _thrust_error(sol.x, d))
-    return PeerRun(
-        ns,
-        failures,
-        worst,
-        "max |thrust - thrust_rdm| [N]",
-        {"presolve": False, "equilibrate": False, "max_iter": 50, "tol": 1e-8},
-    )
+            run.max_error = max(run.max_error, _thrust_error(sol.x, d))
+    return run

@@ -5,13 +5,14 @@ JSON schema ``rdm.bench/1``::
     {"schema", "command", "machine": {...}, "timer_overhead_ns": {...},
      "failed_solves_ours", "failed_solves_peers",
      "cases": {name: {"group", "title", "median_us", "p99_us", "p999_us", "max_us",
-                      "mean_us", "min_us", "budget_us", "fraction_of_budget", "n",
+                      "mean_us", "min_us", "budget_us", "fraction_of_budget" (median / budget),
+                      "fractions_of_budget": {"median", "p99", "p999", "max"}, "n",
                       "failures", "notes",
                       "target": {kind: {"limit", "value", "met"}},
                       "peers": {peer: {"median_us", "p99_us", "p999_us", "max_us",
                                        "mean_us", "min_us", "n", "fraction_of_budget",
-                                       "speedup", "failures", "max_error", "error_kind",
-                                       "settings"}
+                                       "speedup", "failures", "failure_statuses",
+                                       "max_error", "error_kind", "settings"}
                                 | {"skipped": reason}}}}}
 
 ``speedup`` = peer median / this measurement's median (> 1: we are faster).
@@ -38,6 +39,7 @@ def peer_dict(peer: PeerResult, m: Measurement) -> dict[str, Any]:
     d["max_error"] = peer.max_error
     d["error_kind"] = peer.error_kind
     d["settings"] = peer.settings
+    d["failure_statuses"] = peer.failure_statuses
     return d
 
 
@@ -59,6 +61,9 @@ def to_json(
         d.update(m.summary.to_dict())
         d["budget_us"] = m.budget_us
         d["fraction_of_budget"] = m.fraction_of_budget
+        d["fractions_of_budget"] = {
+            k: getattr(m.summary, f"{k}_us") / m.budget_us for k in ("median", "p99", "p999", "max")
+        }
         d["failures"] = m.failures
         d["notes"] = list(m.notes)
         d["target"] = {t.kind: target_dict(t) for t in m.targets}
@@ -122,7 +127,12 @@ def format_text(doc: dict[str, Any]) -> str:
             f"{name:<22}{_us(c['median_us'])}{_us(c['p99_us'])}{_us(c['p999_us'])}"
             f"{_us(c['max_us'])}    {c['fraction_of_budget']:10.2e}{c['n']:9d}{c['failures']:6d}"
         )
-        lines.append(f"    {c['title']}; budget {c['budget_us']:g} us")
+        f = c["fractions_of_budget"]
+        lines.append(
+            f"    {c['title']}; budget {c['budget_us']:g} us; as % of budget: median "
+            f"{100 * f['median']:.4f}, p99 {100 * f['p99']:.4f}, p99.9 {100 * f['p999']:.4f}, "
+            f"max {100 * f['max']:.4f}"
+        )
         for kind, t in c["target"].items():
             lines.append(
                 "    target: " + _target_text(Target(kind, t["limit"], t["value"], t["met"]))
@@ -142,6 +152,7 @@ def format_text(doc: dict[str, Any]) -> str:
                 f"  {peer:<30}{_us(p['median_us'])}{_us(p['p99_us'])}{_us(p['p999_us'])}"
                 f"{_us(p['max_us'])}  us  n {p['n']}, failures {p['failures']}, "
                 f"{p['error_kind']} {p['max_error']:.2e}"
+                + (f"; failed as {p['failure_statuses']}" if p["failure_statuses"] else "")
             )
             for name in members:
                 speedup = doc["cases"][name]["peers"][peer]["speedup"]
