@@ -471,3 +471,50 @@ class PositionController:
 
 def vectoring_angles(n: NDArray[np.float64]) -> tuple[float, float]:
     """Eqs. (33)-(34) for a unit direction n: (alpha, beta)."""
+
+# --- bench ---
+# Rust-side timing loops of `rdm bench` (crates/rdm_py/src/bench.rs): each times every call
+# with std::time::Instant, GIL released, and returns what each step computed.
+def time_spinal_steps(
+    gains: _np.ndarray,
+    pinv: _np.ndarray,
+    inertia: tuple[float, float, float, float, float, float],
+    now: _np.ndarray,
+    gyro: _np.ndarray,
+    acc: _np.ndarray,
+    mag: _np.ndarray,
+    voltage: float,
+    command_every: int,
+    command_angles: tuple[float, float, float],
+    command_base_thrust: _np.ndarray,
+    rate_hz: float = 200.0,
+    gyro_calib_duration_s: float = 0.0,
+) -> dict[str, _Any]:
+    """Keys: ns (n,) int64, duty (n, 4), thrust (n, 4), euler (n, 3), invalid."""
+
+def time_lqi_synthesis(
+    masses: _np.ndarray, inertias: _np.ndarray, allocations: _np.ndarray, warm: bool = True
+) -> dict[str, _Any]:
+    """Keys: ns (n,) int64, k (n, 4, 12), failures, fell_back."""
+
+def time_onboard_ticks(
+    position: _np.ndarray,
+    velocity: _np.ndarray,
+    target_position: _np.ndarray,
+    target_velocity: _np.ndarray,
+    target_yaw: _np.ndarray,
+    link_rotations: _np.ndarray,
+    dt: float,
+    foot_wrench: _np.ndarray,
+    foot_allocation: _np.ndarray,
+    allocation: _np.ndarray,
+    mass: float,
+    initial_thrust: _np.ndarray,
+    rate_hz: float = 40.0,
+    cutoff_hz: float = 1.0,
+) -> dict[str, _Any]:
+    """Keys: ns (n,) int64, thrust (n, 4), status (n,) uint8, status_names, alpha, beta,
+    acceleration (n, 2), failures, position_failures."""
+
+def bench_build_profile() -> str: ...
+def time_timer_overhead(n: int = 10000) -> _np.ndarray: ...

@@ -14,6 +14,10 @@ from collections.abc import Sequence
 
 # name -> (module under rdm.commands, one-line help). Keep sorted by name.
 COMMANDS: dict[str, tuple[str, str]] = {
+    "bench": (
+        "bench",
+        "measure the real-time core against its 200 Hz and 40 Hz budgets and against peers",
+    ),
     "decode": ("decode", "decode a UART capture, candump log or Leptrino capture"),
     "model": ("model", "load a robot and print its mass properties, allocation and aerial ZMP"),
     "neuron": ("neuron", "run a Neuron board mirror on a CAN bus"),

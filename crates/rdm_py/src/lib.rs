@@ -4,6 +4,7 @@
 use pyo3::prelude::*;
 
 mod attitude;
+mod bench;
 mod errors;
 mod estimate;
 mod lqi;
@@ -21,5 +22,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     lqi::register(m)?;
     position::register(m)?;
     perch::register(m)?;
+    bench::register(m)?;
     Ok(())
 }
