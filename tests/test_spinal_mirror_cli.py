@@ -12,20 +12,21 @@ import time
 from pathlib import Path
 from typing import Any
 
+import rdm
 from rdm.link.serial import open_serial
 from rdm.protocol.rosserial import spinal_registry
 from rdm.protocol.rosserial.events import LogReceived, MessageReceived, ServiceResponse
 from rdm.protocol.rosserial.server import ServerSession
 
 REPO = Path(__file__).resolve().parents[1]
+# Child processes import the same `rdm` as this test (installed wheel or editable tree).
+RDM_IMPORT_ROOT = str(Path(rdm.__file__).resolve().parents[1])
 REG = spinal_registry()
 
 
 def start_spinal(*extra: str) -> tuple[subprocess.Popen, str]:
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(
-        p for p in (str(REPO / "python"), env.get("PYTHONPATH")) if p
-    )
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (RDM_IMPORT_ROOT, env.get("PYTHONPATH")) if p)
     cmd = [sys.executable, "-m", "rdm.cli", "spinal", "--uart", "pty", *extra]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     line = proc.stdout.readline()
@@ -100,7 +101,7 @@ def test_rdm_spinal_process_handshake_imu_service_and_sigterm():
 
 
 def test_rdm_spinal_rejects_bad_arguments():
-    env = dict(os.environ, PYTHONPATH=str(REPO / "python"))
+    env = dict(os.environ, PYTHONPATH=RDM_IMPORT_ROOT)
     for extra in (["--rate", "5000"], ["--uart", "nonsense"], ["--can", "bogus:x"]):
         args = ["--uart", "pty", "--can", "virtual:y", *extra]
         res = subprocess.run(

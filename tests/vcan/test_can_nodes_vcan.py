@@ -20,6 +20,7 @@ from pathlib import Path
 import can
 import pytest
 
+import rdm
 from rdm.link.can import open_can
 from rdm.nodes.base import drain, run_realtime
 from rdm.nodes.can_master import CanMaster, MasterState, UavModel
@@ -28,6 +29,8 @@ from rdm.nodes.servo_model import ServoConfig
 from rdm.protocol import neuron as nr
 
 REPO = Path(__file__).resolve().parents[2]
+# Child processes import the same `rdm` as this test (installed wheel or editable tree).
+RDM_IMPORT_ROOT = str(Path(rdm.__file__).resolve().parents[1])
 SPEC = "socketcan:vcan0"
 
 
@@ -159,9 +162,7 @@ def test_enumeration_pwm_polling_and_watchdog_in_process():
 
 def test_master_enumerates_a_neuron_mirror_process():
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(
-        p for p in (str(REPO / "python"), env.get("PYTHONPATH")) if p
-    )
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (RDM_IMPORT_ROOT, env.get("PYTHONPATH")) if p)
     cmd = [
         sys.executable,
         "-m",

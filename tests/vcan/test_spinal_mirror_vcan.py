@@ -22,6 +22,7 @@ from typing import Any
 
 import can
 
+import rdm
 from rdm.link.serial import open_serial
 from rdm.protocol import neuron as nr
 from rdm.protocol.rosserial import spinal_registry
@@ -29,6 +30,8 @@ from rdm.protocol.rosserial.events import MessageReceived, ServiceResponse
 from rdm.protocol.rosserial.server import ServerSession
 
 REPO = Path(__file__).resolve().parents[2]
+# Child processes import the same `rdm` as this test (installed wheel or editable tree).
+RDM_IMPORT_ROOT = str(Path(rdm.__file__).resolve().parents[1])
 SPEC = "socketcan:vcan0"
 REG = spinal_registry()
 PWM_ID = 15  # MOTOR device, message 0, broadcast slave field (DBC: MotorPwmSlaves1To6)
@@ -36,9 +39,7 @@ PWM_ID = 15  # MOTOR device, message 0, broadcast slave field (DBC: MotorPwmSlav
 
 def _env() -> dict[str, str]:
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(
-        p for p in (str(REPO / "python"), env.get("PYTHONPATH")) if p
-    )
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (RDM_IMPORT_ROOT, env.get("PYTHONPATH")) if p)
     return env
 
 
