@@ -14,7 +14,9 @@ from collections.abc import Sequence
 
 # name -> (module under rdm.commands, one-line help). Keep sorted by name.
 COMMANDS: dict[str, tuple[str, str]] = {
+    "decode": ("decode", "decode a UART capture, candump log or Leptrino capture"),
     "model": ("model", "load a robot and print its mass properties, allocation and aerial ZMP"),
+    "plant": ("plant", "build the MuJoCo model of a robot; export it for MuJoCo's viewer"),
 }
 
 

@@ -1,0 +1,163 @@
+"""UART byte transport over pyserial, chosen by one configuration string per port.
+
+Accepted specs (the Spinal link runs at 921600 baud 8N1 without flow control, fact sheet
+sec. 1.1, which is the default):
+
+* ``serial:/dev/ttyUSB0@921600`` or ``serial:/dev/flight_controller`` (default baud), also a
+  bare ``/dev/ttyUSB0[@baud]``;
+* a pyserial URL such as ``loop://`` (echo), ``socket://host:port`` or ``rfc2217://host:port``;
+* ``pty``: a fresh pseudo-terminal pair; the returned link is pyserial on the slave side and its
+  :attr:`SerialLink.peer` is pyserial on the master side (for tests and simulators).
+
+Reads never block: :meth:`SerialLink.read_available` returns what has arrived (maybe ``b""``).
+A pty ignores the baud rate and delivers at memory speed; line timing must be modelled elsewhere.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import re
+from dataclasses import dataclass
+
+import serial
+
+DEFAULT_BAUD = 921600
+_URL = re.compile(r"^[a-z][a-z0-9+]*://", re.IGNORECASE)
+
+
+class SerialSpecError(ValueError):
+    """A configuration string that is not a serial spec; the message lists the accepted forms."""
+
+
+@dataclass(frozen=True)
+class SerialSpec:
+    """A parsed spec: ``kind`` is ``device``, ``url`` or ``pty``."""
+
+    kind: str
+    target: str
+    baudrate: int
+
+
+_FORMS = "'serial:/dev/ttyUSB0@921600', '/dev/ttyUSB0', 'loop://', 'socket://host:port' or 'pty'"
+
+
+def parse_serial_spec(spec: str) -> SerialSpec:
+    """Parse a configuration string (see the module doc) without opening anything."""
+    if not isinstance(spec, str) or not spec.strip():
+        raise SerialSpecError(f"empty serial spec; expected {_FORMS}")
+    text = spec.strip()
+    if text == "pty":
+        return SerialSpec("pty", "", DEFAULT_BAUD)
+    if _URL.match(text):
+        return SerialSpec("url", text, DEFAULT_BAUD)
+    if text.startswith("serial:"):
+        text = text[len("serial:") :]
+    elif not text.startswith("/"):
+        raise SerialSpecError(f"unrecognised serial spec {spec!r}; expected {_FORMS}")
+    path, sep, baud_text = text.rpartition("@") if "@" in text else (text, "", "")
+    if not path:
+        raise SerialSpecError(f"serial spec {spec!r} has no device path; expected {_FORMS}")
+    baud = DEFAULT_BAUD
+    if sep:
+        if not baud_text.isdigit() or int(baud_text) <= 0:
+            raise SerialSpecError(
+                f"serial spec {spec!r}: baud rate {baud_text!r} is not a positive integer"
+            )
+        baud = int(baud_text)
+    return SerialSpec("device", path, baud)
+
+
+class SerialLink:
+    """A non-blocking byte pipe over one pyserial port."""
+
+    def __init__(self, port: serial.SerialBase, spec: str, peer: SerialLink | None = None) -> None:
+        self.port = port
+        self.spec = spec
+        self.peer = peer  # the other end of a pty pair, else None
+
+    def read_available(self) -> bytes:
+        """All bytes received so far (``b""`` if none); never blocks."""
+        waiting = self.port.in_waiting
+        return self.port.read(waiting) if waiting else b""
+
+    def write(self, data: bytes) -> int:
+        """Write ``data``; returns the number of bytes handed to the port."""
+        if not data:
+            return 0
+        written = self.port.write(data)
+        return len(data) if written is None else int(written)
+
+    def close(self) -> None:
+        """Close this end (and the peer of a pty pair)."""
+        self.port.close()
+        if self.peer is not None:
+            peer, self.peer = self.peer, None
+            peer.close()
+
+    def __enter__(self) -> SerialLink:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class _PtyMasterSerial(serial.Serial):
+    """pyserial on an already-open pty master fd (the master has no path to open by name)."""
+
+    def __init__(self, master_fd: int, name: str) -> None:
+        self._master_fd = master_fd
+        super().__init__(port=None, baudrate=DEFAULT_BAUD, timeout=0)
+        self._port = name
+
+    def open(self) -> None:
+        self.fd = self._master_fd
+        self.pipe_abort_read_r, self.pipe_abort_read_w = os.pipe()
+        self.pipe_abort_write_r, self.pipe_abort_write_w = os.pipe()
+        fcntl.fcntl(self.pipe_abort_read_r, fcntl.F_SETFL, os.O_NONBLOCK)
+        fcntl.fcntl(self.pipe_abort_write_r, fcntl.F_SETFL, os.O_NONBLOCK)
+        fcntl.fcntl(self.fd, fcntl.F_SETFL, os.O_NONBLOCK)
+        self.is_open = True
+
+
+def _open_port(target: str, baudrate: int, url: bool) -> serial.SerialBase:
+    kwargs = dict(
+        baudrate=baudrate,
+        bytesize=serial.EIGHTBITS,
+        parity=serial.PARITY_NONE,
+        stopbits=serial.STOPBITS_ONE,
+        xonxoff=False,
+        rtscts=False,
+        dsrdtr=False,
+        timeout=0,
+    )
+    if url:
+        return serial.serial_for_url(target, **kwargs)
+    return serial.Serial(target, **kwargs)
+
+
+def open_pty_pair() -> tuple[SerialLink, SerialLink]:
+    """A pseudo-terminal pair as two links: (slave side, master side), both pyserial."""
+    master, slave = os.openpty()
+    slave_name = os.ttyname(slave)
+    try:
+        slave_port = _open_port(slave_name, DEFAULT_BAUD, url=False)  # configures raw 8N1
+    finally:
+        os.close(slave)  # pyserial holds its own fd on the slave
+    master_port = _PtyMasterSerial(master, f"{slave_name} (master)")
+    master_port.open()
+    master_link = SerialLink(master_port, "pty-master")
+    return SerialLink(slave_port, "pty", master_link), master_link
+
+
+def open_serial(spec: str) -> SerialLink:
+    """Open the port a configuration string names (see the module doc)."""
+    parsed = parse_serial_spec(spec)
+    if parsed.kind == "pty":
+        slave, _master = open_pty_pair()
+        return slave
+    try:
+        port = _open_port(parsed.target, parsed.baudrate, url=parsed.kind == "url")
+    except ValueError as exc:  # pyserial rejects unknown URL schemes and bad settings this way
+        raise SerialSpecError(f"serial spec {spec!r}: {exc}") from exc
+    return SerialLink(port, spec)

@@ -1,0 +1,115 @@
+"""ESC + motor model: PWM duty -> steady thrust, then a first-order lag.
+
+The flight firmware (Spinal ``pwmConversion``, SQRT mode; jsk-wire-protocols.md sec. 3.6)
+turns a thrust command f [N] into a duty by solving
+
+    v_factor * f = 0.1 p2 x^2 + 0.1 p1 x + p0,   x = duty * 100 [%],  v_factor = (V_ref/V)^2
+
+for x. The plant's ESC is the inverse: a duty gives the steady thrust
+``(0.1 p2 x^2 + 0.1 p1 x + p0) / v_factor``, clamped to [0, thrust_max]; duty <= 0.5
+(a 1000 us pulse, ``IDLE_DUTY``) stops the motor. The rotor then follows that steady thrust
+with a first-order lag of time constant ``tau`` (ASSUMPTION 0.05 s: motor + prop spin-up).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+IDLE_DUTY = 0.5
+
+
+@dataclass(frozen=True)
+class EscParams:
+    """SQRT-mode conversion coefficients and motor lag.
+
+    Defaults: the Hydrus quad ``MotorInfo.yaml`` reference at 25.2 V (p2, p1, p0 "x10" as
+    the firmware stores them), thrust_max 20 N (Sec. VI-B), tau 0.05 s (ASSUMPTION).
+    """
+
+    p2: float = 0.07983707
+    p1: float = -6.627443098
+    p0: float = 12.3593793002
+    v_ref: float = 25.2
+    thrust_max: float = 20.0
+    tau: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not self.p2 > 0:
+            raise ValueError("EscParams.p2: must be > 0 (the SQRT mode needs an upward parabola)")
+        if not (self.v_ref > 0 and self.thrust_max > 0 and self.tau > 0):
+            raise ValueError("EscParams: v_ref, thrust_max and tau must be > 0")
+
+    def v_factor(self, voltage: float) -> float:
+        """SQRT-mode voltage factor (V_ref / V)^2."""
+        return (self.v_ref / voltage) ** 2
+
+    def steady_thrust(self, duty: float, voltage: float) -> float:
+        """Steady thrust [N] for a duty at battery ``voltage`` (inverse of the firmware)."""
+        if not math.isfinite(duty) or duty <= IDLE_DUTY:
+            return 0.0
+        x = 100.0 * min(duty, 1.0)
+        f = (0.1 * self.p2 * x * x + 0.1 * self.p1 * x + self.p0) / self.v_factor(voltage)
+        return min(max(f, 0.0), self.thrust_max)
+
+    def duty_for_thrust(self, thrust: float, voltage: float) -> float:
+        """The firmware's SQRT-mode duty for ``thrust`` [N] (no min/max-duty clamp)."""
+        f = max(self.v_factor(voltage) * thrust, 0.0) if math.isfinite(thrust) else 0.0
+        disc = self.p1 * self.p1 - 40.0 * self.p2 * (self.p0 - f)
+        x = (-self.p1 + math.sqrt(max(disc, 0.0))) / (2.0 * self.p2)
+        return min(max(x / 100.0, IDLE_DUTY), 1.0)
+
+
+class Esc:
+    """One ESC + motor + propeller: duty or thrust in, lagged thrust out."""
+
+    def __init__(self, params: EscParams | None = None, voltage: float | None = None) -> None:
+        self.params = params or EscParams()
+        self.voltage = self.params.v_ref if voltage is None else voltage
+        self._target = 0.0
+        self._thrust = 0.0
+        self.duty = IDLE_DUTY
+        self.rejected = 0  # count of non-finite commands replaced by a stop
+
+    def set_voltage(self, voltage: float) -> None:
+        """Battery voltage [V] (changes the duty -> thrust map of later duty commands)."""
+        if not (math.isfinite(voltage) and voltage > 0):
+            raise ValueError(f"voltage: must be a positive number, got {voltage}")
+        self.voltage = voltage
+
+    def command_duty(self, duty: float) -> None:
+        """Command a PWM duty in [0.5, 1] (0.5 = stop); the thrust settles to its steady value."""
+        if not math.isfinite(duty):
+            self.rejected += 1
+            duty = IDLE_DUTY
+        self.duty = min(max(duty, IDLE_DUTY), 1.0)
+        self._target = self.params.steady_thrust(self.duty, self.voltage)
+
+    def command_thrust(self, thrust: float) -> None:
+        """Command a steady thrust [N] directly (clamped to [0, thrust_max]), bypassing PWM."""
+        if not math.isfinite(thrust):
+            self.rejected += 1
+            thrust = 0.0
+        self._target = min(max(thrust, 0.0), self.params.thrust_max)
+        self.duty = self.params.duty_for_thrust(self._target, self.voltage)
+
+    def reset(self, thrust: float = 0.0) -> None:
+        """Set both the command and the present thrust (a spun-up rotor at ``thrust``)."""
+        self.command_thrust(thrust)
+        self._thrust = self._target
+
+    @property
+    def target_thrust(self) -> float:
+        """Steady thrust the rotor is heading to [N]."""
+        return self._target
+
+    @property
+    def thrust(self) -> float:
+        """Present (lagged) thrust [N], before the ceiling effect."""
+        return self._thrust
+
+    def update(self, dt: float) -> float:
+        """Advance the lag by ``dt`` seconds (exact discretisation) and return the thrust."""
+        if dt > 0:
+            self._thrust += (1.0 - math.exp(-dt / self.params.tau)) * (self._target - self._thrust)
+        return self._thrust

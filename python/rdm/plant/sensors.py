@@ -1,0 +1,134 @@
+"""Sensor error models: IMU (gyro, accelerometer, magnetometer) and 6-axis wrench sensors.
+
+MuJoCo computes the ideal values; these classes add a constant bias drawn once from a seeded
+generator, white noise, saturation and quantisation, so the same seed always gives the same
+stream. Scales follow the real parts: IMU LSBs from Spinal's CAN rescaling
+(jsk-wire-protocols.md sec. 2.4: +-2000 dps over 32767, 9.80665/4096 m/s^2, 4912/32760 uT),
+Leptrino raw 10000 = rated capacity (sec. 5).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from rdm.plant.description import WrenchSensorSpec
+
+GYRO_LSB = math.radians(2000.0 / 32767.0)  # rad/s
+ACCEL_LSB = 9.80665 / 4096.0  # m/s^2
+MAG_LSB = 4912.0 / 32760.0  # uT
+GYRO_RANGE = math.radians(2000.0)  # +-2000 dps
+ACCEL_RANGE = 8.0 * 9.80665  # +-8 g
+LEPTRINO_FULL_SCALE_COUNTS = 10000.0
+
+
+@dataclass(frozen=True)
+class ImuNoise:
+    """IMU error model (ASSUMPTIONS: ICM-20948-class datasheet levels, docs/plant.md).
+
+    ``*_std``: white noise per sample; ``*_bias_std``: std of the constant per-axis bias
+    drawn at construction (or set ``*_bias`` explicitly to fix it).
+    """
+
+    gyro_std: float = math.radians(0.1)
+    gyro_bias_std: float = math.radians(0.5)
+    accel_std: float = 0.03
+    accel_bias_std: float = 0.05
+    mag_std: float = 0.5
+    mag_bias_std: float = 1.0
+    gyro_bias: tuple[float, float, float] | None = None
+    accel_bias: tuple[float, float, float] | None = None
+    mag_bias: tuple[float, float, float] | None = None
+    quantize: bool = True
+
+
+@dataclass(frozen=True)
+class ImuReading:
+    """One IMU sample in the IMU (root-link) frame."""
+
+    gyro: np.ndarray  # rad/s
+    accel: np.ndarray  # specific force, m/s^2 (reads +g up at rest)
+    mag: np.ndarray  # uT
+    saturated: bool
+
+
+class ImuModel:
+    """Adds bias, noise, saturation and quantisation to ideal IMU values."""
+
+    def __init__(self, noise: ImuNoise, rng: np.random.Generator) -> None:
+        self.noise = noise
+        self._rng = rng
+
+        def bias(explicit: tuple[float, float, float] | None, std: float) -> np.ndarray:
+            drawn = rng.normal(0.0, std, 3)  # always drawn: the stream does not depend on it
+            return drawn if explicit is None else np.asarray(explicit, dtype=float)
+
+        self.gyro_bias = bias(noise.gyro_bias, noise.gyro_bias_std)
+        self.accel_bias = bias(noise.accel_bias, noise.accel_bias_std)
+        self.mag_bias = bias(noise.mag_bias, noise.mag_bias_std)
+
+    def sample(self, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray) -> ImuReading:
+        """Corrupt one ideal sample (the generator advances by nine normals)."""
+        n = self.noise
+        w = self._rng.normal(0.0, 1.0, 9)
+        g = gyro + self.gyro_bias + n.gyro_std * w[0:3]
+        a = accel + self.accel_bias + n.accel_std * w[3:6]
+        m = mag + self.mag_bias + n.mag_std * w[6:9]
+        saturated = bool(np.any(np.abs(g) > GYRO_RANGE) or np.any(np.abs(a) > ACCEL_RANGE))
+        g = np.clip(g, -GYRO_RANGE, GYRO_RANGE)
+        a = np.clip(a, -ACCEL_RANGE, ACCEL_RANGE)
+        if n.quantize:
+            g = np.round(g / GYRO_LSB) * GYRO_LSB
+            a = np.round(a / ACCEL_LSB) * ACCEL_LSB
+            m = np.round(m / MAG_LSB) * MAG_LSB
+        return ImuReading(g, a, m, saturated)
+
+
+@dataclass(frozen=True)
+class WrenchNoise:
+    """Wrench sensor error model (ASSUMPTION: noise 0.3 % of rated capacity per axis).
+
+    The paper reports the foot sensor as noisy at times (Sec. VII-B) without numbers.
+    ``bias``: constant offset (Fx, Fy, Fz, Mx, My, Mz); zero = freshly calibrated.
+    """
+
+    noise_fraction_of_rated: float = 0.003
+    bias: tuple[float, float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    quantize: bool = True
+
+
+@dataclass(frozen=True)
+class WrenchReading:
+    """One 6-axis sample in the sensor frame: the wrench the robot applies through it."""
+
+    force: np.ndarray  # N
+    torque: np.ndarray  # N m, about the sensor frame origin
+    saturated: np.ndarray  # bool per axis (Fx, Fy, Fz, Mx, My, Mz): clipped at rated capacity
+
+    @property
+    def any_saturated(self) -> bool:
+        """True if any axis hit its rated capacity."""
+        return bool(np.any(self.saturated))
+
+
+class WrenchSensorModel:
+    """Leptrino-style 6-axis sensor: rated-capacity clipping, noise, 1/10000 resolution."""
+
+    def __init__(self, spec: WrenchSensorSpec, noise: WrenchNoise, rng: np.random.Generator):
+        self.spec = spec
+        self.noise = noise
+        self.rated = np.array([*spec.force_range, *spec.torque_range], dtype=float)
+        self._rng = rng
+
+    def sample(self, force: np.ndarray, torque: np.ndarray) -> WrenchReading:
+        """Corrupt one ideal sample (the generator advances by six normals)."""
+        w = np.concatenate([force, torque]) + np.asarray(self.noise.bias, dtype=float)
+        w = w + self.noise.noise_fraction_of_rated * self.rated * self._rng.normal(0.0, 1.0, 6)
+        saturated = np.abs(w) >= self.rated
+        w = np.clip(w, -self.rated, self.rated)
+        if self.noise.quantize:
+            lsb = self.rated / LEPTRINO_FULL_SCALE_COUNTS
+            w = np.round(w / lsb) * lsb
+        return WrenchReading(w[:3].copy(), w[3:].copy(), saturated)

@@ -1,0 +1,140 @@
+"""Ground truth for metrics: base state, joints, foot contact wrench, slip and ZMP.
+
+Contact quantities are computed from MuJoCo's contact list (``mj_contactForce``), not from
+the wrench sensors, so metrics can compare a controller's estimate with the truth.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """The true state of the plant at ``time``.
+
+    Wrenches follow the wrench sensors' convention: what the robot applies to the
+    environment, in the foot frame (z out of the contact face), moments about its origin.
+    """
+
+    time: float
+    base_position: np.ndarray  # foot frame origin, world [m]
+    base_quaternion: np.ndarray  # foot frame orientation (w, x, y, z), world
+    base_linear_velocity: np.ndarray  # world frame [m/s]
+    base_angular_velocity: np.ndarray  # foot (body) frame [rad/s]
+    joint_positions: np.ndarray  # joint_order
+    joint_velocities: np.ndarray  # joint_order
+    cog_position: np.ndarray  # whole robot, world
+    end_effector_position: np.ndarray  # world
+    end_effector_quaternion: np.ndarray  # (w, x, y, z), world
+    rotor_thrusts: np.ndarray  # applied thrust incl. ceiling effect [N]
+    foot_in_contact: bool
+    foot_contact_points: int
+    foot_contact_force: np.ndarray  # foot frame [N]
+    foot_contact_torque: np.ndarray  # foot frame, about the plate centre [N m]
+    foot_zmp: np.ndarray  # centre of pressure (x, y) in the foot frame; NaN off contact
+    foot_slip: np.ndarray  # (x, y) world displacement of the foot since first contact [m]
+    # (kept through contact gaps < 0.1 s; zero when there is no contact anchor)
+    foot_slip_yaw: float  # rotation about the ceiling normal since first contact [rad]
+
+
+def _yaw_about(normal: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> float:
+    """Angle of the rotation r0 -> r1 about ``normal`` (x axes projected on the plane)."""
+    x0 = r0[:, 0] - normal * (r0[:, 0] @ normal)
+    x1 = r1[:, 0] - normal * (r1[:, 0] @ normal)
+    return math.atan2(float(normal @ np.cross(x0, x1)), float(x0 @ x1))
+
+
+class FootContactTracker:
+    """Sums the foot plate's contact forces and remembers where contact started.
+
+    The first-contact anchor survives contact gaps shorter than ``release_time`` (a sliding
+    or vibrating foot chatters on and off the surface); after a longer gap the next
+    contact starts a new anchor.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        plate_body: int,
+        env_geoms: set[int],
+        release_time: float = 0.1,
+    ) -> None:
+        self._model = model
+        self.release_time = release_time
+        self._last_contact_time = -math.inf
+        self._plate_body = plate_body
+        self._env_geoms = env_geoms
+        self._anchor_pos: np.ndarray | None = None
+        self._anchor_rot: np.ndarray | None = None
+        self._buf = np.zeros(6)
+
+    def update(self, data: mujoco.MjData) -> None:
+        """Per-step bookkeeping of the first-contact anchor (cheap: no contact forces)."""
+        in_contact = False
+        if data.ncon:
+            bodies = self._model.geom_bodyid[data.contact.geom]  # (ncon, 2)
+            in_contact = bool(np.any(bodies == self._plate_body))
+        self._track(data, in_contact)
+
+    def _track(self, data: mujoco.MjData, in_contact: bool) -> None:
+        if in_contact:
+            self._last_contact_time = float(data.time)
+            if self._anchor_pos is None:
+                self._anchor_pos = data.xpos[self._plate_body].copy()
+                self._anchor_rot = data.xmat[self._plate_body].reshape(3, 3).copy()
+        elif float(data.time) - self._last_contact_time > self.release_time:
+            self.reset()
+
+    def reset(self) -> None:
+        """Forget the first-contact anchor."""
+        self._last_contact_time = -math.inf
+        self._anchor_pos = None
+        self._anchor_rot = None
+
+    def measure(
+        self, data: mujoco.MjData
+    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """(points, force, torque, zmp, slip, slip_yaw) for the present contacts."""
+        m = self._model
+        origin = data.xpos[self._plate_body]
+        rot = data.xmat[self._plate_body].reshape(3, 3)
+        force_w = np.zeros(3)  # environment on robot, world
+        torque_w = np.zeros(3)
+        cop_num = np.zeros(3)
+        normal_sum = 0.0
+        points = 0
+        for i in range(data.ncon):
+            c = data.contact[i]
+            b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
+            if b1 == self._plate_body and c.geom2 in self._env_geoms:
+                sign = -1.0  # force on geom2 from geom1 is +f: the plate is geom1
+            elif b2 == self._plate_body and c.geom1 in self._env_geoms:
+                sign = 1.0
+            else:
+                continue
+            mujoco.mj_contactForce(m, data, i, self._buf)
+            frame = c.frame.reshape(3, 3)  # rows: normal, tangent1, tangent2
+            f = sign * (frame.T @ self._buf[:3])
+            t = sign * (frame.T @ self._buf[3:])
+            force_w += f
+            torque_w += t + np.cross(c.pos - origin, f)
+            n = abs(self._buf[0])
+            cop_num += n * (c.pos - origin)
+            normal_sum += n
+            points += 1
+        # Report what the robot applies to the environment, in the foot frame.
+        force = -(rot.T @ force_w)
+        torque = -(rot.T @ torque_w)
+        self._track(data, points > 0)
+        zmp = (rot.T @ (cop_num / normal_sum))[:2] if normal_sum > 0 else np.full(2, np.nan)
+        if self._anchor_pos is None or self._anchor_rot is None:
+            return points, force, torque, zmp, np.zeros(2), 0.0
+        anchor_rot = self._anchor_rot
+        slip = (origin - self._anchor_pos)[:2]
+        yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
+        return points, force, torque, zmp, slip.copy(), yaw

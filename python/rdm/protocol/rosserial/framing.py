@@ -1,0 +1,192 @@
+"""rosserial v2 frames: encoder and a sans-IO, resynchronising parser (fact sheet sec. 1.2).
+
+Frame: ``FF FE len_lo len_hi len_chk topic_lo topic_hi payload[len] msg_chk``.
+
+The parser takes bytes plus the current time and returns events in stream order:
+:class:`Frame` (both checksums good), :class:`BadFrame` (never delivered, counted per reason)
+and :class:`SkippedBytes` (bytes outside any frame). Reasons: ``version`` (0xFF not followed by
+0xFE), ``length_checksum``, ``oversize`` (length above the receiver's buffer), ``message_checksum``
+and ``timeout`` (frame not complete within ``frame_timeout`` of its first 0xFF; checked, like the
+firmware, when ``feed``/``poll`` is called, not per byte).
+
+With ``rescan=True`` (default) the parser restarts the sync search at the byte after a rejected
+frame's 0xFF, so a valid frame hidden behind garbage or a truncated frame is still found. With
+``rescan=False`` it discards what it consumed, as the Spinal client state machine does.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+
+from rdm.protocol.rosserial.checksums import length_checksum, length_ok, message_checksum
+from rdm.protocol.rosserial.constants import FRAME_OVERHEAD, PROTOCOL_VERSION, SYNC
+
+BAD_FRAME_REASONS = ("version", "length_checksum", "oversize", "message_checksum", "timeout")
+
+
+class FrameError(ValueError):
+    """A frame that cannot be built (topic id or payload length out of range)."""
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A frame whose two checksums passed."""
+
+    topic_id: int
+    payload: bytes
+    offset: int  # stream offset of its 0xFF
+
+    @property
+    def size(self) -> int:
+        return len(self.payload) + FRAME_OVERHEAD
+
+
+@dataclass(frozen=True)
+class BadFrame:
+    """A rejected frame candidate starting at ``offset``; ``data`` holds the bytes examined."""
+
+    reason: str
+    offset: int
+    data: bytes
+
+
+@dataclass(frozen=True)
+class SkippedBytes:
+    """Bytes outside any frame candidate (line noise, a capture starting mid-frame)."""
+
+    offset: int
+    data: bytes
+
+
+ParseEvent = Frame | BadFrame | SkippedBytes
+
+
+def encode_frame(topic_id: int, payload: bytes) -> bytes:
+    """Build one v2 frame."""
+    if not 0 <= topic_id <= 0xFFFF:
+        raise FrameError(f"topic_id {topic_id} outside 0..65535")
+    n = len(payload)
+    if n > 0xFFFF:
+        raise FrameError(f"payload of {n} bytes does not fit the uint16 length field")
+    header = bytes(
+        (
+            SYNC,
+            PROTOCOL_VERSION,
+            n & 0xFF,
+            n >> 8,
+            length_checksum(n),
+            topic_id & 0xFF,
+            topic_id >> 8,
+        )
+    )
+    return header + bytes(payload) + bytes((message_checksum(topic_id, payload),))
+
+
+class FrameParser:
+    """Incremental frame parser; feed it bytes in any chunking.
+
+    ``max_payload``: largest accepted length field (512 on the Spinal client, 1022 on the
+    rosserial_server side). ``frame_timeout``: None (no timeout) or the allowed time between a
+    frame's 0xFF and its last byte, in the units of ``now``.
+    """
+
+    def __init__(
+        self, max_payload: int, frame_timeout: float | None = None, rescan: bool = True
+    ) -> None:
+        self.max_payload = max_payload
+        self.frame_timeout = frame_timeout
+        self.rescan = rescan
+        self.counts: Counter[str] = Counter()
+        self._buf = bytearray()
+        self._base = 0  # stream offset of _buf[0]
+        self._started: float | None = None  # time the current candidate's 0xFF was seen
+
+    @property
+    def in_frame(self) -> bool:
+        """True while a frame candidate is partially received."""
+        return self._started is not None
+
+    @property
+    def pending(self) -> tuple[int, bytes]:
+        """Stream offset and bytes of the incomplete frame candidate (``b""`` if none)."""
+        return self._base, bytes(self._buf)
+
+    @property
+    def bad_frames(self) -> int:
+        return sum(self.counts[r] for r in BAD_FRAME_REASONS)
+
+    def reset(self) -> None:
+        """Forget buffered bytes (counters are kept)."""
+        self._base += len(self._buf)
+        self._buf.clear()
+        self._started = None
+
+    def poll(self, now: float = 0.0) -> list[ParseEvent]:
+        """Apply the frame timeout at time ``now`` without new bytes."""
+        return self.feed(b"", now)
+
+    def feed(self, data: bytes, now: float = 0.0) -> list[ParseEvent]:
+        """Consume ``data`` received at ``now``; return the events it completes."""
+        events: list[ParseEvent] = []
+        buf = self._buf
+        pos = 0
+        if (
+            self._started is not None
+            and self.frame_timeout is not None
+            and now - self._started > self.frame_timeout
+        ):
+            used = 1 if self.rescan else len(buf)
+            events.append(BadFrame("timeout", self._base, bytes(buf)))
+            self.counts["timeout"] += 1
+            pos = used
+            self._started = None
+        buf += data
+        end = len(buf)
+        while pos < end:
+            if buf[pos] != SYNC:
+                nxt = buf.find(SYNC, pos)
+                stop = end if nxt < 0 else nxt
+                events.append(SkippedBytes(self._base + pos, bytes(buf[pos:stop])))
+                self.counts["skipped_bytes"] += stop - pos
+                pos = stop
+                continue
+            if self._started is None:
+                self._started = now
+            if end - pos < 2:
+                break
+            reason = ""
+            used = 0
+            if buf[pos + 1] != PROTOCOL_VERSION:
+                reason, used = "version", 2
+            elif end - pos < 7:
+                break
+            else:
+                n = buf[pos + 2] | (buf[pos + 3] << 8)
+                if not length_ok(buf[pos + 2], buf[pos + 3], buf[pos + 4]):
+                    reason, used = "length_checksum", 5
+                elif n > self.max_payload:
+                    reason, used = "oversize", 5
+                elif end - pos < n + FRAME_OVERHEAD:
+                    break
+                else:
+                    used = n + FRAME_OVERHEAD
+                    body = buf[pos + 5 : pos + 7 + n]  # topic id + payload
+                    if (sum(body) + buf[pos + 7 + n]) % 256 == 255:
+                        topic = buf[pos + 5] | (buf[pos + 6] << 8)
+                        events.append(
+                            Frame(topic, bytes(buf[pos + 7 : pos + 7 + n]), self._base + pos)
+                        )
+                        self.counts["frames"] += 1
+                    else:
+                        reason = "message_checksum"
+            if reason:
+                events.append(BadFrame(reason, self._base + pos, bytes(buf[pos : pos + used])))
+                self.counts[reason] += 1
+                if self.rescan:
+                    used = 1
+            pos += used
+            self._started = None
+        del buf[:pos]
+        self._base += pos
+        return events

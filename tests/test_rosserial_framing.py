@@ -1,0 +1,139 @@
+"""rosserial v2 framing: the fact sheet's frames byte for byte, checksums, limits, resync."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from rdm.protocol.rosserial.checksums import length_checksum, message_checksum
+from rdm.protocol.rosserial.framing import (
+    BadFrame,
+    Frame,
+    FrameError,
+    FrameParser,
+    SkippedBytes,
+    encode_frame,
+)
+from rdm.protocol.rosserial.registry import spinal_registry
+
+SPINAL = Path(__file__).resolve().parents[1] / "firmware_protocol" / "spinal"
+sys.path.insert(0, str(SPINAL / "tools"))
+import rosbags_oracle as oracle  # noqa: E402
+
+GOLDEN = json.loads((SPINAL / "golden_frames.json").read_text())
+REG = spinal_registry()
+
+
+def frames(events):
+    return [e for e in events if isinstance(e, Frame)]
+
+
+def bad(events):
+    return [e for e in events if isinstance(e, BadFrame)]
+
+
+def test_fact_sheet_example_frames_byte_for_byte():
+    # literal hex of jsk-wire-protocols.md sec. 1.2
+    examples = {e["name"]: bytes.fromhex(e["hex"]) for e in GOLDEN["fact_sheet_examples"]}
+    assert encode_frame(0, b"") == examples["server topic request"]
+    time = REG.msg("std_msgs/Time")
+    assert encode_frame(10, time.encode(time.new())) == examples["client time request"]
+    cmd = REG.msg("spinal/FourAxisCommand")
+    payload = cmd.encode(cmd.new(angles=[0.0, 0.0, 0.0], base_thrust=[5.0] * 4))
+    name = "FourAxisCommand angles {0,0,0}, base_thrust {5,5,5,5} on id 108"
+    assert encode_frame(108, payload) == examples[name]
+    assert examples["server topic request"].hex(" ") == "ff fe 00 00 ff 00 00 ff"
+
+
+@given(st.integers(0, 0xFFFF), st.binary(max_size=300))
+def test_checksums_match_the_independent_formula(topic_id, payload):
+    assert encode_frame(topic_id, payload) == oracle.frame(topic_id, payload)
+    n = len(payload)
+    assert (n % 256 + n // 256 + length_checksum(n)) % 256 == 255
+    total = topic_id % 256 + topic_id // 256 + sum(payload) + message_checksum(topic_id, payload)
+    assert total % 256 == 255
+
+
+def test_encode_frame_limits():
+    with pytest.raises(FrameError, match="topic_id"):
+        encode_frame(70000, b"")
+    with pytest.raises(FrameError, match="uint16"):
+        encode_frame(1, bytes(70000))
+
+
+@pytest.mark.parametrize("vec", GOLDEN["bad_frames"], ids=lambda v: v["reason"] + ":" + v["name"])
+def test_golden_bad_frames_are_rejected_for_the_listed_reason(vec):
+    parser = FrameParser(512, rescan=False)  # the Spinal client's receive limits
+    events = parser.feed(bytes.fromhex(vec["hex"]))
+    assert not frames(events)
+    assert bad(events)[0].reason == vec["reason"]
+    assert bad(events)[0].offset == 0
+    assert parser.counts[vec["reason"]] >= 1
+
+
+def test_golden_good_frames_in_any_chunking():
+    stream = b"".join(bytes.fromhex(v["hex"]) for v in GOLDEN["topics"])
+    expected = [(v["topic_id"], bytes.fromhex(v["hex"])[7:-1]) for v in GOLDEN["topics"]]
+    for chunk in (1, 2, 7, 64, 1000, len(stream)):
+        parser = FrameParser(512)
+        got = []
+        for i in range(0, len(stream), chunk):
+            got += [(f.topic_id, f.payload) for f in frames(parser.feed(stream[i : i + chunk]))]
+        assert got == expected
+        assert parser.bad_frames == 0
+
+
+def test_garbage_then_valid_frame_resyncs_and_reports_offsets():
+    good = bytes.fromhex(GOLDEN["topics"][3]["hex"])
+    garbage = bytes([0x00, 0x41, 0xFF, 0x13, 0xFF, 0xFE, 0x05, 0x00, 0x00, 0x99])
+    parser = FrameParser(512)
+    events = parser.feed(garbage + good)
+    assert [f.offset for f in frames(events)] == [len(garbage)]
+    assert frames(events)[0].payload == good[7:-1]
+    assert [(b.reason, b.offset) for b in bad(events)] == [("version", 2), ("length_checksum", 4)]
+    skipped = sum(len(e.data) for e in events if isinstance(e, SkippedBytes))
+    assert skipped == 2 + 1 + 5  # 00 41, 13, then FE 05 00 00 99 after the bad header's FF
+
+
+def test_truncated_frame_followed_by_valid_frame():
+    good = next(bytes.fromhex(v["hex"]) for v in GOLDEN["topics"] if len(v["hex"]) > 80)
+    # a frame cut after 10 bytes swallows the next frame as its body; rescanning finds it
+    parser = FrameParser(1022)
+    events = parser.feed(good[:10] + good)
+    assert [f.offset for f in frames(events)] == [10]
+    assert [b.reason for b in bad(events)] == ["message_checksum"]
+    # the firmware-like mode (no rescan) loses the second frame, as Spinal would
+    firmware = FrameParser(1022, rescan=False)
+    assert not frames(firmware.feed(good[:10] + good))
+
+
+def test_oversize_is_rejected_before_buffering():
+    parser = FrameParser(512)
+    n = 513
+    header = bytes([0xFF, 0xFE, n & 0xFF, n >> 8, length_checksum(n), 100, 0])
+    events = parser.feed(header)
+    assert [b.reason for b in bad(events)] == ["oversize"]
+    exact = encode_frame(100, bytes(512))
+    assert len(frames(parser.feed(exact))) == 1
+
+
+def test_frame_timeout_20ms():
+    good = bytes.fromhex(GOLDEN["topics"][0]["hex"])
+    on_time = FrameParser(512, frame_timeout=20)
+    assert not on_time.feed(good[:6], now=1000)
+    assert len(frames(on_time.feed(good[6:], now=1020))) == 1
+    late = FrameParser(512, frame_timeout=20)
+    assert not late.feed(good[:6], now=1000)
+    events = late.feed(good[6:], now=1021)
+    assert not frames(events)
+    assert bad(events)[0].reason == "timeout" and bad(events)[0].offset == 0
+    assert late.counts["timeout"] == 1
+    # poll() applies the timeout without new bytes, then a fresh frame is accepted
+    idle = FrameParser(512, frame_timeout=20)
+    idle.feed(good[:3], now=0)
+    assert [b.reason for b in bad(idle.poll(now=25))] == ["timeout"]
+    assert len(frames(idle.feed(good, now=30))) == 1
