@@ -320,9 +320,12 @@ def _toml(name: str, summary: str) -> str:
         )
     rotors = []
     for i, (unit, side) in enumerate(
-        [("foot_unit", 1), ("foot_unit", -1), ("arm_unit", 1), ("arm_unit", -1)], start=1
+        [("foot_unit", 1), ("foot_unit", -1), ("arm_unit", -1), ("arm_unit", 1)], start=1
     ):
-        spin = 1 if i % 2 == 1 else -1  # sigma_i = (-1)^(i+1)
+        # sigma_i = (-1)^(i+1). The arm pair is mirrored (rotor 3 at -y) so equal spins sit
+        # on a diagonal, as on a quadrotor: otherwise roll and yaw torques are proportional
+        # in straight configurations and Q-bar loses rank (rho = 0, eq. 65).
+        spin = 1 if i % 2 == 1 else -1
         rotors.append(
             f'[[rotors]]\nname = "rotor{i}"\nparent = "{unit}_pitch"\n'
             f"offset = [0.0, {_f(side * ROTOR_SPACING / 2)}, {_f(ROTOR_HEIGHT)}]\n"
