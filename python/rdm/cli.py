@@ -16,6 +16,8 @@ from collections.abc import Sequence
 COMMANDS: dict[str, tuple[str, str]] = {
     "decode": ("decode", "decode a UART capture, candump log or Leptrino capture"),
     "model": ("model", "load a robot and print its mass properties, allocation and aerial ZMP"),
+    "plan": ("plan", "plan an end-effector motion (differential-kinematics planner, Sec. V)"),
+    "design": ("design", "reachability/feasibility sweep reproducing Tables II-III"),
     "plant": ("plant", "build the MuJoCo model of a robot; export it for MuJoCo's viewer"),
 }
 

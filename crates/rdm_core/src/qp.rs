@@ -156,7 +156,12 @@ fn check(what: &'static str, v: &[f64], len: usize) -> Result<(), QpError> {
 
 impl DenseQp {
     /// A solver for `n` variables, `n_eq` equality rows and `n_ineq` inequality rows.
-    pub fn new(n: usize, n_eq: usize, n_ineq: usize, settings: QpSettings) -> Result<Self, QpError> {
+    pub fn new(
+        n: usize,
+        n_eq: usize,
+        n_ineq: usize,
+        settings: QpSettings,
+    ) -> Result<Self, QpError> {
         if n == 0 {
             return Err(QpError::WrongLength {
                 what: "n",
@@ -338,7 +343,10 @@ mod tests {
             .unwrap();
         assert_eq!(st, QpStatus::Solved);
         let x = qp.solution();
-        assert!((x[0] - 0.8).abs() < 1e-6 && (x[1] - 0.2).abs() < 1e-6, "{x:?}");
+        assert!(
+            (x[0] - 0.8).abs() < 1e-6 && (x[1] - 0.2).abs() < 1e-6,
+            "{x:?}"
+        );
     }
 
     #[test]

@@ -9,7 +9,9 @@ mod estimate;
 mod lqi;
 mod model;
 mod perch;
+mod planner;
 mod position;
+mod qp;
 
 #[pymodule]
 fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -21,5 +23,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     lqi::register(m)?;
     position::register(m)?;
     perch::register(m)?;
+    qp::register(m)?;
+    planner::register(m)?;
     Ok(())
 }

@@ -107,8 +107,22 @@ impl Constraint for JointTorque {
             let p = &ctx.cfg.torque;
             let (a, b) = g.split_at_mut((2 * i + 1) * nf);
             let up = &mut a[2 * i * nf..];
-            row(ctx, r, 1.0, up, &mut h[2 * i], allowed_approach(stall - tau, p));
-            row(ctx, r, -1.0, &mut b[..nf], &mut h[2 * i + 1], allowed_approach(tau + stall, p));
+            row(
+                ctx,
+                r,
+                1.0,
+                up,
+                &mut h[2 * i],
+                allowed_approach(stall - tau, p),
+            );
+            row(
+                ctx,
+                r,
+                -1.0,
+                &mut b[..nf],
+                &mut h[2 * i + 1],
+                allowed_approach(tau + stall, p),
+            );
         }
     }
 }
@@ -132,14 +146,24 @@ impl Constraint for RotorThrust {
             let lam = ctx.values[l.thrust() + i];
             let upper = ctx.values[l.thrust_upper() + i];
             let lower = ctx.thrust_min.get(i).copied().unwrap_or(0.0);
-            let (ju, jl) = (ctx.jac_row(l.thrust_upper() + i), ctx.jac_row(l.thrust() + i));
+            let (ju, jl) = (
+                ctx.jac_row(l.thrust_upper() + i),
+                ctx.jac_row(l.thrust() + i),
+            );
             let up = &mut g[2 * i * nf..(2 * i + 1) * nf];
             for c in 0..nf {
                 up[c] = jl.get(c).unwrap_or(&0.0) - ju.get(c).unwrap_or(&0.0);
             }
             h[2 * i] = allowed_approach(upper - lam, p);
             let (_, rest) = g.split_at_mut((2 * i + 1) * nf);
-            row(ctx, l.thrust() + i, -1.0, &mut rest[..nf], &mut h[2 * i + 1], allowed_approach(lam - lower, p));
+            row(
+                ctx,
+                l.thrust() + i,
+                -1.0,
+                &mut rest[..nf],
+                &mut h[2 * i + 1],
+                allowed_approach(lam - lower, p),
+            );
         }
     }
 }

@@ -63,7 +63,12 @@ pub fn feasible_force(
         // Foot wrench = minus the residual (about the foot).
         Some((tau, Vector6::new(-f.x, -f.y, -f.z, -m.x, -m.y, -m.z)))
     };
-    let t0 = [base.thrust[0], base.thrust[1], base.thrust[2], base.thrust[3]];
+    let t0 = [
+        base.thrust[0],
+        base.thrust[1],
+        base.thrust[2],
+        base.thrust[3],
+    ];
     let (tau0, w0) = torque_and_wrench(&t0, &zero6, &g)?;
     let mut thrust_cols = Vec::with_capacity(4);
     for i in 0..4 {

@@ -20,5 +20,5 @@ pub mod thrust;
 
 pub use config::{DamperParams, Mode, PlannerConfig, ShapePair, ShapeSpec};
 pub use force::{feasible_force, FeasibleForce};
-pub use quantities::{QuantityLayout, Quantities};
+pub use quantities::{Quantities, QuantityLayout};
 pub use step::{Planner, PlannerError, StepReport, StepStatus};

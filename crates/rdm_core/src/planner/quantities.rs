@@ -10,7 +10,9 @@ use super::config::{Mode, PlannerConfig, ShapePair, ShapeSpec};
 use super::leveling::Leveler;
 use super::shapes::{ceiling_clearance, clearance, PlacedShape};
 use super::thrust::static_thrust;
-use crate::model::{base_pose_from_zeta, ModelError, ModelWorkspace, RobotDescription, StaticLoads};
+use crate::model::{
+    base_pose_from_zeta, ModelError, ModelWorkspace, RobotDescription, StaticLoads,
+};
 
 /// Where each quantity sits in the flat vector.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -65,9 +67,9 @@ pub struct Quantities {
 
 fn place(spec: &ShapeSpec, ws: &ModelWorkspace) -> PlacedShape {
     let at = |link: usize, p: &[f64; 3]| -> Vector3<f64> {
-        ws.link_pose
-            .get(link)
-            .map_or(Vector3::zeros(), |pose| pose.transform_point(&Point3::from(*p)).coords)
+        ws.link_pose.get(link).map_or(Vector3::zeros(), |pose| {
+            pose.transform_point(&Point3::from(*p)).coords
+        })
     };
     match spec {
         ShapeSpec::Capsule { link, a, b, radius } => PlacedShape {
@@ -75,7 +77,11 @@ fn place(spec: &ShapeSpec, ws: &ModelWorkspace) -> PlacedShape {
             b: at(*link, b),
             radius: *radius,
         },
-        ShapeSpec::Sphere { link, center, radius } => {
+        ShapeSpec::Sphere {
+            link,
+            center,
+            radius,
+        } => {
             let c = at(*link, center);
             PlacedShape {
                 a: c,
@@ -139,9 +145,13 @@ impl Quantities {
         let eta = Vector3::new(zeta[3], zeta[4], zeta[5]);
         let base: Isometry3<f64> = base_pose_from_zeta(&p, &eta);
         self.q_scratch.copy_from_slice(&zeta[6..]);
-        robot.evaluate(&self.q_scratch, &base, &mut self.ws).map_err(Some)?;
+        robot
+            .evaluate(&self.q_scratch, &base, &mut self.ws)
+            .map_err(Some)?;
         leveler.level(&self.ws, &mut self.q_scratch);
-        robot.evaluate(&self.q_scratch, &base, &mut self.ws).map_err(Some)?;
+        robot
+            .evaluate(&self.q_scratch, &base, &mut self.ws)
+            .map_err(Some)?;
         zeta[6..].copy_from_slice(&self.q_scratch);
 
         let perched = cfg.mode == Mode::Perched;
@@ -158,7 +168,14 @@ impl Quantities {
         if perched {
             foot_wrench[2] = -cfg.perch_force;
         }
-        let ee_wrench = [cfg.ee_force[0], cfg.ee_force[1], cfg.ee_force[2], 0.0, 0.0, 0.0];
+        let ee_wrench = [
+            cfg.ee_force[0],
+            cfg.ee_force[1],
+            cfg.ee_force[2],
+            0.0,
+            0.0,
+            0.0,
+        ];
         let gravity = [0.0, 0.0, -cfg.gravity];
         let thrusts = [st.thrust[0], st.thrust[1], st.thrust[2], st.thrust[3]];
         let thrusts = thrusts.get(..l.n_rotors).ok_or(None)?;

@@ -5,7 +5,7 @@ use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use super::config::{Mode, PlannerConfig};
 use super::constraints::{all_constraints, Constraint, Context};
 use super::leveling::Leveler;
-use super::quantities::{QuantityLayout, Quantities};
+use super::quantities::{Quantities, QuantityLayout};
 use crate::model::{Frame, Matrix6xN, ModelError, RobotDescription};
 use crate::qp::{DenseQp, QpError, QpSettings, QpStatus};
 
@@ -100,7 +100,11 @@ fn finite(v: &[f64]) -> bool {
 
 impl Planner {
     /// Build a planner; `zeta0` = [p, eta, q] is the start state (unit angles are re-solved).
-    pub fn new(robot: RobotDescription, cfg: PlannerConfig, zeta0: &[f64]) -> Result<Self, PlannerError> {
+    pub fn new(
+        robot: RobotDescription,
+        cfg: PlannerConfig,
+        zeta0: &[f64],
+    ) -> Result<Self, PlannerError> {
         if robot.n_rotors() != 4 {
             return Err(PlannerError::Description(format!(
                 "the static thrust distribution needs 4 rotors, got {}",
@@ -113,7 +117,11 @@ impl Planner {
         if cfg.mode == Mode::Flight {
             free.extend(0..6);
         }
-        free.extend((0..n_q).filter(|&i| !leveler.is_unit_angle(i)).map(|i| 6 + i));
+        free.extend(
+            (0..n_q)
+                .filter(|&i| !leveler.is_unit_angle(i))
+                .map(|i| 6 + i),
+        );
         let quantities = Quantities::new(&robot, &cfg);
         let constraints = all_constraints();
         let rows: Vec<usize> = constraints
@@ -175,7 +183,13 @@ impl Planner {
 
     fn refresh(&mut self) -> Result<(), PlannerError> {
         self.quantities
-            .evaluate(&self.robot, &self.leveler, &self.cfg, &mut self.zeta, &mut self.values)
+            .evaluate(
+                &self.robot,
+                &self.leveler,
+                &self.cfg,
+                &mut self.zeta,
+                &mut self.values,
+            )
             .map_err(PlannerError::from)
     }
 
@@ -206,7 +220,11 @@ impl Planner {
     }
     /// Constraint names and their row counts, in QP order.
     pub fn constraint_rows(&self) -> Vec<(&'static str, usize)> {
-        self.constraints.iter().map(|c| c.name()).zip(self.rows.iter().copied()).collect()
+        self.constraints
+            .iter()
+            .map(|c| c.name())
+            .zip(self.rows.iter().copied())
+            .collect()
     }
     /// Rows G, h of the last QP (row-major).
     pub fn last_rows(&self) -> (&[f64], &[f64]) {
@@ -246,8 +264,12 @@ impl Planner {
         let ws = self.quantities.workspace();
         let ee = Frame::Link(self.robot.end_effector_link);
         let foot = Frame::Link(self.robot.foot_link);
-        self.robot.frame_jacobian(ws, ee, &mut self.j_ee).map_err(PlannerError::Model)?;
-        self.robot.frame_jacobian(ws, foot, &mut self.j_foot).map_err(PlannerError::Model)?;
+        self.robot
+            .frame_jacobian(ws, ee, &mut self.j_ee)
+            .map_err(PlannerError::Model)?;
+        self.robot
+            .frame_jacobian(ws, foot, &mut self.j_foot)
+            .map_err(PlannerError::Model)?;
         let ee_pose = ws.link_pose[self.robot.end_effector_link];
         let foot_pose = ws.link_pose[self.robot.foot_link];
 
@@ -257,7 +279,10 @@ impl Planner {
         let pos_err = e_pos.norm();
         let d_pos = e_pos * (self.cfg.kappa_position / pos_err.max(1e-12)).min(1.0);
         let (e_rot, w_rot) = match orientation {
-            Some(r) => ((r * ee_pose.rotation.inverse()).scaled_axis(), self.cfg.s2_ee_orientation),
+            Some(r) => (
+                (r * ee_pose.rotation.inverse()).scaled_axis(),
+                self.cfg.s2_ee_orientation,
+            ),
             None => (Vector3::zeros(), 0.0),
         };
         let rot_err = e_rot.norm();
@@ -267,7 +292,11 @@ impl Planner {
 
         // Cost of eq. (57): P = S1 + J_eeᵀ S2' J_ee + J_footᵀ S2'' J_foot, q = -Jᵀ S2 delta-xi.
         let nf = self.free.len();
-        let w_foot = if self.cfg.mode == Mode::Flight { self.cfg.s2_foot } else { 0.0 };
+        let w_foot = if self.cfg.mode == Mode::Flight {
+            self.cfg.s2_foot
+        } else {
+            0.0
+        };
         self.p.fill(0.0);
         self.q.fill(0.0);
         for (a, &ka) in self.free.iter().enumerate() {
@@ -348,5 +377,12 @@ impl Planner {
             }
         }
         best.map(|(n, _)| n)
+    }
+}
+
+impl Planner {
+    /// Model workspace at the current state.
+    pub fn workspace(&self) -> &crate::model::ModelWorkspace {
+        self.quantities.workspace()
     }
 }

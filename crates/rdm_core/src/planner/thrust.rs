@@ -15,7 +15,11 @@ use nalgebra::{Matrix4, Vector3, Vector4};
 use crate::model::{ModelWorkspace, RobotDescription};
 
 /// World allocation (rows fz, mx, my, mz) about `r0`.
-pub fn world_allocation(robot: &RobotDescription, ws: &ModelWorkspace, r0: &Vector3<f64>) -> Matrix4<f64> {
+pub fn world_allocation(
+    robot: &RobotDescription,
+    ws: &ModelWorkspace,
+    r0: &Vector3<f64>,
+) -> Matrix4<f64> {
     let mut q = Matrix4::zeros();
     for (i, rotor) in robot.rotors.iter().take(4).enumerate() {
         let u = ws.rotor_direction[i];
