@@ -22,3 +22,8 @@ echo "== python: ruff"
 echo "== python: pytest"
 # Run from tests/ against the installed wheel, not the source tree.
 "$PY" -m pytest tests -q -p no:cacheprovider --import-mode=importlib
+
+echo "== python: SocketCAN tests on vcan0 (VM harness)"
+# tests/vcan on a real kernel vcan0: here if the host has one, else in a small qemu VM
+# (scripts/vcanvm/; installs qemu on first use as root). See docs/vcan.md.
+bash scripts/test-vcan.sh -q

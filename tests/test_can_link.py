@@ -7,6 +7,7 @@ import time
 
 import can
 import pytest
+
 from rdm.link.can import (
     CanSpecError,
     CanUnavailableError,

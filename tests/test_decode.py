@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from rdm.cli import main
 from rdm.commands.decode import FORMATS, detect_format
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from rdm.protocol import leptrino as lp
 
 VECTORS = json.loads(

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+
 from rdm.cli import main
 from rdm.model import Robot, shipped_robot_files
 

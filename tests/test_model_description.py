@@ -7,6 +7,7 @@ import re
 from pathlib import Path
 
 import pytest
+
 from rdm import descriptions
 from rdm.model import DescriptionError, Robot, shipped_robot_files
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+
 from rdm.model import Robot, shipped_robot_files
 
 N_CONFIGS = 40

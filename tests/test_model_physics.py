@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from rdm.model import VERTICAL_Q, Robot
 
 STALL = 3.4  # XH430-W350-R stall torque, N m
@@ -79,6 +80,7 @@ def test_static_torques_match_mujoco_subtree_moments() -> None:
     """Eq. (61) per joint == minus the axial moment of all loads beyond the joint, built from
     MuJoCo's body masses, CoMs and joint anchors (random configurations and thrusts)."""
     import mujoco
+
     from rdm.model import shipped_robot_files
 
     robot = Robot.default()

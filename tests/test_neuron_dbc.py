@@ -8,6 +8,7 @@ import cantools
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from rdm.protocol import neuron as nr
 
 DBC_DIR = Path(__file__).resolve().parents[1] / "firmware_protocol" / "neuron"

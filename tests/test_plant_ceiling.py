@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+
 from rdm.plant import CeilingEffect, NoCeilingEffect, ParametricCeilingEffect, Plant
 
 R = 0.127 / 2

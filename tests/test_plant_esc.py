@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 import pytest
-from rdm.plant import Esc, EscParams, NoCeilingEffect, Plant
 from scipy.optimize import curve_fit
+
+from rdm.plant import Esc, EscParams, NoCeilingEffect, Plant
 
 # Hydrus quad MotorInfo.yaml, 25.2 V reference (jsk-wire-protocols.md sec. 3.6).
 P2, P1, P0, VREF = 0.07983707, -6.627443098, 12.3593793002, 25.2

@@ -7,11 +7,12 @@ import dataclasses
 import mujoco
 import numpy as np
 import pytest
+from scipy import signal
+from test_plant_urdf_oracle import joint_limits, mass_and_cog, robot_files, rotors
+
 from rdm.cli import main as cli_main
 from rdm.plant import DescriptionError, Plant, ServoParams, load_robot
 from rdm.plant.mjcf import rotor_site, servo_actuator
-from scipy import signal
-from test_plant_urdf_oracle import joint_limits, mass_and_cog, robot_files, rotors
 
 JOINTS = ("q1", "q2", "q3", "q4", "q5", "q6", "alpha1", "beta1", "alpha2", "beta2")
 

@@ -7,8 +7,9 @@ import dataclasses
 import mujoco
 import numpy as np
 import pytest
-from rdm.plant import NoCeilingEffect, Plant, ServoParams, load_robot
 from test_plant_urdf_oracle import mass_and_cog, robot_files, rotors
+
+from rdm.plant import NoCeilingEffect, Plant, ServoParams, load_robot
 
 G = 9.81
 STIFF = ServoParams(kp=1000.0, kv=50.0)  # isolates rotor/mass physics from servo sag

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from rdm.plant import ImuNoise, Plant, WrenchNoise
 from rdm.plant.sensors import ACCEL_LSB, GYRO_LSB
 

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+
 from rdm.protocol.rosserial.checksums import length_checksum, message_checksum
 from rdm.protocol.rosserial.framing import (
     BadFrame,

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+
 from rdm.protocol.rosserial.client import ClientSession
 from rdm.protocol.rosserial.events import FrameRejected, MessageReceived
 from rdm.protocol.rosserial.framing import BadFrame, Frame, FrameParser, SkippedBytes

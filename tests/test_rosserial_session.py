@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
+
 from rdm.link.serial import open_pty_pair
 from rdm.protocol.rosserial import constants as C
 from rdm.protocol.rosserial.client import ClientSession

@@ -6,6 +6,7 @@ import time
 
 import pytest
 import serial
+
 from rdm.link.serial import (
     DEFAULT_BAUD,
     SerialSpec,

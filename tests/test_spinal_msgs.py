@@ -9,11 +9,12 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from rosbags.typesys.base import Nodetype
+
 from rdm.protocol.rosserial.codec import DecodeError, EncodeError, message_to_dict
 from rdm.protocol.rosserial.framing import FrameParser, encode_frame
 from rdm.protocol.rosserial.msgdef import MsgDefError, parse_msg, parse_srv
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
-from rosbags.typesys.base import Nodetype
 
 SPINAL = Path(__file__).resolve().parents[1] / "firmware_protocol" / "spinal"
 sys.path.insert(0, str(SPINAL / "tools"))

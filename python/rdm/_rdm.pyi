@@ -6,11 +6,11 @@ class RdmError(ValueError):
     """Base class of every error raised by rdm's core."""
 
 # --- model ---
-from os import PathLike  # noqa: E402
-from typing import Any  # noqa: E402
+from os import PathLike
+from typing import Any
 
-import numpy as np  # noqa: E402
-import numpy.typing as npt  # noqa: E402
+import numpy as np
+import numpy.typing as npt
 
 _F = npt.NDArray[np.float64]
 _Pose = _F | list[list[float]] | list[float] | None
@@ -91,3 +91,383 @@ class Robot:
     def jacobian(self, frame: str, zeta: npt.ArrayLike) -> _F:
         """6 x (6 + n_q) w.r.t. zeta = [p, roll, pitch, yaw, q]; rows: world linear, angular."""
     def stability_gradient(self, q: npt.ArrayLike) -> _F: ...
+
+# --- perch ---
+from typing import Any as _Any
+
+import numpy as _np
+from numpy.typing import NDArray as _NDArray
+
+class PerchError(RdmError):
+    """Bad argument or parameter of the perching controller (the message names it)."""
+
+class PerchQp:
+    def __init__(self, params: dict[str, _Any] | None = None) -> None: ...
+    def solve(
+        self,
+        foot_allocation: _NDArray[_np.float64],
+        allocation: _NDArray[_np.float64],
+        mass: float,
+        foot_wrench: _NDArray[_np.float64],
+        previous_thrust: _NDArray[_np.float64],
+        previous_foot_wrench: _NDArray[_np.float64],
+        flight_thrust: _NDArray[_np.float64] | None = None,
+    ) -> dict[str, _Any]: ...
+    def problem_data(self) -> dict[str, _Any]: ...
+    def counters(self) -> dict[str, int]: ...
+    def params(self) -> dict[str, _Any]: ...
+
+class PerchController:
+    def __init__(
+        self, params: dict[str, _Any] | None = None, rate_hz: float = 40.0, cutoff_hz: float = 1.0
+    ) -> None: ...
+    def tick(
+        self,
+        foot_wrench: _NDArray[_np.float64],
+        foot_allocation: _NDArray[_np.float64],
+        allocation: _NDArray[_np.float64],
+        mass: float,
+        flight_thrust: _NDArray[_np.float64] | None = None,
+    ) -> dict[str, _Any]: ...
+    def reset(self, thrust: _NDArray[_np.float64] | None = None) -> None: ...
+    def filtered_foot_wrench(self) -> _NDArray[_np.float64]: ...
+    def filter_coefficients(self) -> tuple[float, float, float]: ...
+    def problem_data(self) -> dict[str, _Any]: ...
+    def counters(self) -> dict[str, int]: ...
+    def params(self) -> dict[str, _Any]: ...
+
+class WrenchFilter:
+    def __init__(self, cutoff_hz: float = 1.0, sample_hz: float = 40.0) -> None: ...
+    def update(self, sample: _NDArray[_np.float64]) -> _NDArray[_np.float64] | None: ...
+    def reset(self) -> None: ...
+    def coefficients(self) -> tuple[float, float, float]: ...
+
+# --- spinal ---
+
+import numpy as np
+import numpy.typing as npt
+
+N_ROTORS: int
+
+class CommandRejectedError(RdmError):
+    """A message to the Spinal controller was rejected or ignored; names the field."""
+
+class AttitudeEstimator:
+    """Spinal complementary-filter attitude estimator (docs/spinal.md)."""
+
+    def __init__(
+        self, rate_hz: float = 200.0, time_matched: bool = False, **overrides: Any
+    ) -> None: ...
+    def step(self, gyro: Any, acc: Any, mag: Any) -> str: ...
+    def run(
+        self,
+        gyro: npt.NDArray[np.float64],
+        acc: npt.NDArray[np.float64],
+        mag: npt.NDArray[np.float64],
+    ) -> dict[str, Any]: ...
+    def restart_gyro_calibration(self) -> None: ...
+    def estimate(self) -> dict[str, npt.NDArray[np.float64]]: ...
+    @property
+    def rotation(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def quaternion(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def euler(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def angular_velocity(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def acc(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def mag(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def gyro_bias(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def filter_vectors(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def counters(self) -> dict[str, int]: ...
+    @property
+    def config(self) -> dict[str, Any]: ...
+
+class ControlOutput:
+    """Output of one controller step."""
+
+    @property
+    def status(self) -> str: ...
+    @property
+    def thrust(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def duty(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def pwm_report(self) -> npt.NDArray[np.uint16]: ...
+    @property
+    def alpha(self) -> float: ...
+    @property
+    def beta(self) -> float: ...
+    @property
+    def euler(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def error_integral(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def events(self) -> list[tuple[str, Any]]: ...
+
+class SpinalStepOutput:
+    """Output of one SpinalStep.step."""
+
+    @property
+    def estimate_status(self) -> str: ...
+    @property
+    def control(self) -> ControlOutput: ...
+    @property
+    def status(self) -> str: ...
+    @property
+    def duty(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def thrust(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def euler(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def quaternion(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def angular_velocity(self) -> npt.NDArray[np.float64]: ...
+    def estimate(self) -> dict[str, npt.NDArray[np.float64]]: ...
+    @property
+    def events(self) -> list[tuple[str, Any]]: ...
+
+class _SpinalControllerMessages:
+    def set_uav_info(self, motor_num: int, uav_model: int) -> None: ...
+    def set_pwm_info(
+        self,
+        min_pwm: float,
+        max_pwm: float,
+        min_thrust: float,
+        force_landing_thrust: float,
+        mode: int,
+        motor_info: npt.NDArray[np.float64],
+    ) -> None: ...
+    def set_pwm_info_hydrus_example(self) -> None: ...
+    def flight_config(self, cmd: int, now_s: float) -> None: ...
+    def four_axis_command(
+        self, angles: Any, base_thrust: npt.NDArray[np.float64], now_s: float
+    ) -> None: ...
+    def set_gains(self, gains: npt.NDArray[np.float64]) -> None: ...
+    def set_gains_wire(self, terms: npt.NDArray[np.int64]) -> None: ...
+    def set_torque_allocation_inv_wire(self, rows: npt.NDArray[np.int16]) -> None: ...
+    def set_pinv_inertia(self, pinv: npt.NDArray[np.float64], inertia: Any) -> None: ...
+    def set_pinv_inertia_wire(self, pinv: npt.NDArray[np.int16], inertia: Any) -> None: ...
+    def set_desire_coordinate(self, roll: float, pitch: float, yaw: float) -> None: ...
+    def set_attitude_control(self, enabled: bool) -> None: ...
+    @property
+    def armed(self) -> bool: ...
+    @property
+    def force_landing(self) -> bool: ...
+    @property
+    def integrating(self) -> bool: ...
+    @property
+    def motor_number(self) -> int: ...
+    @property
+    def base_thrust(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def error_integral(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def target_angles(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def max_yaw_index(self) -> int | None: ...
+    @property
+    def thrust_gains(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def pwm_state(self) -> tuple[float, float, float, int] | None: ...
+    @property
+    def counters(self) -> dict[str, int]: ...
+
+class AttitudeController(_SpinalControllerMessages):
+    """Spinal attitude controller and flight state machine."""
+
+    def __init__(
+        self,
+        rate_hz: float = 200.0,
+        *,
+        anti_windup: bool = True,
+        integral_limit: float = 1.0,
+        command_timeout_s: float = 0.5,
+        max_tilt_rad: float = 1.0,
+        force_landing_rate: float = 2.5,
+    ) -> None: ...
+    def step(
+        self, now_s: float, rotation: npt.NDArray[np.float64], gyro: Any, voltage: float
+    ) -> ControlOutput: ...
+
+class SpinalStep(_SpinalControllerMessages):
+    """Estimator + attitude controller + PWM conversion (the Spinal mirror's step)."""
+
+    def __init__(
+        self,
+        rate_hz: float = 200.0,
+        *,
+        time_matched: bool = False,
+        anti_windup: bool = True,
+        integral_limit: float = 1.0,
+        command_timeout_s: float = 0.5,
+        max_tilt_rad: float = 1.0,
+        force_landing_rate: float = 2.5,
+        **estimator_overrides: Any,
+    ) -> None: ...
+    def step(
+        self, now_s: float, gyro: Any, acc: Any, mag: Any, voltage: float
+    ) -> SpinalStepOutput: ...
+    def restart_gyro_calibration(self) -> None: ...
+
+class PwmConverter:
+    """Thrust -> duty conversion as Spinal's pwmConversion."""
+
+    def __init__(
+        self,
+        min_pwm: float,
+        max_pwm: float,
+        min_thrust: float,
+        force_landing_thrust: float,
+        mode: int,
+        motor_info: npt.NDArray[np.float64],
+    ) -> None: ...
+    @staticmethod
+    def hydrus_example() -> PwmConverter: ...
+    def update_voltage(self, voltage: float, now_s: float) -> bool: ...
+    def force_voltage(self, voltage: float) -> None: ...
+    def set_rotor_divider(self, rotor_divider: float) -> None: ...
+    def raw_duty(self, thrust: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+    def duty(self, thrust: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+    @property
+    def voltage_factor(self) -> float: ...
+    @property
+    def reference_index(self) -> int: ...
+    @property
+    def min_duty(self) -> float: ...
+    @property
+    def max_duty(self) -> float: ...
+    @property
+    def thrust_limit(self) -> float: ...
+    @property
+    def rejected_voltages(self) -> int: ...
+
+def duty_to_pwm_report(duty: npt.NDArray[np.float64]) -> npt.NDArray[np.uint16]: ...
+def duty_to_can(duty: npt.NDArray[np.float64]) -> npt.NDArray[np.uint16]: ...
+def duty_to_dshot(duty: npt.NDArray[np.float64]) -> npt.NDArray[np.uint16]: ...
+def gains_to_wire_terms(gains: npt.NDArray[np.float64]) -> npt.NDArray[np.int16]: ...
+def gains_from_wire_terms(terms: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]: ...
+def clamp_gain(gains: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], bool]: ...
+
+# --- lqi ---
+import numpy as np
+from numpy.typing import NDArray
+
+LQI_STATE_NAMES: list[str]
+JSK_TO_PAPER: list[int]
+MAX_WIRE_GAIN: float
+N_VECTORING: int
+GRAVITY: float
+
+class CareSolveError(RdmError):
+    """The Riccati solver failed (not stabilisable, not converged, or invalid input)."""
+
+class LqiSynthesisError(RdmError):
+    """LQI synthesis or the LQI control law failed; the message names the argument."""
+
+class PositionControlError(RdmError):
+    """Position control rejected its input; the message names the argument."""
+
+def solve_care(
+    a: NDArray[np.float64],
+    b: NDArray[np.float64],
+    q: NDArray[np.float64],
+    r: NDArray[np.float64],
+    k0: NDArray[np.float64] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], dict[str, object]]:
+    """12-state, 4-input CARE: (P, K = -R^-1 B^T P, report). With k0: Kleinman warm start
+    with the cold sign-function method as fallback. report: method ('sign'|'kleinman'),
+    iterations, fell_back, relative_residual."""
+
+def augmented_system(
+    mass: float, inertia: NDArray[np.float64], allocation: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(A_bar 12x12, B_bar 12x4) of eq. (26) in the JSK state order."""
+
+def gain_set_from_k(k: NDArray[np.float64], clamp: bool = True) -> NDArray[np.float64]:
+    """Sec. 4 mapping of K (4x12): (4, 4, 3) array, axes (roll, pitch, yaw, z), (P, I, D)."""
+
+def gyro_compensation(
+    allocation: NDArray[np.float64], inertia: NDArray[np.float64]
+) -> dict[str, object]:
+    """pinv(Q_bar) columns pinv_roll/pinv_pitch/pinv_yaw, inertia, pseudo_inverse, rank."""
+
+def flight_thrust(
+    k: NDArray[np.float64],
+    state: NDArray[np.float64],
+    allocation: NDArray[np.float64],
+    inertia: NDArray[np.float64],
+    omega: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], dict[str, object]]:
+    """Eq. (29): (K x_bar + pinv(Q_bar)[0; w x I w], gyro-compensation dict)."""
+
+class LqiSynthesizer:
+    """Warm-started LQI gain synthesizer (weights default to Table V)."""
+
+    def __init__(
+        self,
+        q_weights: NDArray[np.float64] | None = None,
+        r_weights: NDArray[np.float64] | None = None,
+        clamp_gain: bool = True,
+        kleinman_tolerance: float | None = None,
+    ) -> None: ...
+    def synthesize(
+        self, mass: float, inertia: NDArray[np.float64], allocation: NDArray[np.float64]
+    ) -> dict[str, object]:
+        """Keys k, p, b, gains, clamp_scales, report. GIL released while solving."""
+    def reset(self) -> None: ...
+    @property
+    def has_solution(self) -> bool: ...
+
+class PcAxisController:
+    """PC-side altitude P-I-D (base thrust) and yaw P-I (angles[2]) of JSK sec. 4."""
+
+    def __init__(self) -> None: ...
+    def step(
+        self,
+        gains: NDArray[np.float64],
+        z_error: float,
+        z_rate_error: float,
+        yaw_error: float,
+        feed_forward: NDArray[np.float64],
+        dt: float,
+    ) -> tuple[NDArray[np.float64], float, int | None]: ...
+    @property
+    def integrals(self) -> tuple[float, float]: ...
+
+class PositionController:
+    """Eqs. (30)-(36); defaults Table V, integral limit 1 m/s^2 per axis (assumption)."""
+
+    def __init__(
+        self,
+        x_pid: tuple[float, float, float] | None = None,
+        y_pid: tuple[float, float, float] | None = None,
+        integral_limit: tuple[float, float] | None = None,
+        k_roll: float | None = None,
+        k_pitch: float | None = None,
+        k_pitch_vectoring: list[float] | None = None,
+        k_roll_vectoring: list[float] | None = None,
+        gravity: float | None = None,
+    ) -> None: ...
+    def step(
+        self,
+        position: NDArray[np.float64],
+        velocity: NDArray[np.float64],
+        target_position: NDArray[np.float64],
+        target_velocity: NDArray[np.float64],
+        target_yaw: float,
+        link_rotations: NDArray[np.float64],
+        dt: float,
+    ) -> dict[str, object]: ...
+    @property
+    def integral(self) -> NDArray[np.float64]: ...
+    def reset(self) -> None: ...
+
+def vectoring_angles(n: NDArray[np.float64]) -> tuple[float, float]:
+    """Eqs. (33)-(34) for a unit direction n: (alpha, beta)."""

@@ -15,9 +15,10 @@ from collections.abc import Sequence
 # name -> (module under rdm.commands, one-line help). Keep sorted by name.
 COMMANDS: dict[str, tuple[str, str]] = {
     "decode": ("decode", "decode a UART capture, candump log or Leptrino capture"),
-    "model": ("model", "load a robot and print its mass properties, allocation and aerial ZMP"),
-    "plan": ("plan", "plan an end-effector motion (differential-kinematics planner, Sec. V)"),
     "design": ("design", "reachability/feasibility sweep reproducing Tables II-III"),
+    "model": ("model", "load a robot and print its mass properties, allocation and aerial ZMP"),
+    "neuron": ("neuron", "run a Neuron board mirror on a CAN bus"),
+    "plan": ("plan", "plan an end-effector motion (differential-kinematics planner, Sec. V)"),
     "plant": ("plant", "build the MuJoCo model of a robot; export it for MuJoCo's viewer"),
 }
 

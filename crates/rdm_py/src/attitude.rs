@@ -1,7 +1,513 @@
-//! Bindings of `rdm_core::control::attitude`.
+//! Bindings of `rdm_core::control::attitude`: the Spinal attitude controller with its
+//! arming/fail-safe state machine, the combined `SpinalStep`, PWM conversion and the gain
+//! wire form.
 
+mod pwm;
+mod wire;
+
+use numpy::{
+    PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+};
+use pyo3::create_exception;
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use rdm_core::control::attitude::{
+    AntiWindup, AttitudeControlConfig, AttitudeController, AttitudeOutput, CommandError,
+    ControlStatus, SpinalConfig, SpinalEvent, SpinalOutput, SpinalStep,
+};
+use rdm_core::estimate::ImuSample;
 
-pub fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+use crate::errors::RdmError;
+use crate::estimate::{estimate_into_dict, estimator_config, status_name};
+
+create_exception!(
+    _rdm,
+    CommandRejectedError,
+    RdmError,
+    "A message to the Spinal controller was rejected or ignored; the message names the field."
+);
+
+fn rejected(e: CommandError) -> PyErr {
+    CommandRejectedError::new_err(e.to_string())
+}
+
+fn control_status_name(s: ControlStatus) -> &'static str {
+    match s {
+        ControlStatus::Disarmed => "disarmed",
+        ControlStatus::Armed => "armed",
+        ControlStatus::ForceLanding => "force_landing",
+        ControlStatus::InvalidInput => "invalid_input",
+    }
+}
+
+fn control_config(
+    rate_hz: f64,
+    anti_windup: bool,
+    integral_limit: f64,
+    command_timeout_s: f64,
+    max_tilt_rad: f64,
+    force_landing_rate: f64,
+) -> PyResult<AttitudeControlConfig> {
+    let config = AttitudeControlConfig {
+        rate_hz,
+        anti_windup: if anti_windup {
+            AntiWindup::ClampAndConditional {
+                limit: integral_limit,
+            }
+        } else {
+            AntiWindup::Off
+        },
+        command_timeout_s,
+        max_tilt_rad,
+        force_landing_rate,
+    };
+    config
+        .validate()
+        .map_err(|field| RdmError::new_err(format!("{field}: out of range")))?;
+    Ok(config)
+}
+
+fn events_list<'py>(py: Python<'py>, out: &AttitudeOutput) -> PyResult<Bound<'py, PyList>> {
+    let list = PyList::empty(py);
+    for event in out.events.iter() {
+        let item: (&str, Py<PyAny>) = match event {
+            SpinalEvent::Ack(cmd) => ("ack", cmd.to_wire().into_pyobject(py)?.into_any().unbind()),
+            SpinalEvent::FailsafeCommandTimeout => ("failsafe_timeout", py.None()),
+            SpinalEvent::FailsafeTilt => ("failsafe_tilt", py.None()),
+            SpinalEvent::FailsafeCommandTilt => ("failsafe_command_tilt", py.None()),
+            SpinalEvent::Rejected(e) => (
+                "rejected",
+                e.to_string().into_pyobject(py)?.into_any().unbind(),
+            ),
+        };
+        list.append(item)?;
+    }
+    if out.events.dropped() > 0 {
+        list.append(("events_dropped", out.events.dropped()))?;
+    }
+    Ok(list)
+}
+
+/// Output of one controller step. Arrays are built when read.
+#[pyclass(module = "rdm._rdm", frozen)]
+pub struct ControlOutput {
+    inner: AttitudeOutput,
+}
+
+#[pymethods]
+impl ControlOutput {
+    /// "disarmed", "armed", "force_landing" or "invalid_input".
+    #[getter]
+    fn status(&self) -> &'static str {
+        control_status_name(self.inner.status)
+    }
+    /// Target thrust per rotor, N.
+    #[getter]
+    fn thrust<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.inner.thrust)
+    }
+    /// Duty per rotor (0.5 = stopped).
+    #[getter]
+    fn duty<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.inner.duty)
+    }
+    /// `motor_pwms` values (duty x 2000).
+    #[getter]
+    fn pwm_report<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u16>> {
+        PyArray1::from_slice(py, &self.inner.pwm_report)
+    }
+    /// Base-thrust saturation factor alpha.
+    #[getter]
+    fn alpha(&self) -> f64 {
+        self.inner.alpha
+    }
+    /// Yaw saturation factor beta.
+    #[getter]
+    fn beta(&self) -> f64 {
+        self.inner.beta
+    }
+    /// Roll, pitch, yaw in the desired coordinate frame, rad.
+    #[getter]
+    fn euler<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.inner.euler)
+    }
+    /// Roll/pitch error integrals, rad s.
+    #[getter]
+    fn error_integral<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.inner.error_integral)
+    }
+    /// Events since the previous step: ("ack", cmd), ("failsafe_timeout", None),
+    /// ("failsafe_tilt", None), ("failsafe_command_tilt", None), ("rejected", message).
+    #[getter]
+    fn events<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        events_list(py, &self.inner)
+    }
+}
+
+/// Output of one `SpinalStep.step`: the controller output plus the estimate.
+#[pyclass(module = "rdm._rdm", frozen)]
+pub struct SpinalStepOutput {
+    inner: SpinalOutput,
+}
+
+#[pymethods]
+impl SpinalStepOutput {
+    /// Estimator status name of this sample.
+    #[getter]
+    fn estimate_status(&self) -> &'static str {
+        status_name(self.inner.estimate_status)
+    }
+    /// The controller output.
+    #[getter]
+    fn control(&self) -> ControlOutput {
+        ControlOutput {
+            inner: self.inner.control,
+        }
+    }
+    /// Controller status name.
+    #[getter]
+    fn status(&self) -> &'static str {
+        control_status_name(self.inner.control.status)
+    }
+    /// Duty per rotor.
+    #[getter]
+    fn duty<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.inner.control.duty)
+    }
+    /// Thrust per rotor, N.
+    #[getter]
+    fn thrust<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.inner.control.thrust)
+    }
+    /// Estimated roll, pitch, yaw (body, ZYX), rad.
+    #[getter]
+    fn euler<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.inner.estimate.euler)
+    }
+    /// Estimated quaternion x, y, z, w.
+    #[getter]
+    fn quaternion<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.inner.estimate.quaternion)
+    }
+    /// Filtered body rate, rad/s.
+    #[getter]
+    fn angular_velocity<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, self.inner.estimate.angular_velocity.as_slice())
+    }
+    /// The estimate as a dict of arrays (rotation, quaternion, euler, angular_velocity).
+    fn estimate<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        estimate_into_dict(py, &self.inner.estimate, &d)?;
+        Ok(d)
+    }
+    /// Controller events (see `ControlOutput.events`).
+    #[getter]
+    fn events<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        events_list(py, &self.inner.control)
+    }
+}
+
+fn three_rows<T: numpy::Element + Copy>(
+    a: &PyReadonlyArray2<'_, T>,
+    field: &str,
+) -> PyResult<Vec<[T; 3]>> {
+    if a.ndim() != 2 || a.shape()[1] != 3 {
+        return Err(RdmError::new_err(format!("{field}: need shape (n, 3)")));
+    }
+    Ok(a.as_array()
+        .rows()
+        .into_iter()
+        .map(|r| [r[0], r[1], r[2]])
+        .collect())
+}
+
+/// Gives the message methods access to the controller of either class.
+trait ControllerHost {
+    fn ctrl(&mut self) -> &mut AttitudeController;
+    fn ctrl_ref(&self) -> &AttitudeController;
+}
+
+/// The message and state methods shared by `AttitudeController` and `SpinalStep`, plus
+/// the class-specific methods passed in.
+macro_rules! controller_pymethods {
+    ($ty:ty, { $($extra:tt)* }) => {
+        #[pymethods]
+        impl $ty {
+            $($extra)*
+
+            /// `uav_info`: motor number and model (DRAGON = 32 halves the thrust per rotor).
+            fn set_uav_info(&mut self, motor_num: u8, uav_model: u8) -> PyResult<()> {
+                self.ctrl().set_uav_info(motor_num, uav_model).map_err(rejected)
+            }
+
+            /// `motor_info`: rows (voltage, max_thrust, p0..p4); mode 0 SQRT, 1 POLY.
+            #[pyo3(signature = (min_pwm, max_pwm, min_thrust, force_landing_thrust, mode, motor_info))]
+            fn set_pwm_info(&mut self, min_pwm: f64, max_pwm: f64, min_thrust: f64,
+                            force_landing_thrust: f64, mode: u8,
+                            motor_info: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
+                let info = pwm::pwm_info(min_pwm, max_pwm, min_thrust, force_landing_thrust, mode, &motor_info)?;
+                self.ctrl().set_pwm_info(info).map_err(rejected)
+            }
+
+            /// `motor_info` of the Hydrus quad example (SQRT, 25.2 V curve).
+            fn set_pwm_info_hydrus_example(&mut self) -> PyResult<()> {
+                self.ctrl().set_pwm_info(rdm_core::pwm::PwmInfo::hydrus_example()).map_err(rejected)
+            }
+
+            /// `flight_config_cmd` (0 ARM_ON, 1 ARM_OFF, 2 FORCE_LANDING, 160/161 integration).
+            fn flight_config(&mut self, cmd: u8, now_s: f64) -> PyResult<()> {
+                self.ctrl().flight_config(cmd, now_s).map_err(rejected)
+            }
+
+            /// `four_axes/command`: angles (roll, pitch, yaw term), base thrust per motor.
+            fn four_axis_command(&mut self, angles: [f64; 3], base_thrust: PyReadonlyArray1<'_, f64>, now_s: f64) -> PyResult<()> {
+                let base = base_thrust.as_slice().map_err(|_| RdmError::new_err("base_thrust: need a contiguous 1-D array"))?;
+                self.ctrl().four_axis_command(angles, base, now_s).map_err(rejected)
+            }
+
+            /// `rpy/gain` from a gain set of shape (N_ROTORS, 4, 3).
+            fn set_gains(&mut self, gains: PyReadonlyArray3<'_, f64>) -> PyResult<()> {
+                let set = wire::gain_set(&gains)?;
+                self.ctrl().set_gains(&set).map_err(rejected)
+            }
+
+            /// `rpy/gain` in wire form: int array (motor_number or 1, 7).
+            fn set_gains_wire(&mut self, terms: PyReadonlyArray2<'_, i64>) -> PyResult<()> {
+                let terms = wire::wire_terms(&terms)?;
+                self.ctrl().set_gains_wire(&terms).map_err(rejected)
+            }
+
+            /// `torque_allocation_matrix_inv` in wire form: int16 rows (motor_number, 3).
+            fn set_torque_allocation_inv_wire(&mut self, rows: PyReadonlyArray2<'_, i16>) -> PyResult<()> {
+                let rows = three_rows(&rows, "rows")?;
+                self.ctrl().set_torque_allocation_inv_wire(&rows).map_err(rejected)
+            }
+
+            /// `p_matrix_pseudo_inverse_inertia`: pinv rows (motor_number, 3) and inertia
+            /// (xx, yy, zz, xy, yz, xz), physical units.
+            fn set_pinv_inertia(&mut self, pinv: PyReadonlyArray2<'_, f64>, inertia: [f64; 6]) -> PyResult<()> {
+                let rows = three_rows(&pinv, "pinv")?;
+                self.ctrl().set_pinv_inertia(&rows, inertia).map_err(rejected)
+            }
+
+            /// `p_matrix_pseudo_inverse_inertia` in wire form (int16 x 1000).
+            fn set_pinv_inertia_wire(&mut self, pinv: PyReadonlyArray2<'_, i16>, inertia: [i16; 6]) -> PyResult<()> {
+                let rows = three_rows(&pinv, "pinv")?;
+                self.ctrl().set_pinv_inertia_wire(&rows, inertia).map_err(rejected)
+            }
+
+            /// `desire_coordinate`: roll, pitch, yaw of the control frame.
+            fn set_desire_coordinate(&mut self, roll: f64, pitch: f64, yaw: f64) -> PyResult<()> {
+                self.ctrl().set_desire_coordinate(roll, pitch, yaw).map_err(rejected)
+            }
+
+            /// `set_attitude_control`.
+            fn set_attitude_control(&mut self, enabled: bool) {
+                self.ctrl().set_attitude_control(enabled);
+            }
+
+            /// Whether armed.
+            #[getter]
+            fn armed(&self) -> bool { self.ctrl_ref().armed() }
+            /// Whether force landing.
+            #[getter]
+            fn force_landing(&self) -> bool { self.ctrl_ref().force_landing() }
+            /// Whether the roll/pitch integrator runs.
+            #[getter]
+            fn integrating(&self) -> bool { self.ctrl_ref().integrating() }
+            /// Motor number (0 until uav_info).
+            #[getter]
+            fn motor_number(&self) -> usize { self.ctrl_ref().motor_number() }
+            /// Base thrust per rotor, N.
+            #[getter]
+            fn base_thrust<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+                PyArray1::from_slice(py, &self.ctrl_ref().base_thrust())
+            }
+            /// Roll/pitch error integrals, rad s.
+            #[getter]
+            fn error_integral<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+                PyArray1::from_slice(py, &self.ctrl_ref().error_integral())
+            }
+            /// Roll/pitch targets, rad.
+            #[getter]
+            fn target_angles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+                PyArray1::from_slice(py, &self.ctrl_ref().target_angles())
+            }
+            /// Rotor with the largest positive yaw d gain, or None.
+            #[getter]
+            fn max_yaw_index(&self) -> Option<usize> { self.ctrl_ref().max_yaw_index() }
+            /// Per-rotor thrust gains Spinal applies, shape (3, N_ROTORS, 3): P, I, D x
+            /// rotor x axis (roll, pitch, yaw).
+            #[getter]
+            fn thrust_gains<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                let (p, i, d) = self.ctrl_ref().thrust_gains();
+                let rows: Vec<Vec<f64>> = [p, i, d].iter().map(|g| g.iter().flatten().copied().collect()).collect();
+                Ok(PyArray2::from_vec2(py, &rows)?)
+            }
+            /// (min_duty, max_duty, voltage_factor, reference_index), or None before motor_info.
+            #[getter]
+            fn pwm_state(&self) -> Option<(f64, f64, f64, usize)> {
+                self.ctrl_ref().pwm().map(|p| (p.min_duty(), p.max_duty(), p.voltage_factor(), p.reference_index()))
+            }
+            /// Counters: wrong_length, non_finite, ignored, invalid_steps, failsafes.
+            #[getter]
+            fn counters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+                let c = self.ctrl_ref().counters();
+                let d = PyDict::new(py);
+                d.set_item("wrong_length", c.wrong_length)?;
+                d.set_item("non_finite", c.non_finite)?;
+                d.set_item("ignored", c.ignored)?;
+                d.set_item("invalid_steps", c.invalid_steps)?;
+                d.set_item("failsafes", c.failsafes)?;
+                Ok(d)
+            }
+        }
+    };
+}
+
+/// The Spinal attitude controller and flight state machine (see docs/spinal.md).
+#[pyclass(module = "rdm._rdm", name = "AttitudeController")]
+pub struct PyAttitudeController {
+    inner: AttitudeController,
+}
+
+impl ControllerHost for PyAttitudeController {
+    fn ctrl(&mut self) -> &mut AttitudeController {
+        &mut self.inner
+    }
+    fn ctrl_ref(&self) -> &AttitudeController {
+        &self.inner
+    }
+}
+
+controller_pymethods!(PyAttitudeController, {
+    #[new]
+    #[pyo3(signature = (rate_hz = 200.0, *, anti_windup = true, integral_limit = 1.0,
+                        command_timeout_s = 0.5, max_tilt_rad = 1.0, force_landing_rate = 2.5))]
+    fn new(
+        rate_hz: f64,
+        anti_windup: bool,
+        integral_limit: f64,
+        command_timeout_s: f64,
+        max_tilt_rad: f64,
+        force_landing_rate: f64,
+    ) -> PyResult<Self> {
+        let config = control_config(
+            rate_hz,
+            anti_windup,
+            integral_limit,
+            command_timeout_s,
+            max_tilt_rad,
+            force_landing_rate,
+        )?;
+        let inner = AttitudeController::new(config)
+            .map_err(|f| RdmError::new_err(format!("{f}: out of range")))?;
+        Ok(Self { inner })
+    }
+
+    /// One step: time (s), body attitude (3x3, body -> world), filtered body rate (3),
+    /// battery voltage (V).
+    fn step(
+        &mut self,
+        now_s: f64,
+        rotation: PyReadonlyArray2<'_, f64>,
+        gyro: [f64; 3],
+        voltage: f64,
+    ) -> PyResult<ControlOutput> {
+        if rotation.shape() != [3, 3] {
+            return Err(RdmError::new_err("rotation: need shape (3, 3)"));
+        }
+        let r = rotation.as_array();
+        let m = nalgebra::Matrix3::from_fn(|i, j| r[[i, j]]);
+        let out = self
+            .inner
+            .step(now_s, &m, &nalgebra::Vector3::from(gyro), voltage);
+        Ok(ControlOutput { inner: out })
+    }
+});
+
+/// The Spinal mirror's step: estimator + attitude controller + PWM conversion.
+///
+/// `SpinalStep(rate_hz=200.0, *, time_matched=False, firmware_exact=False, anti_windup=True,
+/// integral_limit=1.0, **estimator_overrides)`.
+#[pyclass(module = "rdm._rdm", name = "SpinalStep")]
+pub struct PySpinalStep {
+    inner: SpinalStep,
+}
+
+impl ControllerHost for PySpinalStep {
+    fn ctrl(&mut self) -> &mut AttitudeController {
+        self.inner.controller_mut()
+    }
+    fn ctrl_ref(&self) -> &AttitudeController {
+        self.inner.controller()
+    }
+}
+
+controller_pymethods!(PySpinalStep, {
+    #[new]
+    #[pyo3(signature = (rate_hz = 200.0, *, time_matched = false, anti_windup = true,
+                        integral_limit = 1.0, command_timeout_s = 0.5, max_tilt_rad = 1.0,
+                        force_landing_rate = 2.5, **estimator_overrides))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        rate_hz: f64,
+        time_matched: bool,
+        anti_windup: bool,
+        integral_limit: f64,
+        command_timeout_s: f64,
+        max_tilt_rad: f64,
+        force_landing_rate: f64,
+        estimator_overrides: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let config = SpinalConfig {
+            estimator: estimator_config(rate_hz, time_matched, estimator_overrides)?,
+            control: control_config(
+                rate_hz,
+                anti_windup,
+                integral_limit,
+                command_timeout_s,
+                max_tilt_rad,
+                force_landing_rate,
+            )?,
+        };
+        let inner =
+            SpinalStep::new(config).map_err(|f| RdmError::new_err(format!("{f}: out of range")))?;
+        Ok(Self { inner })
+    }
+
+    /// One step: time (s), raw gyro (rad/s), acc (m/s^2), mag (uT), battery voltage (V).
+    fn step(
+        &mut self,
+        now_s: f64,
+        gyro: [f64; 3],
+        acc: [f64; 3],
+        mag: [f64; 3],
+        voltage: f64,
+    ) -> SpinalStepOutput {
+        let out = self
+            .inner
+            .step(now_s, &ImuSample { gyro, acc, mag }, voltage);
+        SpinalStepOutput { inner: out }
+    }
+
+    /// Restarts the estimator's gyro bias calibration.
+    fn restart_gyro_calibration(&mut self) {
+        self.inner.estimator_mut().restart_gyro_calibration();
+    }
+});
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add(
+        "CommandRejectedError",
+        m.py().get_type::<CommandRejectedError>(),
+    )?;
+    m.add("N_ROTORS", rdm_core::N_ROTORS)?;
+    m.add_class::<PyAttitudeController>()?;
+    m.add_class::<PySpinalStep>()?;
+    m.add_class::<ControlOutput>()?;
+    m.add_class::<SpinalStepOutput>()?;
+    pwm::register(m)?;
+    wire::register(m)?;
     Ok(())
 }

@@ -1,7 +1,442 @@
-//! Bindings of `rdm_core::control::lqi`.
+//! Bindings of `rdm_core::control::lqi` and `rdm_core::control::riccati`.
 
+use nalgebra::{Matrix3, SMatrix, Vector3};
+use numpy::ndarray::{Array1, Array2, Array3};
+use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn};
+use pyo3::create_exception;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
-pub fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+use rdm_core::control::gains::{GainSet, PidGains};
+use rdm_core::control::lqi::{
+    self as core_lqi, Allocation, AllocationInverse, GyroCompensation, LqiConfig, LqiError,
+    LqiGains, LqiState, LqiWeights, PcAxisController as CorePcAxisController, PcAxisErrors,
+    RotorVector,
+};
+use rdm_core::control::riccati::{
+    CareConfig, CareError, CareMethod, CareReport, CareSolver, GainMatrix, InputMatrix,
+    InputWeight, StateMatrix, N_STATE,
+};
+use rdm_core::N_ROTORS;
+
+use crate::errors::RdmError;
+
+create_exception!(
+    _rdm,
+    CareSolveError,
+    RdmError,
+    "The Riccati solver failed (not stabilisable, not converged, or invalid input)."
+);
+create_exception!(
+    _rdm,
+    LqiSynthesisError,
+    RdmError,
+    "LQI synthesis or the LQI control law failed; the message names the argument."
+);
+
+/// Copies a 2-D numpy array of the exact shape into a fixed-size matrix.
+pub(crate) fn to_matrix<const R: usize, const C: usize>(
+    array: &PyReadonlyArray2<'_, f64>,
+    argument: &str,
+) -> PyResult<SMatrix<f64, R, C>> {
+    let view = array.as_array();
+    if view.shape() != [R, C] {
+        return Err(RdmError::new_err(format!(
+            "`{argument}` must have shape ({R}, {C}), got {:?}",
+            view.shape()
+        )));
+    }
+    Ok(SMatrix::from_fn(|i, j| view[[i, j]]))
+}
+
+/// Copies a 1-D numpy array of length N.
+pub(crate) fn to_vector<const N: usize>(
+    array: &PyReadonlyArray1<'_, f64>,
+    argument: &str,
+) -> PyResult<SMatrix<f64, N, 1>> {
+    let view = array.as_array();
+    if view.len() != N {
+        return Err(RdmError::new_err(format!(
+            "`{argument}` must have length {N}, got {}",
+            view.len()
+        )));
+    }
+    Ok(SMatrix::from_fn(|i, _| view[i]))
+}
+
+/// Fixed-size matrix to a new numpy array.
+pub(crate) fn matrix_to_py<'py, const R: usize, const C: usize>(
+    py: Python<'py>,
+    m: &SMatrix<f64, R, C>,
+) -> Bound<'py, PyAny> {
+    Array2::from_shape_fn((R, C), |(i, j)| m[(i, j)])
+        .into_pyarray(py)
+        .into_any()
+}
+
+pub(crate) fn vector_to_py<'py, const N: usize>(
+    py: Python<'py>,
+    v: &SMatrix<f64, N, 1>,
+) -> Bound<'py, PyAny> {
+    Array1::from_shape_fn(N, |i| v[i])
+        .into_pyarray(py)
+        .into_any()
+}
+
+fn care_error(e: CareError) -> PyErr {
+    match e {
+        CareError::InvalidInput { argument } => {
+            CareSolveError::new_err(format!("invalid argument `{argument}`: {e}"))
+        }
+        _ => CareSolveError::new_err(e.to_string()),
+    }
+}
+
+fn lqi_error(e: LqiError) -> PyErr {
+    match e {
+        LqiError::InvalidInput { argument } => {
+            LqiSynthesisError::new_err(format!("invalid argument `{argument}`: {e}"))
+        }
+        LqiError::Care(inner) => care_error(inner),
+        LqiError::SingularAllocation => LqiSynthesisError::new_err(format!("`allocation`: {e}")),
+    }
+}
+
+fn report_dict<'py>(py: Python<'py>, report: &CareReport) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let method = match report.method {
+        CareMethod::SignFunction => "sign",
+        CareMethod::Kleinman => "kleinman",
+    };
+    d.set_item("method", method)?;
+    d.set_item("iterations", report.iterations)?;
+    d.set_item("fell_back", report.fell_back)?;
+    d.set_item("relative_residual", report.relative_residual)?;
+    Ok(d)
+}
+
+/// Gain set as an (N_ROTORS, 4, 3) array: axes (roll, pitch, yaw, z), columns (P, I, D).
+pub(crate) fn gain_set_to_py<'py>(py: Python<'py>, set: &GainSet) -> Bound<'py, PyAny> {
+    Array3::from_shape_fn((N_ROTORS, 4, 3), |(rotor, axis, term)| {
+        let g = &set[rotor];
+        let pid = [g.roll, g.pitch, g.yaw, g.z][axis];
+        [pid.p, pid.i, pid.d][term]
+    })
+    .into_pyarray(py)
+    .into_any()
+}
+
+fn gain_set_from_py(array: &PyReadonlyArrayDyn<'_, f64>) -> PyResult<GainSet> {
+    let view = array.as_array();
+    if view.shape() != [N_ROTORS, 4, 3] {
+        return Err(RdmError::new_err(format!(
+            "`gains` must have shape ({N_ROTORS}, 4, 3), got {:?}",
+            view.shape()
+        )));
+    }
+    let mut set = GainSet::default();
+    for (rotor, g) in set.iter_mut().enumerate() {
+        let pid = |axis: usize| PidGains {
+            p: view[[rotor, axis, 0]],
+            i: view[[rotor, axis, 1]],
+            d: view[[rotor, axis, 2]],
+        };
+        g.roll = pid(0);
+        g.pitch = pid(1);
+        g.yaw = pid(2);
+        g.z = pid(3);
+    }
+    Ok(set)
+}
+
+/// Solves the 12-state, N_ROTORS-input CARE. With `k0`, Kleinman warm start from `k0`
+/// (`u = k0 x`) with the cold sign-function method as fallback; otherwise cold.
+/// Returns `(P, K, report)` with `K = -R⁻¹BᵀP`.
+#[pyfunction]
+#[pyo3(signature = (a, b, q, r, k0=None))]
+fn solve_care<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray2<'py, f64>,
+    b: PyReadonlyArray2<'py, f64>,
+    q: PyReadonlyArray2<'py, f64>,
+    r: PyReadonlyArray2<'py, f64>,
+    k0: Option<PyReadonlyArray2<'py, f64>>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyDict>)> {
+    let a: StateMatrix = to_matrix(&a, "a")?;
+    let b: InputMatrix = to_matrix(&b, "b")?;
+    let q: StateMatrix = to_matrix(&q, "q")?;
+    let r: InputWeight = to_matrix(&r, "r")?;
+    let k0: Option<GainMatrix> = k0.map(|k| to_matrix(&k, "k0")).transpose()?;
+    let (result, p, k) = py.detach(move || {
+        let mut solver = CareSolver::new(CareConfig::default());
+        let result = match k0 {
+            Some(k0) => solver.solve_warm_from(&a, &b, &q, &r, &k0),
+            None => solver.solve_cold(&a, &b, &q, &r),
+        };
+        (result, *solver.p(), *solver.k())
+    });
+    let report = result.map_err(care_error)?;
+    Ok((
+        matrix_to_py(py, &p),
+        matrix_to_py(py, &k),
+        report_dict(py, &report)?,
+    ))
+}
+
+/// `(Ā, B̄)` of eq. (26) in the JSK state order.
+#[pyfunction]
+fn augmented_system<'py>(
+    py: Python<'py>,
+    mass: f64,
+    inertia: PyReadonlyArray2<'py, f64>,
+    allocation: PyReadonlyArray2<'py, f64>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
+    let allocation: Allocation = to_matrix(&allocation, "allocation")?;
+    let b = core_lqi::augmented_input_matrix(mass, &inertia, &allocation).map_err(lqi_error)?;
+    Ok((
+        matrix_to_py(py, &core_lqi::augmented_state_matrix()),
+        matrix_to_py(py, &b),
+    ))
+}
+
+/// The sec. 4 mapping of K (N_ROTORS x 12) onto the gain set, optionally with `clampGain`.
+/// Returns the (N_ROTORS, 4, 3) gain array (axes roll, pitch, yaw, z; P, I, D).
+#[pyfunction]
+#[pyo3(signature = (k, clamp=true))]
+fn gain_set_from_k<'py>(
+    py: Python<'py>,
+    k: PyReadonlyArray2<'py, f64>,
+    clamp: bool,
+) -> PyResult<Bound<'py, PyAny>> {
+    let k: GainMatrix = to_matrix(&k, "k")?;
+    let mut set = core_lqi::gain_set_from_k(&k);
+    if clamp {
+        core_lqi::clamp_gain(&mut set);
+    }
+    Ok(gain_set_to_py(py, &set))
+}
+
+fn gyro_dict<'py>(py: Python<'py>, gyro: &GyroCompensation) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("pinv_roll", vector_to_py(py, &gyro.pinv_roll))?;
+    d.set_item("pinv_pitch", vector_to_py(py, &gyro.pinv_pitch))?;
+    d.set_item("pinv_yaw", vector_to_py(py, &gyro.pinv_yaw))?;
+    d.set_item("inertia", matrix_to_py(py, &gyro.inertia))?;
+    let (pseudo, rank) = match gyro.inverse {
+        AllocationInverse::Exact => (false, 4),
+        AllocationInverse::PseudoInverse { rank } => (true, rank),
+    };
+    d.set_item("pseudo_inverse", pseudo)?;
+    d.set_item("rank", rank)?;
+    Ok(d)
+}
+
+/// Gyro-compensation data (`p_matrix_pseudo_inverse_inertia` contents, unscaled).
+#[pyfunction]
+fn gyro_compensation<'py>(
+    py: Python<'py>,
+    allocation: PyReadonlyArray2<'py, f64>,
+    inertia: PyReadonlyArray2<'py, f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let allocation: Allocation = to_matrix(&allocation, "allocation")?;
+    let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
+    let gyro = GyroCompensation::new(&allocation, &inertia).map_err(lqi_error)?;
+    gyro_dict(py, &gyro)
+}
+
+/// Eq. (29): `λ_flight = K x̄ + Q̄⁻¹[0; ω×Iω]`; returns (thrust, gyro-compensation dict).
+#[pyfunction]
+fn flight_thrust<'py>(
+    py: Python<'py>,
+    k: PyReadonlyArray2<'py, f64>,
+    state: PyReadonlyArray1<'py, f64>,
+    allocation: PyReadonlyArray2<'py, f64>,
+    inertia: PyReadonlyArray2<'py, f64>,
+    omega: PyReadonlyArray1<'py, f64>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
+    let k: GainMatrix = to_matrix(&k, "k")?;
+    let state: LqiState = to_vector::<N_STATE>(&state, "state")?;
+    let allocation: Allocation = to_matrix(&allocation, "allocation")?;
+    let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
+    let omega: Vector3<f64> = to_vector::<3>(&omega, "omega")?;
+    if k.iter().any(|v| !v.is_finite()) {
+        return Err(LqiSynthesisError::new_err(
+            "invalid argument `k`: not finite",
+        ));
+    }
+    let gyro = GyroCompensation::new(&allocation, &inertia).map_err(lqi_error)?;
+    let thrust = core_lqi::flight_thrust(&k, &state, &gyro, &omega).map_err(lqi_error)?;
+    Ok((vector_to_py(py, &thrust), gyro_dict(py, &gyro)?))
+}
+
+/// Stateful LQI gain synthesizer (warm-starts from its previous solution).
+#[pyclass(module = "rdm._rdm")]
+struct LqiSynthesizer {
+    inner: core_lqi::LqiSynthesizer,
+}
+
+fn gains_dict<'py>(py: Python<'py>, g: &LqiGains) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("k", matrix_to_py(py, &g.k))?;
+    d.set_item("p", matrix_to_py(py, &g.p))?;
+    d.set_item("b", matrix_to_py(py, &g.b))?;
+    d.set_item("gains", gain_set_to_py(py, &g.gains))?;
+    let s = &g.clamp_scales;
+    d.set_item(
+        "clamp_scales",
+        (s.roll_p, s.roll_d, s.pitch_p, s.pitch_d, s.yaw_d),
+    )?;
+    d.set_item("report", report_dict(py, &g.report)?)?;
+    Ok(d)
+}
+
+#[pymethods]
+impl LqiSynthesizer {
+    #[new]
+    #[pyo3(signature = (q_weights=None, r_weights=None, clamp_gain=true, kleinman_tolerance=None))]
+    fn new(
+        q_weights: Option<PyReadonlyArray1<'_, f64>>,
+        r_weights: Option<PyReadonlyArray1<'_, f64>>,
+        clamp_gain: bool,
+        kleinman_tolerance: Option<f64>,
+    ) -> PyResult<Self> {
+        let mut config = LqiConfig {
+            clamp_gain,
+            ..LqiConfig::default()
+        };
+        let defaults = LqiWeights::table_v();
+        let q = match q_weights {
+            Some(w) => to_vector::<N_STATE>(&w, "q_weights")?.into(),
+            None => defaults.q,
+        };
+        let r = match r_weights {
+            Some(w) => to_vector::<N_ROTORS>(&w, "r_weights")?.into(),
+            None => defaults.r,
+        };
+        config.weights = LqiWeights { q, r };
+        if let Some(tolerance) = kleinman_tolerance {
+            if !(tolerance.is_finite() && tolerance > 0.0) {
+                return Err(LqiSynthesisError::new_err(
+                    "invalid argument `kleinman_tolerance`: must be finite and > 0",
+                ));
+            }
+            config.care.kleinman_tolerance = tolerance;
+        }
+        let inner = core_lqi::LqiSynthesizer::new(config).map_err(lqi_error)?;
+        Ok(Self { inner })
+    }
+
+    /// Synthesizes gains for (mass, inertia 3x3, allocation 4xN_ROTORS). GIL released.
+    fn synthesize<'py>(
+        &mut self,
+        py: Python<'py>,
+        mass: f64,
+        inertia: PyReadonlyArray2<'py, f64>,
+        allocation: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
+        let allocation: Allocation = to_matrix(&allocation, "allocation")?;
+        let inner = &mut self.inner;
+        let result = py.detach(move || inner.synthesize(mass, &inertia, &allocation).copied());
+        gains_dict(py, &result.map_err(lqi_error)?)
+    }
+
+    /// Forgets the warm start.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// Whether a previous solution exists (the next synthesis is warm).
+    #[getter]
+    fn has_solution(&self) -> bool {
+        self.inner.last().is_some()
+    }
+}
+
+/// PC-side altitude P-I-D (base thrust) and yaw P-I (`angles[2]`) of sec. 4.
+#[pyclass(module = "rdm._rdm")]
+struct PcAxisController {
+    inner: CorePcAxisController,
+}
+
+#[pymethods]
+impl PcAxisController {
+    #[new]
+    fn new() -> Self {
+        Self {
+            inner: CorePcAxisController::new(),
+        }
+    }
+
+    /// One step; returns (base_thrust, yaw_command, yaw_rotor or None).
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (gains, z_error, z_rate_error, yaw_error, feed_forward, dt))]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        gains: PyReadonlyArrayDyn<'py, f64>,
+        z_error: f64,
+        z_rate_error: f64,
+        yaw_error: f64,
+        feed_forward: PyReadonlyArray1<'py, f64>,
+        dt: f64,
+    ) -> PyResult<(Bound<'py, PyAny>, f64, Option<usize>)> {
+        let gains = gain_set_from_py(&gains)?;
+        let feed_forward: RotorVector = to_vector::<N_ROTORS>(&feed_forward, "feed_forward")?;
+        let errors = PcAxisErrors {
+            z: z_error,
+            z_rate: z_rate_error,
+            yaw: yaw_error,
+        };
+        let command = self
+            .inner
+            .step(&gains, &errors, &feed_forward, dt)
+            .map_err(lqi_error)?;
+        Ok((
+            vector_to_py(py, &command.base_thrust),
+            command.yaw_command,
+            command.yaw_rotor,
+        ))
+    }
+
+    /// (∫e_z, ∫e_ψ).
+    #[getter]
+    fn integrals(&self) -> (f64, f64) {
+        self.inner.integrals()
+    }
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("CareSolveError", py.get_type::<CareSolveError>())?;
+    m.add("LqiSynthesisError", py.get_type::<LqiSynthesisError>())?;
+    m.add("LQI_STATE_NAMES", core_lqi_state_names())?;
+    m.add("JSK_TO_PAPER", core_lqi::JSK_TO_PAPER.to_vec())?;
+    m.add("MAX_WIRE_GAIN", core_lqi::MAX_WIRE_GAIN)?;
+    m.add_function(wrap_pyfunction!(solve_care, m)?)?;
+    m.add_function(wrap_pyfunction!(augmented_system, m)?)?;
+    m.add_function(wrap_pyfunction!(gain_set_from_k, m)?)?;
+    m.add_function(wrap_pyfunction!(gyro_compensation, m)?)?;
+    m.add_function(wrap_pyfunction!(flight_thrust, m)?)?;
+    m.add_class::<LqiSynthesizer>()?;
+    m.add_class::<PcAxisController>()?;
     Ok(())
+}
+
+fn core_lqi_state_names() -> Vec<&'static str> {
+    vec![
+        "z",
+        "z_dot",
+        "roll",
+        "roll_dot",
+        "pitch",
+        "pitch_dot",
+        "yaw",
+        "yaw_dot",
+        "int_z",
+        "int_roll",
+        "int_pitch",
+        "int_yaw",
+    ]
 }

@@ -1,1 +1,299 @@
-//! See [crate::control].
+//! Horizontal position control and vectoring-apparatus angles (Sec. IV-A-2, eqs. 30-36).
+//!
+//! Runs at the position rate (40 Hz in the paper). Per step:
+//! 1. eq. (30): PID on the world x/y error to a desired acceleration, with a clamp on the
+//!    integral term (anti-windup; the paper has none, see [`AxisPid::integral_limit`]);
+//! 2. eqs. (31)-(32): roll/pitch targets (Table V: `k_φd = 0`, i.e. the paper's `φ_d = 0`);
+//! 3. eqs. (33)-(36): angles `α_i`, `β_i` of each vectoring apparatus from the rotation
+//!    that eq. (36) applies (`ᶜ_{Lᵢ}R` as the paper writes it), and the desired yaw `ψ_d`.
+//!
+//! Geometric meaning of (33)-(34): with `n = n_va/|n_va|` and `n_z > 0`,
+//! `R_x(α) R_y(β) e_z = n`, i.e. turning the apparatus z axis first by α about x, then by
+//! β about the new y, aligns it with n.
+
+use nalgebra::{Matrix3, Vector2, Vector3};
+
+use crate::N_ROTORS;
+
+/// Number of vectoring apparatuses (two rotors each).
+pub const N_VECTORING: usize = N_ROTORS / 2;
+
+/// Standard gravity [m/s²] (assumption: the paper's g).
+pub const GRAVITY: f64 = 9.80665;
+
+/// PID gains of one horizontal axis (eq. 30).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AxisPid {
+    pub p: f64,
+    pub i: f64,
+    pub d: f64,
+    /// Bound on `|k_I ∫e dt|` [m/s²]. Assumption (not in the paper): 1.0 m/s²; set to
+    /// `f64::INFINITY` for the paper's unbounded integral.
+    pub integral_limit: f64,
+}
+
+/// Gains of the position controller.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PositionGains {
+    pub x: AxisPid,
+    pub y: AxisPid,
+    /// `k_φd` of eq. (31).
+    pub k_roll: f64,
+    /// `k_θd` of eq. (32).
+    pub k_pitch: f64,
+    /// `k_θi` of eq. (36), per apparatus.
+    pub k_pitch_vectoring: [f64; N_VECTORING],
+    /// `k_φi` of eq. (36), per apparatus.
+    pub k_roll_vectoring: [f64; N_VECTORING],
+    /// g of eqs. (31), (32), (36).
+    pub gravity: f64,
+}
+
+impl PositionGains {
+    /// Table V: x (4.6, 1.5, 7.0), y (7.0, 0.005, 10.5), `k_φd = 0`, `k_θd = 1`,
+    /// `(k_θ1, k_φ1) = (0, 1)`, `(k_θ2, k_φ2) = (0, 0)`; integral limit 1 m/s² (assumption).
+    pub fn table_v() -> Self {
+        Self {
+            x: AxisPid {
+                p: 4.6,
+                i: 1.5,
+                d: 7.0,
+                integral_limit: 1.0,
+            },
+            y: AxisPid {
+                p: 7.0,
+                i: 0.005,
+                d: 10.5,
+                integral_limit: 1.0,
+            },
+            k_roll: 0.0,
+            k_pitch: 1.0,
+            k_pitch_vectoring: [0.0, 0.0],
+            k_roll_vectoring: [1.0, 0.0],
+            gravity: GRAVITY,
+        }
+    }
+
+    fn validate(&self) -> Result<(), PositionError> {
+        let axes_ok = [self.x, self.y].iter().all(|a| {
+            a.p.is_finite()
+                && a.i.is_finite()
+                && a.d.is_finite()
+                && !a.integral_limit.is_nan()
+                && a.integral_limit >= 0.0
+        });
+        let rest_ok = self.k_roll.is_finite()
+            && self.k_pitch.is_finite()
+            && self
+                .k_pitch_vectoring
+                .iter()
+                .chain(self.k_roll_vectoring.iter())
+                .all(|k| k.is_finite())
+            && self.gravity.is_finite()
+            && self.gravity > 0.0;
+        if axes_ok && rest_ok {
+            Ok(())
+        } else {
+            Err(PositionError::InvalidInput { argument: "gains" })
+        }
+    }
+}
+
+impl Default for PositionGains {
+    fn default() -> Self {
+        Self::table_v()
+    }
+}
+
+/// Inputs of one position step (world frame).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PositionInput {
+    /// Estimated x, y [m].
+    pub position: Vector2<f64>,
+    /// Estimated ẋ, ẏ [m/s].
+    pub velocity: Vector2<f64>,
+    /// Target x, y [m].
+    pub target_position: Vector2<f64>,
+    /// Target ẋ, ẏ [m/s].
+    pub target_velocity: Vector2<f64>,
+    /// Desired yaw `ψ_d` [rad].
+    pub target_yaw: f64,
+    /// The rotation eq. (36) multiplies, one per vectoring apparatus.
+    pub link_rotations: [Matrix3<f64>; N_VECTORING],
+    /// Step length [s].
+    pub dt: f64,
+}
+
+/// Outputs of one position step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PositionOutput {
+    /// `p̈_d` of eq. (30) [m/s²].
+    pub acceleration: Vector2<f64>,
+    /// `φ_d` of eq. (31) [rad].
+    pub roll: f64,
+    /// `θ_d` of eq. (32) [rad].
+    pub pitch: f64,
+    /// `α_i` of eq. (33) [rad].
+    pub alpha: [f64; N_VECTORING],
+    /// `β_i` of eq. (34) [rad].
+    pub beta: [f64; N_VECTORING],
+    /// `n_i = n_va,i/|n_va,i|` of eq. (35).
+    pub direction: [Vector3<f64>; N_VECTORING],
+    /// True when an integral term hit its limit this step.
+    pub integral_clamped: bool,
+}
+
+/// Why a position step failed; the controller state is left unchanged.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PositionError {
+    /// NaN/inf or out-of-domain input; names the field.
+    InvalidInput { argument: &'static str },
+}
+
+impl core::fmt::Display for PositionError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::InvalidInput { argument } => {
+                write!(f, "invalid position-control input `{argument}`")
+            }
+        }
+    }
+}
+
+impl std::error::Error for PositionError {}
+
+/// Principal value `tan⁻¹(num/den)` in [−π/2, π/2], defined for `den = 0`.
+fn atan_ratio(num: f64, den: f64) -> f64 {
+    if den > 0.0 {
+        num.atan2(den)
+    } else if den < 0.0 {
+        (-num).atan2(-den)
+    } else if num == 0.0 {
+        0.0
+    } else {
+        core::f64::consts::FRAC_PI_2.copysign(num)
+    }
+}
+
+/// Eqs. (33)-(34): apparatus angles from the unit direction n.
+pub fn vectoring_angles(n: &Vector3<f64>) -> (f64, f64) {
+    let alpha = atan_ratio(-n.y, n.z);
+    let beta = atan_ratio(n.x, -n.y * alpha.sin() + n.z * alpha.cos());
+    (alpha, beta)
+}
+
+/// PID position controller with vectoring (eqs. 30-36).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PositionController {
+    gains: PositionGains,
+    /// `∫e dt` per axis [m s].
+    integral: Vector2<f64>,
+}
+
+impl PositionController {
+    /// Validates the gains.
+    pub fn new(gains: PositionGains) -> Result<Self, PositionError> {
+        gains.validate()?;
+        Ok(Self {
+            gains,
+            integral: Vector2::zeros(),
+        })
+    }
+
+    /// The gains in use.
+    pub fn gains(&self) -> &PositionGains {
+        &self.gains
+    }
+
+    /// `∫e dt` of x and y.
+    pub fn integral(&self) -> Vector2<f64> {
+        self.integral
+    }
+
+    /// Zeroes the integrators.
+    pub fn reset(&mut self) {
+        self.integral = Vector2::zeros();
+    }
+
+    /// One step. The integral advances by `e dt` (rectangle rule) and is then clamped so
+    /// that `|k_I ∫e| <= integral_limit`.
+    pub fn step(&mut self, input: &PositionInput) -> Result<PositionOutput, PositionError> {
+        validate_input(input)?;
+        let g = &self.gains;
+        let error = input.target_position - input.position;
+        let error_rate = input.target_velocity - input.velocity;
+        let mut integral = self.integral + error * input.dt;
+        let mut integral_clamped = false;
+        for (axis, pid) in [g.x, g.y].iter().enumerate() {
+            if pid.i != 0.0 && pid.integral_limit.is_finite() {
+                let bound = pid.integral_limit / pid.i.abs();
+                if integral[axis].abs() > bound {
+                    integral[axis] = bound.copysign(integral[axis]);
+                    integral_clamped = true;
+                }
+            }
+        }
+        self.integral = integral;
+        let acceleration = Vector2::new(
+            g.x.p * error.x + g.x.i * integral.x + g.x.d * error_rate.x,
+            g.y.p * error.y + g.y.i * integral.y + g.y.d * error_rate.y,
+        );
+        let (sin_yaw, cos_yaw) = input.target_yaw.sin_cos();
+        // Desired acceleration in the yaw-aligned frame, as eqs. (31), (32), (36) use it.
+        let forward = acceleration.x * cos_yaw + acceleration.y * sin_yaw;
+        let lateral = acceleration.x * sin_yaw - acceleration.y * cos_yaw;
+        let roll = g.k_roll * lateral / g.gravity;
+        let pitch = g.k_pitch * forward / g.gravity;
+        let mut alpha = [0.0; N_VECTORING];
+        let mut beta = [0.0; N_VECTORING];
+        let mut direction = [Vector3::zeros(); N_VECTORING];
+        for i in 0..N_VECTORING {
+            let local = Vector3::new(
+                g.k_pitch_vectoring[i] * forward,
+                g.k_roll_vectoring[i] * lateral,
+                g.gravity,
+            );
+            let n_va = input.link_rotations[i] * local;
+            // |n_va| >= g * smallest singular value of the rotation, so > 0 for a valid input.
+            let n = n_va / n_va.norm();
+            let (a, b) = vectoring_angles(&n);
+            alpha[i] = a;
+            beta[i] = b;
+            direction[i] = n;
+        }
+        Ok(PositionOutput {
+            acceleration,
+            roll,
+            pitch,
+            alpha,
+            beta,
+            direction,
+            integral_clamped,
+        })
+    }
+}
+
+fn validate_input(input: &PositionInput) -> Result<(), PositionError> {
+    let finite2 = |v: &Vector2<f64>| v.iter().all(|x| x.is_finite());
+    let check = |ok: bool, argument: &'static str| {
+        if ok {
+            Ok(())
+        } else {
+            Err(PositionError::InvalidInput { argument })
+        }
+    };
+    check(finite2(&input.position), "position")?;
+    check(finite2(&input.velocity), "velocity")?;
+    check(finite2(&input.target_position), "target_position")?;
+    check(finite2(&input.target_velocity), "target_velocity")?;
+    check(input.target_yaw.is_finite(), "target_yaw")?;
+    check(input.dt.is_finite() && input.dt > 0.0, "dt")?;
+    for rotation in &input.link_rotations {
+        let finite = rotation.iter().all(|x| x.is_finite());
+        // A rotation: orthonormal up to rounding (also guarantees |n_va| > 0).
+        let orthonormal =
+            finite && (rotation.transpose() * rotation - Matrix3::identity()).amax() < 1e-6;
+        check(orthonormal, "link_rotations")?;
+    }
+    Ok(())
+}

@@ -227,7 +227,9 @@ fn eq73_with_balancing_thrusts_equals_cog_projection() {
     // Vertical thrusts that cancel roll/pitch moments about the CoG put eq. (73) on the CoG.
     let robot = rdm();
     let mut ws = ModelWorkspace::new(&robot);
-    let q = [0.2, 0.1, -0.3, 0.2, 0.1, 0.0, 0.0, 0.0, 0.0, 0.0];
+    // Bent arm with every thrust vertical: q2 = -q4 keeps the middle-to-end chain level,
+    // yaw joints move the rotors sideways, units untilted.
+    let q = [0.0, 0.0, 0.4, 0.0, -0.7, 0.3, 0.0, 0.0, 0.0, 0.0];
     robot.evaluate(&q, &Isometry3::identity(), &mut ws).unwrap();
     let mut q_bar = Matrix4xN::zeros(4);
     assert!(allocation_bar(&ws, &mut q_bar));
@@ -238,9 +240,8 @@ fn eq73_with_balancing_thrusts_equals_cog_projection() {
         .unwrap()
         .unwrap();
     let steady = robot.aerial_zmp(&mut ws).unwrap();
-    // Rotor directions are not exactly vertical here (q tilts the units), so allow the
-    // horizontal-thrust moment; with beta = alpha = 0 the units tilt with the links.
-    assert!((from_thrusts.point - steady.point).norm() < 0.05);
+    assert!(ws.rotor_direction.iter().all(|u| (u.z - 1.0).abs() < 1e-12));
+    assert!((from_thrusts.point - steady.point).norm() < 1e-9);
 }
 
 #[test]

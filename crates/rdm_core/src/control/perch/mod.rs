@@ -1,0 +1,22 @@
+//! Perching controller of Sec. IV-B (eqs. 37-49) with the foot-wrench filter of Sec. VII-B.
+//!
+//! - [`params`]: Table VII parameters and the ones the paper leaves out.
+//! - [`filter`]: the 1 Hz first-order IIR low-pass on the measured foot wrench.
+//! - [`qp`]: the QP of eq. (49) on one Clarabel solver built once (fixed sparsity).
+//! - [`status`]: typed outcome of a tick and the failure counters.
+//! - [`controller`]: filter + QP + the state carried from tick to tick.
+//!
+//! The exact formulation (decision vector, cost, every constraint row with its equation
+//! number) is written out in `docs/perch.md` and next to the row builder in [`qp`].
+
+pub mod controller;
+pub mod filter;
+pub mod params;
+pub mod qp;
+pub mod status;
+
+pub use controller::PerchController;
+pub use filter::WrenchFilter;
+pub use params::{ParamError, PerchParams};
+pub use qp::{PerchInput, PerchQp, PerchSolution, N_ROWS, N_VARS, N_ZERO_ROWS};
+pub use status::{PerchCounters, PerchStatus};

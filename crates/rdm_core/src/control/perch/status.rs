@@ -1,0 +1,96 @@
+//! Typed outcome of one perching tick and the counters of every outcome.
+
+/// What happened in one perching tick.
+///
+/// Every status other than [`PerchStatus::Solved`] and [`PerchStatus::AlmostSolved`]
+/// means the thrust is the documented safe command (see `PerchQp::safe_thrust`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PerchStatus {
+    /// Clarabel converged to the requested tolerances.
+    Solved,
+    /// Clarabel converged to its reduced tolerances; the thrust is used after clipping to
+    /// the bounds of eqs. (45) and (48).
+    AlmostSolved,
+    /// The constraints of eq. (49) have no common point (Clarabel's infeasibility certificate).
+    Infeasible,
+    /// The iteration cap (`PerchParams::max_iter`) was reached.
+    MaxIterations,
+    /// Clarabel stopped on a numerical error or lack of progress, or returned a non-finite point.
+    NumericalError,
+    /// An input (wrench, thrust, allocation, mass) was NaN or infinite.
+    NonFiniteInput,
+    /// `Q̄(q)` of eq. (47) is singular, or every controlled row of `Q̄_perch` is zero.
+    SingularAllocation,
+}
+
+impl PerchStatus {
+    /// All statuses in counter order.
+    pub const ALL: [PerchStatus; 7] = [
+        PerchStatus::Solved,
+        PerchStatus::AlmostSolved,
+        PerchStatus::Infeasible,
+        PerchStatus::MaxIterations,
+        PerchStatus::NumericalError,
+        PerchStatus::NonFiniteInput,
+        PerchStatus::SingularAllocation,
+    ];
+
+    /// True when the thrust comes from the QP solution rather than the safe command.
+    pub fn is_solution(self) -> bool {
+        matches!(self, PerchStatus::Solved | PerchStatus::AlmostSolved)
+    }
+
+    /// Stable snake_case name (used by the bindings and logs).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PerchStatus::Solved => "solved",
+            PerchStatus::AlmostSolved => "almost_solved",
+            PerchStatus::Infeasible => "infeasible",
+            PerchStatus::MaxIterations => "max_iterations",
+            PerchStatus::NumericalError => "numerical_error",
+            PerchStatus::NonFiniteInput => "non_finite_input",
+            PerchStatus::SingularAllocation => "singular_allocation",
+        }
+    }
+
+    fn index(self) -> usize {
+        match self {
+            PerchStatus::Solved => 0,
+            PerchStatus::AlmostSolved => 1,
+            PerchStatus::Infeasible => 2,
+            PerchStatus::MaxIterations => 3,
+            PerchStatus::NumericalError => 4,
+            PerchStatus::NonFiniteInput => 5,
+            PerchStatus::SingularAllocation => 6,
+        }
+    }
+}
+
+/// How many ticks ended in each [`PerchStatus`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PerchCounters {
+    counts: [u64; 7],
+}
+
+impl PerchCounters {
+    /// Count one tick with `status`.
+    pub fn record(&mut self, status: PerchStatus) {
+        let slot = &mut self.counts[status.index()];
+        *slot = slot.saturating_add(1);
+    }
+
+    /// Ticks that ended in `status`.
+    pub fn count(&self, status: PerchStatus) -> u64 {
+        self.counts[status.index()]
+    }
+
+    /// All ticks.
+    pub fn total(&self) -> u64 {
+        self.counts.iter().fold(0u64, |a, c| a.saturating_add(*c))
+    }
+
+    /// Ticks whose thrust is the safe command.
+    pub fn failures(&self) -> u64 {
+        self.total() - self.count(PerchStatus::Solved) - self.count(PerchStatus::AlmostSolved)
+    }
+}

@@ -1,1 +1,0 @@
-//! Attitude estimation as the Spinal firmware runs it (complementary filter).

@@ -1,0 +1,63 @@
+"""The Spinal-side attitude step: controller, flight state machine and the combined step.
+
+* :class:`AttitudeController` applies the roll/pitch part of the LQI law (paper eqs. 28-29)
+  with per-rotor gains from the PC, the gyro-moment compensation, yaw spreading, the
+  saturation factors alpha/beta, thrust -> PWM, and the firmware's arming and fail-safe
+  state machine (ARM_ON/OFF, FORCE_LANDING, 500 ms command timeout, 1 rad tilt limit).
+* :class:`SpinalStep` chains the attitude estimator and the controller: the Spinal mirror's
+  200 Hz step.
+* Gain sets are float arrays of shape ``(N_ROTORS, 4, 3)`` (rotor, axis roll/pitch/yaw/z,
+  term P/I/D); their ``rpy/gain`` wire form is int16 ``(N_ROTORS, 7)`` x 1000.
+
+Every method takes the caller's timestamp; nothing reads a clock. Rejected messages raise
+:class:`CommandRejectedError` (a :class:`rdm._rdm.RdmError`) and are counted.
+See ``docs/spinal.md``.
+"""
+
+from __future__ import annotations
+
+from rdm._rdm import (
+    N_ROTORS,
+    AttitudeController,
+    CommandRejectedError,
+    ControlOutput,
+    SpinalStep,
+    SpinalStepOutput,
+    clamp_gain,
+    gains_from_wire_terms,
+    gains_to_wire_terms,
+)
+
+#: ``spinal/FlightConfigCmd`` values.
+ARM_ON = 0
+ARM_OFF = 1
+FORCE_LANDING = 2
+INTEGRATION_CONTROL_ON = 160
+INTEGRATION_CONTROL_OFF = 161
+
+#: ``spinal/UavInfo`` models.
+UAV_DRONE = 0
+UAV_HYDRUS = 16
+UAV_HYDRUS_XI = 17
+UAV_DRAGON = 32
+
+__all__ = [
+    "ARM_OFF",
+    "ARM_ON",
+    "FORCE_LANDING",
+    "INTEGRATION_CONTROL_OFF",
+    "INTEGRATION_CONTROL_ON",
+    "N_ROTORS",
+    "UAV_DRAGON",
+    "UAV_DRONE",
+    "UAV_HYDRUS",
+    "UAV_HYDRUS_XI",
+    "AttitudeController",
+    "CommandRejectedError",
+    "ControlOutput",
+    "SpinalStep",
+    "SpinalStepOutput",
+    "clamp_gain",
+    "gains_from_wire_terms",
+    "gains_to_wire_terms",
+]

@@ -1,0 +1,96 @@
+"""LQI attitude/altitude gain synthesis (paper Sec. IV-A-1, eqs. 21-29) over the Rust core.
+
+State order (JSK ``lqi_mode`` 4)::
+
+    x = [z, z_dot, roll, roll_dot, pitch, pitch_dot, yaw, yaw_dot, int_z, int_roll,
+         int_pitch, int_yaw]
+
+Gain arrays have shape ``(N_ROTORS, 4, 3)``: axes ``(roll, pitch, yaw, z)``, terms
+``(P, I, D)``. Weights default to the paper's Table V (see docs/lqi.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rdm import _rdm
+
+STATE_NAMES: tuple[str, ...] = tuple(_rdm.LQI_STATE_NAMES)
+#: Paper index (x = [xi_bar; xi_bar_dot; v], eq. 26) of each JSK-order state.
+JSK_TO_PAPER: tuple[int, ...] = tuple(_rdm.JSK_TO_PAPER)
+#: Largest |gain| that fits the int16 x 0.001 ``rpy/gain`` wire format.
+MAX_WIRE_GAIN: float = _rdm.MAX_WIRE_GAIN
+#: Table V, W1 in JSK state order.
+TABLE_V_Q = np.array([20.0, 30.0, 90.0, 12.8, 600.0, 80.0, 100.0, 50.0, 20.0, 0.15, 1.0, 0.5])
+#: Table V, W2.
+TABLE_V_R = np.ones(4)
+
+CareSolveError = _rdm.CareSolveError
+LqiSynthesisError = _rdm.LqiSynthesisError
+solve_care = _rdm.solve_care
+augmented_system = _rdm.augmented_system
+gain_set_from_k = _rdm.gain_set_from_k
+gyro_compensation = _rdm.gyro_compensation
+flight_thrust = _rdm.flight_thrust
+PcAxisController = _rdm.PcAxisController
+
+
+@dataclass(frozen=True)
+class LqiResult:
+    """One synthesis: K (lambda_bar = K x_bar), P, B_bar, the Spinal gain set and solver info."""
+
+    k: np.ndarray
+    p: np.ndarray
+    b: np.ndarray
+    gains: np.ndarray
+    clamp_scales: tuple[float, float, float, float, float]
+    method: str
+    iterations: int
+    fell_back: bool
+    relative_residual: float
+
+
+class LqiSynthesizer:
+    """Warm-started LQI synthesizer; ``synthesize`` releases the GIL while solving."""
+
+    def __init__(
+        self,
+        q_weights: np.ndarray | None = None,
+        r_weights: np.ndarray | None = None,
+        clamp_gain: bool = True,
+        kleinman_tolerance: float | None = None,
+    ) -> None:
+        q = None if q_weights is None else np.ascontiguousarray(q_weights, dtype=float)
+        r = None if r_weights is None else np.ascontiguousarray(r_weights, dtype=float)
+        self._core = _rdm.LqiSynthesizer(q, r, clamp_gain, kleinman_tolerance)
+
+    def synthesize(self, mass: float, inertia: np.ndarray, allocation: np.ndarray) -> LqiResult:
+        """Gains for mass [kg], inertia (3x3, CoG frame) and allocation Q_bar (4 x N_ROTORS)."""
+        out = self._core.synthesize(
+            float(mass),
+            np.ascontiguousarray(inertia, dtype=float),
+            np.ascontiguousarray(allocation, dtype=float),
+        )
+        report = out["report"]
+        return LqiResult(
+            k=out["k"],
+            p=out["p"],
+            b=out["b"],
+            gains=out["gains"],
+            clamp_scales=out["clamp_scales"],
+            method=report["method"],
+            iterations=report["iterations"],
+            fell_back=report["fell_back"],
+            relative_residual=report["relative_residual"],
+        )
+
+    def reset(self) -> None:
+        """Forget the warm start (next synthesis is cold)."""
+        self._core.reset()
+
+    @property
+    def has_solution(self) -> bool:
+        """Whether the next synthesis is warm-started."""
+        return self._core.has_solution

@@ -1,0 +1,82 @@
+"""Horizontal position control and vectoring angles (paper Sec. IV-A-2, eqs. 30-36).
+
+Defaults are the paper's Table V; the integral clamp (1 m/s^2 per axis) is an assumption.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rdm import _rdm
+
+PositionControlError = _rdm.PositionControlError
+N_VECTORING: int = _rdm.N_VECTORING
+GRAVITY: float = _rdm.GRAVITY
+vectoring_angles = _rdm.vectoring_angles
+
+
+@dataclass(frozen=True)
+class PositionCommand:
+    """Outputs of one step: desired acceleration, roll/pitch targets, apparatus angles."""
+
+    acceleration: np.ndarray
+    roll: float
+    pitch: float
+    alpha: tuple[float, ...]
+    beta: tuple[float, ...]
+    direction: np.ndarray
+    integral_clamped: bool
+
+
+class PositionController:
+    """PID on world x/y to acceleration, then eqs. (31)-(36)."""
+
+    def __init__(self, **gains: object) -> None:
+        """Keyword gains: x_pid, y_pid (P, I, D), integral_limit (x, y) [m/s^2], k_roll,
+        k_pitch, k_pitch_vectoring, k_roll_vectoring (per apparatus), gravity."""
+        self._core = _rdm.PositionController(**gains)
+
+    def step(
+        self,
+        position: np.ndarray,
+        velocity: np.ndarray,
+        target_position: np.ndarray,
+        target_velocity: np.ndarray,
+        target_yaw: float,
+        link_rotations: np.ndarray,
+        dt: float,
+    ) -> PositionCommand:
+        """One step; ``link_rotations`` (N_VECTORING, 3, 3) is the rotation eq. (36) applies."""
+
+        def vec(a: np.ndarray) -> np.ndarray:
+            return np.ascontiguousarray(a, dtype=float)
+
+        out = self._core.step(
+            vec(position),
+            vec(velocity),
+            vec(target_position),
+            vec(target_velocity),
+            float(target_yaw),
+            vec(link_rotations),
+            float(dt),
+        )
+        return PositionCommand(
+            acceleration=out["acceleration"],
+            roll=out["roll"],
+            pitch=out["pitch"],
+            alpha=tuple(out["alpha"]),
+            beta=tuple(out["beta"]),
+            direction=np.asarray(out["direction"]),
+            integral_clamped=out["integral_clamped"],
+        )
+
+    @property
+    def integral(self) -> np.ndarray:
+        """Integral of the x/y position error [m s]."""
+        return self._core.integral
+
+    def reset(self) -> None:
+        """Zero the integrators."""
+        self._core.reset()

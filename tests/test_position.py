@@ -1,0 +1,175 @@
+"""Position control (eqs. 30-36) against an independent numpy implementation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from rdm.control import position as pc
+
+G = 9.80665
+TABLE_V = dict(
+    kp=np.array([4.6, 7.0]),
+    ki=np.array([1.5, 0.005]),
+    kd=np.array([7.0, 10.5]),
+    k_roll=0.0,
+    k_pitch=1.0,
+    k_theta=np.array([0.0, 0.0]),
+    k_phi=np.array([1.0, 0.0]),
+)
+
+
+class NumpyPosition:
+    """Eqs. (30)-(36) re-derived, with the documented integral clamp |k_I int e| <= limit."""
+
+    def __init__(self, kp, ki, kd, k_roll, k_pitch, k_theta, k_phi, limit=(1.0, 1.0)):
+        self.kp, self.ki, self.kd = kp, ki, kd
+        self.k_roll, self.k_pitch, self.k_theta, self.k_phi = k_roll, k_pitch, k_theta, k_phi
+        self.limit = np.asarray(limit)
+        self.integral = np.zeros(2)
+
+    def step(self, p, v, pd, vd, yaw, rots, dt):
+        e = pd - p
+        self.integral = self.integral + e * dt
+        bound = self.limit / np.abs(self.ki)
+        self.integral = np.clip(self.integral, -bound, bound)
+        acc = self.kp * e + self.ki * self.integral + self.kd * (vd - v)
+        s, c = np.sin(yaw), np.cos(yaw)
+        roll = self.k_roll * (acc[0] * s - acc[1] * c) / G
+        pitch = self.k_pitch * (acc[0] * c + acc[1] * s) / G
+        alphas, betas, ns = [], [], []
+        for i, rot in enumerate(rots):
+            n_va = rot @ np.array(
+                [
+                    self.k_theta[i] * (acc[0] * c + acc[1] * s),
+                    self.k_phi[i] * (acc[0] * s - acc[1] * c),
+                    G,
+                ]
+            )
+            n = n_va / np.linalg.norm(n_va)
+            alpha = np.arctan(-n[1] / n[2])
+            beta = np.arctan(n[0] / (-n[1] * np.sin(alpha) + n[2] * np.cos(alpha)))
+            alphas.append(alpha)
+            betas.append(beta)
+            ns.append(n)
+        return acc, roll, pitch, alphas, betas, np.array(ns)
+
+
+def rx(a):
+    return Rotation.from_euler("x", a).as_matrix()
+
+
+def ry(b):
+    return Rotation.from_euler("y", b).as_matrix()
+
+
+@pytest.mark.parametrize("gains", ["table_v", "random"])
+def test_position_steps_match_numpy(gains):
+    rng = np.random.default_rng(0 if gains == "table_v" else 1)
+    if gains == "table_v":
+        g = TABLE_V
+        ctrl = pc.PositionController()
+    else:
+        g = dict(
+            kp=rng.uniform(1, 8, 2),
+            ki=rng.uniform(0.1, 2, 2),
+            kd=rng.uniform(1, 10, 2),
+            k_roll=rng.uniform(0, 1),
+            k_pitch=rng.uniform(0, 1),
+            k_theta=rng.uniform(0, 1, 2),
+            k_phi=rng.uniform(0, 1, 2),
+        )
+        ctrl = pc.PositionController(
+            x_pid=(g["kp"][0], g["ki"][0], g["kd"][0]),
+            y_pid=(g["kp"][1], g["ki"][1], g["kd"][1]),
+            k_roll=g["k_roll"],
+            k_pitch=g["k_pitch"],
+            k_pitch_vectoring=list(g["k_theta"]),
+            k_roll_vectoring=list(g["k_phi"]),
+        )
+    ref = NumpyPosition(**g)
+    clamped = 0
+    for _ in range(400):
+        p, v, pd, vd = (rng.normal(scale=s, size=2) for s in (1.0, 0.5, 1.0, 0.2))
+        yaw = rng.uniform(-np.pi, np.pi)
+        rots = (
+            Rotation.random(2, random_state=rng).as_matrix()
+            if rng.random() < 0.5
+            else (
+                np.stack(
+                    [rx(rng.uniform(-0.5, 0.5)) @ ry(rng.uniform(-0.5, 0.5)) for _ in range(2)]
+                )
+            )
+        )
+        pd = pd + 2.0  # persistent error so the integral clamp engages
+        out = ctrl.step(p, v, pd, vd, yaw, rots, 0.025)
+        acc, roll, pitch, alphas, betas, ns = ref.step(p, v, pd, vd, yaw, rots, 0.025)
+        np.testing.assert_allclose(out.acceleration, acc, rtol=1e-12, atol=1e-12)
+        assert out.roll == pytest.approx(roll, abs=1e-12)
+        assert out.pitch == pytest.approx(pitch, abs=1e-12)
+        np.testing.assert_allclose(out.alpha, alphas, atol=1e-12)
+        np.testing.assert_allclose(out.beta, betas, atol=1e-12)
+        np.testing.assert_allclose(out.direction, ns, atol=1e-12)
+        np.testing.assert_allclose(ctrl.integral, ref.integral, atol=1e-12)
+        clamped += out.integral_clamped
+    assert clamped > 0, "anti-windup clamp never exercised"
+
+
+def test_angles_turn_apparatus_z_onto_direction():
+    rng = np.random.default_rng(2)
+    for _ in range(500):
+        n = rng.normal(size=3)
+        n[2] = abs(n[2]) + 0.05
+        n /= np.linalg.norm(n)
+        alpha, beta = pc.vectoring_angles(n)
+        turned = rx(alpha) @ ry(beta) @ np.array([0.0, 0.0, 1.0])
+        # atan (not atan2) gives cos(beta) > 0 only when the denominator is positive.
+        sign = np.sign(-n[1] * np.sin(alpha) + n[2] * np.cos(alpha))
+        np.testing.assert_allclose(turned * sign, n, atol=1e-12)
+
+
+def test_controller_directions_are_realised_by_its_angles():
+    rng = np.random.default_rng(3)
+    ctrl = pc.PositionController()
+    for _ in range(100):
+        rots = np.stack([rx(rng.uniform(-0.4, 0.4)) @ ry(rng.uniform(-0.4, 0.4)) for _ in range(2)])
+        out = ctrl.step(
+            rng.normal(size=2),
+            rng.normal(size=2),
+            np.zeros(2),
+            np.zeros(2),
+            rng.uniform(-3, 3),
+            rots,
+            0.025,
+        )
+        for i in range(2):
+            turned = rx(out.alpha[i]) @ ry(out.beta[i]) @ np.array([0.0, 0.0, 1.0])
+            np.testing.assert_allclose(turned, out.direction[i], atol=1e-12)
+
+
+def test_bad_inputs_raise_named_errors():
+    ctrl = pc.PositionController()
+    good = dict(
+        position=np.zeros(2),
+        velocity=np.zeros(2),
+        target_position=np.ones(2),
+        target_velocity=np.zeros(2),
+        target_yaw=0.0,
+        link_rotations=np.stack([np.eye(3)] * 2),
+        dt=0.025,
+    )
+    for name, bad in [
+        ("position", np.array([np.nan, 0.0])),
+        ("velocity", np.array([0.0, np.inf])),
+        ("target_yaw", float("nan")),
+        ("dt", 0.0),
+        ("link_rotations", np.stack([np.eye(3) * 2] * 2)),
+    ]:
+        before = ctrl.integral.copy()
+        with pytest.raises(pc.PositionControlError, match=name):
+            ctrl.step(**{**good, name: bad})
+        np.testing.assert_array_equal(ctrl.integral, before)
+    with pytest.raises(pc.PositionControlError, match="gains"):
+        pc.PositionController(x_pid=(float("nan"), 0.0, 0.0))
+    ctrl.step(**good)
