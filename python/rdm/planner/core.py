@@ -12,11 +12,13 @@ from rdm import _rdm
 from rdm.model import Robot, shipped_robot_files
 from rdm.planner.shapes import collision_config
 
-#: Perched start: foot on the ceiling at the origin, arm curled down and forward.
-#: ASSUMPTION (any collision-free start works; this one is well inside every limit).
-PERCHED_START_Q = (1.0, 0.7, 0.0, 0.7, 0.0, 0.0)
-#: Flight start: the root link tilted down, arm forward.
-FLIGHT_START_Q = (1.2, 0.4, 0.3, 0.4, -0.3, 0.0)
+#: Perched start: foot on the ceiling at the origin, root link pitched down, middle link
+#: folded forward, end link back down. ASSUMPTION, chosen by a grid search (docs/planner.md)
+#: for the largest margin to every limit: the hover thrusts (9.0, 9.0, 11.7, 11.7) N are
+#: inside [0, 20] N (the CoG lies between the two rotor pairs), |tau| <= 1.72 N m, rho = 1.5e-3.
+PERCHED_START_Q = (1.2, 0.8, 0.0, -0.9, 0.0, 0.0)
+#: Flight start, chosen the same way: thrusts (7.8, 7.8, 10.4, 10.4) N, rho = 1.8e-3.
+FLIGHT_START_Q = (1.0, 1.1, 0.0, -0.9, 0.0, 0.0)
 
 
 @dataclass(frozen=True)

@@ -117,10 +117,8 @@ def evaluate_design(
             ex.submit(_evaluate_chunk, setup, [tuple(p) for p in c]): i
             for i, c in enumerate(chunks)
         }
-        done = 0
-        for fut in as_completed(futures):
+        for done, fut in enumerate(as_completed(futures), start=1):
             results[futures[fut]] = fut.result()
-            done += 1
             if progress:
                 print(
                     f"\r{name}: {done}/{len(chunks)} chunks ({len(pts)} points)",
@@ -171,8 +169,7 @@ def run_table(
     """Evaluate every robot of Table ``which`` (2 or 3)."""
     setups = table2_setups() if which == 2 else table3_setups()
     return {
-        n: evaluate_design(s, n, resolution, executor, progress=progress)
-        for n, s in setups.items()
+        n: evaluate_design(s, n, resolution, executor, progress=progress) for n, s in setups.items()
     }
 
 

@@ -127,10 +127,12 @@ impl PlannerConfig {
                 forbidden: 0.2,
                 gain: 0.5,
             },
+            // rho is 1.5e-3 (perched) / 1.8e-3 (flight) at the default starts and falls
+            // to 0 when the two rotor pairs line up (docs/planner.md, "rho thresholds").
             stability: DamperParams {
-                restricted: 2e-4,
-                forbidden: 5e-5,
-                gain: 2e-5,
+                restricted: 3e-4,
+                forbidden: 1e-4,
+                gain: 5e-5,
             },
             collision: DamperParams {
                 restricted: 0.1,
