@@ -72,3 +72,33 @@ def test_bad_input_names_argument():
     with pytest.raises(QpInputError, match="P"):
         solver.solve(np.full((2, 2), np.nan), np.zeros(2), np.zeros((0, 2)), np.zeros(0),
                      np.ones((1, 2)), np.ones(1))  # fmt: skip
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_random_infeasible_qps_agree_with_clarabel_wheel(seed):
+    """Random constraints plus a contradicting pair hidden in a random direction."""
+    rng = np.random.default_rng(100 + seed)
+    n, ni = 5, 8
+    M = rng.normal(size=(n, n))
+    P = M @ M.T + 0.1 * np.eye(n)
+    q = rng.normal(size=n)
+    G = rng.normal(size=(ni, n))
+    h = rng.uniform(0.5, 1.0, ni)
+    d = rng.normal(size=n)
+    G[0], h[0] = d, -1.0  # d.x <= -1
+    G[1], h[1] = -d, -1.0  # d.x >= 1
+    A, b = np.zeros((0, n)), np.zeros(0)
+    status, x = QpSolver(n, 0, ni).solve(P, q, A, b, G, h)
+    ref_status, _ = _reference(P, q, A, b, G, h)
+    assert ref_status == "PrimalInfeasible"
+    assert status == "primal_infeasible"
+    assert np.all(x == 0.0)
+    # The same QP without the contradiction is solved and matches the wheel.
+    h[1] = 1.5
+    status, x = QpSolver(n, 0, ni).solve(P, q, A, b, G, h)
+    ref_status, x_ref = _reference(P, q, A, b, G, h)
+    if ref_status == "Solved":
+        assert status == "solved"
+        np.testing.assert_allclose(x, x_ref, atol=1e-6)
+    else:
+        assert status == "primal_infeasible" and ref_status == "PrimalInfeasible"

@@ -8,7 +8,7 @@
 //! equilibration is computed once from the setup data (dummy zeros here) and merely
 //! re-applied on update. Instead each inequality row is normalised by its Euclidean norm
 //! before it is handed over, which keeps rows of different physical units comparable.
-//! After `new`, `solve` allocates nothing (checked in `tests/qp_no_alloc.rs`).
+//! After `new`, `solve` allocates nothing (checked in `tests/qp_alloc.rs`).
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
