@@ -231,3 +231,18 @@ def test_planner_torques_match_model_binding(rdm_setup, robot):
     np.testing.assert_allclose(tau, out[0], atol=1e-9)
     # Thrusts balance weight plus perching force.
     assert thrust.sum() == pytest.approx(robot.mass * G + perch, rel=1e-6)
+
+
+def test_plan_command(tmp_path, capsys):
+    import json
+
+    from rdm.cli import main
+
+    out = tmp_path / "traj.csv"
+    assert main(["plan", "--target", "0.2,-0.3,-0.7", "--out", str(out)]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["reached"] and summary["final_error_m"] < 1e-3
+    assert out.stat().st_size > 0
+    assert main(["plan", "--target", "2.5,0,-0.5"]) == 1
+    assert json.loads(capsys.readouterr().out)["blocking"] == "rotor_thrust"
+    assert main(["plan", "--target", "1,2"]) == 2

@@ -67,3 +67,79 @@ def make_core(setup: PlannerSetup, zeta0: np.ndarray | None = None) -> _rdm.Core
     """Build the Rust planner for ``setup`` starting at ``zeta0`` (default start if None)."""
     start = default_start(setup) if zeta0 is None else np.asarray(zeta0, dtype=float)
     return _rdm.CorePlanner(setup.urdf, setup.toml, setup.mode, start, dict(setup.config))
+
+
+#: Default damper thresholds (restricted) used to score starts; they mirror
+#: ``PlannerConfig::new`` in crates/rdm_core/src/planner/config.rs.
+_RESTRICTED = {"state": 0.15, "rho": 3e-4, "collision": 0.1}
+_FORBIDDEN_DISTANCE = 0.01
+
+
+def start_margin(core: _rdm.CorePlanner, model: Robot) -> float:
+    """Smallest normalised distance of the core's current state to any limit (< 0: a limit
+    is violated or a damper band is entered): thrust to [min, upper] over thrust_max,
+    torque to stall, joints and rho to their restricted bands, clearances and rotor spacing
+    to their forbidden distance (over the restricted one)."""
+    lay, v = core.layout, core.values
+    t0, nt = lay["thrust"]
+    thrust = v[t0 : t0 + nt]
+    upper = v[lay["thrust_upper"][0] : lay["thrust_upper"][0] + nt]
+    tmin = np.array([r["thrust_min"] for r in model.rotors])
+    tmax = np.array([r["thrust_max"] for r in model.rotors])
+    tau = v[lay["torque"][0] : lay["torque"][0] + lay["torque"][1]]
+    stall = np.array(model.stall_torques)
+    lo, hi = np.array(model.joint_limits).T
+    q = core.zeta[6:]
+    free = [i - 6 for i in core.free if i >= 6]
+    c0, nc = lay["collision"]
+    a0, na = lay["airflow"]
+    parts = [
+        ((thrust - tmin) / tmax).min(),
+        ((upper - thrust) / tmax).min(),
+        ((stall - np.abs(tau)) / stall).min(),
+        (np.minimum(q - lo, hi - q)[free] / _RESTRICTED["state"] - 1.0).min(),
+        v[lay["rho"][0]] / _RESTRICTED["rho"] - 1.0,
+    ]
+    # Distances only need to clear the forbidden band: rotors of two units on one link
+    # (the RCM) sit a fixed 13 mm beyond a diameter apart.
+    if nc:
+        parts.append((v[c0 : c0 + nc].min() - _FORBIDDEN_DISTANCE) / _RESTRICTED["collision"])
+    if na:
+        parts.append((v[a0 : a0 + na].min() - _FORBIDDEN_DISTANCE) / _RESTRICTED["collision"])
+    return float(min(parts))
+
+
+def feasible_starts(
+    setup: PlannerSetup, step: float = 0.2, bin_width: float = 0.3
+) -> list[np.ndarray]:
+    """Start states for design sweeps, found by a grid search over the planar (x-z) arm
+    configurations (q1, q2, q4; yaw joints and q6 zero): in every ``bin_width`` band of
+    end-effector x, the configuration with the largest ``start_margin``. Differential IK
+    is local, so a sweep tries these starts in turn, nearest first. Only starts with a
+    positive margin are returned (empty when the robot cannot hold any planar
+    configuration, e.g. Table II's root variant)."""
+    model = Robot.from_strs(setup.urdf, setup.toml)
+    lo, hi = np.array(model.joint_limits).T
+    base = np.zeros(6 + model.n_q)
+    core = None
+    best: dict[int, tuple[float, np.ndarray]] = {}
+    q1s = np.arange(0.0, hi[0] - 0.15 + 1e-9, step)
+    q2s = np.arange(lo[1] + 0.15, hi[1] - 0.15 + 1e-9, step)
+    q4s = np.arange(lo[3] + 0.15, hi[3] - 0.15 + 1e-9, step)
+    for q1 in q1s:
+        for q2 in q2s:
+            for q4 in q4s:
+                zeta = base.copy()
+                zeta[6:10] = (q1, q2, 0.0, q4)
+                try:
+                    if core is None:
+                        core = make_core(setup, zeta)
+                    else:
+                        core.set_zeta(zeta)
+                except (_rdm.RdmError, ValueError):
+                    continue
+                margin = start_margin(core, model)
+                key = int(np.floor(core.end_effector_pose()[0][0] / bin_width))
+                if margin > 0.0 and margin > best.get(key, (0.0, None))[0]:
+                    best[key] = (margin, core.zeta.copy())
+    return [best[k][1] for k in sorted(best)]

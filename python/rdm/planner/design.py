@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rdm.planner.core import PlannerSetup, default_start, make_core
+from rdm.planner.core import PlannerSetup, feasible_starts, make_core
 from rdm.planner.plan import run_core
 
 #: Representative force F [N] and length L [m] of eq. (4) (Table III).
@@ -28,9 +28,10 @@ REPRESENTATIVE_LENGTH = 1.2
 #: Grid extent in the foot frame's x-z plane [m] (arm reach 1.05 m plus the q1 offset).
 X_RANGE = (-1.2, 1.2)
 Z_RANGE = (-1.25, -0.05)
-#: Alternative starts tried in order when the previous one does not reach a target
-#: (differential IK is local; ASSUMPTION: two curls, forward and backward).
-STARTS_Q = ((1.0, 0.7, 0.0, 0.7, 0.0, 0.0), (1.45, 1.3, 0.0, 0.9, 0.0, 0.0))
+#: Steps allowed per target and start.
+MAX_STEPS_PER_TARGET = 400
+#: Starts tried per target, nearest end effector first (ASSUMPTION, docs/planner.md).
+MAX_STARTS_PER_TARGET = 3
 
 
 @dataclass
@@ -69,26 +70,33 @@ def grid(resolution: float) -> np.ndarray:
     return np.array([(x, z) for z in zs for x in xs])
 
 
-def _evaluate_chunk(setup: PlannerSetup, points: list[tuple[float, float]]) -> list[tuple]:
-    """Worker: plan to every point (trying each start), feasible force where reached."""
-    base = default_start(setup)
+def _evaluate_chunk(
+    setup: PlannerSetup, starts: list[np.ndarray], points: list[tuple[float, float]]
+) -> list[tuple]:
+    """Worker: plan to every point, trying the starts nearest to it first (differential IK
+    is local); feasible force where reached."""
     core = None
     out = []
+    anchors = []
+    for zeta in starts:
+        if core is None:
+            core = make_core(setup, zeta)
+        else:
+            core.set_zeta(zeta)
+        anchors.append(np.array(core.end_effector_pose()[0]))
     for x, z in points:
-        result = (False, 0.0, None)
-        for q6 in STARTS_Q:
-            zeta = base.copy()
-            zeta[6:12] = q6
-            if core is None:
-                core = make_core(setup, zeta)
-            else:
-                core.set_zeta(zeta)
-            traj = run_core(core, (x, 0.0, z), setup.mode, max_steps=400)
+        result = (False, 0.0, "no feasible start")
+        target = np.array((x, 0.0, z))
+        order = sorted(range(len(starts)), key=lambda i: np.linalg.norm(anchors[i] - target))
+        for i in order[:MAX_STARTS_PER_TARGET]:
+            core.set_zeta(starts[i])
+            traj = run_core(core, tuple(target), setup.mode, max_steps=MAX_STEPS_PER_TARGET)
             if traj.reached:
                 f = core.feasible_force()
                 result = (True, 0.0 if f is None else f[1], None)
                 break
-            result = (False, 0.0, traj.blocking)
+            if result[2] == "no feasible start":
+                result = (False, 0.0, traj.blocking)
         out.append(result)
     return out
 
@@ -107,6 +115,7 @@ def evaluate_design(
     all cores), e.g. a Dask ``Client.get_executor()``. Progress goes to stderr.
     """
     t0 = time.perf_counter()
+    starts = feasible_starts(setup, step=0.1)
     pts = grid(resolution)
     chunks = [pts[i : i + chunk] for i in range(0, len(pts), chunk)]
     own = executor is None
@@ -114,7 +123,7 @@ def evaluate_design(
     results: list[list[tuple] | None] = [None] * len(chunks)
     try:
         futures = {
-            ex.submit(_evaluate_chunk, setup, [tuple(p) for p in c]): i
+            ex.submit(_evaluate_chunk, setup, starts, [tuple(p) for p in c]): i
             for i, c in enumerate(chunks)
         }
         for done, fut in enumerate(as_completed(futures), start=1):

@@ -78,7 +78,10 @@ pub fn feasible_force(
     }
     let (hx, hy) = (0.5 * robot.plate_size[0], 0.5 * robot.plate_size[1]);
     let (mu, mu_z) = (robot.friction_xy, robot.friction_z);
-    let mut qp = DenseQp::new(NV, 0, 2 * n_q + 8 + 10, QpSettings::default()).ok()?;
+    // Rows: torque ±(2 n_q), thrust upper and lower (8), normal force (1), friction x/y,
+    // yaw friction and ZMP x/y as ± pairs (10), force in [0, FORCE_CAP] (2).
+    let n_rows = 2 * n_q + 8 + 1 + 10 + 2;
+    let mut qp = DenseQp::new(NV, 0, n_rows, QpSettings::default()).ok()?;
     let mut per_axis = [0.0f64; 3];
     for (j, best) in per_axis.iter_mut().enumerate() {
         for sign in [1.0, -1.0] {
@@ -138,8 +141,7 @@ pub fn feasible_force(
             push(a, FORCE_CAP);
             a[0] = -1.0;
             push(a, 0.0);
-            let n_rows = g_rows.len();
-            if n_rows != qp.n_ineq() {
+            if g_rows.len() != n_rows {
                 return None;
             }
             let mut gm = vec![0.0; n_rows * NV];
