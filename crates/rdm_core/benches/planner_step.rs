@@ -56,7 +56,7 @@ fn planner() -> Planner {
 /// Step toward alternating targets, restarting from the start every 40 steps so the
 /// steps stay representative (moving, constraints active near the end).
 fn run(planner: &mut Planner, start: &[f64], k: usize) {
-    if k % 40 == 0 {
+    if k.is_multiple_of(40) {
         planner.set_zeta(start).unwrap();
     }
     let target = TARGETS[(k / 40) % TARGETS.len()];

@@ -271,8 +271,8 @@ impl DenseQp {
             let row = &g[i * n..(i + 1) * n];
             let norm = row.iter().map(|v| v * v).sum::<f64>().sqrt();
             let scale = if norm > 1e-12 { 1.0 / norm } else { 1.0 };
-            for j in 0..n {
-                self.a_values[j * m + n_eq + i] = row[j] * scale;
+            for (j, v) in row.iter().enumerate() {
+                self.a_values[j * m + n_eq + i] = v * scale;
             }
             self.b[n_eq + i] = (h[i] * scale).min(QP_LOOSE_BOUND);
         }

@@ -151,8 +151,8 @@ impl Constraint for RotorThrust {
                 ctx.jac_row(l.thrust() + i),
             );
             let up = &mut g[2 * i * nf..(2 * i + 1) * nf];
-            for c in 0..nf {
-                up[c] = jl.get(c).unwrap_or(&0.0) - ju.get(c).unwrap_or(&0.0);
+            for (c, u) in up.iter_mut().enumerate() {
+                *u = jl.get(c).unwrap_or(&0.0) - ju.get(c).unwrap_or(&0.0);
             }
             h[2 * i] = allowed_approach(upper - lam, p);
             let (_, rest) = g.split_at_mut((2 * i + 1) * nf);

@@ -242,6 +242,7 @@ impl Quantities {
 
     /// Central-difference Jacobian of the quantity vector w.r.t. `zeta[free[k]]` into
     /// `jac` (row-major, len x free.len()). Leaves the workspace at `zeta` (re-levelled).
+    #[allow(clippy::too_many_arguments)]
     pub fn jacobian(
         &mut self,
         robot: &RobotDescription,
