@@ -246,3 +246,45 @@ def test_plan_command(tmp_path, capsys):
     assert main(["plan", "--target", "2.5,0,-0.5"]) == 1
     assert json.loads(capsys.readouterr().out)["blocking"] == "rotor_thrust"
     assert main(["plan", "--target", "1,2"]) == 2
+
+
+def _segment_distance(a0, a1, b0, b1):
+    """Exact segment-segment distance: the convex quadratic over (s, t) in [0, 1]^2,
+    minimised with scipy (independent of the planner's closed form)."""
+    from scipy.optimize import minimize
+
+    def f(st):
+        d = (a0 + st[0] * (a1 - a0)) - (b0 + st[1] * (b1 - b0))
+        return d @ d
+
+    r = minimize(f, [0.5, 0.5], bounds=[(0, 1), (0, 1)], method="L-BFGS-B", tol=1e-14)
+    return float(np.sqrt(r.fun))
+
+
+@pytest.mark.parametrize(
+    ("target", "reached"), [((0.2, -0.3, -0.7), True), ((0.3, 0.0, -0.6), False)]
+)
+def test_capsule_collision_binds_around_an_obstacle(rdm_setup, robot, target, reached):
+    """A 3 cm pole (a capsule fixed to the foot frame, i.e. the world when perched) across
+    the end link's path: the planner either goes around it or stops at d_F; the end-link
+    capsule never touches it (distance from the model's link poses, scipy minimiser)."""
+    foot, end = robot.link_names.index("foot"), robot.link_names.index("end_link")
+    pole = (np.array([0.2, -0.6, -0.78]), np.array([0.2, 0.6, -0.78]))
+    shapes = [*rdm_setup.config["shapes"], ("capsule", foot, tuple(pole[0]), tuple(pole[1]), 0.03)]
+    end_shape = next(i for i, sh in enumerate(shapes) if sh[0] == "capsule" and sh[1] == end)
+    pairs = [*rdm_setup.config["pairs"], (end_shape, len(shapes) - 1)]
+    traj = plan(_with(rdm_setup, shapes=shapes, pairs=pairs), target)
+    assert traj.reached == reached
+    _check_every_step(traj, robot)
+    assert _bound(traj, "collision")
+    if not reached:
+        assert traj.blocking == "collision"
+    _, a, b, r_end = shapes[end_shape][1:]
+    gaps = []
+    for z in traj.zeta:
+        pose = np.array(robot.evaluate(z[6:], base_pose=list(z[:6]))["frames"]["end_link"])
+        p0 = pose[:3, :3] @ np.array(a) + pose[:3, 3]
+        p1 = pose[:3, :3] @ np.array(b) + pose[:3, 3]
+        gaps.append(_segment_distance(p0, p1, *pole) - r_end - 0.03)
+    assert min(gaps) >= D_F - 1e-3
+    assert min(gaps) < 0.02  # it came close: the constraint was active
