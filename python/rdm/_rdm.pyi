@@ -518,3 +518,67 @@ def time_onboard_ticks(
 
 def bench_build_profile() -> str: ...
 def time_timer_overhead(n: int = 10000) -> _np.ndarray: ...
+
+# --- planner ---
+
+class QpInputError(RdmError):
+    """A QpSolver argument has the wrong shape or holds NaN/-inf (message names it)."""
+
+class PlannerError(RdmError):
+    """Bad planner input: description, mode, config key, zeta (message names it)."""
+
+class QpSolver:
+    """Dense QP on Clarabel (rdm_core::qp): min ½xᵀPx + qᵀx s.t. A_eq x = b_eq, G x <= h.
+    Fixed sizes; the solver is reused across solves."""
+
+    def __init__(
+        self, n: int, n_eq: int, n_ineq: int, max_iter: int = 50, tolerance: float = 1e-8
+    ) -> None: ...
+    def solve(
+        self,
+        p: NDArray[np.float64],
+        q: NDArray[np.float64],
+        a_eq: NDArray[np.float64],
+        b_eq: NDArray[np.float64],
+        g: NDArray[np.float64],
+        h: NDArray[np.float64],
+    ) -> tuple[str, NDArray[np.float64]]:
+        """(status, x): status one of solved, almost_solved, primal_infeasible,
+        dual_infeasible, max_iterations, numerical_error; x is zeros unless solved."""
+    @property
+    def iterations(self) -> int: ...
+
+class CorePlanner:
+    """Sec. V planner core (rdm_core::planner). ``mode``: "perched" or "flight";
+    ``zeta0`` = [p, eta, q]; ``config``: parameter overrides (docs/planner.md)."""
+
+    def __init__(
+        self,
+        urdf: str,
+        toml: str,
+        mode: str,
+        zeta0: NDArray[np.float64],
+        config: dict[str, object] | None = None,
+    ) -> None: ...
+    @property
+    def zeta(self) -> NDArray[np.float64]: ...
+    def set_zeta(self, zeta: NDArray[np.float64]) -> None: ...
+    @property
+    def free(self) -> list[int]: ...
+    @property
+    def values(self) -> NDArray[np.float64]: ...
+    @property
+    def layout(self) -> dict[str, object]: ...
+    def linearize(self) -> NDArray[np.float64]: ...
+    @property
+    def constraint_rows(self) -> list[tuple[str, int]]: ...
+    def last_rows(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+    def end_effector_pose(
+        self,
+    ) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]: ...
+    def step(
+        self, position: list[float], orientation: list[float] | None = None
+    ) -> dict[str, object]:
+        """Keys: status ("moved" or "qp_failed:<status>"), position_error,
+        orientation_error, binding (constraint name or None)."""
+    def feasible_force(self) -> tuple[tuple[float, float, float], float] | None: ...

@@ -19,12 +19,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "measure the real-time core against its 200 Hz and 40 Hz budgets and against peers",
     ),
     "decode": ("decode", "decode a UART capture, candump log or Leptrino capture"),
+    "design": ("design", "reachability/feasibility sweep reproducing Tables II-III"),
     "model": ("model", "load a robot and print its mass properties, allocation and aerial ZMP"),
     "neuron": ("neuron", "run a Neuron board mirror on a CAN bus"),
     "onboard": (
         "onboard",
         "run the onboard-PC node: rosserial server, 40 Hz position/perching control, LQI",
     ),
+    "plan": ("plan", "plan an end-effector motion (differential-kinematics planner, Sec. V)"),
     "plant": ("plant", "build the MuJoCo model of a robot; export it for MuJoCo's viewer"),
     "sim": (
         "sim",

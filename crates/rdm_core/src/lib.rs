@@ -9,7 +9,9 @@
 pub mod control;
 pub mod estimate;
 pub mod model;
+pub mod planner;
 pub mod pwm;
+pub mod qp;
 
 /// Number of rotors the real-time controllers are built for.
 ///

@@ -10,7 +10,9 @@ mod estimate;
 mod lqi;
 mod model;
 mod perch;
+mod planner;
 mod position;
+mod qp;
 
 #[pymodule]
 fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -23,5 +25,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     position::register(m)?;
     perch::register(m)?;
     bench::register(m)?;
+    qp::register(m)?;
+    planner::register(m)?;
     Ok(())
 }

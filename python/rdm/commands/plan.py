@@ -1,0 +1,45 @@
+"""``rdm plan``: plan an end-effector motion with the differential-kinematics planner."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``plan``'s options."""
+    parser.add_argument("--robot", default="rdm", help="shipped name or TOML path (default rdm)")
+    parser.add_argument(
+        "--target", required=True, help="x,y,z[,roll,pitch,yaw] in the world/foot frame [m, rad]"
+    )
+    parser.add_argument("--mode", choices=("perched", "flight"), default="perched")
+    parser.add_argument("--out", help="write the trajectory (.csv or .json)")
+    parser.add_argument("--plot", help="write a PNG of the trajectory")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Plan; exit 0 if reached, 1 if unreachable, 2 on bad input."""
+    from rdm.planner import plan
+
+    try:
+        target = [float(v) for v in args.target.split(",")]
+        if len(target) not in (3, 6):
+            raise ValueError("expected 3 or 6 comma-separated numbers")
+    except ValueError as e:
+        print(f"rdm plan: --target: {e}", file=sys.stderr)
+        return 2
+    traj = plan(args.robot, target, mode=args.mode)
+    if args.out:
+        traj.save(args.out)
+    if args.plot:
+        traj.plot(args.plot)
+    summary = {
+        "reached": traj.reached,
+        "blocking": traj.blocking,
+        "steps": traj.steps,
+        "final_error_m": traj.final_error,
+        "final_q": [round(v, 4) for v in traj.zeta[-1][6:]],
+    }
+    print(json.dumps(summary))
+    return 0 if traj.reached else 1
