@@ -12,7 +12,7 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use rdm_core::control::attitude::{AttitudeControlConfig, SpinalConfig, SpinalStep};
-use rdm_core::control::gains::{GainSet, PidGains};
+use rdm_core::control::gains::GainSet;
 use rdm_core::control::lqi::{LqiConfig, LqiSynthesizer};
 use rdm_core::control::perch::{PerchController, PerchParams, PerchStatus};
 use rdm_core::control::position::{PositionController, PositionGains, PositionInput, N_VECTORING};
@@ -108,26 +108,7 @@ fn armed_spinal(
 }
 
 fn gain_set(a: &PyReadonlyArray3<'_, f64>) -> PyResult<GainSet> {
-    let v = a.as_array();
-    if v.shape() != [N_ROTORS, 4, 3] {
-        return Err(bad(format!(
-            "`gains` must have shape ({N_ROTORS}, 4, 3), got {:?}",
-            v.shape()
-        )));
-    }
-    let mut set = GainSet::default();
-    for (rotor, g) in set.iter_mut().enumerate() {
-        let pid = |axis: usize| PidGains {
-            p: v[[rotor, axis, 0]],
-            i: v[[rotor, axis, 1]],
-            d: v[[rotor, axis, 2]],
-        };
-        g.roll = pid(0);
-        g.pitch = pid(1);
-        g.yaw = pid(2);
-        g.z = pid(3);
-    }
-    Ok(set)
+    crate::gains::gain_set_from_view(a.as_array().into_dyn())
 }
 
 /// Times `SpinalStep::step` (estimator + attitude control + PWM) once per row of the

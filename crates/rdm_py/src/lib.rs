@@ -7,6 +7,7 @@ mod attitude;
 mod bench;
 mod errors;
 mod estimate;
+mod gains;
 mod lqi;
 mod model;
 mod perch;

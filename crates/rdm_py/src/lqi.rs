@@ -1,13 +1,13 @@
 //! Bindings of `rdm_core::control::lqi` and `rdm_core::control::riccati`.
 
 use nalgebra::{Matrix3, SMatrix, Vector3};
-use numpy::ndarray::{Array1, Array2, Array3};
+use numpy::ndarray::{Array1, Array2};
 use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn};
 use pyo3::create_exception;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use rdm_core::control::gains::{GainSet, PidGains};
+use rdm_core::control::gains::GainSet;
 use rdm_core::control::lqi::{
     self as core_lqi, Allocation, AllocationInverse, GyroCompensation, LqiConfig, LqiError,
     LqiGains, LqiState, LqiWeights, PcAxisController as CorePcAxisController, PcAxisErrors,
@@ -117,36 +117,11 @@ fn report_dict<'py>(py: Python<'py>, report: &CareReport) -> PyResult<Bound<'py,
 
 /// Gain set as an (N_ROTORS, 4, 3) array: axes (roll, pitch, yaw, z), columns (P, I, D).
 pub(crate) fn gain_set_to_py<'py>(py: Python<'py>, set: &GainSet) -> Bound<'py, PyAny> {
-    Array3::from_shape_fn((N_ROTORS, 4, 3), |(rotor, axis, term)| {
-        let g = &set[rotor];
-        let pid = [g.roll, g.pitch, g.yaw, g.z][axis];
-        [pid.p, pid.i, pid.d][term]
-    })
-    .into_pyarray(py)
-    .into_any()
+    crate::gains::gain_set_to_array(py, set).into_any()
 }
 
 fn gain_set_from_py(array: &PyReadonlyArrayDyn<'_, f64>) -> PyResult<GainSet> {
-    let view = array.as_array();
-    if view.shape() != [N_ROTORS, 4, 3] {
-        return Err(RdmError::new_err(format!(
-            "`gains` must have shape ({N_ROTORS}, 4, 3), got {:?}",
-            view.shape()
-        )));
-    }
-    let mut set = GainSet::default();
-    for (rotor, g) in set.iter_mut().enumerate() {
-        let pid = |axis: usize| PidGains {
-            p: view[[rotor, axis, 0]],
-            i: view[[rotor, axis, 1]],
-            d: view[[rotor, axis, 2]],
-        };
-        g.roll = pid(0);
-        g.pitch = pid(1);
-        g.yaw = pid(2);
-        g.z = pid(3);
-    }
-    Ok(set)
+    crate::gains::gain_set_from_view(array.as_array())
 }
 
 /// Solves the 12-state, N_ROTORS-input CARE. With `k0`, Kleinman warm start from `k0`

@@ -11,33 +11,14 @@ use pyo3::prelude::*;
 use rdm_core::control::attitude::wire::{
     clamp_gain, gains_from_wire, gains_to_wire, RollPitchYawTermWire,
 };
-use rdm_core::control::gains::{GainSet, PidGains};
+use rdm_core::control::gains::GainSet;
 use rdm_core::N_ROTORS;
 
 use crate::errors::RdmError;
 
 /// A (N_ROTORS, 4, 3) array into a gain set.
 pub(crate) fn gain_set(gains: &PyReadonlyArray3<'_, f64>) -> PyResult<GainSet> {
-    if gains.shape() != [N_ROTORS, 4, 3] {
-        return Err(RdmError::new_err(format!(
-            "gains: need shape ({N_ROTORS}, 4, 3) (rotor, axis roll/pitch/yaw/z, term P/I/D), got {:?}",
-            gains.shape()
-        )));
-    }
-    let a = gains.as_array();
-    let mut set = GainSet::default();
-    for (i, rotor) in set.iter_mut().enumerate() {
-        let pid = |axis: usize| PidGains {
-            p: a[[i, axis, 0]],
-            i: a[[i, axis, 1]],
-            d: a[[i, axis, 2]],
-        };
-        rotor.roll = pid(0);
-        rotor.pitch = pid(1);
-        rotor.yaw = pid(2);
-        rotor.z = pid(3);
-    }
-    Ok(set)
+    crate::gains::gain_set_from_view(gains.as_array().into_dyn())
 }
 
 /// A gain set into a (N_ROTORS, 4, 3) array.
@@ -45,13 +26,7 @@ pub(crate) fn gain_array<'py>(
     py: Python<'py>,
     set: &GainSet,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    let mut flat = Vec::with_capacity(N_ROTORS * 12);
-    for r in set {
-        for pid in [r.roll, r.pitch, r.yaw, r.z] {
-            flat.extend_from_slice(&[pid.p, pid.i, pid.d]);
-        }
-    }
-    PyArray1::from_vec(py, flat).reshape([N_ROTORS, 4, 3])
+    Ok(crate::gains::gain_set_to_array(py, set))
 }
 
 /// An (n, 7) integer array into wire terms.
