@@ -64,6 +64,9 @@ trap 'exit 255' TERM INT HUP
   echo "#!/bin/bash"
   export -p | grep -vE '^declare -x (SHLVL|OLDPWD|_)='
   printf 'cd %q || exit 254\n' "$PWD"
+  # Temporary files on a guest tmpfs: the host's /tmp arrives over 9p, which loses files
+  # that are open but unlinked (pytest's capture files) once child processes come and go.
+  echo 'mkdir -p /run/rdm-vcanvm-tmp && mount -t tmpfs -o size=256m tmpfs /run/rdm-vcanvm-tmp && export TMPDIR=/run/rdm-vcanvm-tmp'
   # The guest's stdout is its serial console, a tty even when ours is a pipe or file: tell
   # programs (pytest's colours) what the real output is.
   if [ -t 1 ]; then
