@@ -128,7 +128,7 @@ def osqp_solve(P, q, A, lo, hi) -> np.ndarray | None:
         verbose=False,
         max_iter=400000,
     )
-    res = m.solve()
+    res = m.solve(raise_error=False)  # status is checked below
     if res.info.status != "solved" or res.info.status_polish != 1:
         return None  # not converged, or polishing failed: the answer is not exact
     return np.asarray(res.x)
