@@ -1,33 +1,18 @@
 //! Criterion benchmark of the Spinal mirror's 200 Hz step (estimator + attitude control +
 //! PWM conversion), armed and flying. Target (reported, not asserted): median <= 2 us.
 
+#[path = "../tests/spinal_common/mod.rs"]
+mod spinal_common;
+
 use criterion::{criterion_group, criterion_main, Criterion};
 use rdm_core::control::attitude::{SpinalConfig, SpinalStep};
-use rdm_core::control::gains::{GainSet, PidGains, RotorGains};
 use rdm_core::estimate::ImuSample;
 use rdm_core::pwm::PwmInfo;
+use spinal_common::example_gains;
 
 fn armed_spinal() -> SpinalStep {
     let mut spinal = SpinalStep::new(SpinalConfig::default()).expect("config");
-    let rotor = RotorGains {
-        roll: PidGains {
-            p: 3.0,
-            i: 0.5,
-            d: 0.8,
-        },
-        pitch: PidGains {
-            p: 3.0,
-            i: 0.5,
-            d: 0.8,
-        },
-        yaw: PidGains {
-            p: 0.0,
-            i: 0.0,
-            d: 0.4,
-        },
-        z: PidGains::default(),
-    };
-    let gains: GainSet = [rotor; 4];
+    let gains = example_gains();
     let c = spinal.controller_mut();
     c.set_uav_info(4, 16).expect("uav_info");
     c.set_pwm_info(PwmInfo::hydrus_example()).expect("pwm info");

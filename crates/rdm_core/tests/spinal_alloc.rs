@@ -1,40 +1,21 @@
 //! Proves that the Spinal real-time steps allocate nothing after setup: a counting global
 //! allocator wraps the system allocator and the steps run many times inside a region.
 
+mod spinal_common;
+
 use std::alloc::System;
+
+use spinal_common::example_gains;
 
 use rdm_core::control::attitude::{
     AttitudeControlConfig, AttitudeController, SpinalConfig, SpinalStep,
 };
-use rdm_core::control::gains::{GainSet, PidGains, RotorGains};
 use rdm_core::estimate::{AttitudeEstimator, EstimatorConfig, ImuSample};
 use rdm_core::pwm::PwmInfo;
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 
 #[global_allocator]
 static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
-
-fn gains() -> GainSet {
-    let rotor = RotorGains {
-        roll: PidGains {
-            p: 3.0,
-            i: 0.5,
-            d: 0.8,
-        },
-        pitch: PidGains {
-            p: 3.0,
-            i: 0.5,
-            d: 0.8,
-        },
-        yaw: PidGains {
-            p: 0.0,
-            i: 0.0,
-            d: 0.4,
-        },
-        z: PidGains::default(),
-    };
-    [rotor; 4]
-}
 
 fn sample(k: usize) -> ImuSample {
     let t = k as f64 * 0.005;
@@ -48,7 +29,7 @@ fn sample(k: usize) -> ImuSample {
 fn arm(controller: &mut AttitudeController) {
     controller.set_uav_info(4, 16).unwrap();
     controller.set_pwm_info(PwmInfo::hydrus_example()).unwrap();
-    controller.set_gains(&gains()).unwrap();
+    controller.set_gains(&example_gains()).unwrap();
     controller
         .set_pinv_inertia(&[[0.5, 0.5, 0.2]; 4], [0.1, 0.1, 0.2, 0.0, 0.0, 0.0])
         .unwrap();
@@ -104,7 +85,7 @@ fn attitude_step_and_messages_allocate_nothing() {
         if k.is_multiple_of(5) {
             let _ = controller.four_axis_command([0.01, -0.02, 0.1], &[5.0, 5.0, 5.0, 5.0], now);
             let _ = controller.four_axis_command([0.0, 0.0, 0.0], &[5.0, 5.0], now); // rejected
-            let _ = controller.set_gains(&gains());
+            let _ = controller.set_gains(&example_gains());
         }
         let gyro = nalgebra::Vector3::new(0.1, -0.1, 0.05);
         std::hint::black_box(controller.step(now, &rotation, &gyro, 24.0));
