@@ -43,7 +43,9 @@ class NumpyPosition:
             n_va = rot @ np.array(
                 [
                     self.k_theta[i] * (acc[0] * c + acc[1] * s),
-                    self.k_phi[i] * (acc[0] * s - acc[1] * c),
+                    # heading-frame lateral acceleration (the thrust leans toward it; the
+                    # printed eq. 36 has the opposite sign here, see docs/lqi.md)
+                    self.k_phi[i] * (-acc[0] * s + acc[1] * c),
                     G,
                 ]
             )
@@ -173,3 +175,21 @@ def test_bad_inputs_raise_named_errors():
     with pytest.raises(pc.PositionControlError, match="gains"):
         pc.PositionController(x_pid=(float("nan"), 0.0, 0.0))
     ctrl.step(**good)
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.7, -2.0])
+def test_vectoring_thrust_leans_toward_the_lateral_demand(yaw):
+    """Physical sign of eqs. (33)-(36): with level links (R = I), a demand toward +y' (the
+    heading frame's y) must tilt the thrust R_x(alpha) R_y(beta) e_z toward +y', else the
+    vectoring loop feeds back positively."""
+    ctrl = pc.PositionController(x_pid=(1.0, 0.0, 0.0), y_pid=(1.0, 0.0, 0.0))
+    lateral_world = np.array([-np.sin(yaw), np.cos(yaw)])  # heading-frame +y in the world
+    target = 0.5 * lateral_world  # robot at the origin, target along +y'
+    out = ctrl.step(
+        np.zeros(2), np.zeros(2), target, np.zeros(2), yaw, np.stack([np.eye(3)] * 2), 0.025
+    )
+    thrust = rx(out.alpha[0]) @ ry(out.beta[0]) @ np.array([0.0, 0.0, 1.0])
+    assert thrust[1] > 0.02, f"thrust y {thrust[1]} does not lean toward the demand"
+    # k_phi = 0 on the arm apparatus (Table V): its thrust stays vertical
+    arm = rx(out.alpha[1]) @ ry(out.beta[1]) @ np.array([0.0, 0.0, 1.0])
+    np.testing.assert_allclose(arm, [0.0, 0.0, 1.0], atol=1e-12)

@@ -86,7 +86,7 @@ def test_same_seed_same_bytes(takeoff):
 
 def test_uart_drop_triggers_spinal_failsafe_and_descent(tmp_path):
     drop = 2.3
-    st = _run(tmp_path, 3.6, drop_at=drop, log=False)
+    st = _run(tmp_path, 5.0, drop_at=drop, log=False)
     assert st.spinal.counters.failsafes, "no fail-safe after the UART went silent"
     assert st.spinal_link.bytes_lost > 0
     a = truth_arrays(st)

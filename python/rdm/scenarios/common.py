@@ -15,28 +15,16 @@ from rdm.sim import Metric, format_metrics_table, write_summary
 
 from .stack import Stack, StackOptions
 
-#: Table V weights (JSK order, docs/lqi.md) with the yaw weights lowered: ASSUMPTION
-#: (docs/sim.md). The rotor drag-torque yaw authority of the simulated robot is tiny
-#: (c = 0.016 m) and Table V's yaw weights saturate the rotors.
-SIM_LQI_Q = (20.0, 30.0, 90.0, 12.8, 600.0, 80.0, 10.0, 5.0, 20.0, 0.15, 1.0, 0.05)
-
 
 def sim_onboard_config(**overrides: Any) -> OnboardConfig:
-    """The onboard configuration the simulated robot flies with (assumptions in docs/sim.md):
-    the vectoring lateral sign flipped (``k_roll_vectoring = (-1, 0)``) so that eq. (33)'s
-    alpha tilts the thrust toward the desired lateral acceleration about the URDF's +x roll axis,
-    and :data:`SIM_LQI_Q`."""
-    kw: dict[str, Any] = {
-        "position_gains": {"k_roll_vectoring": (-1.0, 0.0)},
-        "lqi_q_weights": SIM_LQI_Q,
-    }
-    kw.update(overrides)
-    return OnboardConfig(**kw)
+    """The onboard configuration the simulated robot flies with: the paper's Table V gains
+    (the core defaults) unless overridden."""
+    return OnboardConfig(**overrides)
 
 
 def sim_stack_options(seed: int, uart: str, **overrides: Any) -> StackOptions:
-    """Stack options of the scenarios: ESC lag 10 ms (ASSUMPTION, docs/sim.md)."""
-    kw: dict[str, Any] = {"seed": seed, "uart": uart, "esc_tau": 0.01}
+    """Stack options of the scenarios (assumptions in docs/sim.md and :class:`StackOptions`)."""
+    kw: dict[str, Any] = {"seed": seed, "uart": uart}
     kw.update(overrides)
     if "onboard" not in kw:
         kw["onboard"] = sim_onboard_config()

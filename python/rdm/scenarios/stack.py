@@ -176,6 +176,11 @@ class StackOptions:
     boot_delay_ms: int = 100
     spinal_rate_hz: float = 200.0
     gyro_calib_duration_s: float = 0.5
+    #: Spinal's IMU prefilters and complementary factors rescaled so that ``spinal_rate_hz``
+    #: keeps the firmware's 1 kHz time constants (True), or the firmware's per-sample factors
+    #: (False: at 200 Hz the gyro low-pass lag becomes 60 ms instead of 12 ms and the roll
+    #: loop of the simulated robot goes unstable). ASSUMPTION (docs/sim.md).
+    spinal_time_matched: bool = True
     onboard: OnboardConfig | None = None
     leptrino_rate_hz: float = 500.0
     mocap_period: float = 0.01
@@ -183,11 +188,14 @@ class StackOptions:
     log: bool = True
     speed: float | None = None
     #: Rotor (ESC + motor) first-order lag [s]; None = the plant's default (0.05 s).
-    esc_tau: float | None = None
+    #: ASSUMPTION 0.01 s: with 0.05 s the LQI roll loop (I_xx = 0.004 kg m^2) is unstable.
+    esc_tau: float | None = 0.01
     #: Battery voltage [V] (a full 6S pack, the Hydrus PwmInfo reference: 20 N at max duty).
     battery_voltage: float = 25.2
-    #: Joint servo model (None = the plant's default soft Dynamixel gains).
-    servo: ServoParams | None = None
+    #: Joint servo model. ASSUMPTION: a stiff position servo (kp 150 N m/rad, kv 5 N m s/rad,
+    #: about 1 deg of error at 2.6 N m, torque limited to the stall torque) as a Dynamixel X
+    #: holds its goal; the plant's softer default (kp 30) lets q2 sag 0.35 rad at take-off.
+    servo: ServoParams | None = field(default_factory=lambda: ServoParams(kp=150.0, kv=5.0))
 
 
 @dataclass
@@ -273,6 +281,7 @@ def build_stack(
         rate_hz=opt.spinal_rate_hz,
         boot_delay_ms=opt.boot_delay_ms,
         gyro_calib_duration_s=opt.gyro_calib_duration_s,
+        time_matched=opt.spinal_time_matched,
     )
     config = opt.onboard or OnboardConfig()
     from dataclasses import replace

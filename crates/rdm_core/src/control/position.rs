@@ -248,9 +248,14 @@ impl PositionController {
         let mut beta = [0.0; N_VECTORING];
         let mut direction = [Vector3::zeros(); N_VECTORING];
         for i in 0..N_VECTORING {
+            // Eqs. (33)-(34) solve R_x(α) R_y(β) e_z = n: n is the thrust direction, which must
+            // lean toward the desired acceleration, whose heading-frame y component is
+            // −lateral. The printed eq. (36) puts eq. (31)'s roll-target sign (+lateral) in that
+            // slot, which leans the thrust away from the demand: positive feedback in y (seen
+            // in MuJoCo). We use the direction sign; k_roll_vectoring = −1 gives the print.
             let local = Vector3::new(
                 g.k_pitch_vectoring[i] * forward,
-                g.k_roll_vectoring[i] * lateral,
+                -g.k_roll_vectoring[i] * lateral,
                 g.gravity,
             );
             let n_va = input.link_rotations[i] * local;
