@@ -127,6 +127,7 @@ class OnboardNode:
                 ("p_matrix_pseudo_inverse_inertia", "spinal/PMatrixPseudoInverseWithInertia"),
                 ("pinv_unit", "spinal/PMatrixPseudoInverseUnit"),
                 ("servo/target_states", "spinal/ServoControlCmd"),
+                ("desire_coordinate", "spinal/DesireCoord"),
             )
         }
         self.arming = ArmingSequencer(config.info_period_s, config.command_retry_s)
@@ -425,6 +426,13 @@ class OnboardNode:
                     pseudo_inverse=[unit.new(r=r, p=p, y=y) for r, p, y in rows],
                     inertia=inertia,
                 ),
+            )
+        desire = ctl.desire_coordinate() if self.config.send_desire_coordinate else None
+        if desire is not None:
+            roll, pitch, yaw = desire
+            self._publish(
+                "desire_coordinate",
+                self._msg["desire_coordinate"].new(roll=roll, pitch=pitch, yaw=yaw),
             )
         targets = self._current_joint_targets(now)
         dt = self.period

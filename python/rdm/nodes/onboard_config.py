@@ -131,6 +131,12 @@ class OnboardConfig:
     #: q before the first servo/states (joint_order). ASSUMPTION: zeros (arm straight).
     initial_q: tuple[float, ...] | None = None
     gravity: float = 9.80665
+    #: Link that carries Spinal's IMU (the processor at the root-link tip, Sec. VI-B); the
+    #: node sends its rotation to the CoG frame as ``desire_coordinate`` every tick.
+    imu_link: str = "root_link"
+    #: Send ``desire_coordinate`` (False: Spinal controls the IMU link's attitude, correct
+    #: only while that link is parallel to the CoG frame, e.g. q1 = 0).
+    send_desire_coordinate: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):

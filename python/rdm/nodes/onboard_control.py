@@ -66,6 +66,9 @@ class ModelTerms:
     foot_allocation: np.ndarray  # 4 x N about the foot origin
     link_rotations: np.ndarray  # (N_VECTORING, 3, 3): eq. (36)'s R_i = (C<-L_i)^T
     hover_thrust: np.ndarray
+    #: C<-IMU link: Spinal's ``desire_coordinate`` (its attitude is the IMU link's, the
+    #: controlled frame is the CoG frame; firmware ``rot = R_est offset_rot^T``)
+    imu_to_cog: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -110,6 +113,9 @@ class ControlPipeline:
             (names.index(u["roll_joint"]), names.index(u["pitch_joint"])) for u in units
         ]
         self.thrust_max = np.array([r["thrust_max"] for r in robot.rotors], dtype=float)
+        frames = list(robot.frame_names)
+        if config.imu_link not in frames:
+            raise ValueError(f"imu_link={config.imu_link!r}: not a frame of the robot ({frames})")
         self.lqi = LqiSynthesizer(
             None if config.lqi_q_weights is None else np.array(config.lqi_q_weights),
             None if config.lqi_r_weights is None else np.array(config.lqi_r_weights),
@@ -127,6 +133,7 @@ class ControlPipeline:
         self.lqi_result = None
         self.perching = False
         self.perch_thrust = np.zeros(robot.n_rotors)
+        self._position_held = False
         self._ticks = 0
 
     # -- 1. model ------------------------------------------------------------------------
@@ -141,6 +148,9 @@ class ControlPipeline:
         full = np.asarray(o["allocation"], dtype=float)
         qfoot = foot_allocation(full, np.asarray(o["foot_in_cog"], dtype=float))
         rotations = np.array([np.asarray(r).T for r in o["unit_parent_rotations"]])
+        frames = o["frames"]  # poses in the foot frame
+        cog_rot = np.asarray(frames["cog"], dtype=float)[:3, :3]
+        imu = cog_rot.T @ np.asarray(frames[self.config.imu_link], dtype=float)[:3, :3]
         g = self.config.gravity
         hover = np.linalg.lstsq(qbar, [o["mass"] * g, 0.0, 0.0, 0.0], rcond=None)[0]
         if not (np.all(np.isfinite(qbar)) and np.all(np.isfinite(hover))):
@@ -155,8 +165,21 @@ class ControlPipeline:
             qfoot,
             rotations,
             hover,
+            imu,
         )
         return True
+
+    def desire_coordinate(self) -> tuple[float, float, float] | None:
+        """ZYX (roll, pitch, yaw) of C<-IMU link, the firmware's ``from_euler`` order, so that
+        Spinal estimates and controls the CoG frame's attitude whatever q is."""
+        t = self.terms
+        if t is None:
+            return None
+        r = t.imu_to_cog
+        roll = math.atan2(r[2, 1], r[2, 2])
+        pitch = -math.asin(max(-1.0, min(1.0, r[2, 0])))
+        yaw = math.atan2(r[1, 0], r[0, 0])
+        return roll, pitch, yaw
 
     # -- 2. LQI --------------------------------------------------------------------------
     def synthesize_due(self) -> bool:
@@ -241,11 +264,23 @@ class ControlPipeline:
             self.counts["not_ready"] += 1
             return None
         n_rot = self.robot.n_rotors
+        if self.perching:
+            # Perched, the foot cannot translate: a horizontal error would only wind up the
+            # PID and tilt the attitude targets, i.e. press the plate onto an edge. The loop is
+            # held at zero error (φ_d = θ_d = 0, vectoring level) with its integral cleared.
+            # ASSUMPTION (the paper's Fig. 6 shows no position loop in perching mode).
+            xy_target, xy_velocity = state.position[:2], np.zeros(2)
+            if not self._position_held:
+                self.position.reset()
+                self._position_held = True
+        else:
+            xy_target, xy_velocity = setpoint.position[:2], setpoint.velocity[:2]
+            self._position_held = False
         pos = self.position.step(
             state.position[:2],
-            state.velocity[:2],
-            setpoint.position[:2],
-            setpoint.velocity[:2],
+            state.velocity[:2] if not self.perching else np.zeros(2),
+            xy_target,
+            xy_velocity,
             setpoint.yaw,
             t.link_rotations,
             dt,
@@ -260,10 +295,15 @@ class ControlPipeline:
             beta.append(float(pos.beta[i]) if ok else float(joint_targets[jb]))
             applied.append(ok)
         ff = t.hover_thrust if self.config.feed_forward == "hover" else np.zeros(n_rot)
+        # Perched, the altitude loop is held too (zero error, integral kept): λ_flight keeps
+        # carrying the weight and λ_perch alone presses the plate (eq. 20); a live z loop would
+        # integrate the pinned height error and cancel λ_perch. ASSUMPTION, like the xy hold.
+        z_err = 0.0 if self.perching else float(setpoint.position[2] - state.position[2])
+        vz_err = 0.0 if self.perching else float(setpoint.velocity[2] - state.velocity[2])
         base, yaw_term, yaw_rotor = self.pc_axes.step(
             gains,
-            float(setpoint.position[2] - state.position[2]),
-            float(setpoint.velocity[2] - state.velocity[2]),
+            z_err,
+            vz_err,
             wrap_angle(setpoint.yaw - state.yaw),
             np.ascontiguousarray(ff, dtype=float),
             dt,

@@ -94,3 +94,34 @@ def finish(result: ScenarioResult, seconds: float, wall_s: float) -> ScenarioRes
     result.facts = facts
     write_summary(st.folder.summary_json, result.metrics, seed=st.plant.seed, **facts)
     return result
+
+
+class SetpointRamp:
+    """A position setpoint that moves toward its goal at a bounded speed (what an operator's
+    joystick or a planner would send), so that a step in the goal does not saturate rotors."""
+
+    def __init__(self, start: np.ndarray, speed: float) -> None:
+        self.position = np.asarray(start, dtype=float).copy()
+        self.goal = self.position.copy()
+        self.speed = float(speed)
+        self.velocity = np.zeros(3)
+
+    def set_goal(self, goal: np.ndarray, speed: float | None = None) -> None:
+        self.goal = np.asarray(goal, dtype=float).copy()
+        if speed is not None:
+            self.speed = float(speed)
+
+    def step(self, dt: float) -> None:
+        delta = self.goal - self.position
+        dist = float(np.linalg.norm(delta))
+        reach = self.speed * dt
+        if dist <= reach:
+            self.position = self.goal.copy()
+            self.velocity = np.zeros(3)
+        else:
+            self.velocity = delta / dist * self.speed
+            self.position = self.position + delta / dist * reach
+
+    @property
+    def arrived(self) -> bool:
+        return bool(np.all(self.position == self.goal))

@@ -1,14 +1,13 @@
 """Scenario registry: name -> (run function, default duration, one-line description).
 
-Only scenarios that run end to end are listed (no stubs). ``perching``, ``flight`` and
-``push`` are not here yet: the simulated robot does not hover stably (docs/sim.md)."""
+Only scenarios that run end to end are listed (no stubs)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from . import hover
+from . import hover, perching
 
 
 @dataclass(frozen=True)
@@ -23,5 +22,11 @@ SCENARIOS: dict[str, Scenario] = {
     "hover": Scenario(
         "hover", hover.run, hover.DEFAULT_DURATION, "take-off and hover at 0.4 m through every wire"
     ),
+    "perching": Scenario(
+        "perching",
+        perching.run,
+        perching.DEFAULT_DURATION,
+        "climb, fold to the hanging posture, perch on the ceiling, move the arm (Fig. 10)",
+    ),
 }
-DEFAULT_SCENARIO = "hover"
+DEFAULT_SCENARIO = "perching"
