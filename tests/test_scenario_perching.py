@@ -1,0 +1,75 @@
+"""The perching scenario (Fig. 10) end to end through every wire: physical outcomes from
+MuJoCo's ground truth, the perching QP's status in the MCAP log."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from rdm.scenarios import perching
+from rdm.scenarios.common import truth_arrays
+
+#: one arm motion while perched (the default has three) keeps the run short
+SHORT_MOTION = ((3.0, (1.5708, -0.9, 0.3, 0.5, 0.0, 0.0)),)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    base = tmp_path_factory.mktemp("perching")
+    res = perching.run(base, duration=23.0, motion=SHORT_MOTION)
+    return res, truth_arrays(res.stack)
+
+
+def test_perches_and_holds_without_slip(run):
+    res, a = run
+    t_perch = res.facts["t_perch"]
+    assert t_perch is not None, "never touched the ceiling"
+    assert res.facts["final_phase"] == "hold"
+    held = a["t"] >= t_perch + 0.5
+    assert held.sum() > 500
+    assert a["contact"][held].all(), "the foot left the ceiling"
+    slip = a["slip"][held]
+    assert np.max(np.linalg.norm(slip - slip[0], axis=1)) < 1e-3  # < 1 mm
+    # the foot really is at the ceiling (1.6 m), plate level
+    assert abs(a["foot"][held, 2].mean() - 1.6) < 0.01
+
+
+def test_contact_wrench_inside_friction_and_zmp_limits(run):
+    res, a = run
+    held = a["t"] >= res.facts["t_perch"] + perching.SETTLE_S
+    f, m, zmp = a["force"][held], a["torque"][held], a["zmp"][held]
+    fz = f[:, 2]
+    assert np.all(fz > 1.0)  # eq. (39)
+    assert np.all(np.hypot(f[:, 0], f[:, 1]) < perching.MU[0] * fz)  # eq. (40)
+    assert np.all(np.abs(m[:, 2]) < perching.MU[2] * fz)  # eq. (41)
+    # centre of pressure inside the 0.10 x 0.15 m plate (Table IV), off the edge most of the time
+    assert np.all(np.abs(zmp[:, 0]) <= 0.05 + 1e-9)
+    assert np.all(np.abs(zmp[:, 1]) <= 0.075 + 1e-9)
+    inner = (np.abs(zmp[:, 0]) < 0.049) & (np.abs(zmp[:, 1]) < 0.074)
+    assert inner.mean() > 0.9
+
+
+def test_arm_moves_while_perched_and_nothing_fails(run):
+    res, a = run
+    goal = np.array(SHORT_MOTION[-1][1])
+    assert np.max(np.abs(a["q"][-1, :6] - goal)) < 0.03
+    assert not res.stack.spinal.counters.failsafes
+    assert np.all(a["thrust"] <= 20.0 * 1.5)  # rotor limit x the ceiling-effect ceiling
+    counts = res.facts["perch_status_counts"]
+    assert counts.get("solved", 0) > 0 and set(counts) <= {"solved", "almost_solved"}
+
+
+def test_mcap_carries_the_perching_qp_status(run):
+    res, _ = run
+    statuses = []
+    with open(res.folder / "signals.mcap", "rb") as fh:
+        for _schema, channel, message in make_reader(fh).iter_messages():
+            if channel.topic == "/onboard/status":
+                statuses.append(json.loads(message.data)["perch_status"])
+    assert "solved" in statuses
+    assert statuses[0] is None  # flight before perching
+    summary = json.loads((res.folder / "summary.json").read_text())
+    assert summary["metrics"]
