@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from . import hover
+from . import flight, hover
 
 
 @dataclass(frozen=True)
@@ -23,5 +23,6 @@ SCENARIOS: dict[str, Scenario] = {
     "hover": Scenario(
         "hover", hover.run, hover.DEFAULT_DURATION, "take-off and hover at 0.4 m through every wire"
     ),
+    "flight": Scenario("flight", flight.run, flight.DEFAULT_DURATION, "Fig. 9 configuration change in flight"),
 }
 DEFAULT_SCENARIO = "hover"
