@@ -23,6 +23,8 @@ SCENARIOS: dict[str, Scenario] = {
     "hover": Scenario(
         "hover", hover.run, hover.DEFAULT_DURATION, "take-off and hover at 0.4 m through every wire"
     ),
-    "flight": Scenario("flight", flight.run, flight.DEFAULT_DURATION, "Fig. 9 configuration change in flight"),
+    "flight": Scenario(
+        "flight", flight.run, flight.DEFAULT_DURATION, "Fig. 9 configuration change in flight"
+    ),
 }
 DEFAULT_SCENARIO = "hover"
