@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from . import hover, perching
+from . import flight, hover, perching
 
 
 @dataclass(frozen=True)
@@ -21,6 +21,9 @@ class Scenario:
 SCENARIOS: dict[str, Scenario] = {
     "hover": Scenario(
         "hover", hover.run, hover.DEFAULT_DURATION, "take-off and hover at 0.4 m through every wire"
+    ),
+    "flight": Scenario(
+        "flight", flight.run, flight.DEFAULT_DURATION, "Fig. 9 configuration change in flight"
     ),
     "perching": Scenario(
         "perching",
