@@ -30,7 +30,7 @@ from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
 from rdm.nodes.lockstep import Lockstep
 from rdm.nodes.neuron_mirror import NeuronMirror
 from rdm.nodes.onboard import OnboardNode
-from rdm.nodes.onboard_config import OnboardConfig, ServoMap
+from rdm.nodes.onboard_config import OnboardConfig
 from rdm.nodes.plant_bridge import BusLayout, PlantBridge, default_layout
 from rdm.nodes.spinal_mirror import SpinalMirror
 from rdm.plant import EscParams, Plant, ServoParams
@@ -75,13 +75,6 @@ class DroppableLink:
         self.link.close()
 
 
-def servo_map_for(layout: BusLayout, joint_order: tuple[str, ...]) -> ServoMap:
-    """The onboard node's joint -> servo index map for a bus layout: Spinal numbers servos by
-    their position in the CAN master's table (Neurons by slave id, then servo index)."""
-    table = [j for nl in sorted(layout.neurons, key=lambda n: n.slave) for j in nl.joints]
-    return ServoMap(servo_index=tuple(table.index(j) for j in joint_order))
-
-
 def quaternion_yaw(q_wxyz: np.ndarray) -> float:
     """ZYX yaw of a (w, x, y, z) quaternion."""
     w, x, y, z = (float(v) for v in q_wxyz)
@@ -108,46 +101,6 @@ class MocapNode:
         self._last = p
         if self.enabled:
             self.onboard.set_mocap(p, v, quaternion_yaw(gt.base_quaternion))
-
-
-class TorqueOnNode:
-    """The PC's servo torque-on (JSK servo_bridge does it at start-up): ``servo/torque_enable``
-    for every servo index, over the onboard node's rosserial session, re-sent every
-    ``period`` until every Neuron servo reports torque on. The onboard node itself sends no
-    torque command (its targets alone would never move a servo: Spinal's
-    ``servo/target_states`` does not switch torque on)."""
-
-    name = "torque_on"
-
-    def __init__(
-        self, onboard: OnboardNode, neurons: list[NeuronMirror], n_servos: int, period: float = 0.5
-    ) -> None:
-        from rdm.protocol.rosserial import spinal_registry
-
-        self.onboard = onboard
-        self.neurons = neurons
-        self.period = period
-        self.msg = (
-            spinal_registry()
-            .msg("spinal/ServoTorqueCmd")
-            .new(index=list(range(n_servos)), torque_enable=[1] * n_servos)
-        )
-        self.sent = 0
-        self.done = False
-
-    def tick(self, now: float) -> None:
-        if self.done:
-            return
-        if all(sv.torque_enable for n in self.neurons for sv in n.servos):
-            self.done = True
-            return
-        if self.onboard.state.value == "idle" and "rx:servo/states" not in self.onboard.counts:
-            return  # Spinal's servo table is not up yet
-        try:
-            self.onboard.session.publish("servo/torque_enable", self.msg)
-            self.sent += 1
-        except Exception:
-            pass
 
 
 class ScriptNode:
@@ -286,7 +239,6 @@ def build_stack(
     config = opt.onboard or OnboardConfig()
     from dataclasses import replace
 
-    config = replace(config, servo_map=servo_map_for(layout, plant.joint_names))
     if config.initial_q is None:
         config = replace(config, initial_q=tuple(q0.tolist()))
     onboard = OnboardNode(onboard_link, f_host, config=config)
@@ -314,8 +266,7 @@ def build_stack(
     )
     mocap = MocapNode(plant, onboard, opt.mocap_period)
     status_log: list = []
-    torque = TorqueOnNode(onboard, neurons, len(plant.joint_names))
-    nodes: list = [bridge, *neurons, spinal, mocap, onboard, torque, sensor]
+    nodes: list = [bridge, *neurons, spinal, mocap, onboard, sensor]
     stack = Stack(
         plant,
         layout,
