@@ -106,11 +106,12 @@ class MocapNode:
 class ScriptNode:
     """Runs a scenario's script ``f(now)`` (targets, perch requests, pushes) at its period."""
 
-    name = "script"
-
-    def __init__(self, fn: Callable[[float], None], period: float = 0.01) -> None:
+    def __init__(
+        self, fn: Callable[[float], None], period: float = 0.01, name: str = "script"
+    ) -> None:
         self.fn = fn
         self.period = period
+        self.name = name
 
     def tick(self, now: float) -> None:
         self.fn(now)
@@ -145,6 +146,8 @@ class StackOptions:
     esc_tau: float | None = 0.01
     #: Battery voltage [V] (a full 6S pack, the Hydrus PwmInfo reference: 20 N at max duty).
     battery_voltage: float = 25.2
+    #: Called as ``progress(stack, now)`` once per simulated second (``rdm sim``'s display).
+    progress: Callable[[Any, float], None] | None = None
     #: Joint servo model. ASSUMPTION: a stiff position servo (kp 150 N m/rad, kv 5 N m s/rad,
     #: about 1 deg of error at 2.6 N m, torque limited to the stall torque) as a Dynamixel X
     #: holds its goal; the plant's softer default (kp 30) lets q2 sag 0.35 rad at take-off.
@@ -288,6 +291,9 @@ def build_stack(
     if script is not None:
         nodes.append(ScriptNode(lambda t: script(stack, t), script_period))
     nodes.append(StatusNode(stack))
+    if opt.progress is not None:
+        report = opt.progress
+        nodes.append(ScriptNode(lambda t: report(stack, t), 1.0, name="progress"))
     stack.loop = Lockstep(
         nodes, physics=plant, can_channels=[channel], barriers=barriers, speed=opt.speed
     )
