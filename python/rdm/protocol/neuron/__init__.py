@@ -3,6 +3,12 @@
 from .base import NeuronFrame
 from .candump import decode_candump
 from .codec import DecodeResult, NeuronDecoder, decode_candidates, decode_frame, encode_frame
+from .memo import (
+    decode_frame_cached,
+    encode_pwm_cached,
+    encode_servo_state_cached,
+    encode_servo_words_cached,
+)
 from .errors import NeuronFrameError
 from .ids import (
     BROADCAST_ID,
@@ -48,6 +54,10 @@ from .pwm import PwmFrame, duty_to_pwm_value, pack_pwm, pwm_for_slave
 from .servo import ServoState, ServoTargetAngles, ServoTargetCurrents
 
 __all__ = [
+    "decode_frame_cached",
+    "encode_pwm_cached",
+    "encode_servo_state_cached",
+    "encode_servo_words_cached",
     "ACC_SCALE",
     "BOARD_CONFIG_CLASSES",
     "BROADCAST_ID",
