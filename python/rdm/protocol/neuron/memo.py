@@ -39,7 +39,9 @@ def _remember(cache: dict, key: object, value: object) -> None:
     cache[key] = value
 
 
-def decode_frame_cached(can_id: int, data: bytes, direction: Direction | None = None) -> NeuronFrame:
+def decode_frame_cached(
+    can_id: int, data: bytes, direction: Direction | None = None
+) -> NeuronFrame:
     """:func:`decode_frame` with memoisation of valid frames (``data`` must be ``bytes``)."""
     key = (can_id, data, direction)
     frame = _decoded.get(key)
