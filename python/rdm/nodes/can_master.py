@@ -186,10 +186,7 @@ class CanMaster:
                 break
             self._receive(msg, now_ms)
         last = self._last_ms
-        if last is None:
-            self._step(now_ms)
-            self._last_ms = now_ms
-        elif now_ms == last + 1:  # the usual case: one new millisecond
+        if last is None or now_ms == last + 1:  # the usual case: one new millisecond
             self._step(now_ms)
             self._last_ms = now_ms
         elif now_ms > last:

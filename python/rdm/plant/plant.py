@@ -322,7 +322,7 @@ class Plant:
         else:
             axis_z = self._v_site_xmat[:, 8].tolist()
             z = self._v_site_xpos[:, 2].tolist()
-            for i, (esc, sid) in enumerate(zip(self.escs, self._rotor_site_list)):
+            for i, (esc, sid) in enumerate(zip(self.escs, self._rotor_site_list, strict=True)):
                 az = axis_z[sid]
                 dist = max(h - z[sid], 0.0) / az if az > 1e-6 else math.inf
                 thrusts[i] = esc._thrust * effects[i].thrust_ratio(dist)
@@ -345,7 +345,7 @@ class Plant:
         for _ in range(int(n)):
             step1(m, d)
             # First-order ESC lag, exact discretisation (Esc.update with a cached factor).
-            for esc, alpha in zip(escs, alphas):
+            for esc, alpha in zip(escs, alphas, strict=True):
                 esc._thrust += alpha * (esc._target - esc._thrust)
             self._apply_rotor_thrusts()
             if self._external:

@@ -3,12 +3,6 @@
 from .base import NeuronFrame
 from .candump import decode_candump
 from .codec import DecodeResult, NeuronDecoder, decode_candidates, decode_frame, encode_frame
-from .memo import (
-    decode_frame_cached,
-    encode_pwm_cached,
-    encode_servo_state_cached,
-    encode_servo_words_cached,
-)
 from .errors import NeuronFrameError
 from .ids import (
     BROADCAST_ID,
@@ -50,14 +44,16 @@ from .initializer import (
     initial_config_reply,
     initialization_sequence,
 )
+from .memo import (
+    decode_frame_cached,
+    encode_pwm_cached,
+    encode_servo_state_cached,
+    encode_servo_words_cached,
+)
 from .pwm import PwmFrame, duty_to_pwm_value, pack_pwm, pwm_for_slave
 from .servo import ServoState, ServoTargetAngles, ServoTargetCurrents
 
 __all__ = [
-    "decode_frame_cached",
-    "encode_pwm_cached",
-    "encode_servo_state_cached",
-    "encode_servo_words_cached",
     "ACC_SCALE",
     "BOARD_CONFIG_CLASSES",
     "BROADCAST_ID",
@@ -105,8 +101,12 @@ __all__ = [
     "decode_candidates",
     "decode_candump",
     "decode_frame",
+    "decode_frame_cached",
     "duty_to_pwm_value",
     "encode_frame",
+    "encode_pwm_cached",
+    "encode_servo_state_cached",
+    "encode_servo_words_cached",
     "initial_config_reply",
     "initialization_sequence",
     "make_id",
