@@ -104,6 +104,7 @@ class Plant:
         self._data = mujoco.MjData(self.model)
         #: True after a step until the lazy ``mj_forward`` ran (see :meth:`sync`).
         self._stale = False
+        self._needs_step1 = True
         m = self.model
         self.seed = seed
         self.joint_names: tuple[str, ...] = desc.joint_order
@@ -169,7 +170,15 @@ class Plant:
     # ----------------------------------------------------------------- lazy forward
     @property
     def data(self) -> mujoco.MjData:
-        """The MuJoCo data, brought up to date (:meth:`sync`) before it is handed out."""
+        """The MuJoCo data, brought up to date (:meth:`sync`) before it is handed out. The
+        caller may change the state through it, so the next step recomputes everything."""
+        if self._stale:
+            self.sync()
+        self._needs_step1 = True
+        return self._data
+
+    def _fresh(self) -> mujoco.MjData:
+        """The data after :meth:`sync`, for the plant's own reads and ctrl/xfrc writes."""
         if self._stale:
             self.sync()
         return self._data
@@ -179,6 +188,7 @@ class Plant:
         re-aimed at the bodies' new poses, then one ``mj_forward``. Runs by itself before a
         reading or a command; calling it again before the next step does nothing."""
         self._stale = False
+        self._needs_step1 = False  # this forward covers the next step's mj_step1 stages
         m, d = self.model, self._data
         if self._external:
             mujoco.mj_kinematics(m, d)
@@ -208,6 +218,7 @@ class Plant:
         spinning at ``thrusts`` (default stopped). Sensor generators are re-seeded."""
         m, d = self.model, self._data
         self._stale = False
+        self._needs_step1 = True
         mujoco.mj_resetData(m, d)
         q = (
             np.zeros(len(self.joint_names))
@@ -259,9 +270,9 @@ class Plant:
         q = _vector(q, len(self.joint_names), "q")
         ok = np.isfinite(q)
         self.rejected_commands += int(np.count_nonzero(~ok))
-        # ``data`` syncs first: readings taken after this command still see the forward
+        # Sync first: readings taken after this command still see the forward
         # pass of the previous ctrl, as when the forward ran right after the step.
-        self.data.ctrl[self._servo_act[ok]] = q[ok]
+        self._fresh().ctrl[self._servo_act[ok]] = q[ok]
 
     def apply_body_wrench(
         self,
@@ -277,13 +288,13 @@ class Plant:
         bid = self.model.body(body).id
         f = _vector(force, 3, "force")
         t = _vector(torque, 3, "torque")
-        rot = self.data.xmat[bid].reshape(3, 3)
-        origin = self.data.xpos[bid]
+        rot = self._fresh().xmat[bid].reshape(3, 3)
+        origin = self._fresh().xpos[bid]
         at = origin if point is None else _vector(point, 3, "point")
         self._external[bid] = (f, t, rot.T @ (at - origin))
         if not (f.any() or t.any()):
             del self._external[bid]
-            self.data.xfrc_applied[bid] = 0.0
+            self._fresh().xfrc_applied[bid] = 0.0
         self._apply_external()
 
     def _apply_external(self) -> None:
@@ -300,7 +311,7 @@ class Plant:
         dist = np.full(len(self.rotor_names), np.inf)
         if h is None:
             return dist
-        d = self.data
+        d = self._fresh()
         for i, sid in enumerate(self._rotor_site):
             axis_z = d.site_xmat[sid][8]  # z component of the site z axis
             if axis_z > 1e-6:
@@ -343,7 +354,12 @@ class Plant:
         tracker = self._tracker
         step1, step2 = mujoco.mj_step1, mujoco.mj_step2
         for _ in range(int(n)):
-            step1(m, d)
+            if self._stale or self._needs_step1:
+                step1(m, d)
+            # else: a forward pass (sync) already ran on this very state: mj_step1's position
+            # and velocity stages would recompute the same numbers (they do not depend on
+            # ctrl or xfrc_applied), so only mj_step2 runs (bit-identical; docs/plant.md).
+            self._needs_step1 = True
             # First-order ESC lag, exact discretisation (Esc.update with a cached factor).
             for esc, alpha in zip(escs, alphas, strict=True):
                 esc._thrust += alpha * (esc._target - esc._thrust)
@@ -353,6 +369,7 @@ class Plant:
             step2(m, d)
             tracker.update(d)  # contacts of this step's start: keep the slip anchor
         self._stale = True  # the forward pass runs when something reads (see sync)
+        self._needs_step1 = True
 
     @property
     def time(self) -> float:
@@ -362,7 +379,7 @@ class Plant:
     # -------------------------------------------------------------------------- sensors
     def _sensor(self, name: str, size: int = 3) -> np.ndarray:
         adr = self._sensor_adr[name]
-        return self.data.sensordata[adr : adr + size].copy()
+        return self._fresh().sensordata[adr : adr + size].copy()
 
     def joint_positions_list(self) -> list[float]:
         """Present joint positions (joint_order) as floats (no forward pass needed)."""
@@ -403,7 +420,7 @@ class Plant:
 
     def servo_torques(self) -> np.ndarray:
         """Servo output torques (joint_order) [N m], limited to the stall torques."""
-        return self.data.actuator_force[self._servo_act].copy()
+        return self._fresh().actuator_force[self._servo_act].copy()
 
     def servo_currents(self) -> np.ndarray:
         """Servo currents (joint_order) [A] from a linear torque constant (ASSUMPTION)."""
@@ -420,7 +437,7 @@ class Plant:
     # ---------------------------------------------------------------------- ground truth
     def ground_truth(self) -> GroundTruth:
         """The true state now (see :class:`GroundTruth`)."""
-        d = self.data
+        d = self._fresh()
         points, force, torque, zmp, slip, yaw = self._tracker.measure(d)
         fb = self._foot_body
         if self.options.fixed_base:
