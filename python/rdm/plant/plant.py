@@ -105,6 +105,9 @@ class Plant:
         #: True after a step until the lazy ``mj_forward`` ran (see :meth:`sync`).
         self._stale = False
         self._needs_step1 = True
+        #: Changes with every step / reset / outside access to ``data`` (ground-truth cache).
+        self._state_version = 0
+        self._truth_cache: tuple[int, GroundTruth] | None = None
         m = self.model
         self.seed = seed
         self.joint_names: tuple[str, ...] = desc.joint_order
@@ -175,6 +178,7 @@ class Plant:
         if self._stale:
             self.sync()
         self._needs_step1 = True
+        self._state_version += 1  # the caller may change the state: no cached truth
         return self._data
 
     def _fresh(self) -> mujoco.MjData:
@@ -219,6 +223,7 @@ class Plant:
         m, d = self.model, self._data
         self._stale = False
         self._needs_step1 = True
+        self._state_version += 1
         mujoco.mj_resetData(m, d)
         q = (
             np.zeros(len(self.joint_names))
@@ -370,6 +375,7 @@ class Plant:
             tracker.update(d)  # contacts of this step's start: keep the slip anchor
         self._stale = True  # the forward pass runs when something reads (see sync)
         self._needs_step1 = True
+        self._state_version += 1
 
     @property
     def time(self) -> float:
@@ -436,7 +442,17 @@ class Plant:
 
     # ---------------------------------------------------------------------- ground truth
     def ground_truth(self) -> GroundTruth:
-        """The true state now (see :class:`GroundTruth`)."""
+        """The true state now (see :class:`GroundTruth`). Asked twice for the same state
+        (e.g. a logger and a mocap node in one tick), it returns the same object: treat
+        its arrays as read-only."""
+        cached = self._truth_cache
+        if cached is not None and cached[0] == self._state_version:
+            return cached[1]
+        truth = self._ground_truth()
+        self._truth_cache = (self._state_version, truth)
+        return truth
+
+    def _ground_truth(self) -> GroundTruth:
         d = self._fresh()
         points, force, torque, zmp, slip, yaw = self._tracker.measure(d)
         fb = self._foot_body
