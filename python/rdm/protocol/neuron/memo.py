@@ -20,6 +20,7 @@ from collections.abc import Sequence
 
 from .base import NeuronFrame
 from .codec import decode_frame
+from .errors import NeuronFrameError
 from .ids import Direction
 from .pwm import pack_pwm
 from .servo import ServoState, ServoTargetAngles, ServoTargetCurrents
@@ -46,9 +47,27 @@ def decode_frame_cached(
     key = (can_id, data, direction)
     frame = _decoded.get(key)
     if frame is None:
-        frame = decode_frame(can_id, data, direction)
+        frame = _decode_servo_state(can_id, data) if direction is _N2S else None
+        if frame is None:
+            frame = decode_frame(can_id, data, direction)
         _remember(_decoded, key, frame)
     return frame
+
+
+_N2S = Direction.NEURON_TO_SPINAL
+
+
+def _decode_servo_state(can_id: int, data: bytes) -> NeuronFrame | None:
+    """The only Neuron->Spinal reading of a SERVO id (message = servo index 0..3, slave
+    1..14, DLC 8) is a ServoState: decode it directly (the codec would also try the
+    Spinal->Neuron target frames sharing ids 0 and 1 and drop them for their direction).
+    None when it does not apply or fails: the codec then gives its own answer or error."""
+    if not (0x200 <= can_id <= 0x23F and len(data) == 8 and 1 <= (can_id & 0xF) <= 14):
+        return None
+    try:
+        return ServoState.decode_payload(can_id & 0xF, (can_id >> 4) & 0xF, data)
+    except NeuronFrameError:
+        return None
 
 
 def encode_servo_state_cached(
