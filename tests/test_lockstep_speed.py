@@ -324,3 +324,40 @@ def test_servos_see_the_plant_angle_of_the_bridge_tick():
             b.shutdown()
     assert all(got == want for got, want in seen)
     assert seen[-1][0] > seen[0][0] + 100  # the joint moved toward the goal
+
+
+# --------------------------------------------------------------------------- in-process bus
+def test_send_standard_delivers_what_send_of_a_standard_message_delivers():
+    from rdm.link.inproc_can import InProcessBus, add_tap, remove_tap
+
+    def fields(m: can.Message) -> tuple:
+        return (m.timestamp, m.arbitration_id, m.is_extended_id, m.is_remote_frame,
+                m.is_error_frame, m.channel, m.dlc, bytes(m.data), type(m.data), m.is_fd,
+                m.is_rx, m.bitrate_switch, m.error_state_indicator)  # fmt: skip
+
+    gen = random.Random(8)
+    frames = [(gen.randrange(0x800), bytes(gen.randrange(256) for _ in range(gen.randrange(9))))
+              for _ in range(300)]  # fmt: skip
+    seen = {}
+    for name, fast in (("speed_a", False), ("speed_b", True)):
+        tx = InProcessBus(name, receive_own_messages=True)
+        rx = InProcessBus(name)
+        filtered = InProcessBus(name, can_filters=[{"can_id": 0x100, "can_mask": 0x700}])
+        tapped: list = []
+        add_tap(name, tapped.append)
+        for can_id, data in frames:
+            if fast:
+                tx.send_standard(can_id, data)
+            else:
+                tx.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
+        got = [[fields(m) for m in tapped]]
+        for b in (tx, rx, filtered):
+            got.append([fields(m) for m in iter(lambda b=b: b.recv(timeout=0), None)])
+        remove_tap(name, tapped.append)
+        for b in (tx, rx, filtered):
+            b.shutdown()
+        seen[fast] = [
+            [(*f[:5], "ch", *f[6:]) for f in group] for group in got
+        ]  # channel names differ
+    assert seen[True] == seen[False]
+    assert len(seen[True][3]) > 10  # the filter let some through

@@ -327,11 +327,7 @@ class NeuronMirror:
 
     # ------------------------------------------------------------------ transmit
     def _send(self, frame: nr.NeuronFrame) -> None:
-        try:
-            self.bus.send(neuron_message(frame.can_id, frame.encode()), timeout=0)
-            self.tx_count += 1
-        except (can.CanError, OSError):
-            self.tx_errors += 1
+        self._send_raw(frame.can_id, frame.encode())
 
     def config_frames(self) -> list[nr.NeuronFrame]:
         """The INITIAL_CONFIG_0..3 set this Neuron sends now."""
@@ -419,7 +415,11 @@ class NeuronMirror:
 
     def _send_raw(self, can_id: int, payload: bytes) -> None:
         try:
-            self.bus.send(neuron_message(can_id, payload), timeout=0)
+            fast = getattr(self.bus, "send_standard", None)  # the in-process bus
+            if fast is not None:
+                fast(can_id, payload)
+            else:
+                self.bus.send(neuron_message(can_id, payload), timeout=0)
             self.tx_count += 1
         except (can.CanError, OSError):
             self.tx_errors += 1
