@@ -196,25 +196,42 @@ class _JointFeed:
     """The plant's joint angles in raw ticks, snapshot at each bridge tick and converted once,
     on the first read (``center + q * ticks_per_rad``, joint_order); shared by every servo."""
 
-    __slots__ = ("_center", "_plant", "_q", "_scale", "_ticks", "_ticks_epoch", "epoch")
+    __slots__ = (
+        "_center",
+        "_plant",
+        "_q",
+        "_qadr",
+        "_qpos",
+        "_scale",
+        "_ticks",
+        "_ticks_epoch",
+        "epoch",
+    )
 
     def __init__(self, plant, center: int, scale: np.ndarray) -> None:
         self._plant = plant
         self._center = center
         self._scale = scale
         self.epoch = 0
+        self._qpos = getattr(plant, "_v_qpos", None)  # rdm.plant.Plant's qpos view
+        self._qadr = getattr(plant, "_qadr", None)
+        if self._qadr is None:
+            self._qpos = None
         self._q = plant.servo_positions()
         self._ticks: list[float] = []
         self._ticks_epoch = -1
 
     def snapshot(self) -> None:
         self.epoch += 1
-        self._q = self._plant.servo_positions()  # a copy: later physics steps do not move it
+        # A copy (later physics steps do not move it); the whole qpos when the plant offers
+        # its view (one memcpy), else the joint positions.
+        self._q = self._qpos.copy() if self._qpos is not None else self._plant.servo_positions()
 
     def ticks(self) -> list[float]:
         if self._ticks_epoch != self.epoch:
             self._ticks_epoch = self.epoch
-            self._ticks = (self._center + self._q * self._scale).tolist()
+            q = self._q[self._qadr] if self._qpos is not None else self._q
+            self._ticks = (self._center + q * self._scale).tolist()
         return self._ticks
 
 

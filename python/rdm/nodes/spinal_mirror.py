@@ -100,6 +100,13 @@ _IMU_CALIB_GYRO = 2  # spinal/ImuCalib CALIB_GYRO
 _MAG_SET = 1  # spinal/MagDeclination SET
 
 
+def _floats(values: Sequence[float]) -> tuple[float, ...]:
+    """``tuple(float(v) for v in values)``; a float64 array in one ``tolist`` call."""
+    if isinstance(values, np.ndarray) and values.dtype == np.float64:
+        return tuple(values.tolist())
+    return tuple(float(v) for v in values)
+
+
 def rejection_reason(text: str) -> str:
     """Counter key for a :class:`CommandRejectedError` message of the core."""
     lowered = text.lower()
@@ -244,9 +251,9 @@ class SpinalMirror:
         self, gyro: Sequence[float], acc: Sequence[float], mag: Sequence[float]
     ) -> None:
         """The IMU sample the next control steps use: gyro rad/s, acc m/s^2, mag uT (body)."""
-        self.gyro = tuple(float(v) for v in gyro)
-        self.acc = tuple(float(v) for v in acc)
-        self.mag = tuple(float(v) for v in mag)
+        self.gyro = _floats(gyro)
+        self.acc = _floats(acc)
+        self.mag = _floats(mag)
 
     def set_battery_voltage(self, volts: float) -> None:
         """The raw battery reading (V), sampled every 20 ms and low-passed as the firmware does."""

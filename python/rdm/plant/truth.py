@@ -79,6 +79,8 @@ class FootContactTracker:
         in_contact = False
         if data.ncon:
             in_contact = not self._plate_geoms.isdisjoint(data.contact.geom.ravel().tolist())
+        elif self._anchor_pos is None and self._last_contact_time == -math.inf:
+            return  # no contact and nothing to release: _track would change nothing
         self._track(data, in_contact)
 
     def _track(self, data: mujoco.MjData, in_contact: bool) -> None:
