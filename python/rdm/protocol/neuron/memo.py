@@ -16,11 +16,11 @@ Each cache is bounded (cleared when full), so memory stays flat over long runs.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Sequence
 
 from .base import NeuronFrame
 from .codec import decode_frame
-from .errors import NeuronFrameError
 from .ids import Direction
 from .pwm import pack_pwm
 from .servo import ServoState, ServoTargetAngles, ServoTargetCurrents
@@ -64,10 +64,29 @@ def _decode_servo_state(can_id: int, data: bytes) -> NeuronFrame | None:
     None when it does not apply or fails: the codec then gives its own answer or error."""
     if not (0x200 <= can_id <= 0x23F and len(data) == 8 and 1 <= (can_id & 0xF) <= 14):
         return None
-    try:
-        return ServoState.decode_payload(can_id & 0xF, (can_id >> 4) & 0xF, data)
-    except NeuronFrameError:
-        return None
+    angle, temperature, status, current, servo_error = _SERVO_STATE.unpack(data)
+    if status & ~0b111:
+        return None  # reserved bits: the codec reports it
+    # Every field is in range by construction (slave 1..14 and index 0..3 from the id test,
+    # the rest from the struct codes), so ServoState's own checks could not fail: build the
+    # frozen instance without re-running them (same fields, same equality and hash).
+    frame = _new_servo_state(ServoState)
+    frame.__dict__.update(
+        slave=can_id & 0xF,
+        index=(can_id >> 4) & 0xF,
+        angle=angle,
+        temperature=temperature,
+        force_servo_off=bool(status & 1),
+        moving=bool(status & 2),
+        goal_reported=bool(status & 4),
+        current=current,
+        servo_error=servo_error,
+    )
+    return frame
+
+
+_SERVO_STATE = struct.Struct("<hBBhBx")
+_new_servo_state = object.__new__
 
 
 def encode_servo_state_cached(
