@@ -10,7 +10,9 @@ Measurement ``lockstep_hover``: the wall time of every base tick (one simulated 
 every due node plus one physics step) is the per-call sample; the budget is 50 us per
 simulated ms, i.e. 20x real time (the issue's target). The headline figure is the target
 ``speedup_vs:real_time`` = simulated seconds / wall seconds over the whole run (the mean, not
-the median: the 40 Hz onboard tick and the 100 Hz loggers make some ticks far longer). The
+the median: the 40 Hz onboard tick and the 100 Hz loggers make some ticks far longer), and
+``speedup_vs:real_time_per_cpu_s`` = simulated seconds / CPU seconds of this process (the
+fairer figure on a shared machine). The
 notes carry the share of wall time per node from a second, profiled run (full runs only).
 """
 
@@ -52,6 +54,9 @@ class RealTimeMeasurement(Measurement):
         for t in self.targets:
             if t.kind == "speedup_vs:real_time":
                 t.value = self.real_time_factor
+                t.met = t.value >= t.limit
+            elif t.kind == "speedup_vs:real_time_per_cpu_s":
+                t.value = self.sim_seconds / self.cpu_seconds if self.cpu_seconds > 0 else math.inf
                 t.met = t.value >= t.limit
             else:
                 rest.append(t)
@@ -133,7 +138,11 @@ def run_lockstep(ctx: Context) -> list[Measurement]:
         summarize_ns(ns),
         BASE_TICK_US / TARGET_REAL_TIME_FACTOR,
         0,
-        [Target("speedup_vs:real_time", TARGET_REAL_TIME_FACTOR)],
+        [
+            Target("speedup_vs:real_time", TARGET_REAL_TIME_FACTOR),
+            # the same per CPU second of this process (less sensitive to other load)
+            Target("speedup_vs:real_time_per_cpu_s", TARGET_REAL_TIME_FACTOR),
+        ],
         {},
         notes,
         sim_seconds=sim,
