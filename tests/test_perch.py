@@ -268,6 +268,28 @@ def test_warm_started_active_set_controller_matches_clarabel_wheel_each_tick() -
 
 
 @pytest.mark.parametrize("solver", SOLVERS)
+def test_problem_data_rows_match_the_paper_equations(solver: str) -> None:
+    """A x ≤ b rows of problem_data, unscaled, reproduce eqs. (39)-(48) for one instance."""
+    inst = feasible_instances(1, seed=5)[0]
+    qp = PerchQp(solver=solver)
+    res = qp.solve(**inst)
+    prob = qp.problem_data()
+    x = np.concatenate([res.thrust, res.foot_wrench]) / prob.variable_scale
+    slack = prob.b - prob.A @ x
+    assert np.all(np.abs(slack[: prob.zero_cone]) < 1e-7)
+    assert np.all(slack[prob.zero_cone :] > -1e-7)
+    # The thrust-bound rows (17-20) carry λ_max of eq. (47) (rows are normalised to 1).
+    assert np.allclose(prob.b[17:21] * prob.variable_scale, thrust_max(inst))
+    assert np.allclose(res.thrust_max, thrust_max(inst))
+
+
+def safe_command(prev: np.ndarray, lmax: np.ndarray) -> np.ndarray:
+    hi = np.maximum(lmax, 0.0)
+    target = np.clip(prev, 0.0, hi)
+    return np.clip(prev + np.clip(target - prev, -DELTA, DELTA), 0.0, hi)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
 def test_rate_limit_too_tight_is_infeasible_with_safe_command(solver: str) -> None:
     inst = feasible_instances(1, seed=2)[0]
     inst["previous_thrust"] = np.zeros(4)

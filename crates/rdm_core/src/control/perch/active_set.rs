@@ -88,7 +88,7 @@ impl Factor {
         }
         let (c, z) = self.split(v);
         let norm = z.norm();
-        if !(norm > DEPENDENT_TOL) {
+        if norm.is_nan() || norm <= DEPENDENT_TOL {
             return false;
         }
         let k = self.len;
@@ -411,7 +411,7 @@ impl<const ROWS: usize> DualActiveSet<ROWS> {
         let mut combination = Vector4::zeros();
         for k in 0..self.active_len {
             let u = self.multipliers[k];
-            if !(u >= -VERIFY_TOL) {
+            if u.is_nan() || u < -VERIFY_TOL {
                 return false;
             }
             combination += self.normals[self.active[k]] * u;
