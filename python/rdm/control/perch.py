@@ -67,8 +67,9 @@ class PerchResult:
 
 @dataclass(frozen=True)
 class PerchProblem:
-    """The scaled QP of the last tick (reduced by the active-set solver, sent to Clarabel): min ½xᵀPx + qᵀx s.t. Ax + s = b,
-    s in (zero cone of ``zero_cone`` rows) x (nonnegative cone of the rest).
+    """The scaled QP of the last tick (what the active-set solver reduces and Clarabel is
+    sent): min ½xᵀPx + qᵀx s.t. Ax + s = b, s in (zero cone of ``zero_cone`` rows) x
+    (nonnegative cone of the rest).
 
     ``P`` is upper-triangular. Variables are scaled: thrust = ``variable_scale`` * x[:4],
     W_foot,t = ``variable_scale`` * x[4:].

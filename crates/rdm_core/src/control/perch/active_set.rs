@@ -34,7 +34,8 @@ const DEPENDENT_TOL: f64 = 1e-9;
 /// An infeasibility proof is trusted only if the violated row misses by more than this;
 /// closer calls are reported as [`ActiveSetOutcome::Unsure`] (the caller falls back).
 const INFEASIBLE_MIN_GAP: f64 = 1e-6;
-/// Final check: every slack ≥ −VERIFY_TOL, every multiplier ≥ −VERIFY_TOL, stationarity
+/// Final check (a full KKT certificate): every slack ≥ −VERIFY_TOL, every multiplier
+/// ≥ −VERIFY_TOL, active rows with a multiplier hold with equality, stationarity
 /// `‖y − N u‖ ≤ VERIFY_TOL`; otherwise the answer is [`ActiveSetOutcome::Unsure`].
 const VERIFY_TOL: f64 = 1e-9;
 
@@ -403,7 +404,8 @@ impl<const ROWS: usize> DualActiveSet<ROWS> {
         (ActiveSetOutcome::Optimal, iterations)
     }
 
-    /// Independent check of the KKT conditions at the returned point.
+    /// Independent check of the KKT conditions at the returned point (feasibility, dual
+    /// feasibility, complementarity, stationarity: together they prove optimality).
     fn verified(&self) -> bool {
         if !self.y.iter().all(|v| v.is_finite()) {
             return false;
@@ -412,6 +414,10 @@ impl<const ROWS: usize> DualActiveSet<ROWS> {
         for k in 0..self.active_len {
             let u = self.multipliers[k];
             if u.is_nan() || u < -VERIFY_TOL {
+                return false;
+            }
+            // Complementarity: a row carrying a multiplier must hold with equality.
+            if u > VERIFY_TOL && self.slack(self.active[k]) > VERIFY_TOL {
                 return false;
             }
             combination += self.normals[self.active[k]] * u;
@@ -446,5 +452,76 @@ mod tests {
         s.set_row(0, Vector4::new(1.0, 1.0, 0.0, 0.0), 3.0);
         s.set_row(1, Vector4::new(-1.0, -1.0, 0.0, 0.0), -1.0);
         assert_eq!(s.solve(20).0, ActiveSetOutcome::Infeasible);
+    }
+
+    /// Projection of 0 onto the polytope by enumerating every set of at most 4 rows: the
+    /// optimum is the unique point `y = N_S u` with `N_Sᵀ y = e_S`, `u ≥ 0`, all rows held.
+    /// `None` when no subset gives one (infeasible).
+    fn brute_force(rows: &[(Vector4<f64>, f64)]) -> Option<Vector4<f64>> {
+        let m = rows.len();
+        for mask in 0u32..(1 << m) {
+            if mask.count_ones() > 4 {
+                continue;
+            }
+            let picked: Vec<usize> = (0..m).filter(|i| mask & (1 << i) != 0).collect();
+            let n = nalgebra::DMatrix::from_fn(4, picked.len(), |r, c| rows[picked[c]].0[r]);
+            let e = nalgebra::DVector::from_fn(picked.len(), |r, _| rows[picked[r]].1);
+            let gram = n.transpose() * &n;
+            let Some(u) = gram.clone().cholesky().map(|c| c.solve(&e)) else {
+                continue;
+            };
+            if gram.determinant().abs() < 1e-10 || u.iter().any(|v| *v < -1e-9) {
+                continue;
+            }
+            let y: Vector4<f64> = Vector4::from_iterator((&n * &u).iter().copied());
+            let tol = 1e-9 * (1.0 + y.norm()); // far-away optima (nearly infeasible) round off
+            if rows.iter().all(|(nr, er)| nr.dot(&y) - er > -tol) {
+                return Some(y);
+            }
+        }
+        None
+    }
+
+    #[test]
+    fn warm_started_and_degenerate_problems_match_enumeration() {
+        // Deterministic pseudo-random rows (LCG), including exact duplicates and parallels.
+        let mut state = 12345u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        let mut solver = DualActiveSet::<8>::new();
+        let mut checked = 0;
+        for trial in 0..200 {
+            let mut rows = [(Vector4::zeros(), 0.0); 8];
+            for row in rows.iter_mut() {
+                *row = (Vector4::new(next(), next(), next(), next()), 0.5 * next());
+            }
+            rows[5] = rows[1]; // duplicate
+            rows[6] = (rows[2].0 * 3.0, rows[2].1 * 3.0 - 0.01 * (trial % 3) as f64); // parallel
+            solver.clear_rows();
+            for (i, (n, e)) in rows.iter().enumerate() {
+                solver.set_row(i, *n, *e);
+            }
+            let (outcome, _) = solver.solve(50); // warm start from the previous trial
+            let reference = brute_force(&rows);
+            match (outcome, reference) {
+                (ActiveSetOutcome::Optimal, Some(r)) => {
+                    let d = (solver.solution() - r).norm();
+                    assert!(d < 1e-8 * (1.0 + r.norm()), "trial {trial}: {d}");
+                    checked += 1;
+                }
+                (ActiveSetOutcome::Infeasible, None) => {}
+                other => panic!(
+                    "trial {trial}: {other:?} active {:?} mult {:?} y {} rows {rows:?}",
+                    solver.active_rows(),
+                    solver.multipliers,
+                    solver.solution()
+                ),
+            }
+        }
+        assert!(checked > 50, "{checked}");
     }
 }

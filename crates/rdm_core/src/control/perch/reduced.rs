@@ -75,14 +75,14 @@ pub fn load(
         }
         *inv = 1.0 / c.sqrt();
     }
-    for k in 0..N_ZERO_ROWS {
-        let pivot = a[k][N_ROTORS + k];
+    for (k, (row, rhs)) in a.iter().zip(b.iter()).enumerate().take(N_ZERO_ROWS) {
+        let pivot = row[N_ROTORS + k];
         if !(pivot.is_finite() && pivot != 0.0) {
             return None;
         }
-        elim.w_offset[k] = b[k] / pivot;
-        for i in 0..N_ROTORS {
-            elim.w_gain[k][i] = -a[k][i] / pivot;
+        elim.w_offset[k] = rhs / pivot;
+        for (g, coef) in elim.w_gain[k].iter_mut().zip(row.iter()) {
+            *g = -coef / pivot;
         }
     }
     solver.clear_rows();
