@@ -15,7 +15,7 @@ the trajectory is bit-identical to forwarding after every step, see docs/plant.m
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import mujoco
@@ -68,6 +68,8 @@ class Plant:
             :class:`ParametricCeilingEffect` built from each rotor's radius.
         esc: ESC parameters (thrust_max defaults to each rotor's TOML value).
         battery_voltage: battery voltage [V] of the duty -> thrust map.
+        scene: edits the MjSpec before it is compiled, to add world objects (the tasks'
+            boards, panels, valves); must not touch the robot.
     """
 
     def __init__(
@@ -86,6 +88,7 @@ class Plant:
         contact: ContactParams | None = None,
         imu_noise: ImuNoise | None = None,
         wrench_noise: WrenchNoise | None = None,
+        scene: Callable[[mujoco.MjSpec], None] | None = None,
     ) -> None:
         if not (math.isfinite(timestep) and timestep > 0):
             raise ValueError(f"timestep: must be > 0, got {timestep}")
@@ -100,6 +103,10 @@ class Plant:
             contact=contact,
         )
         self.spec = build_spec(desc, self.options)
+        if scene is not None:
+            # extra world objects (task targets, walls), before compiling: every id the plant
+            # uses is looked up by name after this, so shifted geom ids cannot go stale
+            scene(self.spec)
         self.model = self.spec.compile()
         self._data = mujoco.MjData(self.model)
         #: True after a step until the lazy ``mj_forward`` ran (see :meth:`sync`).

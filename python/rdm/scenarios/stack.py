@@ -146,6 +146,8 @@ class StackOptions:
     esc_tau: float | None = 0.01
     #: Battery voltage [V] (a full 6S pack, the Hydrus PwmInfo reference: 20 N at max duty).
     battery_voltage: float = 25.2
+    #: Adds world objects to the MuJoCo spec before it compiles (``Plant(scene=...)``).
+    scene: Callable[[Any], None] | None = None
     #: Called as ``progress(stack, now)`` once per simulated second (``rdm sim``'s display).
     progress: Callable[[Any, float], None] | None = None
     #: Joint servo model. ASSUMPTION: a stiff position servo (kp 150 N m/rad, kv 5 N m s/rad,
@@ -205,6 +207,7 @@ def build_stack(
         floor_height=opt.floor_height,
         servo=opt.servo,
         esc=None if opt.esc_tau is None else EscParams(tau=opt.esc_tau),
+        scene=opt.scene,
     )
     q0 = np.zeros(len(plant.joint_names)) if opt.q0 is None else np.asarray(opt.q0, float)
     plant.reset(q0=q0, base_position=opt.base_position)
