@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from . import flight, hover, perching, push, tracking
+from . import flight, hover, perching, push
 
 
 @dataclass(frozen=True)
@@ -36,12 +36,6 @@ SCENARIOS: dict[str, Scenario] = {
         push.run,
         push.DEFAULT_DURATION,
         "end-effector pushed and pulled in x, y, z in flight and perched (Figs. 11-12)",
-    ),
-    "tracking": Scenario(
-        "tracking",
-        tracking.run,
-        tracking.DEFAULT_DURATION,
-        "end-effector tracking of one joint path in flight vs perched (Fig. 13)",
     ),
 }
 DEFAULT_SCENARIO = "perching"
