@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from . import flight, hover, perching
+from . import flight, hover, perching, push
 
 
 @dataclass(frozen=True)
@@ -30,6 +30,12 @@ SCENARIOS: dict[str, Scenario] = {
         perching.run,
         perching.DEFAULT_DURATION,
         "climb, fold to the hanging posture, perch on the ceiling, move the arm (Fig. 10)",
+    ),
+    "push": Scenario(
+        "push",
+        push.run,
+        push.DEFAULT_DURATION,
+        "end-effector pushed and pulled in x, y, z in flight and perched (Figs. 11-12)",
     ),
 }
 DEFAULT_SCENARIO = "perching"

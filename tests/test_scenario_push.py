@@ -1,0 +1,86 @@
+"""The push scenario (Figs. 11-12): an external force at the end effector, in flight and
+perched, through every wire. Outcomes from MuJoCo's ground truth and its end-effector force
+sensor; one shortened run shared by the module."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from rdm.scenarios import push
+from rdm.scenarios.common import truth_arrays
+
+#: short timeline: 1 s quiet, then x, y, z pushes of 1.5 s each
+PLAN = push.PushPlan(quiet_s=1.0, push_s=1.5, gap_s=0.5)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    res = push.run(tmp_path_factory.mktemp("push"), plan=PLAN, log=False, plots=False)
+    return res, truth_arrays(res.stack)
+
+
+def _window(a, w):
+    return (a["t"] >= w[0]) & (a["t"] <= w[1])
+
+
+def test_both_stages_ran_and_nothing_failed(run):
+    res, a = run
+    script = res.script
+    assert script.t_flight_stage is not None and script.t_perched_stage is not None
+    assert script.phase == "done"
+    assert not res.stack.spinal.counters.failsafes
+    # airborne through the flight stage: the foot well above the floor and below the ceiling
+    fl = _window(a, push.stage_windows(PLAN, script.t_flight_stage + PLAN.move_s)["pushes"])
+    assert a["foot"][fl, 2].min() > 0.4 and a["foot"][fl, 2].max() < 1.5
+    assert not a["contact"][fl].any()
+
+
+def test_push_makes_the_flying_robot_drift(run):
+    res, a = run
+    w = push.stage_windows(PLAN, res.script.t_flight_stage + PLAN.move_s)
+    pushed, quiet = _window(a, w["pushes"]), _window(a, w["quiet"])
+    foot = a["foot"]
+    std_pushed = np.std(foot[pushed], axis=0)
+    std_quiet = np.std(foot[quiet], axis=0)
+    # the unobserved push moves the root: several times the hover scatter, centimetres
+    assert np.linalg.norm(std_pushed) > 3 * np.linalg.norm(std_quiet)
+    excursion = np.linalg.norm(foot[pushed] - foot[quiet].mean(axis=0), axis=1).max()
+    assert excursion > 0.01
+
+
+def test_perched_robot_holds_the_push(run):
+    res, a = run
+    w = push.stage_windows(PLAN, res.script.t_perched_stage)
+    pushed = _window(a, w["pushes"])
+    assert a["contact"][pushed].all(), "the foot left the ceiling under the push"
+    slip = a["slip"][pushed]
+    assert np.max(np.linalg.norm(slip - slip[0], axis=1)) < 1e-3
+    zmp = a["zmp"][pushed]
+    assert np.all(np.abs(zmp[:, 0]) <= push.PLATE_HALF[0] + 1e-6)
+    assert np.all(np.abs(zmp[:, 1]) <= push.PLATE_HALF[1] + 1e-6)
+    # the perched root barely moves, far less than the flying one under a smaller push
+    fl = push.stage_windows(PLAN, res.script.t_flight_stage + PLAN.move_s)
+    std_perched = np.linalg.norm(np.std(a["foot"][pushed], axis=0))
+    std_flight = np.linalg.norm(np.std(a["foot"][_window(a, fl["pushes"])], axis=0))
+    assert std_perched < 0.1 * std_flight
+    assert np.max(PLAN.perched_force) > np.max(PLAN.flight_force)
+
+
+def test_end_effector_sensor_sees_the_applied_force(run):
+    """MuJoCo's end-effector force sensor reads the pushes at the planned size: the mean |F|
+    of the profile (integrated here with scipy) times the amplitude the plan implies."""
+    res, _ = run
+    mean_abs_shape, _ = quad(lambda s: abs(np.sin(2 * np.pi * s) * np.sin(np.pi * s) ** 2), 0, 1)
+    assert abs(mean_abs_shape - push.PROFILE_MEAN_ABS) < 1e-3
+    for stage, means in (("flight", PLAN.flight_force), ("perched", PLAN.perched_force)):
+        r = res.analysis[stage]
+        for ax in range(3):
+            assert r["force_mean_abs"][ax] == pytest.approx(means[ax], rel=0.15), (stage, ax)
+        # the sensor's force follows the applied one (sign convention: one sign for all axes)
+        log = r["log"]
+        for k in range(3):
+            on = np.abs(log["applied"][:, k]) > 0.2 * means[k]
+            corr = np.corrcoef(log["applied"][on, k], log["force"][on, k])[0, 1]
+            assert abs(corr) > 0.9, (stage, k, corr)
