@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from . import flight, hover, perching
+from . import flight, hover, perching, tasks
 
 
 @dataclass(frozen=True)
@@ -30,6 +30,24 @@ SCENARIOS: dict[str, Scenario] = {
         perching.run,
         perching.DEFAULT_DURATION,
         "climb, fold to the hanging posture, perch on the ceiling, move the arm (Fig. 10)",
+    ),
+    "drilling": Scenario(
+        "drilling",
+        tasks.run_drilling,
+        tasks.duration_of("drilling"),
+        "perch, then drill (point contact) at three targets on a board (Fig. 14 A)",
+    ),
+    "painting": Scenario(
+        "painting",
+        tasks.run_painting,
+        tasks.duration_of("painting"),
+        "perch, then slide a brush 0.5 m along a panel keeping contact (Fig. 14 B)",
+    ),
+    "valve": Scenario(
+        "valve",
+        tasks.run_valve,
+        tasks.duration_of("valve"),
+        "perch, then turn a hinged valve handle with the wrist (Fig. 14 C)",
     ),
 }
 DEFAULT_SCENARIO = "perching"
