@@ -66,7 +66,7 @@ def solve(
     tool_x: float,
     axis: np.ndarray | None = None,
     q1_ref: float = math.pi / 2,
-    q1_weight: float = 0.3,
+    q1_weight: float = 0.02,
     axis_weight: float = 0.3,
     damping: float = 1e-3,
     iterations: int = 200,

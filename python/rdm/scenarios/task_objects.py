@@ -182,7 +182,7 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
         axis = layout.valve_axis
         valve = spec.worldbody.add_body(name=VALVE, pos=[axis[0], axis[1], axis[2]])
         j = valve.add_joint(name=VALVE_JOINT, type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
-        j.damping = layout.valve_damping
+        j.damping = [layout.valve_damping, 0.0, 0.0]  # linear term only
         j.frictionloss = layout.valve_friction
         j.armature = 1e-3
         valve.mass = 0.3

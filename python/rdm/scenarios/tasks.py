@@ -55,6 +55,9 @@ STROKE_S = 8.0
 VALVE_Q = (math.pi / 2, -0.5, 0.0, 0.5, 0.0, 0.0)
 VALVE_TURN = 1.2  # rad of q6
 TURN_S = 5.0
+#: IK seed of the drilling targets: middle link leaning forward, end link down (keeps the
+#: arm rotors off the vertical through the foot: pitch authority, docs/planner.md rho).
+IK_SEED_DRILL = (math.pi / 2, -0.7, 0.0, 0.7, 0.0, 0.0)
 START_AFTER = 0.5  # s after the perching script's hold begins
 
 
@@ -127,6 +130,7 @@ class TaskScript(perching.PerchingScript):
             return duration
 
         if self.task == "drilling":
+            q = task_ik.level(np.r_[IK_SEED_DRILL, np.zeros(robot.n_q - 6)])
             for dx, dy in DRILL_TARGETS:
                 target = lay.board_point(dx, dy)
                 self.targets.append(target)
