@@ -81,7 +81,8 @@ def solve(
     lo, hi = np.asarray(robot.joint_limits, dtype=float).T
     pos_err = ax_err = math.inf
     it = 0
-    for it in range(1, iterations + 1):
+    while it < iterations:
+        it += 1
         p, x_axis = tool_pose(robot, base, q, tool_x)
         e = target - p
         jac = np.asarray(robot.jacobian("end_effector", np.r_[base, q]), dtype=float)

@@ -66,7 +66,7 @@ def _valve_layout(robot) -> obj.TaskLayout:
     base = obj.TaskLayout()
     q = task_ik.level(np.r_[VALVE_Q, np.zeros(4)])
     p, _ = task_ik.tool_pose(robot, np.r_[base.nominal_foot, 0.0, 0.0, 0.0], q, obj.GRIPPER_AT)
-    fx, fy, _ = base.nominal_foot
+    fx = base.nominal_foot[0]
     return obj.TaskLayout(valve_x=float(p[0] - fx), valve_handle_z=float(p[2]))
 
 
@@ -104,9 +104,9 @@ class TaskScript(perching.PerchingScript):
 
     def __call__(self, stack: Stack, now: float) -> None:
         super().__call__(stack, now)
-        if self.phase == "hold" and self.t_task is None and self.t_motion_end is not None:
-            if now >= self.t_motion_end + START_AFTER:
-                self._start(stack, now)
+        ready = self.t_motion_end is not None and now >= self.t_motion_end + START_AFTER
+        if self.phase == "hold" and self.t_task is None and ready:
+            self._start(stack, now)
         if self.t_task is not None:
             self._record(stack, now)
 
@@ -134,7 +134,7 @@ class TaskScript(perching.PerchingScript):
             for dx, dy in DRILL_TARGETS:
                 target = lay.board_point(dx, dy)
                 self.targets.append(target)
-                up = target + [0.0, 0.0, HOVER]
+                up = target + np.array([0.0, 0.0, HOVER])
                 t += go(up, obj.DRILL_LEN, MOVE_S)
                 t += go(target - [0.0, 0.0, PRESS_DEPTH], obj.DRILL_LEN, PRESS_S)
                 self.windows.append((t - 0.5 * PRESS_S, t + 0.5 * PRESS_S, "press"))
@@ -144,20 +144,20 @@ class TaskScript(perching.PerchingScript):
             fx, fy, _ = lay.nominal_foot
             tip = obj.BRUSH_AT + obj.BRUSH_RADIUS
             start = np.array([fx + STROKE_START, fy, lay.panel_top_z])
-            self.targets = [start, start + [STROKE, 0.0, 0.0]]
-            t += go(start + [0.0, 0.0, HOVER], tip, 2 * MOVE_S)
+            self.targets = [start, start + np.array([STROKE, 0.0, 0.0])]
+            t += go(start + np.array([0.0, 0.0, HOVER]), tip, 2 * MOVE_S)
             t += go(start - [0.0, 0.0, PRESS_DEPTH], tip, PRESS_S)
             n = 20
             t_stroke = t
             for k in range(1, n + 1):
-                p = start + [STROKE * k / n, 0.0, -PRESS_DEPTH]
+                p = start + np.array([STROKE * k / n, 0.0, -PRESS_DEPTH])
                 t += go(p, tip, STROKE_S / n, linear=True)
             self.windows.append((t_stroke, t, "stroke"))
             t += go(self.targets[1] + [0.0, 0.0, HOVER], tip, RETRACT_S)
         else:
             axis = lay.valve_axis
             self.targets = [axis]
-            t += go(axis + [0.0, 0.0, 0.06], obj.GRIPPER_AT, MOVE_S)
+            t += go(axis + np.array([0.0, 0.0, 0.06]), obj.GRIPPER_AT, MOVE_S)
             t += go(axis, obj.GRIPPER_AT, MOVE_S)
             t0 = t
             n = 10
@@ -352,7 +352,9 @@ def evaluate(stack: Stack, script: TaskScript) -> ScenarioResult:
         script.t_task_end is not None and bool(len(ta["t"])) and ta["t"][-1] >= script.t_task_end
     )
     metrics = [
-        Metric("perched (foot contact reached)", float(script.t_perch is not None), 1.0, "", "near"),
+        Metric(
+            "perched (foot contact reached)", float(script.t_perch is not None), 1.0, "", "near"
+        ),
         Metric("task trajectory finished", done, 1.0, "", "near"),
         Metric("foot contact kept while perched", kept, 1.0, "fraction", "min", limit=1.0),
         Metric("foot slip while perched", slip, None, "mm", "max", limit=1.0),
@@ -380,12 +382,29 @@ def evaluate(stack: Stack, script: TaskScript) -> ScenarioResult:
         facts["hole_errors_m"] = errs
         press = win & (ta["f"] > 0)
         metrics += [
-            Metric("holes touched", float(np.sum(np.isfinite(errs))), float(len(errs)), "", "min",
-                   limit=float(len(errs))),
-            Metric("max hole position error", float(np.nanmax(errs) * 1e3) if errs else nan,
-                   10.0, "mm", "max", limit=20.0),
-            Metric("mean drilling force (contact, truth)",
-                   float(np.mean(ta["f"][press])) if press.any() else nan, None, "N", "info"),
+            Metric(
+                "holes touched",
+                float(np.sum(np.isfinite(errs))),
+                float(len(errs)),
+                "",
+                "min",
+                limit=float(len(errs)),
+            ),
+            Metric(
+                "max hole position error",
+                float(np.nanmax(errs) * 1e3) if errs else nan,
+                10.0,
+                "mm",
+                "max",
+                limit=20.0,
+            ),
+            Metric(
+                "mean drilling force (contact, truth)",
+                float(np.mean(ta["f"][press])) if press.any() else nan,
+                None,
+                "N",
+                "info",
+            ),
         ]
     elif script.task == "painting":
         length, frac, force = stroke_in_contact(script, ta)
@@ -401,10 +420,20 @@ def evaluate(stack: Stack, script: TaskScript) -> ScenarioResult:
         m_noisy = np.abs(ta["ee_m"][win, 0]) if win.any() else np.array([nan])
         metrics += [
             Metric("valve angle turned", math.degrees(turned), None, "deg", "min", limit=30.0),
-            Metric("peak |M_x| at the EE sensor while turning (truth)", float(np.max(m_axis)),
-                   None, "N m", "info"),
-            Metric("mean |M_x| at the EE sensor while turning (sensor)", float(np.mean(m_noisy)),
-                   None, "N m", "info"),
+            Metric(
+                "peak |M_x| at the EE sensor while turning (truth)",
+                float(np.max(m_axis)),
+                None,
+                "N m",
+                "info",
+            ),
+            Metric(
+                "mean |M_x| at the EE sensor while turning (sensor)",
+                float(np.mean(m_noisy)),
+                None,
+                "N m",
+                "info",
+            ),
         ]
     _plots(stack, a, ta, script)
     return ScenarioResult(script.task, stack, metrics, facts)
