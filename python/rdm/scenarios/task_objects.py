@@ -97,7 +97,8 @@ class TaskLayout:
 def _object_geom(body: mujoco.MjsBody, bits: int, friction: float, solref, **kw) -> None:
     g = body.add_geom(**kw)
     g.contype = 0
-    g.conaffinity = ROBOT_GROUP | bits
+    g.conaffinity = 0  # off until enable_objects(): the robot flies up through this space
+    g.userdata = [float(ROBOT_GROUP | bits)]
     g.condim = 3
     g.priority = 2  # the object's friction and stiffness win over the robot geoms'
     g.friction = [friction, 0.005, 1e-4]
@@ -220,6 +221,19 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
             size=[0.015, (axis[2] - 0.03) / 2, 0],
             pos=[axis[0], axis[1], (axis[2] - 0.03) / 2],
         )
+
+
+def enable_objects(model: mujoco.MjModel) -> int:
+    """Switch the task objects' contacts on (they are off while the robot climbs to the
+    ceiling through the space the objects occupy: ASSUMPTION, the objects are brought under
+    the perched robot). Returns how many geoms were enabled."""
+    n = 0
+    for i in range(model.ngeom):
+        name = model.geom(i).name
+        if name.startswith("task_"):
+            model.geom_conaffinity[i] = int(model.geom_user[i][0]) if model.nuser_geom else 0
+            n += 1
+    return n
 
 
 def _ids(model: mujoco.MjModel) -> dict[str, list]:

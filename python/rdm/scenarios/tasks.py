@@ -112,6 +112,7 @@ class TaskScript(perching.PerchingScript):
 
     # ------------------------------------------------------------------ planning
     def _start(self, stack: Stack, now: float) -> None:
+        obj.enable_objects(stack.plant.model)
         gt = stack.plant.ground_truth()  # the foot pose as mocap gives it
         base = np.r_[gt.base_position, task_ik.rpy_of_quaternion(gt.base_quaternion)]
         robot = stack.onboard.robot
