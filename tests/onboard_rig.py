@@ -90,7 +90,12 @@ class Rig:
             self.publish("imu", imu)
             if self.servo_q is not None:
                 st = REG.msg("spinal/ServoState")
-                servos = [st.new(index=i, angle=a) for i, a in enumerate(raw_ticks(self.servo_q))]
+                # Spinal's index of joint j: the node's CAN-table map (checked on its own in
+                # test_onboard.py::test_default_servo_map_is_the_can_table_order)
+                index = self.node.config.servo_map.servo_index
+                servos = [
+                    st.new(index=index[j], angle=a) for j, a in enumerate(raw_ticks(self.servo_q))
+                ]
                 servos += [st.new(index=i, angle=a) for i, a in self.servo_extra]
                 self.publish("servo/states", REG.msg("spinal/ServoStates").new(servos=servos))
             self.publish("battery_voltage_status", REG.msg("std_msgs/Float32").new(data=24.5))

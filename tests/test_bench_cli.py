@@ -65,7 +65,8 @@ def test_quick_run_writes_every_case_peer_and_field(
     lqi_peer = doc["cases"]["lqi_warm_rust"]["peers"]["scipy_care"]
     assert lqi_peer["max_error"] < 1e-6
     tick_peers = doc["cases"]["tick_40hz_rust"]["peers"]
-    assert tick_peers["clarabel_py_setup_solve"]["max_error"] < 1e-6
+    # Exact active-set answer vs an interior point at gap 1e-8: ≤ 5e-3 N (docs/perch.md).
+    assert tick_peers["clarabel_py_setup_solve"]["max_error"] < 5e-3
     assert tick_peers["osqp_eps1e-6_update_solve"]["max_error"] < 1e-2
     m = doc["machine"]
     assert m["cpu_model"] and m["logical_cores"] >= 1
@@ -76,7 +77,7 @@ def test_quick_run_writes_every_case_peer_and_field(
     # Human report on stdout, progress on stderr.
     for name in expected:
         assert name in captured.out
-    assert "[3/3]" in captured.err
+    assert f"[{len(CASES)}/{len(CASES)}]" in captured.err
 
 
 def test_only_selects_a_case_and_unknown_names_fail(

@@ -101,7 +101,9 @@ def test_onboard_tick_loop_matches_the_bindings_and_clarabel() -> None:
     # ... and agree with clarabel's Python wheel on the very same QPs.
     oracle = peers.run_clarabel(problems, update=False)
     assert oracle.failures == 0
-    assert oracle.max_error < 1e-6
+    # The core's default active-set answer is exact; an interior point at gap 1e-8 sits
+    # ~sqrt(gap) off a weakly active bound (λ = 0): ≤ sqrt(2e-8) * 30 N ≈ 4.2e-3 N (docs/perch.md).
+    assert oracle.max_error < 5e-3
 
 
 def test_timing_loops_name_bad_arguments() -> None:

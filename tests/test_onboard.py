@@ -350,11 +350,14 @@ def test_vectoring_targets_match_eqs_33_36_and_point_thrust() -> None:
         a_par = ax * math.cos(tyaw) + ay * math.sin(tyaw)
         a_perp = ax * math.sin(tyaw) - ay * math.cos(tyaw)
         msg = rig.by_topic["servo/target_states"][-1][1]
-        got = (np.array(msg.angles) - 2048) / (4096 / (2 * np.pi))
+        by_index = dict(zip(msg.index, msg.angles, strict=True))
+        raw = [by_index[i] for i in rig.node.config.servo_map.servo_index]  # joint order
+        got = (np.array(raw) - 2048) / (4096 / (2 * np.pi))
         q_cmd = qq.copy()
         for i, (k_th, k_ph) in enumerate(((0.0, 1.0), (0.0, 0.0))):
             r_ci = o["unit_parent_rotations"][i]
-            n = r_ci.T @ np.array([k_th * a_par, k_ph * a_perp, G])
+            # heading-frame lateral demand -a_perp: the thrust leans toward it (docs/lqi.md)
+            n = r_ci.T @ np.array([k_th * a_par, -k_ph * a_perp, G])
             n /= np.linalg.norm(n)
             alpha = math.atan(-n[1] / n[2])
             beta = math.atan(n[0] / (-n[1] * math.sin(alpha) + n[2] * math.cos(alpha)))
@@ -366,10 +369,31 @@ def test_vectoring_targets_match_eqs_33_36_and_point_thrust() -> None:
         # geometry: at the commanded angles the model's rotors point along n_va (CoG axes)
         o2 = model_at(q_cmd)
         for i, rotors in enumerate(((0, 1), (2, 3))):
-            want = np.array([0.0, [1.0, 0.0][i] * a_perp, G])
+            want = np.array([0.0, -[1.0, 0.0][i] * a_perp, G])  # toward the demand
             want /= np.linalg.norm(want)
             for r in rotors:
                 assert np.allclose(o2["rotor_directions"][r], want, atol=1e-9)
         assert np.allclose(got[:6], qq[:6], atol=2e-3)  # joints follow their targets
     finally:
         rig.close()
+
+
+def test_default_servo_map_is_the_can_table_order() -> None:
+    """Spinal numbers servos by their place in its CAN table: Neurons by slave id, then the
+    servos on each (docs/neuron.md: 1 = foot unit alpha1, beta1; 2 = q1-q3; 3 = arm unit
+    alpha2, beta2; 4 = q4-q6). The node's default map must follow it, not joint order."""
+    from rdm.nodes.onboard import OnboardNode
+    from rdm.sim import open_inproc_uart
+
+    table = ["alpha1", "beta1", "q1", "q2", "q3", "alpha2", "beta2", "q4", "q5", "q6"]
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        dev, host = open_inproc_uart(d, "spinal", ".bin")
+        node = OnboardNode(host, None)
+        try:
+            names = list(node.robot.joint_names)
+            assert node.config.servo_map.servo_index == tuple(table.index(j) for j in names)
+        finally:
+            dev.close()
+            host.close()

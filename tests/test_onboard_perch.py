@@ -167,7 +167,8 @@ def test_bad_input_counted_never_nan_on_wire() -> None:
         )
         t = fly(rig, t, t + 0.05)
         assert node.counts["servo_states_partial"] == before + 1
-        assert node.present_q[1] == pytest.approx(100 * 2 * np.pi / 4096)
+        joint = node.config.servo_map.joint_of(1)  # Spinal index 1: beta1 (CAN table order)
+        assert node.present_q[joint] == pytest.approx(100 * 2 * np.pi / 4096)
         # corrupted Leptrino bytes between good frames
         good = node.foot.counts["samples"]
         bad_bcc = bytearray(lp.encode_response(lp.ForceData((1, 2, 3, 4, 5, 6))))
@@ -203,9 +204,11 @@ def test_trajectory_interpolated_into_servo_targets() -> None:
         assert rig.node.set_trajectory([(0.5, np.zeros(10)), (1.5, q_end)])
         rig.run(0.0, 1.0)
         t, msg = rig.by_topic["servo/target_states"][-1]
-        got = (np.array(msg.angles) - 2048) * 2 * np.pi / 4096
+        by_index = dict(zip(msg.index, msg.angles, strict=True))
+        assert sorted(by_index) == list(range(10))  # every servo, once
+        raw = [by_index[i] for i in rig.node.config.servo_map.servo_index]  # joint order
+        got = (np.array(raw) - 2048) * 2 * np.pi / 4096
         want = q_end * (t - 0.5) / 1.0
-        assert list(msg.index) == list(range(10))
         assert np.allclose(got, want, atol=2e-3)
     finally:
         rig.close()

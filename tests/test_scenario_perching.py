@@ -73,3 +73,30 @@ def test_mcap_carries_the_perching_qp_status(run):
     assert statuses[0] is None  # flight before perching
     summary = json.loads((res.folder / "summary.json").read_text())
     assert summary["metrics"]
+
+
+def test_infeasible_perching_qp_is_logged_and_the_command_stays_safe(tmp_path):
+    """A normal-force floor the rotors cannot reach (epsilon_z = 11 N with the thrust limits)
+    makes every perching QP infeasible: the status is in the MCAP and the counters, the safe
+    command keeps every rotor inside [0, thrust_max], Spinal sees no bad command."""
+    from rdm.scenarios.common import sim_onboard_config
+
+    onboard = sim_onboard_config(
+        position_gains=dict(perching.POSITION_GAINS), perch_params={"epsilon_z": 11.0}
+    )
+    res = perching.run(tmp_path, duration=17.0, motion=SHORT_MOTION, onboard=onboard)
+    assert res.facts["t_perch"] is not None
+    counts = res.facts["perch_status_counts"]
+    assert counts.get("infeasible", 0) > 20, counts
+    assert res.stack.onboard.control.counts["perch_infeasible"] > 20  # counted by the node
+    logged = []
+    with open(res.folder / "signals.mcap", "rb") as fh:
+        for _schema, channel, message in make_reader(fh).iter_messages():
+            if channel.topic == "/onboard/status":
+                rec = json.loads(message.data)
+                if rec["perch_status"] is not None:
+                    logged.append(rec)
+    assert any(r["perch_status"] == "infeasible" for r in logged)
+    for r in logged:
+        assert all(0.0 <= b <= 20.0 for b in r["base_thrust"])
+    assert not res.stack.spinal.counters.rejected

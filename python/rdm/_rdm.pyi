@@ -582,3 +582,13 @@ class CorePlanner:
         """Keys: status ("moved" or "qp_failed:<status>"), position_error,
         orientation_error, binding (constraint name or None)."""
     def feasible_force(self) -> tuple[tuple[float, float, float], float] | None: ...
+
+# --- qp ---
+# Perching solver choice (PerchQp / PerchController `params`): "solver" is one of
+# PERCH_SOLVER_NAMES ("active_set", the default, or "clarabel"); "active_set_max_iter"
+# (int, 1..=500) caps the active-set passes before Clarabel takes over. Solution dicts carry
+# "fallback" (bool: Clarabel answered an active-set tick); counters() carries "fallback"
+# (count of such ticks) next to the per-status counts.
+from typing import Literal as _Literal
+
+PerchSolverName = _Literal["active_set", "clarabel"]

@@ -1,6 +1,6 @@
 //! The 40 Hz onboard tick: position step (eqs. 30-36) followed by the perching controller
-//! tick (filter + eq. 49 on Clarabel), timed together on random feasible perching
-//! instances. Targets (reported, not asserted): median <= 20 us, p99.9 <= 100 us.
+//! tick (filter + eq. 49), timed together on random perching instances, once with the
+//! default active-set solver and once with Clarabel. Targets (reported, not asserted): median <= 20 us, p99.9 <= 100 us.
 //! Besides criterion's estimate, one pass of 100,000 individually timed ticks prints
 //! median, p99, p99.9 and max.
 
@@ -16,7 +16,7 @@ use nalgebra::{Matrix3, Vector2};
 use perch_common::random_instance;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rdm_core::control::perch::{PerchController, PerchInput, PerchParams};
+use rdm_core::control::perch::{PerchController, PerchInput, PerchParams, PerchSolver};
 use rdm_core::control::position::{PositionController, PositionGains, PositionInput};
 
 fn inputs(n: usize) -> Vec<(PositionInput, PerchInput)> {
@@ -46,10 +46,14 @@ struct OnboardTick {
 }
 
 impl OnboardTick {
-    fn new() -> Self {
+    fn new(solver: PerchSolver) -> Self {
+        let params = PerchParams {
+            solver,
+            ..PerchParams::default()
+        };
         Self {
             position: PositionController::new(PositionGains::table_v()).expect("gains"),
-            perch: PerchController::new(PerchParams::default(), 40.0, 1.0).expect("params"),
+            perch: PerchController::new(params, 40.0, 1.0).expect("params"),
         }
     }
 
@@ -67,9 +71,9 @@ impl OnboardTick {
     }
 }
 
-fn percentiles() {
+fn percentiles(solver: PerchSolver) {
     let inputs = inputs(100_000);
-    let mut onboard = OnboardTick::new();
+    let mut onboard = OnboardTick::new(solver);
     let mut times: Vec<f64> = Vec::with_capacity(inputs.len());
     let mut failures = 0usize;
     for input in &inputs {
@@ -81,28 +85,35 @@ fn percentiles() {
     times.sort_by(f64::total_cmp);
     let at = |q: f64| times[((times.len() - 1) as f64 * q).round() as usize];
     println!(
-        "tick_40hz, {} ticks: median {:.2} us, p99 {:.2} us, p99.9 {:.2} us, max {:.2} us; \
+        "tick_40hz ({}), {} ticks: median {:.2} us, p99 {:.2} us, p99.9 {:.2} us, max {:.2} us; \
          ticks without a QP solution (random instances, the filter and the rate limit make \
-         some infeasible): {failures}",
+         some infeasible): {failures}, active-set fallbacks: {}",
+        solver.as_str(),
         times.len(),
         at(0.5),
         at(0.99),
         at(0.999),
         at(1.0),
+        onboard.perch.counters().fallbacks(),
     );
 }
 
 fn bench(c: &mut Criterion) {
-    percentiles();
+    let solvers = [PerchSolver::ActiveSet, PerchSolver::Clarabel];
+    for solver in solvers {
+        percentiles(solver);
+    }
     let inputs = inputs(1024);
-    let mut onboard = OnboardTick::new();
     let mut k = 0usize;
-    c.bench_function("tick_40hz", |b| {
-        b.iter(|| {
-            k = (k + 1) % inputs.len();
-            black_box(onboard.tick(black_box(&inputs[k])))
-        })
-    });
+    for solver in solvers {
+        let mut onboard = OnboardTick::new(solver);
+        c.bench_function(&format!("tick_40hz/{}", solver.as_str()), |b| {
+            b.iter(|| {
+                k = (k + 1) % inputs.len();
+                black_box(onboard.tick(black_box(&inputs[k])))
+            })
+        });
+    }
 }
 
 criterion_group!(benches, bench);

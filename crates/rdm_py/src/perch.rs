@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rdm_core::control::perch::{
     PerchController as CoreController, PerchInput, PerchParams, PerchQp as CoreQp, PerchSolution,
-    PerchStatus, WrenchFilter as CoreFilter, N_ROWS, N_VARS, N_ZERO_ROWS,
+    PerchSolver, PerchStatus, WrenchFilter as CoreFilter, N_ROWS, N_VARS, N_ZERO_ROWS,
 };
 use rdm_core::N_ROTORS;
 
@@ -98,6 +98,15 @@ fn parse_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<PerchParams> {
             }
             "feedback_gain" => p.feedback_gain = value.extract().map_err(bad)?,
             "gravity" => p.gravity = value.extract().map_err(bad)?,
+            "solver" => {
+                let name: String = value.extract().map_err(bad)?;
+                p.solver = PerchSolver::from_name(&name).ok_or_else(|| {
+                    err(format!(
+                        "parameter `solver` must be \"active_set\" or \"clarabel\", got {name:?}"
+                    ))
+                })?
+            }
+            "active_set_max_iter" => p.active_set_max_iter = value.extract().map_err(bad)?,
             "max_iter" => p.max_iter = value.extract().map_err(bad)?,
             "tolerance" => p.tolerance = value.extract().map_err(bad)?,
             _ => return Err(err(format!("unknown perch parameter `{key}`"))),
@@ -128,6 +137,8 @@ fn params_dict<'py>(py: Python<'py>, p: &PerchParams) -> PyResult<Bound<'py, PyD
     d.set_item("rotor_thrust_max", p.rotor_thrust_max.to_vec())?;
     d.set_item("feedback_gain", p.feedback_gain)?;
     d.set_item("gravity", p.gravity)?;
+    d.set_item("solver", p.solver.as_str())?;
+    d.set_item("active_set_max_iter", p.active_set_max_iter)?;
     d.set_item("max_iter", p.max_iter)?;
     d.set_item("tolerance", p.tolerance)?;
     Ok(d)
@@ -147,6 +158,7 @@ fn solution_dict<'py>(py: Python<'py>, s: &PerchSolution) -> PyResult<Bound<'py,
     d.set_item("thrust_min", PyArray1::from_slice(py, &s.thrust_min))?;
     d.set_item("thrust_max", PyArray1::from_slice(py, &s.thrust_max))?;
     d.set_item("iterations", s.iterations)?;
+    d.set_item("fallback", s.fallback)?;
     Ok(d)
 }
 
@@ -158,6 +170,7 @@ fn counters_dict<'py>(
     for status in PerchStatus::ALL {
         d.set_item(status.as_str(), c.count(status))?;
     }
+    d.set_item("fallback", c.fallbacks())?;
     Ok(d)
 }
 
@@ -233,7 +246,8 @@ impl PyPerchQp {
         solution_dict(py, &solution)
     }
 
-    /// `P, q, A, b` and cone sizes exactly as last sent to Clarabel (scaled variables).
+    /// `P, q, A, b` and cone sizes of the last tick's scaled problem (what the active-set
+    /// solver reduces and Clarabel is sent).
     fn problem_data<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         problem_dict(py, &self.inner)
     }
@@ -304,7 +318,8 @@ impl PyPerchController {
         self.inner.filter().coefficients()
     }
 
-    /// `P, q, A, b` and cone sizes exactly as last sent to Clarabel (scaled variables).
+    /// `P, q, A, b` and cone sizes of the last tick's scaled problem (what the active-set
+    /// solver reduces and Clarabel is sent).
     fn problem_data<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         problem_dict(py, self.inner.qp())
     }

@@ -3,6 +3,7 @@
 * :mod:`rdm.bench.statistics`: median, p99, p99.9, max of per-call nanoseconds.
 * :mod:`rdm.bench.scenarios`: deterministic inputs from the default robot.
 * :mod:`rdm.bench.cases`: the case registry (:data:`~rdm.bench.cases.CASES`).
+* :mod:`rdm.bench.lockstep`: the full stack in lockstep against 20x real time.
 * :mod:`rdm.bench.peers`: scipy / OSQP / Clarabel-wheel peers (optional ``rdm[bench]``).
 * :mod:`rdm.bench.report`: text report and the ``rdm.bench/1`` JSON schema.
 * :func:`run_benchmarks`: run selected cases and return the JSON document.
@@ -13,3 +14,5 @@ from __future__ import annotations
 from rdm.bench.runner import run_benchmarks
 
 __all__ = ["run_benchmarks"]
+
+from rdm.bench import lockstep as _lockstep  # noqa: F401  (registers the "lockstep" case)

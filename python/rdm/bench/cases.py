@@ -335,8 +335,9 @@ def run_lqi_peers(ctx: Context, li: sc.LqiInputs) -> dict[str, PeerResult]:
 
 
 def run_tick(ctx: Context) -> list[Measurement]:
-    """Position step + perching controller tick, inside Rust and through Python; OSQP and
-    Clarabel's wheel on the QPs the Python run sent to Clarabel."""
+    """Position step + perching controller tick, inside Rust and through Python with the
+    default active-set solver, and through Python with ``solver="clarabel"``; OSQP and
+    Clarabel's wheel on the QPs of the Python run."""
     from rdm import _rdm
 
     n = ctx.count(100_000)
@@ -359,15 +360,18 @@ def run_tick(ctx: Context) -> list[Measurement]:
     m = ctx.peer_count(5_000)
     ctx.progress(f"tick_40hz: {n} ticks through Python")
     py_ns, py_failures, problems = time_tick_python(ti, collect=m)
+    ctx.progress(f"tick_40hz: {n} ticks through Python, solver=clarabel")
+    cl_ns, cl_failures, _ = time_tick_python(ti, collect=0, solver="clarabel")
     peers = run_tick_peers(ctx, problems)
     notes = [
-        "position step (eqs. 30-36) + perching tick (filter + eq. 49 on Clarabel)",
+        "position step (eqs. 30-36) + perching tick (filter + eq. 49; default solver: dense "
+        "active set on the reduced QP, Clarabel as fallback; docs/perch.md)",
         "perched default robot, joint trajectory, scripted foot wrench (docs/bench.md)",
     ]
     return [
         Measurement(
             "tick_40hz_rust",
-            "40 Hz onboard tick (position + perching QP), inside Rust",
+            "40 Hz onboard tick (position + perching QP, active set), inside Rust",
             summarize_ns(rust["ns"]),
             TICK_BUDGET_US,
             int(rust["failures"]),
@@ -389,18 +393,28 @@ def run_tick(ctx: Context) -> list[Measurement]:
             peers,
             notes,
         ),
+        Measurement(
+            "tick_40hz_python_clarabel",
+            "40 Hz onboard tick through Python, perching QP on Clarabel (solver='clarabel')",
+            summarize_ns(cl_ns),
+            TICK_BUDGET_US,
+            cl_failures,
+            [Target("faster_than:osqp_setup_solve", 1.0)],
+            peers,
+            notes,
+        ),
     ]
 
 
 def time_tick_python(
-    ti: sc.TickInputs, collect: int
+    ti: sc.TickInputs, collect: int, solver: str = "active_set"
 ) -> tuple[np.ndarray, int, list[peer_mod.QpData]]:
-    """Per-call ns of the public Python tick; the QPs of the first ``collect`` ticks are
-    read back (untimed) with ``problem_data()`` for the peers."""
+    """Per-call ns of the public Python tick with the perching ``solver``; the QPs of the
+    first ``collect`` ticks are read back (untimed) with ``problem_data()`` for the peers."""
     from rdm.control.perch import PerchController
     from rdm.control.position import PositionControlError, PositionController
 
-    position, perch = PositionController(), PerchController()
+    position, perch = PositionController(), PerchController(solver=solver)
     perch.reset(ti.initial_thrust)
     n = len(ti.target_yaw)
     ns = np.zeros(n, dtype=np.int64)
@@ -504,7 +518,7 @@ register(
         "tick_40hz",
         "40 Hz onboard tick",
         run_tick,
-        ("tick_40hz_rust", "tick_40hz_python"),
+        ("tick_40hz_rust", "tick_40hz_python", "tick_40hz_python_clarabel"),
         TICK_PEERS,
     )
 )

@@ -41,6 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from rdm.scenarios import SCENARIOS
+    from rdm.scenarios.common import progress_to
     from rdm.sim import format_metrics_table
 
     sc = SCENARIOS[args.scenario]
@@ -48,7 +49,11 @@ def run(args: argparse.Namespace) -> int:
     if not duration > 0:
         print("rdm sim: --duration must be > 0", file=sys.stderr)
         return 2
-    result = sc.run(args.out, duration=duration, seed=args.seed, uart=args.uart, speed=args.speed)
+    print(f"rdm sim {sc.name}: {sc.description}", file=sys.stderr)
+    with progress_to(sys.stderr, duration):
+        result = sc.run(
+            args.out, duration=duration, seed=args.seed, uart=args.uart, speed=args.speed
+        )
     if args.json:
         print(json.dumps(json.loads(result.stack.folder.summary_json.read_text())))
     else:

@@ -1,4 +1,7 @@
-"""Perching controller (paper Sec. IV-B, eqs. 37-49) on the Rust core's Clarabel QP.
+"""Perching controller (paper Sec. IV-B, eqs. 37-49) on the Rust core's QP solvers.
+
+Solver choice: ``solver="active_set"`` (default: dense dual active-set solver on the reduced
+problem, Clarabel as fallback) or ``solver="clarabel"`` (Clarabel every tick).
 
 Thin face over :mod:`rdm._rdm`: converts inputs to float64 numpy arrays, returns typed results
 and builds scipy sparse matrices of the exact QP the core solves (so tests can hand the same
@@ -50,6 +53,7 @@ class PerchResult:
     thrust_min: Array
     thrust_max: Array
     iterations: int
+    fallback: bool = False
 
     @property
     def ok(self) -> bool:
@@ -63,8 +67,9 @@ class PerchResult:
 
 @dataclass(frozen=True)
 class PerchProblem:
-    """The QP exactly as sent to Clarabel: min ½xᵀPx + qᵀx s.t. Ax + s = b,
-    s in (zero cone of ``zero_cone`` rows) x (nonnegative cone of the rest).
+    """The scaled QP of the last tick (what the active-set solver reduces and Clarabel is
+    sent): min ½xᵀPx + qᵀx s.t. Ax + s = b, s in (zero cone of ``zero_cone`` rows) x
+    (nonnegative cone of the rest).
 
     ``P`` is upper-triangular. Variables are scaled: thrust = ``variable_scale`` * x[:4],
     W_foot,t = ``variable_scale`` * x[4:].
@@ -99,7 +104,8 @@ class PerchProblem:
 class PerchQp:
     """Eq. (49) with every input explicit (no filter, no memory between calls).
 
-    ``params``: overrides of Table VII (keys as in :class:`rdm._rdm.PerchQp`).
+    ``params``: overrides of Table VII (keys as in :class:`rdm._rdm.PerchQp`), e.g.
+    ``solver="clarabel"``.
     """
 
     def __init__(self, **params: Any) -> None:
@@ -128,11 +134,11 @@ class PerchQp:
         return PerchResult._from(d)
 
     def problem_data(self) -> PerchProblem:
-        """The last QP sent to Clarabel as scipy sparse matrices."""
+        """The last tick's scaled QP as scipy sparse matrices."""
         return PerchProblem._from(self._inner.problem_data())
 
     def counters(self) -> dict[str, int]:
-        """Calls per status."""
+        """Calls per status, plus ``"fallback"``: active-set calls Clarabel answered."""
         return self._inner.counters()
 
     def params(self) -> dict[str, Any]:
@@ -177,11 +183,11 @@ class PerchController:
         return self._inner.filter_coefficients()
 
     def problem_data(self) -> PerchProblem:
-        """The last QP sent to Clarabel as scipy sparse matrices."""
+        """The last tick's scaled QP as scipy sparse matrices."""
         return PerchProblem._from(self._inner.problem_data())
 
     def counters(self) -> dict[str, int]:
-        """Ticks per status."""
+        """Ticks per status, plus ``"fallback"``: active-set ticks Clarabel answered."""
         return self._inner.counters()
 
     def params(self) -> dict[str, Any]:

@@ -109,21 +109,25 @@ def channel_frame_count(name: str) -> int:
 
 
 def _copy(msg: Message, stamp: float, channel: str, is_rx: bool) -> Message:
-    # Message.__init__ with check=False is the cheapest way to an independent frame.
-    return Message(
-        timestamp=stamp,
-        arbitration_id=msg.arbitration_id,
-        is_extended_id=msg.is_extended_id,
-        is_remote_frame=msg.is_remote_frame,
-        is_error_frame=msg.is_error_frame,
-        channel=channel,
-        dlc=msg.dlc,
-        data=bytes(msg.data),
-        is_fd=msg.is_fd,
-        is_rx=is_rx,
-        bitrate_switch=msg.bitrate_switch,
-        error_state_indicator=msg.error_state_indicator,
-    )
+    # An independent frame without Message.__init__'s argument handling: every slot set
+    # directly (the data as a fresh bytearray, as __init__ stores it).
+    new = _new_message(Message)
+    new.timestamp = stamp
+    new.arbitration_id = msg.arbitration_id
+    new.is_extended_id = msg.is_extended_id
+    new.is_remote_frame = msg.is_remote_frame
+    new.is_error_frame = msg.is_error_frame
+    new.channel = channel
+    new.dlc = msg.dlc
+    new.data = bytearray(msg.data)
+    new.is_fd = msg.is_fd
+    new.is_rx = is_rx
+    new.bitrate_switch = msg.bitrate_switch
+    new.error_state_indicator = msg.error_state_indicator
+    return new
+
+
+_new_message = Message.__new__
 
 
 class InProcessBus(can.BusABC):
@@ -170,8 +174,34 @@ class InProcessBus(can.BusABC):
             raise CanOperationError("Cannot operate on a closed bus")
         ch = self._ch
         stamp = msg.timestamp if self.preserve_timestamps else ch.clock()
+        self._deliver(msg, _copy(msg, stamp, self.channel_id, True))
+
+    def send_standard(self, arbitration_id: int, data: bytes) -> None:
+        """``send(Message(arbitration_id=.., data=data, is_extended_id=False))`` without
+        building the sender's message (a classic data frame; what the Neuron link sends)."""
+        if not self._open:
+            raise CanOperationError("Cannot operate on a closed bus")
+        ch = self._ch
+        new = _new_message(Message)
+        new.timestamp = 0.0 if self.preserve_timestamps else ch.clock()
+        new.arbitration_id = arbitration_id
+        new.is_extended_id = False
+        new.is_remote_frame = False
+        new.is_error_frame = False
+        new.channel = self.channel_id
+        new.dlc = len(data)
+        new.data = bytearray(data)
+        new.is_fd = False
+        new.is_rx = True
+        new.bitrate_switch = False
+        new.error_state_indicator = False
+        self._deliver(new, new)
+
+    def _deliver(self, msg: Message, delivered: Message) -> None:
+        """Hand ``delivered`` (stamped, ``is_rx``) to the taps and every other bus."""
+        ch = self._ch
+        stamp = delivered.timestamp
         name = self.channel_id
-        delivered = _copy(msg, stamp, name, True)
         ch.frames += 1
         for tap in ch.taps:
             tap(delivered)

@@ -29,7 +29,7 @@ from rdm.protocol import neuron as nr
 from rdm.protocol.neuron.pwm import PWM_MAX_MOTORS
 from rdm.protocol.neuron.servo import WORD_VALUE_MAX, WORD_VALUE_MIN
 
-from .base import drain, to_ms
+from .base import MAX_FRAMES_PER_TICK, to_ms
 
 BOOT_DELAY_MS = 5000
 ENUM_WAIT_MS = 200
@@ -179,18 +179,19 @@ class CanMaster:
         A tick that skips milliseconds (a late real-time loop) replays the schedule for at most
         ``MAX_CATCH_UP_MS`` of them; repeated or older times only receive.
         """
-        for msg in drain(self.bus):
+        recv = self.bus.recv
+        for _ in range(MAX_FRAMES_PER_TICK):
+            msg = recv(timeout=0)
+            if msg is None:
+                break
             self._receive(msg, now_ms)
         last = self._last_ms
-        if last is None:
-            steps = [now_ms]
-        elif now_ms <= last:
-            steps = []
-        else:
-            steps = list(range(max(last + 1, now_ms - MAX_CATCH_UP_MS + 1), now_ms + 1))
-        for t in steps:
-            self._step(t)
-        if steps:
+        if last is None or now_ms == last + 1:  # the usual case: one new millisecond
+            self._step(now_ms)
+            self._last_ms = now_ms
+        elif now_ms > last:
+            for t in range(max(last + 1, now_ms - MAX_CATCH_UP_MS + 1), now_ms + 1):
+                self._step(t)
             self._last_ms = now_ms
 
     # ------------------------------------------------------------------ commands
@@ -349,24 +350,27 @@ class CanMaster:
                 self._rerequest[frame.slave] = t + REBOOT_REQUEST_MS
             return
         if t % 2 == 0:
-            values = [nr.duty_to_pwm_value(d) for d in self._duties[:PWM_MAX_MOTORS]]
-            for frame in nr.pack_pwm(values):
-                self._send(frame)
+            values = tuple(nr.duty_to_pwm_value(d) for d in self._duties[:PWM_MAX_MOTORS])
+            for can_id, payload in nr.encode_pwm_cached(values):
+                self._send_raw(can_id, payload)
             return
         neuron = self.neurons[self._round_robin % len(self.neurons)]
         self._round_robin = (self._round_robin + 1) % len(self.neurons)
         if not neuron.servos:
             return  # a DLC-0 servo frame is not a valid frame of this protocol
         servos = neuron.servos
-        self._send(
-            nr.ServoTargetAngles(
+        # Memoised ServoTargetAngles / ServoTargetCurrents (same bytes, checks on a miss).
+        self._send_raw(
+            *nr.encode_servo_words_cached(
+                False,
                 neuron.slave,
                 tuple(s.goal_position for s in servos),
                 tuple(s.goal_valid for s in servos),
             )
         )
-        self._send(
-            nr.ServoTargetCurrents(
+        self._send_raw(
+            *nr.encode_servo_words_cached(
+                True,
                 neuron.slave,
                 tuple(s.goal_current for s in servos),
                 tuple(s.torque_enable and not s.force_servo_off for s in servos),
@@ -390,7 +394,7 @@ class CanMaster:
             self.rx_errors[reason] += 1
             return
         try:
-            frame = nr.decode_frame(
+            frame = nr.decode_frame_cached(
                 msg.arbitration_id, bytes(msg.data), nr.Direction.NEURON_TO_SPINAL
             )
         except nr.NeuronFrameError as exc:
@@ -468,8 +472,15 @@ class CanMaster:
 
     # ------------------------------------------------------------------ transmit
     def _send(self, frame: nr.NeuronFrame) -> None:
+        self._send_raw(frame.can_id, frame.encode())
+
+    def _send_raw(self, can_id: int, payload: bytes) -> None:
         try:
-            self.bus.send(neuron_message(frame.can_id, frame.encode()), timeout=0)
+            fast = getattr(self.bus, "send_standard", None)  # the in-process bus
+            if fast is not None:
+                fast(can_id, payload)
+            else:
+                self.bus.send(neuron_message(can_id, payload), timeout=0)
             self.tx_count += 1
         except (can.CanError, OSError):
             self.tx_errors += 1

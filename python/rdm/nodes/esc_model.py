@@ -7,20 +7,55 @@ pulse at 500 Hz; while its CAN watchdog is tripped it outputs ``v = 0`` (1000 us
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from rdm.protocol.neuron.pwm import PWM_STOP_VALUE
 
 #: ESC PWM frame period of the Neuron timer (500 Hz).
 ESC_PERIOD_US = 2000
 
 
-@dataclass
 class EscModel:
-    """``held_value`` is the last slot value received; ``stopped`` is the watchdog's verdict."""
+    """``held_value`` is the last slot value received; ``stopped`` is the watchdog's verdict.
 
-    held_value: int = PWM_STOP_VALUE
-    stopped: bool = True
+    Every change of either bumps ``changes[0]`` (a counter the owning Neuron shares with its
+    servos), so a plant bridge can skip unchanged boards without reading each output.
+    """
+
+    __slots__ = ("_held_value", "_stopped", "changes")
+
+    def __init__(self, held_value: int = PWM_STOP_VALUE, stopped: bool = True) -> None:
+        self._held_value = held_value
+        self._stopped = stopped
+        self.changes = [0]
+
+    def __repr__(self) -> str:
+        return f"EscModel(held_value={self._held_value!r}, stopped={self._stopped!r})"
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, EscModel):
+            return NotImplemented
+        return (self._held_value, self._stopped) == (other._held_value, other._stopped)
+
+    __hash__ = None  # type: ignore[assignment]  # mutable, as the dataclass it replaces
+
+    @property
+    def held_value(self) -> int:
+        return self._held_value
+
+    @held_value.setter
+    def held_value(self, value: int) -> None:
+        if value != self._held_value:
+            self._held_value = value
+            self.changes[0] += 1
+
+    @property
+    def stopped(self) -> bool:
+        return self._stopped
+
+    @stopped.setter
+    def stopped(self, value: bool) -> None:
+        if value != self._stopped:
+            self._stopped = value
+            self.changes[0] += 1
 
     @property
     def value(self) -> int:

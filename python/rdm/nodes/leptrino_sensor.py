@@ -84,7 +84,10 @@ class LeptrinoSensorNode:
     # ------------------------------------------------------------------ inputs
     def set_wrench(self, force: Sequence[float], torque: Sequence[float]) -> None:
         """The wrench the sensor measures now (N, N m, sensor frame). Non-finite is refused."""
-        w = (*force, *torque)
+        # Plain floats (numpy arrays -> tolist): the same values, cheaper arithmetic below.
+        f = force.tolist() if hasattr(force, "tolist") else force
+        t = torque.tolist() if hasattr(torque, "tolist") else torque
+        w = (*f, *t)
         if len(w) != 6 or not all(math.isfinite(v) for v in w):
             self.errors["bad_wrench"] += 1
             return

@@ -30,7 +30,7 @@ from rdm.link.can import neuron_message
 from rdm.protocol import neuron as nr
 from rdm.protocol.neuron.ids import NEURON_SLAVE_IDS
 
-from .base import drain, to_ms
+from .base import MAX_FRAMES_PER_TICK
 from .esc_model import EscModel
 from .servo_model import ServoConfig, ServoModel
 
@@ -87,6 +87,12 @@ class NeuronMirror:
         self.imu_send_flag = imu
         self.has_esc = esc
         self.esc = EscModel()
+        #: One counter bumped by every change of a servo goal / torque or the ESC output, so a
+        #: plant bridge reads this board's outputs only after a change.
+        self.changes = [0]
+        for servo in self.servos:
+            servo.changes = self.changes
+        self.esc.changes = self.changes
         self.ttl_rs485_mixed = ttl_rs485_mixed
         self.pulley_skip_thresh = pulley_skip_thresh
         self.reboot_ms = reboot_ms
@@ -110,27 +116,35 @@ class NeuronMirror:
     # ------------------------------------------------------------------ node interface
     def tick(self, now: float) -> None:
         """Advance to ``now`` seconds: receive, answer, move servos, apply the watchdog."""
-        now_ms = to_ms(now)
+        now_ms = math.floor(now * 1000.0 + 1e-6)  # base.to_ms, inlined (1 kHz per board)
         self._now_ms = now_ms
         if self._last_rx_ms is None:
             self._last_rx_ms = now_ms  # the watchdog counter starts at boot
+        recv = self.bus.recv
         if self._rebooting_until is not None:
-            for _ in drain(self.bus):
+            for _ in range(MAX_FRAMES_PER_TICK):
+                if recv(timeout=0) is None:
+                    break
                 self.rx_filtered += 1  # a resetting MCU hears nothing
             if now_ms >= self._rebooting_until:
                 self._finish_reboot(now_ms)
         else:
             trigger = False
-            for msg in drain(self.bus):
+            for _ in range(MAX_FRAMES_PER_TICK):
+                msg = recv(timeout=0)
+                if msg is None:
+                    break
                 trigger |= self._receive(msg, now_ms)
             if trigger:
                 self._send_states()
-        dt = 0.0 if self._last_now is None else max(0.0, now - self._last_now)
-        self._last_now = now
         if not self.plant_driven:
+            dt = 0.0 if self._last_now is None else max(0.0, now - self._last_now)
             for servo in self.servos:
                 servo.advance(dt)
-        self.esc.stopped = self._rebooting_until is not None or not self.connected
+        self._last_now = now
+        self.esc.stopped = (
+            self._rebooting_until is not None or now_ms - self._last_rx_ms > WATCHDOG_MS
+        )
 
     @property
     def connected(self) -> bool:
@@ -216,7 +230,7 @@ class NeuronMirror:
             self.rx_errors["fd"] += 1
             return False
         try:
-            frame = nr.decode_frame(
+            frame = nr.decode_frame_cached(
                 msg.arbitration_id, bytes(msg.data), nr.Direction.SPINAL_TO_NEURON
             )
         except nr.NeuronFrameError as exc:
@@ -313,11 +327,7 @@ class NeuronMirror:
 
     # ------------------------------------------------------------------ transmit
     def _send(self, frame: nr.NeuronFrame) -> None:
-        try:
-            self.bus.send(neuron_message(frame.can_id, frame.encode()), timeout=0)
-            self.tx_count += 1
-        except (can.CanError, OSError):
-            self.tx_errors += 1
+        self._send_raw(frame.can_id, frame.encode())
 
     def config_frames(self) -> list[nr.NeuronFrame]:
         """The INITIAL_CONFIG_0..3 set this Neuron sends now."""
@@ -381,8 +391,38 @@ class NeuronMirror:
         return out
 
     def _send_states(self) -> None:
-        for frame in self.state_frames():
-            self._send(frame)
+        # Same frames as state_frames(), through the memoised encoder (a repeated state is
+        # not re-validated and re-packed: the bytes are those the frame class produced).
+        slave = self.slave_id
+        for i, servo in enumerate(self.servos):
+            if not servo.config.send_data_flag:
+                continue
+            self._send_raw(
+                *nr.encode_servo_state_cached(
+                    slave,
+                    i,
+                    servo.reported_angle,
+                    min(max(servo.temperature, 0), 255),
+                    servo.moving,
+                    servo.send_goal_position,
+                    _int16(servo.current),
+                    servo.hardware_error & 0xFF,
+                )
+            )
+        if self.imu_send_flag:
+            for sensor in (nr.ImuMessage.GYRO, nr.ImuMessage.ACC, nr.ImuMessage.MAG):
+                self._send(nr.ImuFrame(slave, sensor, *self.imu_raw[sensor]))
+
+    def _send_raw(self, can_id: int, payload: bytes) -> None:
+        try:
+            fast = getattr(self.bus, "send_standard", None)  # the in-process bus
+            if fast is not None:
+                fast(can_id, payload)
+            else:
+                self.bus.send(neuron_message(can_id, payload), timeout=0)
+            self.tx_count += 1
+        except (can.CanError, OSError):
+            self.tx_errors += 1
 
     def close(self) -> None:
         """Shut the bus down (the node owns it)."""

@@ -29,12 +29,13 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from rdm.nodes.onboard_arming import ArmingSequencer, FlightState
-from rdm.nodes.onboard_config import OnboardConfig
+from rdm.nodes.onboard_config import OnboardConfig, ServoMap
 from rdm.nodes.onboard_control import ControlCommand, ControlPipeline, Setpoint, State
 from rdm.nodes.onboard_foot import ByteLink, FootSensorReader
 from rdm.protocol.rosserial.codec import RosTime
@@ -82,6 +83,21 @@ def _scalar(value: Any) -> float | None:
     return v if math.isfinite(v) else None
 
 
+def default_servo_map(robot: Any) -> ServoMap:
+    """Servo map of a robot's default CAN bus layout (Neurons by slave id, then servo index),
+    or the identity map when the robot has no shipped description to derive it from."""
+    from rdm.nodes.plant_bridge import default_layout
+    from rdm.plant.description import load_robot
+
+    try:
+        desc = load_robot(robot.name)
+    except (OSError, ValueError, AttributeError):
+        return ServoMap()
+    layout = default_layout(desc)
+    table = [j for nl in sorted(layout.neurons, key=lambda n: n.slave) for j in nl.joints]
+    return ServoMap.from_can_table(table, tuple(robot.joint_names))
+
+
 class OnboardNode:
     """The onboard PC (see the module doc). ``uart``/``foot_sensor``: byte links with
     ``read_available()`` and ``write()`` (e.g. :func:`rdm.link.serial.open_serial`)."""
@@ -107,6 +123,8 @@ class OnboardNode:
             config = OnboardConfig() if rate_hz is None else OnboardConfig(rate_hz=rate_hz)
         elif rate_hz is not None and rate_hz != config.rate_hz:
             raise ValueError("rate_hz given twice (argument and config) with different values")
+        if config.servo_map is None:
+            config = replace(config, servo_map=default_servo_map(robot))
         self.config = config
         self.period = 1.0 / config.rate_hz
         self.robot = robot
@@ -128,6 +146,7 @@ class OnboardNode:
                 ("pinv_unit", "spinal/PMatrixPseudoInverseUnit"),
                 ("servo/target_states", "spinal/ServoControlCmd"),
                 ("desire_coordinate", "spinal/DesireCoord"),
+                ("servo/torque_enable", "spinal/ServoTorqueCmd"),
             )
         }
         self.arming = ArmingSequencer(config.info_period_s, config.command_retry_s)
@@ -167,6 +186,8 @@ class OnboardNode:
         self._arm_z: float | None = None
         self._announced = False
         self.integration_on_sent = False
+        self.servos_torque_on = False
+        self._torque_sent_at: float | None = None
 
     # ------------------------------------------------------------------ inputs from outside
     def set_mocap(
@@ -281,6 +302,7 @@ class OnboardNode:
                     for topic in ("uav_info", "motor_info")
                 )
             self._arming_messages(now)
+            self._torque_on(now)
             self._control(now)
         else:
             self.counts["waiting_for_handshake"] += 1
@@ -320,6 +342,10 @@ class OnboardNode:
                 self.imu_gyro = g
         elif event.topic == "servo/states":
             self._on_servo_states(msg)
+        elif event.topic == "servo/torque_states":
+            flags = [bool(v) for v in msg.torque_enable]
+            indices = self.config.servo_map.servo_index
+            self.servos_torque_on = all(i < len(flags) and flags[i] for i in indices)
         elif event.topic == "flight_config_ack":
             before = self.arming.state
             self.arming.on_ack(int(msg.data))
@@ -490,6 +516,23 @@ class OnboardNode:
         except ValueError:
             self.counts["control_error"] += 1
             return None
+
+    def _torque_on(self, now: float) -> None:
+        """``servo/torque_enable`` for every mapped servo once Spinal's servo table is up (its
+        ``servo/states`` arrive), re-sent until ``servo/torque_states`` shows them all on."""
+        if not self.config.servo_torque_on_start or self.servos_torque_on:
+            return
+        if self.counts["rx:servo/states"] == 0:
+            return
+        if self._torque_sent_at is not None and now - self._torque_sent_at < (
+            self.config.torque_retry_s
+        ):
+            return
+        indices = list(self.config.servo_map.servo_index)
+        msg = self._msg["servo/torque_enable"].new(index=indices, torque_enable=[1] * len(indices))
+        if self._publish("servo/torque_enable", msg):
+            self._torque_sent_at = now
+            self.counts["torque_enable_sent"] += 1
 
     def _rp_integration(self, z: float) -> None:
         """Spinal integrates roll/pitch only after INTEGRATION_CONTROL_ON (160), which JSK

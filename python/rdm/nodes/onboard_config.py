@@ -33,6 +33,15 @@ class ServoMap:
     angle_scale: tuple[float, ...] = (DYNAMIXEL_RAD_PER_TICK,) * 10
     angle_sign: tuple[int, ...] = (1,) * 10
 
+    @classmethod
+    def from_can_table(cls, table: list[str], joint_order: tuple[str, ...]) -> ServoMap:
+        """Spinal numbers servos by their position in its CAN table (Neurons by slave id,
+        then servo index on the Neuron): ``table`` lists the joint of each position."""
+        missing = [j for j in joint_order if j not in table]
+        if missing:
+            raise ValueError(f"ServoMap: joints {missing} are on no Neuron of the CAN table")
+        return cls(servo_index=tuple(table.index(j) for j in joint_order))
+
     def __post_init__(self) -> None:
         n = len(self.servo_index)
         if not (len(self.zero_point) == len(self.angle_scale) == len(self.angle_sign) == n):
@@ -127,13 +136,20 @@ class OnboardConfig:
     foot_sensor_model: str = "CFS034CA301U"
     #: Raw offset subtracted before conversion (tare). ASSUMPTION: zero (calibrated sensor).
     foot_sensor_offset: tuple[float, ...] = (0.0,) * 6
-    servo_map: ServoMap = field(default_factory=ServoMap)
+    #: Joint <-> Spinal servo index. None: from the robot description's default CAN bus
+    #: layout (``rdm.nodes.plant_bridge.default_layout``, the wiring the mirrors use).
+    servo_map: ServoMap | None = None
     #: q before the first servo/states (joint_order). ASSUMPTION: zeros (arm straight).
     initial_q: tuple[float, ...] | None = None
     gravity: float = 9.80665
     #: Link that carries Spinal's IMU (the processor at the root-link tip, Sec. VI-B); the
     #: node sends its rotation to the CoG frame as ``desire_coordinate`` every tick.
     imu_link: str = "root_link"
+    #: Switch every mapped servo's torque on after start-up (``servo/torque_enable``), as JSK's
+    #: servo_bridge does; re-sent every ``torque_retry_s`` until ``servo/torque_states``
+    #: reports them on. Spinal's ``servo/target_states`` alone never enables a servo.
+    servo_torque_on_start: bool = True
+    torque_retry_s: float = 0.5
     #: Send ``desire_coordinate`` (False: Spinal controls the IMU link's attitude, correct
     #: only while that link is parallel to the CoG frame, e.g. q1 = 0).
     send_desire_coordinate: bool = True
@@ -152,6 +168,7 @@ class OnboardConfig:
             "mocap_loss_force_landing_s",
             "foot_timeout_s",
             "foot_restart_s",
+            "torque_retry_s",
         ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):

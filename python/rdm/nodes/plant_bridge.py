@@ -3,8 +3,11 @@
 Each ``tick(now)`` (the plant must be at ``now``; the lockstep scheduler steps it after the
 nodes), in this order:
 
-1. plant joint positions -> every Neuron's present positions (raw Dynamixel ticks);
-2. Neuron servo goals (servos with torque on) -> plant servo targets (rad);
+1. plant joint positions -> every Neuron's present positions (raw Dynamixel ticks): a snapshot
+   of the joints at ``now`` that each servo converts when its Neuron first reads it (a state
+   report, torque-on, a config reply), so boards that report nothing cost nothing;
+2. Neuron servo goals (servos with torque on) -> plant servo targets (rad), read only from
+   Neurons whose change counter (``NeuronMirror.changes``: goals, torque, ESC output) moved;
 3. battery voltage -> plant ESCs and the battery sinks (the Spinal mirror's
    ``set_battery_voltage``); a change re-commands the duties (the plant converts a duty at the
    voltage of the moment it is commanded);
@@ -189,6 +192,49 @@ def _ratio(period: float | None, base: float, what: str) -> int:
     return n
 
 
+class _JointFeed:
+    """The plant's joint angles in raw ticks, snapshot at each bridge tick and converted once,
+    on the first read (``center + q * ticks_per_rad``, joint_order); shared by every servo."""
+
+    __slots__ = (
+        "_center",
+        "_plant",
+        "_q",
+        "_qadr",
+        "_qpos",
+        "_scale",
+        "_ticks",
+        "_ticks_epoch",
+        "epoch",
+    )
+
+    def __init__(self, plant, center: int, scale: np.ndarray) -> None:
+        self._plant = plant
+        self._center = center
+        self._scale = scale
+        self.epoch = 0
+        self._qpos = getattr(plant, "_v_qpos", None)  # rdm.plant.Plant's qpos view
+        self._qadr = getattr(plant, "_qadr", None)
+        if self._qadr is None:
+            self._qpos = None
+        self._q = plant.servo_positions()
+        self._ticks: list[float] = []
+        self._ticks_epoch = -1
+
+    def snapshot(self) -> None:
+        self.epoch += 1
+        # A copy (later physics steps do not move it); the whole qpos when the plant offers
+        # its view (one memcpy), else the joint positions.
+        self._q = self._qpos.copy() if self._qpos is not None else self._plant.servo_positions()
+
+    def ticks(self) -> list[float]:
+        if self._ticks_epoch != self.epoch:
+            self._ticks_epoch = self.epoch
+            q = self._q[self._qadr] if self._qpos is not None else self._q
+            self._ticks = (self._center + q * self._scale).tolist()
+        return self._ticks
+
+
 class PlantBridge:
     """The 1 kHz coupling node between a :class:`rdm.plant.Plant` and the mirrors.
 
@@ -276,6 +322,12 @@ class PlantBridge:
         scale = np.array([layout_scale(self.layout, j) for j in plant.joint_names], dtype=float)
         self._tick_scale = scale
         self._last_goal: dict[tuple[int, int], int] = {}
+        self._targets_changed = False
+        self._seen_changes = [-1] * len(self._servo_map)  # every board is read at first
+        self._feed = _JointFeed(plant, self.layout.center_ticks, scale)
+        for neuron, servos in self._servo_map:
+            for i, k, _ in servos:
+                neuron.servos[i].feed = (self._feed, k)
         self._duties = np.full(len(plant.rotor_names), 0.5)
         self._voltage: float | None = None
         self._foot_body = plant.model.body(plant.description.foot_frame).id
@@ -288,15 +340,21 @@ class PlantBridge:
         self.ticks += 1
         if abs(plant.time - now) > 0.5 * self.period:
             self.time_mismatches += 1
-        layout = self.layout
-        center = layout.center_ticks
-        ticks = (center + plant.servo_positions() * self._tick_scale).tolist()
+        # 1. Present positions: a snapshot of the plant's joints at ``now``; each servo reads
+        # (and converts) it only when its Neuron needs it (state report, torque-on, config).
+        self._feed.snapshot()
+        # 2. Goals of servos with torque on, only for Neurons whose outputs changed.
+        center = self.layout.center_ticks
         targets = self._targets
-        changed = False
-        for neuron, servos in self._servo_map:
+        seen = self._seen_changes
+        changed_neurons = []
+        for j, (neuron, servos) in enumerate(self._servo_map):
+            c = neuron.changes[0]
+            if c == seen[j]:
+                continue
+            seen[j] = c
+            changed_neurons.append(neuron)
             models = neuron.servos
-            for i, k, _ in servos:
-                models[i].set_present_position(ticks[k])
             for i, k, _ in servos:
                 servo = models[i]
                 if servo.torque_enable and servo.goal != self._last_goal.get((k, i)):
@@ -304,8 +362,9 @@ class PlantBridge:
                     goal = (servo.goal - center) / self._tick_scale[k]
                     if goal != targets[k]:
                         targets[k] = goal
-                        changed = True
-        if changed:
+                        self._targets_changed = True
+        if self._targets_changed:
+            self._targets_changed = False
             plant.set_servo_targets(targets)
         # The plant's ESCs convert a duty at the voltage they hold when commanded: a new
         # voltage is applied first and re-commands the duties.
@@ -318,11 +377,12 @@ class PlantBridge:
             for sink in self._battery_sinks:
                 sink(volts)
             changed = True
-        for r, neuron in self._rotor_map:
-            d = neuron.esc.duty
-            if d != duties[r]:
-                duties[r] = d
-                changed = True
+        if changed_neurons:
+            for r, neuron in self._rotor_map:
+                d = neuron.esc.duty
+                if d != duties[r]:
+                    duties[r] = d
+                    changed = True
         if changed:
             plant.set_rotor_duties(duties)
         if self._imu_on and self._imu_every():

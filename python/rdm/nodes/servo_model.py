@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Protocol
 
 #: Dynamixel X "Profile Velocity" unit: 0.229 rpm; 4096 ticks per revolution.
 TICKS_PER_S_PER_PROFILE_UNIT = 0.229 * 4096.0 / 60.0
@@ -60,6 +61,15 @@ class ServoConfig:
             raise ValueError(f"ServoConfig: dynamixel_id {self.dynamixel_id} not in 0..252")
 
 
+class PositionFeed(Protocol):
+    """Plant feedback shared by many servos: ``epoch`` changes when the plant moved;
+    ``ticks()`` gives every joint's present position in raw ticks at that epoch."""
+
+    epoch: int
+
+    def ticks(self) -> list[float]: ...
+
+
 def _clip(value: float, low: int, high: int) -> int:
     return int(min(max(round(value), low), high))
 
@@ -75,12 +85,19 @@ class ServoModel:
     """
 
     def __init__(self, config: ServoConfig) -> None:
+        #: Bumped by every goal / torque change (a Neuron shares one counter with its servos
+        #: and ESC so a plant bridge can skip boards whose outputs did not change).
+        self.changes = [0]
+        #: Optional plant feedback: ``(feed, joint_index)``; the position is then read from
+        #: ``feed.ticks()`` (the plant's angle at the feed's present epoch) when first needed.
+        self.feed: tuple[PositionFeed, int] | None = None
+        self._feed_epoch = -1
+        self._position = float(config.initial_position)
         self.config = config
-        self.position = float(config.initial_position)
         self.velocity = 0.0
-        self.goal = config.initial_position
+        self._goal = config.initial_position
         self.goal_current = config.goal_current
-        self.torque_enable = False
+        self._torque_enable = False
         self.send_goal_position = False
         self.temperature = config.temperature
         self.hardware_error = 0
@@ -88,6 +105,45 @@ class ServoModel:
         self.round_offset = 0
         #: When set, the plant drives ``current`` (else it follows the position-error model).
         self.external_current: int | None = None
+
+    # ------------------------------------------------------------------ tracked state
+    @property
+    def position(self) -> float:
+        """Present position (raw ticks, float); from the plant feed when one is attached."""
+        feed = self.feed
+        if feed is not None and feed[0].epoch != self._feed_epoch:
+            self._feed_epoch = feed[0].epoch
+            position = feed[0].ticks()[feed[1]]
+            if not math.isfinite(position):
+                raise ValueError(f"present position {position!r} is not finite")
+            self._position = position
+        return self._position
+
+    @position.setter
+    def position(self, value: float) -> None:
+        self._position = value
+        if self.feed is not None:
+            self._feed_epoch = self.feed[0].epoch  # an explicit value holds until the next
+
+    @property
+    def goal(self) -> int:
+        return self._goal
+
+    @goal.setter
+    def goal(self, value: int) -> None:
+        if value != self._goal:
+            self._goal = value
+            self.changes[0] += 1
+
+    @property
+    def torque_enable(self) -> bool:
+        return self._torque_enable
+
+    @torque_enable.setter
+    def torque_enable(self, value: bool) -> None:
+        if value != self._torque_enable:
+            self._torque_enable = value
+            self.changes[0] += 1
 
     # ------------------------------------------------------------------ commands from CAN
     def set_torque(self, enable: bool) -> None:

@@ -66,6 +66,24 @@ LEVEL_MAG = (30.0, 0.0, -40.0)
 DEFAULT_BATTERY_V = 25.2
 MAX_RATE_HZ = 1000.0
 
+#: (key, period ms, strict) of every periodic publisher, as ``_publish_due`` checks them.
+_PUBLISHERS = (
+    ("imu", IMU_PUB_MS, False),
+    ("battery_voltage_status", BATTERY_PUB_MS, True),
+    ("motor_pwms", MOTOR_PWMS_PUB_MS, True),
+    ("servo/states", SERVO_STATES_PUB_MS, False),
+    ("servo/torque_states", SERVO_TORQUE_PUB_MS, False),
+)
+
+
+def _next_due(last_pub: dict[str, int], key: str, period_ms: int, strict: bool) -> int:
+    """First ms at which ``SpinalMirror._due(key, ...)`` returns True again."""
+    last = last_pub.get(key)
+    if last is None:
+        return -(2**62)
+    return last + period_ms + (1 if strict else 0)
+
+
 _FAILSAFE_TEXT = {
     "failsafe_timeout": "failsafe: cannot connect with ROS",
     "failsafe_tilt": "failsafe: the roll pitch angles are too large",
@@ -80,6 +98,13 @@ _LOG_LEVELS = {
 }
 _IMU_CALIB_GYRO = 2  # spinal/ImuCalib CALIB_GYRO
 _MAG_SET = 1  # spinal/MagDeclination SET
+
+
+def _floats(values: Sequence[float]) -> tuple[float, ...]:
+    """``tuple(float(v) for v in values)``; a float64 array in one ``tolist`` call."""
+    if isinstance(values, np.ndarray) and values.dtype == np.float64:
+        return tuple(values.tolist())
+    return tuple(float(v) for v in values)
 
 
 def rejection_reason(text: str) -> str:
@@ -218,15 +243,17 @@ class SpinalMirror:
         self._can_ms: int | None = None
         self._master_was_running = False
         self._last_pub: dict[str, int] = {}
+        self._next_pub_ms = -(2**62)  # earliest ms a publisher can be due (see _publish)
+        self._duties_to_master: list[float] | None = None
 
     # ---------------------------------------------------------------- inputs from outside
     def set_imu_sample(
         self, gyro: Sequence[float], acc: Sequence[float], mag: Sequence[float]
     ) -> None:
         """The IMU sample the next control steps use: gyro rad/s, acc m/s^2, mag uT (body)."""
-        self.gyro = tuple(float(v) for v in gyro)
-        self.acc = tuple(float(v) for v in acc)
-        self.mag = tuple(float(v) for v in mag)
+        self.gyro = _floats(gyro)
+        self.acc = _floats(acc)
+        self.mag = _floats(mag)
 
     def set_battery_voltage(self, volts: float) -> None:
         """The raw battery reading (V), sampled every 20 ms and low-passed as the firmware does."""
@@ -484,8 +511,13 @@ class SpinalMirror:
                 if not self._master_was_running:
                     self._master_was_running = True
                     self._adopt_can_model()
-                if len(self.duties) == self.master.motor_number:
+                if len(self.duties) == self.master.motor_number and (
+                    self.duties is not self._duties_to_master
+                ):
+                    # Only a new duty list is handed over (the master keeps the last one;
+                    # _step always builds a new list, so the same object = the same values).
                     self.master.set_motor_duties(self.duties)
+                    self._duties_to_master = self.duties
             self.master.tick_ms(t)
         self._can_ms = now_ms
 
@@ -518,6 +550,15 @@ class SpinalMirror:
     def _publish(self, now_ms: int) -> None:
         if not self.session.configured or self.last_output is None:
             return
+        if now_ms < self._next_pub_ms:
+            return  # no publisher due (exact: the earliest time any _due below fires)
+        self._publish_due(now_ms)
+        last = self._last_pub
+        self._next_pub_ms = min(
+            _next_due(last, key, period, strict) for key, period, strict in _PUBLISHERS
+        )
+
+    def _publish_due(self, now_ms: int) -> None:
         out = self.last_output
         stamp = self.session.now(now_ms)
         if self._due("imu", now_ms, IMU_PUB_MS, strict=False):

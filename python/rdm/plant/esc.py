@@ -108,6 +108,11 @@ class Esc:
         """Present (lagged) thrust [N], before the ceiling effect."""
         return self._thrust
 
+    def lag_factor(self, dt: float) -> float:
+        """The fraction of the remaining gap the lag closes in ``dt``: ``1 - exp(-dt/tau)``
+        (the plant caches it per physics step; :meth:`update` uses the same expression)."""
+        return (1.0 - math.exp(-dt / self.params.tau)) if dt > 0 else 0.0
+
     def update(self, dt: float) -> float:
         """Advance the lag by ``dt`` seconds (exact discretisation) and return the thrust."""
         if dt > 0:

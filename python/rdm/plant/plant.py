@@ -6,14 +6,16 @@ effect and the sensor error models. It runs at the physics rate (1 kHz by defaul
 
 Per physics step: kinematics (``mj_step1``), each ESC's lag advances, each rotor's thrust is
 scaled by the ceiling effect at its present distance to the ceiling, then ``mj_step2``
-integrates. After ``step(n)`` a final ``mj_forward`` makes every reading refer to the
-current time.
+integrates. Every reading refers to the current time: the ``mj_forward`` that makes the
+derived quantities (sensors, body poses, actuator forces) current runs lazily, once, before
+the first reading or command after a step (a step that nobody reads costs no forward pass;
+the trajectory is bit-identical to forwarding after every step, see docs/plant.md).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import mujoco
@@ -66,6 +68,8 @@ class Plant:
             :class:`ParametricCeilingEffect` built from each rotor's radius.
         esc: ESC parameters (thrust_max defaults to each rotor's TOML value).
         battery_voltage: battery voltage [V] of the duty -> thrust map.
+        scene: edits the MjSpec before it is compiled, to add world objects (the tasks'
+            boards, panels, valves); must not touch the robot.
     """
 
     def __init__(
@@ -84,6 +88,7 @@ class Plant:
         contact: ContactParams | None = None,
         imu_noise: ImuNoise | None = None,
         wrench_noise: WrenchNoise | None = None,
+        scene: Callable[[mujoco.MjSpec], None] | None = None,
     ) -> None:
         if not (math.isfinite(timestep) and timestep > 0):
             raise ValueError(f"timestep: must be > 0, got {timestep}")
@@ -98,8 +103,18 @@ class Plant:
             contact=contact,
         )
         self.spec = build_spec(desc, self.options)
+        if scene is not None:
+            # extra world objects (task targets, walls), before compiling: every id the plant
+            # uses is looked up by name after this, so shifted geom ids cannot go stale
+            scene(self.spec)
         self.model = self.spec.compile()
-        self.data = mujoco.MjData(self.model)
+        self._data = mujoco.MjData(self.model)
+        #: True after a step until the lazy ``mj_forward`` ran (see :meth:`sync`).
+        self._stale = False
+        self._needs_step1 = True
+        #: Changes with every step / reset / outside access to ``data`` (ground-truth cache).
+        self._state_version = 0
+        self._truth_cache: tuple[int, GroundTruth] | None = None
         m = self.model
         self.seed = seed
         self.joint_names: tuple[str, ...] = desc.joint_order
@@ -140,13 +155,57 @@ class Plant:
             ]
         else:
             self.ceiling_effects = [ceiling_effect for _ in desc.rotors]
+        self._esc_alpha: list[float] = []  # per ESC, 1 - exp(-dt/tau) (set in reset)
+        self._ceiling_z = ceiling_height
         self._imu_noise = imu_noise or ImuNoise()
         self._wrench_noise = wrench_noise or WrenchNoise()
         self.rejected_commands = 0
-        self._thrusts = np.zeros(len(self.rotor_names))
+        self._thrusts_list = [0.0] * len(self.rotor_names)
+        # Cached views on the MjData buffers (stable for the data's lifetime): attribute
+        # access through the bindings costs more than the arithmetic at 1 kHz.
+        d = self._data
+        self._v_site_xmat = d.site_xmat
+        self._v_site_xpos = d.site_xpos
+        self._v_ctrl = d.ctrl
+        self._v_qpos = d.qpos
+        self._rotor_site_list = self._rotor_site.tolist()
+        self._qadr_list = self._qadr.tolist()
+        acts = self._rotor_act.tolist()
+        contiguous = acts == list(range(acts[0], acts[0] + len(acts))) if acts else False
+        self._rotor_act_slice = slice(acts[0], acts[0] + len(acts)) if contiguous else None
         self._external: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._seed_sensors()
         self.reset()
+
+    # ----------------------------------------------------------------- lazy forward
+    @property
+    def data(self) -> mujoco.MjData:
+        """The MuJoCo data, brought up to date (:meth:`sync`) before it is handed out. The
+        caller may change the state through it, so the next step recomputes everything."""
+        if self._stale:
+            self.sync()
+        self._needs_step1 = True
+        self._state_version += 1  # the caller may change the state: no cached truth
+        return self._data
+
+    def _fresh(self) -> mujoco.MjData:
+        """The data after :meth:`sync`, for the plant's own reads and ctrl/xfrc writes."""
+        if self._stale:
+            self.sync()
+        return self._data
+
+    def sync(self) -> None:
+        """Make every derived quantity refer to the present state: held external wrenches
+        re-aimed at the bodies' new poses, then one ``mj_forward``. Runs by itself before a
+        reading or a command; calling it again before the next step does nothing."""
+        self._stale = False
+        self._needs_step1 = False  # this forward covers the next step's mj_step1 stages
+        m, d = self.model, self._data
+        if self._external:
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            self._apply_external()
+        mujoco.mj_forward(m, d)
 
     # ----------------------------------------------------------------- set-up and reset
     def _seed_sensors(self) -> None:
@@ -168,7 +227,10 @@ class Plant:
         """Restart at rest: joints at ``q0`` (joint_order, servo targets too), foot frame at
         ``base_position``/``base_quaternion`` (ignored with ``fixed_base``), rotors already
         spinning at ``thrusts`` (default stopped). Sensor generators are re-seeded."""
-        m, d = self.model, self.data
+        m, d = self.model, self._data
+        self._stale = False
+        self._needs_step1 = True
+        self._state_version += 1
         mujoco.mj_resetData(m, d)
         q = (
             np.zeros(len(self.joint_names))
@@ -191,6 +253,7 @@ class Plant:
         )
         for esc, value in zip(self.escs, t, strict=True):
             esc.reset(float(value))
+        self._esc_alpha = [esc.lag_factor(m.opt.timestep) for esc in self.escs]
         self._tracker.reset()
         self._external.clear()
         self._seed_sensors()
@@ -219,7 +282,9 @@ class Plant:
         q = _vector(q, len(self.joint_names), "q")
         ok = np.isfinite(q)
         self.rejected_commands += int(np.count_nonzero(~ok))
-        self.data.ctrl[self._servo_act[ok]] = q[ok]
+        # Sync first: readings taken after this command still see the forward
+        # pass of the previous ctrl, as when the forward ran right after the step.
+        self._fresh().ctrl[self._servo_act[ok]] = q[ok]
 
     def apply_body_wrench(
         self,
@@ -235,17 +300,17 @@ class Plant:
         bid = self.model.body(body).id
         f = _vector(force, 3, "force")
         t = _vector(torque, 3, "torque")
-        rot = self.data.xmat[bid].reshape(3, 3)
-        origin = self.data.xpos[bid]
+        rot = self._fresh().xmat[bid].reshape(3, 3)
+        origin = self._fresh().xpos[bid]
         at = origin if point is None else _vector(point, 3, "point")
         self._external[bid] = (f, t, rot.T @ (at - origin))
         if not (f.any() or t.any()):
             del self._external[bid]
-            self.data.xfrc_applied[bid] = 0.0
+            self._fresh().xfrc_applied[bid] = 0.0
         self._apply_external()
 
     def _apply_external(self) -> None:
-        d = self.data
+        d = self._data  # called inside step and sync: never the syncing property
         for bid, (f, t, local) in self._external.items():
             at = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ local
             # xfrc_applied acts at the body's centre of mass: carry the force's moment over.
@@ -254,50 +319,85 @@ class Plant:
 
     # -------------------------------------------------------------------------- physics
     def _rotor_distances(self) -> np.ndarray:
-        h = self.options.ceiling_height
+        h = self._ceiling_z
         dist = np.full(len(self.rotor_names), np.inf)
         if h is None:
             return dist
+        d = self._fresh()
         for i, sid in enumerate(self._rotor_site):
-            axis_z = self.data.site_xmat[sid][8]  # z component of the site z axis
+            axis_z = d.site_xmat[sid][8]  # z component of the site z axis
             if axis_z > 1e-6:
-                dist[i] = max(h - self.data.site_xpos[sid][2], 0.0) / axis_z
+                dist[i] = max(h - d.site_xpos[sid][2], 0.0) / axis_z
         return dist
 
     def _apply_rotor_thrusts(self) -> None:
-        dist = self._rotor_distances()
-        for i, (esc, effect) in enumerate(zip(self.escs, self.ceiling_effects, strict=True)):
-            self._thrusts[i] = esc.thrust * effect.thrust_ratio(float(dist[i]))
-        self.data.ctrl[self._rotor_act] = self._thrusts
+        """Ceiling-scaled ESC thrusts into the rotor actuators (kinematics must be current).
+
+        Plain floats in one pass (this runs at the physics rate); the arithmetic is the same
+        as :meth:`_rotor_distances` and :meth:`Esc.thrust` give.
+        """
+        h = self._ceiling_z
+        thrusts = self._thrusts_list
+        effects = self.ceiling_effects
+        if h is None:
+            for i, esc in enumerate(self.escs):
+                thrusts[i] = esc._thrust * effects[i].thrust_ratio(math.inf)
+        else:
+            axis_z = self._v_site_xmat[:, 8].tolist()
+            z = self._v_site_xpos[:, 2].tolist()
+            for i, (esc, sid) in enumerate(zip(self.escs, self._rotor_site_list, strict=True)):
+                az = axis_z[sid]
+                dist = max(h - z[sid], 0.0) / az if az > 1e-6 else math.inf
+                thrusts[i] = esc._thrust * effects[i].thrust_ratio(dist)
+        if self._rotor_act_slice is not None:
+            self._v_ctrl[self._rotor_act_slice] = thrusts
+        else:
+            self._v_ctrl[self._rotor_act] = thrusts
+
+    @property
+    def _thrusts(self) -> np.ndarray:
+        return np.array(self._thrusts_list, dtype=float)
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` physics steps."""
-        m, d = self.model, self.data
-        dt = m.opt.timestep
+        """Advance ``n`` physics steps (readings then refer to the new time)."""
+        m, d = self.model, self._data
+        escs = self.escs
+        alphas = self._esc_alpha
+        tracker = self._tracker
+        step1, step2 = mujoco.mj_step1, mujoco.mj_step2
         for _ in range(int(n)):
-            mujoco.mj_step1(m, d)
-            for esc in self.escs:
-                esc.update(dt)
+            if self._stale or self._needs_step1:
+                step1(m, d)
+            # else: a forward pass (sync) already ran on this very state: mj_step1's position
+            # and velocity stages would recompute the same numbers (they do not depend on
+            # ctrl or xfrc_applied), so only mj_step2 runs (bit-identical; docs/plant.md).
+            self._needs_step1 = True
+            # First-order ESC lag, exact discretisation (Esc.update with a cached factor).
+            for esc, alpha in zip(escs, alphas, strict=True):
+                esc._thrust += alpha * (esc._target - esc._thrust)
             self._apply_rotor_thrusts()
             if self._external:
                 self._apply_external()
-            mujoco.mj_step2(m, d)
-            self._tracker.update(d)  # contacts of this step's start: keep the slip anchor
-        if self._external:  # re-aim held forces at the bodies' new poses before reading
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_comPos(m, d)
-            self._apply_external()
-        mujoco.mj_forward(m, d)
+            step2(m, d)
+            tracker.update(d)  # contacts of this step's start: keep the slip anchor
+        self._stale = True  # the forward pass runs when something reads (see sync)
+        self._needs_step1 = True
+        self._state_version += 1
 
     @property
     def time(self) -> float:
         """Simulated time [s]."""
-        return float(self.data.time)
+        return self._data.time
 
     # -------------------------------------------------------------------------- sensors
     def _sensor(self, name: str, size: int = 3) -> np.ndarray:
         adr = self._sensor_adr[name]
-        return self.data.sensordata[adr : adr + size].copy()
+        return self._fresh().sensordata[adr : adr + size].copy()
+
+    def joint_positions_list(self) -> list[float]:
+        """Present joint positions (joint_order) as floats (no forward pass needed)."""
+        q = self._v_qpos.tolist()
+        return [q[i] for i in self._qadr_list]
 
     def imu(self) -> ImuReading:
         """One noisy IMU sample in the IMU frame (root link, at the processor)."""
@@ -325,15 +425,15 @@ class Plant:
 
     def servo_positions(self) -> np.ndarray:
         """Present joint positions (joint_order) [rad]."""
-        return self.data.qpos[self._qadr].copy()
+        return self._data.qpos[self._qadr]  # fancy indexing copies; qpos is current
 
     def servo_velocities(self) -> np.ndarray:
         """Present joint velocities (joint_order) [rad/s]."""
-        return self.data.qvel[self._vadr].copy()
+        return self._data.qvel[self._vadr]
 
     def servo_torques(self) -> np.ndarray:
         """Servo output torques (joint_order) [N m], limited to the stall torques."""
-        return self.data.actuator_force[self._servo_act].copy()
+        return self._fresh().actuator_force[self._servo_act].copy()
 
     def servo_currents(self) -> np.ndarray:
         """Servo currents (joint_order) [A] from a linear torque constant (ASSUMPTION)."""
@@ -341,7 +441,7 @@ class Plant:
 
     def rotor_thrusts(self) -> np.ndarray:
         """Thrusts applied in the last step, ceiling effect included [N]."""
-        return self._thrusts.copy()
+        return self._thrusts
 
     def rotor_distances_to_ceiling(self) -> np.ndarray:
         """Distance of each rotor to the ceiling along its axis [m] (inf: none ahead)."""
@@ -349,8 +449,18 @@ class Plant:
 
     # ---------------------------------------------------------------------- ground truth
     def ground_truth(self) -> GroundTruth:
-        """The true state now (see :class:`GroundTruth`)."""
-        d = self.data
+        """The true state now (see :class:`GroundTruth`). Asked twice for the same state
+        (e.g. a logger and a mocap node in one tick), it returns the same object: treat
+        its arrays as read-only."""
+        cached = self._truth_cache
+        if cached is not None and cached[0] == self._state_version:
+            return cached[1]
+        truth = self._ground_truth()
+        self._truth_cache = (self._state_version, truth)
+        return truth
+
+    def _ground_truth(self) -> GroundTruth:
+        d = self._fresh()
         points, force, torque, zmp, slip, yaw = self._tracker.measure(d)
         fb = self._foot_body
         if self.options.fixed_base:

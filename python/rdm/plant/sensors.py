@@ -70,20 +70,43 @@ class ImuModel:
         self.mag_bias = bias(noise.mag_bias, noise.mag_bias_std)
 
     def sample(self, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray) -> ImuReading:
-        """Corrupt one ideal sample (the generator advances by nine normals)."""
+        """Corrupt one ideal sample (the generator advances by nine normals).
+
+        Scalar float arithmetic (nine values: cheaper than numpy's per-call overhead), the
+        same IEEE operations in the same order as the array form, so the same numbers."""
         n = self.noise
-        w = self._rng.normal(0.0, 1.0, 9)
-        g = gyro + self.gyro_bias + n.gyro_std * w[0:3]
-        a = accel + self.accel_bias + n.accel_std * w[3:6]
-        m = mag + self.mag_bias + n.mag_std * w[6:9]
-        saturated = bool(np.any(np.abs(g) > GYRO_RANGE) or np.any(np.abs(a) > ACCEL_RANGE))
-        g = np.clip(g, -GYRO_RANGE, GYRO_RANGE)
-        a = np.clip(a, -ACCEL_RANGE, ACCEL_RANGE)
+        w = self._rng.normal(0.0, 1.0, 9).tolist()
+        gb, ab, mb = self._bias_lists
+        g = [x + b + n.gyro_std * e for x, b, e in zip(gyro.tolist(), gb, w[0:3], strict=True)]
+        a = [x + b + n.accel_std * e for x, b, e in zip(accel.tolist(), ab, w[3:6], strict=True)]
+        m = [x + b + n.mag_std * e for x, b, e in zip(mag.tolist(), mb, w[6:9], strict=True)]
+        saturated = any(abs(v) > GYRO_RANGE for v in g) or any(abs(v) > ACCEL_RANGE for v in a)
+        g = [_clip(v, GYRO_RANGE) for v in g]
+        a = [_clip(v, ACCEL_RANGE) for v in a]
         if n.quantize:
-            g = np.round(g / GYRO_LSB) * GYRO_LSB
-            a = np.round(a / ACCEL_LSB) * ACCEL_LSB
-            m = np.round(m / MAG_LSB) * MAG_LSB
-        return ImuReading(g, a, m, saturated)
+            g = [_quantize(v, GYRO_LSB) for v in g]
+            a = [_quantize(v, ACCEL_LSB) for v in a]
+            m = [_quantize(v, MAG_LSB) for v in m]
+        return ImuReading(np.array(g), np.array(a), np.array(m), saturated)
+
+    @property
+    def _bias_lists(self) -> tuple[list[float], list[float], list[float]]:
+        return self.gyro_bias.tolist(), self.accel_bias.tolist(), self.mag_bias.tolist()
+
+
+def _clip(v: float, limit: float) -> float:
+    """``np.clip(v, -limit, limit)`` for one float (NaN passes through)."""
+    return min(max(v, -limit), limit)
+
+
+def _quantize(v: float, lsb: float) -> float:
+    """``np.round(v / lsb) * lsb`` for one float, signed zeros and non-finite values included."""
+    if not math.isfinite(v):
+        return v
+    r = float(round(v / lsb))
+    if r == 0.0:
+        r = math.copysign(0.0, v)  # np.round keeps the sign of a value that rounds to zero
+    return r * lsb
 
 
 @dataclass(frozen=True)
@@ -120,15 +143,26 @@ class WrenchSensorModel:
         self.spec = spec
         self.noise = noise
         self.rated = np.array([*spec.force_range, *spec.torque_range], dtype=float)
+        self._rated_list = self.rated.tolist()
         self._rng = rng
 
     def sample(self, force: np.ndarray, torque: np.ndarray) -> WrenchReading:
-        """Corrupt one ideal sample (the generator advances by six normals)."""
-        w = np.concatenate([force, torque]) + np.asarray(self.noise.bias, dtype=float)
-        w = w + self.noise.noise_fraction_of_rated * self.rated * self._rng.normal(0.0, 1.0, 6)
-        saturated = np.abs(w) >= self.rated
-        w = np.clip(w, -self.rated, self.rated)
-        if self.noise.quantize:
-            lsb = self.rated / LEPTRINO_FULL_SCALE_COUNTS
-            w = np.round(w / lsb) * lsb
-        return WrenchReading(w[:3].copy(), w[3:].copy(), saturated)
+        """Corrupt one ideal sample (the generator advances by six normals); scalar floats,
+        the same operations in the same order as the array form."""
+        noise = self.noise
+        e = self._rng.normal(0.0, 1.0, 6).tolist()
+        frac = noise.noise_fraction_of_rated
+        w = [
+            x + b + frac * r * n
+            for x, b, r, n in zip(
+                force.tolist() + torque.tolist(), noise.bias, self._rated_list, e, strict=True
+            )
+        ]
+        saturated = np.array([abs(v) >= r for v, r in zip(w, self._rated_list, strict=True)])
+        w = [_clip(v, r) for v, r in zip(w, self._rated_list, strict=True)]
+        if noise.quantize:
+            w = [
+                _quantize(v, r / LEPTRINO_FULL_SCALE_COUNTS)
+                for v, r in zip(w, self._rated_list, strict=True)
+            ]
+        return WrenchReading(np.array(w[:3]), np.array(w[3:]), saturated)

@@ -72,13 +72,15 @@ class FootContactTracker:
         self._anchor_pos: np.ndarray | None = None
         self._anchor_rot: np.ndarray | None = None
         self._buf = np.zeros(6)
+        self._plate_geoms = frozenset(np.flatnonzero(model.geom_bodyid == plate_body).tolist())
 
     def update(self, data: mujoco.MjData) -> None:
         """Per-step bookkeeping of the first-contact anchor (cheap: no contact forces)."""
         in_contact = False
         if data.ncon:
-            bodies = self._model.geom_bodyid[data.contact.geom]  # (ncon, 2)
-            in_contact = bool(np.any(bodies == self._plate_body))
+            in_contact = not self._plate_geoms.isdisjoint(data.contact.geom.ravel().tolist())
+        elif self._anchor_pos is None and self._last_contact_time == -math.inf:
+            return  # no contact and nothing to release: _track would change nothing
         self._track(data, in_contact)
 
     def _track(self, data: mujoco.MjData, in_contact: bool) -> None:

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 DLE, STX, ETX = 0x10, 0x02, 0x03
+DLE_BYTE = bytes([DLE])
 #: Leptrino's receiver drops frames whose unstuffed payload exceeds this.
 MAX_PAYLOAD = 255
 HEADER_LEN = 4
@@ -120,7 +121,25 @@ class LeptrinoStreamParser:
     def feed(self, data: bytes | bytearray) -> list[StreamEvent]:
         """Consume bytes; return the frames (and framing errors) completed by them."""
         events: list[StreamEvent] = []
-        for ch in bytes(data):
+        data = bytes(data)
+        n = len(data)
+        i = 0
+        while i < n:
+            if self._state is _State.DATA:
+                # Fast path: copy the plain bytes up to the next DLE in one slice (the same
+                # result as appending them one at a time; an over-long payload still fails
+                # at the byte that does not fit, through the per-byte path below).
+                end = data.find(DLE_BYTE, i)
+                if end < 0:
+                    end = n
+                take = min(end - i, MAX_PAYLOAD - len(self._buf))
+                if take > 0:
+                    self._buf += data[i : i + take]
+                    self._pos += take
+                    i += take
+                    continue
+            ch = data[i]
+            i += 1
             pos = self._pos
             self._pos += 1
             st = self._state

@@ -4,9 +4,13 @@ ground-truth arrays and the metrics/plots/summary writer."""
 from __future__ import annotations
 
 import math
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -22,9 +26,40 @@ def sim_onboard_config(**overrides: Any) -> OnboardConfig:
     return OnboardConfig(**overrides)
 
 
+_PROGRESS: ContextVar[Callable[[Any, float], None] | None] = ContextVar(
+    "rdm_sim_progress", default=None
+)
+
+
+@contextmanager
+def progress_to(stream: TextIO, duration: float) -> Iterator[None]:
+    """Every stack built inside the block reports once per simulated second on ``stream``:
+    simulated time, the onboard state, perching on/off and the speed so far."""
+    start = time.perf_counter()
+
+    def report(stack: Any, now: float) -> None:
+        wall = max(time.perf_counter() - start, 1e-9)
+        ob = stack.onboard
+        perch = "perched" if ob.control.perching else "flight"
+        stream.write(
+            f"\r  {now:6.1f} / {duration:g} s simulated  {ob.state.value:<8} {perch:<7} "
+            f"{now / wall:5.2f}x real time"
+        )
+        stream.flush()
+
+    token = _PROGRESS.set(report)
+    try:
+        yield
+    finally:
+        _PROGRESS.reset(token)
+        stream.write("\n")
+        stream.flush()
+
+
 def sim_stack_options(seed: int, uart: str, **overrides: Any) -> StackOptions:
-    """Stack options of the scenarios (assumptions in docs/sim.md and :class:`StackOptions`)."""
-    kw: dict[str, Any] = {"seed": seed, "uart": uart}
+    """Stack options of the scenarios (assumptions in docs/sim.md and :class:`StackOptions`).
+    Inside :func:`progress_to` the stack reports its progress."""
+    kw: dict[str, Any] = {"seed": seed, "uart": uart, "progress": _PROGRESS.get()}
     kw.update(overrides)
     if "onboard" not in kw:
         kw["onboard"] = sim_onboard_config()

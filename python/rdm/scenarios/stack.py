@@ -30,7 +30,7 @@ from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
 from rdm.nodes.lockstep import Lockstep
 from rdm.nodes.neuron_mirror import NeuronMirror
 from rdm.nodes.onboard import OnboardNode
-from rdm.nodes.onboard_config import OnboardConfig, ServoMap
+from rdm.nodes.onboard_config import OnboardConfig
 from rdm.nodes.plant_bridge import BusLayout, PlantBridge, default_layout
 from rdm.nodes.spinal_mirror import SpinalMirror
 from rdm.plant import EscParams, Plant, ServoParams
@@ -75,13 +75,6 @@ class DroppableLink:
         self.link.close()
 
 
-def servo_map_for(layout: BusLayout, joint_order: tuple[str, ...]) -> ServoMap:
-    """The onboard node's joint -> servo index map for a bus layout: Spinal numbers servos by
-    their position in the CAN master's table (Neurons by slave id, then servo index)."""
-    table = [j for nl in sorted(layout.neurons, key=lambda n: n.slave) for j in nl.joints]
-    return ServoMap(servo_index=tuple(table.index(j) for j in joint_order))
-
-
 def quaternion_yaw(q_wxyz: np.ndarray) -> float:
     """ZYX yaw of a (w, x, y, z) quaternion."""
     w, x, y, z = (float(v) for v in q_wxyz)
@@ -110,54 +103,15 @@ class MocapNode:
             self.onboard.set_mocap(p, v, quaternion_yaw(gt.base_quaternion))
 
 
-class TorqueOnNode:
-    """The PC's servo torque-on (JSK servo_bridge does it at start-up): ``servo/torque_enable``
-    for every servo index, over the onboard node's rosserial session, re-sent every
-    ``period`` until every Neuron servo reports torque on. The onboard node itself sends no
-    torque command (its targets alone would never move a servo: Spinal's
-    ``servo/target_states`` does not switch torque on)."""
-
-    name = "torque_on"
-
-    def __init__(
-        self, onboard: OnboardNode, neurons: list[NeuronMirror], n_servos: int, period: float = 0.5
-    ) -> None:
-        from rdm.protocol.rosserial import spinal_registry
-
-        self.onboard = onboard
-        self.neurons = neurons
-        self.period = period
-        self.msg = (
-            spinal_registry()
-            .msg("spinal/ServoTorqueCmd")
-            .new(index=list(range(n_servos)), torque_enable=[1] * n_servos)
-        )
-        self.sent = 0
-        self.done = False
-
-    def tick(self, now: float) -> None:
-        if self.done:
-            return
-        if all(sv.torque_enable for n in self.neurons for sv in n.servos):
-            self.done = True
-            return
-        if self.onboard.state.value == "idle" and "rx:servo/states" not in self.onboard.counts:
-            return  # Spinal's servo table is not up yet
-        try:
-            self.onboard.session.publish("servo/torque_enable", self.msg)
-            self.sent += 1
-        except Exception:
-            pass
-
-
 class ScriptNode:
     """Runs a scenario's script ``f(now)`` (targets, perch requests, pushes) at its period."""
 
-    name = "script"
-
-    def __init__(self, fn: Callable[[float], None], period: float = 0.01) -> None:
+    def __init__(
+        self, fn: Callable[[float], None], period: float = 0.01, name: str = "script"
+    ) -> None:
         self.fn = fn
         self.period = period
+        self.name = name
 
     def tick(self, now: float) -> None:
         self.fn(now)
@@ -192,6 +146,10 @@ class StackOptions:
     esc_tau: float | None = 0.01
     #: Battery voltage [V] (a full 6S pack, the Hydrus PwmInfo reference: 20 N at max duty).
     battery_voltage: float = 25.2
+    #: Adds world objects to the MuJoCo spec before it compiles (``Plant(scene=...)``).
+    scene: Callable[[Any], None] | None = None
+    #: Called as ``progress(stack, now)`` once per simulated second (``rdm sim``'s display).
+    progress: Callable[[Any, float], None] | None = None
     #: Joint servo model. ASSUMPTION: a stiff position servo (kp 150 N m/rad, kv 5 N m s/rad,
     #: about 1 deg of error at 2.6 N m, torque limited to the stall torque) as a Dynamixel X
     #: holds its goal; the plant's softer default (kp 30) lets q2 sag 0.35 rad at take-off.
@@ -249,6 +207,7 @@ def build_stack(
         floor_height=opt.floor_height,
         servo=opt.servo,
         esc=None if opt.esc_tau is None else EscParams(tau=opt.esc_tau),
+        scene=opt.scene,
     )
     q0 = np.zeros(len(plant.joint_names)) if opt.q0 is None else np.asarray(opt.q0, float)
     plant.reset(q0=q0, base_position=opt.base_position)
@@ -286,7 +245,6 @@ def build_stack(
     config = opt.onboard or OnboardConfig()
     from dataclasses import replace
 
-    config = replace(config, servo_map=servo_map_for(layout, plant.joint_names))
     if config.initial_q is None:
         config = replace(config, initial_q=tuple(q0.tolist()))
     onboard = OnboardNode(onboard_link, f_host, config=config)
@@ -314,8 +272,7 @@ def build_stack(
     )
     mocap = MocapNode(plant, onboard, opt.mocap_period)
     status_log: list = []
-    torque = TorqueOnNode(onboard, neurons, len(plant.joint_names))
-    nodes: list = [bridge, *neurons, spinal, mocap, onboard, torque, sensor]
+    nodes: list = [bridge, *neurons, spinal, mocap, onboard, sensor]
     stack = Stack(
         plant,
         layout,
@@ -337,6 +294,9 @@ def build_stack(
     if script is not None:
         nodes.append(ScriptNode(lambda t: script(stack, t), script_period))
     nodes.append(StatusNode(stack))
+    if opt.progress is not None:
+        report = opt.progress
+        nodes.append(ScriptNode(lambda t: report(stack, t), 1.0, name="progress"))
     stack.loop = Lockstep(
         nodes, physics=plant, can_channels=[channel], barriers=barriers, speed=opt.speed
     )

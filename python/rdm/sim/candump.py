@@ -14,6 +14,9 @@ import can
 
 from rdm.link import inproc_can
 
+#: Frames buffered before one write to the file.
+BATCH_LINES = 512
+
 
 class CandumpCapture:
     """Write every frame of ``channel`` (an ``inproc:`` channel name, or None) to ``path``."""
@@ -24,14 +27,44 @@ class CandumpCapture:
         self.path = path
         self._writer = can.CanutilsLogWriter(path, channel=channel or "can0")
         self.frames = 0
+        self._lines: list[str] = []
         self._channel = channel
         if channel is not None:
             inproc_can.add_tap(channel, self.on_message_received)
 
     def on_message_received(self, msg: can.Message) -> None:
-        """Append one frame."""
-        self._writer.on_message_received(msg)
+        """Append one frame (the line python-can's ``CanutilsLogWriter`` writes)."""
+        w = self._writer
+        stamp = msg.timestamp
+        channel = msg.channel
+        # (python-can's writer keeps the FIRST frame's timestamp as its floor.)
+        if (
+            w.last_timestamp is not None
+            and stamp is not None
+            and stamp >= w.last_timestamp
+            and isinstance(channel, str)
+            and not channel.isdigit()
+            and not (msg.is_error_frame or msg.is_extended_id or msg.is_remote_frame or msg.is_fd)
+        ):
+            # The common frame (classic, standard id, in time order): the writer's own
+            # format, without its per-frame branching (same bytes; checked in the tests).
+            lines = self._lines
+            lines.append(
+                f"({stamp:f}) {channel} {msg.arbitration_id:03X}#{msg.data.hex().upper()}"
+                + (" R\n" if msg.is_rx else " T\n")
+            )
+            if len(lines) >= BATCH_LINES:
+                self.flush()
+        else:
+            self.flush()
+            w.on_message_received(msg)
         self.frames += 1
+
+    def flush(self) -> None:
+        """Write the lines batched so far (one write call instead of one per frame)."""
+        if self._lines:
+            self._writer.file.write("".join(self._lines))
+            self._lines.clear()
 
     def close(self) -> None:
         """Detach from the channel and close the file (idempotent)."""
@@ -39,4 +72,5 @@ class CandumpCapture:
             inproc_can.remove_tap(self._channel, self.on_message_received)
             self._channel = None
         if not self._writer.file.closed:
+            self.flush()
             self._writer.stop()

@@ -52,6 +52,16 @@ def ros1_definition(registry: TypeRegistry, full_name: str) -> str:
 
 def _jsonable(value: Any) -> Any:
     if isinstance(value, np.ndarray):
+        kind = value.dtype.kind
+        # Fast paths, same result as the element-wise walk: finite floats, ints and bools
+        # come out of tolist() as the Python values the walk would return.
+        if kind in "iub":
+            return value.tolist()
+        if kind == "f" and value.ndim == 1:
+            values = value.tolist()
+            if all(map(math.isfinite, values)):
+                return values
+            return [v if math.isfinite(v) else None for v in values]
         return [_jsonable(v) for v in value.tolist()]
     if isinstance(value, (list, tuple)):
         return [_jsonable(v) for v in value]

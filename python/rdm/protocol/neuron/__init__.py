@@ -44,6 +44,12 @@ from .initializer import (
     initial_config_reply,
     initialization_sequence,
 )
+from .memo import (
+    decode_frame_cached,
+    encode_pwm_cached,
+    encode_servo_state_cached,
+    encode_servo_words_cached,
+)
 from .pwm import PwmFrame, duty_to_pwm_value, pack_pwm, pwm_for_slave
 from .servo import ServoState, ServoTargetAngles, ServoTargetCurrents
 
@@ -95,8 +101,12 @@ __all__ = [
     "decode_candidates",
     "decode_candump",
     "decode_frame",
+    "decode_frame_cached",
     "duty_to_pwm_value",
     "encode_frame",
+    "encode_pwm_cached",
+    "encode_servo_state_cached",
+    "encode_servo_words_cached",
     "initial_config_reply",
     "initialization_sequence",
     "make_id",

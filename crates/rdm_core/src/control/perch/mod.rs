@@ -2,21 +2,26 @@
 //!
 //! - [`params`]: Table VII parameters and the ones the paper leaves out.
 //! - [`filter`]: the 1 Hz first-order IIR low-pass on the measured foot wrench.
-//! - [`qp`]: the QP of eq. (49) on one Clarabel solver built once (fixed sparsity).
+//! - [`qp`]: the QP of eq. (49): row builder, solver choice, safe command.
+//! - [`reduced`]: eq. (38) eliminated, the cost made `½‖y‖²` (4 thrust variables).
+//! - [`active_set`]: the dense dual active-set solver (default, allocation-free).
+//! - Clarabel (one solver built once, fixed sparsity) as the alternative and the fallback.
 //! - [`status`]: typed outcome of a tick and the failure counters.
 //! - [`controller`]: filter + QP + the state carried from tick to tick.
 //!
 //! The exact formulation (decision vector, cost, every constraint row with its equation
 //! number) is written out in `docs/perch.md` and next to the row builder in [`qp`].
 
+pub mod active_set;
 pub mod controller;
 pub mod filter;
 pub mod params;
 pub mod qp;
+pub mod reduced;
 pub mod status;
 
 pub use controller::PerchController;
 pub use filter::WrenchFilter;
-pub use params::{ParamError, PerchParams};
+pub use params::{ParamError, PerchParams, PerchSolver};
 pub use qp::{PerchInput, PerchQp, PerchSolution, N_ROWS, N_VARS, N_ZERO_ROWS};
 pub use status::{PerchCounters, PerchStatus};

@@ -2,6 +2,37 @@
 
 use crate::N_ROTORS;
 
+/// Which solver answers the perching QP of eq. (49).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum PerchSolver {
+    /// Dense dual active-set solver on the reduced problem (eq. 38 eliminated), warm-started
+    /// from the previous tick's active set; Clarabel answers when it hits its iteration cap
+    /// or is numerically unsure (counted as a fallback).
+    #[default]
+    ActiveSet,
+    /// Clarabel's interior-point method on the full problem, every tick.
+    Clarabel,
+}
+
+impl PerchSolver {
+    /// Stable snake_case name (`"active_set"`, `"clarabel"`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PerchSolver::ActiveSet => "active_set",
+            PerchSolver::Clarabel => "clarabel",
+        }
+    }
+
+    /// Parse [`Self::as_str`]'s names.
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "active_set" => Some(PerchSolver::ActiveSet),
+            "clarabel" => Some(PerchSolver::Clarabel),
+            _ => None,
+        }
+    }
+}
+
 /// Parameters of eqs. (37)-(49) and of the solver.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PerchParams {
@@ -37,6 +68,10 @@ pub struct PerchParams {
     pub feedback_gain: f64,
     /// Gravity `g` of eq. (47) [m/s²].
     pub gravity: f64,
+    /// Solver of eq. (49) (default: the active-set solver with Clarabel as fallback).
+    pub solver: PerchSolver,
+    /// Add/drop passes allowed to the active-set solver before Clarabel takes over.
+    pub active_set_max_iter: u32,
     /// Clarabel iteration cap (a tick that needs more is a `MaxIterations` failure).
     pub max_iter: u32,
     /// Clarabel gap and feasibility tolerance (scaled problem).
@@ -60,6 +95,8 @@ impl Default for PerchParams {
             rotor_thrust_max: [30.0; N_ROTORS],
             feedback_gain: 1.0,
             gravity: 9.80665,
+            solver: PerchSolver::ActiveSet,
+            active_set_max_iter: 50,
             max_iter: 50,
             tolerance: 1e-8,
         }
@@ -142,6 +179,12 @@ impl PerchParams {
         if self.max_iter == 0 || self.max_iter > 500 {
             return Err(ParamError {
                 field: "max_iter",
+                reason: "must be in 1..=500",
+            });
+        }
+        if self.active_set_max_iter == 0 || self.active_set_max_iter > 500 {
+            return Err(ParamError {
+                field: "active_set_max_iter",
                 reason: "must be in 1..=500",
             });
         }

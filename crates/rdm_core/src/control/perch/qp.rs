@@ -1,4 +1,11 @@
-//! The perching QP of eq. (49) on one Clarabel solver with a fixed sparsity pattern.
+//! The perching QP of eq. (49): the row builder shared by both solvers, the solver choice
+//! ([`PerchSolver`]), and the safe command of a failed tick.
+//!
+//! Default path: [`super::reduced`] eliminates eq. (38) and [`super::active_set`] solves the
+//! 4-variable problem (dense, fixed-size, warm-started). Clarabel (one solver built at setup
+//! with a fixed sparsity pattern, updated in place) is the alternative
+//! (`PerchSolver::Clarabel`) and the fallback when the active-set solver reaches its
+//! iteration cap or is numerically unsure.
 //!
 //! # Formulation (see `docs/perch.md` for the derivation)
 //!
@@ -40,7 +47,9 @@ use clarabel::solver::{
 };
 use nalgebra::{Matrix4, Vector4};
 
-use super::params::{ParamError, PerchParams};
+use super::active_set::{ActiveSetOutcome, DualActiveSet};
+use super::params::{ParamError, PerchParams, PerchSolver};
+use super::reduced::{self, REDUCED_ROWS};
 use super::status::{PerchCounters, PerchStatus};
 use crate::N_ROTORS;
 
@@ -104,16 +113,21 @@ pub struct PerchSolution {
     pub thrust_min: [f64; N_ROTORS],
     /// `λ_max` used this tick (eq. 47 or the flight-thrust form; last valid one on failure).
     pub thrust_max: [f64; N_ROTORS],
-    /// Clarabel iterations (0 when the solver did not run).
+    /// Iterations of the solver that answered: active-set add/drop passes, or Clarabel's
+    /// interior-point iterations on a fallback or with `PerchSolver::Clarabel` (0 when no
+    /// solver ran).
     pub iterations: u32,
+    /// True when the active-set solver handed this tick over to Clarabel.
+    pub fallback: bool,
 }
 
-/// One Clarabel solver for eq. (49), built once; each [`PerchQp::solve`] rewrites `A` and `b`
-/// in place and re-solves. Allocation-free after [`PerchQp::new`].
+/// Eq. (49) with its two solvers, built once; each [`PerchQp::solve`] rewrites `A` and `b`
+/// in place and solves. Allocation-free after [`PerchQp::new`] on the active-set path.
 pub struct PerchQp {
     params: PerchParams,
     scale: f64,
     solver: DefaultSolver<f64>,
+    active_set: DualActiveSet<REDUCED_ROWS>,
     p_colptr: Vec<usize>,
     p_rowval: Vec<usize>,
     p_nzval: Vec<f64>,
@@ -232,6 +246,7 @@ impl PerchQp {
             params,
             scale,
             solver,
+            active_set: DualActiveSet::new(),
             p_colptr,
             p_rowval,
             p_nzval,
@@ -268,6 +283,9 @@ impl PerchQp {
     pub fn solve(&mut self, input: &PerchInput) -> PerchSolution {
         let solution = self.solve_inner(input);
         self.counters.record(solution.status);
+        if solution.fallback {
+            self.counters.record_fallback();
+        }
         self.last_thrust = solution.thrust;
         self.last_thrust_max = solution.thrust_max;
         self.last_foot_wrench = solution.foot_wrench;
@@ -307,6 +325,71 @@ impl PerchQp {
         }
 
         self.fill_rows(input, &perch_allocation, &thrust_max);
+        if self.params.solver == PerchSolver::ActiveSet {
+            if let Some(solution) = self.solve_active_set(input, &thrust_max) {
+                return solution;
+            }
+            let mut solution = self.solve_clarabel(input, thrust_max);
+            solution.fallback = true;
+            return solution;
+        }
+        self.solve_clarabel(input, thrust_max)
+    }
+
+    /// The default path; `None` hands the tick to Clarabel (iteration cap, unsure).
+    fn solve_active_set(
+        &mut self,
+        input: &PerchInput,
+        thrust_max: &[f64; N_ROTORS],
+    ) -> Option<PerchSolution> {
+        let mut cost = [0.0; N_ROTORS];
+        for (c, p) in cost.iter_mut().zip(self.p_nzval.iter()) {
+            *c = *p;
+        }
+        let elimination = reduced::load(&mut self.active_set, &self.dense_a, &self.b, &cost)?;
+        let (outcome, iterations) = self.active_set.solve(self.params.active_set_max_iter);
+        match outcome {
+            ActiveSetOutcome::Optimal => {
+                let x = elimination.thrust(&self.active_set.solution());
+                let w = elimination.foot_wrench(&x);
+                let thrust = x.map(|v| v * self.scale);
+                let foot_wrench = w.map(|v| v * self.scale);
+                if thrust
+                    .iter()
+                    .chain(foot_wrench.iter())
+                    .any(|v| !v.is_finite())
+                {
+                    self.active_set.forget_warm_start();
+                    return None;
+                }
+                let thrust = clip_to_box(
+                    &thrust,
+                    &input.previous_thrust,
+                    thrust_max,
+                    &self.params.thrust_rate_limit,
+                );
+                Some(self.solution(
+                    PerchStatus::Solved,
+                    thrust,
+                    foot_wrench,
+                    *thrust_max,
+                    input,
+                    iterations,
+                ))
+            }
+            ActiveSetOutcome::Infeasible => Some(self.failure(
+                PerchStatus::Infeasible,
+                &input.previous_thrust,
+                Some(*thrust_max),
+                input,
+                iterations,
+            )),
+            ActiveSetOutcome::IterationLimit | ActiveSetOutcome::Unsure => None,
+        }
+    }
+
+    /// Clarabel on the full problem (rows already written by `fill_rows`).
+    fn solve_clarabel(&mut self, input: &PerchInput, thrust_max: [f64; N_ROTORS]) -> PerchSolution {
         if self.solver.update_A(&self.a_nzval).is_err() || self.solver.update_b(&self.b).is_err() {
             return self.failure(
                 PerchStatus::NumericalError,
@@ -517,6 +600,7 @@ impl PerchQp {
             thrust_min: [0.0; N_ROTORS],
             thrust_max,
             iterations,
+            fallback: false,
         }
     }
 
@@ -549,7 +633,8 @@ impl PerchQp {
         (&self.p_colptr, &self.p_rowval, &self.p_nzval)
     }
 
-    /// `A` of the scaled problem as CSC `(colptr, rowval, nzval)`, as last sent to Clarabel.
+    /// `A` of the scaled problem as CSC `(colptr, rowval, nzval)`, as built for the last
+    /// solved tick (the active-set solver reduces exactly these rows; Clarabel gets them).
     pub fn a_csc(&self) -> (&[usize], &[usize], &[f64]) {
         (&self.a_colptr, &self.a_rowval, &self.a_nzval)
     }
@@ -559,7 +644,7 @@ impl PerchQp {
         &self.q
     }
 
-    /// `b` of the scaled problem, as last sent to Clarabel.
+    /// `b` of the scaled problem, as built for the last solved tick (see [`Self::a_csc`]).
     pub fn b(&self) -> &[f64] {
         &self.b
     }

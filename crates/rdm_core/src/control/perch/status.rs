@@ -6,14 +6,17 @@
 /// means the thrust is the documented safe command (see `PerchQp::safe_thrust`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum PerchStatus {
-    /// Clarabel converged to the requested tolerances.
+    /// The active-set solver's KKT check passed, or Clarabel converged to the requested
+    /// tolerances.
     Solved,
     /// Clarabel converged to its reduced tolerances; the thrust is used after clipping to
     /// the bounds of eqs. (45) and (48).
     AlmostSolved,
-    /// The constraints of eq. (49) have no common point (Clarabel's infeasibility certificate).
+    /// The constraints of eq. (49) have no common point (the active-set solver's Farkas
+    /// certificate, or Clarabel's infeasibility certificate).
     Infeasible,
-    /// The iteration cap (`PerchParams::max_iter`) was reached.
+    /// Clarabel's iteration cap (`PerchParams::max_iter`) was reached (the active-set
+    /// solver's cap hands over to Clarabel instead).
     MaxIterations,
     /// Clarabel stopped on a numerical error or lack of progress, or returned a non-finite point.
     NumericalError,
@@ -70,6 +73,7 @@ impl PerchStatus {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PerchCounters {
     counts: [u64; 7],
+    fallbacks: u64,
 }
 
 impl PerchCounters {
@@ -77,6 +81,17 @@ impl PerchCounters {
     pub fn record(&mut self, status: PerchStatus) {
         let slot = &mut self.counts[status.index()];
         *slot = slot.saturating_add(1);
+    }
+
+    /// Count one tick on which the active-set solver handed over to Clarabel.
+    pub fn record_fallback(&mut self) {
+        self.fallbacks = self.fallbacks.saturating_add(1);
+    }
+
+    /// Ticks on which the active-set solver handed over to Clarabel (iteration cap or
+    /// numerically unsure); their status is Clarabel's.
+    pub fn fallbacks(&self) -> u64 {
+        self.fallbacks
     }
 
     /// Ticks that ended in `status`.
