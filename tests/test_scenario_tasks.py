@@ -43,12 +43,12 @@ def test_drilling_touches_every_target_and_keeps_the_perch(drilling):
 
 
 def test_drilling_presses_with_a_real_force(drilling):
-    m = {x.name: x.value for x in drilling.metrics}
+    m = {x.name: x.ours for x in drilling.metrics}
     assert m["mean drilling force (contact, truth)"] > 1.0
 
 
 def test_valve_turns_and_the_wrist_sensor_sees_the_moment(valve):
-    m = {x.name: x.value for x in valve.metrics}
+    m = {x.name: x.ours for x in valve.metrics}
     assert m["valve angle turned"] > 30.0  # degrees of the hinge (truth)
     # the stem's dry friction alone is 0.15 N m: the EE must apply at least that
     assert m["peak |M_x| at the EE sensor while turning (truth)"] > 0.1

@@ -1,13 +1,10 @@
 """Simulated objects of the perching manipulation tasks (paper Sec. VII-D, Fig. 14) and the
 tools on the end effector, added to a built :class:`rdm.plant.Plant`'s MuJoCo scene.
 
-The plant has no hook to edit its ``MjSpec`` before it compiles, so :func:`add_task_objects`
-edits ``plant.spec`` after construction, recompiles in place and swaps ``model``/``data``
-(and the foot-contact tracker, which holds the model). Everything added comes *after* the
-robot in MuJoCo's id order (new world bodies after the robot tree, new geoms on the massless
-``end_effector`` body, a valve hinge after every robot joint, no new actuators or sensors),
-so every id and address the plant and its nodes cached stays valid; the function checks this
-and raises otherwise. Call it before the first ``plant.step`` (it resets the plant).
+:func:`scene` returns the ``StackOptions.scene`` / ``Plant(scene=...)`` callable that adds
+tools and objects to the ``MjSpec`` before it compiles (the plant looks every id up by name
+afterwards). The objects' contacts start off and :func:`enable_objects` switches them on when
+the task starts (see :func:`enable_objects` for why).
 
 Tools (ASSUMPTION: the paper swaps tools between experiments; here all three are mounted
 coaxially along the end-effector x axis and collision bits make each touch only its own
@@ -30,9 +27,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from rdm.plant import Plant
-from rdm.plant.mjcf import CEILING_GEOM, FLOOR_GEOM, ROBOT_GROUP
-from rdm.plant.truth import FootContactTracker
+from rdm.plant.mjcf import ROBOT_GROUP
 
 #: Collision bits: robot links keep ROBOT_GROUP (1) and touch every object; each tool
 #: touches only the object with its bit.
@@ -72,7 +67,7 @@ class TaskLayout:
     board_x: tuple[float, float] = (0.26, 0.46)  # relative to the foot x
     board_half_y: float = 0.15
     panel_top_z: float = 0.60  # m, world: the painted panel (horizontal, facing up)
-    panel_x: tuple[float, float] = (0.02, 0.72)  # relative to the foot x
+    panel_x: tuple[float, float] = (-0.08, 0.62)  # relative to the foot x
     panel_half_y: float = 0.15
     valve_x: float = 0.19  # relative to the foot x
     valve_handle_z: float = 0.48  # m, world, handle bar centre
@@ -94,11 +89,15 @@ class TaskLayout:
         return np.array([fx + self.valve_x, fy, self.valve_handle_z])
 
 
+#: conaffinity each object geom gets from enable_objects (robot links + its tool's bit)
+_AFFINITY: dict[str, int] = {}
+
+
 def _object_geom(body: mujoco.MjsBody, bits: int, friction: float, solref, **kw) -> None:
     g = body.add_geom(**kw)
     g.contype = 0
     g.conaffinity = 0  # off until enable_objects(): the robot flies up through this space
-    g.userdata = [float(ROBOT_GROUP | bits)]
+    _AFFINITY[g.name] = ROBOT_GROUP | bits
     g.condim = 3
     g.priority = 2  # the object's friction and stiffness win over the robot geoms'
     g.friction = [friction, 0.005, 1e-4]
@@ -224,59 +223,28 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
 
 
 def enable_objects(model: mujoco.MjModel) -> int:
-    """Switch the task objects' contacts on (they are off while the robot climbs to the
-    ceiling through the space the objects occupy: ASSUMPTION, the objects are brought under
-    the perched robot). Returns how many geoms were enabled."""
+    """Switch the task objects' contacts on. Returns how many geoms were enabled.
+
+    ASSUMPTION (the objects are brought under the perched robot): the robot takes off from
+    the floor with the arm straight along x (x ~ 0..1 m, y ~ 0) and hangs from the ceiling
+    with the tool reaching only that same x-z band below the foot (q3 stays 0 for the
+    levelled vectoring units), so every place the tool can reach was crossed by the arm on
+    the way up; objects there would be hit during the climb."""
     n = 0
     for i in range(model.ngeom):
         name = model.geom(i).name
-        if name.startswith("task_"):
-            model.geom_conaffinity[i] = int(model.geom_user[i][0]) if model.nuser_geom else 0
+        if name in _AFFINITY:
+            model.geom_conaffinity[i] = _AFFINITY[name]
             n += 1
     return n
 
 
-def _ids(model: mujoco.MjModel) -> dict[str, list]:
-    return {
-        "body": [model.body(i).name for i in range(model.nbody)],
-        "jnt": [model.joint(i).name for i in range(model.njnt)],
-        "act": [model.actuator(i).name for i in range(model.nu)],
-        "sensor": [model.sensor(i).name for i in range(model.nsensor)],
-        "site": [model.site(i).name for i in range(model.nsite)],
-    }
+def scene(tasks: tuple[str, ...], layout: TaskLayout | None = None, ee: str = "end_effector"):
+    """The ``scene`` callable (``StackOptions.scene``) that adds the tools of ``tasks`` to body
+    ``ee`` and their objects to the world."""
+    lay = layout or TaskLayout()
 
+    def edit(spec: mujoco.MjSpec) -> None:
+        edit_spec(spec, lay, tasks, ee)
 
-def add_task_objects(
-    plant: Plant,
-    tasks: tuple[str, ...],
-    layout: TaskLayout | None = None,
-    q0=None,
-    base_position=(0.0, 0.0, 0.12),
-) -> TaskLayout:
-    """Add tools and objects to ``plant`` in place and reset it at ``q0``/``base_position``
-    (what :func:`rdm.scenarios.stack.build_stack` did). Raises RuntimeError if an id the
-    plant cached would move."""
-    layout = layout or TaskLayout()
-    before = _ids(plant.model)
-    edit_spec(plant.spec, layout, tasks, plant.description.end_effector_frame)
-    model = plant.spec.compile()
-    after = _ids(model)
-    for key, names in before.items():
-        if after[key][: len(names)] != names:
-            raise RuntimeError(f"add_task_objects: {key} ids moved; the plant needs a spec hook")
-    geoms_env = (CEILING_GEOM, FLOOR_GEOM)
-    for g in geoms_env:
-        if mujoco.mj_name2id(plant.model, mujoco.mjtObj.mjOBJ_GEOM, g) != mujoco.mj_name2id(
-            model, mujoco.mjtObj.mjOBJ_GEOM, g
-        ):
-            raise RuntimeError("add_task_objects: environment geom ids moved")
-    plant.model = model
-    plant.data = mujoco.MjData(model)
-    env = {
-        model.geom(g).id
-        for g in geoms_env
-        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) >= 0
-    }
-    plant._tracker = FootContactTracker(model, plant._plate_body, env)
-    plant.reset(q0=q0, base_position=base_position)
-    return layout
+    return edit

@@ -47,7 +47,7 @@ PRESS_DEPTH = 0.012  # m the tool is commanded behind the surface (-> contact fo
 HOVER = 0.03  # m above a target before and after pressing
 MOVE_S, PRESS_S, RETRACT_S = 2.0, 2.0, 1.0
 #: Painting: panel height, stroke start (dx) and length along +x. ASSUMPTION (see module doc).
-STROKE_START = 0.10
+STROKE_START = 0.0
 STROKE = 0.50
 STROKE_S = 8.0
 #: Valve: joint configuration whose gripper centre defines the valve axis (end link
@@ -58,6 +58,10 @@ TURN_S = 5.0
 #: IK seed of the drilling targets: middle link leaning forward, end link down (keeps the
 #: arm rotors off the vertical through the foot: pitch authority, docs/planner.md rho).
 IK_SEED_DRILL = (math.pi / 2, -0.7, 0.0, 0.7, 0.0, 0.0)
+#: IK seed of the painting stroke: the same elbow-forward branch (q2 < 0, q4 > 0). The other
+#: branch (q2 > 0) passes the middle link through the vertical under the foot, where rho of
+#: eq. (65) drops to ~1e-4; on this one it stays 2-3e-3 over the whole 0.5 m (IK sweep).
+IK_SEED_PAINT = (math.pi / 2, -0.7, 0.0, 1.45, 0.0, 0.0)
 START_AFTER = 0.5  # s after the perching script's hold begins
 
 
@@ -117,6 +121,7 @@ class TaskScript(perching.PerchingScript):
         base = np.r_[gt.base_position, task_ik.rpy_of_quaternion(gt.base_quaternion)]
         robot = stack.onboard.robot
         q = task_ik.level(np.r_[perching.PERCH_POSTURE, np.zeros(robot.n_q - 6)])
+        q_now = q.copy()  # where the joints are (the perching posture): the path starts here
         way: list[tuple[float, np.ndarray, bool]] = []  # (duration, q, linear)
         lay = self.layout
         t = now
@@ -146,6 +151,7 @@ class TaskScript(perching.PerchingScript):
             tip = obj.BRUSH_AT + obj.BRUSH_RADIUS
             start = np.array([fx + STROKE_START, fy, lay.panel_top_z])
             self.targets = [start, start + np.array([STROKE, 0.0, 0.0])]
+            q = task_ik.level(np.r_[IK_SEED_PAINT, np.zeros(robot.n_q - 6)])
             t += go(start + np.array([0.0, 0.0, HOVER]), tip, 2 * MOVE_S)
             t += go(start - [0.0, 0.0, PRESS_DEPTH], tip, PRESS_S)
             n = 20
@@ -166,7 +172,7 @@ class TaskScript(perching.PerchingScript):
                 t += go(axis, obj.GRIPPER_AT, TURN_S / n, q6=VALVE_TURN * k / n, linear=True)
             self.windows.append((t0, t, "turn"))
             t += go(axis, obj.GRIPPER_AT, 1.0, q6=VALVE_TURN)
-        points = _trajectory(now, q, way, stack.onboard.robot.n_q)
+        points = _trajectory(now, q_now, way, stack.onboard.robot.n_q)
         stack.onboard.set_trajectory(points)
         self.q_plan = points
         self.t_task = now
@@ -259,11 +265,11 @@ def run_task(
             position_gains=dict(perching.POSITION_GAINS),
             perch_params=dict(perching.PERCH_PARAMS),
         )
-    opts = sim_stack_options(seed, uart, speed=speed, log=log, **stack_overrides)
     layout = _valve_layout(Robot.default()) if task == "valve" else obj.TaskLayout()
+    stack_overrides.setdefault("scene", obj.scene((task,), layout))
+    opts = sim_stack_options(seed, uart, speed=speed, log=log, **stack_overrides)
     script = TaskScript(task, layout)
     stack = build_stack(task, base, opts, script)
-    obj.add_task_objects(stack.plant, (task,), layout, opts.q0, opts.base_position)
     t0 = time.perf_counter()
     try:
         stack.loop.run(duration)
