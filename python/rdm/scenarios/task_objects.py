@@ -64,7 +64,7 @@ class TaskLayout:
 
     nominal_foot: tuple[float, float, float] = (0.523, 0.020, 1.600)
     board_top_z: float = 0.50  # m, world
-    board_x: tuple[float, float] = (0.26, 0.46)  # relative to the foot x
+    board_x: tuple[float, float] = (0.16, 0.40)  # relative to the foot x
     board_half_y: float = 0.15
     panel_top_z: float = 0.60  # m, world: the painted panel (horizontal, facing up)
     panel_x: tuple[float, float] = (-0.08, 0.62)  # relative to the foot x
@@ -206,7 +206,7 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
             name="task_valve_wheel",
             type=cyl,
             size=[0.07, 0.004, 0],
-            pos=[0.0, 0.0, -0.02],
+            pos=[0.0, 0.0, -0.035],  # below the finger tips (they reach -0.025)
             rgba=[0.6, 0.1, 0.1, 1.0],
         )
         stem = spec.worldbody.add_body(name="task_valve_stem")
@@ -235,6 +235,10 @@ def enable_objects(model: mujoco.MjModel) -> int:
         name = model.geom(i).name
         if name in _AFFINITY:
             model.geom_conaffinity[i] = _AFFINITY[name]
+            # MuJoCo's broad phase filters body pairs first with the per-body OR of the
+            # geoms' bits, computed at compile time (0 here): update it too
+            body = model.geom_bodyid[i]
+            model.body_conaffinity[body] |= _AFFINITY[name]
             n += 1
     return n
 

@@ -43,11 +43,14 @@ TASKS = ("drilling", "painting", "valve")
 EE_SENSOR = "end_effector_wrench"
 #: Hole targets (dx, dy) relative to the nominal foot, on the board top. ASSUMPTION.
 DRILL_TARGETS: tuple[tuple[float, float], ...] = ((0.24, 0.0), (0.30, 0.05), (0.27, -0.05))
-PRESS_DEPTH = 0.012  # m the tool is commanded behind the surface (-> contact force)
+#: m the tool is commanded behind the surface (the stiff servos turn it into the contact
+#: force). 12 mm gave 35 N (drill) / 17 N (brush), which rocked the perch (slip 2-5 mm) and
+#: stalled the brush; 4 mm is ours.
+PRESS_DEPTH = 0.004
 HOVER = 0.03  # m above a target before and after pressing
 MOVE_S, PRESS_S, RETRACT_S = 2.0, 2.0, 1.0
 #: Painting: panel height, stroke start (dx) and length along +x. ASSUMPTION (see module doc).
-STROKE_START = 0.0
+STROKE_START = 0.05  # q4 reaches its +pi/2 limit below dx ~ 0.03
 STROKE = 0.50
 STROKE_S = 8.0
 #: Valve: joint configuration whose gripper centre defines the valve axis (end link
@@ -105,6 +108,12 @@ class TaskScript(perching.PerchingScript):
         self.ik_errors: list[float] = []
         self.targets: list[np.ndarray] = []
         self._geoms: tuple[set[int], set[int]] | None = None
+        #: when the objects' contacts switch on: once the tool is at its first hover pose
+        #: (see task_objects.enable_objects); ticks where a robot link (not the tool)
+        #: touched an object afterwards
+        self.t_enable: float | None = None
+        self.enabled = False
+        self.link_hit_ticks = 0
 
     def __call__(self, stack: Stack, now: float) -> None:
         super().__call__(stack, now)
@@ -112,11 +121,13 @@ class TaskScript(perching.PerchingScript):
         if self.phase == "hold" and self.t_task is None and ready:
             self._start(stack, now)
         if self.t_task is not None:
+            if not self.enabled and self.t_enable is not None and now >= self.t_enable:
+                obj.enable_objects(stack.plant.model)
+                self.enabled = True
             self._record(stack, now)
 
     # ------------------------------------------------------------------ planning
     def _start(self, stack: Stack, now: float) -> None:
-        obj.enable_objects(stack.plant.model)
         gt = stack.plant.ground_truth()  # the foot pose as mocap gives it
         base = np.r_[gt.base_position, task_ik.rpy_of_quaternion(gt.base_quaternion)]
         robot = stack.onboard.robot
@@ -126,9 +137,10 @@ class TaskScript(perching.PerchingScript):
         lay = self.layout
         t = now
 
-        def go(target, tool_x, duration, q6=0.0, linear=False, q_from=None):
+        def go(target, tool_x, duration, q6=0.0, linear=False, q_from=None, axis=None):
             nonlocal q
-            res = task_ik.solve(robot, base, q if q_from is None else q_from, target, tool_x)
+            start = q if q_from is None else q_from
+            res = task_ik.solve(robot, base, start, target, tool_x, axis=axis)
             q = res.q.copy()
             q[5] = q6
             self.ik_errors.append(res.position_error)
@@ -164,19 +176,24 @@ class TaskScript(perching.PerchingScript):
         else:
             axis = lay.valve_axis
             self.targets = [axis]
-            t += go(axis + np.array([0.0, 0.0, 0.06]), obj.GRIPPER_AT, MOVE_S)
-            t += go(axis, obj.GRIPPER_AT, MOVE_S)
+            down = np.array([0.0, 0.0, -1.0])  # tool axis along the valve's hinge
+            t += go(axis + np.array([0.0, 0.0, 0.06]), obj.GRIPPER_AT, MOVE_S, axis=down)
+            t += go(axis, obj.GRIPPER_AT, MOVE_S, axis=down)
             t0 = t
             n = 10
             for k in range(1, n + 1):
-                t += go(axis, obj.GRIPPER_AT, TURN_S / n, q6=VALVE_TURN * k / n, linear=True)
+                t += go(
+                    axis, obj.GRIPPER_AT, TURN_S / n, VALVE_TURN * k / n, linear=True, axis=down
+                )
             self.windows.append((t0, t, "turn"))
-            t += go(axis, obj.GRIPPER_AT, 1.0, q6=VALVE_TURN)
+            t += go(axis, obj.GRIPPER_AT, 1.0, q6=VALVE_TURN, axis=down)
         points = _trajectory(now, q_now, way, stack.onboard.robot.n_q)
         stack.onboard.set_trajectory(points)
         self.q_plan = points
         self.t_task = now
         self.t_task_end = t
+        # first waypoint (hover above the first target) reached + 0.5 s settling
+        self.t_enable = now + way[0][0] + 0.5
 
     # --------------------------------------------------------------- recording
     def _tool_object_geoms(self, model: mujoco.MjModel) -> tuple[set[int], set[int]]:
@@ -192,6 +209,16 @@ class TaskScript(perching.PerchingScript):
         }[self.task]
         return {model.geom(g).id for g in tools}, {model.geom(g).id for g in objects}
 
+    @staticmethod
+    def _is_link_hit(m: mujoco.MjModel, g1: int, g2: int, tools: set[int]) -> bool:
+        """A robot geom other than the tool touching a task object."""
+        names = (m.geom(g1).name, m.geom(g2).name)
+        is_obj = [n.startswith("task_") for n in names]
+        if is_obj[0] == is_obj[1]:
+            return False
+        other = g2 if is_obj[0] else g1
+        return other not in tools and m.body_rootid[m.geom_bodyid[other]] != 0
+
     def _record(self, stack: Stack, now: float) -> None:
         plant = stack.plant
         m, d = plant.model, plant.data
@@ -200,6 +227,7 @@ class TaskScript(perching.PerchingScript):
         tools, objects = self._geoms
         buf = np.zeros(6)
         fsum, psum = 0.0, np.zeros(3)
+        hit = False
         for i in range(d.ncon):
             c = d.contact[i]
             if (c.geom1 in tools and c.geom2 in objects) or (
@@ -208,6 +236,9 @@ class TaskScript(perching.PerchingScript):
                 mujoco.mj_contactForce(m, d, i, buf)
                 fsum += abs(buf[0])
                 psum += abs(buf[0]) * c.pos
+            elif self._is_link_hit(m, c.geom1, c.geom2, tools):
+                hit = True
+        self.link_hit_ticks += hit
         lg = self.log
         lg.t.append(now)
         lg.contact_force.append(fsum)
@@ -381,6 +412,17 @@ def evaluate(stack: Stack, script: TaskScript) -> ScenarioResult:
         "t_task_end": script.t_task_end,
         "final_phase": script.phase,
     }
+    metrics.append(
+        Metric(
+            "ticks with a robot link (not the tool) touching an object",
+            float(script.link_hit_ticks),
+            None,
+            "",
+            "max",
+            limit=0.0,
+        )
+    )
+    facts["t_enable"] = script.t_enable
     win = np.zeros(len(ta["t"]), bool)
     for t0, t1, _ in script.windows:
         win |= (ta["t"] >= t0) & (ta["t"] <= t1)
