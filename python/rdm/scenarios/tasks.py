@@ -44,13 +44,14 @@ EE_SENSOR = "end_effector_wrench"
 #: Hole targets (dx, dy) relative to the nominal foot, on the board top. ASSUMPTION.
 DRILL_TARGETS: tuple[tuple[float, float], ...] = ((0.24, 0.0), (0.30, 0.05), (0.27, -0.05))
 #: m the tool is commanded behind the surface (the stiff servos turn it into the contact
-#: force). 12 mm gave 35 N (drill) / 17 N (brush), which rocked the perch (slip 2-5 mm) and
-#: stalled the brush; 4 mm is ours.
-PRESS_DEPTH = 0.004
+#: force: ~7.5 N per mm measured on the drill). 12 mm gave 35 N (drill) / 17 N (brush),
+#: 4 mm 30 N; that rocked the perch (slip 0.2-5 mm, brief contact loss) and stalled the
+#: brush. 1 mm is ours.
+PRESS_DEPTH = 0.001
 HOVER = 0.03  # m above a target before and after pressing
 MOVE_S, PRESS_S, RETRACT_S = 2.0, 2.0, 1.0
 #: Painting: panel height, stroke start (dx) and length along +x. ASSUMPTION (see module doc).
-STROKE_START = 0.05  # q4 reaches its +pi/2 limit below dx ~ 0.03
+STROKE_START = 0.08  # the hover pose above dx < 0.08 needs q4 past its +pi/2 limit
 STROKE = 0.50
 STROKE_S = 8.0
 #: Valve: joint configuration whose gripper centre defines the valve axis (end link
@@ -177,6 +178,7 @@ class TaskScript(perching.PerchingScript):
             axis = lay.valve_axis
             self.targets = [axis]
             down = np.array([0.0, 0.0, -1.0])  # tool axis along the valve's hinge
+            q = task_ik.level(np.r_[VALVE_Q, np.zeros(robot.n_q - 6)])  # IK seed
             t += go(axis + np.array([0.0, 0.0, 0.06]), obj.GRIPPER_AT, MOVE_S, axis=down)
             t += go(axis, obj.GRIPPER_AT, MOVE_S, axis=down)
             t0 = t
