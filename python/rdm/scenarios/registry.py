@@ -37,17 +37,5 @@ SCENARIOS: dict[str, Scenario] = {
         tasks.duration_of("drilling"),
         "perch, then drill (point contact) at three targets on a board (Fig. 14 A)",
     ),
-    "painting": Scenario(
-        "painting",
-        tasks.run_painting,
-        tasks.duration_of("painting"),
-        "perch, then slide a brush 0.5 m along a panel keeping contact (Fig. 14 B)",
-    ),
-    "valve": Scenario(
-        "valve",
-        tasks.run_valve,
-        tasks.duration_of("valve"),
-        "perch, then turn a hinged valve handle with the wrist (Fig. 14 C)",
-    ),
 }
 DEFAULT_SCENARIO = "perching"

@@ -18,6 +18,10 @@ noisy) and its noise-free value.
   travelled while in contact, contact force (paper: over 0.5 m, on a wall);
 * valve: the gripper straddles the handle bar of a hinged hand-wheel and turns it with q6;
   valve angle reached and the moment about the tool axis at the end-effector sensor.
+
+Status: drilling meets its metrics (registered, tested); painting and valve run but fail
+theirs (brush stalls after ~0.17 m; valve IK with the axis constraint does not converge,
+24 deg turned) and are not registered (docs/scenarios.md ``## tasks``).
 """
 
 from __future__ import annotations
@@ -321,8 +325,8 @@ def _runner(task: str):
 
 
 run_drilling = _runner("drilling")
-run_painting = _runner("painting")
-run_valve = _runner("valve")
+# painting and valve run through run_task() but do not meet their metrics yet (not
+# registered as scenarios; docs/scenarios.md ``## tasks``)
 
 
 # -------------------------------------------------------------------- evaluation
