@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from . import flight, hover, perching, push
+from . import flight, hover, perching, push, tasks
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,12 @@ SCENARIOS: dict[str, Scenario] = {
         push.run,
         push.DEFAULT_DURATION,
         "end-effector pushed and pulled in x, y, z in flight and perched (Figs. 11-12)",
+    ),
+    "drilling": Scenario(
+        "drilling",
+        tasks.run_drilling,
+        tasks.duration_of("drilling"),
+        "perch, then drill (point contact) at three targets on a board (Fig. 14 A)",
     ),
 }
 DEFAULT_SCENARIO = "perching"

@@ -1,0 +1,254 @@
+"""Simulated objects of the perching manipulation tasks (paper Sec. VII-D, Fig. 14) and the
+tools on the end effector, added to a built :class:`rdm.plant.Plant`'s MuJoCo scene.
+
+:func:`scene` returns the ``StackOptions.scene`` / ``Plant(scene=...)`` callable that adds
+tools and objects to the ``MjSpec`` before it compiles (the plant looks every id up by name
+afterwards). The objects' contacts start off and :func:`enable_objects` switches them on when
+the task starts (see :func:`enable_objects` for why).
+
+Tools (ASSUMPTION: the paper swaps tools between experiments; here all three are mounted
+coaxially along the end-effector x axis and collision bits make each touch only its own
+object, so one perch can run every task):
+
+* drill bit: capsule 0..``DRILL_LEN`` m, radius 5 mm (point contact at its tip);
+* brush: a sphere of radius ``BRUSH_RADIUS`` centred ``BRUSH_AT`` m out (sliding contact);
+* gripper: two finger capsules at y = +-``FINGER_Y`` that straddle the valve's handle bar.
+
+Objects (positions relative to the nominal perch spot of the foot, see :class:`TaskLayout`):
+a horizontal wood board below the arm (drilling), a horizontal panel (painting; the paper
+paints a wall, see docs/scenarios.md for why the hanging arm cannot), and a
+valve: a hand-wheel on a vertical hinge with damping and dry friction (opening resistance).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from rdm.plant.mjcf import ROBOT_GROUP
+
+#: Collision bits: robot links keep ROBOT_GROUP (1) and touch every object; each tool
+#: touches only the object with its bit.
+DRILL_BIT, BRUSH_BIT, GRIPPER_BIT = 2, 4, 8
+DRILL_LEN = 0.10  # m, bit length from the tool flange
+DRILL_RADIUS = 0.005
+BRUSH_AT = 0.08  # m
+BRUSH_RADIUS = 0.02
+FINGER_Y = 0.02  # m, finger axis offset from the tool axis
+FINGER_RADIUS = 0.005
+FINGER_SPAN = (0.04, 0.09)  # m along the tool axis
+GRIPPER_AT = 0.07  # m: where the handle bar sits between the fingers (tool axis)
+
+BOARD = "task_board"
+PANEL = "task_panel"
+VALVE = "task_valve"
+VALVE_JOINT = "task_valve_hinge"
+DRILL_GEOM = "tool_drill"
+BRUSH_GEOM = "tool_brush"
+FINGER_GEOMS = ("tool_finger_l", "tool_finger_r")
+HANDLE_GEOM = "task_valve_handle"
+
+
+@dataclass(frozen=True)
+class TaskLayout:
+    """Where the objects are, relative to the nominal foot position on the ceiling.
+
+    ASSUMPTIONS (the paper shows photos only): ``nominal_foot`` is where the perching
+    scenario's foot lands (seed 0); the board, panel and valve are placed inside
+    the hanging arm's reach in the x-z plane of the arm. Stiffness/friction: wood-like stiff
+    contacts (2 ms time constant), board/valve friction 0.6, painted panel 0.3 (a wet brush
+    slides), valve damping 0.3 N m s/rad and dry friction 0.15 N m.
+    """
+
+    nominal_foot: tuple[float, float, float] = (0.523, 0.020, 1.600)
+    board_top_z: float = 0.50  # m, world
+    board_x: tuple[float, float] = (0.16, 0.40)  # relative to the foot x
+    board_half_y: float = 0.15
+    panel_top_z: float = 0.60  # m, world: the painted panel (horizontal, facing up)
+    panel_x: tuple[float, float] = (-0.08, 0.62)  # relative to the foot x
+    panel_half_y: float = 0.15
+    valve_x: float = 0.19  # relative to the foot x
+    valve_handle_z: float = 0.48  # m, world, handle bar centre
+    valve_damping: float = 0.3  # N m s/rad
+    valve_friction: float = 0.15  # N m (dry friction of the stem)
+    board_friction: float = 0.6
+    panel_friction: float = 0.3
+    contact_solref: tuple[float, float] = (0.002, 1.0)
+
+    def board_point(self, dx: float, dy: float) -> np.ndarray:
+        """World point on the board's top face at (foot x + dx, foot y + dy)."""
+        fx, fy, _ = self.nominal_foot
+        return np.array([fx + dx, fy + dy, self.board_top_z])
+
+    @property
+    def valve_axis(self) -> np.ndarray:
+        """World point of the valve hinge axis at the handle bar's height (axis = +z)."""
+        fx, fy, _ = self.nominal_foot
+        return np.array([fx + self.valve_x, fy, self.valve_handle_z])
+
+
+#: conaffinity each object geom gets from enable_objects (robot links + its tool's bit)
+_AFFINITY: dict[str, int] = {}
+
+
+def _object_geom(body: mujoco.MjsBody, bits: int, friction: float, solref, **kw) -> None:
+    g = body.add_geom(**kw)
+    g.contype = 0
+    g.conaffinity = 0  # off until enable_objects(): the robot flies up through this space
+    _AFFINITY[g.name] = ROBOT_GROUP | bits
+    g.condim = 3
+    g.priority = 2  # the object's friction and stiffness win over the robot geoms'
+    g.friction = [friction, 0.005, 1e-4]
+    g.solref = list(solref)
+    g.density = 0.0
+
+
+def _tool_geom(body: mujoco.MjsBody, bit: int, **kw) -> None:
+    g = body.add_geom(**kw)
+    g.contype = bit
+    g.conaffinity = 0
+    g.condim = 3
+    g.density = 0.0
+    g.rgba = [0.8, 0.5, 0.1, 1.0]
+
+
+def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], ee: str) -> None:
+    """Add the tools to body ``ee`` and the objects of ``tasks`` to the world of ``spec``."""
+    tool = spec.body(ee)
+    cap = mujoco.mjtGeom.mjGEOM_CAPSULE
+    box = mujoco.mjtGeom.mjGEOM_BOX
+    cyl = mujoco.mjtGeom.mjGEOM_CYLINDER
+    if "drilling" in tasks:
+        _tool_geom(
+            tool,
+            DRILL_BIT,
+            name=DRILL_GEOM,
+            type=cap,
+            fromto=[0.0, 0.0, 0.0, DRILL_LEN - DRILL_RADIUS, 0.0, 0.0],
+            size=[DRILL_RADIUS, 0, 0],
+        )
+    if "painting" in tasks:
+        _tool_geom(
+            tool,
+            BRUSH_BIT,
+            name=BRUSH_GEOM,
+            type=mujoco.mjtGeom.mjGEOM_SPHERE,
+            pos=[BRUSH_AT, 0.0, 0.0],
+            size=[BRUSH_RADIUS, 0, 0],
+        )
+    if "valve" in tasks:
+        for name, y in zip(FINGER_GEOMS, (FINGER_Y, -FINGER_Y), strict=True):
+            _tool_geom(
+                tool,
+                GRIPPER_BIT,
+                name=name,
+                type=cap,
+                fromto=[FINGER_SPAN[0], y, 0.0, FINGER_SPAN[1], y, 0.0],
+                size=[FINGER_RADIUS, 0, 0],
+            )
+    fx, fy, _ = layout.nominal_foot
+    sr = layout.contact_solref
+    if "drilling" in tasks:
+        x0, x1 = layout.board_x
+        board = spec.worldbody.add_body(name=BOARD)
+        _object_geom(
+            board,
+            DRILL_BIT,
+            layout.board_friction,
+            sr,
+            name=BOARD,
+            type=box,
+            size=[(x1 - x0) / 2, layout.board_half_y, 0.01],
+            pos=[fx + (x0 + x1) / 2, fy, layout.board_top_z - 0.01],
+            rgba=[0.7, 0.55, 0.35, 1.0],
+        )
+    if "painting" in tasks:
+        x0, x1 = layout.panel_x
+        panel = spec.worldbody.add_body(name=PANEL)
+        _object_geom(
+            panel,
+            BRUSH_BIT,
+            layout.panel_friction,
+            sr,
+            name=PANEL,
+            type=box,
+            size=[(x1 - x0) / 2, layout.panel_half_y, 0.01],
+            pos=[fx + (x0 + x1) / 2, fy, layout.panel_top_z - 0.01],
+            rgba=[0.9, 0.9, 0.85, 0.6],
+        )
+    if "valve" in tasks:
+        axis = layout.valve_axis
+        valve = spec.worldbody.add_body(name=VALVE, pos=[axis[0], axis[1], axis[2]])
+        j = valve.add_joint(name=VALVE_JOINT, type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
+        j.damping = [layout.valve_damping, 0.0, 0.0]  # linear term only
+        j.frictionloss = layout.valve_friction
+        j.armature = 1e-3
+        valve.mass = 0.3
+        valve.inertia = [1e-3, 1e-3, 1e-3]
+        valve.explicitinertial = True
+        _object_geom(  # the handle bar the fingers straddle
+            valve,
+            GRIPPER_BIT,
+            layout.board_friction,
+            sr,
+            name=HANDLE_GEOM,
+            type=box,
+            size=[0.06, 0.009, 0.01],
+            rgba=[0.8, 0.1, 0.1, 1.0],
+        )
+        _object_geom(  # the hand-wheel under it
+            valve,
+            GRIPPER_BIT,
+            layout.board_friction,
+            sr,
+            name="task_valve_wheel",
+            type=cyl,
+            size=[0.07, 0.004, 0],
+            pos=[0.0, 0.0, -0.035],  # below the finger tips (they reach -0.025)
+            rgba=[0.6, 0.1, 0.1, 1.0],
+        )
+        stem = spec.worldbody.add_body(name="task_valve_stem")
+        _object_geom(
+            stem,
+            0,
+            layout.board_friction,
+            sr,
+            name="task_valve_stem",
+            type=cyl,
+            size=[0.015, (axis[2] - 0.03) / 2, 0],
+            pos=[axis[0], axis[1], (axis[2] - 0.03) / 2],
+        )
+
+
+def enable_objects(model: mujoco.MjModel) -> int:
+    """Switch the task objects' contacts on. Returns how many geoms were enabled.
+
+    ASSUMPTION (the objects are brought under the perched robot): the robot takes off from
+    the floor with the arm straight along x (x ~ 0..1 m, y ~ 0) and hangs from the ceiling
+    with the tool reaching only that same x-z band below the foot (q3 stays 0 for the
+    levelled vectoring units), so every place the tool can reach was crossed by the arm on
+    the way up; objects there would be hit during the climb."""
+    n = 0
+    for i in range(model.ngeom):
+        name = model.geom(i).name
+        if name in _AFFINITY:
+            model.geom_conaffinity[i] = _AFFINITY[name]
+            # MuJoCo's broad phase filters body pairs first with the per-body OR of the
+            # geoms' bits, computed at compile time (0 here): update it too
+            body = model.geom_bodyid[i]
+            model.body_conaffinity[body] |= _AFFINITY[name]
+            n += 1
+    return n
+
+
+def scene(tasks: tuple[str, ...], layout: TaskLayout | None = None, ee: str = "end_effector"):
+    """The ``scene`` callable (``StackOptions.scene``) that adds the tools of ``tasks`` to body
+    ``ee`` and their objects to the world."""
+    lay = layout or TaskLayout()
+
+    def edit(spec: mujoco.MjSpec) -> None:
+        edit_spec(spec, lay, tasks, ee)
+
+    return edit
