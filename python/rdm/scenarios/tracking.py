@@ -52,6 +52,9 @@ PAPER_RMSE_PERCHED = (0.00320, 0.0286, 0.0191, 0.0002, 0.0001, 0.0005)
 #: Sec. VII-C-2: perched errors "generally less than 0.05 m and 0.1 rad" (Fig. 13 (B)).
 PAPER_PERCHED_BAND = (0.05, 0.1)
 FLIGHT_POSTURE = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+#: Base posture of the flight stage: "straight" (q = 0, after the climb; the default) or
+#: "hanging" (``PERCH_POSTURE``, after the fold; the flying hanging robot is lightly damped).
+FLIGHT_POSTURES = {"straight": FLIGHT_POSTURE, "hanging": PERCH_POSTURE}
 #: The joint path: (duration [s], q1..q6 offset from the stage's base posture) segments,
 #: back to zero offset at the end. ASSUMPTION: Fig. 13's motion is not given; a slow arm
 #: pitch/yaw sweep of the size the flying robot tracks without saturating (docs).
@@ -101,13 +104,16 @@ class TrackingScript(StagedPerchingScript):
     """Flight stage at q = 0 with the CoG setpoint streamed (root held); perched stage in the
     hanging posture with the setpoint held. Same joint offsets and timing in both."""
 
-    def __init__(self, motion, robot: Robot) -> None:
+    def __init__(self, motion, robot: Robot, flight_posture: str = "straight") -> None:
+        if flight_posture not in FLIGHT_POSTURES:
+            raise ValueError(f"flight_posture={flight_posture!r}: one of {list(FLIGHT_POSTURES)}")
         self.offsets = tuple(motion)
         self.motion_s = motion_seconds(motion)
+        self.flight_posture = flight_posture
         super().__init__(
             SETTLE_S + PRE_S + self.motion_s + AFTER_S,
             PRE_S + self.motion_s + AFTER_S,
-            flight_after="climb",
+            flight_after="climb" if flight_posture == "straight" else "reconfigure",
         )
         self.robot = robot
         self.plans: dict[str, StagePlan] = {}
@@ -127,7 +133,8 @@ class TrackingScript(StagedPerchingScript):
     def flight_tick(self, stack: Stack, now: float, s: float) -> None:
         assert self.ramp is not None
         if "flight" not in self.plans:
-            plan = self._send(stack, "flight", now, now + SETTLE_S + PRE_S, FLIGHT_POSTURE)
+            base = FLIGHT_POSTURES[self.flight_posture]
+            plan = self._send(stack, "flight", now, now + SETTLE_S + PRE_S, base)
             cogs = []
             for _, q in plan.points:
                 f = _frames(self.robot, q)
@@ -333,6 +340,7 @@ def run(
     motion=MOTION,
     log: bool = True,
     plots: bool = True,
+    flight_posture: str = "straight",
 ) -> ScenarioResult:
     """Run the scenario: it stops after the perched stage, or at ``duration``."""
     onboard = sim_onboard_config(
@@ -340,7 +348,7 @@ def run(
     )
     opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard)
     robot = Robot.default()
-    script = TrackingScript(motion, robot)
+    script = TrackingScript(motion, robot, flight_posture)
     stack = build_stack("tracking", base, opts, script)
     t0 = time.perf_counter()
     try:
@@ -354,6 +362,7 @@ def run(
         plot(stack, errs)
     facts: dict[str, Any] = {
         "motion_offsets": [list(map(float, [d, *g])) for d, g in script.offsets],
+        "flight_posture": flight_posture,
         "t_flight_stage": script.t_flight_stage,
         "t_perch": script.t_perch,
         "t_perched_stage": script.t_perched_stage,
