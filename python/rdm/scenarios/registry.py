@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from . import flight, hover, perching, push, tasks
+from . import flight, hover, perching, push, tasks, tracking
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,12 @@ SCENARIOS: dict[str, Scenario] = {
         push.run,
         push.DEFAULT_DURATION,
         "end-effector pushed and pulled in x, y, z in flight and perched (Figs. 11-12)",
+    ),
+    "tracking": Scenario(
+        "tracking",
+        tracking.run,
+        tracking.DEFAULT_DURATION,
+        "end-effector pose errors under the same joint motion in flight and perched (Fig. 13)",
     ),
     "drilling": Scenario(
         "drilling",
