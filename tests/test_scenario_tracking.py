@@ -83,7 +83,7 @@ def test_both_stages_ran_without_failsafe(run):
     _, fwin = _window(a, fl)
     assert fwin.sum() > 100 and not a["contact"][fwin].any()
     # perched stage: the foot stays on the ceiling without slipping
-    held = t >= pe.t_start - tracking.PRE_S
+    held = t >= pe.t_start - tracking.PRE_S - tracking.SETTLE_S
     assert a["contact"][held].all()
     slip = a["slip"][held]
     assert np.max(np.linalg.norm(slip - slip[0], axis=1)) < 1e-3
