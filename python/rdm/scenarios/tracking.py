@@ -331,7 +331,7 @@ def plot(stack: Stack, errs: dict[str, StageErrors | None]) -> None:
     )
 
 
-#: upper bound of a run [s]; the run stops 0.5 s after the perched stage (~41 s by default)
+#: upper bound of a run [s]; the run stops 0.5 s after the perched stage (~42 s by default)
 DEFAULT_DURATION = 60.0
 
 
