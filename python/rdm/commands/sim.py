@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
         f = result.facts
         print(f"run folder: {result.folder}")
         print(
-            f"{duration:g} simulated s in {f['wall_s']:.1f} wall s "
+            f"{f['simulated_s']:g} simulated s in {f['wall_s']:.1f} wall s "
             f"({f['sim_s_per_wall_s']:.2f} simulated s per wall s)"
         )
     return 0 if result.all_passed else 1

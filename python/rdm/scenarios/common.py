@@ -112,16 +112,19 @@ def roll_pitch(quat_wxyz: np.ndarray) -> np.ndarray:
 
 
 def finish(result: ScenarioResult, seconds: float, wall_s: float) -> ScenarioResult:
-    """Write metrics.txt and summary.json; returns the result."""
+    """Write metrics.txt and summary.json (with the simulated time the plant reached, at most
+    ``seconds``); returns the result."""
     st = result.stack
     table = format_metrics_table(result.metrics)
     st.folder.metrics_txt.write_text(table + "\n")
     facts = dict(result.facts)
+    # what the plant really simulated (a scenario may stop before its ``seconds`` bound)
+    simulated = float(st.plant.time) if math.isfinite(st.plant.time) else seconds
     facts.update(
         scenario=result.name,
-        simulated_s=seconds,
+        simulated_s=round(simulated, 6),
         wall_s=round(wall_s, 3),
-        sim_s_per_wall_s=round(seconds / wall_s, 3) if wall_s > 0 else math.nan,
+        sim_s_per_wall_s=round(simulated / wall_s, 3) if wall_s > 0 else math.nan,
         spinal_failsafes=dict(st.spinal.counters.failsafes),
         spinal_rejected=dict(st.spinal.counters.rejected),
         onboard_state=st.onboard.state.value,
