@@ -12,7 +12,8 @@ object, so one perch can run every task):
 
 * drill bit: capsule 0..``DRILL_LEN`` m, radius 5 mm (point contact at its tip);
 * brush: a sphere of radius ``BRUSH_RADIUS`` centred ``BRUSH_AT`` m out (sliding contact);
-* gripper: two finger capsules at y = +-``FINGER_Y`` that straddle the valve's handle bar.
+* gripper: four finger capsules at (y, z) = (+-``FINGER_Y``, +-``FINGER_Z``) that straddle
+  the valve's handle bar on both sides of the hinge.
 
 Objects (positions relative to the nominal perch spot of the foot, see :class:`TaskLayout`):
 a horizontal wood board below the arm (drilling), a horizontal panel (painting; the paper
@@ -36,7 +37,13 @@ DRILL_LEN = 0.10  # m, bit length from the tool flange
 DRILL_RADIUS = 0.005
 BRUSH_AT = 0.08  # m
 BRUSH_RADIUS = 0.02
-FINGER_Y = 0.02  # m, finger axis offset from the tool axis
+#: Four fingers at (y, z) = (+-FINGER_Y, +-FINGER_Z) in the tool frame (z is along the handle
+#: bar when the tool points down): each pair flanks the bar FINGER_Z out from the hinge, so a
+#: q6 turn pushes the bar sideways. Two fingers flanking the bar at the hinge (the first
+#: design) only slide along it: they engaged after acos(14/20) = 46 deg of a 69 deg turn.
+#: Clearance to the bar 3 mm per side (backlash atan(3/40) = 4 deg).
+FINGER_Y = 0.017  # m
+FINGER_Z = 0.04  # m
 FINGER_RADIUS = 0.005
 FINGER_SPAN = (0.04, 0.09)  # m along the tool axis
 GRIPPER_AT = 0.07  # m: where the handle bar sits between the fingers (tool axis)
@@ -47,7 +54,7 @@ VALVE = "task_valve"
 VALVE_JOINT = "task_valve_hinge"
 DRILL_GEOM = "tool_drill"
 BRUSH_GEOM = "tool_brush"
-FINGER_GEOMS = ("tool_finger_l", "tool_finger_r")
+FINGER_GEOMS = ("tool_finger_lf", "tool_finger_rf", "tool_finger_lb", "tool_finger_rb")
 HANDLE_GEOM = "task_valve_handle"
 
 
@@ -139,13 +146,15 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
             size=[BRUSH_RADIUS, 0, 0],
         )
     if "valve" in tasks:
-        for name, y in zip(FINGER_GEOMS, (FINGER_Y, -FINGER_Y), strict=True):
+        offsets = ((1, 1), (-1, 1), (1, -1), (-1, -1))
+        for name, (sy, sz) in zip(FINGER_GEOMS, offsets, strict=True):
+            y, z = sy * FINGER_Y, sz * FINGER_Z
             _tool_geom(
                 tool,
                 GRIPPER_BIT,
                 name=name,
                 type=cap,
-                fromto=[FINGER_SPAN[0], y, 0.0, FINGER_SPAN[1], y, 0.0],
+                fromto=[FINGER_SPAN[0], y, z, FINGER_SPAN[1], y, z],
                 size=[FINGER_RADIUS, 0, 0],
             )
     fx, fy, _ = layout.nominal_foot
