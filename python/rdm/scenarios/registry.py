@@ -49,5 +49,11 @@ SCENARIOS: dict[str, Scenario] = {
         tasks.duration_of("drilling"),
         "perch, then drill (point contact) at three targets on a board (Fig. 14 A)",
     ),
+    "valve": Scenario(
+        "valve",
+        tasks.run_valve,
+        tasks.duration_of("valve"),
+        "perch, then grip a hand-wheel's handle bar and turn it 69 deg with q6 (Fig. 14 C)",
+    ),
 }
 DEFAULT_SCENARIO = "perching"
