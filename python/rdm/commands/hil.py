@@ -84,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
                     f"{role:>8}/{node:<14} ticks {s['ticks']:6d} overruns {s['overruns']:5d} "
                     f"late max {s['max_late_ms']:8.2f} ms mean {s['mean_late_ms']:6.2f} ms"
                 )
-        print(f"wall {res.wall_s:.1f} s (+{res.startup_wall_s:.1f} s start-up); "
-              f"{'PASS' if ok else 'FAIL'}; folder {out}")
+        print(
+            f"wall {res.wall_s:.1f} s (+{res.startup_wall_s:.1f} s start-up); "
+            f"{'PASS' if ok else 'FAIL'}; folder {out}"
+        )
     return 0 if ok else 1

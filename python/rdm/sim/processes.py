@@ -35,6 +35,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -90,10 +91,43 @@ class ProcessRunError(RuntimeError):
 
 
 # ----------------------------------------------------------------------------- the roles
-def _stack_options(seed: int):
+def stack_config(seed: int) -> dict[str, Any]:
+    """The lockstep stack's defaults (:class:`rdm.scenarios.stack.StackOptions`) as plain data
+    for the children, so that only the robot process imports MuJoCo and none imports the
+    scenarios."""
     from rdm.scenarios.stack import StackOptions
 
-    return StackOptions(seed=seed)
+    opt = StackOptions(seed=seed)
+    keys = (
+        "seed",
+        "ceiling_height",
+        "floor_height",
+        "base_position",
+        "boot_delay_ms",
+        "spinal_rate_hz",
+        "gyro_calib_duration_s",
+        "spinal_time_matched",
+        "leptrino_rate_hz",
+        "mocap_period",
+        "truth_period",
+        "esc_tau",
+        "battery_voltage",
+    )
+    cfg = {k: getattr(opt, k) for k in keys}
+    cfg["servo"] = None if opt.servo is None else asdict(opt.servo)
+    return cfg
+
+
+def neuron_filters(slave: int) -> list[dict[str, Any]]:
+    """Kernel acceptance filters of a Neuron: standard ids whose slave field is its own id or
+    the broadcast id, which is the rule the mirror applies in software (then it counts the
+    rest in ``rx_filtered``; with the kernel filter they never reach Python)."""
+    from rdm.protocol.neuron.ids import BROADCAST_ID
+
+    return [
+        {"can_id": slave, "can_mask": 0xF, "extended": False},
+        {"can_id": BROADCAST_ID, "can_mask": 0xF, "extended": False},
+    ]
 
 
 def _tapped_pty(folder: Path, stem: str, ext: str):
@@ -127,41 +161,38 @@ def robot_main(cfg: dict[str, Any]) -> None:
     from rdm.nodes.lockstep import Lockstep
     from rdm.nodes.neuron_mirror import NeuronMirror
     from rdm.nodes.plant_bridge import PlantBridge, default_layout
-    from rdm.plant import EscParams, Plant
+    from rdm.plant import EscParams, Plant, ServoParams
     from rdm.sim.side_channels import ImuSender, MocapSender
     from rdm.sim.udp_can import open_bus
 
     folder = Path(cfg["out"])
-    opt = _stack_options(cfg["seed"])
+    opt = SimpleNamespace(**cfg["stack"])
     plant = Plant(
         "rdm",
         seed=opt.seed,
         ceiling_height=opt.ceiling_height,
         floor_height=opt.floor_height,
-        servo=opt.servo,
+        servo=None if opt.servo is None else ServoParams(**opt.servo),
         esc=None if opt.esc_tau is None else EscParams(tau=opt.esc_tau),
     )
     q0 = np.zeros(len(plant.joint_names))
     plant.reset(q0=q0, base_position=opt.base_position)
     layout = default_layout(plant.description)
     q0_map = dict(zip(plant.joint_names, q0.tolist(), strict=True))
-    neurons = [
-        NeuronMirror(
-            open_bus(cfg["can"]),
-            nl.slave,
-            layout.servo_configs(nl.slave, q0_map),
-            plant_driven=True,
+    neurons = []
+    for nl in layout.neurons:
+        bus = open_bus(cfg["can"])
+        if cfg["can"].startswith("socketcan:"):
+            bus.set_filters(neuron_filters(nl.slave))
+        neurons.append(
+            NeuronMirror(bus, nl.slave, layout.servo_configs(nl.slave, q0_map), plant_driven=True)
         )
-        for nl in layout.neurons
-    ]
     lep_dev, lep_slave, lep_path = _tapped_pty(folder, "leptrino_foot", ".lep")
     sensor = LeptrinoSensorNode(lep_dev, "CFS034CA301U", rate_hz=opt.leptrino_rate_hz)
     truth: list[tuple] = []
 
     def record(gt: Any) -> None:
-        truth.append(
-            (gt.time, *gt.cog_position, *gt.base_quaternion, *gt.rotor_thrusts)
-        )
+        truth.append((gt.time, *gt.cog_position, *gt.base_quaternion, *gt.rotor_thrusts))
 
     loop: Lockstep | None = None
     imu = ImuSender(cfg["token"], lambda: loop.time if loop is not None else 0.0)
@@ -179,7 +210,7 @@ def robot_main(cfg: dict[str, Any]) -> None:
     )
     mocap = MocapSender(cfg["token"], plant, opt.mocap_period)
     loop = Lockstep([bridge, *neurons, mocap, sensor], physics=plant)
-    start = _handshake({"leptrino_pty": lep_path, "joints": len(q0)})
+    start = _handshake({"leptrino_pty": lep_path})
     clock = ScaledClock(start["epoch"], start["scale"])
     end = float(start["duration"])
     dt = loop.dt
@@ -248,7 +279,7 @@ def spinal_main(cfg: dict[str, Any]) -> None:
     from rdm.sim.udp_can import open_bus
 
     folder = Path(cfg["out"])
-    opt = _stack_options(cfg["seed"])
+    opt = SimpleNamespace(**cfg["stack"])
     dev, slave, path = _tapped_pty(folder, "spinal", ".bin")
     spinal = SpinalMirror(
         dev,
@@ -319,20 +350,23 @@ def onboard_main(cfg: dict[str, Any]) -> None:
     from rdm.link.serial import open_serial
     from rdm.model import Robot
     from rdm.nodes.onboard import OnboardNode
-    from rdm.scenarios.common import sim_onboard_config
+    from rdm.nodes.onboard_config import OnboardConfig
     from rdm.sim.side_channels import MocapReceiver
 
     folder = Path(cfg["out"])
-    opt = _stack_options(cfg["seed"])
+    opt = SimpleNamespace(**cfg["stack"])
     robot = Robot.default()
-    config = sim_onboard_config(initial_q=tuple([0.0] * robot.n_q))
-    uart = open_serial(f"serial:{cfg['spinal_pty']}")
-    foot = open_serial(f"serial:{cfg['leptrino_pty']}@460800")
+    # The scenarios' onboard configuration (rdm.scenarios.common.sim_onboard_config: the
+    # defaults, Table V gains), with the initial joint angles of the plant (all zero).
+    config = OnboardConfig(initial_q=tuple([0.0] * robot.n_q))
+    # The ptys are offered by the other children: they arrive with the start line.
+    start = _handshake({})
+    uart = open_serial(f"serial:{start['spinal_pty']}")
+    foot = open_serial(f"serial:{start['leptrino_pty']}@460800")
     node = OnboardNode(uart, foot, robot, config=config)
     mocap_in = MocapReceiver(cfg["token"], node, opt.mocap_period)
     script = HoverScript(node, cfg["target"], cfg["arm_at"])
     log = StateLog(node)
-    start = _handshake({})
     clock = ScaledClock(start["epoch"], start["scale"])
     stats = None
     try:
@@ -443,30 +477,34 @@ def run_hover_processes(folder: str | Path, options: ProcessRunOptions) -> Proce
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     token = secrets.token_hex(6)
-    base = {"out": str(out), "can": opt.can, "seed": opt.seed, "token": token}
+    base = {
+        "out": str(out),
+        "can": opt.can,
+        "token": token,
+        "stack": stack_config(opt.seed),
+        "target": list(opt.target),
+        "arm_at": opt.arm_at,
+    }
     t0 = time.monotonic()
     children: dict[str, _Child] = {}
     notifier = writer = bus = None
     try:
-        for role in ("robot", "spinal"):
+        for role in ROLES:  # in parallel: start-up is mostly imports
             children[role] = _Child(role, base, opt.python, out)
         ready = {r: c.wait_ready(opt.startup_timeout_s) for r, c in children.items()}
-        onboard_cfg = dict(
-            base,
-            spinal_pty=ready["spinal"]["spinal_pty"],
-            leptrino_pty=ready["robot"]["leptrino_pty"],
-            target=list(opt.target),
-            arm_at=opt.arm_at,
-        )
-        children["onboard"] = _Child("onboard", onboard_cfg, opt.python, out)
-        children["onboard"].wait_ready(opt.startup_timeout_s)
         if opt.candump:
             bus = open_bus(opt.can)
             writer = can.CanutilsLogWriter(out / "can.log", channel=_candump_channel(opt.can))
             notifier = can.Notifier(bus, [writer], timeout=0.2)
         startup = time.monotonic() - t0
         epoch = time.monotonic() + opt.start_margin_s
-        line = {"epoch": epoch, "scale": opt.scale, "duration": opt.duration}
+        line = {
+            "epoch": epoch,
+            "scale": opt.scale,
+            "duration": opt.duration,
+            "spinal_pty": ready["spinal"]["spinal_pty"],
+            "leptrino_pty": ready["robot"]["leptrino_pty"],
+        }
         for c in children.values():
             c.start(line)
         budget = opt.start_margin_s + opt.duration / opt.scale * 1.5 + 120.0
@@ -549,7 +587,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if len(args) != 2 or args[0] not in _MAINS:
         print(f"usage: python -m rdm.sim.processes {{{','.join(ROLES)}}} CONFIG_JSON")
         return 2
-    _MAINS[args[0]](json.loads(args[1]))
+    cfg = json.loads(args[1])
+    if os.environ.get("RDM_PROCESSES_PROFILE") == "1":  # cProfile of the role: <out>/<role>.prof
+        import cProfile
+
+        cProfile.runctx(
+            "_MAINS[args[0]](cfg)", globals(), locals(), str(Path(cfg["out"]) / f"{args[0]}.prof")
+        )
+    else:
+        _MAINS[args[0]](cfg)
     print(DONE, flush=True)
     return 0
 
