@@ -39,6 +39,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--scale", type=float, default=0.05, help="simulated s per wall s (default 0.05)"
     )
+    parser.add_argument(
+        "--free-running",
+        action="store_true",
+        help="pure scaled wall clock: the controllers do not wait for a slow physics process",
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default=None, help="run folder (default runs/hil-<time>)")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -59,7 +64,13 @@ def run(args: argparse.Namespace) -> int:
         return 2
     spec = random_udp_spec() if args.can == "udp" else args.can
     out = Path(args.out or f"runs/hil-{time.strftime('%Y%m%d-%H%M%S')}")
-    opts = ProcessRunOptions(can=spec, duration=args.duration, scale=args.scale, seed=args.seed)
+    opts = ProcessRunOptions(
+        can=spec,
+        duration=args.duration,
+        scale=args.scale,
+        seed=args.seed,
+        gate=not args.free_running,
+    )
     print(
         f"rdm hil: 3 processes on {spec}, {args.duration:g} simulated s at scale "
         f"{args.scale:g} (~{args.duration / args.scale:.0f} wall s) -> {out}",

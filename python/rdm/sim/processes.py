@@ -24,12 +24,15 @@ prints ``RDM-READY <json>`` (the pty path it offers); the parent answers one JSO
 
 from __future__ import annotations
 
+import contextlib
 import json
+import math
 import os
 import queue
 import secrets
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Sequence
@@ -40,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from rdm.sim.scaled_clock import ScaledClock, run_scaled
+from rdm.sim.scaled_clock import ScaledClock, SharedTimes, run_scaled
 
 ROLES = ("robot", "spinal", "onboard")
 READY = "RDM-READY "
@@ -61,10 +64,19 @@ class ProcessRunOptions:
     seed: int = 0
     arm_at: float = ARM_AT
     target: tuple[float, float, float] = HOVER_TARGET
+    #: Never let a controller's clock pass the time the robot process has produced its
+    #: outputs for (shared through a memory-mapped file): a slow plant slows the run instead
+    #: of lagging behind the controllers, and Spinal's 200 Hz control always sees the IMU
+    #: sample of its own tick (as its SPI read on the board). False: a pure scaled wall
+    #: clock (real-time behaviour; the IMU sample may then be one IMU period old).
+    gate: bool = True
     #: Wall seconds between "all ready" and simulated time 0.
     start_margin_s: float = 1.0
     #: Wall seconds a child may take to import and build its nodes.
     startup_timeout_s: float = 300.0
+    #: With ``gate``, the run may take this many times ``duration / scale`` (plus 2 min)
+    #: before it is declared hung.
+    max_slowdown: float = 4.0
     python: str = sys.executable
     candump: bool = True
 
@@ -151,6 +163,35 @@ def _handshake(info: dict[str, Any]) -> dict[str, Any]:
     return json.loads(line)
 
 
+#: Slots of the shared time file: robot outputs produced up to; Spinal, onboard done up to.
+SLOTS = 3
+_SLOT = {"spinal": 1, "onboard": 2}
+#: Wall seconds the robot waits for a controller before declaring it dead.
+CONTROLLER_TIMEOUT_S = 120.0
+
+
+def _clock(start: dict[str, Any], role: str):
+    """The controllers' clock (scaled wall time, gated by the physics time if asked) and the
+    ``progress`` callback of :func:`run_scaled` that tells the robot how far we are."""
+    if not start.get("time_file"):
+        return ScaledClock(start["epoch"], start["scale"]), None
+    shared = SharedTimes(start["time_file"], SLOTS)
+    slot = _SLOT[role]
+    clock = ScaledClock(start["epoch"], start["scale"], gate=lambda: shared.get(0), gate_slack=0.0)
+    return clock, lambda t: shared.set(slot, t)
+
+
+def _wait_for_controllers(shared: SharedTimes, produced: float) -> None:
+    """Block until every controller has run all its ticks due at or before ``produced``."""
+    deadline = None
+    while min(shared.get(s) for s in _SLOT.values()) < produced:
+        if deadline is None:
+            deadline = time.monotonic() + CONTROLLER_TIMEOUT_S
+        elif time.monotonic() > deadline:
+            raise RuntimeError(f"controllers stuck before t={produced:.3f} s")
+        time.sleep(5e-5)
+
+
 def _write_report(folder: Path, role: str, report: dict[str, Any]) -> None:
     (folder / f"{role}.json").write_text(json.dumps(report, indent=1, default=str))
 
@@ -212,6 +253,7 @@ def robot_main(cfg: dict[str, Any]) -> None:
     loop = Lockstep([bridge, *neurons, mocap, sensor], physics=plant)
     start = _handshake({"leptrino_pty": lep_path})
     clock = ScaledClock(start["epoch"], start["scale"])
+    shared = SharedTimes(start["time_file"], SLOTS) if start.get("time_file") else None
     end = float(start["duration"])
     dt = loop.dt
     late_steps, max_lag, sum_lag = 0, 0.0, 0.0
@@ -223,12 +265,20 @@ def robot_main(cfg: dict[str, Any]) -> None:
             if lag < 0:
                 clock.sleep(-lag)
                 continue
+            if shared is not None:
+                _wait_for_controllers(shared, loop.time - dt)
             if lag > dt:
                 late_steps += 1
             sum_lag += lag
             max_lag = max(max_lag, lag)
             loop.step()
+            if shared is not None:
+                # The bridge, Neurons, mocap and Leptrino have produced everything for this
+                # tick's time (loop.time - dt): the controllers may run up to it.
+                shared.set(0, loop.time - dt)
     finally:
+        if shared is not None:
+            shared.set(0, math.inf)  # the physics is done: the others finish on the wall clock
         wall = time.monotonic() - wall0
         steps = loop.stats.base_ticks
         np.savez(folder / "truth.npz", truth=np.array(truth, dtype=float))
@@ -270,6 +320,8 @@ def robot_main(cfg: dict[str, Any]) -> None:
         mocap.close()
         lep_dev.close()
         lep_slave.close()
+        if shared is not None:
+            shared.close()
 
 
 def spinal_main(cfg: dict[str, Any]) -> None:
@@ -291,10 +343,10 @@ def spinal_main(cfg: dict[str, Any]) -> None:
     )
     imu_in = ImuReceiver(cfg["token"], spinal)
     start = _handshake({"spinal_pty": path})
-    clock = ScaledClock(start["epoch"], start["scale"])
+    clock, progress = _clock(start, "spinal")
     stats = None
     try:
-        stats = run_scaled([imu_in, spinal], clock, float(start["duration"]))
+        stats = run_scaled([imu_in, spinal], clock, float(start["duration"]), progress)
     finally:
         report = {
             "deadlines": stats.as_dict() if stats else {},
@@ -307,6 +359,24 @@ def spinal_main(cfg: dict[str, Any]) -> None:
         imu_in.close()
         spinal.close()
         slave.close()
+
+
+class LateLink:
+    """A byte link whose port is attached after the node was built (nothing is read or
+    written before :meth:`attach`)."""
+
+    def __init__(self) -> None:
+        self.link: Any = None
+
+    def attach(self, link: Any) -> Any:
+        self.link = link
+        return link
+
+    def read_available(self) -> bytes:
+        return b"" if self.link is None else self.link.read_available()
+
+    def write(self, data: bytes) -> int:
+        return 0 if self.link is None else self.link.write(data)
 
 
 class HoverScript:
@@ -359,18 +429,20 @@ def onboard_main(cfg: dict[str, Any]) -> None:
     # The scenarios' onboard configuration (rdm.scenarios.common.sim_onboard_config: the
     # defaults, Table V gains), with the initial joint angles of the plant (all zero).
     config = OnboardConfig(initial_q=tuple([0.0] * robot.n_q))
-    # The ptys are offered by the other children: they arrive with the start line.
-    start = _handshake({})
-    uart = open_serial(f"serial:{start['spinal_pty']}")
-    foot = open_serial(f"serial:{start['leptrino_pty']}@460800")
-    node = OnboardNode(uart, foot, robot, config=config)
+    # Built before the handshake (its lazy imports cost seconds in the emulated VM); the ptys
+    # are offered by the other children and arrive with the start line.
+    uart_end, foot_end = LateLink(), LateLink()
+    node = OnboardNode(uart_end, foot_end, robot, config=config)
     mocap_in = MocapReceiver(cfg["token"], node, opt.mocap_period)
     script = HoverScript(node, cfg["target"], cfg["arm_at"])
     log = StateLog(node)
-    clock = ScaledClock(start["epoch"], start["scale"])
+    start = _handshake({})
+    uart = uart_end.attach(open_serial(f"serial:{start['spinal_pty']}"))
+    foot = foot_end.attach(open_serial(f"serial:{start['leptrino_pty']}@460800"))
+    clock, progress = _clock(start, "onboard")
     stats = None
     try:
-        stats = run_scaled([mocap_in, node, script, log], clock, float(start["duration"]))
+        stats = run_scaled([mocap_in, node, script, log], clock, float(start["duration"]), progress)
     finally:
         node.close()
         status = node.status()
@@ -488,6 +560,7 @@ def run_hover_processes(folder: str | Path, options: ProcessRunOptions) -> Proce
     t0 = time.monotonic()
     children: dict[str, _Child] = {}
     notifier = writer = bus = None
+    time_file: str | None = None
     try:
         for role in ROLES:  # in parallel: start-up is mostly imports
             children[role] = _Child(role, base, opt.python, out)
@@ -497,6 +570,10 @@ def run_hover_processes(folder: str | Path, options: ProcessRunOptions) -> Proce
             writer = can.CanutilsLogWriter(out / "can.log", channel=_candump_channel(opt.can))
             notifier = can.Notifier(bus, [writer], timeout=0.2)
         startup = time.monotonic() - t0
+        if opt.gate:
+            fd, time_file = tempfile.mkstemp(prefix=f"rdm-{token}-", suffix=".time")
+            os.close(fd)
+            SharedTimes(time_file, SLOTS, init=(-1e-3, -math.inf, -math.inf)).close()
         epoch = time.monotonic() + opt.start_margin_s
         line = {
             "epoch": epoch,
@@ -504,10 +581,11 @@ def run_hover_processes(folder: str | Path, options: ProcessRunOptions) -> Proce
             "duration": opt.duration,
             "spinal_pty": ready["spinal"]["spinal_pty"],
             "leptrino_pty": ready["robot"]["leptrino_pty"],
+            "time_file": time_file,
         }
         for c in children.values():
             c.start(line)
-        budget = opt.start_margin_s + opt.duration / opt.scale * 1.5 + 120.0
+        budget = opt.start_margin_s + opt.duration / opt.scale * opt.max_slowdown + 120.0
         deadline = time.monotonic() + budget
         for role, c in children.items():
             try:
@@ -526,6 +604,9 @@ def run_hover_processes(folder: str | Path, options: ProcessRunOptions) -> Proce
             bus.shutdown()
         for c in children.values():
             c.close()
+        if time_file is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(time_file)
     reports = {r: json.loads((out / f"{r}.json").read_text()) for r in ROLES}
     rows = np.load(out / "truth.npz")["truth"]
     truth = {

@@ -13,6 +13,9 @@ each tick starts (deadline overruns are reported, never asserted).
 from __future__ import annotations
 
 import math
+import mmap
+import os
+import struct
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -23,13 +26,56 @@ from rdm.nodes.base import Node
 _DUE_SLACK = 1e-7
 
 
+class SharedTimes:
+    """A few float64 slots in a memory-mapped file shared by the processes of a run: slot 0
+    is the time the robot process has produced its outputs for (the *gate* of the
+    controllers' :class:`ScaledClock`), slots 1.. the time up to which each controller process
+    has run all its due ticks (the robot waits for them before its next tick). Put the file
+    on a RAM file system (the default temp dir; in the vcan VM that is a tmpfs)."""
+
+    _FMT = struct.Struct("<d")
+
+    def __init__(
+        self, path: str | os.PathLike[str], slots: int, init: Sequence[float] | None = None
+    ) -> None:
+        size = self._FMT.size * slots
+        fd = os.open(path, os.O_RDWR | (os.O_CREAT if init is not None else 0), 0o600)
+        try:
+            if init is not None:
+                os.ftruncate(fd, size)
+                os.pwrite(fd, struct.pack(f"<{slots}d", *init), 0)
+            self._map = mmap.mmap(fd, size)
+        finally:
+            os.close(fd)
+        self.slots = slots
+
+    def set(self, slot: int, t: float) -> None:
+        self._FMT.pack_into(self._map, 8 * slot, t)
+
+    def get(self, slot: int) -> float:
+        return self._FMT.unpack_from(self._map, 8 * slot)[0]
+
+    def close(self) -> None:
+        self._map.close()
+
+
 @dataclass(frozen=True)
 class ScaledClock:
-    """Simulated time = (``monotonic`` - ``epoch``) * ``scale`` (s); shared across processes."""
+    """Simulated time = (``monotonic`` - ``epoch``) * ``scale`` (s); shared across processes.
+
+    With a ``gate`` (a function returning the physics time reached, e.g.
+    :meth:`SharedTime.get`) the clock never runs more than ``gate_slack`` ahead of it: when
+    the physics process cannot keep up with the scaled wall clock the controllers wait for it
+    instead of flying a plant that lags (the run slows down; rates stay right in simulated
+    time). Without a gate it is a pure scaled wall clock.
+    """
 
     epoch: float
     scale: float
     monotonic: Callable[[], float] = time.monotonic
+    sleeper: Callable[[float], None] = time.sleep
+    gate: Callable[[], float] | None = None
+    gate_slack: float = 0.001
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.scale) and self.scale > 0):
@@ -37,20 +83,28 @@ class ScaledClock:
         if not math.isfinite(self.epoch):
             raise ValueError(f"ScaledClock: epoch {self.epoch!r} must be finite")
 
-    def now(self) -> float:
-        """Simulated seconds since the epoch (negative before it)."""
+    def wall_now(self) -> float:
+        """Simulated seconds since the epoch on the scaled wall clock alone (no gate)."""
         return (self.monotonic() - self.epoch) * self.scale
 
+    def now(self) -> float:
+        """Simulated seconds since the epoch (negative before it), held back by the gate."""
+        t = (self.monotonic() - self.epoch) * self.scale
+        if self.gate is not None:
+            return min(t, self.gate() + self.gate_slack)
+        return t
+
     def sleep(self, sim_seconds: float) -> None:
-        """Sleep ``sim_seconds`` of simulated time (nothing if <= 0)."""
+        """Sleep ``sim_seconds`` of simulated time at the wall rate (nothing if <= 0); with a
+        gate the clock may have advanced less: callers re-check :meth:`now`."""
         if sim_seconds > 0:
-            time.sleep(sim_seconds / self.scale)
+            self.sleeper(sim_seconds / self.scale)
 
     def wait_for_epoch(self) -> None:
         """Block until simulated time 0."""
         left = self.epoch - self.monotonic()
         if left > 0:
-            time.sleep(left)
+            self.sleeper(left)
 
 
 @dataclass
@@ -78,14 +132,20 @@ class DeadlineStats:
         return out
 
 
-def run_scaled(nodes: Sequence[Node], clock: ScaledClock, end: float) -> DeadlineStats:
+def run_scaled(
+    nodes: Sequence[Node],
+    clock: ScaledClock,
+    end: float,
+    progress: Callable[[float], None] | None = None,
+) -> DeadlineStats:
     """Tick ``nodes`` on ``clock`` from simulated time 0 until ``end``; return the stats.
 
     A node's k-th tick is due at ``k * period``; it is passed that scheduled time (as a
     firmware timer interrupt would stamp it) when it runs within one period of it. A tick that
     starts more than one period late is an overrun: the node is passed the clock's time, its
     missed ticks are dropped and its schedule re-phased (no burst of catch-up ticks). Nodes due
-    at the same instant tick in list order.
+    at the same instant tick in list order. ``progress(t)`` is told after every pass that all
+    ticks due at or before ``t`` have run (``inf`` at the end).
     """
     if not nodes:
         raise ValueError("run_scaled: no nodes given")
@@ -101,7 +161,7 @@ def run_scaled(nodes: Sequence[Node], clock: ScaledClock, end: float) -> Deadlin
         {n: 0.0 for n in names},
     )
     clock.wait_for_epoch()
-    wall0 = time.monotonic()
+    wall0 = clock.monotonic()
     due = [0.0] * len(nodes)
     now = clock.now()
     while now < end:
@@ -122,9 +182,13 @@ def run_scaled(nodes: Sequence[Node], clock: ScaledClock, end: float) -> Deadlin
             if late > stats.max_late_s[name]:
                 stats.max_late_s[name] = late
             now = clock.now()
+        if progress is not None:
+            progress(min(due) - 2 * _DUE_SLACK)
         wait = min(min(due), end) - clock.now()
         clock.sleep(wait)
         now = clock.now()
-    stats.wall_s = time.monotonic() - wall0
+    if progress is not None:
+        progress(math.inf)
+    stats.wall_s = clock.monotonic() - wall0
     stats.end_time = now
     return stats
