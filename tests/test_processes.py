@@ -223,3 +223,31 @@ def test_hover_as_processes_matches_lockstep(tmp_path):
     assert run.reports["onboard"]["states"][-1][1] == "armed"
     pwm = [line for line in run.candump.read_text().splitlines() if " 00F#" in line]
     assert len(pwm) > 250 * (duration - opts.arm_at)
+
+
+def test_gated_clock_waits_for_the_physics(tmp_path):
+    from rdm.sim.scaled_clock import SharedTimes
+
+    ft = FakeTime()
+    path = tmp_path / "t.time"
+    SharedTimes(path, 3, init=(0.002, -math.inf, -math.inf)).close()
+    robot, ctrl = SharedTimes(path, 3), SharedTimes(path, 3)  # two maps of one file
+    clock = ScaledClock(
+        100.0,
+        0.5,
+        monotonic=ft.monotonic,
+        sleeper=ft.sleep,
+        gate=lambda: ctrl.get(0),
+        gate_slack=0.0,
+    )
+    ft.t = 100.02  # wall says 10 ms simulated, the physics has produced 2 ms
+    assert clock.wall_now() == pytest.approx(0.01) and clock.now() == pytest.approx(0.002)
+    before = ft.t
+    clock.sleep(0.004)  # held by the gate: a short poll, not 8 ms of wall time
+    assert ft.t - before == pytest.approx(clock.gate_poll_s)
+    robot.set(0, 0.5)
+    assert clock.now() == pytest.approx((ft.t - 100.0) * 0.5)  # gate ahead: the wall rules
+    robot.set(2, 0.125)
+    assert ctrl.get(2) == 0.125 and ctrl.get(1) == -math.inf
+    robot.close()
+    ctrl.close()

@@ -8,9 +8,11 @@ fail-safe), checked on the robot process's MuJoCo ground truth; and the Neuron P
 the kernel bus, decoded from the candump with an independent bit layout and equal to what the
 Neuron mirrors applied. Nothing about timing is asserted: the deadline figures are printed.
 
-In the emulated VM the robot process needs ~30 ms of wall time per simulated ms (MuJoCo under
-TCG), so the default scale is 0.025 (40 wall s per simulated s); ``RDM_PROCESSES_SCALE`` and
-``RDM_PROCESSES_DURATION`` override it.
+The run uses the co-simulation clock (``gate``, the default): the controllers never run ahead
+of the physics and the robot process waits for them, so the run goes as fast as the slowest
+process allows, at most ``scale``. In the emulated VM the robot process needs ~30 ms of wall
+time per simulated ms (MuJoCo under TCG), below the 0.05 asked. ``RDM_PROCESSES_SCALE`` and
+``RDM_PROCESSES_DURATION`` override the defaults.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import numpy as np
 from rdm.protocol.neuron import decode_candump
 from rdm.sim.processes import ProcessRunOptions, run_hover_processes
 
-SCALE = float(os.environ.get("RDM_PROCESSES_SCALE", "0.025"))
+SCALE = float(os.environ.get("RDM_PROCESSES_SCALE", "0.05"))
 DURATION = float(os.environ.get("RDM_PROCESSES_DURATION", "4.0"))
 PWM_ID = 0x00F  # MOTOR device, message 0 (slaves 1..6), broadcast slave field
 

@@ -189,7 +189,7 @@ def _wait_for_controllers(shared: SharedTimes, produced: float) -> None:
             deadline = time.monotonic() + CONTROLLER_TIMEOUT_S
         elif time.monotonic() > deadline:
             raise RuntimeError(f"controllers stuck before t={produced:.3f} s")
-        time.sleep(5e-5)
+        time.sleep(2e-4)
 
 
 def _write_report(folder: Path, role: str, report: dict[str, Any]) -> None:

@@ -76,6 +76,9 @@ class ScaledClock:
     sleeper: Callable[[float], None] = time.sleep
     gate: Callable[[], float] | None = None
     gate_slack: float = 0.001
+    #: Longest wall sleep while the gate holds the clock (the gate moves when another
+    #: process works, not with the wall clock, so it is polled).
+    gate_poll_s: float = 0.0005
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.scale) and self.scale > 0):
@@ -97,8 +100,12 @@ class ScaledClock:
     def sleep(self, sim_seconds: float) -> None:
         """Sleep ``sim_seconds`` of simulated time at the wall rate (nothing if <= 0); with a
         gate the clock may have advanced less: callers re-check :meth:`now`."""
-        if sim_seconds > 0:
-            self.sleeper(sim_seconds / self.scale)
+        if sim_seconds <= 0:
+            return
+        wall = sim_seconds / self.scale
+        if self.gate is not None and self.gate() + self.gate_slack < self.wall_now():
+            wall = min(wall, self.gate_poll_s)
+        self.sleeper(wall)
 
     def wait_for_epoch(self) -> None:
         """Block until simulated time 0."""
