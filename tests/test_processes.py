@@ -217,8 +217,11 @@ def test_hover_as_processes_matches_lockstep(tmp_path):
         assert m[key] < 0.03 and ref[key] < 0.03
     assert m["max_abs_err_z_last1s"] < 0.12 and ref["max_abs_err_z_last1s"] < 0.12
     assert m["max_roll_pitch_deg_after_arm"] < 5.0
-    assert abs(m["climb_m"] - ref["climb_m"]) < 0.05
-    assert abs(m["final_z"] - ref["final_z"]) < 0.05
+    # The gated run reproduces lockstep closely (the VM run matched it to 4 decimals; here
+    # pty and UDP delivery times vary a little between runs).
+    assert abs(m["climb_m"] - ref["climb_m"]) < 0.02
+    assert abs(m["final_z"] - ref["final_z"]) < 0.02
+    assert abs(m["max_roll_pitch_deg_after_arm"] - ref["max_roll_pitch_deg_after_arm"]) < 1.0
     assert not run.reports["spinal"]["diagnostics"]["failsafes"]
     assert run.reports["onboard"]["states"][-1][1] == "armed"
     pwm = [line for line in run.candump.read_text().splitlines() if " 00F#" in line]

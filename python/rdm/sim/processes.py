@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from rdm.sim.scaled_clock import ScaledClock, SharedTimes, run_scaled
+from rdm.sim.scaled_clock import ScaledClock, SharedTimes, WakeSocket, run_scaled
 
 ROLES = ("robot", "spinal", "onboard")
 READY = "RDM-READY "
@@ -170,26 +170,43 @@ _SLOT = {"spinal": 1, "onboard": 2}
 CONTROLLER_TIMEOUT_S = 120.0
 
 
-def _clock(start: dict[str, Any], role: str):
+def _clock(start: dict[str, Any], role: str, token: str):
     """The controllers' clock (scaled wall time, gated by the physics time if asked) and the
-    ``progress`` callback of :func:`run_scaled` that tells the robot how far we are."""
+    ``progress`` callback of :func:`run_scaled` that tells the robot how far we are. While
+    gated, the process blocks on its wake socket until the robot has produced a new tick."""
     if not start.get("time_file"):
         return ScaledClock(start["epoch"], start["scale"]), None
     shared = SharedTimes(start["time_file"], SLOTS)
+    wake = WakeSocket(token, role)
     slot = _SLOT[role]
-    clock = ScaledClock(start["epoch"], start["scale"], gate=lambda: shared.get(0), gate_slack=0.0)
-    return clock, lambda t: shared.set(slot, t)
+    clock = ScaledClock(
+        start["epoch"],
+        start["scale"],
+        gate=lambda: shared.get(0),
+        gate_slack=0.0,
+        waiter=lambda s: wake.wait(min(s, 0.5)),
+    )
+
+    def progress(t: float) -> None:
+        shared.set(slot, t)
+        wake.notify("robot")
+
+    return clock, progress
 
 
-def _wait_for_controllers(shared: SharedTimes, produced: float) -> None:
-    """Block until every controller has run all its ticks due at or before ``produced``."""
+def _wait_for_controllers(shared: SharedTimes, wake: WakeSocket, produced: float) -> None:
+    """Wake the controllers that have ticks due at or before ``produced`` and block until
+    every controller has run them."""
+    for role, slot in _SLOT.items():
+        if shared.get(slot) < produced:
+            wake.notify(role)
     deadline = None
     while min(shared.get(s) for s in _SLOT.values()) < produced:
         if deadline is None:
             deadline = time.monotonic() + CONTROLLER_TIMEOUT_S
         elif time.monotonic() > deadline:
             raise RuntimeError(f"controllers stuck before t={produced:.3f} s")
-        time.sleep(2e-4)
+        wake.wait(0.05)
 
 
 def _write_report(folder: Path, role: str, report: dict[str, Any]) -> None:
@@ -254,6 +271,7 @@ def robot_main(cfg: dict[str, Any]) -> None:
     start = _handshake({"leptrino_pty": lep_path})
     clock = ScaledClock(start["epoch"], start["scale"])
     shared = SharedTimes(start["time_file"], SLOTS) if start.get("time_file") else None
+    wake = WakeSocket(cfg["token"], "robot")
     end = float(start["duration"])
     dt = loop.dt
     late_steps, max_lag, sum_lag = 0, 0.0, 0.0
@@ -266,7 +284,7 @@ def robot_main(cfg: dict[str, Any]) -> None:
                 clock.sleep(-lag)
                 continue
             if shared is not None:
-                _wait_for_controllers(shared, loop.time - dt)
+                _wait_for_controllers(shared, wake, loop.time - dt)
             if lag > dt:
                 late_steps += 1
             sum_lag += lag
@@ -322,6 +340,7 @@ def robot_main(cfg: dict[str, Any]) -> None:
         lep_slave.close()
         if shared is not None:
             shared.close()
+        wake.close()
 
 
 def spinal_main(cfg: dict[str, Any]) -> None:
@@ -343,7 +362,7 @@ def spinal_main(cfg: dict[str, Any]) -> None:
     )
     imu_in = ImuReceiver(cfg["token"], spinal)
     start = _handshake({"spinal_pty": path})
-    clock, progress = _clock(start, "spinal")
+    clock, progress = _clock(start, "spinal", cfg["token"])
     stats = None
     try:
         stats = run_scaled([imu_in, spinal], clock, float(start["duration"]), progress)
@@ -439,7 +458,7 @@ def onboard_main(cfg: dict[str, Any]) -> None:
     start = _handshake({})
     uart = uart_end.attach(open_serial(f"serial:{start['spinal_pty']}"))
     foot = foot_end.attach(open_serial(f"serial:{start['leptrino_pty']}@460800"))
-    clock, progress = _clock(start, "onboard")
+    clock, progress = _clock(start, "onboard", cfg["token"])
     stats = None
     try:
         stats = run_scaled([mocap_in, node, script, log], clock, float(start["duration"]), progress)
@@ -587,13 +606,18 @@ def run_hover_processes(folder: str | Path, options: ProcessRunOptions) -> Proce
             c.start(line)
         budget = opt.start_margin_s + opt.duration / opt.scale * opt.max_slowdown + 120.0
         deadline = time.monotonic() + budget
-        for role, c in children.items():
-            try:
-                rc = c.proc.wait(max(deadline - time.monotonic(), 0.1))
-            except subprocess.TimeoutExpired as exc:
-                raise ProcessRunError(f"{role}: still running after {budget:.0f} s") from exc
-            if rc != 0:
-                raise ProcessRunError(f"{role}: exit status {rc}{c.tail()}")
+        running = dict(children)
+        while running:  # any child failing ends the run at once
+            for role, c in list(running.items()):
+                rc = c.proc.poll()
+                if rc is None:
+                    continue
+                if rc != 0:
+                    raise ProcessRunError(f"{role}: exit status {rc}{c.tail()}")
+                del running[role]
+            if time.monotonic() > deadline:
+                raise ProcessRunError(f"{sorted(running)}: still running after {budget:.0f} s")
+            time.sleep(0.2)
         wall = time.monotonic() - epoch
     finally:
         if notifier is not None:

@@ -12,9 +12,12 @@ each tick starts (deadline overruns are reported, never asserted).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import mmap
 import os
+import select
+import socket
 import struct
 import time
 from collections.abc import Callable, Sequence
@@ -59,6 +62,39 @@ class SharedTimes:
         self._map.close()
 
 
+class WakeSocket:
+    """A wake-up line between processes (Unix datagram socket, abstract namespace): a process
+    that waits for another's progress blocks in :meth:`wait` instead of polling, and the other
+    calls :meth:`notify` after it made progress. A full queue means a wake is pending already."""
+
+    def __init__(self, token: str, name: str) -> None:
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self.sock.bind(f"\0rdm-{token}-wake-{name}")
+        self.sock.setblocking(False)
+        self._out = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self._out.setblocking(False)
+        self.token = token
+
+    def wait(self, timeout: float) -> None:
+        """Block until a wake arrives or ``timeout`` wall seconds pass; drain the wakes."""
+        if timeout > 0:
+            select.select([self.sock], [], [], timeout)
+        while True:
+            try:
+                self.sock.recv(16)
+            except BlockingIOError:
+                return
+
+    def notify(self, name: str) -> None:
+        """Wake the process waiting on ``name`` (lost wakes are harmless: it re-checks)."""
+        with contextlib.suppress(OSError):
+            self._out.sendto(b"w", f"\0rdm-{self.token}-wake-{name}")
+
+    def close(self) -> None:
+        self.sock.close()
+        self._out.close()
+
+
 @dataclass(frozen=True)
 class ScaledClock:
     """Simulated time = (``monotonic`` - ``epoch``) * ``scale`` (s); shared across processes.
@@ -77,8 +113,11 @@ class ScaledClock:
     gate: Callable[[], float] | None = None
     gate_slack: float = 0.001
     #: Longest wall sleep while the gate holds the clock (the gate moves when another
-    #: process works, not with the wall clock, so it is polled).
+    #: process works, not with the wall clock): a poll, or a block in ``waiter``.
     gate_poll_s: float = 0.0005
+    #: ``waiter(wall_s)``: block until the gate may have moved (a :class:`WakeSocket`'s wait)
+    #: or ``wall_s`` passed; None = sleep ``gate_poll_s`` and poll.
+    waiter: Callable[[float], None] | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.scale) and self.scale > 0):
@@ -104,6 +143,9 @@ class ScaledClock:
             return
         wall = sim_seconds / self.scale
         if self.gate is not None and self.gate() + self.gate_slack < self.wall_now():
+            if self.waiter is not None:
+                self.waiter(wall)
+                return
             wall = min(wall, self.gate_poll_s)
         self.sleeper(wall)
 
