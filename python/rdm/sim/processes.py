@@ -1,0 +1,709 @@
+"""The hover scenario with the nodes as separate processes on real ports.
+
+::
+
+    robot process:   MuJoCo plant + PlantBridge + 4 NeuronMirror (CAN) + LeptrinoSensorNode
+                     (pty master) + MocapSender; physics steps 1 ms at a time to catch up with
+                     the shared clock
+    spinal process:  SpinalMirror (CAN + the Spinal UART pty master) + ImuReceiver
+    onboard process: OnboardNode (Spinal UART + Leptrino UART, the pty slaves) + MocapReceiver
+                     + the hover script (target and arm at ``arm_at``)
+    this process:    starts them, logs the CAN bus (candump ``can.log``), collects the results
+
+CAN is any :func:`rdm.sim.udp_can.open_bus` spec: ``socketcan:vcan0`` (real kernel bus) or
+``udp_multicast:<group>,port=N`` (hosts without SocketCAN). IMU and mocap travel on the side
+channels of :mod:`rdm.sim.side_channels`. All processes share a :class:`ScaledClock` (common
+epoch, ``scale`` simulated s per wall s); each writes ``<out>/<role>.json`` (deadline stats,
+diagnostics) and the robot ``<out>/truth.npz`` (ground truth every 10 ms).
+
+Start-up handshake (line-based, on each child's stdin/stdout): the child builds its nodes and
+prints ``RDM-READY <json>`` (the pty path it offers); the parent answers one JSON line
+``{"epoch": ..., "scale": ..., "duration": ...}``; the child runs until ``duration`` and prints
+``RDM-DONE``. Child entry point: ``python -m rdm.sim.processes ROLE CONFIG_JSON``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import queue
+import secrets
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from rdm.sim.scaled_clock import ScaledClock, SharedTimes, WakeSocket, run_scaled
+
+ROLES = ("robot", "spinal", "onboard")
+READY = "RDM-READY "
+DONE = "RDM-DONE"
+#: The hover scenario's target and arming time (rdm.scenarios.hover).
+HOVER_TARGET = (0.483, 0.0, 0.4)
+ARM_AT = 1.5
+
+
+@dataclass
+class ProcessRunOptions:
+    """What :func:`run_hover_processes` takes."""
+
+    can: str = "socketcan:vcan0"
+    duration: float = 5.0
+    #: Simulated seconds per wall second (0.05 = 20 wall s per simulated s).
+    scale: float = 0.05
+    seed: int = 0
+    arm_at: float = ARM_AT
+    target: tuple[float, float, float] = HOVER_TARGET
+    #: Never let a controller's clock pass the time the robot process has produced its
+    #: outputs for (shared through a memory-mapped file): a slow plant slows the run instead
+    #: of lagging behind the controllers, and Spinal's 200 Hz control always sees the IMU
+    #: sample of its own tick (as its SPI read on the board). False: a pure scaled wall
+    #: clock (real-time behaviour; the IMU sample may then be one IMU period old).
+    gate: bool = True
+    #: Wall seconds between "all ready" and simulated time 0.
+    start_margin_s: float = 1.0
+    #: Wall seconds a child may take to import and build its nodes.
+    startup_timeout_s: float = 300.0
+    #: With ``gate``, the run may take this many times ``duration / scale`` (plus 2 min)
+    #: before it is declared hung.
+    max_slowdown: float = 4.0
+    python: str = sys.executable
+    candump: bool = True
+
+
+@dataclass
+class ProcessRun:
+    """Results of a process-level run."""
+
+    folder: Path
+    options: ProcessRunOptions
+    truth: dict[str, np.ndarray]
+    reports: dict[str, dict[str, Any]]
+    wall_s: float
+    startup_wall_s: float
+    metrics: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def candump(self) -> Path:
+        return self.folder / "can.log"
+
+
+class ProcessRunError(RuntimeError):
+    """A child failed to start, crashed, or overran the time budget (message has its log)."""
+
+
+# ----------------------------------------------------------------------------- the roles
+def stack_config(seed: int) -> dict[str, Any]:
+    """The lockstep stack's defaults (:class:`rdm.scenarios.stack.StackOptions`) as plain data
+    for the children, so that only the robot process imports MuJoCo and none imports the
+    scenarios."""
+    from rdm.scenarios.stack import StackOptions
+
+    opt = StackOptions(seed=seed)
+    keys = (
+        "seed",
+        "ceiling_height",
+        "floor_height",
+        "base_position",
+        "boot_delay_ms",
+        "spinal_rate_hz",
+        "gyro_calib_duration_s",
+        "spinal_time_matched",
+        "leptrino_rate_hz",
+        "mocap_period",
+        "truth_period",
+        "esc_tau",
+        "battery_voltage",
+    )
+    cfg = {k: getattr(opt, k) for k in keys}
+    cfg["servo"] = None if opt.servo is None else asdict(opt.servo)
+    return cfg
+
+
+def neuron_filters(slave: int) -> list[dict[str, Any]]:
+    """Kernel acceptance filters of a Neuron: standard ids whose slave field is its own id or
+    the broadcast id, which is the rule the mirror applies in software (then it counts the
+    rest in ``rx_filtered``; with the kernel filter they never reach Python)."""
+    from rdm.protocol.neuron.ids import BROADCAST_ID
+
+    return [
+        {"can_id": slave, "can_mask": 0xF, "extended": False},
+        {"can_id": BROADCAST_ID, "can_mask": 0xF, "extended": False},
+    ]
+
+
+def _tapped_pty(folder: Path, stem: str, ext: str):
+    """(device end with captures, slave link kept open, slave path)."""
+    from rdm.link.serial import open_pty_pair
+    from rdm.sim.uart import TappedLink
+
+    slave, master = open_pty_pair()
+    slave.peer = None  # each end is closed on its own
+    d = folder / "uart"
+    d.mkdir(parents=True, exist_ok=True)
+    dev = TappedLink(master, d / f"{stem}.device_tx{ext}", d / f"{stem}.host_tx{ext}")
+    return dev, slave, slave.port.port
+
+
+def _handshake(info: dict[str, Any]) -> dict[str, Any]:
+    print(READY + json.dumps(info), flush=True)
+    line = sys.stdin.readline()
+    if not line:
+        raise SystemExit("rdm.sim.processes: parent closed stdin before the start line")
+    return json.loads(line)
+
+
+#: Slots of the shared time file: robot outputs produced up to; Spinal, onboard done up to.
+SLOTS = 3
+_SLOT = {"spinal": 1, "onboard": 2}
+#: Wall seconds the robot waits for a controller before declaring it dead.
+CONTROLLER_TIMEOUT_S = 120.0
+
+
+def _clock(start: dict[str, Any], role: str, token: str):
+    """The controllers' clock (scaled wall time, gated by the physics time if asked) and the
+    ``progress`` callback of :func:`run_scaled` that tells the robot how far we are. While
+    gated, the process blocks on its wake socket until the robot has produced a new tick."""
+    if not start.get("time_file"):
+        return ScaledClock(start["epoch"], start["scale"]), None
+    shared = SharedTimes(start["time_file"], SLOTS)
+    wake = WakeSocket(token, role)
+    slot = _SLOT[role]
+    clock = ScaledClock(
+        start["epoch"],
+        start["scale"],
+        gate=lambda: shared.get(0),
+        gate_slack=0.0,
+        waiter=lambda s: wake.wait(min(s, 0.5)),
+    )
+
+    def progress(t: float) -> None:
+        shared.set(slot, t)
+        wake.notify("robot")
+
+    return clock, progress
+
+
+def _wait_for_controllers(shared: SharedTimes, wake: WakeSocket, produced: float) -> None:
+    """Wake the controllers that have ticks due at or before ``produced`` and block until
+    every controller has run them."""
+    for role, slot in _SLOT.items():
+        if shared.get(slot) < produced:
+            wake.notify(role)
+    deadline = None
+    while min(shared.get(s) for s in _SLOT.values()) < produced:
+        if deadline is None:
+            deadline = time.monotonic() + CONTROLLER_TIMEOUT_S
+        elif time.monotonic() > deadline:
+            raise RuntimeError(f"controllers stuck before t={produced:.3f} s")
+        wake.wait(0.05)
+
+
+def _write_report(folder: Path, role: str, report: dict[str, Any]) -> None:
+    (folder / f"{role}.json").write_text(json.dumps(report, indent=1, default=str))
+
+
+def robot_main(cfg: dict[str, Any]) -> None:
+    """Plant + bridge + Neurons + Leptrino + mocap; physics catches up with the clock."""
+    from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
+    from rdm.nodes.lockstep import Lockstep
+    from rdm.nodes.neuron_mirror import NeuronMirror
+    from rdm.nodes.plant_bridge import PlantBridge, default_layout
+    from rdm.plant import EscParams, Plant, ServoParams
+    from rdm.sim.side_channels import ImuSender, MocapSender
+    from rdm.sim.udp_can import open_bus
+
+    folder = Path(cfg["out"])
+    opt = SimpleNamespace(**cfg["stack"])
+    plant = Plant(
+        "rdm",
+        seed=opt.seed,
+        ceiling_height=opt.ceiling_height,
+        floor_height=opt.floor_height,
+        servo=None if opt.servo is None else ServoParams(**opt.servo),
+        esc=None if opt.esc_tau is None else EscParams(tau=opt.esc_tau),
+    )
+    q0 = np.zeros(len(plant.joint_names))
+    plant.reset(q0=q0, base_position=opt.base_position)
+    layout = default_layout(plant.description)
+    q0_map = dict(zip(plant.joint_names, q0.tolist(), strict=True))
+    neurons = []
+    for nl in layout.neurons:
+        bus = open_bus(cfg["can"])
+        if cfg["can"].startswith("socketcan:"):
+            bus.set_filters(neuron_filters(nl.slave))
+        neurons.append(
+            NeuronMirror(bus, nl.slave, layout.servo_configs(nl.slave, q0_map), plant_driven=True)
+        )
+    lep_dev, lep_slave, lep_path = _tapped_pty(folder, "leptrino_foot", ".lep")
+    sensor = LeptrinoSensorNode(lep_dev, "CFS034CA301U", rate_hz=opt.leptrino_rate_hz)
+    truth: list[tuple] = []
+
+    def record(gt: Any) -> None:
+        truth.append((gt.time, *gt.cog_position, *gt.base_quaternion, *gt.rotor_thrusts))
+
+    loop: Lockstep | None = None
+    imu = ImuSender(cfg["token"], lambda: loop.time if loop is not None else 0.0)
+    bridge = PlantBridge(
+        plant,
+        neurons,
+        layout,
+        imu_sink=imu.send_imu,
+        battery_voltage=opt.battery_voltage,
+        battery_sinks=[imu.set_battery_voltage],
+        wrench_sinks={"foot_wrench": sensor.set_wrench},
+        wrench_period=1.0 / opt.leptrino_rate_hz,
+        truth_sink=record,
+        truth_period=opt.truth_period,
+    )
+    mocap = MocapSender(cfg["token"], plant, opt.mocap_period)
+    loop = Lockstep([bridge, *neurons, mocap, sensor], physics=plant)
+    start = _handshake({"leptrino_pty": lep_path})
+    clock = ScaledClock(start["epoch"], start["scale"])
+    shared = SharedTimes(start["time_file"], SLOTS) if start.get("time_file") else None
+    wake = WakeSocket(cfg["token"], "robot")
+    end = float(start["duration"])
+    dt = loop.dt
+    late_steps, max_lag, sum_lag = 0, 0.0, 0.0
+    clock.wait_for_epoch()
+    wall0 = time.monotonic()
+    try:
+        while loop.time < end - 1e-9:
+            lag = clock.now() - loop.time
+            if lag < 0:
+                clock.sleep(-lag)
+                continue
+            if shared is not None:
+                _wait_for_controllers(shared, wake, loop.time - dt)
+            if lag > dt:
+                late_steps += 1
+            sum_lag += lag
+            max_lag = max(max_lag, lag)
+            loop.step()
+            if shared is not None:
+                # The bridge, Neurons, mocap and Leptrino have produced everything for this
+                # tick's time (loop.time - dt): the controllers may run up to it.
+                shared.set(0, loop.time - dt)
+    finally:
+        if shared is not None:
+            shared.set(0, math.inf)  # the physics is done: the others finish on the wall clock
+        wall = time.monotonic() - wall0
+        steps = loop.stats.base_ticks
+        np.savez(folder / "truth.npz", truth=np.array(truth, dtype=float))
+        _write_report(
+            folder,
+            "robot",
+            {
+                "deadlines": {
+                    "physics_step": {
+                        "ticks": steps,
+                        "overruns": late_steps,
+                        "max_late_ms": round(1e3 * max_lag, 3),
+                        "mean_late_ms": round(1e3 * sum_lag / max(steps, 1), 3),
+                    }
+                },
+                "wall_s": round(wall, 3),
+                "ticks": dict(loop.stats.ticks),
+                "neurons": {
+                    n.name: {
+                        "rx": n.rx_count,
+                        "tx": n.tx_count,
+                        "rx_errors": dict(n.rx_errors),
+                        "tx_errors": n.tx_errors,
+                        "pwm": n.esc.value,
+                        "torque_on": [bool(s.torque_enable) for s in n.servos],
+                    }
+                    for n in neurons
+                },
+                "imu_sent": imu.out.sent,
+                "imu_send_errors": imu.out.errors,
+                "mocap_sent": mocap.out.sent,
+                "mocap_send_errors": mocap.out.errors,
+                "bridge_time_mismatches": bridge.time_mismatches,
+            },
+        )
+        for n in neurons:
+            n.close()
+        imu.close()
+        mocap.close()
+        lep_dev.close()
+        lep_slave.close()
+        if shared is not None:
+            shared.close()
+        wake.close()
+
+
+def spinal_main(cfg: dict[str, Any]) -> None:
+    """The Spinal mirror on CAN + its UART pty, IMU from the side channel."""
+    from rdm.nodes.spinal_mirror import SpinalMirror
+    from rdm.sim.side_channels import ImuReceiver
+    from rdm.sim.udp_can import open_bus
+
+    folder = Path(cfg["out"])
+    opt = SimpleNamespace(**cfg["stack"])
+    dev, slave, path = _tapped_pty(folder, "spinal", ".bin")
+    spinal = SpinalMirror(
+        dev,
+        open_bus(cfg["can"]),
+        rate_hz=opt.spinal_rate_hz,
+        boot_delay_ms=opt.boot_delay_ms,
+        gyro_calib_duration_s=opt.gyro_calib_duration_s,
+        time_matched=opt.spinal_time_matched,
+    )
+    imu_in = ImuReceiver(cfg["token"], spinal)
+    start = _handshake({"spinal_pty": path})
+    clock, progress = _clock(start, "spinal", cfg["token"])
+    stats = None
+    try:
+        stats = run_scaled([imu_in, spinal], clock, float(start["duration"]), progress)
+    finally:
+        report = {
+            "deadlines": stats.as_dict() if stats else {},
+            "wall_s": round(stats.wall_s, 3) if stats else None,
+            "imu_samples": imu_in.samples,
+            "imu_malformed": imu_in.malformed,
+            "diagnostics": spinal.diagnostics(),
+        }
+        _write_report(folder, "spinal", report)
+        imu_in.close()
+        spinal.close()
+        slave.close()
+
+
+class LateLink:
+    """A byte link whose port is attached after the node was built (nothing is read or
+    written before :meth:`attach`)."""
+
+    def __init__(self) -> None:
+        self.link: Any = None
+
+    def attach(self, link: Any) -> Any:
+        self.link = link
+        return link
+
+    def read_available(self) -> bytes:
+        return b"" if self.link is None else self.link.read_available()
+
+    def write(self, data: bytes) -> int:
+        return 0 if self.link is None else self.link.write(data)
+
+
+class HoverScript:
+    """The hover scenario's script in the onboard process: at ``arm_at`` set the target and
+    arm (as ``rdm.scenarios.hover.make_script``)."""
+
+    name = "script"
+    period = 0.01
+
+    def __init__(self, onboard: Any, target: Sequence[float], arm_at: float) -> None:
+        self.onboard = onboard
+        self.target = np.asarray(target, dtype=float)
+        self.arm_at = arm_at
+        self.armed_at: float | None = None
+
+    def tick(self, now: float) -> None:
+        if self.armed_at is None and now >= self.arm_at:
+            self.armed_at = now
+            self.onboard.set_target(self.target, 0.0)
+            self.onboard.arm()
+
+
+class StateLog:
+    """Onboard flight-state changes (time, state) for the report."""
+
+    name = "state_log"
+    period = 0.025
+
+    def __init__(self, onboard: Any) -> None:
+        self.onboard = onboard
+        self.changes: list[tuple[float, str]] = []
+
+    def tick(self, now: float) -> None:
+        s = self.onboard.state.value
+        if not self.changes or self.changes[-1][1] != s:
+            self.changes.append((round(now, 4), s))
+
+
+def onboard_main(cfg: dict[str, Any]) -> None:
+    """The onboard node on the two pty slaves, mocap from the side channel, the script."""
+    from rdm.link.serial import open_serial
+    from rdm.model import Robot
+    from rdm.nodes.onboard import OnboardNode
+    from rdm.nodes.onboard_config import OnboardConfig
+    from rdm.sim.side_channels import MocapReceiver
+
+    folder = Path(cfg["out"])
+    opt = SimpleNamespace(**cfg["stack"])
+    robot = Robot.default()
+    # The scenarios' onboard configuration (rdm.scenarios.common.sim_onboard_config: the
+    # defaults, Table V gains), with the initial joint angles of the plant (all zero).
+    config = OnboardConfig(initial_q=tuple([0.0] * robot.n_q))
+    # Built before the handshake (its lazy imports cost seconds in the emulated VM); the ptys
+    # are offered by the other children and arrive with the start line.
+    uart_end, foot_end = LateLink(), LateLink()
+    node = OnboardNode(uart_end, foot_end, robot, config=config)
+    mocap_in = MocapReceiver(cfg["token"], node, opt.mocap_period)
+    script = HoverScript(node, cfg["target"], cfg["arm_at"])
+    log = StateLog(node)
+    start = _handshake({})
+    uart = uart_end.attach(open_serial(f"serial:{start['spinal_pty']}"))
+    foot = foot_end.attach(open_serial(f"serial:{start['leptrino_pty']}@460800"))
+    clock, progress = _clock(start, "onboard", cfg["token"])
+    stats = None
+    try:
+        stats = run_scaled([mocap_in, node, script, log], clock, float(start["duration"]), progress)
+    finally:
+        node.close()
+        status = node.status()
+        status["command"] = None  # numpy-heavy; the truth has the outcome
+        report = {
+            "deadlines": stats.as_dict() if stats else {},
+            "wall_s": round(stats.wall_s, 3) if stats else None,
+            "mocap_applied": mocap_in.applied,
+            "mocap_errors": mocap_in.errors,
+            "armed_at": script.armed_at,
+            "states": log.changes,
+            "status": status,
+        }
+        _write_report(folder, "onboard", report)
+        mocap_in.close()
+        uart.close()
+        foot.close()
+
+
+_MAINS = {"robot": robot_main, "spinal": spinal_main, "onboard": onboard_main}
+
+
+# ----------------------------------------------------------------------------- the parent
+class _Child:
+    def __init__(self, role: str, cfg: dict[str, Any], python: str, folder: Path) -> None:
+        import rdm
+
+        root = str(Path(rdm.__file__).resolve().parents[1])
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+        self.role = role
+        self.log_path = folder / f"{role}.log"
+        self._log = open(self.log_path, "w")  # noqa: SIM115
+        self.proc = subprocess.Popen(
+            [python, "-m", "rdm.sim.processes", role, json.dumps(cfg)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self._log,
+            text=True,
+            env=env,
+        )
+        self.lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.put(line)
+        self.lines.put("")  # EOF
+
+    def wait_ready(self, timeout: float) -> dict[str, Any]:
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise ProcessRunError(f"{self.role}: not ready after {timeout:g} s{self.tail()}")
+            try:
+                line = self.lines.get(timeout=min(left, 1.0))
+            except queue.Empty:
+                continue
+            if line.startswith(READY):
+                return json.loads(line[len(READY) :])
+            if line == "":
+                self.proc.wait(5)
+                raise ProcessRunError(
+                    f"{self.role}: exited ({self.proc.returncode}) before ready{self.tail()}"
+                )
+
+    def start(self, line: dict[str, Any]) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(json.dumps(line) + "\n")
+        self.proc.stdin.flush()
+
+    def tail(self, n: int = 25) -> str:
+        self._log.flush()
+        try:
+            text = self.log_path.read_text().splitlines()[-n:]
+        except OSError:
+            text = []
+        return "\n--- " + self.role + " log ---\n" + "\n".join(text) if text else ""
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(10)
+
+    def close(self) -> None:
+        self.kill()
+        self._log.close()
+
+
+def _candump_channel(spec: str) -> str:
+    return spec.split(":", 1)[1].split(",")[0] if spec.startswith("socketcan:") else "can0"
+
+
+def run_hover_processes(folder: str | Path, options: ProcessRunOptions) -> ProcessRun:
+    """Run the hover scenario as three processes (module doc); raise :class:`ProcessRunError`
+    if a child fails. Returns the ground truth, every child's report and the hover metrics."""
+    import can
+
+    from rdm.sim.udp_can import open_bus
+
+    opt = options
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    token = secrets.token_hex(6)
+    base = {
+        "out": str(out),
+        "can": opt.can,
+        "token": token,
+        "stack": stack_config(opt.seed),
+        "target": list(opt.target),
+        "arm_at": opt.arm_at,
+    }
+    t0 = time.monotonic()
+    children: dict[str, _Child] = {}
+    notifier = writer = bus = None
+    time_file: str | None = None
+    try:
+        for role in ROLES:  # in parallel: start-up is mostly imports
+            children[role] = _Child(role, base, opt.python, out)
+        ready = {r: c.wait_ready(opt.startup_timeout_s) for r, c in children.items()}
+        if opt.candump:
+            bus = open_bus(opt.can)
+            writer = can.CanutilsLogWriter(out / "can.log", channel=_candump_channel(opt.can))
+            notifier = can.Notifier(bus, [writer], timeout=0.2)
+        startup = time.monotonic() - t0
+        if opt.gate:
+            fd, time_file = tempfile.mkstemp(prefix=f"rdm-{token}-", suffix=".time")
+            os.close(fd)
+            SharedTimes(time_file, SLOTS, init=(-1e-3, -math.inf, -math.inf)).close()
+        epoch = time.monotonic() + opt.start_margin_s
+        line = {
+            "epoch": epoch,
+            "scale": opt.scale,
+            "duration": opt.duration,
+            "spinal_pty": ready["spinal"]["spinal_pty"],
+            "leptrino_pty": ready["robot"]["leptrino_pty"],
+            "time_file": time_file,
+        }
+        for c in children.values():
+            c.start(line)
+        budget = opt.start_margin_s + opt.duration / opt.scale * opt.max_slowdown + 120.0
+        deadline = time.monotonic() + budget
+        running = dict(children)
+        while running:  # any child failing ends the run at once
+            for role, c in list(running.items()):
+                rc = c.proc.poll()
+                if rc is None:
+                    continue
+                if rc != 0:
+                    raise ProcessRunError(f"{role}: exit status {rc}{c.tail()}")
+                del running[role]
+            if time.monotonic() > deadline:
+                raise ProcessRunError(f"{sorted(running)}: still running after {budget:.0f} s")
+            time.sleep(0.2)
+        wall = time.monotonic() - epoch
+    finally:
+        if notifier is not None:
+            notifier.stop()
+        if writer is not None:
+            writer.stop()
+        if bus is not None:
+            bus.shutdown()
+        for c in children.values():
+            c.close()
+        if time_file is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(time_file)
+    reports = {r: json.loads((out / f"{r}.json").read_text()) for r in ROLES}
+    rows = np.load(out / "truth.npz")["truth"]
+    truth = {
+        "t": rows[:, 0],
+        "cog": rows[:, 1:4],
+        "quat": rows[:, 4:8],
+        "thrust": rows[:, 8:],
+    }
+    run = ProcessRun(out, opt, truth, reports, wall, startup)
+    run.metrics = hover_outcome(truth, np.asarray(opt.target), opt.arm_at, opt.duration)
+    (out / "summary.json").write_text(
+        json.dumps(
+            {
+                "options": asdict(opt),
+                "metrics": run.metrics,
+                "wall_s": round(wall, 3),
+                "startup_wall_s": round(startup, 3),
+                "deadlines": {r: reports[r]["deadlines"] for r in ROLES},
+            },
+            indent=1,
+            default=str,
+        )
+    )
+    return run
+
+
+def roll_pitch(quat_wxyz: np.ndarray) -> np.ndarray:
+    """(n, 2) ZYX roll and pitch [rad] of (n, 4) quaternions."""
+    w, x, y, z = np.asarray(quat_wxyz, dtype=float).T
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1, 1))
+    return np.stack([roll, pitch], axis=1)
+
+
+def hover_outcome(
+    truth: dict[str, np.ndarray], target: np.ndarray, arm_at: float, duration: float
+) -> dict[str, float]:
+    """The physical outcome of a hover run (same numbers for lockstep and processes): the
+    worst |x|, |y|, |z| error of the CoG over the last second, the max |roll|,|pitch| after
+    arming, the height gained, the final height."""
+    t, cog = truth["t"], truth["cog"]
+    last = t >= duration - 1.0
+    err = np.abs(cog[last] - target) if last.any() else np.full((1, 3), np.nan)
+    after = t > arm_at
+    rp = np.degrees(np.abs(roll_pitch(truth["quat"][after]))) if after.any() else np.nan
+    return {
+        "max_abs_err_x_last1s": float(np.max(err[:, 0])),
+        "max_abs_err_y_last1s": float(np.max(err[:, 1])),
+        "max_abs_err_z_last1s": float(np.max(err[:, 2])),
+        "max_roll_pitch_deg_after_arm": float(np.max(rp)),
+        "climb_m": float(np.max(cog[:, 2]) - cog[0, 2]),
+        "final_z": float(cog[-1, 2]),
+    }
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Child entry point: ``python -m rdm.sim.processes ROLE CONFIG_JSON``."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if len(args) != 2 or args[0] not in _MAINS:
+        print(f"usage: python -m rdm.sim.processes {{{','.join(ROLES)}}} CONFIG_JSON")
+        return 2
+    cfg = json.loads(args[1])
+    if os.environ.get("RDM_PROCESSES_PROFILE") == "1":  # cProfile of the role: <out>/<role>.prof
+        import cProfile
+
+        cProfile.runctx(
+            "_MAINS[args[0]](cfg)", globals(), locals(), str(Path(cfg["out"]) / f"{args[0]}.prof")
+        )
+    else:
+        _MAINS[args[0]](cfg)
+    print(DONE, flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
