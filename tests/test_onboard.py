@@ -378,7 +378,7 @@ def test_vectoring_targets_match_eqs_33_36_and_point_thrust() -> None:
         rig.close()
 
 
-def test_default_servo_map_is_the_can_table_order() -> None:
+def test_default_servo_map_is_the_can_table_order(tmp_path) -> None:
     """Spinal numbers servos by their place in its CAN table: Neurons by slave id, then the
     servos on each (docs/neuron.md: 1 = foot unit alpha1, beta1; 2 = q1-q3; 3 = arm unit
     alpha2, beta2; 4 = q4-q6). The node's default map must follow it, not joint order."""
@@ -386,14 +386,11 @@ def test_default_servo_map_is_the_can_table_order() -> None:
     from rdm.sim import open_inproc_uart
 
     table = ["alpha1", "beta1", "q1", "q2", "q3", "alpha2", "beta2", "q4", "q5", "q6"]
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as d:
-        dev, host = open_inproc_uart(d, "spinal", ".bin")
+    dev, host = open_inproc_uart(tmp_path, "spinal", ".bin")
+    try:
         node = OnboardNode(host, None)
-        try:
-            names = list(node.robot.joint_names)
-            assert node.config.servo_map.servo_index == tuple(table.index(j) for j in names)
-        finally:
-            dev.close()
-            host.close()
+        names = list(node.robot.joint_names)
+        assert node.config.servo_map.servo_index == tuple(table.index(j) for j in names)
+    finally:
+        dev.close()
+        host.close()

@@ -212,3 +212,28 @@ def test_trajectory_interpolated_into_servo_targets() -> None:
         assert np.allclose(got, want, atol=2e-3)
     finally:
         rig.close()
+
+
+def test_perched_node_holds_position_and_altitude_loops() -> None:
+    """Perched, a mocap error must neither tilt the attitude targets nor change the altitude
+    thrust (eq. 20: λ_flight keeps the weight, λ_perch alone presses); flying, the same error
+    does both. Compared with the node's own flying response, so the hold is what is seen."""
+    rig = make_rig()
+    try:
+        rig.foot_raw = raw_of([0.0, 0.0, 10.0, 0.0, 0.0, 0.0])
+        t = start(rig)
+        off = lambda _t: rig.node.set_mocap([0.3, -0.2, 0.8], [0.1, 0.0, 0.0], 0.0)  # noqa: E731
+        t = fly(rig, t, t + 0.2, mocap=off)
+        flying = rig.node.last_command
+        assert abs(flying.angles[1]) > 0.01  # θ_d from the x error
+        rig.node.request_perch(True)
+        t = fly(rig, t, t + 0.1, mocap=off)
+        first = rig.node.last_command
+        t = fly(rig, t, t + 0.5, mocap=off)
+        held = rig.node.last_command
+        assert held.angles[0] == 0.0 and held.angles[1] == 0.0
+        np.testing.assert_allclose(held.flight_thrust, first.flight_thrust, atol=1e-9)
+        assert not np.allclose(flying.flight_thrust, held.flight_thrust)  # z loop was live
+        assert np.all(rig.node.control.position.integral == 0.0)
+    finally:
+        rig.close()

@@ -79,11 +79,8 @@ def test_infeasible_perching_qp_is_logged_and_the_command_stays_safe(tmp_path):
     """A normal-force floor the rotors cannot reach (epsilon_z = 11 N with the thrust limits)
     makes every perching QP infeasible: the status is in the MCAP and the counters, the safe
     command keeps every rotor inside [0, thrust_max], Spinal sees no bad command."""
-    from rdm.scenarios.common import sim_onboard_config
 
-    onboard = sim_onboard_config(
-        position_gains=dict(perching.POSITION_GAINS), perch_params={"epsilon_z": 11.0}
-    )
+    onboard = perching.onboard_config(perch_params={"epsilon_z": 11.0})
     res = perching.run(tmp_path, duration=17.0, motion=SHORT_MOTION, onboard=onboard)
     assert res.facts["t_perch"] is not None
     counts = res.facts["perch_status_counts"]

@@ -169,3 +169,19 @@ def candump_logger(path: str | os.PathLike[str], channel: str = "can0") -> can.L
 def neuron_message(can_id: int, data: bytes) -> can.Message:
     """A classic 11-bit CAN message as the Neuron link uses."""
     return can.Message(arbitration_id=can_id, data=data, is_extended_id=False)
+
+
+def send_neuron_payload(bus: can.BusABC, can_id: int, data: bytes) -> bool:
+    """Send one classic 11-bit frame without blocking; False if the bus refused it.
+
+    The in-process bus takes the fast path (``send_standard``: no sender-side ``Message``);
+    any other python-can bus gets :func:`neuron_message`."""
+    try:
+        fast = getattr(bus, "send_standard", None)
+        if fast is not None:
+            fast(can_id, data)
+        else:
+            bus.send(neuron_message(can_id, data), timeout=0)
+    except (can.CanError, OSError):
+        return False
+    return True

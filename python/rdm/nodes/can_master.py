@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import can
 
-from rdm.link.can import neuron_message
+from rdm.link.can import send_neuron_payload
 from rdm.protocol import neuron as nr
 from rdm.protocol.neuron.pwm import PWM_MAX_MOTORS
 from rdm.protocol.neuron.servo import WORD_VALUE_MAX, WORD_VALUE_MIN
@@ -475,14 +475,9 @@ class CanMaster:
         self._send_raw(frame.can_id, frame.encode())
 
     def _send_raw(self, can_id: int, payload: bytes) -> None:
-        try:
-            fast = getattr(self.bus, "send_standard", None)  # the in-process bus
-            if fast is not None:
-                fast(can_id, payload)
-            else:
-                self.bus.send(neuron_message(can_id, payload), timeout=0)
+        if send_neuron_payload(self.bus, can_id, payload):
             self.tx_count += 1
-        except (can.CanError, OSError):
+        else:
             self.tx_errors += 1
 
     def _log(self, t: int, level: str, text: str) -> None:

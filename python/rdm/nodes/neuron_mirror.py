@@ -26,7 +26,7 @@ from collections.abc import Sequence
 
 import can
 
-from rdm.link.can import neuron_message
+from rdm.link.can import send_neuron_payload
 from rdm.protocol import neuron as nr
 from rdm.protocol.neuron.ids import NEURON_SLAVE_IDS
 
@@ -414,14 +414,9 @@ class NeuronMirror:
                 self._send(nr.ImuFrame(slave, sensor, *self.imu_raw[sensor]))
 
     def _send_raw(self, can_id: int, payload: bytes) -> None:
-        try:
-            fast = getattr(self.bus, "send_standard", None)  # the in-process bus
-            if fast is not None:
-                fast(can_id, payload)
-            else:
-                self.bus.send(neuron_message(can_id, payload), timeout=0)
+        if send_neuron_payload(self.bus, can_id, payload):
             self.tx_count += 1
-        except (can.CanError, OSError):
+        else:
             self.tx_errors += 1
 
     def close(self) -> None:

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from rdm.nodes.bus_layout import can_table, default_neuron_joints
 from rdm.nodes.onboard_arming import ArmingSequencer, FlightState
 from rdm.nodes.onboard_config import OnboardConfig, ServoMap
 from rdm.nodes.onboard_control import ControlCommand, ControlPipeline, Setpoint, State
@@ -84,18 +85,12 @@ def _scalar(value: Any) -> float | None:
 
 
 def default_servo_map(robot: Any) -> ServoMap:
-    """Servo map of a robot's default CAN bus layout (Neurons by slave id, then servo index),
-    or the identity map when the robot has no shipped description to derive it from."""
-    from rdm.nodes.plant_bridge import default_layout
-    from rdm.plant.description import load_robot
-
-    try:
-        desc = load_robot(robot.name)
-    except (OSError, ValueError, AttributeError):
-        return ServoMap()
-    layout = default_layout(desc)
-    table = [j for nl in sorted(layout.neurons, key=lambda n: n.slave) for j in nl.joints]
-    return ServoMap.from_can_table(table, tuple(robot.joint_names))
+    """Servo map of the robot's default CAN wiring (:mod:`rdm.nodes.bus_layout`, the wiring
+    the Neuron mirrors use): Spinal numbers servos by Neuron slave id, then servo index."""
+    wiring = default_neuron_joints(
+        [r["name"] for r in robot.rotors], robot.vectoring_units, tuple(robot.joint_names)
+    )
+    return ServoMap.from_can_table(can_table(wiring), tuple(robot.joint_names))
 
 
 class OnboardNode:

@@ -137,7 +137,7 @@ class OnboardConfig:
     #: Raw offset subtracted before conversion (tare). ASSUMPTION: zero (calibrated sensor).
     foot_sensor_offset: tuple[float, ...] = (0.0,) * 6
     #: Joint <-> Spinal servo index. None: from the robot description's default CAN bus
-    #: layout (``rdm.nodes.plant_bridge.default_layout``, the wiring the mirrors use).
+    #: wiring (``rdm.nodes.bus_layout.default_neuron_joints``, as the mirrors are wired).
     servo_map: ServoMap | None = None
     #: q before the first servo/states (joint_order). ASSUMPTION: zeros (arm straight).
     initial_q: tuple[float, ...] | None = None

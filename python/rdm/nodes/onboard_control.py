@@ -133,7 +133,6 @@ class ControlPipeline:
         self.lqi_result = None
         self.perching = False
         self.perch_thrust = np.zeros(robot.n_rotors)
-        self._position_held = False
         self._ticks = 0
 
     # -- 1. model ------------------------------------------------------------------------
@@ -242,6 +241,7 @@ class ControlPipeline:
     def set_perching(self, on: bool) -> None:
         if on and not self.perching:
             self.perch.reset(np.zeros(self.robot.n_rotors))
+            self.position.reset()  # the horizontal loop is held while perched (see step)
             self.counts["perch_entered"] += 1
         self.perching = on
 
@@ -264,23 +264,18 @@ class ControlPipeline:
             self.counts["not_ready"] += 1
             return None
         n_rot = self.robot.n_rotors
-        if self.perching:
-            # Perched, the foot cannot translate: a horizontal error would only wind up the
-            # PID and tilt the attitude targets, i.e. press the plate onto an edge. The loop is
-            # held at zero error (φ_d = θ_d = 0, vectoring level) with its integral cleared.
-            # ASSUMPTION (the paper's Fig. 6 shows no position loop in perching mode).
-            xy_target, xy_velocity = state.position[:2], np.zeros(2)
-            if not self._position_held:
-                self.position.reset()
-                self._position_held = True
-        else:
-            xy_target, xy_velocity = setpoint.position[:2], setpoint.velocity[:2]
-            self._position_held = False
+        # Perched, the foot cannot translate: a horizontal error would only wind up the PID
+        # and tilt the attitude targets, i.e. press the plate onto an edge. The loop is held
+        # at zero error (φ_d = θ_d = 0, vectoring level; its integral is cleared on entry, see
+        # set_perching). ASSUMPTION (the paper's Fig. 6 shows no position loop when perched).
+        held = self.perching
+        position = state.position[:2]
+        velocity = np.zeros(2) if held else state.velocity[:2]
         pos = self.position.step(
-            state.position[:2],
-            state.velocity[:2] if not self.perching else np.zeros(2),
-            xy_target,
-            xy_velocity,
+            position,
+            velocity,
+            position if held else setpoint.position[:2],
+            velocity if held else setpoint.velocity[:2],
             setpoint.yaw,
             t.link_rotations,
             dt,

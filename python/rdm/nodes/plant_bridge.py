@@ -42,12 +42,12 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+from .bus_layout import MAX_SERVOS_PER_NEURON, default_neuron_joints
 from .servo_model import ServoConfig
 
 #: Dynamixel X: 4096 ticks per revolution, 2048 = the centre (0 rad).
 TICKS_PER_REV = 4096
 CENTER_TICKS = 2048
-MAX_SERVOS_PER_NEURON = 4
 
 
 @dataclass(frozen=True)
@@ -120,47 +120,13 @@ def _vectoring_units(desc: RobotDescription) -> list[dict]:
 
 
 def default_layout(desc: RobotDescription) -> BusLayout:
-    """The default bus layout of a multilink robot description (the RDM's, documented).
-
-    * One Neuron per rotor (Spinal counts one motor per Neuron), slave ids 1.. in rotor order.
-    * Each vectoring unit's roll and pitch servos sit on the Neuron of the unit's first rotor.
-    * The link joints (the rest of ``joint_order``, in order) are split evenly, contiguously,
-      over the Neurons that carry no vectoring servo, in slave order (RDM: q1-q3 on Neuron 2,
-      q4-q6 on Neuron 4); what does not fit goes to the spare slots of the others.
-    * Every servo reports its state (``send_data_flag``), so Spinal infers HYDRUS (16).
-    """
-    rotor_slave = {r.name: i + 1 for i, r in enumerate(desc.rotors)}
-    if len(rotor_slave) > 14:
-        raise ValueError(f"default_layout: {len(rotor_slave)} rotors > 14 Neurons")
-    joints: dict[int, list[str]] = {s: [] for s in rotor_slave.values()}
-    vectoring: set[str] = set()
-    for unit in _vectoring_units(desc):
-        rotors = unit.get("rotors", [])
-        if not rotors or rotors[0] not in rotor_slave:
-            raise ValueError(f"default_layout: vectoring unit {unit.get('name')!r} has no rotor")
-        for key in ("roll_joint", "pitch_joint"):
-            if key in unit:
-                joints[rotor_slave[rotors[0]]].append(unit[key])
-                vectoring.add(unit[key])
-    links = [j for j in desc.joint_order if j not in vectoring]
-    free = [s for s, js in joints.items() if not js] or list(joints)
-    at = 0
-    for i, slave in enumerate(free):
-        share = math.ceil((len(links) - at) / (len(free) - i))
-        take = min(share, MAX_SERVOS_PER_NEURON - len(joints[slave]))
-        joints[slave].extend(links[at : at + take])
-        at += take
-    for slave in joints:  # spill-over into spare slots
-        while at < len(links) and len(joints[slave]) < MAX_SERVOS_PER_NEURON:
-            joints[slave].append(links[at])
-            at += 1
-    if at < len(links):
-        raise ValueError(f"default_layout: {len(links) - at} joints do not fit on the Neurons")
-    return BusLayout(
-        tuple(
-            NeuronLayout(slave, rotor, tuple(joints[slave])) for rotor, slave in rotor_slave.items()
-        )
+    """The default bus layout of a multilink robot description: the wiring rule of
+    :func:`rdm.nodes.bus_layout.default_neuron_joints`; every servo reports its state
+    (``send_data_flag``), so Spinal infers HYDRUS (16)."""
+    table = default_neuron_joints(
+        [r.name for r in desc.rotors], _vectoring_units(desc), desc.joint_order
     )
+    return BusLayout(tuple(NeuronLayout(s, rotor, js) for s, (rotor, js) in table.items()))
 
 
 def layout_scale(layout: BusLayout, joint: str) -> float:

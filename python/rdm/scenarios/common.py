@@ -19,13 +19,6 @@ from rdm.sim import Metric, format_metrics_table, write_summary
 
 from .stack import Stack, StackOptions
 
-
-def sim_onboard_config(**overrides: Any) -> OnboardConfig:
-    """The onboard configuration the simulated robot flies with: the paper's Table V gains
-    (the core defaults) unless overridden."""
-    return OnboardConfig(**overrides)
-
-
 _PROGRESS: ContextVar[Callable[[Any, float], None] | None] = ContextVar(
     "rdm_sim_progress", default=None
 )
@@ -62,7 +55,7 @@ def sim_stack_options(seed: int, uart: str, **overrides: Any) -> StackOptions:
     kw: dict[str, Any] = {"seed": seed, "uart": uart, "progress": _PROGRESS.get()}
     kw.update(overrides)
     if "onboard" not in kw:
-        kw["onboard"] = sim_onboard_config()
+        kw["onboard"] = OnboardConfig()  # the paper's Table V gains (the core defaults)
     return StackOptions(**kw)
 
 
@@ -109,6 +102,17 @@ def roll_pitch(quat_wxyz: np.ndarray) -> np.ndarray:
     roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
     pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1, 1))
     return np.stack([roll, pitch], axis=1)
+
+
+def run_stack(stack: Stack, seconds: float) -> float:
+    """Advance ``stack`` by ``seconds`` of simulated time and close it, whatever happens;
+    returns the wall seconds it took."""
+    t0 = time.perf_counter()
+    try:
+        stack.loop.run(seconds)
+    finally:
+        stack.close()
+    return time.perf_counter() - t0
 
 
 def finish(result: ScenarioResult, seconds: float, wall_s: float) -> ScenarioResult:

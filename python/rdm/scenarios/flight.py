@@ -26,7 +26,6 @@ angles, so it is not used here.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -34,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from rdm.model import Robot
+from rdm.nodes.onboard_config import OnboardConfig
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels, plot_tracking_errors
 
@@ -41,7 +41,7 @@ from .common import (
     ScenarioResult,
     finish,
     roll_pitch,
-    sim_onboard_config,
+    run_stack,
     sim_stack_options,
     truth_arrays,
 )
@@ -426,7 +426,7 @@ def run(
     if duration is not None and duration > plan.duration:
         plan = replace(plan, hold_s=duration - plan.change_end)
     seconds = plan.duration if duration is None else duration
-    onboard = sim_onboard_config(send_desire_coordinate=desire_coordinate)
+    onboard = OnboardConfig(send_desire_coordinate=desire_coordinate)
     opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard)
     robot = Robot.default()
     script_ref: dict[str, FlightScript] = {}
@@ -440,12 +440,7 @@ def run(
         script_ref["s"](stack, now)
 
     stack = build_stack("flight", base, opts, script)
-    t0 = time.perf_counter()
-    try:
-        stack.loop.run(seconds)
-    finally:
-        stack.close()
-    wall = time.perf_counter() - t0
+    wall = run_stack(stack, seconds)
     if "s" not in script_ref:  # stopped before arming
         cog0 = np.asarray(stack.plant.ground_truth().cog_position, dtype=float)
         script_ref["s"] = FlightScript(Reference(plan, robot, cog0))

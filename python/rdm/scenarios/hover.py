@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +9,7 @@ import numpy as np
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels
 
-from .common import ScenarioResult, finish, roll_pitch, sim_stack_options, truth_arrays
+from .common import ScenarioResult, finish, roll_pitch, run_stack, sim_stack_options, truth_arrays
 from .stack import Stack, build_stack
 
 ARM_AT = 1.5  # s: the CAN master runs from ~1.4 s (100 ms boot delay + enumeration)
@@ -38,12 +37,7 @@ def run(
     opts = sim_stack_options(seed, uart, speed=speed)
     target = np.array([0.483, 0.0, HOVER_Z])
     stack = build_stack("hover", base, opts, make_script(target))
-    t0 = time.perf_counter()
-    try:
-        stack.loop.run(duration)
-    finally:
-        stack.close()
-    wall = time.perf_counter() - t0
+    wall = run_stack(stack, duration)
     a = truth_arrays(stack)
     window = a["t"] >= max(ARM_AT + 2.5, duration - 2.0)
     err = a["cog"][window] - target if window.any() else np.full((1, 3), np.nan)

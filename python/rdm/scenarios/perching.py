@@ -21,12 +21,12 @@ slip < 1 mm, ZMP inside the plate.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from rdm.nodes.onboard_config import OnboardConfig
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels
 
@@ -35,7 +35,7 @@ from .common import (
     SetpointRamp,
     finish,
     roll_pitch,
-    sim_onboard_config,
+    run_stack,
     sim_stack_options,
     truth_arrays,
 )
@@ -78,6 +78,18 @@ POSITION_GAINS: dict = {"k_roll": 1.0, "y_pid": (3.0, 0.5, 4.0)}
 #: F_z is controlled, U_mask = diag[1,0,0,0]); 8 N keeps it flat. ASSUMPTION (docs/scenarios.md).
 PERCH_PARAMS: dict = {"epsilon_z": 8.0}
 EDGE_MM = 1.0  # ZMP within this of the plate edge counts as "on the edge" (tipping)
+
+
+def onboard_config(**overrides: Any) -> OnboardConfig:
+    """The onboard configuration of the hanging-posture experiments (perching, push,
+    tracking, tasks): :data:`POSITION_GAINS` and :data:`PERCH_PARAMS` over the defaults;
+    ``overrides`` replace whole fields."""
+    kw: dict[str, Any] = {
+        "position_gains": dict(POSITION_GAINS),
+        "perch_params": dict(PERCH_PARAMS),
+    }
+    kw.update(overrides)
+    return OnboardConfig(**kw)
 
 
 def leveled(q6: np.ndarray, n_q: int) -> np.ndarray:
@@ -188,18 +200,11 @@ def run(
     **stack_overrides: Any,
 ) -> ScenarioResult:
     if "onboard" not in stack_overrides:
-        stack_overrides["onboard"] = sim_onboard_config(
-            position_gains=dict(POSITION_GAINS), perch_params=dict(PERCH_PARAMS)
-        )
+        stack_overrides["onboard"] = onboard_config()
     opts = sim_stack_options(seed, uart, speed=speed, log=log, **stack_overrides)
     script = PerchingScript(motion)
     stack = build_stack("perching", base, opts, script)
-    t0 = time.perf_counter()
-    try:
-        stack.loop.run(duration)
-    finally:
-        stack.close()
-    wall = time.perf_counter() - t0
+    wall = run_stack(stack, duration)
     return finish(_evaluate(stack, script), duration, wall)
 
 

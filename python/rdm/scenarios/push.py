@@ -26,7 +26,6 @@ Table VIII; perched: contact kept, slip, ZMP inside the plate, friction usage.
 
 from __future__ import annotations
 
-import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,8 +35,14 @@ import numpy as np
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels, plot_zmp
 
-from .common import ScenarioResult, finish, sim_onboard_config, sim_stack_options, truth_arrays
-from .perching import MU, PERCH_PARAMS, PERCH_POSTURE, PLATE_HALF, POSITION_GAINS, PerchingScript
+from .common import (
+    ScenarioResult,
+    finish,
+    run_stack,
+    sim_stack_options,
+    truth_arrays,
+)
+from .perching import MU, PERCH_POSTURE, PLATE_HALF, PerchingScript, onboard_config
 from .stack import Stack, build_stack
 
 AXES = ("x", "y", "z")
@@ -548,19 +553,11 @@ def run(
 ) -> ScenarioResult:
     """Run the scenario: it stops 0.5 s after the perched stage, or at ``duration``."""
     plan = plan or DEFAULT_PLAN
-    onboard = sim_onboard_config(
-        position_gains=dict(POSITION_GAINS), perch_params=dict(PERCH_PARAMS)
-    )
-    opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard)
+    opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard_config())
     script = PushScript(plan)
     stack = build_stack("push", base, opts, script)
-    t0 = time.perf_counter()
-    try:
-        stack.loop.run(DEFAULT_DURATION if duration is None else duration)
-    finally:
-        stack.close()
+    wall = run_stack(stack, DEFAULT_DURATION if duration is None else duration)
     seconds = stack.plant.time
-    wall = time.perf_counter() - t0
     res = analyse(stack, script)
     if plots:
         plot(stack, res)

@@ -190,16 +190,9 @@ class Stack:
         self.onboard_link.dropped = dropped
 
 
-def build_stack(
-    name: str,
-    base: str | Path,
-    options: StackOptions,
-    script: Callable[[Stack, float], None] | None = None,
-    script_period: float = 0.01,
-) -> Stack:
-    """Wire the full stack into a run folder ``<base>/<name>-seed<seed>``."""
-    opt = options
-    folder = RunFolder.create(name, base=base, seed=opt.seed)
+def make_plant(opt: StackOptions) -> tuple[Plant, np.ndarray]:
+    """The MuJoCo plant of the options, reset to ``q0`` at ``base_position``; returns it and q0
+    (shared by the lockstep stack and the ``rdm hil`` robot process)."""
     plant = Plant(
         "rdm",
         seed=opt.seed,
@@ -211,18 +204,38 @@ def build_stack(
     )
     q0 = np.zeros(len(plant.joint_names)) if opt.q0 is None else np.asarray(opt.q0, float)
     plant.reset(q0=q0, base_position=opt.base_position)
+    return plant, q0
+
+
+def make_neurons(
+    plant: Plant, q0: np.ndarray, open_bus: Callable[[int], Any]
+) -> tuple[BusLayout, list[NeuronMirror]]:
+    """The robot's Neuron mirrors on its default bus layout, servos starting at ``q0``;
+    ``open_bus(slave)`` gives each board its CAN bus."""
     layout = default_layout(plant.description)
     q0_map = dict(zip(plant.joint_names, q0.tolist(), strict=True))
-    channel = _free_channel()
     neurons = [
         NeuronMirror(
-            open_can(f"inproc:{channel}"),
-            nl.slave,
-            layout.servo_configs(nl.slave, q0_map),
-            plant_driven=True,
+            open_bus(nl.slave), nl.slave, layout.servo_configs(nl.slave, q0_map), plant_driven=True
         )
         for nl in layout.neurons
     ]
+    return layout, neurons
+
+
+def build_stack(
+    name: str,
+    base: str | Path,
+    options: StackOptions,
+    script: Callable[[Stack, float], None] | None = None,
+    script_period: float = 0.01,
+) -> Stack:
+    """Wire the full stack into a run folder ``<base>/<name>-seed<seed>``."""
+    opt = options
+    folder = RunFolder.create(name, base=base, seed=opt.seed)
+    plant, q0 = make_plant(opt)
+    channel = _free_channel()
+    layout, neurons = make_neurons(plant, q0, lambda _slave: open_can(f"inproc:{channel}"))
     barriers: list = []
     if opt.uart == "pty":
         s_dev, s_host, b1 = open_tapped_pty(folder.uart_dir, "spinal", ".bin")

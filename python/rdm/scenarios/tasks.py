@@ -27,7 +27,6 @@ its own (brush stalls after ~0.17 m) and is not registered (docs/scenarios.md ``
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,7 +39,13 @@ from rdm.sim.plots import plot_panels
 
 from . import perching, task_ik
 from . import task_objects as obj
-from .common import ScenarioResult, finish, sim_onboard_config, sim_stack_options, truth_arrays
+from .common import (
+    ScenarioResult,
+    finish,
+    run_stack,
+    sim_stack_options,
+    truth_arrays,
+)
 from .stack import Stack, build_stack
 
 TASKS = ("drilling", "painting", "valve")
@@ -310,21 +315,13 @@ def run_task(
 
     duration = duration_of(task) if duration is None else duration
     if "onboard" not in stack_overrides:
-        stack_overrides["onboard"] = sim_onboard_config(
-            position_gains=dict(perching.POSITION_GAINS),
-            perch_params=dict(perching.PERCH_PARAMS),
-        )
+        stack_overrides["onboard"] = perching.onboard_config()
     layout = _valve_layout(Robot.default()) if task == "valve" else obj.TaskLayout()
     stack_overrides.setdefault("scene", obj.scene((task,), layout))
     opts = sim_stack_options(seed, uart, speed=speed, log=log, **stack_overrides)
     script = TaskScript(task, layout)
     stack = build_stack(task, base, opts, script)
-    t0 = time.perf_counter()
-    try:
-        stack.loop.run(duration)
-    finally:
-        stack.close()
-    wall = time.perf_counter() - t0
+    wall = run_stack(stack, duration)
     return finish(evaluate(stack, script), duration, wall)
 
 

@@ -27,7 +27,6 @@ errors, without the ZYX gimbal singularity). RMSE over the motion and ``AFTER_S`
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,8 +38,14 @@ from rdm.model import Robot
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels, plot_tracking_errors
 
-from .common import ScenarioResult, finish, sim_onboard_config, sim_stack_options, truth_arrays
-from .perching import PERCH_PARAMS, PERCH_POSTURE, POSITION_GAINS, joint_path
+from .common import (
+    ScenarioResult,
+    finish,
+    run_stack,
+    sim_stack_options,
+    truth_arrays,
+)
+from .perching import PERCH_POSTURE, joint_path, onboard_config
 from .push import StagedPerchingScript
 from .stack import Stack, build_stack
 
@@ -347,20 +352,12 @@ def run(
     flight_posture: str = "straight",
 ) -> ScenarioResult:
     """Run the scenario: it stops after the perched stage, or at ``duration``."""
-    onboard = sim_onboard_config(
-        position_gains=dict(POSITION_GAINS), perch_params=dict(PERCH_PARAMS)
-    )
-    opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard)
+    opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard_config())
     robot = Robot.default()
     script = TrackingScript(motion, robot, flight_posture)
     stack = build_stack("tracking", base, opts, script)
-    t0 = time.perf_counter()
-    try:
-        stack.loop.run(DEFAULT_DURATION if duration is None else duration)
-    finally:
-        stack.close()
+    wall = run_stack(stack, DEFAULT_DURATION if duration is None else duration)
     seconds = stack.plant.time
-    wall = time.perf_counter() - t0
     errs = {s: stage_errors(stack, robot, script.plans.get(s)) for s in ("flight", "perched")}
     if plots:
         plot(stack, errs)

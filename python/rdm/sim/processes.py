@@ -217,34 +217,25 @@ def robot_main(cfg: dict[str, Any]) -> None:
     """Plant + bridge + Neurons + Leptrino + mocap; physics catches up with the clock."""
     from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
     from rdm.nodes.lockstep import Lockstep
-    from rdm.nodes.neuron_mirror import NeuronMirror
-    from rdm.nodes.plant_bridge import PlantBridge, default_layout
-    from rdm.plant import EscParams, Plant, ServoParams
+    from rdm.nodes.plant_bridge import PlantBridge
+    from rdm.plant import ServoParams
+    from rdm.scenarios.stack import StackOptions, make_neurons, make_plant
     from rdm.sim.side_channels import ImuSender, MocapSender
     from rdm.sim.udp_can import open_bus
 
     folder = Path(cfg["out"])
-    opt = SimpleNamespace(**cfg["stack"])
-    plant = Plant(
-        "rdm",
-        seed=opt.seed,
-        ceiling_height=opt.ceiling_height,
-        floor_height=opt.floor_height,
-        servo=None if opt.servo is None else ServoParams(**opt.servo),
-        esc=None if opt.esc_tau is None else EscParams(tau=opt.esc_tau),
-    )
-    q0 = np.zeros(len(plant.joint_names))
-    plant.reset(q0=q0, base_position=opt.base_position)
-    layout = default_layout(plant.description)
-    q0_map = dict(zip(plant.joint_names, q0.tolist(), strict=True))
-    neurons = []
-    for nl in layout.neurons:
+    stack_cfg = dict(cfg["stack"])
+    servo = stack_cfg.pop("servo")
+    opt = StackOptions(**stack_cfg, servo=None if servo is None else ServoParams(**servo))
+    plant, q0 = make_plant(opt)
+
+    def open_neuron_bus(slave: int) -> Any:
         bus = open_bus(cfg["can"])
         if cfg["can"].startswith("socketcan:"):
-            bus.set_filters(neuron_filters(nl.slave))
-        neurons.append(
-            NeuronMirror(bus, nl.slave, layout.servo_configs(nl.slave, q0_map), plant_driven=True)
-        )
+            bus.set_filters(neuron_filters(slave))
+        return bus
+
+    layout, neurons = make_neurons(plant, q0, open_neuron_bus)
     lep_dev, lep_slave, lep_path = _tapped_pty(folder, "leptrino_foot", ".lep")
     sensor = LeptrinoSensorNode(lep_dev, "CFS034CA301U", rate_hz=opt.leptrino_rate_hz)
     truth: list[tuple] = []
@@ -445,8 +436,8 @@ def onboard_main(cfg: dict[str, Any]) -> None:
     folder = Path(cfg["out"])
     opt = SimpleNamespace(**cfg["stack"])
     robot = Robot.default()
-    # The scenarios' onboard configuration (rdm.scenarios.common.sim_onboard_config: the
-    # defaults, Table V gains), with the initial joint angles of the plant (all zero).
+    # The scenarios' onboard configuration (the defaults, Table V gains), with the initial
+    # joint angles of the plant (all zero).
     config = OnboardConfig(initial_q=tuple([0.0] * robot.n_q))
     # Built before the handshake (its lazy imports cost seconds in the emulated VM); the ptys
     # are offered by the other children and arrive with the start line.
