@@ -159,34 +159,29 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
             )
     fx, fy, _ = layout.nominal_foot
     sr = layout.contact_solref
+
+    def plate(name: str, bit: int, friction, x_range, half_y: float, top_z: float, rgba) -> None:
+        """A 2 cm thick world plate whose top face is at ``top_z``, x relative to the foot."""
+        x0, x1 = x_range
+        body = spec.worldbody.add_body(name=name)
+        _object_geom(
+            body,
+            bit,
+            friction,
+            sr,
+            name=name,
+            type=box,
+            size=[(x1 - x0) / 2, half_y, 0.01],
+            pos=[fx + (x0 + x1) / 2, fy, top_z - 0.01],
+            rgba=rgba,
+        )
+
     if "drilling" in tasks:
-        x0, x1 = layout.board_x
-        board = spec.worldbody.add_body(name=BOARD)
-        _object_geom(
-            board,
-            DRILL_BIT,
-            layout.board_friction,
-            sr,
-            name=BOARD,
-            type=box,
-            size=[(x1 - x0) / 2, layout.board_half_y, 0.01],
-            pos=[fx + (x0 + x1) / 2, fy, layout.board_top_z - 0.01],
-            rgba=[0.7, 0.55, 0.35, 1.0],
-        )
+        plate(BOARD, DRILL_BIT, layout.board_friction, layout.board_x, layout.board_half_y,
+              layout.board_top_z, [0.7, 0.55, 0.35, 1.0])  # fmt: skip
     if "painting" in tasks:
-        x0, x1 = layout.panel_x
-        panel = spec.worldbody.add_body(name=PANEL)
-        _object_geom(
-            panel,
-            BRUSH_BIT,
-            layout.panel_friction,
-            sr,
-            name=PANEL,
-            type=box,
-            size=[(x1 - x0) / 2, layout.panel_half_y, 0.01],
-            pos=[fx + (x0 + x1) / 2, fy, layout.panel_top_z - 0.01],
-            rgba=[0.9, 0.9, 0.85, 0.6],
-        )
+        plate(PANEL, BRUSH_BIT, layout.panel_friction, layout.panel_x, layout.panel_half_y,
+              layout.panel_top_z, [0.9, 0.9, 0.85, 0.6])  # fmt: skip
     if "valve" in tasks:
         axis = layout.valve_axis
         valve = spec.worldbody.add_body(name=VALVE, pos=[axis[0], axis[1], axis[2]])
