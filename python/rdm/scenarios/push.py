@@ -3,10 +3,11 @@ perched (paper Sec. VII-C-1, Figs. 11-12, Tables VIII-IX).
 
 One run, built on the perching scenario's phases (:class:`rdm.scenarios.perching.PerchingScript`):
 
-1. boot, arm, climb at q = 0, fold in flight to the hanging posture ``PERCH_POSTURE``;
-2. **flight stage**: hovering in the hanging posture, a quiet window (the no-push baseline),
-   then the end effector is pushed and pulled along its x, y, z axes in turn;
-3. approach, perch on the ceiling, settle;
+1. boot, arm, climb at q = 0;
+2. **flight stage**: hovering with the arm straight (q = 0) on ``FLIGHT_GAINS``, a quiet
+   window (the no-push baseline), then the end effector is pushed and pulled along its x, y,
+   z axes in turn;
+3. fold in flight to the hanging posture ``PERCH_POSTURE``, approach, perch, settle;
 4. **perched stage**: the same quiet window and the same push/pull sequence, with the
    perched magnitudes.
 
