@@ -394,3 +394,27 @@ def test_default_servo_map_is_the_can_table_order(tmp_path) -> None:
     finally:
         dev.close()
         host.close()
+
+
+def test_position_gains_switched_at_run_time() -> None:
+    """ControlPipeline.set_position_gains: the next step uses the new x PID (eq. 30 from a
+    zero integral, numpy) and the old integral is gone."""
+    from rdm.nodes.onboard_control import ControlPipeline, Setpoint, State
+
+    pipe = ControlPipeline(ROBOT, OnboardConfig())
+    q = np.zeros(len(ROBOT.joint_names))
+    assert pipe.update_model(q) and pipe.synthesize()
+    p, v = np.array([0.1, 0.0, 1.0]), np.array([0.05, 0.0, 0.0])
+    state = State(p, v, 0.0)
+    target = Setpoint(np.array([0.4, 0.0, 1.0]), np.zeros(3), 0.0)
+    for _ in range(20):  # wind up Table V's integral
+        pipe.step(state, target, q, None, DT)
+    assert pipe.position.integral[0] > 0.1
+    pipe.set_position_gains({"x_pid": (1.0, 0.1, 2.0)})
+    assert np.allclose(pipe.position.integral, 0.0)
+    cmd = pipe.step(state, target, q, None, DT)
+    ex = 0.4 - 0.1
+    ax = 1.0 * ex + 0.1 * ex * DT + 2.0 * (0.0 - v[0])
+    assert cmd is not None
+    assert cmd.angles[1] == pytest.approx(ax / G, rel=1e-9)
+    assert pipe.counts["position_gains_set"] == 1

@@ -245,6 +245,13 @@ class ControlPipeline:
             self.counts["perch_entered"] += 1
         self.perching = on
 
+    def set_position_gains(self, gains: dict) -> None:
+        """Replace the position controller's gains (keyword overrides of
+        :class:`PositionController`, as ``OnboardConfig.position_gains``): a gain schedule per
+        flight posture, as JSK's dynamic reconfigure. The new controller's integral starts at 0."""
+        self.position = PositionController(**gains)
+        self.counts["position_gains_set"] += 1
+
     def reset_integrators(self) -> None:
         self.position.reset()
         self.pc_axes = PcAxisController()

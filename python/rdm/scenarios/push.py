@@ -3,10 +3,11 @@ perched (paper Sec. VII-C-1, Figs. 11-12, Tables VIII-IX).
 
 One run, built on the perching scenario's phases (:class:`rdm.scenarios.perching.PerchingScript`):
 
-1. boot, arm, climb at q = 0, fold in flight to the hanging posture ``PERCH_POSTURE``;
-2. **flight stage**: hovering in the hanging posture, a quiet window (the no-push baseline),
-   then the end effector is pushed and pulled along its x, y, z axes in turn;
-3. approach, perch on the ceiling, settle;
+1. boot, arm, climb at q = 0;
+2. **flight stage**: hovering with the arm straight (q = 0) on ``FLIGHT_GAINS``, a quiet
+   window (the no-push baseline), then the end effector is pushed and pulled along its x, y,
+   z axes in turn;
+3. fold in flight to the hanging posture ``PERCH_POSTURE``, approach, perch, settle;
 4. **perched stage**: the same quiet window and the same push/pull sequence, with the
    perched magnitudes.
 
@@ -54,11 +55,22 @@ PAPER_PERCHED_FORCE_PEAK = (41.8, 15.9, 32.1)
 #: Table IX: standard deviation of the foot position [m], flight and perched.
 PAPER_FOOT_STD_FLIGHT = (0.0416, 0.0281, 0.0220)
 PAPER_FOOT_STD_PERCHED = (0.0009, 0.0011, 0.0004)
-#: Fractions of Table VIII's averages the simulated robot holds (seed 0, measured): in flight
-#: 0.1 drifts centimetres and recovers, 0.3 and 1.0 excite the x/pitch loop until Spinal's
-#: tilt fail-safe; perched 0.05 holds (slip < 1 mm), 0.1 slips 1.5 mm, 0.2 peels, 1.0 falls.
-FLIGHT_SCALE = 0.1
+#: Fractions of Table VIII's averages the simulated robot holds (seed 0, measured, see
+#: docs/scenarios.md). Flight, per axis x, y, z, arm straight (q = 0), FLIGHT_GAINS: x holds
+#: the paper's force; a y push at the end effector (0.57 m ahead of the CoG) is a yaw moment
+#: the rotors' drag cannot hold (1.0 saturates the foot/arm rotors, roll flips); a z push is a
+#: pitch moment of 0.57 m x F_z against ~2.7 N m of pitch authority (arm rotors hover at
+#: 3.8 N, 1 N minimum): 1.0 peels the arm rotors to their minimum and the robot flips.
+#: Perched: 0.05 holds (slip < 1 mm), 0.1 slips 1.5 mm, 0.2 peels, 1.0 falls.
+FLIGHT_SCALE = (1.0, 0.3, 0.4)
 PERCHED_SCALE = 0.05
+#: Position gains of the flight stage (q = 0): Table V (the flight scenario's) except the x
+#: PID. With Table V's W1 the LQI pitch loop has a slow pole at ~sqrt(600/80) = 2.8 rad/s
+#: whatever the inertia; Table V's x PID (4.6, 1.5, 7.0) through it leaves the x/pitch mode
+#: at 4 rad/s with damping 0.09 (0.02 with 30 ms of loop delay), and under the paper's x push
+#: it asks for a 1 rad pitch target: Spinal's commanded-tilt fail-safe. (1.0, 0.1, 2.0) is
+#: damped (0.36). ASSUMPTION (docs/scenarios.md); ``PushPlan(flight_gains={})`` is Table V.
+FLIGHT_GAINS: dict = {"x_pid": (1.0, 0.1, 2.0)}
 EE_BODY = "end_effector"
 EE_SENSOR = "end_effector_wrench"
 
@@ -86,7 +98,7 @@ class PushPlan:
     #: mean |F_ee| per axis in flight / perched [N]: Table VIII's averages scaled to what the
     #: simulated robot holds (FLIGHT_SCALE, PERCHED_SCALE; docs/scenarios.md)
     flight_force: tuple[float, float, float] = tuple(
-        FLIGHT_SCALE * f for f in PAPER_FLIGHT_FORCE_AVG
+        k * f for k, f in zip(FLIGHT_SCALE, PAPER_FLIGHT_FORCE_AVG, strict=True)
     )  # type: ignore[assignment]
     perched_force: tuple[float, float, float] = tuple(
         PERCHED_SCALE * f for f in PAPER_PERCHED_FORCE_AVG
@@ -100,6 +112,9 @@ class PushPlan:
     #: where the flight stage is: "climb" (arm straight, q = 0, as the flight scenario) or
     #: "reconfigure" (in the hanging posture, after the fold)
     flight_after: str = "climb"
+    #: onboard position gains during the flight stage (over Table V, the core defaults); the
+    #: perching configuration's gains (perching.POSITION_GAINS) are restored after it
+    flight_gains: dict = field(default_factory=lambda: dict(FLIGHT_GAINS))
 
     def stage_s(self) -> float:
         return self.quiet_s + len(self.axes) * (self.push_s + self.gap_s)
@@ -253,6 +268,7 @@ class PushScript(StagedPerchingScript):
         assert ramp is not None
         speed = p.flight_drop / max(p.move_s - 0.5, 0.1)
         if self._hover_z is None:  # go down, then push, then back up
+            stack.onboard.control.set_position_gains(p.flight_gains)
             self._hover_z = float(ramp.position[2])
             ramp.set_goal(ramp.position - [0.0, 0.0, p.flight_drop], speed)
         elif s > p.move_s + p.stage_s() and ramp.goal[2] < self._hover_z:
@@ -263,6 +279,7 @@ class PushScript(StagedPerchingScript):
 
     def flight_end(self, stack: Stack, now: float) -> None:
         stack.plant.apply_body_wrench(EE_BODY)  # zero: removed
+        stack.onboard.control.set_position_gains(stack.onboard.config.position_gains)
 
     def perched_tick(self, stack: Stack, now: float, s: float) -> None:
         self._push(stack, now, s, "perched")
