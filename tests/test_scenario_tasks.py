@@ -118,7 +118,7 @@ def test_painting_brush_slides_half_a_metre_in_contact(painting):
     res, script = painting
     force, point, _ = _stroke_log(script)
     on = force > 0
-    assert on.mean() > 0.98, f"in contact {on.mean():.1%} of the stroke window"
+    assert on.mean() >= 0.95, f"in contact {on.mean():.1%} of the stroke window"
     both = on[1:] & on[:-1]
     path = float(np.sum(np.linalg.norm(np.diff(point, axis=0), axis=1)[both]))
     assert path >= 0.5, f"contact path {path:.3f} m"
