@@ -49,6 +49,12 @@ SCENARIOS: dict[str, Scenario] = {
         tasks.duration_of("drilling"),
         "perch, then drill (point contact) at three targets on a board (Fig. 14 A)",
     ),
+    "painting": Scenario(
+        "painting",
+        tasks.run_painting,
+        tasks.duration_of("painting"),
+        "perch, then slide a compliant brush over 0.5 m in contact along a panel (Fig. 14 B)",
+    ),
     "valve": Scenario(
         "valve",
         tasks.run_valve,

@@ -11,7 +11,11 @@ coaxially along the end-effector x axis and collision bits make each touch only 
 object, so one perch can run every task):
 
 * drill bit: capsule 0..``DRILL_LEN`` m, radius 5 mm (point contact at its tip);
-* brush: a sphere of radius ``BRUSH_RADIUS`` centred ``BRUSH_AT`` m out (sliding contact);
+* brush: a sphere of radius ``BRUSH_RADIUS`` centred ``BRUSH_AT`` m out (sliding contact) on
+  a compliant mount: a slide joint along the tool axis (``BRUSH_JOINT``, the bristles)
+  with a preloaded spring (``BRUSH_STIFFNESS``, ``BRUSH_PRELOAD``) and ``BRUSH_TRAVEL`` of
+  compression, so a few mm of arm position error change the contact force by a few tenths
+  of a newton instead of the servos' ~7.5 N/mm;
 * gripper: four finger capsules at (y, z) = (+-``FINGER_Y``, +-``FINGER_Z``) that straddle
   the valve's handle bar on both sides of the hinge.
 
@@ -35,8 +39,20 @@ from rdm.plant.mjcf import ROBOT_GROUP
 DRILL_BIT, BRUSH_BIT, GRIPPER_BIT = 2, 4, 8
 DRILL_LEN = 0.10  # m, bit length from the tool flange
 DRILL_RADIUS = 0.005
-BRUSH_AT = 0.08  # m
+BRUSH_AT = 0.08  # m, brush centre along the tool axis with the bristles uncompressed
 BRUSH_RADIUS = 0.02
+#: Compliant brush (ASSUMPTION, a paint brush/roller: the bristles bend): slide joint along
+#: the tool x axis, coordinate s <= 0 = compression, range [-BRUSH_TRAVEL, 0]. Spring force
+#: BRUSH_PRELOAD + BRUSH_STIFFNESS * |s| pushes the brush out (held at s = 0 by the joint
+#: limit when free). BRUSH_MASS is the moving brush head (not in the onboard model, like the
+#: massless tools).
+BRUSH_JOINT = "tool_brush_slide"
+BRUSH_BODY = "tool_brush_head"
+BRUSH_STIFFNESS = 100.0  # N/m
+BRUSH_PRELOAD = 2.5  # N at s = 0
+BRUSH_TRAVEL = 0.03  # m
+BRUSH_DAMPING = 2.0  # N s/m (critical for 10 g on 100 N/m)
+BRUSH_MASS = 0.01  # kg
 #: Four fingers at (y, z) = (+-FINGER_Y, +-FINGER_Z) in the tool frame (z is along the handle
 #: bar when the tool points down): each pair flanks the bar FINGER_Z out from the hinge, so a
 #: q6 turn pushes the bar sideways. Two fingers flanking the bar at the hinge (the first
@@ -65,7 +81,7 @@ class TaskLayout:
     ASSUMPTIONS (the paper shows photos only): ``nominal_foot`` is where the perching
     scenario's foot lands (seed 0); the board, panel and valve are placed inside
     the hanging arm's reach in the x-z plane of the arm. Stiffness/friction: wood-like stiff
-    contacts (2 ms time constant), board/valve friction 0.6, painted panel 0.3 (a wet brush
+    contacts (2 ms time constant), board/valve friction 0.6, painted panel 0.2 (a wet brush
     slides), valve damping 0.3 N m s/rad and dry friction 0.15 N m.
     """
 
@@ -81,8 +97,11 @@ class TaskLayout:
     valve_damping: float = 0.3  # N m s/rad
     valve_friction: float = 0.15  # N m (dry friction of the stem)
     board_friction: float = 0.6
-    panel_friction: float = 0.3
+    panel_friction: float = 0.2
     contact_solref: tuple[float, float] = (0.002, 1.0)
+    #: brush-panel contact: bristle tips on wet paint, softer than wood (10 ms). With the
+    #: 2 ms of the board the light brush head chattered (zero-force ticks while sliding).
+    panel_solref: tuple[float, float] = (0.01, 1.0)
 
     def board_point(self, dx: float, dy: float) -> np.ndarray:
         """World point on the board's top face at (foot x + dx, foot y + dy)."""
@@ -137,12 +156,24 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
             size=[DRILL_RADIUS, 0, 0],
         )
     if "painting" in tasks:
+        head = tool.add_body(name=BRUSH_BODY, pos=[BRUSH_AT, 0.0, 0.0])
+        head.mass = BRUSH_MASS
+        head.inertia = [1e-6, 1e-6, 1e-6]
+        head.explicitinertial = True
+        j = head.add_joint(name=BRUSH_JOINT, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
+        j.stiffness = [BRUSH_STIFFNESS, 0.0, 0.0]  # linear term only
+        j.springref = BRUSH_PRELOAD / BRUSH_STIFFNESS  # spring rest beyond the limit: preload
+        j.damping = [BRUSH_DAMPING, 0.0, 0.0]
+        j.range = [-BRUSH_TRAVEL, 0.0]
+        j.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+        # the preload (250 m/s^2 on the head) against the default 20 ms limit let the free
+        # head sit ~4 mm past its stop; 4 ms keeps it well under 1 mm
+        j.solref_limit = [0.004, 1.0]
         _tool_geom(
-            tool,
+            head,
             BRUSH_BIT,
             name=BRUSH_GEOM,
             type=mujoco.mjtGeom.mjGEOM_SPHERE,
-            pos=[BRUSH_AT, 0.0, 0.0],
             size=[BRUSH_RADIUS, 0, 0],
         )
     if "valve" in tasks:
@@ -160,7 +191,7 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
     fx, fy, _ = layout.nominal_foot
     sr = layout.contact_solref
 
-    def plate(name: str, bit: int, friction, x_range, half_y: float, top_z: float, rgba) -> None:
+    def plate(name, bit, friction, x_range, half_y, top_z, rgba, solref=sr) -> None:
         """A 2 cm thick world plate whose top face is at ``top_z``, x relative to the foot."""
         x0, x1 = x_range
         body = spec.worldbody.add_body(name=name)
@@ -168,7 +199,7 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
             body,
             bit,
             friction,
-            sr,
+            solref,
             name=name,
             type=box,
             size=[(x1 - x0) / 2, half_y, 0.01],
@@ -181,7 +212,7 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
               layout.board_top_z, [0.7, 0.55, 0.35, 1.0])  # fmt: skip
     if "painting" in tasks:
         plate(PANEL, BRUSH_BIT, layout.panel_friction, layout.panel_x, layout.panel_half_y,
-              layout.panel_top_z, [0.9, 0.9, 0.85, 0.6])  # fmt: skip
+              layout.panel_top_z, [0.9, 0.9, 0.85, 0.6], layout.panel_solref)  # fmt: skip
     if "valve" in tasks:
         axis = layout.valve_axis
         valve = spec.worldbody.add_body(name=VALVE, pos=[axis[0], axis[1], axis[2]])
