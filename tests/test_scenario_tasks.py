@@ -89,11 +89,8 @@ def test_valve_moment_at_the_sensor_matches_the_valve_resistance(valve):
 
 @pytest.fixture(scope="module")
 def painting(tmp_path_factory):
-    scripts: list[tasks.TaskScript] = []
-    res = tasks.run_task(
-        "painting", tmp_path_factory.mktemp("painting"), log=False, scripts=scripts
-    )
-    return res, scripts[0]
+    res = tasks.run_task("painting", tmp_path_factory.mktemp("painting"), log=False)
+    return res, res.script
 
 
 def _stroke_log(script):

@@ -67,6 +67,8 @@ class ScenarioResult:
     stack: Stack
     metrics: list[Metric]
     facts: dict[str, Any] = field(default_factory=dict)
+    #: the scenario's script object when it keeps logs of its own (tasks: per-tick contacts)
+    script: Any = None
 
     @property
     def folder(self) -> Path:

@@ -361,11 +361,10 @@ def run_task(
     uart: str = "inproc",
     speed: float | None = None,
     log: bool = True,
-    scripts: list[TaskScript] | None = None,
     **stack_overrides: Any,
 ) -> ScenarioResult:
-    """Run one task scenario end to end (perch, then the task) and evaluate it. ``scripts``,
-    if given, receives the :class:`TaskScript` (its per-tick contact log, for tests)."""
+    """Run one task scenario end to end (perch, then the task) and evaluate it. The result's
+    ``script`` is the :class:`TaskScript` (its per-tick contact log)."""
     from rdm.model import Robot
 
     duration = duration_of(task) if duration is None else duration
@@ -375,11 +374,11 @@ def run_task(
     stack_overrides.setdefault("scene", obj.scene((task,), layout))
     opts = sim_stack_options(seed, uart, speed=speed, log=log, **stack_overrides)
     script = TaskScript(task, layout)
-    if scripts is not None:
-        scripts.append(script)
     stack = build_stack(task, base, opts, script)
     wall = run_stack(stack, duration)
-    return finish(evaluate(stack, script), duration, wall)
+    result = evaluate(stack, script)
+    result.script = script
+    return finish(result, duration, wall)
 
 
 def _runner(task: str):
