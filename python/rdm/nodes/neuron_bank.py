@@ -103,7 +103,7 @@ class EscView:
 class ServoView:
     """One servo of a board (read from the core); ``feed`` is the plant position feed."""
 
-    __slots__ = ("_board", "_i", "_feed")
+    __slots__ = ("_board", "_feed", "_i")
 
     def __init__(self, board: NeuronBoardView, index: int) -> None:
         self._board = board
@@ -164,9 +164,7 @@ class ServoView:
 
     def set_external_current(self, value: int | None) -> None:
         """When set, the reported current (else the position-error model)."""
-        self._board._bank._core.set_servo_field(
-            self._board._k, self._i, "external_current", value
-        )
+        self._board._bank._core.set_servo_field(self._board._k, self._i, "external_current", value)
 
     def set_present_position(self, position: float) -> None:
         """Plant feedback of this servo's position (raw ticks)."""
@@ -279,7 +277,9 @@ class NeuronBoardView:
             if xyz is not None:
                 sx, sy, sz = NeuronMirror._finite(sensor, xyz)
                 k = _IMU_SCALE[sensor]
-                core.set_imu_raw(self._k, int(sensor), [_int16(sy / k), _int16(-sx / k), _int16(sz / k)])
+                core.set_imu_raw(
+                    self._k, int(sensor), [_int16(sy / k), _int16(-sx / k), _int16(sz / k)]
+                )
         if mag is not None:
             sx, sy, sz = NeuronMirror._finite(nr.ImuMessage.MAG, mag)
             k = nr.MAG_SCALE
