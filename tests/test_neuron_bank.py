@@ -189,7 +189,7 @@ def std(can_id: int, data: bytes = b"", **kw) -> can.Message:
 
 def words(values: list[int], flags: list[bool]) -> bytes:
     return b"".join(
-        struct.pack("<H", (int(f) << 15) | (v & 0x7FFF)) for v, f in zip(values, flags)
+        struct.pack("<H", (int(f) << 15) | (v & 0x7FFF)) for v, f in zip(values, flags, strict=True)
     )
 
 
@@ -218,19 +218,35 @@ def random_frame(rng: random.Random) -> can.Message:
         return std(rng.randrange(2) << 4 | 0xF, bytes(data))
     if r < 0.35:
         n = rng.choice([0, 1, 2, 4, rng.randrange(6)])
-        data = words([rng.randrange(-(1 << 14), 1 << 14) for _ in range(n)],
-                     [rng.random() < 0.6 for _ in range(n)])
+        data = words(
+            [rng.randrange(-(1 << 14), 1 << 14) for _ in range(n)],
+            [rng.random() < 0.6 for _ in range(n)],
+        )
         if rng.random() < 0.1:
             data += bytes([rng.randrange(256)])
         return std(0x200 | rng.choice([0, 1]) << 4 | slave, data)
     if r < 0.45:
         # Direction mixes: enum / config requests and responses, servo states, IMU.
         can_id, dlc = rng.choice(
-            [(0x700, 0), (0x710, 0), (0x710, 5), (0x730, 8), (0x740, 8), (0x220, 8), (0x230, 8),
-             (0x100, 6), (0x120, 6), (0x130, 6), (0x200, 8), (0x750, 0)]
+            [
+                (0x700, 0),
+                (0x710, 0),
+                (0x710, 5),
+                (0x730, 8),
+                (0x740, 8),
+                (0x220, 8),
+                (0x230, 8),
+                (0x100, 6),
+                (0x120, 6),
+                (0x130, 6),
+                (0x200, 8),
+                (0x750, 0),
+            ]
         )
-        data = bytes(rng.randrange(4) if rng.random() < 0.7 else rng.randrange(256)
-                     for _ in range(dlc + rng.choice([0, 0, 0, 1, -1]) if dlc else 0))
+        data = bytes(
+            rng.randrange(4) if rng.random() < 0.7 else rng.randrange(256)
+            for _ in range(dlc + rng.choice([0, 0, 0, 1, -1]) if dlc else 0)
+        )
         return std(can_id | slave, data)
     if r < 0.7:
         cmd = rng.choice([*range(13), rng.randrange(256)])
@@ -340,9 +356,9 @@ def test_enumeration_and_config_replies_decode_with_the_dbc(twin):
     assert 4 in decoded[0].values()  # servo_num
     assert len(decoded) == 13
     # INITIAL_CONFIG_2 of servo 0 on board 3: index 0, position 100, flags send_data only.
-    ic2 = [d for i, d in rs if i == 0x733 and d[0] == 0][0]
+    ic2 = next(d for i, d in rs if i == 0x733 and d[0] == 0)
     assert struct.unpack("<BhHHB", ic2) == (0, 100, 0, 1193, 1)
-    ic3 = [d for i, d in rs if i == 0x743 and d[0] == 3][0]
+    ic3 = next(d for i, d in rs if i == 0x743 and d[0] == 3)
     assert struct.unpack("<BBhhh", ic3) == (3, 0, -20, 4096, 4096)
 
 
@@ -444,7 +460,9 @@ def _run_hover(tmp_path: Path, backend: str, seconds: float) -> dict[str, bytes]
     finally:
         stack.close()
     root = Path(stack.folder.root)
-    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+    return {
+        str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
+    }
 
 
 def test_hover_stack_logs_are_byte_identical(tmp_path):

@@ -205,6 +205,11 @@ impl NeuronBank {
         Ok(list)
     }
 
+    /// True when a frame the boards sent last tick passes another board's id filter.
+    fn sent_frames_heard(&self) -> bool {
+        self.core.sent_frames_heard()
+    }
+
     /// Number of boards.
     fn __len__(&self) -> usize {
         self.core.boards().len()

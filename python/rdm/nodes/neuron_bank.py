@@ -308,7 +308,6 @@ class NeuronBankNode:
         self.boards = [NeuronBoardView(self, k, s) for k, s in enumerate(specs)]
         self._fed: list[tuple[Any, list[int], list[int], list[int]]] | None = []
         self._feed_epochs: dict[int, int] = {}
-        self._sent_last_tick = False
 
     def _feeds_changed(self) -> None:
         self._fed = None  # rebuilt at the next tick
@@ -354,9 +353,12 @@ class NeuronBankNode:
             if msg is None:
                 break
             messages.append(msg)
-        # Positions are only read while handling frames (bus frames, or frames the boards
-        # sent each other last tick).
-        if (messages or self._sent_last_tick) and self._fed != []:
+        # Positions are only read while handling a frame other than a PWM broadcast (MOTOR
+        # device, id < 0x100): servo words, requests, board configs, or a frame a board sent
+        # last tick that another board accepts (colliding slave ids).
+        if self._fed != [] and (
+            any(m.arbitration_id >= 0x100 for m in messages) or self._core.sent_frames_heard()
+        ):
             self._push_positions()
         out = self._core.tick(now, messages)
         if out:
@@ -367,7 +369,6 @@ class NeuronBankNode:
                     boards[k].tx_count += 1
                 else:
                     boards[k].tx_errors += 1
-        self._sent_last_tick = bool(out)
         self._refresh_changes()
 
     def close(self) -> None:

@@ -6,6 +6,7 @@
 //! before it sent in this tick (after them), as separate handles on one bus would.
 
 use super::neuron_board::{BoardError, BoardSettings, NeuronBoard};
+use super::neuron_frame::BROADCAST_ID;
 use super::neuron_tx::{RxFrame, TxEntry, TxQueue};
 
 /// Default send-queue capacity (frames per tick); a board-config burst to 14 boards with
@@ -39,6 +40,7 @@ pub struct NeuronBank {
     boards: Vec<NeuronBoard>,
     tx: TxQueue,
     previous: TxQueue,
+    previous_heard: bool,
 }
 
 /// `floor(now * 1000 + 1e-6)`: seconds to whole ms, robust to float sums (`base.to_ms`).
@@ -63,6 +65,7 @@ impl NeuronBank {
             boards,
             tx: TxQueue::with_capacity(tx_capacity),
             previous: TxQueue::with_capacity(tx_capacity),
+            previous_heard: false,
         })
     }
 
@@ -151,6 +154,22 @@ impl NeuronBank {
             board.end_tick(now, k, &mut self.tx);
         }
         self.previous.copy_from(&self.tx);
+        self.previous_heard = self.previous.frames().iter().any(|e| {
+            let field = (e.frame.id & 0xF) as u8;
+            field == BROADCAST_ID
+                || self
+                    .boards
+                    .iter()
+                    .enumerate()
+                    .any(|(k, b)| k != e.board && b.slave_id == field)
+        });
         Ok(self.tx.frames())
+    }
+
+    /// True when a frame sent in the last tick passes another board's id filter (slave
+    /// ids collide after a SET_SLAVE_ID): the next tick then handles more than the bus
+    /// frames. Lets a caller skip work that only frames can need.
+    pub fn sent_frames_heard(&self) -> bool {
+        self.previous_heard
     }
 }
