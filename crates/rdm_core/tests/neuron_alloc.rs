@@ -37,7 +37,7 @@ fn frames(k: usize, out: &mut [RxFrame; 8]) -> usize {
             n += 1;
         }
     };
-    if k % 2 == 0 {
+    if k.is_multiple_of(2) {
         let v = (k % 1000) as u64;
         let word = v | v << 10 | v << 20 | v << 32 | v << 42 | v << 52;
         put(RxFrame::new(0x00F, 0, &word.to_le_bytes()));
