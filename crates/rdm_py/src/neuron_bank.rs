@@ -32,7 +32,6 @@ fn servo_reason(e: ServoConfigError) -> String {
         ServoConfigError::TimeConstant => "time_constant must be finite and > 0".into(),
         ServoConfigError::CurrentPerTick => "current_per_tick must be finite".into(),
         ServoConfigError::DynamixelId => "dynamixel_id not in 0..252".into(),
-        ServoConfigError::WireRange(name) => format!("{name} does not fit its CAN field"),
     }
 }
 

@@ -436,8 +436,9 @@ fn decode_board_config(data: &[u8]) -> Result<BoardConfig, RxError> {
     })
 }
 
-/// INITIAL_CONFIG_1 read Neuron -> Spinal from a CONFIG_1 id: why it is no command.
-fn initial_config_1_error(data: &[u8]) -> RxError {
+/// INITIAL_CONFIG_1 / _3 (Neuron -> Spinal: DLC 8, servo index in byte 0, no other
+/// constrained field): why such a frame is no command.
+fn indexed_reply_error(data: &[u8]) -> RxError {
     if data.len() != 8 {
         RxError::Dlc
     } else if (byte_at(data, 0) as usize) >= MAX_SERVO_NUM {
@@ -534,7 +535,7 @@ fn decode_initializer(message: u8, slave: u8, data: &[u8]) -> Result<NeuronComma
             }
             decode_board_config(data)
                 .map(NeuronCommand::Board)
-                .map_err(|e| RxError::most_telling(initial_config_1_error(data), e))
+                .map_err(|e| RxError::most_telling(indexed_reply_error(data), e))
         }
         3 => {
             // INITIAL_CONFIG_2 is sent by a Neuron.
@@ -548,7 +549,7 @@ fn decode_initializer(message: u8, slave: u8, data: &[u8]) -> Result<NeuronComma
                 Err(RxError::Direction)
             }
         }
-        4 => Err(initial_config_1_error(data)),
+        4 => Err(indexed_reply_error(data)),
         _ => Err(RxError::UnknownId),
     }
 }

@@ -18,8 +18,6 @@ pub enum ServoConfigError {
     CurrentPerTick,
     /// `dynamixel_id` above 252.
     DynamixelId,
-    /// A field that goes on CAN does not fit its wire type (named).
-    WireRange(&'static str),
 }
 
 /// One servo behind a Neuron (what INITIAL_CONFIG_1/2/3 report) plus model parameters;
