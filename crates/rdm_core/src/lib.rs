@@ -8,6 +8,7 @@
 
 pub mod control;
 pub mod estimate;
+pub mod firmware;
 pub mod model;
 pub mod planner;
 pub mod pwm;

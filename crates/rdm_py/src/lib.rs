@@ -10,6 +10,7 @@ mod estimate;
 mod gains;
 mod lqi;
 mod model;
+mod neuron_bank;
 mod perch;
 mod planner;
 mod position;
@@ -28,5 +29,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     bench::register(m)?;
     qp::register(m)?;
     planner::register(m)?;
+    neuron_bank::register(m)?;
     Ok(())
 }

@@ -28,6 +28,7 @@ import numpy as np
 from rdm.link.can import open_can
 from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
 from rdm.nodes.lockstep import Lockstep
+from rdm.nodes.neuron_bank import NeuronBankNode, NeuronSpec
 from rdm.nodes.neuron_mirror import NeuronMirror
 from rdm.nodes.onboard import OnboardNode
 from rdm.nodes.onboard_config import OnboardConfig
@@ -141,6 +142,10 @@ class StackOptions:
     truth_period: float = 0.01
     log: bool = True
     speed: float | None = None
+    #: Neuron boards: "rust" = one :class:`rdm.nodes.neuron_bank.NeuronBankNode` (Rust core,
+    #: byte-identical logs, tests/test_neuron_bank.py) or "python" = one
+    #: :class:`NeuronMirror` node per board (the reference).
+    neuron_backend: str = "rust"
     #: Rotor (ESC + motor) first-order lag [s]; None = the plant's default (0.05 s).
     #: ASSUMPTION 0.01 s: with 0.05 s the LQI roll loop (I_xx = 0.004 kg m^2) is unstable.
     esc_tau: float | None = 0.01
@@ -162,7 +167,8 @@ class Stack:
 
     plant: Plant
     layout: BusLayout
-    neurons: list[NeuronMirror]
+    #: One :class:`NeuronMirror` per board, or the board views of the Rust bank.
+    neurons: list
     spinal: SpinalMirror
     onboard: OnboardNode
     sensor: LeptrinoSensorNode
@@ -223,6 +229,18 @@ def make_neurons(
     return layout, neurons
 
 
+def make_neuron_bank(plant: Plant, q0: np.ndarray, bus: Any) -> tuple[BusLayout, NeuronBankNode]:
+    """The same boards as :func:`make_neurons` as one Rust-backed node on ``bus`` (board
+    views in ``bank.boards``, layout order)."""
+    layout = default_layout(plant.description)
+    q0_map = dict(zip(plant.joint_names, q0.tolist(), strict=True))
+    specs = [
+        NeuronSpec(nl.slave, tuple(layout.servo_configs(nl.slave, q0_map)), plant_driven=True)
+        for nl in layout.neurons
+    ]
+    return layout, NeuronBankNode(bus, specs)
+
+
 def build_stack(
     name: str,
     base: str | Path,
@@ -235,7 +253,15 @@ def build_stack(
     folder = RunFolder.create(name, base=base, seed=opt.seed)
     plant, q0 = make_plant(opt)
     channel = _free_channel()
-    layout, neurons = make_neurons(plant, q0, lambda _slave: open_can(f"inproc:{channel}"))
+    if opt.neuron_backend == "rust":
+        layout, bank = make_neuron_bank(plant, q0, open_can(f"inproc:{channel}"))
+        neurons: list = list(bank.boards)
+        neuron_nodes: list = [bank]
+    elif opt.neuron_backend == "python":
+        layout, neurons = make_neurons(plant, q0, lambda _slave: open_can(f"inproc:{channel}"))
+        neuron_nodes = list(neurons)
+    else:
+        raise ValueError(f"neuron_backend={opt.neuron_backend!r}: 'rust' or 'python'")
     barriers: list = []
     if opt.uart == "pty":
         s_dev, s_host, b1 = open_tapped_pty(folder.uart_dir, "spinal", ".bin")
@@ -285,7 +311,7 @@ def build_stack(
     )
     mocap = MocapNode(plant, onboard, opt.mocap_period)
     status_log: list = []
-    nodes: list = [bridge, *neurons, spinal, mocap, onboard, sensor]
+    nodes: list = [bridge, *neuron_nodes, spinal, mocap, onboard, sensor]
     stack = Stack(
         plant,
         layout,
@@ -321,7 +347,7 @@ def build_stack(
         onboard_link.close,
         f_dev.close,
         f_host.close,
-        *[n.close for n in neurons],
+        *[n.close for n in neuron_nodes],
     ]
     return stack
 

@@ -1,0 +1,11 @@
+//! Mirrors of the JSK board firmware that sit on the simulated CAN bus.
+//!
+//! The Neuron mirror (`neuron_*`) follows the Python reference `rdm.nodes.neuron_mirror`
+//! frame for frame: same decoding (and error reasons), same replies, same byte order, so a
+//! simulated run writes the same CAN log with either implementation.
+
+pub mod neuron_bank;
+pub mod neuron_board;
+pub mod neuron_frame;
+pub mod neuron_servo;
+pub mod neuron_tx;

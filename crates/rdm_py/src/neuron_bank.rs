@@ -1,0 +1,379 @@
+//! Bindings of `rdm_core::firmware::neuron_bank`: every Neuron of one CAN bus ticked in one
+//! call (python-can messages in, `(board, can_id, payload)` frames out).
+
+use pyo3::create_exception;
+use pyo3::intern;
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict, PyList, PyTuple};
+use rdm_core::firmware::neuron_bank::{BankError, NeuronBank as CoreBank, DEFAULT_TX_CAPACITY};
+use rdm_core::firmware::neuron_board::{BoardError, BoardSettings};
+use rdm_core::firmware::neuron_frame::{RxError, FRAME_KINDS, MAX_SERVO_NUM};
+use rdm_core::firmware::neuron_servo::{ServoConfig, ServoConfigError};
+use rdm_core::firmware::neuron_tx::{RxFrame, FLAG_ERROR, FLAG_EXTENDED, FLAG_FD, FLAG_REMOTE};
+
+use crate::errors::RdmError;
+
+create_exception!(
+    _rdm,
+    NeuronBankError,
+    RdmError,
+    "Bad argument of the Neuron bank (the message names it)."
+);
+
+fn err(msg: String) -> PyErr {
+    NeuronBankError::new_err(msg)
+}
+
+fn servo_reason(e: ServoConfigError) -> String {
+    match e {
+        ServoConfigError::InitialPosition => {
+            "initial_position outside [min_position, max_position]".into()
+        }
+        ServoConfigError::TimeConstant => "time_constant must be finite and > 0".into(),
+        ServoConfigError::CurrentPerTick => "current_per_tick must be finite".into(),
+        ServoConfigError::DynamixelId => "dynamixel_id not in 0..252".into(),
+    }
+}
+
+fn bank_err(e: BankError) -> PyErr {
+    err(match e {
+        BankError::Board(k, BoardError::SlaveId) => format!("boards[{k}].slave_id not in 1..14"),
+        BankError::Board(k, BoardError::ServoCount) => format!("boards[{k}].servos: more than 4"),
+        BankError::Board(k, BoardError::RebootMs) => format!("boards[{k}].reboot_ms must be >= 0"),
+        BankError::Board(k, BoardError::Servo(i, r)) => {
+            format!("boards[{k}].servos[{i}]: {}", servo_reason(r))
+        }
+        BankError::BoardCount => "boards: need 1..14 boards".into(),
+        BankError::DuplicateSlave(s) => format!("boards: slave_id {s} given twice"),
+        BankError::NonFiniteTime => "now must be finite".into(),
+        BankError::BoardIndex(k) => format!("board index {k} out of range"),
+        BankError::ServoIndex(k, i) => format!("board {k}: servo index {i} out of range"),
+        BankError::NonFinitePosition(k, i) => {
+            format!("board {k} servo {i}: present position is not finite")
+        }
+        BankError::Sensor(s) => format!("sensor {s} not in 0..2 (gyro, acc, mag)"),
+    })
+}
+
+fn item<'py, T: FromPyObjectOwned<'py>>(
+    d: &Bound<'py, PyDict>,
+    key: &str,
+    what: &str,
+) -> PyResult<T> {
+    match d.get_item(key)? {
+        Some(v) => v
+            .extract::<T>()
+            .map_err(|e| err(format!("{what}.{key}: {}", Into::<PyErr>::into(e)))),
+        None => Err(err(format!("{what}: missing key {key:?}"))),
+    }
+}
+
+fn servo_config(d: &Bound<'_, PyDict>, what: &str) -> PyResult<ServoConfig> {
+    let ranged = |key: &str, low: i64, high: i64| -> PyResult<i64> {
+        let v: i64 = item(d, key, what)?;
+        if v < low || v > high {
+            return Err(err(format!("{what}.{key}={v} not in {low}..{high}")));
+        }
+        Ok(v)
+    };
+    let c = ServoConfig {
+        dynamixel_id: ranged("dynamixel_id", 0, 252)? as u8,
+        send_data_flag: item(d, "send_data_flag", what)?,
+        external_encoder_flag: item(d, "external_encoder_flag", what)?,
+        p_gain: ranged("p_gain", 0, 0xFFFF)? as u16,
+        i_gain: ranged("i_gain", 0, 0xFFFF)? as u16,
+        d_gain: ranged("d_gain", 0, 0xFFFF)? as u16,
+        profile_velocity: ranged("profile_velocity", 0, 0xFFFF)? as u16,
+        current_limit: ranged("current_limit", 0, 0xFFFF)? as u16,
+        goal_current: item(d, "goal_current", what)?,
+        joint_resolution: ranged("joint_resolution", -0x8000, 0x7FFF)? as i16,
+        servo_resolution: ranged("servo_resolution", -0x8000, 0x7FFF)? as i16,
+        min_position: item(d, "min_position", what)?,
+        max_position: item(d, "max_position", what)?,
+        initial_position: item(d, "initial_position", what)?,
+        temperature: item(d, "temperature", what)?,
+        time_constant: item(d, "time_constant", what)?,
+        current_per_tick: item(d, "current_per_tick", what)?,
+    };
+    c.validate()
+        .map_err(|e| err(format!("{what}: {}", servo_reason(e))))?;
+    Ok(c)
+}
+
+fn board_settings(d: &Bound<'_, PyDict>, k: usize) -> PyResult<BoardSettings> {
+    let what = format!("boards[{k}]");
+    let slave: i64 = item(d, "slave_id", &what)?;
+    if !(1..=14).contains(&slave) {
+        return Err(err(format!("{what}.slave_id={slave} not in 1..14")));
+    }
+    let mut s = BoardSettings::new(slave as u8);
+    let servos: Vec<Bound<'_, PyDict>> = item(d, "servos", &what)?;
+    if servos.len() > MAX_SERVO_NUM {
+        return Err(err(format!("{what}.servos: {} > 4", servos.len())));
+    }
+    for (i, sd) in servos.iter().enumerate() {
+        if let Some(slot) = s.servos.get_mut(i) {
+            *slot = servo_config(sd, &format!("{what}.servos[{i}]"))?;
+        }
+    }
+    s.servo_count = servos.len();
+    s.imu = item(d, "imu", &what)?;
+    s.esc = item(d, "esc", &what)?;
+    s.plant_driven = item(d, "plant_driven", &what)?;
+    s.ttl_rs485_mixed = item(d, "ttl_rs485_mixed", &what)?;
+    let pulley: i64 = item(d, "pulley_skip_thresh", &what)?;
+    if !(0..=0xFFFF).contains(&pulley) {
+        return Err(err(format!(
+            "{what}.pulley_skip_thresh={pulley} not in 0..65535"
+        )));
+    }
+    s.pulley_skip_thresh = pulley as u16;
+    s.reboot_ms = item(d, "reboot_ms", &what)?;
+    Ok(s)
+}
+
+/// Every Neuron of one CAN bus (reference: one `rdm.nodes.neuron_mirror.NeuronMirror` per
+/// board on a shared bus, ticked in list order at the same instant).
+#[pyclass(module = "rdm._rdm")]
+pub struct NeuronBank {
+    core: CoreBank,
+    rx: Vec<RxFrame>,
+}
+
+#[pymethods]
+impl NeuronBank {
+    /// `boards`: dicts with `slave_id`, `servos` (dicts of `ServoConfig` fields), `imu`,
+    /// `esc`, `plant_driven`, `ttl_rs485_mixed`, `pulley_skip_thresh`, `reboot_ms`.
+    #[new]
+    #[pyo3(signature = (boards, tx_capacity=DEFAULT_TX_CAPACITY))]
+    fn new(boards: Vec<Bound<'_, PyDict>>, tx_capacity: usize) -> PyResult<Self> {
+        let mut settings = Vec::with_capacity(boards.len());
+        for (k, d) in boards.iter().enumerate() {
+            settings.push(board_settings(d, k)?);
+        }
+        let core = CoreBank::new(&settings, tx_capacity).map_err(bank_err)?;
+        Ok(NeuronBank {
+            core,
+            rx: Vec::with_capacity(256),
+        })
+    }
+
+    /// Advance to `now` (s) with the python-can messages drained from the bus (in order);
+    /// returns `[(board_index, can_id, payload), ...]` to send, in order.
+    fn tick<'py>(
+        &mut self,
+        py: Python<'py>,
+        now: f64,
+        messages: &Bound<'py, PyList>,
+    ) -> PyResult<Bound<'py, PyList>> {
+        self.rx.clear();
+        for m in messages.iter() {
+            let id: u32 = m.getattr(intern!(py, "arbitration_id"))?.extract()?;
+            let mut flags = 0u8;
+            if m.getattr(intern!(py, "is_extended_id"))?.is_truthy()? {
+                flags |= FLAG_EXTENDED;
+            }
+            if m.getattr(intern!(py, "is_remote_frame"))?.is_truthy()? {
+                flags |= FLAG_REMOTE;
+            }
+            if m.getattr(intern!(py, "is_error_frame"))?.is_truthy()? {
+                flags |= FLAG_ERROR;
+            }
+            if m.getattr(intern!(py, "is_fd"))?.is_truthy()? {
+                flags |= FLAG_FD;
+            }
+            let data: Vec<u8> = m
+                .getattr(intern!(py, "data"))?
+                .extract()
+                .unwrap_or_default();
+            self.rx.push(RxFrame::new(id, flags, &data));
+        }
+        let out = self.core.tick(now, &self.rx).map_err(bank_err)?;
+        let list = PyList::empty(py);
+        for e in out {
+            let t = PyTuple::new(
+                py,
+                [
+                    e.board.into_pyobject(py)?.into_any(),
+                    e.frame.id.into_pyobject(py)?.into_any(),
+                    PyBytes::new(py, e.frame.payload()).into_any(),
+                ],
+            )?;
+            list.append(t)?;
+        }
+        Ok(list)
+    }
+
+    /// True when a frame the boards sent last tick passes another board's id filter.
+    fn sent_frames_heard(&self) -> bool {
+        self.core.sent_frames_heard()
+    }
+
+    /// Number of boards.
+    fn __len__(&self) -> usize {
+        self.core.boards().len()
+    }
+
+    /// Change counter of every board (bumped by goal / torque / ESC output changes).
+    fn changes(&self) -> Vec<u64> {
+        self.core.boards().iter().map(|b| b.changes).collect()
+    }
+
+    /// `(goals, torque_enable)` of board `k`'s servos in index order.
+    fn servo_outputs(&self, k: usize) -> PyResult<(Vec<i64>, Vec<bool>)> {
+        let b = self.core.board(k).map_err(bank_err)?;
+        Ok((
+            b.servos().iter().map(|s| s.goal()).collect(),
+            b.servos().iter().map(|s| s.torque_enable()).collect(),
+        ))
+    }
+
+    /// `(held_value, stopped)` of board `k`'s ESC.
+    fn esc(&self, k: usize) -> PyResult<(u16, bool)> {
+        let b = self.core.board(k).map_err(bank_err)?;
+        Ok((b.esc_held_value(), b.esc_stopped()))
+    }
+
+    /// Set board `k`'s held ESC value (a test hook, as writing the reference's attribute).
+    fn set_esc_held_value(&mut self, k: usize, value: u16) -> PyResult<()> {
+        self.core
+            .board_mut(k)
+            .map_err(bank_err)?
+            .set_esc_held_value(value);
+        Ok(())
+    }
+
+    /// Plant feedback: `ticks[n]` is the present position of servo `servos[n]` of board
+    /// `boards[n]`.
+    fn set_positions(
+        &mut self,
+        boards: Vec<usize>,
+        servos: Vec<usize>,
+        ticks: Vec<f64>,
+    ) -> PyResult<()> {
+        if boards.len() != servos.len() || boards.len() != ticks.len() {
+            return Err(err(
+                "set_positions: boards, servos, ticks differ in length".into()
+            ));
+        }
+        for ((b, s), t) in boards.iter().zip(servos.iter()).zip(ticks.iter()) {
+            self.core.set_position(*b, *s, *t).map_err(bank_err)?;
+        }
+        Ok(())
+    }
+
+    /// Raw int16 sample of `sensor` (0 gyro, 1 acc, 2 mag) of board `k`.
+    fn set_imu_raw(&mut self, k: usize, sensor: usize, xyz: [i16; 3]) -> PyResult<()> {
+        self.core.set_imu_raw(k, sensor, xyz).map_err(bank_err)
+    }
+
+    /// Raw IMU samples of board `k` (`[gyro, acc, mag]`).
+    fn imu_raw(&self, k: usize) -> PyResult<[[i16; 3]; 3]> {
+        Ok(self.core.board(k).map_err(bank_err)?.imu_raw)
+    }
+
+    /// Set a servo's hardware error byte or external current (test hooks of the reference:
+    /// `field` is "hardware_error", "external_current" (None clears), "temperature").
+    #[pyo3(signature = (k, index, field, value))]
+    fn set_servo_field(
+        &mut self,
+        k: usize,
+        index: usize,
+        field: &str,
+        value: Option<i64>,
+    ) -> PyResult<()> {
+        let b = self.core.board_mut(k).map_err(bank_err)?;
+        let s = b
+            .servos_mut()
+            .get_mut(index)
+            .ok_or_else(|| err(format!("board {k}: servo index {index} out of range")))?;
+        match (field, value) {
+            ("hardware_error", Some(v)) => s.hardware_error = v,
+            ("temperature", Some(v)) => s.temperature = v,
+            ("external_current", v) => s.external_current = v,
+            _ => {
+                return Err(err(format!(
+                    "set_servo_field: field {field:?} with {value:?}"
+                )))
+            }
+        }
+        Ok(())
+    }
+
+    /// Everything about board `k` (diagnostics and tests): ids, flags, ESC, counters, and
+    /// per servo its state and configuration.
+    fn board_state<'py>(&self, py: Python<'py>, k: usize) -> PyResult<Bound<'py, PyDict>> {
+        let b = self.core.board(k).map_err(bank_err)?;
+        let d = PyDict::new(py);
+        d.set_item("slave_id", b.slave_id)?;
+        d.set_item("flash_slave_id", b.flash_slave_id)?;
+        d.set_item("imu_send_flag", b.imu_send_flag)?;
+        d.set_item("ttl_rs485_mixed", b.ttl_rs485_mixed)?;
+        d.set_item("pulley_skip_thresh", b.pulley_skip_thresh)?;
+        d.set_item("esc_held_value", b.esc_held_value())?;
+        d.set_item("esc_stopped", b.esc_stopped())?;
+        d.set_item("changes", b.changes)?;
+        d.set_item("connected", b.connected())?;
+        d.set_item("rebooting", b.rebooting())?;
+        let c = &b.counters;
+        d.set_item("rx_count", c.rx_count)?;
+        d.set_item("rx_filtered", c.rx_filtered)?;
+        d.set_item("tx_dropped", c.tx_dropped)?;
+        d.set_item("reboots", c.reboots)?;
+        let errors = PyDict::new(py);
+        for (e, n) in RxError::ALL.iter().zip(c.rx_errors.iter()) {
+            if *n > 0 {
+                errors.set_item(e.name(), *n)?;
+            }
+        }
+        d.set_item("rx_errors", errors)?;
+        let kinds = PyDict::new(py);
+        for (name, n) in FRAME_KINDS.iter().zip(c.rx_kinds.iter()) {
+            if *n > 0 {
+                kinds.set_item(*name, *n)?;
+            }
+        }
+        d.set_item("rx_kinds", kinds)?;
+        let servos = PyList::empty(py);
+        for s in b.servos() {
+            let sd = PyDict::new(py);
+            sd.set_item("position", s.position)?;
+            sd.set_item("velocity", s.velocity)?;
+            sd.set_item("goal", s.goal())?;
+            sd.set_item("goal_current", s.goal_current)?;
+            sd.set_item("torque_enable", s.torque_enable())?;
+            sd.set_item("send_goal_position", s.send_goal_position)?;
+            sd.set_item("homing_offset", s.homing_offset)?;
+            sd.set_item("round_offset", s.round_offset)?;
+            sd.set_item("hardware_error", s.hardware_error)?;
+            sd.set_item("temperature", s.temperature)?;
+            sd.set_item("present_position", s.present_position())?;
+            sd.set_item("current", s.current())?;
+            sd.set_item("moving", s.moving())?;
+            let cfg = s.config;
+            let cd = PyDict::new(py);
+            cd.set_item("dynamixel_id", cfg.dynamixel_id)?;
+            cd.set_item("send_data_flag", cfg.send_data_flag)?;
+            cd.set_item("external_encoder_flag", cfg.external_encoder_flag)?;
+            cd.set_item("p_gain", cfg.p_gain)?;
+            cd.set_item("i_gain", cfg.i_gain)?;
+            cd.set_item("d_gain", cfg.d_gain)?;
+            cd.set_item("profile_velocity", cfg.profile_velocity)?;
+            cd.set_item("current_limit", cfg.current_limit)?;
+            cd.set_item("joint_resolution", cfg.joint_resolution)?;
+            cd.set_item("servo_resolution", cfg.servo_resolution)?;
+            sd.set_item("config", cd)?;
+            servos.append(sd)?;
+        }
+        d.set_item("servos", servos)?;
+        Ok(d)
+    }
+}
+
+/// Register `NeuronBank` and `NeuronBankError`.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("NeuronBankError", py.get_type::<NeuronBankError>())?;
+    m.add_class::<NeuronBank>()?;
+    Ok(())
+}

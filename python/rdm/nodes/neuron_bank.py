@@ -1,0 +1,376 @@
+"""All Neuron boards of one CAN bus in one node, run by the Rust core (``rdm._rdm.NeuronBank``).
+
+Same behaviour, frame for frame and byte for byte, as one :class:`NeuronMirror` per board on a
+shared bus ticked in list order (the Python mirror stays the reference; see
+docs/fastneuron.md). The bank drains its bus once per tick, hands every frame to the core in
+one call and sends the core's replies through the same python-can bus, so captures and the
+Spinal side see exactly what separate mirrors would send.
+
+:attr:`NeuronBankNode.boards` holds one :class:`NeuronBoardView` per board with the part of
+the mirror interface the plant bridge, the stack and the tools use (``slave_id``,
+``servos[i].goal / torque_enable / feed``, ``changes``, ``esc.duty``, ``set_imu`` ...).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import Counter
+from collections.abc import Sequence
+from typing import Any
+
+import can
+
+from rdm import _rdm
+from rdm.link.can import send_neuron_payload
+from rdm.protocol import neuron as nr
+
+from .base import MAX_FRAMES_PER_TICK
+from .esc_model import ESC_PERIOD_US
+from .neuron_mirror import _IMU_SCALE, DEFAULT_REBOOT_MS, NeuronMirror, _int16
+from .servo_model import ServoConfig
+
+_SENSORS = (nr.ImuMessage.GYRO, nr.ImuMessage.ACC, nr.ImuMessage.MAG)
+
+
+@dataclasses.dataclass(frozen=True)
+class NeuronSpec:
+    """One board of a bank: the :class:`NeuronMirror` constructor arguments."""
+
+    slave_id: int
+    servos: tuple[ServoConfig, ...] = ()
+    imu: bool = False
+    esc: bool = True
+    name: str | None = None
+    plant_driven: bool = False
+    ttl_rs485_mixed: bool = False
+    pulley_skip_thresh: int = 0
+    reboot_ms: int = DEFAULT_REBOOT_MS
+
+    def core_dict(self) -> dict[str, Any]:
+        return {
+            "slave_id": self.slave_id,
+            "servos": [dataclasses.asdict(c) for c in self.servos],
+            "imu": self.imu,
+            "esc": self.esc,
+            "plant_driven": self.plant_driven,
+            "ttl_rs485_mixed": self.ttl_rs485_mixed,
+            "pulley_skip_thresh": self.pulley_skip_thresh,
+            "reboot_ms": self.reboot_ms,
+        }
+
+
+class EscView:
+    """A board's ESC as :class:`rdm.nodes.esc_model.EscModel` shows it (read from the core)."""
+
+    __slots__ = ("_board",)
+
+    def __init__(self, board: NeuronBoardView) -> None:
+        self._board = board
+
+    @property
+    def held_value(self) -> int:
+        return self._board._bank._core.esc(self._board._k)[0]
+
+    @held_value.setter
+    def held_value(self, value: int) -> None:
+        self._board._bank._core.set_esc_held_value(self._board._k, value)
+        self._board._bank._refresh_changes()
+
+    @property
+    def stopped(self) -> bool:
+        return self._board._bank._core.esc(self._board._k)[1]
+
+    @property
+    def value(self) -> int:
+        """What the timer outputs now, 0..1000 (``pulse_us - 1000``)."""
+        held, stopped = self._board._bank._core.esc(self._board._k)
+        return nr.pwm.PWM_STOP_VALUE if stopped else held
+
+    @property
+    def pulse_us(self) -> int:
+        return self.value + 1000
+
+    @property
+    def duty(self) -> float:
+        """Spinal's duty convention: pulse / 2000 us, 0.5 (stop) .. 1.0 (full)."""
+        return self.pulse_us / ESC_PERIOD_US
+
+    @property
+    def throttle(self) -> float:
+        return self.value / 1000.0
+
+
+class ServoView:
+    """One servo of a board (read from the core); ``feed`` is the plant position feed."""
+
+    __slots__ = ("_board", "_feed", "_i")
+
+    def __init__(self, board: NeuronBoardView, index: int) -> None:
+        self._board = board
+        self._i = index
+        self._feed: tuple[Any, int] | None = None
+
+    @property
+    def feed(self) -> tuple[Any, int] | None:
+        return self._feed
+
+    @feed.setter
+    def feed(self, value: tuple[Any, int] | None) -> None:
+        self._feed = value
+        self._board._bank._feeds_changed()
+
+    def _state(self) -> dict[str, Any]:
+        return self._board.state()["servos"][self._i]
+
+    @property
+    def goal(self) -> int:
+        return self._board._outputs()[0][self._i]
+
+    @property
+    def torque_enable(self) -> bool:
+        return self._board._outputs()[1][self._i]
+
+    @property
+    def position(self) -> float:
+        return self._state()["position"]
+
+    @property
+    def present_position(self) -> int:
+        return self._state()["present_position"]
+
+    @property
+    def send_goal_position(self) -> bool:
+        return self._state()["send_goal_position"]
+
+    @property
+    def goal_current(self) -> int:
+        return self._state()["goal_current"]
+
+    @property
+    def current(self) -> int:
+        return self._state()["current"]
+
+    @property
+    def moving(self) -> bool:
+        return self._state()["moving"]
+
+    @property
+    def hardware_error(self) -> int:
+        return self._state()["hardware_error"]
+
+    @hardware_error.setter
+    def hardware_error(self, value: int) -> None:
+        self._board._bank._core.set_servo_field(self._board._k, self._i, "hardware_error", value)
+
+    def set_external_current(self, value: int | None) -> None:
+        """When set, the reported current (else the position-error model)."""
+        self._board._bank._core.set_servo_field(self._board._k, self._i, "external_current", value)
+
+    def set_present_position(self, position: float) -> None:
+        """Plant feedback of this servo's position (raw ticks)."""
+        self._board._bank._core.set_positions([self._board._k], [self._i], [float(position)])
+
+
+class NeuronBoardView:
+    """One board of a :class:`NeuronBankNode`, with :class:`NeuronMirror`'s read interface."""
+
+    def __init__(self, bank: NeuronBankNode, k: int, spec: NeuronSpec) -> None:
+        self._bank = bank
+        self._k = k
+        self.name = spec.name or f"neuron{spec.slave_id}"
+        self.period = bank.period
+        self.has_esc = spec.esc
+        self.plant_driven = spec.plant_driven
+        self.servos = [ServoView(self, i) for i in range(len(spec.servos))]
+        self.esc = EscView(self)
+        #: The core's change counter of this board (refreshed after every bank tick).
+        self.changes = [0]
+        self.tx_count = 0
+        self.tx_errors = 0
+        self._outputs_at = -1
+        self._outputs_cache: tuple[list[int], list[bool]] = ([], [])
+
+    def _outputs(self) -> tuple[list[int], list[bool]]:
+        c = self.changes[0]
+        if c != self._outputs_at:
+            self._outputs_cache = self._bank._core.servo_outputs(self._k)
+            self._outputs_at = c
+        return self._outputs_cache
+
+    def state(self) -> dict[str, Any]:
+        """Everything the core holds about this board (see ``NeuronBank.board_state``)."""
+        return self._bank._core.board_state(self._k)
+
+    @property
+    def slave_id(self) -> int:
+        return self.state()["slave_id"]
+
+    @property
+    def flash_slave_id(self) -> int:
+        return self.state()["flash_slave_id"]
+
+    @property
+    def imu_send_flag(self) -> bool:
+        return self.state()["imu_send_flag"]
+
+    @property
+    def connected(self) -> bool:
+        return self.state()["connected"]
+
+    @property
+    def rx_count(self) -> int:
+        return self.state()["rx_count"]
+
+    @property
+    def rx_filtered(self) -> int:
+        return self.state()["rx_filtered"]
+
+    @property
+    def rx_errors(self) -> Counter[str]:
+        return Counter(self.state()["rx_errors"])
+
+    @property
+    def rx_kinds(self) -> Counter[str]:
+        return Counter(self.state()["rx_kinds"])
+
+    @property
+    def reboots(self) -> int:
+        return self.state()["reboots"]
+
+    @property
+    def imu_raw(self) -> dict[nr.ImuMessage, tuple[int, int, int]]:
+        raw = self._bank._core.imu_raw(self._k)
+        return {s: tuple(raw[int(s)]) for s in _SENSORS}  # type: ignore[misc]
+
+    def servo_goals(self) -> list[int]:
+        """Goal positions (raw ticks) the servos are commanded to, in index order."""
+        return list(self._outputs()[0])
+
+    def set_present_positions(self, positions: Sequence[float]) -> None:
+        """Plant feedback of the joint positions (raw ticks), in index order."""
+        if len(positions) != len(self.servos):
+            raise ValueError(f"{self.name}: {len(positions)} positions for {len(self.servos)}")
+        n = len(self.servos)
+        self._bank._core.set_positions([self._k] * n, list(range(n)), [float(p) for p in positions])
+
+    def set_imu_raw(
+        self,
+        gyro: Sequence[int] | None = None,
+        acc: Sequence[int] | None = None,
+        mag: Sequence[int] | None = None,
+    ) -> None:
+        """Raw MPU9250/AK8963 int16 samples in the sensor frame (what goes on CAN)."""
+        for sensor, xyz in zip(_SENSORS, (gyro, acc, mag), strict=True):
+            if xyz is not None:
+                raw = NeuronMirror._check_xyz(sensor, xyz)
+                self._bank._core.set_imu_raw(self._k, int(sensor), list(raw))
+
+    def set_imu(
+        self,
+        gyro: Sequence[float] | None = None,
+        acc: Sequence[float] | None = None,
+        mag: Sequence[float] | None = None,
+    ) -> None:
+        """Physical values in Spinal's frame, as :meth:`NeuronMirror.set_imu` converts them."""
+        core = self._bank._core
+        for sensor, xyz in ((nr.ImuMessage.GYRO, gyro), (nr.ImuMessage.ACC, acc)):
+            if xyz is not None:
+                sx, sy, sz = NeuronMirror._finite(sensor, xyz)
+                k = _IMU_SCALE[sensor]
+                core.set_imu_raw(
+                    self._k, int(sensor), [_int16(sy / k), _int16(-sx / k), _int16(sz / k)]
+                )
+        if mag is not None:
+            sx, sy, sz = NeuronMirror._finite(nr.ImuMessage.MAG, mag)
+            k = nr.MAG_SCALE
+            core.set_imu_raw(self._k, 2, [_int16(-sx / k), _int16(sy / k), _int16(-sz / k)])
+
+    def close(self) -> None:
+        """The bank owns the bus (:meth:`NeuronBankNode.close`)."""
+
+
+class NeuronBankNode:
+    """Every Neuron of ``bus`` (the boards of ``specs``, ticked in that order) as one 1 kHz
+    node; the board views are :attr:`boards`."""
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        specs: Sequence[NeuronSpec],
+        *,
+        name: str = "neurons",
+        period: float = 0.001,
+    ) -> None:
+        self.bus = bus
+        self.name = name
+        self.period = period
+        self._core = _rdm.NeuronBank([s.core_dict() for s in specs])
+        self.boards = [NeuronBoardView(self, k, s) for k, s in enumerate(specs)]
+        self._fed: list[tuple[Any, list[int], list[int], list[int]]] | None = []
+        self._feed_epochs: dict[int, int] = {}
+
+    def _feeds_changed(self) -> None:
+        self._fed = None  # rebuilt at the next tick
+
+    def _build_feeds(self) -> list[tuple[Any, list[int], list[int], list[int]]]:
+        groups: dict[int, tuple[Any, list[int], list[int], list[int]]] = {}
+        for k, board in enumerate(self.boards):
+            for i, servo in enumerate(board.servos):
+                if servo.feed is not None:
+                    feed, joint = servo.feed
+                    g = groups.setdefault(id(feed), (feed, [], [], []))
+                    g[1].append(k)
+                    g[2].append(i)
+                    g[3].append(joint)
+        self._feed_epochs = {}
+        return list(groups.values())
+
+    def _push_positions(self) -> None:
+        # The reference servo reads its plant feed when it first needs the position in a new
+        # feed epoch; the feed's values are fixed within an epoch, so pushing them before the
+        # frames are handled gives the same positions.
+        fed = self._fed
+        if fed is None:
+            fed = self._fed = self._build_feeds()
+        for feed, boards, servos, joints in fed:
+            epoch = feed.epoch
+            if self._feed_epochs.get(id(feed)) == epoch:
+                continue
+            self._feed_epochs[id(feed)] = epoch
+            ticks = feed.ticks()
+            self._core.set_positions(boards, servos, [ticks[j] for j in joints])
+
+    def _refresh_changes(self) -> None:
+        for board, c in zip(self.boards, self._core.changes(), strict=True):
+            board.changes[0] = c
+
+    def tick(self, now: float) -> None:
+        """Drain the bus, run every board at ``now``, send their frames in order."""
+        recv = self.bus.recv
+        messages = []
+        for _ in range(MAX_FRAMES_PER_TICK):
+            msg = recv(timeout=0)
+            if msg is None:
+                break
+            messages.append(msg)
+        # Positions are only read while handling a frame other than a PWM broadcast (MOTOR
+        # device, id < 0x100): servo words, requests, board configs, or a frame a board sent
+        # last tick that another board accepts (colliding slave ids).
+        if self._fed != [] and (
+            any(m.arbitration_id >= 0x100 for m in messages) or self._core.sent_frames_heard()
+        ):
+            self._push_positions()
+        out = self._core.tick(now, messages)
+        if out:
+            bus = self.bus
+            boards = self.boards
+            for k, can_id, payload in out:
+                if send_neuron_payload(bus, can_id, payload):
+                    boards[k].tx_count += 1
+                else:
+                    boards[k].tx_errors += 1
+        self._refresh_changes()
+
+    def close(self) -> None:
+        """Shut the bus down (the node owns it)."""
+        self.bus.shutdown()
