@@ -53,7 +53,7 @@ def foot_allocation(allocation: np.ndarray, foot_in_cog: np.ndarray) -> np.ndarr
     fx, fy, fz = full[0], full[1], full[2]
     out = np.empty((4, full.shape[1]))
     out[0] = fz
-    # p × F written out: the same products and differences, in the same order, as np.cross
+    # p x F written out: the same products and differences, in the same order, as np.cross
     out[1] = full[3] - (py * fz - pz * fy)
     out[2] = full[4] - (pz * fx - px * fz)
     out[3] = full[5] - (px * fy - py * fx)
