@@ -222,3 +222,44 @@ def test_gains_and_pinv_messages_rebuilt_only_on_change():
             pseudo_inverse=[unit.new(r=r, p=p, y=y) for r, p, y in rows], inertia=inertia
         )
         assert pinv.encode(node._p_matrix_msg[1]) == pinv.encode(fresh)
+
+
+def test_leptrino_whole_frame_path_equals_byte_at_a_time():
+    """Whole frames in one chunk take the regex path; byte-at-a-time never can."""
+    gen = random.Random(11)
+    stream = b""
+    for _ in range(300):
+        r = gen.random()
+        payload = bytes(gen.choice([0x10, 0x02, 0x03, gen.randrange(256)]) for _ in range(20))
+        if r < 0.55:
+            stream += lp.frame(payload)
+        elif r < 0.65:  # bad BCC
+            stream += lp.frame(payload)[:-1] + bytes([gen.randrange(256)])
+        elif r < 0.72:  # empty payload
+            stream += b"\x10\x02\x10\x03" + bytes([gen.choice([3, 7])])
+        elif r < 0.8:  # DLE STX inside a frame, then the frame
+            stream += b"\x10\x02\x01\x02\x10\x02" + lp.frame(payload)[2:]
+        elif r < 0.87:  # bad escape
+            stream += b"\x10\x02\x05\x10\x07" + lp.frame(payload)
+        else:
+            stream += bytes(gen.choice([0x10, 0x02, 0x03, gen.randrange(256)]) for _ in range(5))
+    whole, single = lp.LeptrinoStreamParser(), lp.LeptrinoStreamParser()
+    calls = 0
+    original = lp._WHOLE_FRAME
+
+    class Counting:
+        def match(self, data, pos):
+            nonlocal calls
+            calls += 1
+            return original.match(data, pos)
+
+    lp._WHOLE_FRAME = Counting()
+    try:
+        events_whole = whole.feed(stream)
+    finally:
+        lp._WHOLE_FRAME = original
+    events_single = [e for b in stream for e in single.feed(bytes([b]))]
+    assert repr(events_whole) == repr(events_single)
+    assert whole == single  # counters, position, state and buffer
+    assert calls > 150 and whole.frames > 150
+    assert {"bcc", "length", "restart", "escape"} <= set(whole.errors)
