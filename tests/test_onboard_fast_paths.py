@@ -208,7 +208,8 @@ def test_gains_and_pinv_messages_rebuilt_only_on_change():
     codec = REG.msg("spinal/RollPitchYawTerms")
     rng = np.random.default_rng(3)
     wires = [rng.integers(-3000, 3000, size=(4, 7)).astype(np.int16) for _ in range(3)]
-    for wire in [wires[0], wires[0].copy(), wires[1], wires[0], wires[2], wires[2]]:
+    wires.append(rng.uniform(-3000, 3000, size=(4, 7)))  # not int16: the int(v) path
+    for wire in [wires[0], wires[0].copy(), wires[1], wires[3], wires[0], wires[2], wires[2]]:
         node.control.gains_wire = wire
         node._send_gains()  # not negotiated: counted, the message is still built
         assert codec.encode(node._gains_msg[1]) == _fresh_gains_bytes(wire)

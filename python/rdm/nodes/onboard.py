@@ -554,8 +554,10 @@ class OnboardNode:
         if self._gains_msg is None or self._gains_msg[0] != key:
             term = self._msg["rpy_term"]
             names = ("roll_p", "roll_i", "roll_d", "pitch_p", "pitch_i", "pitch_d", "yaw_d")
+            # integer arrays: tolist() gives the same Python ints as int(v), without numpy scalars
+            rows = wire.tolist() if wire.dtype.kind in "iu" else wire
             motors = [
-                term.new(**{k: int(v) for k, v in zip(names, row, strict=True)}) for row in wire
+                term.new(**{k: int(v) for k, v in zip(names, row, strict=True)}) for row in rows
             ]
             self._gains_msg = (key, self._msg["rpy/gain"].new(motors=motors))
         self._publish("rpy/gain", self._gains_msg[1])
