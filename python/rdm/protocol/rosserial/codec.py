@@ -206,7 +206,7 @@ class MessageCodec:
         """Decode one message starting at ``pos``; returns it and the position after it."""
         flat = self._flat
         if flat is not None and len(buf) - pos >= flat.size:
-            return self.cls(**flat.unpack(buf, pos)), pos + flat.size
+            return self.cls(*flat.unpack(buf, pos)), pos + flat.size
         values = {}
         for name, _, dec in self._fields:
             values[name], pos = dec(buf, pos)
@@ -235,6 +235,12 @@ class _FlatLayout:
         self.parts = parts  # (field name, kind: "v" value / "a" array / "t" time / "d", n)
         self.struct = struct.Struct(fmt)
         self.size = self.struct.size
+        self.scalars_only = all(kind == "v" for _, kind, _ in parts)
+        steps, i = [], 0  # (kind, first index in the flat tuple, array length)
+        for _, kind, n in parts:
+            steps.append((kind, i, n))
+            i += n if kind == "a" else (1 if kind == "v" else 2)
+        self.steps = tuple(steps)
 
     @classmethod
     def of(cls, spec: MsgSpec) -> _FlatLayout | None:
@@ -258,20 +264,19 @@ class _FlatLayout:
                 return None
         return cls(parts, fmt) if parts else None
 
-    def unpack(self, buf: bytes, pos: int) -> dict[str, Any]:
+    def unpack(self, buf: bytes, pos: int) -> tuple[Any, ...] | list[Any]:
+        """The field values in field order (the message class takes them positionally)."""
         flat = self.struct.unpack_from(buf, pos)
-        values: dict[str, Any] = {}
-        i = 0
-        for name, kind, n in self.parts:
+        if self.scalars_only:
+            return flat
+        values: list[Any] = []
+        for kind, i, n in self.steps:
             if kind == "v":
-                values[name] = flat[i]
-                i += 1
+                values.append(flat[i])
             elif kind == "a":
-                values[name] = list(flat[i : i + n])
-                i += n
+                values.append(list(flat[i : i + n]))
             else:
-                values[name] = (RosTime if kind == "t" else RosDuration)(flat[i], flat[i + 1])
-                i += 2
+                values.append((RosTime if kind == "t" else RosDuration)(flat[i], flat[i + 1]))
         return values
 
     def pack(self, msg: Any) -> bytes | None:
