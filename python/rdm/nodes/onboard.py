@@ -183,6 +183,9 @@ class OnboardNode:
         self.integration_on_sent = False
         self.servos_torque_on = False
         self._torque_sent_at: float | None = None
+        # messages rebuilt only when their content changed (same object -> same bytes)
+        self._gains_msg: tuple[bytes, Any] | None = None
+        self._p_matrix_msg: tuple[Any, Any] | None = None
 
     # ------------------------------------------------------------------ inputs from outside
     def set_mocap(
@@ -332,9 +335,12 @@ class OnboardNode:
                 return
             x, y, z, w = q
             self.imu_euler = quaternion_to_euler(x, y, z, w)
-            g = _vector(msg.gyro, 3)
-            if g is not None:
-                self.imu_gyro = g
+            try:
+                g = [float(v) for v in msg.gyro]
+            except (TypeError, ValueError):
+                g = []
+            if len(g) == 3 and all(math.isfinite(v) for v in g):  # as _vector(msg.gyro, 3)
+                self.imu_gyro = np.array(g)
         elif event.topic == "servo/states":
             self._on_servo_states(msg)
         elif event.topic == "servo/torque_states":
@@ -439,15 +445,16 @@ class OnboardNode:
                 self.counts["gains_kept"] += 1
         pm = ctl.p_matrix_wire()
         if pm is not None:
-            rows, inertia = pm
-            unit = self._msg["pinv_unit"]
-            self._publish(
-                "p_matrix_pseudo_inverse_inertia",
-                self._msg["p_matrix_pseudo_inverse_inertia"].new(
+            cached = self._p_matrix_msg
+            if cached is None or cached[0] is not pm:  # the pipeline reuses pm while q holds
+                rows, inertia = pm
+                unit = self._msg["pinv_unit"]
+                msg = self._msg["p_matrix_pseudo_inverse_inertia"].new(
                     pseudo_inverse=[unit.new(r=r, p=p, y=y) for r, p, y in rows],
                     inertia=inertia,
-                ),
-            )
+                )
+                cached = self._p_matrix_msg = (pm, msg)
+            self._publish("p_matrix_pseudo_inverse_inertia", cached[1])
         desire = ctl.desire_coordinate() if self.config.send_desire_coordinate else None
         if desire is not None:
             roll, pitch, yaw = desire
@@ -543,10 +550,17 @@ class OnboardNode:
     def _send_gains(self) -> None:
         wire = self.control.gains_wire
         assert wire is not None
-        term = self._msg["rpy_term"]
-        names = ("roll_p", "roll_i", "roll_d", "pitch_p", "pitch_i", "pitch_d", "yaw_d")
-        motors = [term.new(**{k: int(v) for k, v in zip(names, row, strict=True)}) for row in wire]
-        self._publish("rpy/gain", self._msg["rpy/gain"].new(motors=motors))
+        key = wire.tobytes() + f"{wire.dtype.str}{wire.shape}".encode()
+        if self._gains_msg is None or self._gains_msg[0] != key:
+            term = self._msg["rpy_term"]
+            names = ("roll_p", "roll_i", "roll_d", "pitch_p", "pitch_i", "pitch_d", "yaw_d")
+            # integer arrays: tolist() gives the same Python ints as int(v), without numpy scalars
+            rows = wire.tolist() if wire.dtype.kind in "iu" else wire
+            motors = [
+                term.new(**{k: int(v) for k, v in zip(names, row, strict=True)}) for row in rows
+            ]
+            self._gains_msg = (key, self._msg["rpy/gain"].new(motors=motors))
+        self._publish("rpy/gain", self._gains_msg[1])
 
     def _send_servo_targets(self, targets: np.ndarray) -> None:
         q = np.array(targets, dtype=float)

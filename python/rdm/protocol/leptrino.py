@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import enum
 import math
+import re
 import struct
 from collections import Counter
 from collections.abc import Iterator, Sequence
@@ -22,6 +23,8 @@ from typing import Any
 
 DLE, STX, ETX = 0x10, 0x02, 0x03
 DLE_BYTE = bytes([DLE])
+#: A whole frame from its DLE STX: stuffed payload (plain bytes or DLE DLE), DLE ETX, BCC.
+_WHOLE_FRAME = re.compile(rb"\x10\x02((?:[^\x10]|\x10\x10)*)\x10\x03(.)", re.S)
 #: Leptrino's receiver drops frames whose unstuffed payload exceeds this.
 MAX_PAYLOAD = 255
 HEADER_LEN = 4
@@ -125,6 +128,30 @@ class LeptrinoStreamParser:
         n = len(data)
         i = 0
         while i < n:
+            if self._state is _State.IDLE and data[i] == DLE:
+                # Fast path: a whole frame in this chunk, parsed at once; the same result as
+                # the per-byte states below (anything else, e.g. DLE STX or a bad escape
+                # inside, or an over-long payload, does not match and takes the byte path).
+                m = _WHOLE_FRAME.match(data, i)
+                if m is not None:
+                    payload = m.group(1).replace(b"\x10\x10", DLE_BYTE)
+                    if len(payload) <= MAX_PAYLOAD:
+                        end = m.end()
+                        self._start = self._pos
+                        self._pos += end - i
+                        i = end
+                        self._buf[:] = payload
+                        ch, want = data[end - 1], bcc(payload)
+                        if ch != want:
+                            events.append(
+                                self._fail("bcc", f"BCC 0x{ch:02X} != computed 0x{want:02X}")
+                            )
+                        elif not payload:
+                            events.append(self._fail("length", "empty payload"))
+                        else:
+                            self.frames += 1
+                            events.append(StreamEvent(self._start, payload))
+                        continue
             if self._state is _State.DATA:
                 # Fast path: copy the plain bytes up to the next DLE in one slice (the same
                 # result as appending them one at a time; an over-long payload still fails
