@@ -88,7 +88,7 @@ PERCHED_SCALE = (0.1, 0.2, 0.15)
 PERCHED_POSTURE = (1.5708, -1.5708, 0.0, -1.5708, 0.0, 0.0)
 #: Cutoff of the perching QP's foot-wrench filter in the push runs [Hz]. The paper's 1 Hz
 #: (Sec. VII-B, the perching scenario's) lags the 0.4 Hz push-pull: the QP raises F_z only
-#: after the plate is already on its edge; 5 Hz lets it follow (10 Hz: sensor noise, slips).
+#: after the plate is already on its edge; 5 Hz lets it follow (10 Hz slipped in y).
 PERCHED_CUTOFF_HZ = 5.0
 #: Position gains of the flight stage (q = 0): Table V (the flight scenario's) except the x
 #: PID. With Table V's W1 the LQI pitch loop has a slow pole at ~sqrt(600/80) = 2.8 rad/s
