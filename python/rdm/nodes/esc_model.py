@@ -13,7 +13,29 @@ from rdm.protocol.neuron.pwm import PWM_STOP_VALUE
 ESC_PERIOD_US = 2000
 
 
-class EscModel:
+class EscOutputs:
+    """What an ESC outputs, derived from ``value`` (0..1000, the timer's value now): shared by
+    :class:`EscModel` and the Rust Neuron bank's ESC view."""
+
+    __slots__ = ()
+    value: int
+
+    @property
+    def pulse_us(self) -> int:
+        return self.value + 1000
+
+    @property
+    def duty(self) -> float:
+        """Spinal's duty convention: pulse / 2000 us, 0.5 (stop) .. 1.0 (full)."""
+        return self.pulse_us / ESC_PERIOD_US
+
+    @property
+    def throttle(self) -> float:
+        """0 (stop) .. 1 (full) for a plant's rotor model."""
+        return self.value / 1000.0
+
+
+class EscModel(EscOutputs):
     """``held_value`` is the last slot value received; ``stopped`` is the watchdog's verdict.
 
     Every change of either bumps ``changes[0]`` (a counter the owning Neuron shares with its
@@ -61,17 +83,3 @@ class EscModel:
     def value(self) -> int:
         """What the timer outputs now, 0..1000 (``pulse_us - 1000``)."""
         return PWM_STOP_VALUE if self.stopped else self.held_value
-
-    @property
-    def pulse_us(self) -> int:
-        return self.value + 1000
-
-    @property
-    def duty(self) -> float:
-        """Spinal's duty convention: pulse / 2000 us, 0.5 (stop) .. 1.0 (full)."""
-        return self.pulse_us / ESC_PERIOD_US
-
-    @property
-    def throttle(self) -> float:
-        """0 (stop) .. 1 (full) for a plant's rotor model."""
-        return self.value / 1000.0

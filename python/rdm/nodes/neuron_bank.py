@@ -25,7 +25,7 @@ from rdm.link.can import send_neuron_payload
 from rdm.protocol import neuron as nr
 
 from .base import MAX_FRAMES_PER_TICK
-from .esc_model import ESC_PERIOD_US
+from .esc_model import EscOutputs
 from .neuron_mirror import _IMU_SCALE, DEFAULT_REBOOT_MS, NeuronMirror, _int16
 from .servo_model import ServoConfig
 
@@ -59,7 +59,7 @@ class NeuronSpec:
         }
 
 
-class EscView:
+class EscView(EscOutputs):
     """A board's ESC as :class:`rdm.nodes.esc_model.EscModel` shows it (read from the core)."""
 
     __slots__ = ("_board",)
@@ -85,19 +85,6 @@ class EscView:
         """What the timer outputs now, 0..1000 (``pulse_us - 1000``)."""
         held, stopped = self._board._bank._core.esc(self._board._k)
         return nr.pwm.PWM_STOP_VALUE if stopped else held
-
-    @property
-    def pulse_us(self) -> int:
-        return self.value + 1000
-
-    @property
-    def duty(self) -> float:
-        """Spinal's duty convention: pulse / 2000 us, 0.5 (stop) .. 1.0 (full)."""
-        return self.pulse_us / ESC_PERIOD_US
-
-    @property
-    def throttle(self) -> float:
-        return self.value / 1000.0
 
 
 class ServoView:
