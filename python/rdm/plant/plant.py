@@ -137,7 +137,12 @@ class Plant:
         self._ee_body = m.body(desc.end_effector_frame).id
         env = {m.geom(g).id for g in (CEILING_GEOM, FLOOR_GEOM) if _has_geom(m, g)}
         self._tracker = FootContactTracker(m, self._plate_body, env)
-        self._sensor_adr = {m.sensor(i).name: m.sensor_adr[i] for i in range(m.nsensor)}
+        self._sensor_adr = {m.sensor(i).name: int(m.sensor_adr[i]) for i in range(m.nsensor)}
+        adr = self._sensor_adr
+        self._imu_adr = (adr["gyro"], adr["accelerometer"], adr["magnetometer"])
+        self._wrench_adr = {
+            key: (adr[f"{key}_force"], adr[f"{key}_torque"]) for key in desc.wrench_sensors
+        }
 
         base = esc or EscParams()
         self.escs = [
@@ -168,6 +173,7 @@ class Plant:
         self._v_site_xpos = d.site_xpos
         self._v_ctrl = d.ctrl
         self._v_qpos = d.qpos
+        self._v_sensordata = d.sensordata
         self._rotor_site_list = self._rotor_site.tolist()
         self._qadr_list = self._qadr.tolist()
         acts = self._rotor_act.tolist()
@@ -401,8 +407,12 @@ class Plant:
 
     def imu(self) -> ImuReading:
         """One noisy IMU sample in the IMU frame (root link, at the processor)."""
-        return self.imu_model.sample(
-            self._sensor("gyro"), self._sensor("accelerometer"), self._sensor("magnetometer")
+        if self._stale:
+            self.sync()
+        sd = self._v_sensordata
+        g, a, m = self._imu_adr
+        return self.imu_model.sample_lists(
+            sd[g : g + 3].tolist(), sd[a : a + 3].tolist(), sd[m : m + 3].tolist()
         )
 
     def imu_ideal(self) -> ImuReading:
@@ -420,8 +430,16 @@ class Plant:
 
     def wrench(self, sensor: str) -> WrenchReading:
         """One noisy sample of a wrench sensor (``foot_wrench``, ``end_effector_wrench``)."""
-        force, torque = self.wrench_ideal(sensor)
-        return self.wrench_models[sensor].sample(force, torque)
+        adr = self._wrench_adr.get(sensor)
+        if adr is None:
+            raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
+        if self._stale:
+            self.sync()
+        sd = self._v_sensordata
+        f, t = adr
+        return self.wrench_models[sensor].sample_list(
+            sd[f : f + 3].tolist() + sd[t : t + 3].tolist()
+        )
 
     def servo_positions(self) -> np.ndarray:
         """Present joint positions (joint_order) [rad]."""
