@@ -149,10 +149,10 @@ class _JointFeed:
 
     __slots__ = (
         "_center",
+        "_pairs",
         "_plant",
         "_q",
         "_qadr",
-        "_pairs",
         "_qpos",
         "_scale",
         "_ticks",

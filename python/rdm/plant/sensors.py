@@ -194,10 +194,7 @@ class WrenchSensorModel:
         e = self._normals.take(6)
         frac = noise.noise_fraction_of_rated
         rated = self._rated_list
-        w = [
-            x + b + frac * r * n
-            for x, b, r, n in zip(wrench, noise.bias, rated, e, strict=True)
-        ]
+        w = [x + b + frac * r * n for x, b, r, n in zip(wrench, noise.bias, rated, e, strict=True)]
         saturated = np.array([abs(v) >= r for v, r in zip(w, rated, strict=True)])
         w = [_clip(v, r) for v, r in zip(w, rated, strict=True)]
         if noise.quantize:

@@ -1,0 +1,144 @@
+"""The plant bridge's fast paths against their plain forms (helper ``fastbridge``).
+
+Each check compares bit for bit (signed zeros and NaN included) with an independent numpy
+computation: numpy's own generator called once per sample, the array forms of the noise
+models, the array expression of the tick conversion, the tick arithmetic of the schedule.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rdm.nodes.plant_bridge import _JointFeed
+from rdm.plant import Plant
+from rdm.plant.sensors import (
+    ACCEL_LSB,
+    ACCEL_RANGE,
+    GYRO_LSB,
+    GYRO_RANGE,
+    LEPTRINO_FULL_SCALE_COUNTS,
+    MAG_LSB,
+    NORMAL_CHUNK,
+    NormalStream,
+)
+
+
+def _same(x, y) -> bool:
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    return np.array_equal(x, y, equal_nan=True) and np.array_equal(np.signbit(x), np.signbit(y))
+
+
+def test_normal_stream_equals_one_generator_call_per_take():
+    stream = NormalStream(np.random.default_rng(5))
+    ref = np.random.default_rng(5)
+    sizes = np.random.default_rng(1).integers(1, 40, 2000)  # crosses many chunk boundaries
+    assert sizes.sum() > 10 * NORMAL_CHUNK
+    for k in sizes.tolist():
+        assert _same(stream.take(k), ref.normal(0.0, 1.0, k)), k
+
+
+def _flying_plant() -> Plant:
+    plant = Plant("rdm", seed=3, ceiling_height=1.2, floor_height=0.0)
+    plant.reset(base_position=(0.0, 0.0, 0.6), thrusts=[4.0, 4.5, 5.0, 4.2])
+    plant.set_rotor_thrusts([5.0, 3.0, 6.0, 4.0])  # tumbles: gyro, accel, wrench all move
+    return plant
+
+
+def test_plant_imu_and_wrench_equal_the_array_form_of_the_ideal_values():
+    plant = _flying_plant()
+    seeds = np.random.SeedSequence(3).spawn(1 + len(plant.wrench_models))
+    # IMU reference: the model's biases are the generator's first 3 x 3 normals, then 9
+    # normals per sample, one call each.
+    imu_rng = np.random.default_rng(seeds[0])
+    noise = plant.imu_model.noise
+    gb = imu_rng.normal(0.0, noise.gyro_bias_std, 3)
+    ab = imu_rng.normal(0.0, noise.accel_bias_std, 3)
+    mb = imu_rng.normal(0.0, noise.mag_bias_std, 3)
+    keys = list(plant.wrench_models)
+    w_rngs = {k: np.random.default_rng(s) for k, s in zip(keys, seeds[1:], strict=True)}
+    for step in range(600):
+        plant.step(1)
+        if step % 3 == 0:
+            ideal = plant.imu_ideal()
+            r = plant.imu()
+            w = imu_rng.normal(0.0, 1.0, 9)
+            g = np.clip(ideal.gyro + gb + noise.gyro_std * w[0:3], -GYRO_RANGE, GYRO_RANGE)
+            a = np.clip(ideal.accel + ab + noise.accel_std * w[3:6], -ACCEL_RANGE, ACCEL_RANGE)
+            m = ideal.mag + mb + noise.mag_std * w[6:9]
+            assert _same(r.gyro, np.round(g / GYRO_LSB) * GYRO_LSB), step
+            assert _same(r.accel, np.round(a / ACCEL_LSB) * ACCEL_LSB), step
+            assert _same(r.mag, np.round(m / MAG_LSB) * MAG_LSB), step
+        for key in keys:
+            model = plant.wrench_models[key]
+            force, torque = plant.wrench_ideal(key)
+            reading = plant.wrench(key)
+            ref = np.concatenate([force, torque]) + 0.003 * model.rated * w_rngs[key].normal(
+                0, 1, 6
+            )
+            sat = np.abs(ref) >= model.rated
+            ref = np.clip(ref, -model.rated, model.rated)
+            lsb = model.rated / LEPTRINO_FULL_SCALE_COUNTS
+            ref = np.round(ref / lsb) * lsb
+            assert _same(reading.force, ref[:3]) and _same(reading.torque, ref[3:]), step
+            assert np.array_equal(reading.saturated, sat)
+    try:
+        plant.wrench("no_such_sensor")
+    except ValueError as e:
+        assert "no_such_sensor" in str(e)
+    else:  # pragma: no cover
+        raise AssertionError("unknown wrench sensor accepted")
+
+
+def test_joint_feed_float_path_equals_the_array_expression():
+    plant = Plant("rdm", seed=0, fixed_base=True, ceiling_height=None)
+    n = len(plant.joint_names)
+    scale = np.random.default_rng(2).uniform(-900.0, 900.0, n)
+    feed = _JointFeed(plant, 2048, scale)
+    qadr = plant._qadr
+    gen = np.random.default_rng(4)
+    specials = [0.0, -0.0, np.nan, np.inf, -np.inf, 1e-300, -1e300]
+    for k in range(300):
+        q = gen.normal(size=n) * 10.0 ** gen.uniform(-8, 2)
+        q[k % n] = specials[k % len(specials)]
+        plant._v_qpos[qadr] = q
+        feed.snapshot()
+        want = (2048 + plant._v_qpos[qadr] * scale).tolist()
+        assert _same(feed.ticks(), want), k
+        assert feed.ticks() is feed.ticks()  # converted once per snapshot
+
+
+def test_bridge_samples_on_the_first_tick_then_every_nth():
+    from rdm.link.inproc_can import InProcessBus
+    from rdm.nodes.neuron_mirror import NeuronMirror
+    from rdm.nodes.plant_bridge import PlantBridge, default_layout
+
+    plant = Plant("rdm", seed=1, fixed_base=True, ceiling_height=None)
+    layout = default_layout(plant.description)
+    buses = [InProcessBus("fastbridge_sched") for _ in layout.neurons]
+    calls: dict[str, list[int]] = {"imu": [], "wrench": [], "truth": []}
+    tick = [0]
+    try:
+        neurons = [
+            NeuronMirror(b, nl.slave, layout.servo_configs(nl.slave), plant_driven=True)
+            for b, nl in zip(buses, layout.neurons, strict=True)
+        ]
+        bridge = PlantBridge(
+            plant,
+            neurons,
+            imu_sink=lambda g, a, m: calls["imu"].append(tick[0]),
+            imu_period=0.005,
+            wrench_sinks={"foot_wrench": lambda f, t: calls["wrench"].append(tick[0])},
+            wrench_period=0.002,
+            truth_sink=lambda gt: calls["truth"].append(tick[0]),
+            truth_period=0.01,
+        )
+        for k in range(103):
+            tick[0] = k
+            bridge.tick(plant.time)
+            plant.step(1)
+    finally:
+        for b in buses:
+            b.shutdown()
+    assert calls["imu"] == list(range(0, 103, 5))
+    assert calls["wrench"] == list(range(0, 103, 2))
+    assert calls["truth"] == list(range(0, 103, 10))
