@@ -142,3 +142,129 @@ def test_bridge_samples_on_the_first_tick_then_every_nth():
     assert calls["imu"] == list(range(0, 103, 5))
     assert calls["wrench"] == list(range(0, 103, 2))
     assert calls["truth"] == list(range(0, 103, 10))
+
+
+# --------------------------------------------------------------------------- ceiling effect
+def test_inlined_ceiling_ratio_equals_thrust_ratio_of_each_effect():
+    from rdm.plant import NoCeilingEffect
+    from rdm.plant.ceiling import ParametricCeilingEffect
+
+    plant = Plant("rdm", seed=0, ceiling_height=0.75, floor_height=0.0)
+    ratios = []
+    for z in (0.3, 0.55, 0.6, 0.62, 0.65, 0.7, 0.74):
+        plant.reset(
+            base_position=(0.0, 0.0, z),
+            base_quaternion=(0.99, 0.05, 0.1, 0.0),
+            thrusts=[5.0, 6.0, 7.0, 8.0],
+        )
+        for effects in (
+            [ParametricCeilingEffect(radius=r.radius) for r in plant.description.rotors],
+            [NoCeilingEffect(), *(ParametricCeilingEffect(radius=0.1, max_ratio=1.2),) * 3],
+            [ParametricCeilingEffect(radius=0.2, k1=0.05)] * 4,  # capped near the ceiling
+        ):
+            plant.ceiling_effects = effects
+            d = plant._fresh()
+            dist = plant._rotor_distances()  # the plain form: numpy, per rotor
+            plant._apply_rotor_thrusts()
+            r = [e.thrust_ratio(float(x)) for e, x in zip(effects, dist, strict=True)]
+            want = [esc._thrust * k for esc, k in zip(plant.escs, r, strict=True)]
+            assert _same(d.ctrl[plant._rotor_act], want), (z, effects)
+            ratios += r
+    assert any(1.01 < k < 1.2 for k in ratios) and 1.5 in ratios and 1.0 in ratios
+
+
+# --------------------------------------------------------------------------- CAN master
+def _booted_master(channel: str):
+    from rdm.link.inproc_can import InProcessBus
+    from rdm.nodes.can_master import CanMaster, MasterState
+    from rdm.nodes.neuron_mirror import NeuronMirror
+    from rdm.nodes.servo_model import ServoConfig
+
+    buses = [InProcessBus(channel) for _ in range(3)]
+    master = CanMaster(buses[0], boot_delay_ms=0)
+    neurons = [
+        NeuronMirror(buses[1], 2, [ServoConfig(dynamixel_id=1 + i) for i in range(2)]),
+        NeuronMirror(buses[2], 5, [ServoConfig(dynamixel_id=1 + i) for i in range(3)]),
+    ]
+    for t in range(2000):
+        master.tick_ms(t)
+        for n in neurons:
+            n.tick(t / 1000)
+        if master.state is MasterState.RUNNING:
+            break
+    assert master.state is MasterState.RUNNING
+    for b in buses:
+        b.shutdown()
+    return master
+
+
+def _master_state(master) -> tuple:
+    servos = [(n.slave, [dict(vars(s)) for s in n.servos]) for n in master.neurons]
+    return servos, dict(master.rx_errors), dict(master.rx_kinds), master.rx_count
+
+
+def test_can_master_servo_state_branch_equals_the_general_path(monkeypatch):
+    import can
+
+    from rdm.nodes import can_master
+    from rdm.protocol import neuron as nr
+
+    gen = np.random.default_rng(9)
+    frames = []
+    for _ in range(3000):
+        st = nr.ServoState(
+            slave=int(gen.choice([2, 5, 7])),  # 7: unknown slave
+            index=int(gen.integers(0, 4)),  # 2 and 3 beyond Neuron 2's servos
+            angle=int(gen.integers(-0x8000, 0x8000)),
+            temperature=int(gen.integers(0, 256)),
+            force_servo_off=bool(gen.random() < 0.1),
+            moving=bool(gen.random() < 0.5),
+            goal_reported=bool(gen.random() < 0.2),
+            current=int(gen.integers(-0x8000, 0x8000)),
+            servo_error=int(gen.integers(0, 256)),
+        )
+        frames.append((st.can_id, st.encode()))
+        if gen.random() < 0.05:  # other kinds in between
+            imu = nr.ImuFrame(slave=5, sensor=nr.ImuMessage.GYRO, x=1, y=-2, z=3)
+            frames.append((imu.can_id, imu.encode()))
+
+    def run(master) -> tuple:
+        for k, (can_id, data) in enumerate(frames):
+            master._receive(can.Message(arbitration_id=can_id, data=data, is_extended_id=False), k)
+        return _master_state(master)
+
+    fast = run(_booted_master("fastbridge_rx_fast"))
+    monkeypatch.setattr(can_master, "_SERVO_STATE", None)  # every frame takes the general path
+    plain = run(_booted_master("fastbridge_rx_plain"))
+    assert fast == plain
+    assert fast[1].get("unknown_slave", 0) > 100 and fast[1].get("servo_index", 0) > 100
+
+
+def test_can_master_pwm_frames_follow_each_new_duty_list():
+    from rdm.link.inproc_can import InProcessBus
+    from rdm.protocol import neuron as nr
+
+    master = _booted_master("fastbridge_pwm")
+    listener = InProcessBus("fastbridge_pwm_tx")
+    master.bus = InProcessBus("fastbridge_pwm_tx")
+    gen = np.random.default_rng(3)
+    try:
+        t = 10_000
+        for _ in range(50):
+            duties = gen.uniform(0.5, 1.0, master.motor_number).tolist()
+            master.set_motor_duties(duties)
+            for _ in range(4):
+                master._run(t)
+                t += 1
+            sent = [
+                bytes(m.data)
+                for m in iter(lambda: listener.recv(timeout=0), None)
+                if m.arbitration_id == nr.PwmFrame(0, (0,) * 6).can_id
+            ]
+            # independent: Spinal's (uint16_t)(duty * 2000 - 1000), 10 bits per slot
+            values = [int(d * 2000.0 - 1000.0) for d in duties] + [0] * (6 - len(duties))
+            word = sum(v << (10 * (i % 3) + 32 * (i // 3)) for i, v in enumerate(values))
+            assert sent == [word.to_bytes(8, "little")] * 2
+    finally:
+        master.bus.shutdown()
+        listener.shutdown()
