@@ -351,12 +351,13 @@ class Plant:
             for i, esc in enumerate(self.escs):
                 thrusts[i] = esc._thrust * effects[i].thrust_ratio(math.inf)
         else:
-            axis_z = self._v_site_xmat[:, 8].tolist()
-            z = self._v_site_xpos[:, 2].tolist()
+            # ``item`` reads one element as a Python float (the rotor sites only).
+            xmat_at = self._v_site_xmat.item
+            xpos_at = self._v_site_xpos.item
             params = self._ceiling_params(effects)
             for i, (esc, sid) in enumerate(zip(self.escs, self._rotor_site_list, strict=True)):
-                az = axis_z[sid]
-                dist = max(h - z[sid], 0.0) / az if az > 1e-6 else math.inf
+                az = xmat_at(sid, 8)  # z component of the site z axis
+                dist = max(h - xpos_at(sid, 2), 0.0) / az if az > 1e-6 else math.inf
                 if params is None:
                     ratio = effects[i].thrust_ratio(dist)
                 else:
