@@ -44,6 +44,8 @@ REBOOT_REQUEST_MS = 5000
 #: In real time a late tick replays at most this many missed milliseconds of the schedule.
 MAX_CATCH_UP_MS = 10
 IDLE_DUTY = 0.5
+#: The frame class of a servo state report (the fast branch of ``CanMaster._receive``).
+_SERVO_STATE = nr.ServoState
 
 
 class MasterState(enum.Enum):
@@ -157,6 +159,8 @@ class CanMaster:
         self.tx_count = 0
         self.tx_errors = 0
         self._duties: list[float] = []
+        self._pwm_of: list[float] | None = None  # the duty list _pwm_values was made from
+        self._pwm_values: tuple[int, ...] = ()
         self._phase_end = start_ms + boot_delay_ms
         self._config_cursor = 0
         self._enumerated: set[int] = set()
@@ -334,10 +338,11 @@ class CanMaster:
             if last is None or t - last >= DISCONNECT_LOG_INTERVAL_MS:
                 self._last_disconnect_log = t
                 self._log(t, "error", "CAN disconnected!!")
-        for slave, when in list(self._rerequest.items()):
-            if t >= when:
-                del self._rerequest[slave]
-                self._send(nr.InitialConfigRequest(slave))
+        if self._rerequest:
+            for slave, when in list(self._rerequest.items()):
+                if t >= when:
+                    del self._rerequest[slave]
+                    self._send(nr.InitialConfigRequest(slave))
         if self._tx_pause_until is not None:
             if t < self._tx_pause_until:
                 return
@@ -350,7 +355,13 @@ class CanMaster:
                 self._rerequest[frame.slave] = t + REBOOT_REQUEST_MS
             return
         if t % 2 == 0:
-            values = tuple(nr.duty_to_pwm_value(d) for d in self._duties[:PWM_MAX_MOTORS])
+            # The PWM words of the present duty list (``_duties`` is only ever replaced, never
+            # changed in place): converted once per list instead of every other millisecond.
+            duties = self._duties
+            if self._pwm_of is not duties:
+                self._pwm_values = tuple(nr.duty_to_pwm_value(d) for d in duties[:PWM_MAX_MOTORS])
+                self._pwm_of = duties
+            values = self._pwm_values
             for can_id, payload in nr.encode_pwm_cached(values):
                 self._send_raw(can_id, payload)
             return
@@ -401,6 +412,22 @@ class CanMaster:
             self.rx_errors[exc.reason] += 1
             return
         self.rx_kinds[frame.KIND] += 1
+        if type(frame) is _SERVO_STATE:
+            # The common frame (a servo state report): the steps of the general path below
+            # that apply to it, in the same order, without the isinstance chain.
+            slave = frame.slave
+            for neuron in self.neurons:
+                if neuron.slave == slave:
+                    break
+            else:
+                self.rx_errors["unknown_slave"] += 1
+                return
+            index = frame.index
+            if index >= len(neuron.servos):
+                self.rx_errors["servo_index"] += 1
+                return
+            self._servo_state(neuron.servos[index], frame, now_ms)
+            return
         if isinstance(frame, nr.EnumResponse):
             if self.state is MasterState.ENUMERATING:
                 self._enumerated.add(frame.slave)

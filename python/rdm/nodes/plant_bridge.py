@@ -134,21 +134,6 @@ def layout_scale(layout: BusLayout, joint: str) -> float:
     return layout.ticks_per_rev / (2.0 * math.pi) * layout.signs.get(joint, 1.0)
 
 
-class _Every:
-    """Fires every ``n``-th call, starting with the first."""
-
-    __slots__ = ("count", "n")
-
-    def __init__(self, n: int) -> None:
-        self.n = n
-        self.count = 0
-
-    def __call__(self) -> bool:
-        fire = self.count % self.n == 0
-        self.count += 1
-        return fire
-
-
 def _ratio(period: float | None, base: float, what: str) -> int:
     if period is None:
         return 0
@@ -164,6 +149,7 @@ class _JointFeed:
 
     __slots__ = (
         "_center",
+        "_pairs",
         "_plant",
         "_q",
         "_qadr",
@@ -184,6 +170,10 @@ class _JointFeed:
         if self._qadr is None:
             self._qpos = None
         self._q = plant.servo_positions()
+        #: (qpos address, ticks per rad) per joint for the float path (None: array path)
+        self._pairs: list[tuple[int, float]] | None = None
+        if self._qpos is not None:
+            self._pairs = list(zip(np.asarray(self._qadr).tolist(), scale.tolist(), strict=True))
         self._ticks: list[float] = []
         self._ticks_epoch = -1
 
@@ -196,8 +186,15 @@ class _JointFeed:
     def ticks(self) -> list[float]:
         if self._ticks_epoch != self.epoch:
             self._ticks_epoch = self.epoch
-            q = self._q[self._qadr] if self._qpos is not None else self._q
-            self._ticks = (self._center + q * self._scale).tolist()
+            if self._pairs is not None:
+                # Plain floats: ``center + q * scale`` per joint, the same two IEEE operations
+                # as the array expression below (tests/test_plant_fast_paths.py).
+                q = self._q.tolist()
+                c = float(self._center)
+                self._ticks = [c + q[a] * s for a, s in self._pairs]
+            else:
+                q = self._q[self._qadr] if self._qpos is not None else self._q
+                self._ticks = (self._center + q * self._scale).tolist()
         return self._ticks
 
 
@@ -275,10 +272,12 @@ class PlantBridge:
                 raise ValueError(f"PlantBridge: plant has no wrench sensor {key!r}")
         self._mocap_sink = mocap_sink
         self._truth_sink = truth_sink
-        self._imu_every = _Every(_ratio(imu_period, period, "imu_period") or 1)
-        self._wrench_every = _Every(_ratio(wrench_period, period, "wrench_period") or 1)
-        self._mocap_every = _Every(_ratio(mocap_period, period, "mocap_period") or 1)
-        self._truth_every = _Every(_ratio(truth_period, period, "truth_period") or 1)
+        # Ticks between samples (each reading fires on the first tick, then every n-th).
+        self._imu_n = _ratio(imu_period, period, "imu_period") or 1
+        self._wrench_n = _ratio(wrench_period, period, "wrench_period") or 1
+        self._mocap_n = _ratio(mocap_period, period, "mocap_period") or 1
+        self._truth_n = _ratio(truth_period, period, "truth_period") or 1
+        self._sample_count = 0
         self._imu_on = imu_period is not None and (imu_sink is not None or self._imu_neurons)
         self._wrench_on = wrench_period is not None and bool(self._wrench_sinks)
         self._mocap_on = mocap_period is not None and mocap_sink is not None
@@ -351,20 +350,23 @@ class PlantBridge:
                     changed = True
         if changed:
             plant.set_rotor_duties(duties)
-        if self._imu_on and self._imu_every():
+        # Sampling schedule: the n-th tick (from 0) samples a reading when n % ratio == 0.
+        n = self._sample_count
+        self._sample_count = n + 1
+        if self._imu_on and n % self._imu_n == 0:
             r = plant.imu()
             if self._imu_sink is not None:
                 self._imu_sink(r.gyro, r.accel, r.mag)
             for neuron in self._imu_neurons:
                 neuron.set_imu(r.gyro, r.accel, r.mag)
-        if self._wrench_on and self._wrench_every():
+        if self._wrench_on and n % self._wrench_n == 0:
             for key, sink in self._wrench_sinks.items():
                 w = plant.wrench(key)
                 sink(w.force, w.torque)
-        if self._mocap_on and self._mocap_every():
+        if self._mocap_on and n % self._mocap_n == 0:
             d = plant.data
             self._mocap_sink(now, d.xpos[self._foot_body].copy(), d.xquat[self._foot_body].copy())
-        if self._truth_on and self._truth_every():
+        if self._truth_on and n % self._truth_n == 0:
             self._truth_sink(plant.ground_truth())
 
     @property

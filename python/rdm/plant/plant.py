@@ -137,7 +137,12 @@ class Plant:
         self._ee_body = m.body(desc.end_effector_frame).id
         env = {m.geom(g).id for g in (CEILING_GEOM, FLOOR_GEOM) if _has_geom(m, g)}
         self._tracker = FootContactTracker(m, self._plate_body, env)
-        self._sensor_adr = {m.sensor(i).name: m.sensor_adr[i] for i in range(m.nsensor)}
+        self._sensor_adr = {m.sensor(i).name: int(m.sensor_adr[i]) for i in range(m.nsensor)}
+        adr = self._sensor_adr
+        self._imu_adr = (adr["gyro"], adr["accelerometer"], adr["magnetometer"])
+        self._wrench_adr = {
+            key: (adr[f"{key}_force"], adr[f"{key}_torque"]) for key in desc.wrench_sensors
+        }
 
         base = esc or EscParams()
         self.escs = [
@@ -168,12 +173,15 @@ class Plant:
         self._v_site_xpos = d.site_xpos
         self._v_ctrl = d.ctrl
         self._v_qpos = d.qpos
+        self._v_sensordata = d.sensordata
         self._rotor_site_list = self._rotor_site.tolist()
         self._qadr_list = self._qadr.tolist()
         acts = self._rotor_act.tolist()
         contiguous = acts == list(range(acts[0], acts[0] + len(acts))) if acts else False
         self._rotor_act_slice = slice(acts[0], acts[0] + len(acts)) if contiguous else None
         self._external: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._ceiling_key: tuple | None = None
+        self._ceiling_fast: list[tuple[float, float, float, float, float]] | None = None
         self._seed_sensors()
         self.reset()
 
@@ -343,16 +351,54 @@ class Plant:
             for i, esc in enumerate(self.escs):
                 thrusts[i] = esc._thrust * effects[i].thrust_ratio(math.inf)
         else:
-            axis_z = self._v_site_xmat[:, 8].tolist()
-            z = self._v_site_xpos[:, 2].tolist()
+            # ``item`` reads one element as a Python float (the rotor sites only).
+            xmat_at = self._v_site_xmat.item
+            xpos_at = self._v_site_xpos.item
+            params = self._ceiling_params(effects)
             for i, (esc, sid) in enumerate(zip(self.escs, self._rotor_site_list, strict=True)):
-                az = axis_z[sid]
-                dist = max(h - z[sid], 0.0) / az if az > 1e-6 else math.inf
-                thrusts[i] = esc._thrust * effects[i].thrust_ratio(dist)
+                az = xmat_at(sid, 8)  # z component of the site z axis
+                dist = max(h - xpos_at(sid, 2), 0.0) / az if az > 1e-6 else math.inf
+                if params is None:
+                    ratio = effects[i].thrust_ratio(dist)
+                else:
+                    # ParametricCeilingEffect.thrust_ratio written out (same operations).
+                    radius, k2r, k1, limit, max_ratio = params[i]
+                    if math.isnan(dist) or dist < 0.0:
+                        dist = 0.0
+                    if math.isinf(dist):
+                        ratio = 1.0
+                    else:
+                        r = (radius / (dist + k2r)) ** 2 / k1
+                        ratio = max_ratio if r >= limit else 1.0 / (1.0 - r)
+                thrusts[i] = esc._thrust * ratio
         if self._rotor_act_slice is not None:
             self._v_ctrl[self._rotor_act_slice] = thrusts
         else:
             self._v_ctrl[self._rotor_act] = thrusts
+
+    def _ceiling_params(
+        self, effects: list[CeilingEffect]
+    ) -> list[tuple[float, float, float, float, float]] | None:
+        """Per rotor (radius, k2 * radius, k1, 1 - 1/max_ratio, max_ratio) when every effect
+        is exactly a :class:`ParametricCeilingEffect` (frozen), else None; cached per list
+        content, so replacing an effect is seen at the next step."""
+        key = tuple(effects)
+        if key != self._ceiling_key:
+            self._ceiling_key = key
+            if all(type(e) is ParametricCeilingEffect for e in key):
+                self._ceiling_fast = [
+                    (
+                        e.radius,
+                        e.k2_over_radius * e.radius,
+                        e.k1,
+                        1.0 - 1.0 / e.max_ratio,
+                        e.max_ratio,
+                    )
+                    for e in key
+                ]
+            else:
+                self._ceiling_fast = None
+        return self._ceiling_fast
 
     @property
     def _thrusts(self) -> np.ndarray:
@@ -401,8 +447,12 @@ class Plant:
 
     def imu(self) -> ImuReading:
         """One noisy IMU sample in the IMU frame (root link, at the processor)."""
-        return self.imu_model.sample(
-            self._sensor("gyro"), self._sensor("accelerometer"), self._sensor("magnetometer")
+        if self._stale:
+            self.sync()
+        sd = self._v_sensordata
+        g, a, m = self._imu_adr
+        return self.imu_model.sample_lists(
+            sd[g : g + 3].tolist(), sd[a : a + 3].tolist(), sd[m : m + 3].tolist()
         )
 
     def imu_ideal(self) -> ImuReading:
@@ -420,8 +470,16 @@ class Plant:
 
     def wrench(self, sensor: str) -> WrenchReading:
         """One noisy sample of a wrench sensor (``foot_wrench``, ``end_effector_wrench``)."""
-        force, torque = self.wrench_ideal(sensor)
-        return self.wrench_models[sensor].sample(force, torque)
+        adr = self._wrench_adr.get(sensor)
+        if adr is None:
+            raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
+        if self._stale:
+            self.sync()
+        sd = self._v_sensordata
+        f, t = adr
+        return self.wrench_models[sensor].sample_list(
+            sd[f : f + 3].tolist() + sd[t : t + 3].tolist()
+        )
 
     def servo_positions(self) -> np.ndarray:
         """Present joint positions (joint_order) [rad]."""

@@ -22,6 +22,36 @@ MAG_LSB = 4912.0 / 32760.0  # uT
 GYRO_RANGE = math.radians(2000.0)  # +-2000 dps
 ACCEL_RANGE = 8.0 * 9.80665  # +-8 g
 LEPTRINO_FULL_SCALE_COUNTS = 10000.0
+#: Standard normals drawn per refill of a :class:`NormalStream`.
+NORMAL_CHUNK = 1024
+
+
+class NormalStream:
+    """Standard normals of one generator, drawn ``NORMAL_CHUNK`` at a time.
+
+    ``take(k)`` returns the next ``k`` values of the stream ``rng.normal(0.0, 1.0, k)`` calls
+    would return one call after another: numpy's ``Generator.normal`` draws element by element
+    with no state carried between calls, so one big draw is the concatenation of small ones
+    (checked in tests/test_plant_fast_paths.py). Saves numpy's per-call overhead at 1 kHz.
+    The generator then runs ahead of what was taken: the stream owns it.
+    """
+
+    __slots__ = ("_buf", "_pos", "_rng")
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self._rng = rng
+        self._buf: list[float] = []
+        self._pos = 0
+
+    def take(self, k: int) -> list[float]:
+        pos = self._pos
+        end = pos + k
+        buf = self._buf
+        if end > len(buf):
+            buf = self._buf = buf[pos:] + self._rng.normal(0.0, 1.0, NORMAL_CHUNK).tolist()
+            pos, end = 0, k
+        self._pos = end
+        return buf[pos:end]
 
 
 @dataclass(frozen=True)
@@ -68,18 +98,23 @@ class ImuModel:
         self.gyro_bias = bias(noise.gyro_bias, noise.gyro_bias_std)
         self.accel_bias = bias(noise.accel_bias, noise.accel_bias_std)
         self.mag_bias = bias(noise.mag_bias, noise.mag_bias_std)
+        self._normals = NormalStream(rng)
 
     def sample(self, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray) -> ImuReading:
-        """Corrupt one ideal sample (the generator advances by nine normals).
+        """Corrupt one ideal sample (nine normals of the generator's stream).
 
         Scalar float arithmetic (nine values: cheaper than numpy's per-call overhead), the
         same IEEE operations in the same order as the array form, so the same numbers."""
+        return self.sample_lists(gyro.tolist(), accel.tolist(), mag.tolist())
+
+    def sample_lists(self, gyro: list[float], accel: list[float], mag: list[float]) -> ImuReading:
+        """:meth:`sample` of three float lists (what the plant reads from ``sensordata``)."""
         n = self.noise
-        w = self._rng.normal(0.0, 1.0, 9).tolist()
+        w = self._normals.take(9)
         gb, ab, mb = self._bias_lists
-        g = [x + b + n.gyro_std * e for x, b, e in zip(gyro.tolist(), gb, w[0:3], strict=True)]
-        a = [x + b + n.accel_std * e for x, b, e in zip(accel.tolist(), ab, w[3:6], strict=True)]
-        m = [x + b + n.mag_std * e for x, b, e in zip(mag.tolist(), mb, w[6:9], strict=True)]
+        g = [x + b + n.gyro_std * e for x, b, e in zip(gyro, gb, w[0:3], strict=True)]
+        a = [x + b + n.accel_std * e for x, b, e in zip(accel, ab, w[3:6], strict=True)]
+        m = [x + b + n.mag_std * e for x, b, e in zip(mag, mb, w[6:9], strict=True)]
         saturated = any(abs(v) > GYRO_RANGE for v in g) or any(abs(v) > ACCEL_RANGE for v in a)
         g = [_clip(v, GYRO_RANGE) for v in g]
         a = [_clip(v, ACCEL_RANGE) for v in a]
@@ -144,25 +179,24 @@ class WrenchSensorModel:
         self.noise = noise
         self.rated = np.array([*spec.force_range, *spec.torque_range], dtype=float)
         self._rated_list = self.rated.tolist()
+        self._lsb_list = [r / LEPTRINO_FULL_SCALE_COUNTS for r in self._rated_list]
         self._rng = rng
+        self._normals = NormalStream(rng)
 
     def sample(self, force: np.ndarray, torque: np.ndarray) -> WrenchReading:
-        """Corrupt one ideal sample (the generator advances by six normals); scalar floats,
+        """Corrupt one ideal sample (six normals of the generator's stream); scalar floats,
         the same operations in the same order as the array form."""
+        return self.sample_list(force.tolist() + torque.tolist())
+
+    def sample_list(self, wrench: list[float]) -> WrenchReading:
+        """:meth:`sample` of the six floats (Fx, Fy, Fz, Mx, My, Mz)."""
         noise = self.noise
-        e = self._rng.normal(0.0, 1.0, 6).tolist()
+        e = self._normals.take(6)
         frac = noise.noise_fraction_of_rated
-        w = [
-            x + b + frac * r * n
-            for x, b, r, n in zip(
-                force.tolist() + torque.tolist(), noise.bias, self._rated_list, e, strict=True
-            )
-        ]
-        saturated = np.array([abs(v) >= r for v, r in zip(w, self._rated_list, strict=True)])
-        w = [_clip(v, r) for v, r in zip(w, self._rated_list, strict=True)]
+        rated = self._rated_list
+        w = [x + b + frac * r * n for x, b, r, n in zip(wrench, noise.bias, rated, e, strict=True)]
+        saturated = np.array([abs(v) >= r for v, r in zip(w, rated, strict=True)])
+        w = [_clip(v, r) for v, r in zip(w, rated, strict=True)]
         if noise.quantize:
-            w = [
-                _quantize(v, r / LEPTRINO_FULL_SCALE_COUNTS)
-                for v, r in zip(w, self._rated_list, strict=True)
-            ]
+            w = [_quantize(v, lsb) for v, lsb in zip(w, self._lsb_list, strict=True)]
         return WrenchReading(np.array(w[:3]), np.array(w[3:]), saturated)

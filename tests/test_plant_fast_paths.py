@@ -1,0 +1,270 @@
+"""The plant bridge's fast paths against their plain forms (helper ``fastbridge``).
+
+Each check compares bit for bit (signed zeros and NaN included) with an independent numpy
+computation: numpy's own generator called once per sample, the array forms of the noise
+models, the array expression of the tick conversion, the tick arithmetic of the schedule.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rdm.nodes.plant_bridge import _JointFeed
+from rdm.plant import Plant
+from rdm.plant.sensors import (
+    ACCEL_LSB,
+    ACCEL_RANGE,
+    GYRO_LSB,
+    GYRO_RANGE,
+    LEPTRINO_FULL_SCALE_COUNTS,
+    MAG_LSB,
+    NORMAL_CHUNK,
+    NormalStream,
+)
+
+
+def _same(x, y) -> bool:
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    return np.array_equal(x, y, equal_nan=True) and np.array_equal(np.signbit(x), np.signbit(y))
+
+
+def test_normal_stream_equals_one_generator_call_per_take():
+    stream = NormalStream(np.random.default_rng(5))
+    ref = np.random.default_rng(5)
+    sizes = np.random.default_rng(1).integers(1, 40, 2000)  # crosses many chunk boundaries
+    assert sizes.sum() > 10 * NORMAL_CHUNK
+    for k in sizes.tolist():
+        assert _same(stream.take(k), ref.normal(0.0, 1.0, k)), k
+
+
+def _flying_plant() -> Plant:
+    plant = Plant("rdm", seed=3, ceiling_height=1.2, floor_height=0.0)
+    plant.reset(base_position=(0.0, 0.0, 0.6), thrusts=[4.0, 4.5, 5.0, 4.2])
+    plant.set_rotor_thrusts([5.0, 3.0, 6.0, 4.0])  # tumbles: gyro, accel, wrench all move
+    return plant
+
+
+def test_plant_imu_and_wrench_equal_the_array_form_of_the_ideal_values():
+    plant = _flying_plant()
+    seeds = np.random.SeedSequence(3).spawn(1 + len(plant.wrench_models))
+    # IMU reference: the model's biases are the generator's first 3 x 3 normals, then 9
+    # normals per sample, one call each.
+    imu_rng = np.random.default_rng(seeds[0])
+    noise = plant.imu_model.noise
+    gb = imu_rng.normal(0.0, noise.gyro_bias_std, 3)
+    ab = imu_rng.normal(0.0, noise.accel_bias_std, 3)
+    mb = imu_rng.normal(0.0, noise.mag_bias_std, 3)
+    keys = list(plant.wrench_models)
+    w_rngs = {k: np.random.default_rng(s) for k, s in zip(keys, seeds[1:], strict=True)}
+    for step in range(600):
+        plant.step(1)
+        if step % 3 == 0:
+            ideal = plant.imu_ideal()
+            r = plant.imu()
+            w = imu_rng.normal(0.0, 1.0, 9)
+            g = np.clip(ideal.gyro + gb + noise.gyro_std * w[0:3], -GYRO_RANGE, GYRO_RANGE)
+            a = np.clip(ideal.accel + ab + noise.accel_std * w[3:6], -ACCEL_RANGE, ACCEL_RANGE)
+            m = ideal.mag + mb + noise.mag_std * w[6:9]
+            assert _same(r.gyro, np.round(g / GYRO_LSB) * GYRO_LSB), step
+            assert _same(r.accel, np.round(a / ACCEL_LSB) * ACCEL_LSB), step
+            assert _same(r.mag, np.round(m / MAG_LSB) * MAG_LSB), step
+        for key in keys:
+            model = plant.wrench_models[key]
+            force, torque = plant.wrench_ideal(key)
+            reading = plant.wrench(key)
+            ref = np.concatenate([force, torque]) + 0.003 * model.rated * w_rngs[key].normal(
+                0, 1, 6
+            )
+            sat = np.abs(ref) >= model.rated
+            ref = np.clip(ref, -model.rated, model.rated)
+            lsb = model.rated / LEPTRINO_FULL_SCALE_COUNTS
+            ref = np.round(ref / lsb) * lsb
+            assert _same(reading.force, ref[:3]) and _same(reading.torque, ref[3:]), step
+            assert np.array_equal(reading.saturated, sat)
+    try:
+        plant.wrench("no_such_sensor")
+    except ValueError as e:
+        assert "no_such_sensor" in str(e)
+    else:  # pragma: no cover
+        raise AssertionError("unknown wrench sensor accepted")
+
+
+def test_joint_feed_float_path_equals_the_array_expression():
+    plant = Plant("rdm", seed=0, fixed_base=True, ceiling_height=None)
+    n = len(plant.joint_names)
+    scale = np.random.default_rng(2).uniform(-900.0, 900.0, n)
+    feed = _JointFeed(plant, 2048, scale)
+    qadr = plant._qadr
+    gen = np.random.default_rng(4)
+    specials = [0.0, -0.0, np.nan, np.inf, -np.inf, 1e-300, -1e300]
+    for k in range(300):
+        q = gen.normal(size=n) * 10.0 ** gen.uniform(-8, 2)
+        q[k % n] = specials[k % len(specials)]
+        plant._v_qpos[qadr] = q
+        feed.snapshot()
+        want = (2048 + plant._v_qpos[qadr] * scale).tolist()
+        assert _same(feed.ticks(), want), k
+        assert feed.ticks() is feed.ticks()  # converted once per snapshot
+
+
+def test_bridge_samples_on_the_first_tick_then_every_nth():
+    from rdm.link.inproc_can import InProcessBus
+    from rdm.nodes.neuron_mirror import NeuronMirror
+    from rdm.nodes.plant_bridge import PlantBridge, default_layout
+
+    plant = Plant("rdm", seed=1, fixed_base=True, ceiling_height=None)
+    layout = default_layout(plant.description)
+    buses = [InProcessBus("fastbridge_sched") for _ in layout.neurons]
+    calls: dict[str, list[int]] = {"imu": [], "wrench": [], "truth": []}
+    tick = [0]
+    try:
+        neurons = [
+            NeuronMirror(b, nl.slave, layout.servo_configs(nl.slave), plant_driven=True)
+            for b, nl in zip(buses, layout.neurons, strict=True)
+        ]
+        bridge = PlantBridge(
+            plant,
+            neurons,
+            imu_sink=lambda g, a, m: calls["imu"].append(tick[0]),
+            imu_period=0.005,
+            wrench_sinks={"foot_wrench": lambda f, t: calls["wrench"].append(tick[0])},
+            wrench_period=0.002,
+            truth_sink=lambda gt: calls["truth"].append(tick[0]),
+            truth_period=0.01,
+        )
+        for k in range(103):
+            tick[0] = k
+            bridge.tick(plant.time)
+            plant.step(1)
+    finally:
+        for b in buses:
+            b.shutdown()
+    assert calls["imu"] == list(range(0, 103, 5))
+    assert calls["wrench"] == list(range(0, 103, 2))
+    assert calls["truth"] == list(range(0, 103, 10))
+
+
+# --------------------------------------------------------------------------- ceiling effect
+def test_inlined_ceiling_ratio_equals_thrust_ratio_of_each_effect():
+    from rdm.plant import NoCeilingEffect
+    from rdm.plant.ceiling import ParametricCeilingEffect
+
+    plant = Plant("rdm", seed=0, ceiling_height=0.75, floor_height=0.0)
+    ratios = []
+    for z in (0.3, 0.55, 0.6, 0.62, 0.65, 0.7, 0.74):
+        plant.reset(
+            base_position=(0.0, 0.0, z),
+            base_quaternion=(0.99, 0.05, 0.1, 0.0),
+            thrusts=[5.0, 6.0, 7.0, 8.0],
+        )
+        for effects in (
+            [ParametricCeilingEffect(radius=r.radius) for r in plant.description.rotors],
+            [NoCeilingEffect(), *(ParametricCeilingEffect(radius=0.1, max_ratio=1.2),) * 3],
+            [ParametricCeilingEffect(radius=0.2, k1=0.05)] * 4,  # capped near the ceiling
+        ):
+            plant.ceiling_effects = effects
+            d = plant._fresh()
+            dist = plant._rotor_distances()  # the plain form: numpy, per rotor
+            plant._apply_rotor_thrusts()
+            r = [e.thrust_ratio(float(x)) for e, x in zip(effects, dist, strict=True)]
+            want = [esc._thrust * k for esc, k in zip(plant.escs, r, strict=True)]
+            assert _same(d.ctrl[plant._rotor_act], want), (z, effects)
+            ratios += r
+    assert any(1.01 < k < 1.2 for k in ratios) and 1.5 in ratios and 1.0 in ratios
+
+
+# --------------------------------------------------------------------------- CAN master
+def _booted_master(channel: str):
+    from rdm.link.inproc_can import InProcessBus
+    from rdm.nodes.can_master import CanMaster, MasterState
+    from rdm.nodes.neuron_mirror import NeuronMirror
+    from rdm.nodes.servo_model import ServoConfig
+
+    buses = [InProcessBus(channel) for _ in range(3)]
+    master = CanMaster(buses[0], boot_delay_ms=0)
+    neurons = [
+        NeuronMirror(buses[1], 2, [ServoConfig(dynamixel_id=1 + i) for i in range(2)]),
+        NeuronMirror(buses[2], 5, [ServoConfig(dynamixel_id=1 + i) for i in range(3)]),
+    ]
+    for t in range(2000):
+        master.tick_ms(t)
+        for n in neurons:
+            n.tick(t / 1000)
+        if master.state is MasterState.RUNNING:
+            break
+    assert master.state is MasterState.RUNNING
+    for b in buses:
+        b.shutdown()
+    return master
+
+
+def _master_state(master) -> tuple:
+    servos = [(n.slave, [dict(vars(s)) for s in n.servos]) for n in master.neurons]
+    return servos, dict(master.rx_errors), dict(master.rx_kinds), master.rx_count
+
+
+def test_can_master_servo_state_branch_equals_the_general_path(monkeypatch):
+    import can
+
+    from rdm.nodes import can_master
+    from rdm.protocol import neuron as nr
+
+    gen = np.random.default_rng(9)
+    frames = []
+    for _ in range(3000):
+        st = nr.ServoState(
+            slave=int(gen.choice([2, 5, 7])),  # 7: unknown slave
+            index=int(gen.integers(0, 4)),  # 2 and 3 beyond Neuron 2's servos
+            angle=int(gen.integers(-0x8000, 0x8000)),
+            temperature=int(gen.integers(0, 256)),
+            force_servo_off=bool(gen.random() < 0.1),
+            moving=bool(gen.random() < 0.5),
+            goal_reported=bool(gen.random() < 0.2),
+            current=int(gen.integers(-0x8000, 0x8000)),
+            servo_error=int(gen.integers(0, 256)),
+        )
+        frames.append((st.can_id, st.encode()))
+        if gen.random() < 0.05:  # other kinds in between
+            imu = nr.ImuFrame(slave=5, sensor=nr.ImuMessage.GYRO, x=1, y=-2, z=3)
+            frames.append((imu.can_id, imu.encode()))
+
+    def run(master) -> tuple:
+        for k, (can_id, data) in enumerate(frames):
+            master._receive(can.Message(arbitration_id=can_id, data=data, is_extended_id=False), k)
+        return _master_state(master)
+
+    fast = run(_booted_master("fastbridge_rx_fast"))
+    monkeypatch.setattr(can_master, "_SERVO_STATE", None)  # every frame takes the general path
+    plain = run(_booted_master("fastbridge_rx_plain"))
+    assert fast == plain
+    assert fast[1].get("unknown_slave", 0) > 100 and fast[1].get("servo_index", 0) > 100
+
+
+def test_can_master_pwm_frames_follow_each_new_duty_list():
+    from rdm.link.inproc_can import InProcessBus
+    from rdm.protocol import neuron as nr
+
+    master = _booted_master("fastbridge_pwm")
+    listener = InProcessBus("fastbridge_pwm_tx")
+    master.bus = InProcessBus("fastbridge_pwm_tx")
+    gen = np.random.default_rng(3)
+    try:
+        t = 10_000
+        for _ in range(50):
+            duties = gen.uniform(0.5, 1.0, master.motor_number).tolist()
+            master.set_motor_duties(duties)
+            for _ in range(4):
+                master._run(t)
+                t += 1
+            sent = [
+                bytes(m.data)
+                for m in iter(lambda: listener.recv(timeout=0), None)
+                if m.arbitration_id == nr.PwmFrame(0, (0,) * 6).can_id
+            ]
+            # independent: Spinal's (uint16_t)(duty * 2000 - 1000), 10 bits per slot
+            values = [int(d * 2000.0 - 1000.0) for d in duties] + [0] * (6 - len(duties))
+            word = sum(v << (10 * (i % 3) + 32 * (i // 3)) for i, v in enumerate(values))
+            assert sent == [word.to_bytes(8, "little")] * 2
+    finally:
+        master.bus.shutdown()
+        listener.shutdown()
