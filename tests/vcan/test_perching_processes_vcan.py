@@ -17,6 +17,7 @@ import json
 import os
 
 import numpy as np
+import pytest
 
 from rdm.protocol.neuron import decode_candump
 from rdm.sim.processes import ProcessRunOptions, run_processes, stack_ceiling
@@ -25,6 +26,8 @@ DURATION = float(os.environ.get("RDM_PERCHING_DURATION", "11.0"))
 PWM_ID = 0x00F  # MOTOR device, message 0, broadcast slave field
 
 
+# ~11 min in the emulated VM (11 simulated s at ~45 ms wall per simulated ms, + start-up)
+@pytest.mark.timeout(1800)
 def test_perching_as_three_processes_on_vcan0(vcan_channel, tmp_path):
     opts = ProcessRunOptions(
         can=f"socketcan:{vcan_channel}",
