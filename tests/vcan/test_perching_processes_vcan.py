@@ -56,7 +56,8 @@ def test_perching_as_three_processes_on_vcan0(vcan_channel, tmp_path):
     assert m["perched"] == 1.0, onboard["perching"]
     # The switch comes from the PC's foot sensor (F_z > 3 N) after the plant's first contact.
     first_contact = t[np.argmax(tr["contact"])]
-    assert tr["contact"].any() and first_contact <= m["t_perch"] < first_contact + 1.0
+    # (1 us slack: the robot's times are k * 1 ms, the onboard's sums of 10 ms periods)
+    assert tr["contact"].any() and first_contact - 1e-6 <= m["t_perch"] < first_contact + 1.0
     held = t >= m["t_perch"] + 0.5
     assert held.sum() >= 100  # >= 1 s of ground truth judged
     assert tr["contact"][held].all(), "the foot left the ceiling"
