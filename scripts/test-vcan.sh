@@ -23,6 +23,9 @@ PY_REAL=$("$PY" -c 'import sys; print(sys.executable)')
 PYTEST=("$PY_REAL" -m pytest -m vcan tests/vcan -p no:cacheprovider --import-mode=importlib "$@")
 # Inside the harness a missing vcan0 is an error, never a silent skip.
 export RDM_VCAN_REQUIRED=1
+# The two process-level scenario runs (hover ~4.5 min, perching ~8 min under TCG) take the
+# stage past run.sh's default 900 s bound.
+export RDM_VCANVM_TIMEOUT=${RDM_VCANVM_TIMEOUT:-2400}
 
 set +e
 if [ -e /sys/class/net/vcan0 ] && [ "${RDM_VCANVM_FORCE:-0}" != 1 ]; then

@@ -1,21 +1,25 @@
-"""``rdm hil``: the hover scenario with the nodes as separate processes on real ports.
+"""``rdm hil [hover|perching]``: a scenario with the nodes as separate processes on real ports.
 
 Examples::
 
     rdm hil --can socketcan:vcan0                  # kernel CAN (a vcan0, or can0 on a bench)
     rdm hil --can udp                              # no SocketCAN: UDP multicast between processes
     rdm hil --can socketcan:vcan0 --scale 0.05 --duration 5 --out runs/hil
+    rdm hil perching --can udp                     # the perching scenario (contact ~14.8 s)
+    rdm hil perching --quick --can udp             # 4 s fold: contact ~9 s, 11 s by default
 
 Three processes (robot = plant + Neurons + Leptrino + mocap, Spinal, onboard PC) on a shared
 scaled clock (``--scale`` simulated s per wall s), the Spinal and Leptrino UARTs on ptys. Prints
-the outcome, the per-process deadline figures and the run folder; exit 0 when the robot took
-off and holds the target (docs/processes.md), 1 otherwise, 2 on a failed run.
+the outcome, the per-process deadline figures and the run folder; exit 0 when the outcome
+passes (hover: the robot took off and holds the target; perching: perched and held the ceiling
+without slip; docs/processes.md), 1 otherwise, 2 on a failed run.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -29,15 +33,39 @@ LIMITS = {
     "max_abs_err_z_last1s": 0.12,
     "max_roll_pitch_deg_after_arm": 5.0,
 }
+#: Perching: perched, held >= 1 s after the contact transient, contact kept on every sample,
+#: slip < 1 mm and the foot at the ceiling within 1 cm (tests/test_scenario_perching.py's
+#: limits), the ZMP never outside the plate (margin >= 0, it touches the edge in the
+#: transient), < 20 deg (the scenario's attitude limit).
+PERCHING_LIMITS = {
+    "slip_mm": 1.0,
+    "foot_height_err_mm": 10.0,
+    "max_roll_pitch_deg_perched": 20.0,
+}
+#: Simulated seconds of a run when --duration is not given: 2 s after the perch switch.
+DEFAULT_DURATION = {"hover": 5.0, "perching": 17.0, "perching-quick": 11.0}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "scenario", nargs="?", default="hover", choices=("hover", "perching"), help="default hover"
+    )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="perching: fold in 4 s and approach from 5 cm (contact ~9 s instead of ~14.8 s)",
+    )
     parser.add_argument(
         "--can",
         default="socketcan:vcan0",
         help="socketcan:IFACE | udp (a fresh UDP multicast group) | udp_multicast:GROUP,port=N",
     )
-    parser.add_argument("--duration", type=float, default=5.0, help="simulated s (default 5)")
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="simulated s (default hover 5, perching 17, perching --quick 11)",
+    )
     parser.add_argument(
         "--scale", type=float, default=0.05, help="simulated s per wall s (default 0.05)"
     )
@@ -52,38 +80,60 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def passed(metrics: dict[str, float]) -> bool:
-    """The outcome criteria (:data:`LIMITS`, and the robot climbed at least 20 cm)."""
+    """The hover outcome criteria (:data:`LIMITS`, and the robot climbed at least 20 cm)."""
     ok = all(metrics[k] < v for k, v in LIMITS.items())
     return ok and metrics["climb_m"] > 0.2
 
 
+def perching_passed(metrics: dict[str, float]) -> bool:
+    """The perching outcome criteria (:data:`PERCHING_LIMITS` and the comment above it);
+    NaN fails."""
+    ok = all(metrics[k] < v for k, v in PERCHING_LIMITS.items())
+    return (
+        ok
+        and metrics["perched"] == 1.0
+        and metrics["held_s"] >= 1.0
+        and metrics["contact_kept"] == 1.0
+        and metrics["min_zmp_margin_mm"] >= 0.0
+    )
+
+
 def run(args: argparse.Namespace) -> int:
-    from rdm.sim.processes import ProcessRunError, ProcessRunOptions, run_hover_processes
+    from rdm.sim.processes import ProcessRunError, ProcessRunOptions, run_processes
     from rdm.sim.udp_can import random_udp_spec
 
-    if not (args.scale > 0 and args.duration > 0):
+    if args.quick and args.scenario != "perching":
+        print("rdm hil: --quick is for perching", file=sys.stderr)
+        return 2
+    if args.duration is None:
+        key = "perching-quick" if args.quick else args.scenario
+        args.duration = DEFAULT_DURATION[key]
+    if not (args.scale > 0 and args.duration > 0 and math.isfinite(args.duration)):
         print("rdm hil: --scale and --duration must be > 0", file=sys.stderr)
         return 2
     spec = random_udp_spec() if args.can == "udp" else args.can
     out = Path(args.out or f"runs/hil-{time.strftime('%Y%m%d-%H%M%S')}")
     opts = ProcessRunOptions(
         can=spec,
+        scenario=args.scenario,
+        quick=args.quick,
         duration=args.duration,
         scale=args.scale,
         seed=args.seed,
         gate=not args.free_running,
     )
     print(
-        f"rdm hil: 3 processes on {spec}, {args.duration:g} simulated s at scale "
+        f"rdm hil {args.scenario}{' --quick' if args.quick else ''}: 3 processes on {spec}, "
+        f"{args.duration:g} simulated s at scale "
         f"{args.scale:g} (~{args.duration / args.scale:.0f} wall s) -> {out}",
         file=sys.stderr,
     )
     try:
-        res = run_hover_processes(out, opts)
+        res = run_processes(out, opts)
     except (ProcessRunError, OSError, ValueError) as exc:
         print(f"rdm hil: {exc}", file=sys.stderr)
         return 2
-    ok = passed(res.metrics)
+    ok = perching_passed(res.metrics) if args.scenario == "perching" else passed(res.metrics)
     summary = json.loads((out / "summary.json").read_text())
     summary["passed"] = ok
     if args.json:

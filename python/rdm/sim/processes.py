@@ -58,6 +58,11 @@ class ProcessRunOptions:
     """What :func:`run_hover_processes` takes."""
 
     can: str = "socketcan:vcan0"
+    #: ``hover`` (:class:`HoverScript`) or ``perching`` (:class:`rdm.scenarios.perching.
+    #: PerchingScript` in the onboard process, ``perching.onboard_config()``).
+    scenario: str = "hover"
+    #: perching only: :data:`rdm.scenarios.perching.QUICK_TIMING` (contact at ~9 s, not ~14.8)
+    quick: bool = False
     duration: float = 5.0
     #: Simulated seconds per wall second (0.05 = 20 wall s per simulated s).
     scale: float = 0.05
@@ -163,6 +168,12 @@ def _handshake(info: dict[str, Any]) -> dict[str, Any]:
     return json.loads(line)
 
 
+#: Columns of ``truth.npz["foot"]`` (one row per truth sample): contact flag, contact force
+#: (3, foot frame), torque (3), ZMP (2, foot frame), slip (2, world), foot position (3, world),
+#: q1..q6.
+FOOT_COLUMNS = 1 + 3 + 3 + 2 + 2 + 3 + 6
+
+
 #: Slots of the shared time file: robot outputs produced up to; Spinal, onboard done up to.
 SLOTS = 3
 _SLOT = {"spinal": 1, "onboard": 2}
@@ -239,9 +250,21 @@ def robot_main(cfg: dict[str, Any]) -> None:
     lep_dev, lep_slave, lep_path = _tapped_pty(folder, "leptrino_foot", ".lep")
     sensor = LeptrinoSensorNode(lep_dev, "CFS034CA301U", rate_hz=opt.leptrino_rate_hz)
     truth: list[tuple] = []
+    foot: list[tuple] = []
 
     def record(gt: Any) -> None:
         truth.append((gt.time, *gt.cog_position, *gt.base_quaternion, *gt.rotor_thrusts))
+        foot.append(
+            (
+                float(gt.foot_in_contact),
+                *gt.foot_contact_force,
+                *gt.foot_contact_torque,
+                *gt.foot_zmp,
+                *gt.foot_slip,
+                *gt.base_position,
+                *gt.joint_positions[:6],
+            )
+        )
 
     loop: Lockstep | None = None
     imu = ImuSender(cfg["token"], lambda: loop.time if loop is not None else 0.0)
@@ -290,7 +313,11 @@ def robot_main(cfg: dict[str, Any]) -> None:
             shared.set(0, math.inf)  # the physics is done: the others finish on the wall clock
         wall = time.monotonic() - wall0
         steps = loop.stats.base_ticks
-        np.savez(folder / "truth.npz", truth=np.array(truth, dtype=float))
+        np.savez(
+            folder / "truth.npz",
+            truth=np.array(truth, dtype=float),
+            foot=np.array(foot, dtype=float).reshape(len(foot), FOOT_COLUMNS),
+        )
         _write_report(
             folder,
             "robot",
@@ -409,6 +436,62 @@ class HoverScript:
             self.onboard.arm()
 
 
+class PerchingScriptNode:
+    """The perching scenario's phase machine (:class:`rdm.scenarios.perching.PerchingScript`)
+    in the onboard process. The script reads the CoG twice (the climb's start, the contact
+    height); in lockstep it takes the plant's ground truth, which is what the mocap node sends
+    at that instant; here it takes the onboard node's latest mocap datagram (the same number
+    when gated: mocap and script are both due every 10 ms and mocap ticks first). Nothing
+    runs before the first mocap position arrived."""
+
+    name = "script"
+    period = 0.01
+
+    def __init__(self, onboard: Any, mocap_in: Any, quick: bool) -> None:
+        from rdm.scenarios.perching import QUICK_TIMING, PerchingScript
+
+        self.view = SimpleNamespace(onboard=onboard)
+        self.mocap_in = mocap_in
+        self.script = PerchingScript(
+            timing=QUICK_TIMING if quick else None, cog=lambda _view: self.mocap_in.position
+        )
+        self.waiting_for_mocap = 0
+
+    def tick(self, now: float) -> None:
+        if self.mocap_in.position is None:
+            self.waiting_for_mocap += 1
+            return
+        self.script(self.view, now)
+
+    def report(self) -> dict[str, Any]:
+        sc = self.script
+        return {
+            "phase": sc.phase,
+            "t_contact": sc.t_contact,
+            "t_perch": sc.t_perch,
+            "waiting_for_mocap": self.waiting_for_mocap,
+        }
+
+
+class PerchStatusLog:
+    """Counts of the perching QP's status every 25 ms (as the lockstep ``StatusNode``)."""
+
+    name = "perch_status"
+    period = 0.025
+
+    def __init__(self, onboard: Any) -> None:
+        self.onboard = onboard
+        self.counts: dict[str, int] = {}
+
+    def tick(self, now: float) -> None:
+        c = self.onboard.last_command
+        perch = getattr(c, "perch", None) if c is not None else None
+        st = getattr(perch, "status", None) if perch is not None else None
+        if st is not None:
+            key = str(getattr(st, "name", st))
+            self.counts[key] = self.counts.get(key, 0) + 1
+
+
 class StateLog:
     """Onboard flight-state changes (time, state) for the report."""
 
@@ -436,23 +519,37 @@ def onboard_main(cfg: dict[str, Any]) -> None:
     folder = Path(cfg["out"])
     opt = SimpleNamespace(**cfg["stack"])
     robot = Robot.default()
-    # The scenarios' onboard configuration (the defaults, Table V gains), with the initial
-    # joint angles of the plant (all zero).
-    config = OnboardConfig(initial_q=tuple([0.0] * robot.n_q))
+    # The scenario's onboard configuration (hover: the defaults, Table V gains; perching:
+    # perching.onboard_config()), with the initial joint angles of the plant (all zero).
+    q0 = tuple([0.0] * robot.n_q)
+    if cfg.get("scenario") == "perching":
+        from rdm.scenarios.perching import onboard_config
+
+        config = onboard_config(initial_q=q0)
+    else:
+        config = OnboardConfig(initial_q=q0)
     # Built before the handshake (its lazy imports cost seconds in the emulated VM); the ptys
     # are offered by the other children and arrive with the start line.
     uart_end, foot_end = LateLink(), LateLink()
     node = OnboardNode(uart_end, foot_end, robot, config=config)
     mocap_in = MocapReceiver(cfg["token"], node, opt.mocap_period)
-    script = HoverScript(node, cfg["target"], cfg["arm_at"])
+    perching = cfg.get("scenario") == "perching"
+    script: Any = (
+        PerchingScriptNode(node, mocap_in, bool(cfg.get("quick")))
+        if perching
+        else HoverScript(node, cfg["target"], cfg["arm_at"])
+    )
     log = StateLog(node)
+    extra = [PerchStatusLog(node)] if perching else []
     start = _handshake({})
     uart = uart_end.attach(open_serial(f"serial:{start['spinal_pty']}"))
     foot = foot_end.attach(open_serial(f"serial:{start['leptrino_pty']}@460800"))
     clock, progress = _clock(start, "onboard", cfg["token"])
     stats = None
     try:
-        stats = run_scaled([mocap_in, node, script, log], clock, float(start["duration"]), progress)
+        stats = run_scaled(
+            [mocap_in, node, script, log, *extra], clock, float(start["duration"]), progress
+        )
     finally:
         node.close()
         status = node.status()
@@ -462,8 +559,10 @@ def onboard_main(cfg: dict[str, Any]) -> None:
             "wall_s": round(stats.wall_s, 3) if stats else None,
             "mocap_applied": mocap_in.applied,
             "mocap_errors": mocap_in.errors,
-            "armed_at": script.armed_at,
+            "armed_at": getattr(script, "armed_at", None),
             "states": log.changes,
+            "perching": script.report() if perching else None,
+            "perch_status_counts": extra[0].counts if perching else None,
             "status": status,
         }
         _write_report(folder, "onboard", report)
@@ -548,14 +647,25 @@ def _candump_channel(spec: str) -> str:
     return spec.split(":", 1)[1].split(",")[0] if spec.startswith("socketcan:") else "can0"
 
 
+SCENARIOS = ("hover", "perching")
+
+
 def run_hover_processes(folder: str | Path, options: ProcessRunOptions) -> ProcessRun:
-    """Run the hover scenario as three processes (module doc); raise :class:`ProcessRunError`
-    if a child fails. Returns the ground truth, every child's report and the hover metrics."""
+    """:func:`run_processes` (the name from when hover was the only scenario)."""
+    return run_processes(folder, options)
+
+
+def run_processes(folder: str | Path, options: ProcessRunOptions) -> ProcessRun:
+    """Run ``options.scenario`` as three processes (module doc); raise
+    :class:`ProcessRunError` if a child fails. Returns the ground truth, every child's report
+    and the scenario's outcome (:func:`hover_outcome` or :func:`perching_outcome`)."""
     import can
 
     from rdm.sim.udp_can import open_bus
 
     opt = options
+    if opt.scenario not in SCENARIOS:
+        raise ValueError(f"scenario={opt.scenario!r}: one of {', '.join(SCENARIOS)}")
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     token = secrets.token_hex(6)
@@ -566,6 +676,8 @@ def run_hover_processes(folder: str | Path, options: ProcessRunOptions) -> Proce
         "stack": stack_config(opt.seed),
         "target": list(opt.target),
         "arm_at": opt.arm_at,
+        "scenario": opt.scenario,
+        "quick": opt.quick,
     }
     t0 = time.monotonic()
     children: dict[str, _Child] = {}
@@ -623,20 +735,21 @@ def run_hover_processes(folder: str | Path, options: ProcessRunOptions) -> Proce
             with contextlib.suppress(OSError):
                 os.unlink(time_file)
     reports = {r: json.loads((out / f"{r}.json").read_text()) for r in ROLES}
-    rows = np.load(out / "truth.npz")["truth"]
-    truth = {
-        "t": rows[:, 0],
-        "cog": rows[:, 1:4],
-        "quat": rows[:, 4:8],
-        "thrust": rows[:, 8:],
-    }
+    truth = load_truth(out / "truth.npz")
     run = ProcessRun(out, opt, truth, reports, wall, startup)
-    run.metrics = hover_outcome(truth, np.asarray(opt.target), opt.arm_at, opt.duration)
+    if opt.scenario == "perching":
+        run.metrics = perching_outcome(
+            truth, reports["onboard"]["perching"]["t_perch"], stack_ceiling()
+        )
+    else:
+        run.metrics = hover_outcome(truth, np.asarray(opt.target), opt.arm_at, opt.duration)
     (out / "summary.json").write_text(
         json.dumps(
             {
                 "options": asdict(opt),
                 "metrics": run.metrics,
+                "perching": reports["onboard"].get("perching"),
+                "perch_status_counts": reports["onboard"].get("perch_status_counts"),
                 "wall_s": round(wall, 3),
                 "startup_wall_s": round(startup, 3),
                 "deadlines": {r: reports[r]["deadlines"] for r in ROLES},
@@ -646,6 +759,85 @@ def run_hover_processes(folder: str | Path, options: ProcessRunOptions) -> Proce
         )
     )
     return run
+
+
+def load_truth(path: str | Path) -> dict[str, np.ndarray]:
+    """The robot process's ``truth.npz`` as the arrays of
+    :func:`rdm.scenarios.common.truth_arrays` (``t cog quat thrust contact force torque zmp
+    slip foot q``; ``q`` = q1..q6)."""
+    with np.load(path) as z:
+        rows, foot = z["truth"], z["foot"]
+    return {
+        "t": rows[:, 0],
+        "cog": rows[:, 1:4],
+        "quat": rows[:, 4:8],
+        "thrust": rows[:, 8:],
+        "contact": foot[:, 0] > 0.5,
+        "force": foot[:, 1:4],
+        "torque": foot[:, 4:7],
+        "zmp": foot[:, 7:9],
+        "slip": foot[:, 9:11],
+        "foot": foot[:, 11:14],
+        "q": foot[:, 14:20],
+    }
+
+
+def stack_ceiling() -> float:
+    """The ceiling height of the lockstep stack's defaults (the robot process's plant)."""
+    from rdm.scenarios.stack import StackOptions
+
+    h = StackOptions().ceiling_height
+    return math.nan if h is None else float(h)
+
+
+#: Perching outcome: contact is judged from this long after the perch switch (the contact
+#: transient), as ``rdm.scenarios.perching``'s metrics.
+PERCH_SETTLE_S = 0.5
+#: Foot plate half sizes (Table IV, 0.10 x 0.15 m).
+PLATE_HALF = (0.05, 0.075)
+
+
+def perching_outcome(
+    truth: dict[str, np.ndarray], t_perch: float | None, ceiling: float
+) -> dict[str, float]:
+    """The physical outcome of a perching run from ground truth (same numbers for lockstep
+    and processes), from ``t_perch + 0.5 s`` to the end: perched (1/0), seconds held, the
+    fraction of samples in contact, slip of the plate [mm], |mean foot height - ceiling|
+    [mm], min ZMP margin to the plate edge [mm], min normal force [N], max |roll|,|pitch|
+    after the perch [deg]. NaN where there is nothing to judge."""
+    t = truth["t"]
+    nan = math.nan
+    held = t >= t_perch + PERCH_SETTLE_S if t_perch is not None else np.zeros(len(t), bool)
+    out = {
+        "perched": float(t_perch is not None),
+        "t_perch": nan if t_perch is None else float(t_perch),
+        "held_s": float(t[held][-1] - t[held][0]) if held.sum() > 1 else 0.0,
+    }
+    if not held.any():
+        return out | dict.fromkeys(
+            (
+                "contact_kept",
+                "slip_mm",
+                "foot_height_err_mm",
+                "min_zmp_margin_mm",
+                "min_fz_n",
+                "max_roll_pitch_deg_perched",
+            ),
+            nan,
+        )
+    slip = truth["slip"][held]
+    zmp = truth["zmp"][held]
+    with np.errstate(invalid="ignore"):
+        margin = np.minimum(PLATE_HALF[0] - np.abs(zmp[:, 0]), PLATE_HALF[1] - np.abs(zmp[:, 1]))
+    rp = np.degrees(np.abs(roll_pitch(truth["quat"][held])))
+    return out | {
+        "contact_kept": float(np.mean(truth["contact"][held])),
+        "slip_mm": float(np.max(np.linalg.norm(slip - slip[0], axis=1)) * 1e3),
+        "foot_height_err_mm": float(abs(np.mean(truth["foot"][held, 2]) - ceiling) * 1e3),
+        "min_zmp_margin_mm": float(np.nanmin(margin) * 1e3) if np.isfinite(margin).any() else nan,
+        "min_fz_n": float(np.min(truth["force"][held, 2])),
+        "max_roll_pitch_deg_perched": float(np.max(rp)),
+    }
 
 
 def roll_pitch(quat_wxyz: np.ndarray) -> np.ndarray:

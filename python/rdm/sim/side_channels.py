@@ -193,6 +193,8 @@ class MocapReceiver:
         self.errors = 0
         self._apply = ControlPort.apply
         self.node = onboard
+        #: The latest applied mocap position (world CoG), or None before the first.
+        self.position: np.ndarray | None = None
 
     def tick(self, now: float) -> None:
         for _ in range(10_000):
@@ -201,7 +203,11 @@ class MocapReceiver:
             except BlockingIOError:
                 return
             try:
-                self._apply(self, json.loads(data))  # type: ignore[arg-type]
+                cmd = json.loads(data)
+                self._apply(self, cmd)  # type: ignore[arg-type]
+                p = np.asarray(cmd["mocap"]["position"], dtype=float) if "mocap" in cmd else None
+                if p is not None and p.shape == (3,) and np.all(np.isfinite(p)):
+                    self.position = p
                 self.applied += 1
             except (ValueError, TypeError, KeyError, AttributeError):
                 self.errors += 1
