@@ -181,14 +181,19 @@ def test_udp_spec_errors_name_the_option():
         parse_udp_spec("udp_multicast:")
 
 
-def test_hil_command_rejects_bad_scale():
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [(["--scale", "0"], "--scale"), (["hover", "--quick"], "--quick")],
+    ids=["bad-scale", "quick-for-hover"],
+)
+def test_hil_command_rejects_bad_options(args, named):
     r = subprocess.run(
-        [sys.executable, "-m", "rdm.cli", "hil", "--scale", "0", "--can", "udp"],
+        [sys.executable, "-m", "rdm.cli", "hil", *args, "--can", "udp"],
         capture_output=True,
         text=True,
         timeout=120,
     )
-    assert r.returncode == 2 and "--scale" in r.stderr
+    assert r.returncode == 2 and named in r.stderr
 
 
 @needs_udp
@@ -302,16 +307,6 @@ def test_perching_as_processes_matches_lockstep(tmp_path):
     counts = run.reports["onboard"]["perch_status_counts"]
     assert counts.get("solved", 0) > 0 and set(counts) <= {"solved", "almost_solved", "infeasible"}
     assert not run.reports["spinal"]["diagnostics"]["failsafes"]
-
-
-def test_hil_command_rejects_quick_for_hover():
-    r = subprocess.run(
-        [sys.executable, "-m", "rdm.cli", "hil", "hover", "--quick", "--can", "udp"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert r.returncode == 2 and "--quick" in r.stderr
 
 
 def test_perching_outcome_without_a_perch_is_nan_and_fails():
