@@ -264,3 +264,37 @@ def test_leptrino_whole_frame_path_equals_byte_at_a_time():
     assert whole == single  # counters, position, state and buffer
     assert calls > 150 and whole.frames > 150
     assert {"bcc", "length", "restart", "escape"} <= set(whole.errors)
+
+
+def _vector_plain(value, n):
+    """The numpy form of ``rdm.nodes.onboard._vector`` (flatten, length n, all finite)."""
+    try:
+        v = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        return None
+    return v if v.shape == (n,) and np.all(np.isfinite(v)) else None
+
+
+@pytest.mark.parametrize(
+    "value",
+    [
+        (0.1, -2.5, 3e-9),
+        [0.0, -0.0, 1e300],
+        (0.1, float("nan"), 0.0),
+        (float("inf"), 0.0, 0.0),
+        (1, 2, 3),  # ints: the numpy path
+        (0.1, 0.2),
+        (0.1, 0.2, 0.3, 0.4),
+        [[0.1], [0.2], [0.3]],
+        ("0.5", 1.0, 2.0),
+        ("x", 1.0, 2.0),
+        None,
+    ],
+)
+def test_vector_fast_path_equals_numpy_form(value):
+    from rdm.nodes.onboard import _vector
+
+    got, want = _vector(value, 3), _vector_plain(value, 3)
+    assert (got is None) == (want is None), (got, want)
+    if want is not None:
+        assert _same(got, want)

@@ -145,7 +145,7 @@ def test_bridge_samples_on_the_first_tick_then_every_nth():
 
 
 # --------------------------------------------------------------------------- ceiling effect
-def test_inlined_ceiling_ratio_equals_thrust_ratio_of_each_effect():
+def test_rotor_thrusts_equal_thrust_ratio_of_each_effect_at_the_plain_distances():
     from rdm.plant import NoCeilingEffect
     from rdm.plant.ceiling import ParametricCeilingEffect
 

@@ -67,6 +67,10 @@ def quaternion_to_euler(x: float, y: float, z: float, w: float) -> tuple[float, 
 
 
 def _vector(value: Any, n: int) -> np.ndarray | None:
+    """``value`` as a finite float vector of length n, else None."""
+    if type(value) in (tuple, list) and len(value) == n and all(type(v) is float for v in value):
+        # the common case (a decoded message field): the same array without numpy's checks
+        return np.array(value) if all(map(math.isfinite, value)) else None
     try:
         v = np.asarray(value, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -335,12 +339,9 @@ class OnboardNode:
                 return
             x, y, z, w = q
             self.imu_euler = quaternion_to_euler(x, y, z, w)
-            try:
-                g = [float(v) for v in msg.gyro]
-            except (TypeError, ValueError):
-                g = []
-            if len(g) == 3 and all(math.isfinite(v) for v in g):  # as _vector(msg.gyro, 3)
-                self.imu_gyro = np.array(g)
+            g = _vector(msg.gyro, 3)
+            if g is not None:
+                self.imu_gyro = g
         elif event.topic == "servo/states":
             self._on_servo_states(msg)
         elif event.topic == "servo/torque_states":

@@ -11,7 +11,6 @@ raised.
 from __future__ import annotations
 
 import math
-import struct
 from collections import Counter
 from collections.abc import Sequence
 from typing import Protocol
@@ -20,8 +19,6 @@ import numpy as np
 
 from rdm.protocol import leptrino as lp
 
-#: A continuous-output sample's payload: header (length byte, term, command, result) + body.
-_FORCE_PAYLOAD_LEN = lp.HEADER_LEN + struct.calcsize(lp._DATA_FMT)
 #: |offset|, |rated| below this keep (raw - offset) * rated / 10000 finite for int16 raw.
 _MODERATE = 1e100
 
@@ -139,8 +136,8 @@ def _is_ok_sample(payload: bytes) -> bool:
     """True when :func:`rdm.protocol.leptrino.parse_response` would return a
     :class:`~rdm.protocol.leptrino.ForceData` with result OK for ``payload``."""
     return (
-        len(payload) == _FORCE_PAYLOAD_LEN
-        and payload[0] == _FORCE_PAYLOAD_LEN
+        len(payload) == lp.FORCE_PAYLOAD_LEN
+        and payload[0] == lp.FORCE_PAYLOAD_LEN
         and payload[2] == lp.Command.DATA_START
         and payload[3] == lp.Result.OK
     )

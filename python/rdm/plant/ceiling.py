@@ -10,7 +10,7 @@ model can replace the default.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 
@@ -46,12 +46,18 @@ class ParametricCeilingEffect:
     k1: float = 4.7
     k2_over_radius: float = 0.8
     max_ratio: float = 1.5
+    # derived once (the plant calls thrust_ratio per rotor at 1 kHz): k2 = k2_over_radius * R
+    # and the value of s at which the cap takes over
+    _k2: float = field(init=False, repr=False, compare=False)
+    _s_cap: float = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not (self.radius > 0 and self.k1 > 0 and self.k2_over_radius > 0):
             raise ValueError("ParametricCeilingEffect: radius, k1, k2_over_radius must be > 0")
         if not self.max_ratio >= 1.0:
             raise ValueError("ParametricCeilingEffect: max_ratio must be >= 1")
+        object.__setattr__(self, "_k2", self.k2_over_radius * self.radius)
+        object.__setattr__(self, "_s_cap", 1.0 - 1.0 / self.max_ratio)
 
     def thrust_ratio(self, distance_to_ceiling: float) -> float:
         """T/T0 at ``distance_to_ceiling`` [m]; 1 for inf, ``max_ratio`` at worst."""
@@ -60,7 +66,7 @@ class ParametricCeilingEffect:
             z = 0.0
         if math.isinf(z):
             return 1.0
-        s = (self.radius / (z + self.k2_over_radius * self.radius)) ** 2 / self.k1
-        if s >= 1.0 - 1.0 / self.max_ratio:
+        s = (self.radius / (z + self._k2)) ** 2 / self.k1
+        if s >= self._s_cap:
             return self.max_ratio
         return 1.0 / (1.0 - s)

@@ -180,8 +180,6 @@ class Plant:
         contiguous = acts == list(range(acts[0], acts[0] + len(acts))) if acts else False
         self._rotor_act_slice = slice(acts[0], acts[0] + len(acts)) if contiguous else None
         self._external: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self._ceiling_key: tuple | None = None
-        self._ceiling_fast: list[tuple[float, float, float, float, float]] | None = None
         self._seed_sensors()
         self.reset()
 
@@ -354,51 +352,14 @@ class Plant:
             # ``item`` reads one element as a Python float (the rotor sites only).
             xmat_at = self._v_site_xmat.item
             xpos_at = self._v_site_xpos.item
-            params = self._ceiling_params(effects)
             for i, (esc, sid) in enumerate(zip(self.escs, self._rotor_site_list, strict=True)):
                 az = xmat_at(sid, 8)  # z component of the site z axis
                 dist = max(h - xpos_at(sid, 2), 0.0) / az if az > 1e-6 else math.inf
-                if params is None:
-                    ratio = effects[i].thrust_ratio(dist)
-                else:
-                    # ParametricCeilingEffect.thrust_ratio written out (same operations).
-                    radius, k2r, k1, limit, max_ratio = params[i]
-                    if math.isnan(dist) or dist < 0.0:
-                        dist = 0.0
-                    if math.isinf(dist):
-                        ratio = 1.0
-                    else:
-                        r = (radius / (dist + k2r)) ** 2 / k1
-                        ratio = max_ratio if r >= limit else 1.0 / (1.0 - r)
-                thrusts[i] = esc._thrust * ratio
+                thrusts[i] = esc._thrust * effects[i].thrust_ratio(dist)
         if self._rotor_act_slice is not None:
             self._v_ctrl[self._rotor_act_slice] = thrusts
         else:
             self._v_ctrl[self._rotor_act] = thrusts
-
-    def _ceiling_params(
-        self, effects: list[CeilingEffect]
-    ) -> list[tuple[float, float, float, float, float]] | None:
-        """Per rotor (radius, k2 * radius, k1, 1 - 1/max_ratio, max_ratio) when every effect
-        is exactly a :class:`ParametricCeilingEffect` (frozen), else None; cached per list
-        content, so replacing an effect is seen at the next step."""
-        key = tuple(effects)
-        if key != self._ceiling_key:
-            self._ceiling_key = key
-            if all(type(e) is ParametricCeilingEffect for e in key):
-                self._ceiling_fast = [
-                    (
-                        e.radius,
-                        e.k2_over_radius * e.radius,
-                        e.k1,
-                        1.0 - 1.0 / e.max_ratio,
-                        e.max_ratio,
-                    )
-                    for e in key
-                ]
-            else:
-                self._ceiling_fast = None
-        return self._ceiling_fast
 
     @property
     def _thrusts(self) -> np.ndarray:

@@ -355,6 +355,8 @@ class ForceData:
 Response = Ack | ProductInfo | RatedValues | DigitalFilter | ForceData
 
 _DATA_FMT = "<6hhBx"
+#: Payload length of a continuous-output sample: header + 6 raw counts, temperature, status.
+FORCE_PAYLOAD_LEN = HEADER_LEN + struct.calcsize(_DATA_FMT)
 _INFO_SIZES = (PRODUCT_NAME_SIZE, SERIAL_SIZE, FIRMWARE_VERSION_SIZE, OUTPUT_RATE_SIZE)
 
 
@@ -430,7 +432,7 @@ def parse_response(payload: bytes) -> Response:
         Command.GET_INF: sum(_INFO_SIZES),
         Command.GET_LIMIT: 24,
         Command.GET_DF: 4,
-        Command.DATA_START: struct.calcsize(_DATA_FMT),
+        Command.DATA_START: FORCE_PAYLOAD_LEN - HEADER_LEN,
     }
     if cmd not in sizes or len(body) != sizes[cmd]:
         raise LeptrinoError(

@@ -100,7 +100,7 @@ def truth_arrays(stack: Stack) -> dict[str, np.ndarray]:
 
 def roll_pitch(quat_wxyz: np.ndarray) -> np.ndarray:
     """(n, 2) ZYX roll and pitch [rad] of (n, 4) quaternions."""
-    w, x, y, z = quat_wxyz.T
+    w, x, y, z = np.asarray(quat_wxyz, dtype=float).T
     roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
     pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1, 1))
     return np.stack([roll, pitch], axis=1)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,6 +33,7 @@ from rdm.nodes.neuron_mirror import NeuronMirror
 from rdm.nodes.onboard import OnboardNode
 from rdm.nodes.onboard_config import OnboardConfig
 from rdm.nodes.plant_bridge import BusLayout, PlantBridge, default_layout
+from rdm.nodes.servo_model import ServoConfig
 from rdm.nodes.spinal_mirror import SpinalMirror
 from rdm.plant import EscParams, Plant, ServoParams
 from rdm.sim import CandumpCapture, McapLogger, RunFolder, open_inproc_uart, open_tapped_pty
@@ -213,18 +214,24 @@ def make_plant(opt: StackOptions) -> tuple[Plant, np.ndarray]:
     return plant, q0
 
 
+def _board_configs(
+    plant: Plant, q0: np.ndarray
+) -> tuple[BusLayout, list[tuple[int, list[ServoConfig]]]]:
+    """The default bus layout and each board's (slave id, servo configs) with servos at q0."""
+    layout = default_layout(plant.description)
+    q0_map = dict(zip(plant.joint_names, q0.tolist(), strict=True))
+    return layout, [(nl.slave, layout.servo_configs(nl.slave, q0_map)) for nl in layout.neurons]
+
+
 def make_neurons(
     plant: Plant, q0: np.ndarray, open_bus: Callable[[int], Any]
 ) -> tuple[BusLayout, list[NeuronMirror]]:
     """The robot's Neuron mirrors on its default bus layout, servos starting at ``q0``;
     ``open_bus(slave)`` gives each board its CAN bus."""
-    layout = default_layout(plant.description)
-    q0_map = dict(zip(plant.joint_names, q0.tolist(), strict=True))
+    layout, boards = _board_configs(plant, q0)
     neurons = [
-        NeuronMirror(
-            open_bus(nl.slave), nl.slave, layout.servo_configs(nl.slave, q0_map), plant_driven=True
-        )
-        for nl in layout.neurons
+        NeuronMirror(open_bus(slave), slave, configs, plant_driven=True)
+        for slave, configs in boards
     ]
     return layout, neurons
 
@@ -232,13 +239,37 @@ def make_neurons(
 def make_neuron_bank(plant: Plant, q0: np.ndarray, bus: Any) -> tuple[BusLayout, NeuronBankNode]:
     """The same boards as :func:`make_neurons` as one Rust-backed node on ``bus`` (board
     views in ``bank.boards``, layout order)."""
-    layout = default_layout(plant.description)
-    q0_map = dict(zip(plant.joint_names, q0.tolist(), strict=True))
-    specs = [
-        NeuronSpec(nl.slave, tuple(layout.servo_configs(nl.slave, q0_map)), plant_driven=True)
-        for nl in layout.neurons
-    ]
+    layout, boards = _board_configs(plant, q0)
+    specs = [NeuronSpec(slave, tuple(configs), plant_driven=True) for slave, configs in boards]
     return layout, NeuronBankNode(bus, specs)
+
+
+def make_bridge(
+    plant: Plant,
+    neurons: Sequence[Any],
+    layout: BusLayout,
+    opt: StackOptions,
+    *,
+    imu_sink: Callable[..., None],
+    battery_sink: Callable[[float], None],
+    foot_sensor: Any,
+    truth_sink: Callable[[Any], None],
+) -> PlantBridge:
+    """The plant bridge at the options' rates: IMU to ``imu_sink`` (Spinal), battery voltage
+    to ``battery_sink``, the foot wrench to the Leptrino mirror ``foot_sensor``, ground truth
+    to ``truth_sink`` (shared by the lockstep stack and the ``rdm hil`` robot process)."""
+    return PlantBridge(
+        plant,
+        neurons,
+        layout,
+        imu_sink=imu_sink,
+        battery_voltage=opt.battery_voltage,
+        battery_sinks=[battery_sink],
+        wrench_sinks={"foot_wrench": foot_sensor.set_wrench},
+        wrench_period=1.0 / opt.leptrino_rate_hz,
+        truth_sink=truth_sink,
+        truth_period=opt.truth_period,
+    )
 
 
 def build_stack(
@@ -297,17 +328,15 @@ def build_stack(
         if logger is not None:
             logger.log_truth(gt)
 
-    bridge = PlantBridge(
+    bridge = make_bridge(
         plant,
         neurons,
         layout,
+        opt,
         imu_sink=spinal.set_imu_sample,
-        battery_voltage=opt.battery_voltage,
-        battery_sinks=[spinal.set_battery_voltage],
-        wrench_sinks={"foot_wrench": sensor.set_wrench},
-        wrench_period=1.0 / opt.leptrino_rate_hz,
+        battery_sink=spinal.set_battery_voltage,
+        foot_sensor=sensor,
         truth_sink=truth_sink,
-        truth_period=opt.truth_period,
     )
     mocap = MocapNode(plant, onboard, opt.mocap_period)
     status_log: list = []

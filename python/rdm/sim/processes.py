@@ -228,9 +228,8 @@ def robot_main(cfg: dict[str, Any]) -> None:
     """Plant + bridge + Neurons + Leptrino + mocap; physics catches up with the clock."""
     from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
     from rdm.nodes.lockstep import Lockstep
-    from rdm.nodes.plant_bridge import PlantBridge
     from rdm.plant import ServoParams
-    from rdm.scenarios.stack import StackOptions, make_neurons, make_plant
+    from rdm.scenarios.stack import StackOptions, make_bridge, make_neurons, make_plant
     from rdm.sim.side_channels import ImuSender, MocapSender
     from rdm.sim.udp_can import open_bus
 
@@ -268,17 +267,15 @@ def robot_main(cfg: dict[str, Any]) -> None:
 
     loop: Lockstep | None = None
     imu = ImuSender(cfg["token"], lambda: loop.time if loop is not None else 0.0)
-    bridge = PlantBridge(
+    bridge = make_bridge(
         plant,
         neurons,
         layout,
+        opt,
         imu_sink=imu.send_imu,
-        battery_voltage=opt.battery_voltage,
-        battery_sinks=[imu.set_battery_voltage],
-        wrench_sinks={"foot_wrench": sensor.set_wrench},
-        wrench_period=1.0 / opt.leptrino_rate_hz,
+        battery_sink=imu.set_battery_voltage,
+        foot_sensor=sensor,
         truth_sink=record,
-        truth_period=opt.truth_period,
     )
     mocap = MocapSender(cfg["token"], plant, opt.mocap_period)
     loop = Lockstep([bridge, *neurons, mocap, sensor], physics=plant)
@@ -805,6 +802,8 @@ def perching_outcome(
     fraction of samples in contact, slip of the plate [mm], |mean foot height - ceiling|
     [mm], min ZMP margin to the plate edge [mm], min normal force [N], max |roll|,|pitch|
     after the perch [deg]. NaN where there is nothing to judge."""
+    from rdm.scenarios.common import roll_pitch
+
     t = truth["t"]
     nan = math.nan
     held = t >= t_perch + PERCH_SETTLE_S if t_perch is not None else np.zeros(len(t), bool)
@@ -840,20 +839,14 @@ def perching_outcome(
     }
 
 
-def roll_pitch(quat_wxyz: np.ndarray) -> np.ndarray:
-    """(n, 2) ZYX roll and pitch [rad] of (n, 4) quaternions."""
-    w, x, y, z = np.asarray(quat_wxyz, dtype=float).T
-    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1, 1))
-    return np.stack([roll, pitch], axis=1)
-
-
 def hover_outcome(
     truth: dict[str, np.ndarray], target: np.ndarray, arm_at: float, duration: float
 ) -> dict[str, float]:
     """The physical outcome of a hover run (same numbers for lockstep and processes): the
     worst |x|, |y|, |z| error of the CoG over the last second, the max |roll|,|pitch| after
     arming, the height gained, the final height."""
+    from rdm.scenarios.common import roll_pitch
+
     t, cog = truth["t"], truth["cog"]
     last = t >= duration - 1.0
     err = np.abs(cog[last] - target) if last.any() else np.full((1, 3), np.nan)
