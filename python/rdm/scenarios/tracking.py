@@ -45,7 +45,7 @@ from .common import (
     sim_stack_options,
     truth_arrays,
 )
-from .perching import PERCH_POSTURE, joint_path, onboard_config
+from .perching import PERCH_POSTURE, POSITION_GAINS, joint_path, onboard_config
 from .push import StagedPerchingScript
 from .stack import Stack, build_stack
 
@@ -60,6 +60,15 @@ FLIGHT_POSTURE = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 #: Base posture of the flight stage: "straight" (q = 0, after the climb; the default) or
 #: "hanging" (``PERCH_POSTURE``, after the fold; the flying hanging robot is lightly damped).
 FLIGHT_POSTURES = {"straight": FLIGHT_POSTURE, "hanging": PERCH_POSTURE}
+#: Position gains of the hanging posture's flight stage (over ``POSITION_GAINS``). In that
+#: posture the LQI roll and pitch loops are slow (I_xx 0.26 kg m^2 against a 0.07 m rotor
+#: lever), and the hanging configuration's y PID (3.0, 0.5, 4.0) through roll and Table V's x
+#: PID (4.6, 1.5, 7.0) through pitch are linearly unstable there (pairs 0.41 +- 1.97j and
+#: 0.17 +- 3.68j rad/s, ``flight_envelope.horizontal_loop_poles``): the robot fell without
+#: any joint motion. These are the slowest-pole-damped gains of a scan (damping 0.33 and 0.29;
+#: docs/envelope.md). The straight posture keeps the run's configuration (None).
+HANGING_FLIGHT_GAINS: dict = {**POSITION_GAINS, "x_pid": (1.0, 0.1, 2.0), "y_pid": (0.3, 0.05, 0.8)}
+FLIGHT_STAGE_GAINS: dict[str, dict | None] = {"straight": None, "hanging": HANGING_FLIGHT_GAINS}
 #: The joint path: (duration [s], q1..q6 offset from the stage's base posture) segments,
 #: back to zero offset at the end. ASSUMPTION: Fig. 13's motion is not given; a slow arm
 #: pitch/yaw sweep of the size the flying robot tracks without saturating (docs).
@@ -113,9 +122,17 @@ class TrackingScript(StagedPerchingScript):
     hanging posture with the setpoint held. Same settle time, joint offsets and timing in
     both."""
 
-    def __init__(self, motion, robot: Robot, flight_posture: str = "straight") -> None:
+    def __init__(
+        self,
+        motion,
+        robot: Robot,
+        flight_posture: str = "straight",
+        flight_gains: dict | None = None,
+    ) -> None:
         if flight_posture not in FLIGHT_POSTURES:
             raise ValueError(f"flight_posture={flight_posture!r}: one of {list(FLIGHT_POSTURES)}")
+        #: position gains of the flight stage (None: the run's configuration), restored after
+        self.flight_gains = flight_gains
         self.offsets = tuple(motion)
         self.motion_s = motion_seconds(motion)
         self.flight_posture = flight_posture
@@ -142,6 +159,8 @@ class TrackingScript(StagedPerchingScript):
     def flight_tick(self, stack: Stack, now: float, s: float) -> None:
         assert self.ramp is not None
         if "flight" not in self.plans:
+            if self.flight_gains is not None:
+                stack.onboard.control.set_position_gains(self.flight_gains)
             base = FLIGHT_POSTURES[self.flight_posture]
             plan = self._send(stack, "flight", now, now + SETTLE_S + PRE_S, base)
             cogs = []
@@ -159,6 +178,10 @@ class TrackingScript(StagedPerchingScript):
             k = int(np.clip(np.searchsorted(times, now, side="right") - 1, 0, len(times) - 2))
             vel = (c[k + 1] - c[k]) / (times[k + 1] - times[k])
         stack.onboard.set_target(pos, 0.0, vel)
+
+    def flight_end(self, stack: Stack, now: float) -> None:
+        if self.flight_gains is not None:
+            stack.onboard.control.set_position_gains(stack.onboard.config.position_gains)
 
     def perched_tick(self, stack: Stack, now: float, s: float) -> None:
         if "perched" not in self.plans:
@@ -350,11 +373,18 @@ def run(
     log: bool = True,
     plots: bool = True,
     flight_posture: str = "straight",
+    flight_gains: dict | str | None = "posture",
 ) -> ScenarioResult:
-    """Run the scenario: it stops after the perched stage, or at ``duration``."""
+    """Run the scenario: it stops after the perched stage, or at ``duration``.
+    ``flight_gains``: position gains of the flight stage ("posture": ``FLIGHT_STAGE_GAINS``
+    of ``flight_posture``; None: the run's configuration; a dict: those)."""
     opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard_config())
     robot = Robot.default()
-    script = TrackingScript(motion, robot, flight_posture)
+    if flight_gains == "posture":
+        flight_gains = FLIGHT_STAGE_GAINS.get(flight_posture)
+    if isinstance(flight_gains, str):
+        raise ValueError(f"flight_gains={flight_gains!r}: 'posture', None or a dict")
+    script = TrackingScript(motion, robot, flight_posture, flight_gains)
     stack = build_stack("tracking", base, opts, script)
     wall = run_stack(stack, DEFAULT_DURATION if duration is None else duration)
     seconds = stack.plant.time
@@ -369,6 +399,8 @@ def run(
         "t_perched_stage": script.t_perched_stage,
         "final_phase": script.phase,
     }
+    if flight_gains is not None:
+        facts["flight_gains"] = dict(flight_gains)
     for stage, e in errs.items():
         if e is not None:
             facts[stage] = {
