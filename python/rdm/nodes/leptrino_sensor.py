@@ -91,6 +91,20 @@ class LeptrinoSensorNode:
         f = force.tolist() if hasattr(force, "tolist") else force
         t = torque.tolist() if hasattr(torque, "tolist") else torque
         w = (*f, *t)
+        if len(w) == 6:
+            # The common sample: six values inside the limits (NaN and inf fail a chained
+            # comparison), which the clip below leaves as they are: keep ``w`` itself.
+            lim = self._limits
+            if (
+                -lim[0] <= w[0] <= lim[0]
+                and -lim[1] <= w[1] <= lim[1]
+                and -lim[2] <= w[2] <= lim[2]
+                and -lim[3] <= w[3] <= lim[3]
+                and -lim[4] <= w[4] <= lim[4]
+                and -lim[5] <= w[5] <= lim[5]
+            ):
+                self._wrench = w
+                return
         if len(w) != 6 or not all(math.isfinite(v) for v in w):
             self.errors["bad_wrench"] += 1
             return
