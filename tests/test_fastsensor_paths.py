@@ -83,8 +83,11 @@ def test_candump_memo_writes_what_python_cans_writer_writes(tmp_path, monkeypatc
         for k in range(2500):
             clock.set(k * 0.001 if k % 400 else -0.0 + k * 0.001)
             for _ in range(gen.randrange(4)):  # 0..3 frames in one tick, same stamp object
-                if gen.random() < 0.6:
+                r = gen.random()
+                if r < 0.5:
                     can_id, data = gen.choice(common)
+                elif r < 0.7:  # a known id with new data (a PWM frame with other duties)
+                    can_id, data = 0x00F, bytes([gen.randrange(4)] * 8)
                 else:
                     n = gen.randrange(9)
                     can_id, data = gen.randrange(0x800), bytes(gen.randrange(256) for _ in range(n))

@@ -167,7 +167,9 @@ def test_imu_bias_assignment_reaches_the_core_and_in_place_change_is_refused():
     m = ImuModel(
         ImuNoise(gyro_std=0.0, accel_std=0.0, mag_std=0.0, quantize=False), np.random.default_rng(1)
     )
-    m.gyro_bias = (0.5, 0.25, 0.0)
+    mine = np.array([0.5, 0.25, 0.0])
+    m.gyro_bias = mine
+    assert mine.flags.writeable  # the model keeps its own read-only copy
     m.accel_bias = (0.0, 0.0, 0.0)
     m.mag_bias = (1.0, 1.0, 1.0)
     r = m.sample_lists([1.0, 1.0, 1.0], [2.0, 2.0, 2.0], [3.0, 3.0, 3.0])

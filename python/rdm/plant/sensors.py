@@ -135,7 +135,7 @@ class ImuModel:
 
     @gyro_bias.setter
     def gyro_bias(self, value) -> None:
-        self._gyro_bias = _frozen(np.asarray(value, dtype=float))
+        self._gyro_bias = _frozen(np.array(value, dtype=float))
         self._rebuild()
 
     @property
@@ -145,7 +145,7 @@ class ImuModel:
 
     @accel_bias.setter
     def accel_bias(self, value) -> None:
-        self._accel_bias = _frozen(np.asarray(value, dtype=float))
+        self._accel_bias = _frozen(np.array(value, dtype=float))
         self._rebuild()
 
     @property
@@ -155,7 +155,7 @@ class ImuModel:
 
     @mag_bias.setter
     def mag_bias(self, value) -> None:
-        self._mag_bias = _frozen(np.asarray(value, dtype=float))
+        self._mag_bias = _frozen(np.array(value, dtype=float))
         self._rebuild()
 
     def sample(self, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray) -> ImuReading:
