@@ -612,3 +612,46 @@ class NeuronBank:
     def imu_raw(self, k: int) -> list[list[int]]: ...
     def set_servo_field(self, k: int, index: int, field: str, value: int | None) -> None: ...
     def board_state(self, k: int) -> dict[str, object]: ...
+
+# --- fastsensor ---
+from collections.abc import Sequence as _Seq
+
+class WrenchNoiseCore:
+    def __init__(
+        self,
+        rated: _Seq[float],
+        bias: _Seq[float],
+        noise_fraction: float,
+        quantize: bool,
+        full_scale_counts: float,
+    ) -> None: ...
+    def sample(
+        self, ideal: _Seq[float], normals: _Seq[float]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+class ImuNoiseCore:
+    def __init__(
+        self,
+        gyro_bias: _Seq[float],
+        accel_bias: _Seq[float],
+        mag_bias: _Seq[float],
+        std: _Seq[float],
+        range: _Seq[float],
+        lsb: _Seq[float] | None,
+    ) -> None: ...
+    def sample(
+        self,
+        gyro: _Seq[float],
+        accel: _Seq[float],
+        mag: _Seq[float],
+        normals: _Seq[float],
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]: ...
+
+def leptrino_force_frame(
+    wrench: _Seq[float],
+    rated: _Seq[float],
+    temperature: int,
+    status: int,
+    term_no: int,
+    result: int,
+) -> bytes | None: ...

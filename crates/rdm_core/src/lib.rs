@@ -13,6 +13,7 @@ pub mod model;
 pub mod planner;
 pub mod pwm;
 pub mod qp;
+pub mod sim;
 
 /// Number of rotors the real-time controllers are built for.
 ///

@@ -15,6 +15,7 @@ mod perch;
 mod planner;
 mod position;
 mod qp;
+mod sensor_sim;
 
 #[pymodule]
 fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -30,5 +31,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     qp::register(m)?;
     planner::register(m)?;
     neuron_bank::register(m)?;
+    sensor_sim::register(m)?;
     Ok(())
 }

@@ -195,7 +195,23 @@ class InProcessBus(can.BusABC):
         new.is_rx = True
         new.bitrate_switch = False
         new.error_state_indicator = False
-        self._deliver(new, new)
+        # ``_deliver(new, new)`` written out (the sender's frame is the delivered one), with
+        # ``_push`` inlined for the other buses: same taps, same buses, same order.
+        ch.frames += 1
+        for tap in ch.taps:
+            tap(new)
+        for bus in ch.buses:
+            if bus is self:
+                if self.receive_own_messages:
+                    copy = _copy(new, new.timestamp, self.channel_id, False)
+                    if bus._filters is None or bus._matches_filters(copy):
+                        bus._push(copy)
+                continue
+            if bus._filters is None or bus._matches_filters(new):
+                q = bus._queue
+                if q.maxlen is not None and len(q) == q.maxlen:
+                    bus.rx_dropped += 1
+                q.append(new)
 
     def _deliver(self, msg: Message, delivered: Message) -> None:
         """Hand ``delivered`` (stamped, ``is_rx``) to the taps and every other bus."""

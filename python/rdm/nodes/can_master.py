@@ -143,7 +143,8 @@ class CanMaster:
         boot_delay_ms: int = BOOT_DELAY_MS,
         start_ms: int = 0,
     ) -> None:
-        self.bus = bus
+        self._bus = bus
+        self._send_standard = getattr(bus, "send_standard", None)
         self.name = name
         self.period = 0.001
         self.boot_delay_ms = boot_delay_ms
@@ -172,6 +173,16 @@ class CanMaster:
         self._pending_board: list[nr.BoardConfig] = []
         self._rerequest: dict[int, int] = {}  # slave -> ms of the next INITIAL_CONFIG_REQUEST
 
+    @property
+    def bus(self) -> can.BusABC:
+        """The CAN bus (assignable: the fast send path follows it)."""
+        return self._bus
+
+    @bus.setter
+    def bus(self, bus: can.BusABC) -> None:
+        self._bus = bus
+        self._send_standard = getattr(bus, "send_standard", None)
+
     # ------------------------------------------------------------------ node interface
     def tick(self, now: float) -> None:
         """Node interface: ``now`` in seconds; runs :meth:`tick_ms` on whole milliseconds."""
@@ -183,7 +194,7 @@ class CanMaster:
         A tick that skips milliseconds (a late real-time loop) replays the schedule for at most
         ``MAX_CATCH_UP_MS`` of them; repeated or older times only receive.
         """
-        recv = self.bus.recv
+        recv = self._bus.recv
         for _ in range(MAX_FRAMES_PER_TICK):
             msg = recv(timeout=0)
             if msg is None:
@@ -502,7 +513,17 @@ class CanMaster:
         self._send_raw(frame.can_id, frame.encode())
 
     def _send_raw(self, can_id: int, payload: bytes) -> None:
-        if send_neuron_payload(self.bus, can_id, payload):
+        fast = self._send_standard
+        if fast is None:
+            ok = send_neuron_payload(self._bus, can_id, payload)
+        else:
+            # send_neuron_payload's in-process branch, with send_standard looked up once.
+            try:
+                fast(can_id, payload)
+                ok = True
+            except (can.CanError, OSError):
+                ok = False
+        if ok:
             self.tx_count += 1
         else:
             self.tx_errors += 1

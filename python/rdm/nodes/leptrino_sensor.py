@@ -22,6 +22,7 @@ import math
 from collections import Counter
 from collections.abc import Sequence
 
+from rdm._rdm import leptrino_force_frame
 from rdm.protocol import leptrino as lp
 
 
@@ -75,6 +76,8 @@ class LeptrinoSensorNode:
         # Highest raw count the sensor outputs: the int16 range.
         self._limits = tuple(0x7FFF * k / lp.RAW_AT_RATED for k in sensor_model.rated)
         self._wrench: tuple[float, ...] = (0.0,) * 6
+        #: (wrench tuple, temperature, sensor_no, frame) of the last sample frame sent
+        self._frame_cache: tuple | None = None
         self.commands: Counter[str] = Counter()
         self.errors: Counter[str] = Counter()
         self.frames_sent = 0
@@ -88,6 +91,20 @@ class LeptrinoSensorNode:
         f = force.tolist() if hasattr(force, "tolist") else force
         t = torque.tolist() if hasattr(torque, "tolist") else torque
         w = (*f, *t)
+        if len(w) == 6:
+            # The common sample: six values inside the limits (NaN and inf fail a chained
+            # comparison), which the clip below leaves as they are: keep ``w`` itself.
+            lim = self._limits
+            if (
+                -lim[0] <= w[0] <= lim[0]
+                and -lim[1] <= w[1] <= lim[1]
+                and -lim[2] <= w[2] <= lim[2]
+                and -lim[3] <= w[3] <= lim[3]
+                and -lim[4] <= w[4] <= lim[4]
+                and -lim[5] <= w[5] <= lim[5]
+            ):
+                self._wrench = w
+                return
         if len(w) != 6 or not all(math.isfinite(v) for v in w):
             self.errors["bad_wrench"] += 1
             return
@@ -107,9 +124,32 @@ class LeptrinoSensorNode:
                     continue
                 self._command(event.payload or b"")
         if self.streaming:
-            raw = lp.from_wrench(self._wrench, self.model)
-            sample = lp.ForceData(raw, self.temperature, 0, 0, self.sensor_no)
-            self._write(lp.encode_response(sample))
+            self._write(self._sample_frame())
+
+    def _sample_frame(self) -> bytes:
+        """The data frame of the latest wrench: reused while the wrench (the same tuple: a
+        new one per ``set_wrench``), temperature and sensor number are unchanged, encoded in
+        Rust otherwise (the same bytes as :meth:`_sample_frame_plain`; anything the Rust
+        encoder declines goes through the plain path and its exceptions)."""
+        w = self._wrench
+        temp = self.temperature
+        no = self.sensor_no
+        cache = self._frame_cache
+        if cache is not None and cache[0] is w and cache[1] == temp and cache[2] == no:
+            return cache[3]
+        frame = None
+        if type(temp) is int and type(no) is int and -0x8000 <= temp <= 0x7FFF:
+            frame = leptrino_force_frame(w, self.model.rated, temp, 0, no, 0)
+        if frame is None:
+            frame = self._sample_frame_plain()
+        self._frame_cache = (w, temp, no, frame)
+        return frame
+
+    def _sample_frame_plain(self) -> bytes:
+        """The data frame of the latest wrench by the Python codec."""
+        raw = lp.from_wrench(self._wrench, self.model)
+        sample = lp.ForceData(raw, self.temperature, 0, 0, self.sensor_no)
+        return lp.encode_response(sample)
 
     def _command(self, payload: bytes) -> None:
         try:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rdm._rdm import ImuNoiseCore, WrenchNoiseCore
 from rdm.plant.description import WrenchSensorSpec
 
 GYRO_LSB = math.radians(2000.0 / 32767.0)  # rad/s
@@ -85,33 +86,95 @@ class ImuReading:
 
 
 class ImuModel:
-    """Adds bias, noise, saturation and quantisation to ideal IMU values."""
+    """Adds bias, noise, saturation and quantisation to ideal IMU values.
+
+    The per-sample float work runs in Rust (``rdm._rdm.ImuNoiseCore``, the same IEEE
+    operations in the same order as :meth:`sample_lists_plain`); the normals stay numpy's.
+    The bias arrays are read-only: assign a new array to change one.
+    """
 
     def __init__(self, noise: ImuNoise, rng: np.random.Generator) -> None:
-        self.noise = noise
         self._rng = rng
 
         def bias(explicit: tuple[float, float, float] | None, std: float) -> np.ndarray:
             drawn = rng.normal(0.0, std, 3)  # always drawn: the stream does not depend on it
             return drawn if explicit is None else np.asarray(explicit, dtype=float)
 
-        self.gyro_bias = bias(noise.gyro_bias, noise.gyro_bias_std)
-        self.accel_bias = bias(noise.accel_bias, noise.accel_bias_std)
-        self.mag_bias = bias(noise.mag_bias, noise.mag_bias_std)
+        self._noise = noise
+        self._gyro_bias = _frozen(bias(noise.gyro_bias, noise.gyro_bias_std))
+        self._accel_bias = _frozen(bias(noise.accel_bias, noise.accel_bias_std))
+        self._mag_bias = _frozen(bias(noise.mag_bias, noise.mag_bias_std))
         self._normals = NormalStream(rng)
+        self._rebuild()
+
+    def _rebuild(self) -> None:
+        n = self._noise
+        self._core = ImuNoiseCore(
+            self._gyro_bias.tolist(),
+            self._accel_bias.tolist(),
+            self._mag_bias.tolist(),
+            [float(n.gyro_std), float(n.accel_std), float(n.mag_std)],
+            [GYRO_RANGE, ACCEL_RANGE],
+            [GYRO_LSB, ACCEL_LSB, MAG_LSB] if n.quantize else None,
+        )
+
+    @property
+    def noise(self) -> ImuNoise:
+        """The error model (assigning a new one takes effect at the next sample)."""
+        return self._noise
+
+    @noise.setter
+    def noise(self, value: ImuNoise) -> None:
+        self._noise = value
+        self._rebuild()
+
+    @property
+    def gyro_bias(self) -> np.ndarray:
+        """Constant gyro bias (rad/s), read-only array."""
+        return self._gyro_bias
+
+    @gyro_bias.setter
+    def gyro_bias(self, value) -> None:
+        self._gyro_bias = _frozen(np.array(value, dtype=float))
+        self._rebuild()
+
+    @property
+    def accel_bias(self) -> np.ndarray:
+        """Constant accelerometer bias (m/s^2), read-only array."""
+        return self._accel_bias
+
+    @accel_bias.setter
+    def accel_bias(self, value) -> None:
+        self._accel_bias = _frozen(np.array(value, dtype=float))
+        self._rebuild()
+
+    @property
+    def mag_bias(self) -> np.ndarray:
+        """Constant magnetometer bias (uT), read-only array."""
+        return self._mag_bias
+
+    @mag_bias.setter
+    def mag_bias(self, value) -> None:
+        self._mag_bias = _frozen(np.array(value, dtype=float))
+        self._rebuild()
 
     def sample(self, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray) -> ImuReading:
-        """Corrupt one ideal sample (nine normals of the generator's stream).
-
-        Scalar float arithmetic (nine values: cheaper than numpy's per-call overhead), the
-        same IEEE operations in the same order as the array form, so the same numbers."""
+        """Corrupt one ideal sample (nine normals of the generator's stream)."""
         return self.sample_lists(gyro.tolist(), accel.tolist(), mag.tolist())
 
     def sample_lists(self, gyro: list[float], accel: list[float], mag: list[float]) -> ImuReading:
         """:meth:`sample` of three float lists (what the plant reads from ``sensordata``)."""
-        n = self.noise
+        g, a, m, saturated = self._core.sample(gyro, accel, mag, self._normals.take(9))
+        return ImuReading(g, a, m, saturated)
+
+    def sample_lists_plain(
+        self, gyro: list[float], accel: list[float], mag: list[float]
+    ) -> ImuReading:
+        """The Python form of :meth:`sample_lists` (same stream, same numbers; the reference
+        the Rust path is tested against). Scalar floats, the array form's operations."""
+        n = self._noise
         w = self._normals.take(9)
-        gb, ab, mb = self._bias_lists
+        gb, ab, mb = self._gyro_bias.tolist(), self._accel_bias.tolist(), self._mag_bias.tolist()
         g = [x + b + n.gyro_std * e for x, b, e in zip(gyro, gb, w[0:3], strict=True)]
         a = [x + b + n.accel_std * e for x, b, e in zip(accel, ab, w[3:6], strict=True)]
         m = [x + b + n.mag_std * e for x, b, e in zip(mag, mb, w[6:9], strict=True)]
@@ -124,9 +187,11 @@ class ImuModel:
             m = [_quantize(v, MAG_LSB) for v in m]
         return ImuReading(np.array(g), np.array(a), np.array(m), saturated)
 
-    @property
-    def _bias_lists(self) -> tuple[list[float], list[float], list[float]]:
-        return self.gyro_bias.tolist(), self.accel_bias.tolist(), self.mag_bias.tolist()
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    """``a`` made read-only (the Rust core holds a copy: an in-place change would be lost)."""
+    a.flags.writeable = False
+    return a
 
 
 def _clip(v: float, limit: float) -> float:
@@ -172,25 +237,50 @@ class WrenchReading:
 
 
 class WrenchSensorModel:
-    """Leptrino-style 6-axis sensor: rated-capacity clipping, noise, 1/10000 resolution."""
+    """Leptrino-style 6-axis sensor: rated-capacity clipping, noise, 1/10000 resolution.
+
+    The per-sample float work runs in Rust (``rdm._rdm.WrenchNoiseCore``, the same IEEE
+    operations in the same order as :meth:`sample_list_plain`); the normals stay numpy's.
+    """
 
     def __init__(self, spec: WrenchSensorSpec, noise: WrenchNoise, rng: np.random.Generator):
         self.spec = spec
-        self.noise = noise
-        self.rated = np.array([*spec.force_range, *spec.torque_range], dtype=float)
+        self.rated = _frozen(np.array([*spec.force_range, *spec.torque_range], dtype=float))
         self._rated_list = self.rated.tolist()
         self._lsb_list = [r / LEPTRINO_FULL_SCALE_COUNTS for r in self._rated_list]
         self._rng = rng
         self._normals = NormalStream(rng)
+        self.noise = noise
+
+    @property
+    def noise(self) -> WrenchNoise:
+        """The error model (assigning a new one takes effect at the next sample)."""
+        return self._noise
+
+    @noise.setter
+    def noise(self, value: WrenchNoise) -> None:
+        self._noise = value
+        self._core = WrenchNoiseCore(
+            self._rated_list,
+            [float(b) for b in value.bias],
+            float(value.noise_fraction_of_rated),
+            bool(value.quantize),
+            LEPTRINO_FULL_SCALE_COUNTS,
+        )
 
     def sample(self, force: np.ndarray, torque: np.ndarray) -> WrenchReading:
-        """Corrupt one ideal sample (six normals of the generator's stream); scalar floats,
-        the same operations in the same order as the array form."""
+        """Corrupt one ideal sample (six normals of the generator's stream)."""
         return self.sample_list(force.tolist() + torque.tolist())
 
     def sample_list(self, wrench: list[float]) -> WrenchReading:
         """:meth:`sample` of the six floats (Fx, Fy, Fz, Mx, My, Mz)."""
-        noise = self.noise
+        force, torque, saturated = self._core.sample(wrench, self._normals.take(6))
+        return WrenchReading(force, torque, saturated)
+
+    def sample_list_plain(self, wrench: list[float]) -> WrenchReading:
+        """The Python form of :meth:`sample_list` (same stream, same numbers; the reference
+        the Rust path is tested against)."""
+        noise = self._noise
         e = self._normals.take(6)
         frac = noise.noise_fraction_of_rated
         rated = self._rated_list

@@ -16,6 +16,8 @@ from rdm.link import inproc_can
 
 #: Frames buffered before one write to the file.
 BATCH_LINES = 512
+#: Line tails (channel, id, data, direction) remembered; the memo is cleared when full.
+REST_CACHE_SIZE = 4096
 
 
 class CandumpCapture:
@@ -28,6 +30,9 @@ class CandumpCapture:
         self._writer = can.CanutilsLogWriter(path, channel=channel or "can0")
         self.frames = 0
         self._lines: list[str] = []
+        self._stamp: float | None = None  # the float object _stamp_text was made from
+        self._stamp_text = ""
+        self._rest: dict[tuple, str] = {}
         self._channel = channel
         if channel is not None:
             inproc_can.add_tap(channel, self.on_message_received)
@@ -48,11 +53,22 @@ class CandumpCapture:
         ):
             # The common frame (classic, standard id, in time order): the writer's own
             # format, without its per-frame branching (same bytes; checked in the tests).
+            # The stamp text is reused for the frames of one tick (the same float object from
+            # the channel clock), the rest of the line per (channel, id, data, direction).
+            if stamp is not self._stamp:
+                self._stamp = stamp
+                self._stamp_text = f"({stamp:f}) "
+            key = (msg.arbitration_id, bytes(msg.data), channel, msg.is_rx)
+            rest = self._rest.get(key)
+            if rest is None:
+                if len(self._rest) >= REST_CACHE_SIZE:
+                    self._rest.clear()
+                rest = self._rest[key] = (
+                    f"{channel} {msg.arbitration_id:03X}#{msg.data.hex().upper()}"
+                    + (" R\n" if msg.is_rx else " T\n")
+                )
             lines = self._lines
-            lines.append(
-                f"({stamp:f}) {channel} {msg.arbitration_id:03X}#{msg.data.hex().upper()}"
-                + (" R\n" if msg.is_rx else " T\n")
-            )
+            lines.append(self._stamp_text + rest)
             if len(lines) >= BATCH_LINES:
                 self.flush()
         else:

@@ -1,0 +1,7 @@
+//! Simulation-side models that run every simulated millisecond next to the plant: sensor
+//! error models and the sensor-side encoding of what a simulated sensor sends. They mirror
+//! the Python reference forms in `rdm.plant.sensors` / `rdm.protocol.leptrino` operation for
+//! operation, so a run gives the same bytes with either.
+
+pub mod leptrino_stream;
+pub mod sensor_noise;

@@ -1,0 +1,285 @@
+"""The Rust sensor paths (helper ``fastsensor``) against their plain forms.
+
+``rdm._rdm.WrenchNoiseCore`` / ``ImuNoiseCore`` (behind ``WrenchSensorModel.sample_list`` and
+``ImuModel.sample_lists``) against an independent numpy array form (``np.clip``, ``np.round``)
+and against the models' scalar Python forms, bit for bit (signed zeros, NaN, inf, saturation,
+ties of the rounding); ``rdm._rdm.leptrino_force_frame`` and the Leptrino node's frame cache
+against ``rdm.protocol.leptrino``'s encoder.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rdm._rdm import leptrino_force_frame
+from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
+from rdm.plant.description import WrenchSensorSpec
+from rdm.plant.sensors import (
+    ACCEL_LSB,
+    ACCEL_RANGE,
+    GYRO_LSB,
+    GYRO_RANGE,
+    MAG_LSB,
+    ImuModel,
+    ImuNoise,
+    WrenchNoise,
+    WrenchSensorModel,
+)
+from rdm.protocol import leptrino as lp
+
+SPECIALS = [0.0, -0.0, math.nan, math.inf, -math.inf, 1e300, -1e300, 5e-324]
+
+
+def _same(x, y) -> bool:
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    return np.array_equal(x, y, equal_nan=True) and np.array_equal(np.signbit(x), np.signbit(y))
+
+
+def _spec(rated: float) -> WrenchSensorSpec:
+    # lsb = rated / 10000 = 2**-10: ties (k + 0.5) * lsb are exact, so ties-to-even is tested.
+    return WrenchSensorSpec("test", "foot", "test", (rated,) * 3, (rated / 2,) * 3)
+
+
+def _wrench_inputs(gen: np.random.Generator, rated: np.ndarray, n: int):
+    lsb = rated / 10000.0
+    for i in range(n):
+        kind = i % 4
+        if kind == 0:  # ordinary
+            yield (gen.normal(0.0, 0.3, 6) * rated).tolist()
+        elif kind == 1:  # exact ties of v / lsb (noise 0 below), -0.0 rounding
+            yield ((gen.integers(-50, 50, 6) + 0.5) * lsb).tolist()
+        elif kind == 2:  # at, just beyond and far beyond the rated capacity
+            yield (rated * gen.choice([1.0, -1.0, 1.0000001, -3.0, 0.99999], 6)).tolist()
+        else:
+            yield gen.choice(SPECIALS, 6).tolist()
+
+
+@pytest.mark.parametrize("quantize", [True, False])
+@pytest.mark.parametrize("frac", [0.003, 0.0])
+def test_wrench_core_equals_numpy_array_form_and_python_form(quantize, frac):
+    spec = _spec(10000.0 * 2.0**-10)
+    noise = WrenchNoise(frac, bias=(0.0, 0.001, -0.002, 0.0, 0.0, 1e-4), quantize=quantize)
+    fast = WrenchSensorModel(spec, noise, np.random.default_rng(4))
+    plain = WrenchSensorModel(spec, noise, np.random.default_rng(4))
+    ref_rng = np.random.default_rng(4)
+    rated = np.array([*spec.force_range, *spec.torque_range])
+    gen = np.random.default_rng(9)
+    for ideal in _wrench_inputs(gen, rated, 2000):
+        r = fast.sample_list(ideal)
+        p = plain.sample_list_plain(ideal)
+        # numpy array form, written here from the model's definition
+        with np.errstate(invalid="ignore", over="ignore"):
+            v = np.array(ideal) + np.array(noise.bias) + frac * rated * ref_rng.normal(0, 1, 6)
+            sat = np.abs(v) >= rated
+            v = np.clip(v, -rated, rated)
+            if quantize:
+                v = np.where(np.isfinite(v), np.round(v / (rated / 10000.0)) * (rated / 10000.0), v)
+        got = np.concatenate([r.force, r.torque])
+        assert _same(got, v), (ideal, got, v)
+        assert np.array_equal(r.saturated, sat)
+        assert r.saturated.dtype == np.bool_
+        assert _same(got, np.concatenate([p.force, p.torque]))
+        assert np.array_equal(r.saturated, p.saturated)
+
+
+def test_wrench_ties_round_to_even_and_zero_keeps_its_sign():
+    spec = _spec(10000.0 * 2.0**-10)
+    m = WrenchSensorModel(spec, WrenchNoise(0.0), np.random.default_rng(0))
+    lsb, tlsb = 2.0**-10, 2.0**-11  # torque range = force range / 2
+    r = m.sample_list([0.5 * lsb, 1.5 * lsb, 2.5 * lsb, -0.5 * tlsb, -2.5 * tlsb, -0.1 * tlsb])
+    assert r.force.tolist() == [0.0, 2 * lsb, 2 * lsb]
+    assert r.torque.tolist() == [0.0, -2 * tlsb, 0.0]
+    assert math.copysign(1.0, r.torque[0]) == -1.0 and math.copysign(1.0, r.torque[2]) == -1.0
+    assert math.copysign(1.0, r.force[0]) == 1.0
+
+
+def test_wrench_noise_and_bias_changes_take_effect():
+    spec = _spec(10.0)
+    m = WrenchSensorModel(spec, WrenchNoise(0.0), np.random.default_rng(0))
+    m.noise = WrenchNoise(0.0, bias=(1.0, 0.0, 0.0, 0.0, 0.0, 0.0), quantize=False)
+    assert m.sample_list([0.25] * 6).force.tolist() == [1.25, 0.25, 0.25]
+    with pytest.raises(ValueError):
+        m.rated[0] = 1.0  # read-only: the core holds a copy
+
+
+def _imu_inputs(gen: np.random.Generator, n: int):
+    for i in range(n):
+        kind = i % 4
+        if kind == 0:
+            yield [
+                gen.normal(0, 2, 3).tolist(),
+                gen.normal(0, 20, 3).tolist(),
+                gen.normal(0, 50, 3).tolist(),
+            ]
+        elif kind == 1:  # ties of the quantisers
+            yield [
+                ((gen.integers(-9, 9, 3) + 0.5) * GYRO_LSB).tolist(),
+                ((gen.integers(-9, 9, 3) + 0.5) * ACCEL_LSB).tolist(),
+                ((gen.integers(-9, 9, 3) + 0.5) * MAG_LSB).tolist(),
+            ]
+        elif kind == 2:  # saturation of gyro / accel
+            yield [
+                (GYRO_RANGE * gen.choice([1.0, -1.0, 1.1, 0.999], 3)).tolist(),
+                (ACCEL_RANGE * gen.choice([1.0, -1.0, 1.1, 0.999], 3)).tolist(),
+                [1e6, -1e6, 0.0],
+            ]
+        else:
+            yield [gen.choice(SPECIALS[:6], 3).tolist() for _ in range(3)]
+
+
+@pytest.mark.parametrize("quantize", [True, False])
+@pytest.mark.parametrize("zero_noise", [True, False])
+def test_imu_core_equals_numpy_array_form_and_python_form(quantize, zero_noise):
+    kw = {"gyro_std": 0.0, "accel_std": 0.0, "mag_std": 0.0} if zero_noise else {}
+    noise = ImuNoise(quantize=quantize, **kw)
+    fast = ImuModel(noise, np.random.default_rng(6))
+    plain = ImuModel(noise, np.random.default_rng(6))
+    ref = np.random.default_rng(6)
+    gb, ab, mb = (ref.normal(0.0, s, 3) for s in (0.5 * math.pi / 180, 0.05, 1.0))
+    assert _same(gb, fast.gyro_bias) and _same(mb, fast.mag_bias)
+    gen = np.random.default_rng(2)
+    for gyro, acc, mag in _imu_inputs(gen, 2000):
+        r = fast.sample_lists(gyro, acc, mag)
+        p = plain.sample_lists_plain(gyro, acc, mag)
+        w = ref.normal(0.0, 1.0, 9)
+        with np.errstate(invalid="ignore", over="ignore"):
+            g = np.array(gyro) + gb + noise.gyro_std * w[0:3]
+            a = np.array(acc) + ab + noise.accel_std * w[3:6]
+            m = np.array(mag) + mb + noise.mag_std * w[6:9]
+            sat = bool(np.any(np.abs(g) > GYRO_RANGE) or np.any(np.abs(a) > ACCEL_RANGE))
+            g = np.clip(g, -GYRO_RANGE, GYRO_RANGE)
+            a = np.clip(a, -ACCEL_RANGE, ACCEL_RANGE)
+            if quantize:
+                g, a, m = (
+                    np.where(np.isfinite(x), np.round(x / lsb) * lsb, x)
+                    for x, lsb in ((g, GYRO_LSB), (a, ACCEL_LSB), (m, MAG_LSB))
+                )
+        for got, want, pl in ((r.gyro, g, p.gyro), (r.accel, a, p.accel), (r.mag, m, p.mag)):
+            assert _same(got, want), (got, want)
+            assert _same(got, pl)
+        assert r.saturated is sat and p.saturated is sat
+
+
+def test_imu_bias_assignment_reaches_the_core_and_in_place_change_is_refused():
+    m = ImuModel(
+        ImuNoise(gyro_std=0.0, accel_std=0.0, mag_std=0.0, quantize=False), np.random.default_rng(1)
+    )
+    mine = np.array([0.5, 0.25, 0.0])
+    m.gyro_bias = mine
+    assert mine.flags.writeable  # the model keeps its own read-only copy
+    m.accel_bias = (0.0, 0.0, 0.0)
+    m.mag_bias = (1.0, 1.0, 1.0)
+    r = m.sample_lists([1.0, 1.0, 1.0], [2.0, 2.0, 2.0], [3.0, 3.0, 3.0])
+    assert r.gyro.tolist() == [1.5, 1.25, 1.0]
+    assert r.accel.tolist() == [2.0, 2.0, 2.0] and r.mag.tolist() == [4.0, 4.0, 4.0]
+    with pytest.raises(ValueError):
+        m.gyro_bias[0] = 0.0
+    m.noise = ImuNoise(gyro_std=0.0, accel_std=0.0, mag_std=0.0, quantize=True)
+    r = m.sample_lists([0.0] * 3, [0.0] * 3, [0.0] * 3)
+    assert r.mag.tolist() == [round(1.0 / MAG_LSB) * MAG_LSB] * 3
+
+
+# ------------------------------------------------------------------------ Leptrino frames
+
+
+def _plain_frame(wrench, rated, temperature=250, term_no=0) -> bytes | None:
+    model = lp.SensorModel("test", tuple(rated))
+    try:
+        raw = lp.from_wrench(wrench, model)
+        return lp.encode_response(lp.ForceData(raw, temperature, 0, 0, term_no))
+    except lp.LeptrinoError:
+        return None
+
+
+def test_leptrino_force_frame_equals_the_python_encoder():
+    gen = np.random.default_rng(3)
+    rated = [10000.0] * 6  # raw = round(w): exact ties below
+    model_rated = list(lp.MODELS["CFS034CA301U"].rated)
+    cases = []
+    for _ in range(1500):
+        r = model_rated if gen.random() < 0.5 else rated
+        cases.append((gen.normal(0, 0.5, 6) * np.array(r)).tolist())
+        cases[-1] = (cases[-1], r)
+    ties = [k + 0.5 for k in range(-6, 6)]
+    cases += [(ties[i : i + 6], rated) for i in range(0, 7)]
+    cases += [([16.0, 16.0 * 257, -16.0, 4112.0, 0.0, -0.0], rated)]  # DLE bytes: stuffing
+    cases += [([32767.0, -32768.0, 32767.4, -32768.4, 0.0, 0.0], rated)]  # int16 limits
+    cases += [([32767.5, 0.0, 0.0, 0.0, 0.0, 0.0], rated)]  # rounds to 32768: rejected
+    cases += [([-32768.6, 0.0, 0.0, 0.0, 0.0, 0.0], rated)]
+    cases += [([x, 0.0, 0.0, 0.0, 0.0, 0.0], rated) for x in (math.nan, math.inf, -math.inf)]
+    seen_dle = False
+    for wrench, r in cases:
+        want = _plain_frame(wrench, r)
+        got = leptrino_force_frame(wrench, r, 250, 0, 0, 0)
+        assert got == want, (wrench, got, want)
+        seen_dle |= want is not None and b"\x10\x10" in want
+    assert seen_dle
+    w = [1.0] * 6
+    for temp, term in ((-32768, 0), (32767, 254), (-1, 16)):
+        assert leptrino_force_frame(w, rated, temp, 0, term, 0) == _plain_frame(
+            w, rated, temp, term
+        )
+    for temp, status, term, result in (
+        (32768, 0, 0, 0),
+        (0, 256, 0, 0),
+        (0, 0, -1, 0),
+        (0, 0, 0, 300),
+    ):
+        assert leptrino_force_frame(w, rated, temp, status, term, result) is None
+
+
+class _Uart:
+    def __init__(self) -> None:
+        self.out = bytearray()
+        self.inbox = b""
+
+    def read_available(self) -> bytes:
+        data, self.inbox = self.inbox, b""
+        return data
+
+    def write(self, data: bytes) -> int:
+        self.out += data
+        return len(data)
+
+    def close(self) -> None:
+        pass
+
+
+def test_leptrino_node_stream_equals_the_plain_encoder():
+    gen = np.random.default_rng(8)
+    uart = _Uart()
+    node = LeptrinoSensorNode(uart, "CFS034CA301U")
+    node.streaming = True
+    expected = bytearray()
+    rated = np.array(node.model.rated)
+    for k in range(600):
+        if k % 2 == 0:  # the bridge's 500 Hz against the node's 1 kHz
+            w = gen.normal(0, 0.4, 6) * rated * (3.5 if k % 10 == 0 else 1.0)
+            if k % 50 == 0:
+                w[1] = math.nan  # refused: the previous wrench stays
+            node.set_wrench(w[:3], w[3:])
+        if k == 300:
+            node.temperature = -12  # a new temperature re-encodes
+        if k == 400:
+            node.sensor_no = 3
+        uart.out.clear()
+        node.tick(k * 0.001)
+        expected = node._sample_frame_plain()
+        assert bytes(uart.out).endswith(expected)
+    assert node.saturated_samples > 0 and node.errors["bad_wrench"] > 0
+
+
+def test_leptrino_node_odd_field_types_take_the_plain_path():
+    node = LeptrinoSensorNode(_Uart(), "CFS034CA301U")
+    node.set_wrench([1.0, 2.0, 3.0], [0.1, 0.2, 0.3])
+    node.temperature = 25.0  # a float: struct refuses it, as before
+    with pytest.raises((lp.LeptrinoError, TypeError)) as fast_err:
+        node._sample_frame()
+    with pytest.raises(type(fast_err.value)):
+        node._sample_frame_plain()
+    node.temperature = 40000
+    with pytest.raises(lp.LeptrinoError):
+        node._sample_frame()
