@@ -655,3 +655,8 @@ def leptrino_force_frame(
     term_no: int,
     result: int,
 ) -> bytes | None: ...
+
+# --- json_log ---
+def json_float_list(values: npt.NDArray[np.float64]) -> str:
+    """``"v0,v1,..."``: each value as Python's ``repr(float)``, NaN and infinities as
+    ``null`` (the run logger's JSON convention); any stride."""

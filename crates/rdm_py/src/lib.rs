@@ -8,6 +8,7 @@ mod bench;
 mod errors;
 mod estimate;
 mod gains;
+mod json_log;
 mod lqi;
 mod model;
 mod neuron_bank;
@@ -32,5 +33,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     planner::register(m)?;
     neuron_bank::register(m)?;
     sensor_sim::register(m)?;
+    json_log::register(m)?;
     Ok(())
 }

@@ -4,4 +4,5 @@
 //! operation, so a run gives the same bytes with either.
 
 pub mod leptrino_stream;
+pub mod python_float_repr;
 pub mod sensor_noise;
