@@ -76,3 +76,18 @@ def test_slowed_hanging_approach_stays_bounded(tmp_path):
     m = {x.name: x.ours for x in res.metrics}
     assert m["foot contact kept while perched"] == 1.0
     assert m["foot slip while perched"] < 1.0
+
+
+def test_slowed_hanging_approach_with_the_configured_gains_grows(tmp_path):
+    """The counter-check of the test above: the same slow approach with the configured
+    gains (the behaviour before the fold gains) lets the horizontal error grow past 0.5 m
+    within 10 s of the fold's end."""
+    timing = perching.PerchTiming(fold_gains=None, reconfigure_wait_s=6.0, approach_speed=0.02)
+    res = perching.run(tmp_path, duration=23.0, log=False, timing=timing)
+    a = truth_arrays(res.stack)
+    t = a["t"]
+    setpoint = a["cog"][np.searchsorted(t, perching.ARM_AT), :2]
+    err = np.linalg.norm(a["cog"][:, :2] - setpoint, axis=1)
+    fold_end = perching.ARM_AT + 3.0 + perching.RECONFIGURE_S
+    assert err[(t > fold_end) & (t < fold_end + 3.0)].max() < 0.3  # small at first
+    assert err[t > fold_end].max() > 0.5  # then grows
