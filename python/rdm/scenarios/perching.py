@@ -22,7 +22,7 @@ slip < 1 mm, ZMP inside the plate.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -79,6 +79,26 @@ POSITION_GAINS: dict = {"k_roll": 1.0, "y_pid": (3.0, 0.5, 4.0)}
 #: the simulation (the residual pitch moment of the hanging robot is ~0.3-0.5 N m and only
 #: F_z is controlled, U_mask = diag[1,0,0,0]); 8 N keeps it flat. ASSUMPTION (docs/scenarios.md).
 PERCH_PARAMS: dict = {"epsilon_z": 8.0}
+#: Position gains for flying in the hanging posture (over ``POSITION_GAINS``): there the LQI
+#: roll and pitch loops are slow (I_xx 0.26 kg m^2 against a 0.07 m rotor lever), and
+#: ``POSITION_GAINS``' y PID (3.0, 0.5, 4.0) through roll and Table V's x PID (4.6, 1.5, 7.0)
+#: through pitch are linearly unstable (pairs +0.41 +- 1.97j and +0.17 +- 3.68j rad/s,
+#: ``flight_envelope.horizontal_loop_poles``). These are the best-damped gains of a scan
+#: (damping 0.33 and 0.29; docs/envelope.md). For tracking's hanging flight stage and, as an
+#: option (``PerchTiming.fold_gains``), the hanging approach.
+HANGING_FLIGHT_GAINS: dict = {**POSITION_GAINS, "x_pid": (1.0, 0.1, 2.0), "y_pid": (0.3, 0.05, 0.8)}
+#: Where along the fold (fraction of its duration) ``PerchTiming.fold_gains`` take over. The
+#: linearised loops (``horizontal_loop_poles``) along the cosine fold put the configured y pair
+#: in the right half-plane from 0.53 of the fold on (x from 0.72), while the hanging gains
+#: stay stable all along; but their slow x loop (P 1.0) cannot follow the CoG's shift during
+#: the fold (switched at 0.4 or 0.55 the CoG drifted 0.7-0.9 m in x, seed 0), so they take over
+#: once the posture is reached. docs/foldgains.md.
+FOLD_GAINS_AT = 1.0
+#: The hanging gains for the approach, with a stiffer x integral: (1.5, 1.0, 2.0) is the
+#: best-damped x PID of a scan with I >= 1 (damping >= 0.26 from mid-fold on), and it holds
+#: the x offset the fold leaves (seed 0: the foot perched 35 mm from the planned point, 119 mm
+#: with the configured gains, 204 mm with (1.0, 0.1, 2.0)). docs/foldgains.md.
+FOLD_GAINS: dict = {**HANGING_FLIGHT_GAINS, "x_pid": (1.5, 1.0, 2.0)}
 EDGE_MM = 1.0  # ZMP within this of the plate edge counts as "on the edge" (tipping)
 
 
@@ -133,6 +153,13 @@ class PerchTiming:
     #: seconds after the fold before the approach starts
     reconfigure_wait_s: float = 1.0
     approach_speed: float = APPROACH_SPEED
+    #: position gains (``ControlPipeline.set_position_gains``) from ``fold_gains_at`` of the
+    #: fold until the perch switch, when the configured gains are restored (default
+    #: :data:`FOLD_GAINS`); None: the configured gains throughout (the behaviour before
+    #: docs/foldgains.md, whose configured loops are unstable in the hanging posture)
+    fold_gains: dict | None = field(default_factory=lambda: dict(FOLD_GAINS))
+    #: fraction of the fold's duration at which ``fold_gains`` take over
+    fold_gains_at: float = FOLD_GAINS_AT
 
 
 #: A shorter perching run for the process-level runs in the emulated VM (docs/hilperch.md):
@@ -140,7 +167,15 @@ class PerchTiming:
 #: 15 cm), approach after 0.5 s. Contact at 9.03 s instead of 14.83 s (seed 0). ASSUMPTION
 #: (ours; a 3 s fold with a 0.5 m/s climb perched at 7.4 s but tilted 10.8 deg and rocked the
 #: plate on its edge 91 % of the time).
-QUICK_TIMING = PerchTiming(reconfigure_s=4.0, reconfigure_z=1.05, reconfigure_wait_s=0.5)
+#: The configured gains throughout (``fold_gains=None``): its approach lasts 0.9 s, too short
+#: for the hanging instability, and the gain switch's transient (the position integral
+#: restarts) just before the contact rocked the plate more (slip 0.060 vs 0.031 mm, min F_z
+#: 2.5 vs 6.3 N; docs/foldgains.md).
+QUICK_TIMING = PerchTiming(
+    reconfigure_s=4.0, reconfigure_z=1.05, reconfigure_wait_s=0.5, fold_gains=None
+)
+#: The timing before docs/foldgains.md: the configured gains through the fold and approach.
+CONFIGURED_GAINS_TIMING = PerchTiming(fold_gains=None)
 
 
 def truth_cog(stack: Any) -> np.ndarray:
@@ -170,6 +205,9 @@ class PerchingScript:
         self.t_contact: float | None = None
         self.t_motion_end: float | None = None
         self.t_phase_end = 0.0
+        self.t_fold: float | None = None
+        #: (on, off) simulated times of ``timing.fold_gains`` (off None until the perch)
+        self.fold_gains_window: tuple[float, float | None] | None = None
         self.q_plan: list[tuple[float, np.ndarray]] = []
         self._last = 0.0
 
@@ -197,6 +235,7 @@ class PerchingScript:
             )
             ob.set_trajectory(points)
             self.q_plan = points
+            self.t_fold = now
             goal = self.ramp.position.copy()
             goal[2] = tm.reconfigure_z
             self.ramp.set_goal(goal, (tm.reconfigure_z - tm.climb_z) / tm.reconfigure_s)
@@ -212,6 +251,9 @@ class PerchingScript:
                 self.ramp.set_goal(self.ramp.position.copy())
                 ob.request_perch(True)
                 self.t_perch = now
+                if self.fold_gains_window is not None:  # perching mode takes over: restore
+                    self.fold_gains_window = (self.fold_gains_window[0], now)
+                    ob.control.set_position_gains(ob.config.position_gains)
                 self.phase = "settle"
         elif self.phase == "settle" and self.t_perch is not None and now - self.t_perch > SETTLE_S:
             self.phase = "motion"
@@ -220,7 +262,29 @@ class PerchingScript:
             self.q_plan = points
         elif self.phase == "motion" and self.t_motion_end is not None and now > self.t_motion_end:
             self.phase = "hold"
+        self._schedule_fold_gains(stack, now)
         ob.set_target(self.ramp.position, 0.0, self.ramp.velocity)
+
+    def _schedule_fold_gains(self, stack: Any, now: float) -> None:
+        tm = self.timing
+        if (
+            tm.fold_gains is not None
+            and self.fold_gains_window is None
+            and self.t_fold is not None
+            and self.t_perch is None
+            and now >= self.t_fold + tm.fold_gains_at * tm.reconfigure_s
+        ):
+            stack.onboard.control.set_position_gains(tm.fold_gains)
+            self.fold_gains_window = (now, None)
+
+    def phase_gains(self, stack: Any) -> dict:
+        """The position gains the phase machine has in effect now: ``timing.fold_gains``
+        between their switch and the perch, else the configured ones (what a stage that set
+        its own gains restores)."""
+        w = self.fold_gains_window
+        if w is not None and w[1] is None and self.timing.fold_gains is not None:
+            return self.timing.fold_gains
+        return stack.onboard.config.position_gains
 
 
 def _foot_normal_force(stack: Any) -> float | None:
@@ -337,6 +401,7 @@ def _evaluate(stack: Stack, script: PerchingScript) -> ScenarioResult:
         "t_perch": script.t_perch,
         "final_phase": script.phase,
         "perch_status_counts": statuses,
+        "fold_gains_window": script.fold_gains_window,
     }
     _plots(stack, a, rp, script)
     return ScenarioResult("perching", stack, metrics, facts)

@@ -328,7 +328,7 @@ class PushScript(StagedPerchingScript):
 
     def flight_end(self, stack: Stack, now: float) -> None:
         stack.plant.apply_body_wrench(EE_BODY)  # zero: removed
-        stack.onboard.control.set_position_gains(stack.onboard.config.position_gains)
+        stack.onboard.control.set_position_gains(self.phase_gains(stack))
 
     def perched_tick(self, stack: Stack, now: float, s: float) -> None:
         self._push(stack, now, s, "perched")

@@ -157,7 +157,9 @@ class TaskScript(perching.PerchingScript):
     """Perching's phase machine, then the task's waypoints once it holds."""
 
     def __init__(self, task: str, layout: obj.TaskLayout) -> None:
-        super().__init__(motion=())
+        # the configured gains through the approach: the objects are placed around the spot
+        # where the foot landed with them (TaskLayout.nominal_foot; docs/foldgains.md)
+        super().__init__(motion=(), timing=perching.CONFIGURED_GAINS_TIMING)
         if task not in TASKS:
             raise ValueError(f"task: one of {TASKS}, got {task!r}")
         self.task = task

@@ -45,7 +45,7 @@ from .common import (
     sim_stack_options,
     truth_arrays,
 )
-from .perching import PERCH_POSTURE, POSITION_GAINS, joint_path, onboard_config
+from .perching import HANGING_FLIGHT_GAINS, PERCH_POSTURE, joint_path, onboard_config
 from .push import StagedPerchingScript
 from .stack import Stack, build_stack
 
@@ -60,14 +60,9 @@ FLIGHT_POSTURE = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 #: Base posture of the flight stage: "straight" (q = 0, after the climb; the default) or
 #: "hanging" (``PERCH_POSTURE``, after the fold; the flying hanging robot is lightly damped).
 FLIGHT_POSTURES = {"straight": FLIGHT_POSTURE, "hanging": PERCH_POSTURE}
-#: Position gains of the hanging posture's flight stage (over ``POSITION_GAINS``). In that
-#: posture the LQI roll and pitch loops are slow (I_xx 0.26 kg m^2 against a 0.07 m rotor
-#: lever), and the hanging configuration's y PID (3.0, 0.5, 4.0) through roll and Table V's x
-#: PID (4.6, 1.5, 7.0) through pitch are linearly unstable there (pairs 0.41 +- 1.97j and
-#: 0.17 +- 3.68j rad/s, ``flight_envelope.horizontal_loop_poles``): the robot fell without
-#: any joint motion. These are the slowest-pole-damped gains of a scan (damping 0.33 and 0.29;
-#: docs/envelope.md). The straight posture keeps the run's configuration (None).
-HANGING_FLIGHT_GAINS: dict = {**POSITION_GAINS, "x_pid": (1.0, 0.1, 2.0), "y_pid": (0.3, 0.05, 0.8)}
+#: Position gains of the hanging posture's flight stage: ``perching.HANGING_FLIGHT_GAINS``
+#: (the configured y PID and Table V's x PID are linearly unstable there; docs/envelope.md).
+#: The straight posture keeps the run's configuration (None).
 FLIGHT_STAGE_GAINS: dict[str, dict | None] = {"straight": None, "hanging": HANGING_FLIGHT_GAINS}
 #: The joint path: (duration [s], q1..q6 offset from the stage's base posture) segments,
 #: back to zero offset at the end. ASSUMPTION: Fig. 13's motion is not given; a slow arm
@@ -180,8 +175,8 @@ class TrackingScript(StagedPerchingScript):
         stack.onboard.set_target(pos, 0.0, vel)
 
     def flight_end(self, stack: Stack, now: float) -> None:
-        if self.flight_gains is not None:
-            stack.onboard.control.set_position_gains(stack.onboard.config.position_gains)
+        if self.flight_gains is not None:  # back to the phase machine's (fold or configured)
+            stack.onboard.control.set_position_gains(self.phase_gains(stack))
 
     def perched_tick(self, stack: Stack, now: float, s: float) -> None:
         if "perched" not in self.plans:
