@@ -185,17 +185,13 @@ impl RotorPlant {
     /// component of its z axis (+inf without a ceiling or facing away).
     fn distance(&self, site_z: f64, axis_z: f64) -> f64 {
         match self.ceiling_height {
-            None => f64::INFINITY,
-            Some(h) => {
-                if axis_z > 1e-6 {
-                    // Python's max(h - z, 0.0): keeps the first unless 0.0 is greater (NaN stays)
-                    let gap = h - site_z;
-                    let gap = if 0.0 > gap { 0.0 } else { gap };
-                    gap / axis_z
-                } else {
-                    f64::INFINITY
-                }
+            // Python's max(h - z, 0.0): keeps the first unless 0.0 is greater (NaN stays)
+            Some(h) if axis_z > 1e-6 => {
+                let gap = h - site_z;
+                let gap = if 0.0 > gap { 0.0 } else { gap };
+                gap / axis_z
             }
+            _ => f64::INFINITY,
         }
     }
 
