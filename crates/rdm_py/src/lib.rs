@@ -16,6 +16,7 @@ mod perch;
 mod planner;
 mod position;
 mod qp;
+mod rotor_plant;
 mod sensor_sim;
 
 #[pymodule]
@@ -34,5 +35,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     neuron_bank::register(m)?;
     sensor_sim::register(m)?;
     json_log::register(m)?;
+    rotor_plant::register(m)?;
     Ok(())
 }

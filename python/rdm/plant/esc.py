@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 IDLE_DUTY = 0.5
 
@@ -60,16 +61,59 @@ class EscParams:
         return min(max(x / 100.0, IDLE_DUTY), 1.0)
 
 
+class _ThrustStore(Protocol):
+    """Where an attached ESC keeps its present and target thrust (``RotorPlantCore``)."""
+
+    def thrust(self, i: int) -> float: ...
+    def target(self, i: int) -> float: ...
+    def set_thrust(self, i: int, value: float) -> None: ...
+    def set_target(self, i: int, value: float) -> None: ...
+
+
 class Esc:
     """One ESC + motor + propeller: duty or thrust in, lagged thrust out."""
 
     def __init__(self, params: EscParams | None = None, voltage: float | None = None) -> None:
         self.params = params or EscParams()
         self.voltage = self.params.v_ref if voltage is None else voltage
-        self._target = 0.0
-        self._thrust = 0.0
+        # The thrusts live in a store: the Esc's own slots, or a plant's rotor core (one
+        # source of truth for the plant's per-step work and for Python readers/writers).
+        self._store: _ThrustStore | None = None
+        self._slot = 0
+        self._own_target = 0.0
+        self._own_thrust = 0.0
         self.duty = IDLE_DUTY
         self.rejected = 0  # count of non-finite commands replaced by a stop
+
+    def attach(self, store: _ThrustStore, slot: int) -> None:
+        """Keep the thrusts in ``store`` at ``slot`` from now on (the present values move)."""
+        thrust, target = self._thrust, self._target
+        self._store, self._slot = store, slot
+        self._thrust, self._target = thrust, target
+
+    @property
+    def _thrust(self) -> float:
+        store = self._store
+        return self._own_thrust if store is None else store.thrust(self._slot)
+
+    @_thrust.setter
+    def _thrust(self, value: float) -> None:
+        if self._store is None:
+            self._own_thrust = value
+        else:
+            self._store.set_thrust(self._slot, value)
+
+    @property
+    def _target(self) -> float:
+        store = self._store
+        return self._own_target if store is None else store.target(self._slot)
+
+    @_target.setter
+    def _target(self, value: float) -> None:
+        if self._store is None:
+            self._own_target = value
+        else:
+            self._store.set_target(self._slot, value)
 
     def set_voltage(self, voltage: float) -> None:
         """Battery voltage [V] (changes the duty -> thrust map of later duty commands)."""

@@ -21,7 +21,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from rdm.plant.ceiling import CeilingEffect, ParametricCeilingEffect
+from rdm._rdm import RotorPlantCore
+from rdm.plant.ceiling import CeilingEffect, NoCeilingEffect, ParametricCeilingEffect
 from rdm.plant.description import RobotDescription, load_robot
 from rdm.plant.esc import Esc, EscParams
 from rdm.plant.mjcf import (
@@ -154,12 +155,6 @@ class Plant:
             )
             for r in desc.rotors
         ]
-        if ceiling_effect is None:
-            self.ceiling_effects: list[CeilingEffect] = [
-                ParametricCeilingEffect(radius=r.radius) for r in desc.rotors
-            ]
-        else:
-            self.ceiling_effects = [ceiling_effect for _ in desc.rotors]
         self._esc_alpha: list[float] = []  # per ESC, 1 - exp(-dt/tau) (set in reset)
         self._ceiling_z = ceiling_height
         self._imu_noise = imu_noise or ImuNoise()
@@ -180,8 +175,34 @@ class Plant:
         contiguous = acts == list(range(acts[0], acts[0] + len(acts))) if acts else False
         self._rotor_act_slice = slice(acts[0], acts[0] + len(acts)) if contiguous else None
         self._external: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        # The per-step rotor work (ESC lags, ceiling ratios, rotor ctrl) in one Rust call; the
+        # ESCs keep their thrusts in it (one source of truth for both paths).
+        self._rotors = RotorPlantCore(
+            self._rotor_site_list, acts, ceiling_height, d.site_xpos, d.site_xmat, d.ctrl
+        )
+        for i, e in enumerate(self.escs):
+            e.attach(self._rotors, i)
+        self.ceiling_effects = (
+            [ParametricCeilingEffect(radius=r.radius) for r in desc.rotors]
+            if ceiling_effect is None
+            else [ceiling_effect for _ in desc.rotors]
+        )
         self._seed_sensors()
         self.reset()
+
+    @property
+    def ceiling_effects(self) -> tuple[CeilingEffect, ...]:
+        """Ceiling-effect model per rotor (assign a new sequence to change them)."""
+        return self._ceiling_effects
+
+    @ceiling_effects.setter
+    def ceiling_effects(self, effects: Sequence[CeilingEffect]) -> None:
+        effects = tuple(effects)
+        if len(effects) != len(self.rotor_names):
+            raise ValueError(f"ceiling_effects: expected {len(self.rotor_names)} models")
+        self._ceiling_effects = effects
+        # The Rust step covers the shipped models; any other model keeps the Python path.
+        self._rotors_in_core = all(_core_ceiling(self._rotors, i, e) for i, e in enumerate(effects))
 
     # ----------------------------------------------------------------- lazy forward
     @property
@@ -260,6 +281,8 @@ class Plant:
         for esc, value in zip(self.escs, t, strict=True):
             esc.reset(float(value))
         self._esc_alpha = [esc.lag_factor(m.opt.timestep) for esc in self.escs]
+        for i, alpha in enumerate(self._esc_alpha):
+            self._rotors.set_alpha(i, alpha)
         self._tracker.reset()
         self._external.clear()
         self._seed_sensors()
@@ -339,9 +362,14 @@ class Plant:
     def _apply_rotor_thrusts(self) -> None:
         """Ceiling-scaled ESC thrusts into the rotor actuators (kinematics must be current).
 
-        Plain floats in one pass (this runs at the physics rate); the arithmetic is the same
-        as :meth:`_rotor_distances` and :meth:`Esc.thrust` give.
+        Every model a :class:`ParametricCeilingEffect` / :class:`NoCeilingEffect`: one Rust
+        call (``RotorPlantCore.apply``, the same IEEE operations as the Python form below).
+        Otherwise plain floats in one pass; the arithmetic is the same as
+        :meth:`_rotor_distances` and :meth:`Esc.thrust` give.
         """
+        if self._rotors_in_core:
+            self._rotors.apply()
+            return
         h = self._ceiling_z
         thrusts = self._thrusts_list
         effects = self.ceiling_effects
@@ -356,6 +384,7 @@ class Plant:
                 az = xmat_at(sid, 8)  # z component of the site z axis
                 dist = max(h - xpos_at(sid, 2), 0.0) / az if az > 1e-6 else math.inf
                 thrusts[i] = esc._thrust * effects[i].thrust_ratio(dist)
+        self._rotors.set_applied(thrusts)
         if self._rotor_act_slice is not None:
             self._v_ctrl[self._rotor_act_slice] = thrusts
         else:
@@ -363,13 +392,13 @@ class Plant:
 
     @property
     def _thrusts(self) -> np.ndarray:
-        return np.array(self._thrusts_list, dtype=float)
+        return np.array(self._rotors.applied(), dtype=float)
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps (readings then refer to the new time)."""
         m, d = self.model, self._data
-        escs = self.escs
-        alphas = self._esc_alpha
+        rotors = self._rotors
+        in_core = self._rotors_in_core
         tracker = self._tracker
         step1, step2 = mujoco.mj_step1, mujoco.mj_step2
         for _ in range(int(n)):
@@ -379,10 +408,13 @@ class Plant:
             # and velocity stages would recompute the same numbers (they do not depend on
             # ctrl or xfrc_applied), so only mj_step2 runs (bit-identical; docs/plant.md).
             self._needs_step1 = True
-            # First-order ESC lag, exact discretisation (Esc.update with a cached factor).
-            for esc, alpha in zip(escs, alphas, strict=True):
-                esc._thrust += alpha * (esc._target - esc._thrust)
-            self._apply_rotor_thrusts()
+            # First-order ESC lag, exact discretisation (Esc.update with a cached factor),
+            # then the ceiling-scaled thrusts into ctrl: one Rust call for the shipped models.
+            if in_core:
+                rotors.step()
+            else:
+                rotors.advance_lag()
+                self._apply_rotor_thrusts()
             if self._external:
                 self._apply_external()
             step2(m, d)
@@ -514,6 +546,26 @@ class Plant:
     def to_xml(self) -> str:
         """The generated MJCF (opens in ``python -m mujoco.viewer --mjcf``)."""
         return self.spec.to_xml()
+
+
+def _core_ceiling(rotors: RotorPlantCore, i: int, effect: CeilingEffect) -> bool:
+    """Give rotor ``i``'s model to the Rust core if it is one it reproduces bit for bit."""
+    if type(effect) is NoCeilingEffect:
+        rotors.set_ceiling_unity(i)
+        return True
+    if type(effect) is ParametricCeilingEffect:
+        e = effect
+        params = (e.radius, e.k1, e.k2_over_radius, e.max_ratio)
+        try:
+            # Python's float ** raises on overflow where Rust gives inf: keep such
+            # coefficients on the Python path (q = R / (z + k2) <= R / k2 for z >= 0).
+            ok = all(map(math.isfinite, params)) and math.isfinite((e.radius / e._k2) ** 2)
+        except OverflowError:
+            ok = False
+        if ok:
+            rotors.set_ceiling_parametric(i, *params)
+        return ok
+    return False
 
 
 def _has_geom(model: mujoco.MjModel, name: str) -> bool:

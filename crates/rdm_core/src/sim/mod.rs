@@ -5,4 +5,5 @@
 
 pub mod leptrino_stream;
 pub mod python_float_repr;
+pub mod rotor_plant;
 pub mod sensor_noise;

@@ -1,0 +1,182 @@
+//! Binding of `rdm_core::sim::rotor_plant`: the plant's per-physics-step rotor work (ESC lag,
+//! ceiling distance and ratio, rotor controls) in one call. It holds the MuJoCo buffers it
+//! reads and writes (numpy views of one MjData, stable for the data's lifetime) so a step
+//! takes no arguments; `rdm.plant.Plant` owns it and the `Esc` objects read and write their
+//! thrusts through it.
+
+use numpy::{PyArray1, PyArray2, PyArrayMethods};
+use pyo3::exceptions::{PyIndexError, PyValueError};
+use pyo3::prelude::*;
+use rdm_core::sim::rotor_plant::{CeilingRatio, RotorPlant, RotorPlantStatus};
+
+/// ESC state, ceiling models and rotor controls of one plant (see `rdm.plant.Plant`).
+#[pyclass(module = "rdm._rdm")]
+struct RotorPlantCore {
+    inner: RotorPlant,
+    site_xpos: Py<PyArray2<f64>>,
+    site_xmat: Py<PyArray2<f64>>,
+    ctrl: Py<PyArray1<f64>>,
+}
+
+fn index_error(what: &str, i: usize) -> PyErr {
+    PyIndexError::new_err(format!("{what}: rotor index {i} out of range"))
+}
+
+impl RotorPlantCore {
+    fn run(&mut self, py: Python<'_>, lag: bool) -> PyResult<()> {
+        let xpos = self.site_xpos.bind(py).try_readonly()?;
+        let xmat = self.site_xmat.bind(py).try_readonly()?;
+        let mut ctrl = self.ctrl.bind(py).try_readwrite()?;
+        let xpos = xpos
+            .as_slice()
+            .map_err(|_| PyValueError::new_err("site_xpos: must be C-contiguous"))?;
+        let xmat = xmat
+            .as_slice()
+            .map_err(|_| PyValueError::new_err("site_xmat: must be C-contiguous"))?;
+        let ctrl = ctrl
+            .as_slice_mut()
+            .map_err(|_| PyValueError::new_err("ctrl: must be C-contiguous"))?;
+        let status = if lag {
+            self.inner.step(xpos, xmat, ctrl)
+        } else {
+            self.inner.apply(xpos, xmat, ctrl)
+        };
+        match status {
+            RotorPlantStatus::Ok => Ok(()),
+            RotorPlantStatus::SiteOutOfRange => Err(PyValueError::new_err(
+                "site_ids: a rotor site id is outside site_xpos/site_xmat",
+            )),
+            RotorPlantStatus::ActuatorOutOfRange => Err(PyValueError::new_err(
+                "actuator_ids: a rotor actuator id is outside ctrl",
+            )),
+        }
+    }
+}
+
+#[pymethods]
+impl RotorPlantCore {
+    /// Rotors stopped, lag factor 0, no ceiling effect; ``ceiling_height`` None: no ceiling.
+    #[new]
+    #[pyo3(signature = (site_ids, actuator_ids, ceiling_height, site_xpos, site_xmat, ctrl))]
+    fn new(
+        site_ids: Vec<usize>,
+        actuator_ids: Vec<usize>,
+        ceiling_height: Option<f64>,
+        site_xpos: Py<PyArray2<f64>>,
+        site_xmat: Py<PyArray2<f64>>,
+        ctrl: Py<PyArray1<f64>>,
+    ) -> PyResult<Self> {
+        if site_ids.len() != actuator_ids.len() {
+            return Err(PyValueError::new_err(
+                "actuator_ids: must have one entry per site id",
+            ));
+        }
+        Ok(Self {
+            inner: RotorPlant::new(&site_ids, &actuator_ids, ceiling_height),
+            site_xpos,
+            site_xmat,
+            ctrl,
+        })
+    }
+
+    /// Number of rotors.
+    fn __len__(&self) -> usize {
+        self.inner.len()
+    }
+
+    /// One physics step: every ESC lag advances, then the ceiling-scaled thrusts go into ctrl.
+    fn step(&mut self, py: Python<'_>) -> PyResult<()> {
+        self.run(py, true)
+    }
+
+    /// The ceiling-scaled present thrusts into ctrl (no lag step).
+    fn apply(&mut self, py: Python<'_>) -> PyResult<()> {
+        self.run(py, false)
+    }
+
+    /// Only the ESC lags advance (a caller that computes the thrusts itself).
+    fn advance_lag(&mut self) {
+        self.inner.advance_lag();
+    }
+
+    /// Present (lagged) thrust of rotor ``i`` [N].
+    fn thrust(&self, i: usize) -> PyResult<f64> {
+        self.inner.thrust(i).ok_or_else(|| index_error("i", i))
+    }
+
+    /// Target thrust of rotor ``i`` [N].
+    fn target(&self, i: usize) -> PyResult<f64> {
+        self.inner.target(i).ok_or_else(|| index_error("i", i))
+    }
+
+    /// Set the present thrust of rotor ``i`` [N].
+    fn set_thrust(&mut self, i: usize, value: f64) -> PyResult<()> {
+        self.inner
+            .set_thrust(i, value)
+            .then_some(())
+            .ok_or_else(|| index_error("i", i))
+    }
+
+    /// Set the target thrust of rotor ``i`` [N].
+    fn set_target(&mut self, i: usize, value: f64) -> PyResult<()> {
+        self.inner
+            .set_target(i, value)
+            .then_some(())
+            .ok_or_else(|| index_error("i", i))
+    }
+
+    /// Set the lag factor ``1 - exp(-dt/tau)`` of rotor ``i``.
+    fn set_alpha(&mut self, i: usize, value: f64) -> PyResult<()> {
+        self.inner
+            .set_alpha(i, value)
+            .then_some(())
+            .ok_or_else(|| index_error("i", i))
+    }
+
+    /// Rotor ``i`` without ceiling effect (T/T0 = 1).
+    fn set_ceiling_unity(&mut self, i: usize) -> PyResult<()> {
+        self.inner
+            .set_ceiling(i, CeilingRatio::Unity)
+            .then_some(())
+            .ok_or_else(|| index_error("i", i))
+    }
+
+    /// Rotor ``i`` with the parametric ceiling effect (the dataclass fields).
+    fn set_ceiling_parametric(
+        &mut self,
+        i: usize,
+        radius: f64,
+        k1: f64,
+        k2_over_radius: f64,
+        max_ratio: f64,
+    ) -> PyResult<()> {
+        let model = CeilingRatio::parametric(radius, k1, k2_over_radius, max_ratio);
+        self.inner
+            .set_ceiling(i, model)
+            .then_some(())
+            .ok_or_else(|| index_error("i", i))
+    }
+
+    /// Thrusts of the last apply/step, ceiling effect included [N].
+    fn applied(&self) -> Vec<f64> {
+        self.inner.applied().to_vec()
+    }
+
+    /// Overwrite the applied thrusts (computed by the caller's own ceiling models).
+    fn set_applied(&mut self, values: Vec<f64>) -> PyResult<()> {
+        if values.len() != self.inner.len() {
+            return Err(PyValueError::new_err(format!(
+                "values: expected {} thrusts, got {}",
+                self.inner.len(),
+                values.len()
+            )));
+        }
+        self.inner.set_applied(&values);
+        Ok(())
+    }
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<RotorPlantCore>()?;
+    Ok(())
+}
