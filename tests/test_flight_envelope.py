@@ -10,6 +10,7 @@ import mujoco
 import numpy as np
 import pytest
 import scipy.linalg
+from lqi_reference import hover_state_model
 from scipy.optimize import least_squares
 
 from rdm.model import Robot
@@ -155,15 +156,7 @@ def _scipy_loop(mj, joints, pid, axis):
     mj.levelled(joints)
     w, mass = mj.rotor_wrenches()
     qbar = w[2:6]
-    inv_i = np.linalg.inv(mj.inertia())
-    a = np.zeros((12, 12))
-    for ax in range(4):
-        a[2 * ax, 2 * ax + 1] = 1.0
-        a[8 + ax, 2 * ax] = -1.0
-    b = np.zeros((12, 4))
-    b[1] = qbar[0] / mass
-    ang = inv_i @ qbar[1:4]
-    b[3], b[5], b[7] = ang
+    a, b = hover_state_model(mass, mj.inertia(), qbar)
     p = scipy.linalg.solve_continuous_are(a, b, np.diag(TABLE_V_W1), np.eye(4))
     k = -b.T @ p
     st, sign = (2, -1.0) if axis == "y" else (4, 1.0)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.linalg
+from lqi_reference import hover_state_model
 from onboard_rig import REG, Rig, raw_ticks
 
 from rdm.model import Robot
@@ -60,14 +61,7 @@ def scipy_gains(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     (roll, pitch, yaw, z) x (P, I, D) gains before clampGain."""
     o = model_at(q)
     m, inertia, qbar = o["mass"], o["inertia"], o["allocation_bar"]
-    a = np.zeros((12, 12))
-    for i in range(4):
-        a[2 * i, 2 * i + 1] = 1.0
-        a[8 + i, 2 * i] = -1.0
-    b = np.zeros((12, 4))
-    b[1] = qbar[0] / m
-    ang = np.linalg.solve(inertia, qbar[1:4])
-    b[3], b[5], b[7] = ang
+    a, b = hover_state_model(m, inertia, qbar)
     p = scipy.linalg.solve_continuous_are(a, b, W1, np.eye(4))
     k = -b.T @ p
     gains = np.zeros((4, 4, 3))

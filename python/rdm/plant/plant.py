@@ -155,7 +155,6 @@ class Plant:
             )
             for r in desc.rotors
         ]
-        self._esc_alpha: list[float] = []  # per ESC, 1 - exp(-dt/tau) (set in reset)
         self._ceiling_z = ceiling_height
         self._imu_noise = imu_noise or ImuNoise()
         self._wrench_noise = wrench_noise or WrenchNoise()
@@ -280,9 +279,8 @@ class Plant:
         )
         for esc, value in zip(self.escs, t, strict=True):
             esc.reset(float(value))
-        self._esc_alpha = [esc.lag_factor(m.opt.timestep) for esc in self.escs]
-        for i, alpha in enumerate(self._esc_alpha):
-            self._rotors.set_alpha(i, alpha)
+        for i, esc in enumerate(self.escs):  # per ESC, 1 - exp(-dt/tau), kept by the core
+            self._rotors.set_alpha(i, esc.lag_factor(m.opt.timestep))
         self._tracker.reset()
         self._external.clear()
         self._seed_sensors()

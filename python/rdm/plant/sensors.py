@@ -85,6 +85,19 @@ class ImuReading:
     saturated: bool
 
 
+def _bias_property(attr: str, doc: str) -> property:
+    """A read-only bias array whose assignment rebuilds the model's Rust core."""
+
+    def get(self) -> np.ndarray:
+        return getattr(self, attr)
+
+    def set_(self, value) -> None:
+        setattr(self, attr, _frozen(np.array(value, dtype=float)))
+        self._rebuild()
+
+    return property(get, set_, doc=doc)
+
+
 class ImuModel:
     """Adds bias, noise, saturation and quantisation to ideal IMU values.
 
@@ -128,35 +141,9 @@ class ImuModel:
         self._noise = value
         self._rebuild()
 
-    @property
-    def gyro_bias(self) -> np.ndarray:
-        """Constant gyro bias (rad/s), read-only array."""
-        return self._gyro_bias
-
-    @gyro_bias.setter
-    def gyro_bias(self, value) -> None:
-        self._gyro_bias = _frozen(np.array(value, dtype=float))
-        self._rebuild()
-
-    @property
-    def accel_bias(self) -> np.ndarray:
-        """Constant accelerometer bias (m/s^2), read-only array."""
-        return self._accel_bias
-
-    @accel_bias.setter
-    def accel_bias(self, value) -> None:
-        self._accel_bias = _frozen(np.array(value, dtype=float))
-        self._rebuild()
-
-    @property
-    def mag_bias(self) -> np.ndarray:
-        """Constant magnetometer bias (uT), read-only array."""
-        return self._mag_bias
-
-    @mag_bias.setter
-    def mag_bias(self, value) -> None:
-        self._mag_bias = _frozen(np.array(value, dtype=float))
-        self._rebuild()
+    gyro_bias = _bias_property("_gyro_bias", "Constant gyro bias (rad/s), read-only array.")
+    accel_bias = _bias_property("_accel_bias", "Constant accelerometer bias (m/s^2), read-only.")
+    mag_bias = _bias_property("_mag_bias", "Constant magnetometer bias (uT), read-only array.")
 
     def sample(self, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray) -> ImuReading:
         """Corrupt one ideal sample (nine normals of the generator's stream)."""
