@@ -4,6 +4,8 @@ the paper's QP; constraint checks; failure handling."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -291,14 +293,43 @@ def safe_command(prev: np.ndarray, lmax: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_rate_limit_too_tight_is_infeasible_with_safe_command(solver: str) -> None:
+    """Eq. (49) as printed (``relax_rate_limit=False``): the safe command holds the thrust."""
     inst = feasible_instances(1, seed=2)[0]
     inst["previous_thrust"] = np.zeros(4)
-    qp = PerchQp(thrust_rate_limit=[0.01] * 4, solver=solver)
+    qp = PerchQp(thrust_rate_limit=[0.01] * 4, solver=solver, relax_rate_limit=False)
     res = qp.solve(**inst)
     assert res.status == "infeasible"
     assert np.all(np.isfinite(res.thrust))
     assert np.allclose(res.thrust, np.zeros(4))
     assert qp.counters()["infeasible"] == 1
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_rate_limit_too_tight_steps_toward_the_problem_without_eq_48(solver: str) -> None:
+    """The default relaxation: an eq. (49) infeasible only through eq. (48) is solved without
+    it (here by the Clarabel wheel, on the strict problem's rows with rows 21-28 removed) and
+    the thrust moves toward that solution by at most δλ_perch."""
+    rate = 0.5
+    for inst in feasible_instances(10, seed=2):
+        inst["previous_thrust"] = np.zeros(4)
+        strict = PerchQp(thrust_rate_limit=[rate] * 4, solver=solver, relax_rate_limit=False)
+        assert strict.solve(**inst).status == "infeasible"
+        prob = strict.problem_data()
+        keep = np.r_[0:21]  # rows 21-28 are eq. (48)
+        relaxed_prob = dataclasses.replace(
+            prob,
+            A=prob.A[keep, :],
+            b=prob.b[keep],
+            nonnegative_cone=prob.nonnegative_cone - 8,
+        )
+        target = prob.variable_scale * clarabel_solve(relaxed_prob)[:4]
+        expected = np.clip(np.clip(target, -rate, rate), 0.0, None)
+        qp = PerchQp(thrust_rate_limit=[rate] * 4, solver=solver)
+        res = qp.solve(**inst)
+        assert res.status == "rate_limited" and res.ok
+        assert np.allclose(res.thrust, expected, atol=THRUST_ATOL), (res.thrust, expected)
+        assert np.all(np.abs(res.thrust) <= rate + 1e-9)
+        assert qp.counters()["rate_limited"] == 1 and qp.counters()["infeasible"] == 0
 
 
 @pytest.mark.parametrize("solver", SOLVERS)

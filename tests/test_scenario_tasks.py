@@ -123,7 +123,7 @@ def test_painting_brush_slides_half_a_metre_in_contact(painting):
     assert x.max() - x.min() >= 0.5  # covered, not only jittered
     assert x[-1] > x[0] + 0.5  # along +x
     # the contact stayed on the panel's top face, along the stroke line
-    lay = task_objects.TaskLayout()
+    lay = script.layout
     assert np.all(np.abs(point[on, 2] - lay.panel_top_z) < 2e-3)
     assert np.all(np.abs(point[on, 1] - lay.nominal_foot[1]) < 0.03)
     assert _metrics(res)["brush path length in contact"] == pytest.approx(path, rel=1e-6)
@@ -155,3 +155,22 @@ def test_every_task_is_a_registered_scenario():
     assert SCENARIOS["painting"].run is tasks.run_painting
     assert SCENARIOS["valve"].run is tasks.run_valve
     assert SCENARIOS["painting"].default_duration == tasks.duration_of("painting")
+
+
+def test_objects_are_placed_around_the_perched_foot(painting):
+    """The panel was moved to the foot as it perched (task_objects.place_objects): MuJoCo's
+    panel geom sits at the layout's offset from the truth foot position at the task start."""
+    res, script = painting
+    a = truth_arrays(res.stack)
+    k = int(np.searchsorted(a["t"], script.t_task))
+    foot = a["foot"][k, :2]
+    lay = script.compiled_layout
+    m, d = res.stack.plant.model, res.stack.plant.data
+    centre = d.geom_xpos[m.geom(task_objects.PANEL).id]
+    expected_x = foot[0] + 0.5 * (lay.panel_x[0] + lay.panel_x[1])
+    assert centre[0] == pytest.approx(expected_x, abs=2e-3)  # the foot moves < 2 mm perched
+    assert centre[1] == pytest.approx(foot[1], abs=2e-3)
+    assert centre[2] == pytest.approx(lay.panel_top_z - 0.01, abs=1e-9)
+    # and not where it was compiled (the foot perched away from the nominal spot)
+    compiled_x = lay.nominal_foot[0] + 0.5 * (lay.panel_x[0] + lay.panel_x[1])
+    assert abs(centre[0] - compiled_x) > 5e-3

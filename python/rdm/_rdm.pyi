@@ -588,7 +588,9 @@ class CorePlanner:
 # PERCH_SOLVER_NAMES ("active_set", the default, or "clarabel"); "active_set_max_iter"
 # (int, 1..=500) caps the active-set passes before Clarabel takes over. Solution dicts carry
 # "fallback" (bool: Clarabel answered an active-set tick); counters() carries "fallback"
-# (count of such ticks) next to the per-status counts.
+# (count of such ticks) next to the per-status counts. "relax_rate_limit" (bool, default
+# True): an eq. (49) infeasible only through eq. (48) is solved without it and the thrust
+# steps toward that solution (status "rate_limited"; False: "infeasible", thrust held).
 from typing import Literal as _Literal
 
 PerchSolverName = _Literal["active_set", "clarabel"]

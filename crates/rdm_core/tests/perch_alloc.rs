@@ -10,7 +10,7 @@ use perch_common::random_instance;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rdm_core::control::perch::{
-    PerchController, PerchCounters, PerchParams, PerchSolver, PerchStatus,
+    PerchController, PerchCounters, PerchParams, PerchQp, PerchSolver, PerchStatus,
 };
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 
@@ -19,8 +19,8 @@ static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
 
 /// Runs 2000 random ticks (every 97th with a NaN wrench, every 5th with a flight thrust) after
 /// one warm-up tick; returns (allocations + reallocations, net bytes freed ≥ allocated,
-/// counters).
-fn count_tick_allocations(solver: PerchSolver) -> (usize, bool, PerchCounters) {
+/// counters at the end, counters after the warm-up).
+fn count_tick_allocations(solver: PerchSolver) -> (usize, bool, PerchCounters, PerchCounters) {
     let params = PerchParams {
         solver,
         ..PerchParams::default()
@@ -39,6 +39,8 @@ fn count_tick_allocations(solver: PerchSolver) -> (usize, bool, PerchCounters) {
         first.mass,
         None,
     );
+
+    let warm_up = controller.counters();
 
     let region = Region::new(GLOBAL);
     for (k, input) in inputs.iter().enumerate() {
@@ -60,11 +62,12 @@ fn count_tick_allocations(solver: PerchSolver) -> (usize, bool, PerchCounters) {
         change.allocations + change.reallocations,
         change.bytes_deallocated >= change.bytes_allocated,
         controller.counters(),
+        warm_up,
     )
 }
 
 fn clarabel_tick_allocates_only_clarabels_timer() {
-    let (allocations, freed, counters) = count_tick_allocations(PerchSolver::Clarabel);
+    let (allocations, freed, counters, warm_up) = count_tick_allocations(PerchSolver::Clarabel);
     assert!(counters.count(PerchStatus::Solved) > 1000, "{counters:?}");
     assert!(
         counters.count(PerchStatus::NonFiniteInput) >= 20,
@@ -75,7 +78,13 @@ fn clarabel_tick_allocates_only_clarabels_timer() {
     // next insert (clarabel src/timers/timers.rs; no setting disables the timers). Our code
     // allocates nothing: the NaN ticks that skip the solver allocate nothing. Pin the count
     // exactly, and require the block to be freed again so memory cannot grow.
-    let solver_calls = counters.total() - 1 - counters.count(PerchStatus::NonFiniteInput);
+    // An infeasible first solve is retried without eq. (48) (`relax_rate_limit`): those
+    // ticks end rate limited or infeasible and call the solver twice.
+    let counted = |s: PerchStatus| counters.count(s) - warm_up.count(s);
+    let retried = counted(PerchStatus::RateLimited) + counted(PerchStatus::Infeasible);
+    assert!(retried >= 20, "{counters:?}");
+    let solver_calls =
+        counters.total() - warm_up.total() - counted(PerchStatus::NonFiniteInput) + retried;
     assert_eq!(
         allocations, solver_calls as usize,
         "{allocations} allocations, {solver_calls} solves"
@@ -83,10 +92,11 @@ fn clarabel_tick_allocates_only_clarabels_timer() {
     assert!(freed, "net growth");
 }
 
-/// The default path allocates nothing at all: solved, infeasible and NaN ticks alike (a
+/// The default path allocates nothing at all: solved, rate-limited, infeasible and NaN ticks
+/// alike (a
 /// fallback to Clarabel would allocate its timer; none happens on these instances).
 fn active_set_tick_allocates_nothing() {
-    let (allocations, _, counters) = count_tick_allocations(PerchSolver::ActiveSet);
+    let (allocations, _, counters, _) = count_tick_allocations(PerchSolver::ActiveSet);
     assert!(counters.count(PerchStatus::Solved) > 1000, "{counters:?}");
     assert!(
         counters.count(PerchStatus::Infeasible) >= 20,
@@ -100,10 +110,42 @@ fn active_set_tick_allocates_nothing() {
     assert_eq!(allocations, 0, "{counters:?}");
 }
 
+/// The rate relaxation's second solve allocates nothing either: presses from zero thrust
+/// with an `ε_z` beyond one rate step (rate limited on the first tick).
+fn active_set_rate_limited_ticks_allocate_nothing() {
+    let params = PerchParams {
+        epsilon_z: 14.0,
+        ..PerchParams::default()
+    };
+    let mut qp = PerchQp::new(params.clone()).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let inputs: Vec<_> = (0..500)
+        .map(|_| {
+            let mut input = random_instance(&mut rng, &params);
+            input.previous_thrust = [0.0; 4];
+            input
+        })
+        .collect();
+    qp.solve(&inputs[0]);
+    let warm_up = qp.counters();
+    let region = Region::new(GLOBAL);
+    for input in &inputs {
+        qp.solve(input);
+    }
+    let change = region.change();
+    let counters = qp.counters();
+    let limited =
+        counters.count(PerchStatus::RateLimited) - warm_up.count(PerchStatus::RateLimited);
+    assert!(limited >= 100, "{counters:?}");
+    assert_eq!(counters.fallbacks(), 0, "{counters:?}");
+    assert_eq!(change.allocations + change.reallocations, 0, "{counters:?}");
+}
+
 // Runs as a plain `main` (harness = false): the allocation counter is process-global, and
 // libtest's own threads would otherwise allocate while a step is being counted.
 fn main() {
     clarabel_tick_allocates_only_clarabels_timer();
     active_set_tick_allocates_nothing();
+    active_set_rate_limited_ticks_allocate_nothing();
     println!("perch_alloc: ok");
 }

@@ -42,7 +42,11 @@ fn instance_count() -> usize {
 
 #[test]
 fn random_feasible_instances_all_solve_and_satisfy_constraints() {
-    let params = PerchParams::default();
+    // eq. (49) itself: no rate relaxation (tests/perch_rate_relax.rs covers that)
+    let params = PerchParams {
+        relax_rate_limit: false,
+        ..PerchParams::default()
+    };
     assert_eq!(params.solver, PerchSolver::ActiveSet);
     let mut qp = PerchQp::new(params.clone()).unwrap();
     let mut clarabel = PerchQp::new(PerchParams {
@@ -173,6 +177,7 @@ fn general_parameters_agree_with_clarabel() {
             wrench_mask: [true, block % 2 == 0, block % 3 == 0, block % 5 == 0],
             perch_rotors: [true; 4],
             zmp_z: rng.random_range(-0.05..0.05),
+            relax_rate_limit: false,
             ..PerchParams::default()
         };
         let mut qp = PerchQp::new(params.clone()).unwrap();

@@ -107,6 +107,7 @@ fn parse_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<PerchParams> {
                 })?
             }
             "active_set_max_iter" => p.active_set_max_iter = value.extract().map_err(bad)?,
+            "relax_rate_limit" => p.relax_rate_limit = value.extract().map_err(bad)?,
             "max_iter" => p.max_iter = value.extract().map_err(bad)?,
             "tolerance" => p.tolerance = value.extract().map_err(bad)?,
             _ => return Err(err(format!("unknown perch parameter `{key}`"))),
@@ -139,6 +140,7 @@ fn params_dict<'py>(py: Python<'py>, p: &PerchParams) -> PyResult<Bound<'py, PyD
     d.set_item("gravity", p.gravity)?;
     d.set_item("solver", p.solver.as_str())?;
     d.set_item("active_set_max_iter", p.active_set_max_iter)?;
+    d.set_item("relax_rate_limit", p.relax_rate_limit)?;
     d.set_item("max_iter", p.max_iter)?;
     d.set_item("tolerance", p.tolerance)?;
     Ok(d)

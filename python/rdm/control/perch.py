@@ -57,8 +57,9 @@ class PerchResult:
 
     @property
     def ok(self) -> bool:
-        """True when the thrust is the QP solution, False when it is the safe command."""
-        return self.status in ("solved", "almost_solved")
+        """True when the thrust is the QP solution (``rate_limited``: stepping toward the
+        solution without eq. 48), False when it is the safe command."""
+        return self.status in ("solved", "almost_solved", "rate_limited")
 
     @classmethod
     def _from(cls, d: dict[str, Any]) -> PerchResult:

@@ -19,7 +19,9 @@ object, so one perch can run every task):
 * gripper: four finger capsules at (y, z) = (+-``FINGER_Y``, +-``FINGER_Z``) that straddle
   the valve's handle bar on both sides of the hinge.
 
-Objects (positions relative to the nominal perch spot of the foot, see :class:`TaskLayout`):
+Objects (positions relative to the foot, see :class:`TaskLayout`; compiled around the nominal
+perch spot and moved by :func:`place_objects` to the measured perched foot when the task
+starts):
 a horizontal wood board below the arm (drilling), a horizontal panel (painting; the paper
 paints a wall, see docs/scenarios.md for why the hanging arm cannot), and a
 valve: a hand-wheel on a vertical hinge with damping and dry friction (opening resistance).
@@ -27,7 +29,7 @@ valve: a hand-wheel on a vertical hinge with damping and dry friction (opening r
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -68,6 +70,9 @@ BOARD = "task_board"
 PANEL = "task_panel"
 VALVE = "task_valve"
 VALVE_JOINT = "task_valve_hinge"
+VALVE_STEM = "task_valve_stem"
+#: The world bodies of the objects (:func:`place_objects` moves them together).
+OBJECT_BODIES = (BOARD, PANEL, VALVE, VALVE_STEM)
 DRILL_GEOM = "tool_drill"
 BRUSH_GEOM = "tool_brush"
 FINGER_GEOMS = ("tool_finger_lf", "tool_finger_rf", "tool_finger_lb", "tool_finger_rb")
@@ -102,6 +107,10 @@ class TaskLayout:
     #: brush-panel contact: bristle tips on wet paint, softer than wood (10 ms). With the
     #: 2 ms of the board the light brush head chattered (zero-force ticks while sliding).
     panel_solref: tuple[float, float] = (0.01, 1.0)
+
+    def around_foot(self, x: float, y: float) -> TaskLayout:
+        """The same layout with its foot at world ``(x, y)`` (z, the heights, unchanged)."""
+        return replace(self, nominal_foot=(float(x), float(y), self.nominal_foot[2]))
 
     def board_point(self, dx: float, dy: float) -> np.ndarray:
         """World point on the board's top face at (foot x + dx, foot y + dy)."""
@@ -244,13 +253,13 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
             pos=[0.0, 0.0, -0.035],  # below the finger tips (they reach -0.025)
             rgba=[0.6, 0.1, 0.1, 1.0],
         )
-        stem = spec.worldbody.add_body(name="task_valve_stem")
+        stem = spec.worldbody.add_body(name=VALVE_STEM)
         _object_geom(
             stem,
             0,
             layout.board_friction,
             sr,
-            name="task_valve_stem",
+            name=VALVE_STEM,
             type=cyl,
             size=[0.015, (axis[2] - 0.03) / 2, 0],
             pos=[axis[0], axis[1], (axis[2] - 0.03) / 2],
@@ -275,6 +284,29 @@ def enable_objects(model: mujoco.MjModel) -> int:
             body = model.geom_bodyid[i]
             model.body_conaffinity[body] |= _AFFINITY[name]
             n += 1
+    return n
+
+
+def place_objects(model: mujoco.MjModel, compiled: TaskLayout, placed: TaskLayout) -> int:
+    """Move the objects compiled around ``compiled``'s foot so they sit around ``placed``'s
+    foot (a translation in x, y). Returns how many bodies moved.
+
+    ASSUMPTION (as :func:`enable_objects`: the objects are brought under the perched robot):
+    they are placed relative to where the foot actually perched, not to a fixed world spot.
+    The foot lands within a few cm of its planned point (docs/foldgains.md), and the valve's
+    workable window is only about -15..+10 mm of foot position, so a fixed placement makes the
+    outcome depend on the landing. Call it while the objects' contacts are still off."""
+    dx = placed.nominal_foot[0] - compiled.nominal_foot[0]
+    dy = placed.nominal_foot[1] - compiled.nominal_foot[1]
+    n = 0
+    for name in OBJECT_BODIES:
+        try:
+            body = model.body(name)
+        except KeyError:
+            continue  # this task's scene has no such object
+        model.body_pos[body.id, 0] += dx
+        model.body_pos[body.id, 1] += dy
+        n += 1
     return n
 
 

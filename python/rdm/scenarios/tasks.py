@@ -156,13 +156,21 @@ class TaskLog:
 class TaskScript(perching.PerchingScript):
     """Perching's phase machine, then the task's waypoints once it holds."""
 
-    def __init__(self, task: str, layout: obj.TaskLayout) -> None:
-        # the configured gains through the approach: the objects are placed around the spot
-        # where the foot landed with them (TaskLayout.nominal_foot; docs/foldgains.md)
-        super().__init__(motion=(), timing=perching.CONFIGURED_GAINS_TIMING)
+    def __init__(
+        self,
+        task: str,
+        layout: obj.TaskLayout,
+        timing: perching.PerchTiming | None = None,
+    ) -> None:
+        # perching's timing, fold gains included (docs/foldgains.md); the objects follow the
+        # foot wherever it perched (task_objects.place_objects)
+        super().__init__(motion=(), timing=timing or perching.PerchTiming())
         if task not in TASKS:
             raise ValueError(f"task: one of {TASKS}, got {task!r}")
         self.task = task
+        #: the layout the scene was compiled with (around TaskLayout.nominal_foot)
+        self.compiled_layout = layout
+        #: where the objects are: ``layout`` around the perched foot once the task started
         self.layout = layout
         self.log = TaskLog()
         self.t_task: float | None = None
@@ -194,6 +202,9 @@ class TaskScript(perching.PerchingScript):
     def _start(self, stack: Stack, now: float) -> None:
         gt = stack.plant.ground_truth()  # the foot pose as mocap gives it
         base = np.r_[gt.base_position, task_ik.rpy_of_quaternion(gt.base_quaternion)]
+        # bring the objects (contacts still off) to the perched foot
+        self.layout = self.compiled_layout.around_foot(gt.base_position[0], gt.base_position[1])
+        obj.place_objects(stack.plant.model, self.compiled_layout, self.layout)
         robot = stack.onboard.robot
         q = task_ik.level(np.r_[perching.PERCH_POSTURE, np.zeros(robot.n_q - 6)])
         q_now = q.copy()  # where the joints are (the perching posture): the path starts here
@@ -363,10 +374,12 @@ def run_task(
     uart: str = "inproc",
     speed: float | None = None,
     log: bool = True,
+    timing: perching.PerchTiming | None = None,
     **stack_overrides: Any,
 ) -> ScenarioResult:
     """Run one task scenario end to end (perch, then the task) and evaluate it. The result's
-    ``script`` is the :class:`TaskScript` (its per-tick contact log)."""
+    ``script`` is the :class:`TaskScript` (its per-tick contact log). ``timing``: the perching
+    phase machine's (default :class:`perching.PerchTiming`, fold gains on)."""
     from rdm.model import Robot
 
     duration = duration_of(task) if duration is None else duration
@@ -375,7 +388,7 @@ def run_task(
     layout = _valve_layout(Robot.default()) if task == "valve" else obj.TaskLayout()
     stack_overrides.setdefault("scene", obj.scene((task,), layout))
     opts = sim_stack_options(seed, uart, speed=speed, log=log, **stack_overrides)
-    script = TaskScript(task, layout)
+    script = TaskScript(task, layout, timing)
     stack = build_stack(task, base, opts, script)
     wall = run_stack(stack, duration)
     result = evaluate(stack, script)

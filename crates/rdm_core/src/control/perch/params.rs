@@ -76,6 +76,12 @@ pub struct PerchParams {
     pub max_iter: u32,
     /// Clarabel gap and feasibility tolerance (scaled problem).
     pub tolerance: f64,
+    /// Our improvement (not in the paper): when eq. (49) is infeasible, solve it again
+    /// without the rate limit of eq. (48) and, if that is feasible, move the thrust toward
+    /// its solution by at most `δλ_perch` ([`super::PerchStatus::RateLimited`]). Without it
+    /// an `ε_z` beyond one rate step from zero thrust (ε_z > 2 δλ_perch with two perch
+    /// rotors) is infeasible on every tick and the held thrust never presses (latch-up).
+    pub relax_rate_limit: bool,
 }
 
 impl Default for PerchParams {
@@ -99,6 +105,7 @@ impl Default for PerchParams {
             active_set_max_iter: 50,
             max_iter: 50,
             tolerance: 1e-8,
+            relax_rate_limit: true,
         }
     }
 }

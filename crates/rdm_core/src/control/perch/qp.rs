@@ -97,7 +97,8 @@ pub struct PerchInput {
 /// Result of one perching QP. Every field is finite whatever the input.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PerchSolution {
-    /// Outcome; anything but solved/almost solved means `thrust` is the safe command.
+    /// Outcome; anything but solved/almost solved/rate limited means `thrust` is the safe
+    /// command.
     pub status: PerchStatus,
     /// `λ_perch,t` [N], inside `[thrust_min, thrust_max]`.
     pub thrust: [f64; N_ROTORS],
@@ -325,15 +326,82 @@ impl PerchQp {
         }
 
         self.fill_rows(input, &perch_allocation, &thrust_max);
+        let solution = self.solve_rows(input, &thrust_max);
+        if solution.status != PerchStatus::Infeasible || !self.params.relax_rate_limit {
+            return solution;
+        }
+        // Infeasible: is it only the rate limit of eq. (48)? Solve without it and step toward
+        // that solution (clip_to_box keeps the step inside δλ_perch).
+        self.open_rate_rows(&thrust_max);
+        let relaxed = self.solve_rows(input, &thrust_max);
+        if !relaxed.status.is_solution() {
+            return PerchSolution {
+                fallback: solution.fallback || relaxed.fallback,
+                ..solution
+            };
+        }
+        // The reported wrench is the one the applied (rate-limited) thrust commands, so the
+        // feedback term of eq. (38) refers to what was actually applied.
+        let foot_wrench = self.commanded_wrench(&relaxed.thrust, &perch_allocation, input);
+        let mut out = self.solution(
+            PerchStatus::RateLimited,
+            relaxed.thrust,
+            foot_wrench,
+            thrust_max,
+            input,
+            solution.iterations.saturating_add(relaxed.iterations),
+        );
+        out.fallback = solution.fallback || relaxed.fallback;
+        out
+    }
+
+    /// Solve the rows written by `fill_rows` with the configured solver (active set with
+    /// Clarabel as fallback, or Clarabel).
+    fn solve_rows(&mut self, input: &PerchInput, thrust_max: &[f64; N_ROTORS]) -> PerchSolution {
         if self.params.solver == PerchSolver::ActiveSet {
-            if let Some(solution) = self.solve_active_set(input, &thrust_max) {
+            if let Some(solution) = self.solve_active_set(input, thrust_max) {
                 return solution;
             }
-            let mut solution = self.solve_clarabel(input, thrust_max);
+            let mut solution = self.solve_clarabel(input, *thrust_max);
             solution.fallback = true;
             return solution;
         }
-        self.solve_clarabel(input, thrust_max)
+        self.solve_clarabel(input, *thrust_max)
+    }
+
+    /// Open the rate rows of eq. (48) so that they never bind inside the bounds of eqs.
+    /// (45)-(47): `λ ≤ max(λ_max, 0) + δ` and `−λ ≤ δ` (their coefficients are ±1, so the row
+    /// normalisation of `fill_rows` left them unscaled).
+    fn open_rate_rows(&mut self, thrust_max: &[f64; N_ROTORS]) {
+        let s = self.scale;
+        let rates = self.params.thrust_rate_limit;
+        for (i, (max, rate)) in thrust_max.iter().zip(rates.iter()).enumerate() {
+            self.b[ROW_RATE_HIGH + i] = (max.max(0.0) + rate) / s;
+            self.b[ROW_RATE_LOW + i] = rate / s;
+        }
+    }
+
+    /// `W_foot,t` that `thrust` commands through eq. (38): controlled components
+    /// `Q̄_perch,k λ − κ (W_t−1,k − W̃_k)`, the others the measured `W̃_k`.
+    fn commanded_wrench(
+        &self,
+        thrust: &[f64; N_ROTORS],
+        perch_allocation: &Matrix4<f64>,
+        input: &PerchInput,
+    ) -> [f64; 4] {
+        let [_, _, fz, mx, my, mz] = input.foot_wrench;
+        let measured = [fz, mx, my, mz];
+        let mut out = measured;
+        for (k, w) in out.iter_mut().enumerate() {
+            if self.params.wrench_mask[k] {
+                let produced: f64 = (0..N_ROTORS)
+                    .map(|i| perch_allocation[(k, i)] * thrust[i])
+                    .sum();
+                *w = produced
+                    - self.params.feedback_gain * (input.previous_foot_wrench[k] - measured[k]);
+            }
+        }
+        out
     }
 
     /// The default path; `None` hands the tick to Clarabel (iteration cap, unsure).
@@ -635,6 +703,7 @@ impl PerchQp {
 
     /// `A` of the scaled problem as CSC `(colptr, rowval, nzval)`, as built for the last
     /// solved tick (the active-set solver reduces exactly these rows; Clarabel gets them).
+    /// `A` never changes for the rate relaxation; `b` does (see [`Self::b`]).
     pub fn a_csc(&self) -> (&[usize], &[usize], &[f64]) {
         (&self.a_colptr, &self.a_rowval, &self.a_nzval)
     }
@@ -644,7 +713,8 @@ impl PerchQp {
         &self.q
     }
 
-    /// `b` of the scaled problem, as built for the last solved tick (see [`Self::a_csc`]).
+    /// `b` of the scaled problem, as built for the last solved tick (see [`Self::a_csc`]);
+    /// after a [`PerchStatus::RateLimited`] tick, with the rate rows of eq. (48) opened.
     pub fn b(&self) -> &[f64] {
         &self.b
     }

@@ -2,8 +2,9 @@
 
 /// What happened in one perching tick.
 ///
-/// Every status other than [`PerchStatus::Solved`] and [`PerchStatus::AlmostSolved`]
-/// means the thrust is the documented safe command (see `PerchQp::safe_thrust`).
+/// Every status other than [`PerchStatus::Solved`], [`PerchStatus::AlmostSolved`] and
+/// [`PerchStatus::RateLimited`] means the thrust is the documented safe command (see
+/// `PerchQp::safe_thrust`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum PerchStatus {
     /// The active-set solver's KKT check passed, or Clarabel converged to the requested
@@ -24,11 +25,16 @@ pub enum PerchStatus {
     NonFiniteInput,
     /// `Q̄(q)` of eq. (47) is singular, or every controlled row of `Q̄_perch` is zero.
     SingularAllocation,
+    /// Eq. (49) was infeasible only because of the rate limit of eq. (48) (our improvement,
+    /// `PerchParams::relax_rate_limit`): the problem without it was solved and the thrust
+    /// moves toward that solution by at most `δλ_perch` (e.g. a press `ε_z` larger than one
+    /// step can reach from zero thrust).
+    RateLimited,
 }
 
 impl PerchStatus {
     /// All statuses in counter order.
-    pub const ALL: [PerchStatus; 7] = [
+    pub const ALL: [PerchStatus; 8] = [
         PerchStatus::Solved,
         PerchStatus::AlmostSolved,
         PerchStatus::Infeasible,
@@ -36,11 +42,15 @@ impl PerchStatus {
         PerchStatus::NumericalError,
         PerchStatus::NonFiniteInput,
         PerchStatus::SingularAllocation,
+        PerchStatus::RateLimited,
     ];
 
     /// True when the thrust comes from the QP solution rather than the safe command.
     pub fn is_solution(self) -> bool {
-        matches!(self, PerchStatus::Solved | PerchStatus::AlmostSolved)
+        matches!(
+            self,
+            PerchStatus::Solved | PerchStatus::AlmostSolved | PerchStatus::RateLimited
+        )
     }
 
     /// Stable snake_case name (used by the bindings and logs).
@@ -53,6 +63,7 @@ impl PerchStatus {
             PerchStatus::NumericalError => "numerical_error",
             PerchStatus::NonFiniteInput => "non_finite_input",
             PerchStatus::SingularAllocation => "singular_allocation",
+            PerchStatus::RateLimited => "rate_limited",
         }
     }
 
@@ -65,6 +76,7 @@ impl PerchStatus {
             PerchStatus::NumericalError => 4,
             PerchStatus::NonFiniteInput => 5,
             PerchStatus::SingularAllocation => 6,
+            PerchStatus::RateLimited => 7,
         }
     }
 }
@@ -72,7 +84,7 @@ impl PerchStatus {
 /// How many ticks ended in each [`PerchStatus`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PerchCounters {
-    counts: [u64; 7],
+    counts: [u64; 8],
     fallbacks: u64,
 }
 
@@ -106,6 +118,9 @@ impl PerchCounters {
 
     /// Ticks whose thrust is the safe command.
     pub fn failures(&self) -> u64 {
-        self.total() - self.count(PerchStatus::Solved) - self.count(PerchStatus::AlmostSolved)
+        self.total()
+            - self.count(PerchStatus::Solved)
+            - self.count(PerchStatus::AlmostSolved)
+            - self.count(PerchStatus::RateLimited)
     }
 }
