@@ -147,6 +147,10 @@ class StackOptions:
     #: byte-identical logs, tests/test_neuron_bank.py) or "python" = one
     #: :class:`NeuronMirror` node per board (the reference).
     neuron_backend: str = "rust"
+    #: Spinal's CAN master: "rust" = :class:`rdm.nodes.can_master_rust.RustCanMaster`
+    #: (byte-identical logs, tests/test_can_master_rust.py) or "python" = the reference
+    #: :class:`rdm.nodes.can_master.CanMaster`.
+    master_backend: str = "rust"
     #: Rotor (ESC + motor) first-order lag [s]; None = the plant's default (0.05 s).
     #: ASSUMPTION 0.01 s: with 0.05 s the LQI roll loop (I_xx = 0.004 kg m^2) is unstable.
     esc_tau: float | None = 0.01
@@ -311,6 +315,7 @@ def build_stack(
         boot_delay_ms=opt.boot_delay_ms,
         gyro_calib_duration_s=opt.gyro_calib_duration_s,
         time_matched=opt.spinal_time_matched,
+        master_backend=opt.master_backend,
     )
     config = opt.onboard or OnboardConfig()
     from dataclasses import replace
