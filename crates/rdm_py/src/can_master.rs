@@ -8,6 +8,9 @@ use pyo3::types::{PyBytes, PyList, PyTuple};
 use rdm_core::firmware::can_master::{
     CanMaster as CoreMaster, EventKind, MasterError, MasterState, ServoEntry, RX_ERROR_NAMES,
 };
+use rdm_core::firmware::can_wire::{
+    CanWire as CoreWire, Sender, DEFAULT_LOG_CAPACITY, DEFAULT_QUEUE_CAPACITY,
+};
 use rdm_core::firmware::neuron_tx::{RxFrame, FLAG_ERROR, FLAG_EXTENDED, FLAG_FD, FLAG_REMOTE};
 use rdm_core::firmware::spinal_frame::REPLY_KINDS;
 
@@ -136,6 +139,26 @@ impl CanMaster {
         }
         let events = self.core.events().count();
         Ok((state_index(self.core.state), events, list))
+    }
+
+    /// [`tick_ms`] on a [`CanWire`]: receive what the Neurons sent, send on the wire stamped
+    /// `stamp` (the channel clock); returns `(state_index, pending_events, frames_sent,
+    /// log_len)`.
+    fn tick_wire(
+        &mut self,
+        now_ms: i64,
+        stamp: f64,
+        wire: &Bound<'_, CanWire>,
+    ) -> (u8, usize, usize, usize) {
+        let mut w = wire.borrow_mut();
+        w.core.take_for_master(&mut self.rx);
+        let out = self.core.tick_ms(now_ms, &self.rx);
+        for e in out {
+            w.core.send(Sender::Master, stamp, e.frame);
+        }
+        let sent = out.len();
+        let events = self.core.events().count();
+        (state_index(self.core.state), events, sent, w.core.log_len())
     }
 
     /// Phase index: 0 booting, 1 enumerating, 2 configuring, 3 running, 4 disabled.
@@ -311,9 +334,59 @@ impl CanMaster {
     }
 }
 
-/// Register `CanMaster` and `CanMasterError`.
+/// The Neuron bus between this master and a `NeuronBank` without python-can (see
+/// `rdm_core::firmware::can_wire`): delivery queues and the candump log.
+#[pyclass(module = "rdm._rdm")]
+pub struct CanWire {
+    /// The core wire (the bank binding sends and receives through it too).
+    pub core: CoreWire,
+}
+
+#[pymethods]
+impl CanWire {
+    #[new]
+    #[pyo3(signature = (queue_capacity=DEFAULT_QUEUE_CAPACITY, log_capacity=DEFAULT_LOG_CAPACITY, logging=true))]
+    fn new(queue_capacity: usize, log_capacity: usize, logging: bool) -> Self {
+        CanWire {
+            core: CoreWire::new(queue_capacity, log_capacity, logging),
+        }
+    }
+
+    /// Frames sent on the wire so far.
+    #[getter]
+    fn frames(&self) -> u64 {
+        self.core.frames
+    }
+
+    /// `(queue_dropped, log_dropped)`.
+    #[getter]
+    fn dropped(&self) -> (u64, u64) {
+        (self.core.queue_dropped, self.core.log_dropped)
+    }
+
+    /// Frames waiting in the capture log.
+    #[getter]
+    fn log_len(&self) -> usize {
+        self.core.log_len()
+    }
+
+    /// True when a frame other than a PWM broadcast (id >= 0x100) waits for the Neurons.
+    fn neurons_pending_non_pwm(&self) -> bool {
+        self.core.for_neurons().iter().any(|f| f.id >= 0x100)
+    }
+
+    /// The logged frames as `candump -L` lines on `channel`; empties the log.
+    fn drain_log(&mut self, channel: &str) -> String {
+        let mut out = String::with_capacity(self.core.log_len() * 40);
+        self.core.drain_log(channel, &mut out);
+        out
+    }
+}
+
+/// Register `CanMaster`, `CanWire` and `CanMasterError`.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
+    m.add_class::<CanWire>()?;
     m.add("CanMasterError", py.get_type::<CanMasterError>())?;
     m.add_class::<CanMaster>()?;
     Ok(())

@@ -4,7 +4,9 @@
 Same frames, same order, same state and counters as the Python master on the same bus; the
 schedule, decoding and tables live in ``rdm_core::firmware::can_master``. Frames go to and
 from a python-can bus exactly as the Python master sends them (``send_standard`` when the bus
-has it). Servo and Neuron entries are live read-only views of the core's tables.
+has it), or, given a :class:`rdm.link.can_wire.CanWireLink` instead of a bus, straight to the
+Rust Neuron bank on the same wire. Servo and Neuron entries are live read-only views of the
+core's tables.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import can
 
 from rdm import _rdm
 from rdm.link.can import send_neuron_payload
+from rdm.link.can_wire import DRAIN_AT, CanWireLink
 from rdm.protocol import neuron as nr
 from rdm.protocol.neuron.servo import WORD_VALUE_MAX, WORD_VALUE_MIN
 
@@ -149,8 +152,9 @@ class RustCanMaster:
         return self._bus
 
     @bus.setter
-    def bus(self, bus: can.BusABC) -> None:
+    def bus(self, bus: can.BusABC | CanWireLink) -> None:
         self._bus = bus
+        self._wire = bus if isinstance(bus, CanWireLink) else None
         self._send_standard = getattr(bus, "send_standard", None)
 
     # ------------------------------------------------------------------ node interface
@@ -160,6 +164,17 @@ class RustCanMaster:
 
     def tick_ms(self, now_ms: int) -> None:
         """One 1 kHz core-task tick: receive what the bus holds, then the schedule."""
+        link = self._wire
+        if link is not None:
+            link.check_alone()
+            state, self._pending_events, sent, logged = self._core.tick_wire(
+                now_ms, link.clock(), link.wire
+            )
+            self.state = _STATES[state]
+            self.tx_count += sent
+            if logged >= DRAIN_AT:
+                link.drain()
+            return
         recv = self._bus.recv
         messages = []
         for _ in range(MAX_FRAMES_PER_TICK):

@@ -5,6 +5,7 @@
 //! simulated run writes the same CAN log with either implementation.
 
 pub mod can_master;
+pub mod can_wire;
 pub mod neuron_bank;
 pub mod neuron_board;
 pub mod neuron_frame;
