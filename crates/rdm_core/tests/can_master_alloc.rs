@@ -56,7 +56,13 @@ fn frames(t: i64, out: &mut [RxFrame; 8]) -> usize {
     n
 }
 
+/// One test (the allocator counts every thread, the harness's too): both checks in turn.
 #[test]
+fn can_bus_ticks_allocate_nothing() {
+    master_ticks_allocate_nothing();
+    master_bank_and_wire_allocate_nothing();
+}
+
 fn master_ticks_allocate_nothing() {
     let mut m = CanMaster::new(0, 0);
     let mut buf = [RxFrame::default(); 8];
@@ -88,4 +94,62 @@ fn master_ticks_allocate_nothing() {
     assert_eq!(m.motor_number, 3);
     assert!(sent_total > 7000, "the schedule ran: {sent_total} frames");
     assert!(m.rx_error_total() > 100, "bad frames counted");
+}
+
+/// Master and a Neuron bank on a `CanWire`, with the capture log drained into a buffer
+/// reserved at setup: the whole bus allocates nothing per tick.
+fn master_bank_and_wire_allocate_nothing() {
+    use rdm_core::firmware::can_wire::{CanWire, Sender};
+    use rdm_core::firmware::neuron_bank::NeuronBank;
+    use rdm_core::firmware::neuron_board::BoardSettings;
+    use rdm_core::firmware::neuron_servo::ServoConfig;
+
+    let settings: Vec<BoardSettings> = (1..=4u8)
+        .map(|s| {
+            let mut b = BoardSettings::new(s);
+            b.servo_count = 2;
+            b.servos = [ServoConfig::default(); 4];
+            b.imu = s == 1;
+            b
+        })
+        .collect();
+    let mut bank = NeuronBank::new(&settings, 1024).expect("valid settings");
+    let mut master = CanMaster::new(0, 0);
+    let mut wire = CanWire::new(1024, 4096, true);
+    let (mut rx_bank, mut rx_master) = (Vec::with_capacity(1024), Vec::with_capacity(1024));
+    let mut text = String::with_capacity(4096 * 64);
+    let region = Region::new(GLOBAL);
+    let mut lines = 0usize;
+    for t in 0..6000i64 {
+        let stamp = t as f64 * 1e-3;
+        wire.take_for_neurons(&mut rx_bank);
+        if let Ok(out) = bank.tick(stamp, &rx_bank) {
+            for e in out {
+                wire.send(Sender::Neurons, stamp, e.frame);
+            }
+        }
+        wire.take_for_master(&mut rx_master);
+        if master.state == MasterState::Running {
+            let _ = master.set_motor_duties(&[0.6, 0.7, 0.8, 0.9]);
+            master.clear_events();
+        }
+        for f in master.tick_ms(t, &rx_master) {
+            wire.send(Sender::Master, stamp, f.frame);
+        }
+        if wire.log_len() > 1000 {
+            text.clear();
+            wire.drain_log("rdm-sim", &mut text);
+            lines += text.matches('\n').count();
+        }
+    }
+    let stats = region.change();
+    assert_eq!(
+        (stats.allocations, stats.reallocations),
+        (0, 0),
+        "bus ticks allocated"
+    );
+    assert_eq!(master.state, MasterState::Running);
+    assert_eq!(master.motor_number, 4);
+    assert!(lines > 5000, "{lines} frames logged");
+    assert_eq!((wire.queue_dropped, wire.log_dropped), (0, 0));
 }
