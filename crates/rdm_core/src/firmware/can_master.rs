@@ -322,17 +322,18 @@ pub struct CanMaster {
     imu: [ImuSlot; 16],
     imu_seen: u32,
     pwm_values: [u16; PWM_MAX_MOTORS],
-    phase_end: i64,
+    // Deadlines in i128: `t + wait` never overflows (the reference's ints are unbounded).
+    phase_end: i128,
     config_cursor: usize,
     round_robin: usize,
     last_ms: Option<i64>,
     last_rx_ms: i64,
     last_disconnect_log: Option<i64>,
-    tx_pause_until: Option<i64>,
+    tx_pause_until: Option<i128>,
     board: [BoardRequest; BOARD_QUEUE],
     board_head: usize,
     board_len: usize,
-    rerequest: [Option<(i64, u64)>; 16],
+    rerequest: [Option<(i128, u64)>; 16],
     rerequest_seq: u64,
     events: [Option<Event>; EVENT_QUEUE],
     event_len: usize,
@@ -358,7 +359,7 @@ impl CanMaster {
             imu: [ImuSlot::default(); 16],
             imu_seen: 0,
             pwm_values: [0; PWM_MAX_MOTORS],
-            phase_end: start_ms.saturating_add(boot_delay_ms),
+            phase_end: start_ms as i128 + boot_delay_ms as i128,
             config_cursor: 0,
             round_robin: 0,
             last_ms: None,
@@ -391,16 +392,16 @@ impl CanMaster {
                 self.step(now_ms);
                 self.last_ms = Some(now_ms);
             }
-            Some(last) if now_ms == last.saturating_add(1) => {
+            Some(last) if last.checked_add(1) == Some(now_ms) => {
                 self.step(now_ms);
                 self.last_ms = Some(now_ms);
             }
             Some(last) if now_ms > last => {
-                let first = (last + 1).max(now_ms.saturating_sub(MAX_CATCH_UP_MS - 1));
-                let mut t = first;
-                while t <= now_ms {
+                let first = last
+                    .saturating_add(1)
+                    .max(now_ms.saturating_sub(MAX_CATCH_UP_MS - 1));
+                for t in first..=now_ms {
                     self.step(t);
-                    t += 1;
                 }
                 self.last_ms = Some(now_ms);
             }
@@ -542,7 +543,7 @@ impl CanMaster {
 
     /// True when a frame arrived within [`DISCONNECT_MS`] of the last tick.
     pub fn connected(&self) -> bool {
-        matches!(self.last_ms, Some(last) if last - self.last_rx_ms <= DISCONNECT_MS)
+        matches!(self.last_ms, Some(last) if last.saturating_sub(self.last_rx_ms) <= DISCONNECT_MS)
     }
 
     /// IMU slot of `slave` if any sample arrived.
@@ -588,19 +589,19 @@ impl CanMaster {
     fn step(&mut self, t: i64) {
         match self.state {
             MasterState::Booting => {
-                if t >= self.phase_end {
+                if t as i128 >= self.phase_end {
                     self.state = MasterState::Enumerating;
                     self.send(enum_request());
-                    self.phase_end = t + ENUM_WAIT_MS;
+                    self.phase_end = t as i128 + ENUM_WAIT_MS as i128;
                 }
             }
             MasterState::Enumerating => {
-                if t >= self.phase_end {
+                if t as i128 >= self.phase_end {
                     self.end_enumeration(t);
                 }
             }
             MasterState::Configuring => {
-                if t >= self.phase_end {
+                if t as i128 >= self.phase_end {
                     self.next_config(t);
                 }
             }
@@ -631,7 +632,7 @@ impl CanMaster {
         self.state = MasterState::Configuring;
         self.config_cursor = 0;
         self.send(initial_config_request(first));
-        self.phase_end = t + CONFIG_WAIT_MS;
+        self.phase_end = t as i128 + CONFIG_WAIT_MS as i128;
     }
 
     fn next_config(&mut self, t: i64) {
@@ -641,9 +642,9 @@ impl CanMaster {
             if let Some(slave) = self.neurons().get(self.config_cursor).map(|e| e.slave) {
                 self.send(initial_config_request(slave));
             }
-            self.phase_end = t + CONFIG_WAIT_MS;
+            self.phase_end = t as i128 + CONFIG_WAIT_MS as i128;
         } else if self.config_cursor < 2 * n {
-            self.phase_end = t + IMU_INIT_MS;
+            self.phase_end = t as i128 + IMU_INIT_MS as i128;
         } else {
             self.start_running(t);
         }
@@ -682,10 +683,10 @@ impl CanMaster {
     }
 
     fn run(&mut self, t: i64) {
-        if t - self.last_rx_ms > DISCONNECT_MS {
+        if t.saturating_sub(self.last_rx_ms) > DISCONNECT_MS {
             let due = match self.last_disconnect_log {
                 None => true,
-                Some(last) => t - last >= DISCONNECT_LOG_INTERVAL_MS,
+                Some(last) => t.saturating_sub(last) >= DISCONNECT_LOG_INTERVAL_MS,
             };
             if due {
                 self.last_disconnect_log = Some(t);
@@ -694,7 +695,7 @@ impl CanMaster {
         }
         self.send_rerequests(t);
         if let Some(until) = self.tx_pause_until {
-            if t < until {
+            if (t as i128) < until {
                 return;
             }
             self.tx_pause_until = None;
@@ -704,9 +705,9 @@ impl CanMaster {
             self.board_head = (self.board_head + 1) % BOARD_QUEUE;
             self.board_len -= 1;
             self.send(request.frame);
-            self.tx_pause_until = Some(t + TX_PAUSE_MS);
+            self.tx_pause_until = Some(t as i128 + TX_PAUSE_MS as i128);
             if let Some(slave) = request.reboot_slave {
-                self.schedule_rerequest(slave, t + REBOOT_REQUEST_MS);
+                self.schedule_rerequest(slave, t as i128 + REBOOT_REQUEST_MS as i128);
             }
             return;
         }
@@ -762,7 +763,7 @@ impl CanMaster {
         self.send(servo_words(true, neuron.slave, v, f));
     }
 
-    fn schedule_rerequest(&mut self, slave: u8, when: i64) {
+    fn schedule_rerequest(&mut self, slave: u8, when: i128) {
         // The reference's dict: re-assigning a key keeps its place, a new key goes last.
         let seq = self.rerequest_seq;
         if let Some(slot) = self.rerequest.get_mut(slave as usize) {
@@ -782,7 +783,7 @@ impl CanMaster {
             let mut best: Option<(usize, u64)> = None;
             for (slave, slot) in self.rerequest.iter().enumerate() {
                 if let Some((when, seq)) = slot {
-                    if t >= *when && best.is_none_or(|(_, s)| *seq < s) {
+                    if t as i128 >= *when && best.is_none_or(|(_, s)| *seq < s) {
                         best = Some((slave, *seq));
                     }
                 }
