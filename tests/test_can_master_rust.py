@@ -357,3 +357,17 @@ def test_hover_stack_logs_are_byte_identical(tmp_path):
     for name in py:
         assert hashlib.sha256(rs[name]).hexdigest() == hashlib.sha256(py[name]).hexdigest(), name
     assert py["can.log"].count(b"\n") > 4000
+
+
+def test_jump_to_the_end_of_time_matches_the_reference():
+    """Times near the i64 limits (the reference's ints are unbounded): same phase, no hang."""
+    pair = Pair(boot_delay_ms=0)
+    try:
+        pair.tick(0)
+        pair.inject([msg(0x701, b"")])
+        for t in (1, 2**63 - 1, 2**63 - 1, -(2**63)):
+            pair.tick(t)
+            pair.check(t)
+        assert pair.rs.state is MasterState.CONFIGURING and pair.rs.slaves == [1]
+    finally:
+        pair.close()
