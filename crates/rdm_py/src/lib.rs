@@ -5,6 +5,7 @@ use pyo3::prelude::*;
 
 mod attitude;
 mod bench;
+mod can_master;
 mod errors;
 mod estimate;
 mod gains;
@@ -36,5 +37,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     sensor_sim::register(m)?;
     json_log::register(m)?;
     rotor_plant::register(m)?;
+    can_master::register(m)?;
     Ok(())
 }

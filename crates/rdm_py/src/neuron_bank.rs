@@ -204,6 +204,29 @@ impl NeuronBank {
         Ok(list)
     }
 
+    /// [`tick`] on a `CanWire`: the frames the master sent, replies sent on the wire stamped
+    /// `stamp` (the channel clock); returns the sending board index of each reply.
+    fn tick_wire(
+        &mut self,
+        now: f64,
+        stamp: f64,
+        wire: &Bound<'_, crate::can_master::CanWire>,
+    ) -> PyResult<Vec<usize>> {
+        let mut w = wire.borrow_mut();
+        w.core.take_for_neurons(&mut self.rx);
+        let out = self.core.tick(now, &self.rx).map_err(bank_err)?;
+        let mut boards = Vec::with_capacity(out.len());
+        for e in out {
+            w.core.send(
+                rdm_core::firmware::can_wire::Sender::Neurons,
+                stamp,
+                e.frame,
+            );
+            boards.push(e.board);
+        }
+        Ok(boards)
+    }
+
     /// True when a frame the boards sent last tick passes another board's id filter.
     fn sent_frames_heard(&self) -> bool {
         self.core.sent_frames_heard()

@@ -22,6 +22,7 @@ import can
 
 from rdm import _rdm
 from rdm.link.can import send_neuron_payload
+from rdm.link.can_wire import CanWireLink
 from rdm.protocol import neuron as nr
 
 from .base import MAX_FRAMES_PER_TICK
@@ -289,6 +290,8 @@ class NeuronBankNode:
         period: float = 0.001,
     ) -> None:
         self.bus = bus
+        #: Given a :class:`rdm.link.can_wire.CanWireLink` instead of a bus: the Rust wire.
+        self._wire = bus if isinstance(bus, CanWireLink) else None
         self.name = name
         self.period = period
         self._core = _rdm.NeuronBank([s.core_dict() for s in specs])
@@ -333,6 +336,17 @@ class NeuronBankNode:
 
     def tick(self, now: float) -> None:
         """Drain the bus, run every board at ``now``, send their frames in order."""
+        if self._wire is not None:  # the Rust wire to the Rust master (docs/canwire.md)
+            wire = self._wire.wire
+            if self._fed != [] and (
+                wire.neurons_pending_non_pwm() or self._core.sent_frames_heard()
+            ):
+                self._push_positions()
+            boards = self.boards
+            for k in self._core.tick_wire(now, self._wire.clock(), wire):
+                boards[k].tx_count += 1
+            self._refresh_changes()
+            return
         recv = self.bus.recv
         messages = []
         for _ in range(MAX_FRAMES_PER_TICK):

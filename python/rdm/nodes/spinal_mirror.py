@@ -168,6 +168,7 @@ class SpinalMirror:
         boot_delay_ms: int = BOOT_DELAY_MS,
         registry: TypeRegistry | None = None,
         layout: Any = None,
+        master_backend: str = "python",
         **spinal_options: Any,
     ) -> None:
         if not (isinstance(rate_hz, (int, float)) and 0 < rate_hz <= MAX_RATE_HZ):
@@ -180,7 +181,14 @@ class SpinalMirror:
         self.period = float(period)
         self.rate_hz = float(rate_hz)
         self.uart = UartPump(uart)
-        self.master = CanMaster(can_bus, boot_delay_ms=boot_delay_ms)
+        if master_backend == "rust":  # the Rust core (docs/canwire.md); "python" = reference
+            from rdm.nodes.can_master_rust import RustCanMaster
+
+            self.master = RustCanMaster(can_bus, boot_delay_ms=boot_delay_ms)
+        elif master_backend == "python":
+            self.master = CanMaster(can_bus, boot_delay_ms=boot_delay_ms)
+        else:
+            raise ValueError(f"SpinalMirror: master_backend {master_backend!r}: 'python' or 'rust'")
         self.core = SpinalStep(self.rate_hz, **spinal_options)
         self.servos = ServoBridge(self.master)
         reg = registry or spinal_registry()

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from rdm.link.can import open_can
+from rdm.link.can_wire import CanWireLink, WireCandump
 from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
 from rdm.nodes.lockstep import Lockstep
 from rdm.nodes.neuron_bank import NeuronBankNode, NeuronSpec
@@ -147,6 +148,15 @@ class StackOptions:
     #: byte-identical logs, tests/test_neuron_bank.py) or "python" = one
     #: :class:`NeuronMirror` node per board (the reference).
     neuron_backend: str = "rust"
+    #: Spinal's CAN master: "rust" = :class:`rdm.nodes.can_master_rust.RustCanMaster`
+    #: (byte-identical logs, tests/test_can_master_rust.py) or "python" = the reference
+    #: :class:`rdm.nodes.can_master.CanMaster`.
+    master_backend: str = "rust"
+    #: With both backends "rust": the Neuron CAN frames go from the Rust master to the Rust
+    #: bank on a :class:`rdm.link.can_wire.CanWireLink` (no python-can bus; the candump is
+    #: the same bytes, docs/canwire.md). The channel then admits no other python-can endpoint
+    #: (CanWireError); False keeps the in-process python-can channel.
+    can_wire: bool = True
     #: Rotor (ESC + motor) first-order lag [s]; None = the plant's default (0.05 s).
     #: ASSUMPTION 0.01 s: with 0.05 s the LQI roll loop (I_xx = 0.004 kg m^2) is unstable.
     esc_tau: float | None = 0.01
@@ -284,8 +294,13 @@ def build_stack(
     folder = RunFolder.create(name, base=base, seed=opt.seed)
     plant, q0 = make_plant(opt)
     channel = _free_channel()
+    wire = (
+        CanWireLink(channel, logging=opt.log)
+        if opt.can_wire and opt.neuron_backend == "rust" and opt.master_backend == "rust"
+        else None
+    )
     if opt.neuron_backend == "rust":
-        layout, bank = make_neuron_bank(plant, q0, open_can(f"inproc:{channel}"))
+        layout, bank = make_neuron_bank(plant, q0, wire or open_can(f"inproc:{channel}"))
         neurons: list = list(bank.boards)
         neuron_nodes: list = [bank]
     elif opt.neuron_backend == "python":
@@ -306,11 +321,12 @@ def build_stack(
     spinal_link, onboard_link = DroppableLink(s_dev), DroppableLink(s_host)
     spinal = SpinalMirror(
         spinal_link,
-        open_can(f"inproc:{channel}"),
+        wire or open_can(f"inproc:{channel}"),
         rate_hz=opt.spinal_rate_hz,
         boot_delay_ms=opt.boot_delay_ms,
         gyro_calib_duration_s=opt.gyro_calib_duration_s,
         time_matched=opt.spinal_time_matched,
+        master_backend=opt.master_backend,
     )
     config = opt.onboard or OnboardConfig()
     from dataclasses import replace
@@ -320,7 +336,13 @@ def build_stack(
     onboard = OnboardNode(onboard_link, f_host, config=config)
     sensor = LeptrinoSensorNode(f_dev, "CFS034CA301U", rate_hz=opt.leptrino_rate_hz)
     logger = McapLogger(folder.mcap) if opt.log else None
-    candump = CandumpCapture(folder.candump, channel=channel) if opt.log else None
+    candump: Any = None
+    if opt.log:
+        candump = (
+            WireCandump(folder.candump, wire)
+            if wire is not None
+            else CandumpCapture(folder.candump, channel=channel)
+        )
     truth: list = []
 
     def truth_sink(gt: Any) -> None:

@@ -4,8 +4,11 @@
 //! frame for frame: same decoding (and error reasons), same replies, same byte order, so a
 //! simulated run writes the same CAN log with either implementation.
 
+pub mod can_master;
+pub mod can_wire;
 pub mod neuron_bank;
 pub mod neuron_board;
 pub mod neuron_frame;
 pub mod neuron_servo;
 pub mod neuron_tx;
+pub mod spinal_frame;

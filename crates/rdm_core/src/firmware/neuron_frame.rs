@@ -341,7 +341,7 @@ fn servo_state_error(data: &[u8]) -> RxError {
     }
 }
 
-fn decode_board_config(data: &[u8]) -> Result<BoardConfig, RxError> {
+pub(crate) fn decode_board_config(data: &[u8]) -> Result<BoardConfig, RxError> {
     let command = byte_at(data, 0);
     let b = |k| byte_at(data, k);
     Ok(match command {

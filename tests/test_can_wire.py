@@ -1,0 +1,169 @@
+"""The Rust CanWire (master <-> Neuron bank without python-can) against the in-process
+python-can channel with ``CandumpCapture`` and the Python ``CanMaster`` (the reference): the
+same candump bytes, the same master and board state, at every tick; the full hover stack
+writes the same logs; another python-can endpoint on a wired channel is refused."""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rdm.link.can import open_can
+from rdm.link.can_wire import CanWireError, CanWireLink, WireCandump
+from rdm.link.inproc_can import SimClock, add_tap, remove_tap, set_channel_clock
+from rdm.nodes.can_master import CanMaster, MasterState
+from rdm.nodes.can_master_rust import SERVO_FIELDS, RustCanMaster
+from rdm.nodes.neuron_bank import NeuronBankNode, NeuronSpec
+from rdm.nodes.servo_model import ServoConfig
+from rdm.protocol import neuron as nr
+from rdm.sim import CandumpCapture
+
+_channels = itertools.count()
+
+
+def _specs() -> list[NeuronSpec]:
+    cfg = [ServoConfig(dynamixel_id=10 + i, send_data_flag=i != 1) for i in range(3)]
+    return [
+        NeuronSpec(1, tuple(cfg[:2]), imu=True),
+        NeuronSpec(2, tuple(cfg[:1])),
+        NeuronSpec(3, tuple(cfg)),
+        NeuronSpec(4),
+    ]
+
+
+class Rig:
+    """A Neuron bank and a CAN master ticked bank-first each ms (the stack's node order)."""
+
+    def __init__(self, tmp: Path, wired: bool) -> None:
+        self.channel = f"canwire_rig_{next(_channels)}"
+        self.clock = SimClock()
+        self.path = tmp / f"{'wire' if wired else 'bus'}.log"
+        if wired:
+            link = CanWireLink(self.channel)
+            set_channel_clock(self.channel, self.clock)
+            self.bank = NeuronBankNode(link, _specs())
+            self.master = RustCanMaster(link, boot_delay_ms=3)
+            self.capture = WireCandump(self.path, link)
+        else:
+            self.bank = NeuronBankNode(open_can(f"inproc:{self.channel}"), _specs())
+            self.master = CanMaster(open_can(f"inproc:{self.channel}"), boot_delay_ms=3)
+            set_channel_clock(self.channel, self.clock)
+            self.capture = CandumpCapture(self.path, channel=self.channel)
+
+    def tick(self, t_ms: int) -> None:
+        self.clock.now = t_ms / 1000
+        self.bank.tick(t_ms / 1000)
+        self.master.tick_ms(t_ms)
+
+    def close(self) -> bytes:
+        self.capture.close()
+        self.master.close()
+        self.bank.close()
+        return self.path.read_bytes()
+
+
+def _observed(m) -> tuple:
+    return (
+        m.state,
+        m.motor_number,
+        m.uav_model,
+        m.rx_count,
+        list(m.rx_errors.items()),
+        list(m.rx_kinds.items()),
+        m.tx_count,
+        m.connected,
+        {k: tuple(getattr(e, f) for f in SERVO_FIELDS) for k, e in m.servo_states.items()},
+        m.imu,
+        [(e.stamp_ms, e.text) for e in m.pop_events()],
+    )
+
+
+def test_wire_equals_python_bus_and_candump(tmp_path):
+    """Boot, enumeration, config, handshake, duties, torque, board configs + reboot, late
+    ticks (10 ms replay: several frames per tick in each direction) and an IMU board: the
+    same candump bytes and the same master / board state every ms."""
+    bus, wire = Rig(tmp_path, wired=False), Rig(tmp_path, wired=True)
+    rigs = (bus, wire)
+    t = 0
+    try:
+        while t < 9000:
+            for r in rigs:
+                m = r.master
+                if m.state is MasterState.RUNNING:
+                    if t % 5 == 0:
+                        m.set_motor_duties([0.5 + ((t // 5 + k) % 50) / 100 for k in range(4)])
+                    if t == 1700:
+                        m.set_servo_torque(3, 2, True)
+                        m.set_servo_targets({(1, 0): 321, (3, 2): -77})
+                        m.set_servo_current(1, 1, 12)
+                    if t == 2000:
+                        m.configure_board(nr.SetSendDataFlag(3, 0, False))
+                        m.configure_board(nr.Reboot(2))
+                r.tick(t)
+            assert _observed(bus.master) == _observed(wire.master), t
+            for a, b in zip(bus.bank.boards, wire.bank.boards, strict=True):
+                assert a.state() == b.state(), (t, a.name)
+                assert a.tx_count == b.tx_count, (t, a.name)
+            t += 23 if t in (3000, 3100, 7000) else 1
+        assert bus.master.state is MasterState.RUNNING
+    finally:
+        # Each rig has its own channel name (it is in every line): compared as "can0".
+        logs = [r.close().replace(r.channel.encode(), b"can0") for r in rigs]
+    assert logs[0] == logs[1]
+    assert logs[0].count(b"\n") > 5000  # (4 s of it are the two board-config pauses)
+    assert b" 722#07 R" in logs[0]  # the reboot went out
+
+
+def test_other_endpoint_on_a_wired_channel_is_refused(tmp_path):
+    """A python-can bus or a tap joining the channel: CanWireError at the next master tick
+    (the wire would not deliver to it)."""
+    link = CanWireLink(f"canwire_alone_{next(_channels)}")
+    master = RustCanMaster(link, boot_delay_ms=0)
+    master.tick_ms(0)
+    intruder = open_can(f"inproc:{link.channel}")
+    with pytest.raises(CanWireError, match="1 other bus"):
+        master.tick_ms(1)
+    intruder.shutdown()
+    master.tick_ms(2)
+
+    def tap(_msg):
+        return None
+
+    add_tap(link.channel, tap)
+    with pytest.raises(CanWireError, match="1 tap"):
+        master.tick_ms(3)
+    remove_tap(link.channel, tap)
+    master.close()
+
+
+def _run_hover(tmp_path: Path, name: str, seconds: float, **kw) -> dict[str, bytes]:
+    from rdm.scenarios.common import sim_stack_options
+    from rdm.scenarios.hover import HOVER_Z, make_script
+    from rdm.scenarios.stack import build_stack
+
+    opts = sim_stack_options(0, "inproc", speed=None, **kw)
+    stack = build_stack(name, tmp_path, opts, make_script(np.array([0.483, 0.0, HOVER_Z])))
+    try:
+        stack.loop.run(seconds)
+    finally:
+        stack.close()
+    root = Path(stack.folder.root)
+    return {
+        str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
+    }
+
+
+def test_hover_stack_on_the_wire_is_byte_identical(tmp_path):
+    """4 simulated s from power-on: the wired stack (default) and the python-can stack with
+    the Python master (the reference) write the same can.log, signals.mcap and UART bytes."""
+    ref = _run_hover(tmp_path / "ref", "ref", 4.0, master_backend="python", can_wire=False)
+    wired = _run_hover(tmp_path / "wire", "wire", 4.0)
+    assert {"can.log", "signals.mcap"} <= set(ref)
+    assert sorted(ref) == sorted(wired)
+    for name in ref:
+        assert hashlib.sha256(wired[name]).hexdigest() == hashlib.sha256(ref[name]).hexdigest()
+    assert ref["can.log"].count(b"\n") > 4000
