@@ -2,7 +2,6 @@
 //! `(can_id, payload)` frames out). The Python node `rdm.nodes.can_master_rust` wraps it.
 
 use pyo3::create_exception;
-use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList, PyTuple};
 use rdm_core::firmware::can_master::{
@@ -11,9 +10,10 @@ use rdm_core::firmware::can_master::{
 use rdm_core::firmware::can_wire::{
     CanWire as CoreWire, Sender, DEFAULT_LOG_CAPACITY, DEFAULT_QUEUE_CAPACITY,
 };
-use rdm_core::firmware::neuron_tx::{RxFrame, FLAG_ERROR, FLAG_EXTENDED, FLAG_FD, FLAG_REMOTE};
+use rdm_core::firmware::neuron_tx::RxFrame;
 use rdm_core::firmware::spinal_frame::REPLY_KINDS;
 
+use crate::can_frame::rx_frame_of;
 use crate::errors::RdmError;
 
 create_exception!(
@@ -112,25 +112,7 @@ impl CanMaster {
     ) -> PyResult<(u8, usize, Bound<'py, PyList>)> {
         self.rx.clear();
         for m in messages.iter() {
-            let id: u32 = m.getattr(intern!(py, "arbitration_id"))?.extract()?;
-            let mut flags = 0u8;
-            if m.getattr(intern!(py, "is_extended_id"))?.is_truthy()? {
-                flags |= FLAG_EXTENDED;
-            }
-            if m.getattr(intern!(py, "is_remote_frame"))?.is_truthy()? {
-                flags |= FLAG_REMOTE;
-            }
-            if m.getattr(intern!(py, "is_error_frame"))?.is_truthy()? {
-                flags |= FLAG_ERROR;
-            }
-            if m.getattr(intern!(py, "is_fd"))?.is_truthy()? {
-                flags |= FLAG_FD;
-            }
-            let data: Vec<u8> = m
-                .getattr(intern!(py, "data"))?
-                .extract()
-                .unwrap_or_default();
-            self.rx.push(RxFrame::new(id, flags, &data));
+            self.rx.push(rx_frame_of(py, &m)?);
         }
         let out = self.core.tick_ms(now_ms, &self.rx);
         let list = PyList::empty(py);

@@ -5,6 +5,7 @@ use pyo3::prelude::*;
 
 mod attitude;
 mod bench;
+mod can_frame;
 mod can_master;
 mod errors;
 mod estimate;

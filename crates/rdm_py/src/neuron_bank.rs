@@ -2,15 +2,15 @@
 //! call (python-can messages in, `(board, can_id, payload)` frames out).
 
 use pyo3::create_exception;
-use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList, PyTuple};
 use rdm_core::firmware::neuron_bank::{BankError, NeuronBank as CoreBank, DEFAULT_TX_CAPACITY};
 use rdm_core::firmware::neuron_board::{BoardError, BoardSettings};
 use rdm_core::firmware::neuron_frame::{RxError, FRAME_KINDS, MAX_SERVO_NUM};
 use rdm_core::firmware::neuron_servo::{ServoConfig, ServoConfigError};
-use rdm_core::firmware::neuron_tx::{RxFrame, FLAG_ERROR, FLAG_EXTENDED, FLAG_FD, FLAG_REMOTE};
+use rdm_core::firmware::neuron_tx::RxFrame;
 
+use crate::can_frame::rx_frame_of;
 use crate::errors::RdmError;
 
 create_exception!(
@@ -168,25 +168,7 @@ impl NeuronBank {
     ) -> PyResult<Bound<'py, PyList>> {
         self.rx.clear();
         for m in messages.iter() {
-            let id: u32 = m.getattr(intern!(py, "arbitration_id"))?.extract()?;
-            let mut flags = 0u8;
-            if m.getattr(intern!(py, "is_extended_id"))?.is_truthy()? {
-                flags |= FLAG_EXTENDED;
-            }
-            if m.getattr(intern!(py, "is_remote_frame"))?.is_truthy()? {
-                flags |= FLAG_REMOTE;
-            }
-            if m.getattr(intern!(py, "is_error_frame"))?.is_truthy()? {
-                flags |= FLAG_ERROR;
-            }
-            if m.getattr(intern!(py, "is_fd"))?.is_truthy()? {
-                flags |= FLAG_FD;
-            }
-            let data: Vec<u8> = m
-                .getattr(intern!(py, "data"))?
-                .extract()
-                .unwrap_or_default();
-            self.rx.push(RxFrame::new(id, flags, &data));
+            self.rx.push(rx_frame_of(py, &m)?);
         }
         let out = self.core.tick(now, &self.rx).map_err(bank_err)?;
         let list = PyList::empty(py);

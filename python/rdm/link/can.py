@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import re
 import socket
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -182,6 +183,20 @@ def send_neuron_payload(bus: can.BusABC, can_id: int, data: bytes) -> bool:
             fast(can_id, data)
         else:
             bus.send(neuron_message(can_id, data), timeout=0)
+    except (can.CanError, OSError):
+        return False
+    return True
+
+
+def send_neuron_payload_via(
+    bus: can.BusABC, fast: Callable[[int, bytes], None] | None, can_id: int, data: bytes
+) -> bool:
+    """:func:`send_neuron_payload` with the bus's ``send_standard`` looked up once by the
+    caller (``fast``; None for a bus without it). False if the bus refused the frame."""
+    if fast is None:
+        return send_neuron_payload(bus, can_id, data)
+    try:
+        fast(can_id, data)
     except (can.CanError, OSError):
         return False
     return True

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import can
 
-from rdm.link.can import send_neuron_payload
+from rdm.link.can import send_neuron_payload_via
 from rdm.protocol import neuron as nr
 from rdm.protocol.neuron.pwm import PWM_MAX_MOTORS
 from rdm.protocol.neuron.servo import WORD_VALUE_MAX, WORD_VALUE_MIN
@@ -513,17 +513,7 @@ class CanMaster:
         self._send_raw(frame.can_id, frame.encode())
 
     def _send_raw(self, can_id: int, payload: bytes) -> None:
-        fast = self._send_standard
-        if fast is None:
-            ok = send_neuron_payload(self._bus, can_id, payload)
-        else:
-            # send_neuron_payload's in-process branch, with send_standard looked up once.
-            try:
-                fast(can_id, payload)
-                ok = True
-            except (can.CanError, OSError):
-                ok = False
-        if ok:
+        if send_neuron_payload_via(self._bus, self._send_standard, can_id, payload):
             self.tx_count += 1
         else:
             self.tx_errors += 1

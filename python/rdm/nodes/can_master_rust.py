@@ -18,12 +18,12 @@ from collections.abc import Mapping, Sequence
 import can
 
 from rdm import _rdm
-from rdm.link.can import send_neuron_payload
+from rdm.link.can import send_neuron_payload_via
 from rdm.link.can_wire import DRAIN_AT, CanWireLink
 from rdm.protocol import neuron as nr
 from rdm.protocol.neuron.servo import WORD_VALUE_MAX, WORD_VALUE_MIN
 
-from .base import MAX_FRAMES_PER_TICK, to_ms
+from .base import drain, to_ms
 from .can_master import BOOT_DELAY_MS, ImuReading, LogEvent, MasterState, UavModel
 
 _STATES = (
@@ -175,27 +175,13 @@ class RustCanMaster:
             if logged >= DRAIN_AT:
                 link.drain()
             return
-        recv = self._bus.recv
-        messages = []
-        for _ in range(MAX_FRAMES_PER_TICK):
-            msg = recv(timeout=0)
-            if msg is None:
-                break
-            messages.append(msg)
+        messages = list(drain(self._bus))
         state, self._pending_events, out = self._core.tick_ms(now_ms, messages)
         self.state = _STATES[state]
         if out:
             fast = self._send_standard
             for can_id, payload in out:
-                if fast is None:
-                    ok = send_neuron_payload(self._bus, can_id, payload)
-                else:
-                    try:
-                        fast(can_id, payload)
-                        ok = True
-                    except (can.CanError, OSError):
-                        ok = False
-                if ok:
+                if send_neuron_payload_via(self._bus, fast, can_id, payload):
                     self.tx_count += 1
                 else:
                     self.tx_errors += 1

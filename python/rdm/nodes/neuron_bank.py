@@ -25,7 +25,7 @@ from rdm.link.can import send_neuron_payload
 from rdm.link.can_wire import CanWireLink
 from rdm.protocol import neuron as nr
 
-from .base import MAX_FRAMES_PER_TICK
+from .base import drain
 from .esc_model import EscOutputs
 from .neuron_mirror import _IMU_SCALE, DEFAULT_REBOOT_MS, NeuronMirror, _int16
 from .servo_model import ServoConfig
@@ -347,13 +347,7 @@ class NeuronBankNode:
                 boards[k].tx_count += 1
             self._refresh_changes()
             return
-        recv = self.bus.recv
-        messages = []
-        for _ in range(MAX_FRAMES_PER_TICK):
-            msg = recv(timeout=0)
-            if msg is None:
-                break
-            messages.append(msg)
+        messages = list(drain(self.bus))
         # Positions are only read while handling a frame other than a PWM broadcast (MOTOR
         # device, id < 0x100): servo words, requests, board configs, or a frame a board sent
         # last tick that another board accepts (colliding slave ids).

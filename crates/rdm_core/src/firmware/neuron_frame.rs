@@ -448,18 +448,26 @@ fn indexed_reply_error(data: &[u8]) -> RxError {
     }
 }
 
-/// Decode one classic standard frame as a Neuron receives it (direction Spinal -> Neuron),
-/// with the reference codec's reason on failure. `data` is the payload (its length the DLC).
-pub fn decode_spinal_to_neuron(can_id: u32, data: &[u8]) -> Result<NeuronCommand, RxError> {
+/// `(device, message, slave)` of a classic standard frame's id (fact sheet sec. 2.5), after
+/// the checks both directions make first: payload of at most 8 bytes, an 11-bit id.
+pub(crate) fn split_frame_id(can_id: u32, data: &[u8]) -> Result<(u32, u8, u8), RxError> {
     if data.len() > 8 {
         return Err(RxError::Dlc);
     }
     if can_id > MAX_STD_ID {
         return Err(RxError::NotStandardId);
     }
-    let device = (can_id >> 8) & 0x7;
-    let message = ((can_id >> 4) & 0xF) as u8;
-    let slave = (can_id & 0xF) as u8;
+    Ok((
+        (can_id >> 8) & 0x7,
+        ((can_id >> 4) & 0xF) as u8,
+        (can_id & 0xF) as u8,
+    ))
+}
+
+/// Decode one classic standard frame as a Neuron receives it (direction Spinal -> Neuron),
+/// with the reference codec's reason on failure. `data` is the payload (its length the DLC).
+pub fn decode_spinal_to_neuron(can_id: u32, data: &[u8]) -> Result<NeuronCommand, RxError> {
+    let (device, message, slave) = split_frame_id(can_id, data)?;
     let addressed = (1..=14).contains(&slave);
     match device {
         DEVICE_MOTOR if message <= 1 && slave == BROADCAST_ID => decode_pwm(message, data),

@@ -4,8 +4,8 @@
 //! section). StdId = device << 8 | message << 4 | slave; multi-byte fields little-endian.
 
 use super::neuron_frame::{
-    decode_board_config, CanFrame, RxError, BROADCAST_ID, DEVICE_IMU, DEVICE_INITIALIZER,
-    DEVICE_MOTOR, DEVICE_SERVO, MAX_SERVO_NUM, MAX_STD_ID,
+    decode_board_config, split_frame_id, CanFrame, RxError, BROADCAST_ID, DEVICE_IMU,
+    DEVICE_INITIALIZER, DEVICE_MOTOR, DEVICE_SERVO, MAX_SERVO_NUM, MAX_STD_ID,
 };
 
 /// Names of the accepted reply kinds (the reference frame classes' `KIND`), counter order.
@@ -138,15 +138,7 @@ fn pwm_error(data: &[u8]) -> RxError {
 /// with the reference codec's reason on failure (candidates ranked "field error < DLC <
 /// direction"). `data` is the payload (its length the DLC).
 pub fn decode_neuron_to_spinal(can_id: u32, data: &[u8]) -> Result<NeuronReply, RxError> {
-    if data.len() > 8 {
-        return Err(RxError::Dlc);
-    }
-    if can_id > MAX_STD_ID {
-        return Err(RxError::NotStandardId);
-    }
-    let device = (can_id >> 8) & 0x7;
-    let message = ((can_id >> 4) & 0xF) as u8;
-    let slave = (can_id & 0xF) as u8;
+    let (device, message, slave) = split_frame_id(can_id, data)?;
     match device {
         DEVICE_MOTOR if message <= 1 && slave == BROADCAST_ID => Err(pwm_error(data)),
         DEVICE_IMU if message <= 2 && is_neuron(slave) => {
