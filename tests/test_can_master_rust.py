@@ -11,8 +11,8 @@ import random
 from pathlib import Path
 
 import can
-import numpy as np
 import pytest
+from hover_run_files import hover_run_files
 
 from rdm import _rdm
 from rdm.link.can import open_can
@@ -331,20 +331,7 @@ def test_core_errors_are_typed():
 
 
 def _run_hover(tmp_path: Path, backend: str, seconds: float) -> dict[str, bytes]:
-    from rdm.scenarios.common import sim_stack_options
-    from rdm.scenarios.hover import HOVER_Z, make_script
-    from rdm.scenarios.stack import build_stack
-
-    opts = sim_stack_options(0, "inproc", speed=None, master_backend=backend)
-    stack = build_stack(backend, tmp_path, opts, make_script(np.array([0.483, 0.0, HOVER_Z])))
-    try:
-        stack.loop.run(seconds)
-    finally:
-        stack.close()
-    root = Path(stack.folder.root)
-    return {
-        str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
-    }
+    return hover_run_files(tmp_path, backend, seconds, master_backend=backend)
 
 
 def test_hover_stack_logs_are_byte_identical(tmp_path):

@@ -9,8 +9,8 @@ import hashlib
 import itertools
 from pathlib import Path
 
-import numpy as np
 import pytest
+from hover_run_files import hover_run_files
 
 from rdm.link.can import open_can
 from rdm.link.can_wire import CanWireError, CanWireLink, WireCandump
@@ -140,21 +140,7 @@ def test_other_endpoint_on_a_wired_channel_is_refused(tmp_path):
     master.close()
 
 
-def _run_hover(tmp_path: Path, name: str, seconds: float, **kw) -> dict[str, bytes]:
-    from rdm.scenarios.common import sim_stack_options
-    from rdm.scenarios.hover import HOVER_Z, make_script
-    from rdm.scenarios.stack import build_stack
-
-    opts = sim_stack_options(0, "inproc", speed=None, **kw)
-    stack = build_stack(name, tmp_path, opts, make_script(np.array([0.483, 0.0, HOVER_Z])))
-    try:
-        stack.loop.run(seconds)
-    finally:
-        stack.close()
-    root = Path(stack.folder.root)
-    return {
-        str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
-    }
+_run_hover = hover_run_files
 
 
 def test_hover_stack_on_the_wire_is_byte_identical(tmp_path):
