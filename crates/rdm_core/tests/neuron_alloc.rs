@@ -1,9 +1,11 @@
 //! Proves that a Neuron bank tick allocates nothing after setup: a counting global allocator
 //! wraps the system allocator while the bank handles a flight-like frame stream plus bad
-//! frames, configuration bursts, reboots and the watchdog.
+//! frames, configuration bursts, reboots and the watchdog; the plant bridge's coupling
+//! (`BankBridge` snapshot / push / couple) runs beside it every millisecond.
 
 use std::alloc::System;
 
+use rdm_core::firmware::bank_bridge::{BankBridge, ServoEntry};
 use rdm_core::firmware::neuron_bank::NeuronBank;
 use rdm_core::firmware::neuron_board::BoardSettings;
 use rdm_core::firmware::neuron_frame::RxError;
@@ -26,6 +28,10 @@ fn bank() -> NeuronBank {
         })
         .collect();
     NeuronBank::new(&settings, 1024).expect("valid settings")
+}
+
+fn bank_joints(bank: &NeuronBank) -> usize {
+    bank.boards().iter().map(|b| b.servos().len()).sum()
 }
 
 /// The frames Spinal would send at millisecond `k` (plus junk and configuration).
@@ -66,8 +72,34 @@ fn frames(k: usize, out: &mut [RxFrame; 8]) -> usize {
     n
 }
 
+/// Every servo of `bank()` on its own joint (qpos address 7 + joint), a rotor per board.
+fn bridge(bank: &NeuronBank) -> BankBridge {
+    let mut servos = Vec::new();
+    for (k, b) in bank.boards().iter().enumerate() {
+        for i in 0..b.servos().len() {
+            let joint = servos.len();
+            servos.push(ServoEntry {
+                board: k,
+                servo: i,
+                joint,
+            });
+        }
+    }
+    let n = servos.len();
+    let qadr: Vec<usize> = (7..7 + n).collect();
+    let scale = vec![4096.0 / std::f64::consts::TAU; n];
+    let rotors: Vec<(usize, usize)> = (0..4).map(|r| (r, r)).collect();
+    BankBridge::new(bank, 2048, &qadr, &scale, &servos, &rotors, &[0, 1, 2, 3])
+        .expect("valid bridge")
+}
+
 fn main() {
     let mut bank = bank();
+    let mut coupling = bridge(&bank);
+    let mut qpos = [0.0f64; 32];
+    let mut targets = [0.0f64; 12];
+    let mut duties = [0.5f64; 4];
+    let mut coupled = 0usize;
     let mut buf = [RxFrame::default(); 8];
     // Warm up outside the region.
     for k in 0..200 {
@@ -83,6 +115,15 @@ fn main() {
         } else {
             frames(k, &mut buf)
         };
+        if let Some(q) = qpos.get_mut(7 + k % 5) {
+            *q = (k % 13) as f64 * 0.01;
+        }
+        coupling.snapshot(&qpos).expect("qpos covers qadr");
+        coupling.push_positions(&mut bank).expect("finite joints");
+        let c = coupling
+            .couple(&bank, &mut targets[..bank_joints(&bank)], &mut duties)
+            .expect("sized outputs");
+        coupled += usize::from(c.targets || c.duties);
         let _ = bank.set_position(1, 0, 2048.0 + (k % 7) as f64);
         let _ = bank.set_imu_raw(0, 0, [k as i16, 0, 1]);
         sent += bank
@@ -98,7 +139,11 @@ fn main() {
             stats.bytes_allocated
         ),
         (0, 0, 0),
-        "NeuronBank::tick allocated: {stats:?}"
+        "NeuronBank::tick / BankBridge allocated: {stats:?}"
+    );
+    assert!(
+        coupled > 100,
+        "goals and duties reach the bridge, {coupled} changes"
     );
     assert!(
         sent > 10_000,

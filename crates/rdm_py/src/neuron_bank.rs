@@ -1,9 +1,11 @@
 //! Bindings of `rdm_core::firmware::neuron_bank`: every Neuron of one CAN bus ticked in one
 //! call (python-can messages in, `(board, can_id, payload)` frames out).
 
+use numpy::{PyArray1, PyArrayMethods};
 use pyo3::create_exception;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList, PyTuple};
+use rdm_core::firmware::bank_bridge::{BankBridge, BridgeError, ServoEntry};
 use rdm_core::firmware::neuron_bank::{BankError, NeuronBank as CoreBank, DEFAULT_TX_CAPACITY};
 use rdm_core::firmware::neuron_board::{BoardError, BoardSettings};
 use rdm_core::firmware::neuron_frame::{RxError, FRAME_KINDS, MAX_SERVO_NUM};
@@ -52,6 +54,20 @@ fn bank_err(e: BankError) -> PyErr {
             format!("board {k} servo {i}: present position is not finite")
         }
         BankError::Sensor(s) => format!("sensor {s} not in 0..2 (gyro, acc, mag)"),
+    })
+}
+
+fn bridge_err(e: BridgeError) -> PyErr {
+    err(match e {
+        BridgeError::ServoEntry(n) => format!("servos[{n}]: no such board/servo in the bank"),
+        BridgeError::JointIndex(n) => format!("servos[{n}]: joint index outside qadr"),
+        BridgeError::RotorEntry(n) => {
+            format!("rotors[{n}]: no such board, or rotor outside duties")
+        }
+        BridgeError::QposAddress(j) => format!("qadr[{j}]: outside qpos"),
+        BridgeError::Scale(j) => format!("scale[{j}]: must be finite and non-zero"),
+        BridgeError::Length => "targets/scale: length differs from qadr".into(),
+        BridgeError::NonFiniteJoint(j) => format!("qpos: joint {j} is not finite"),
     })
 }
 
@@ -138,6 +154,7 @@ fn board_settings(d: &Bound<'_, PyDict>, k: usize) -> PyResult<BoardSettings> {
 pub struct NeuronBank {
     core: CoreBank,
     rx: Vec<RxFrame>,
+    bridge: Option<BankBridge>,
 }
 
 #[pymethods]
@@ -155,7 +172,83 @@ impl NeuronBank {
         Ok(NeuronBank {
             core,
             rx: Vec::with_capacity(256),
+            bridge: None,
         })
+    }
+
+    /// Attach the plant bridge's per-millisecond coupling (`rdm.nodes.plant_bridge`):
+    /// `center` ticks, per joint its qpos address `qadr` and ticks per radian `scale`,
+    /// `servos` `(board, servo, joint)` grouped by board in the order of `group_boards`,
+    /// `rotors` `(rotor, board)`.
+    fn attach_bridge(
+        &mut self,
+        center: i64,
+        qadr: Vec<usize>,
+        scale: Vec<f64>,
+        servos: Vec<(usize, usize, usize)>,
+        rotors: Vec<(usize, usize)>,
+        group_boards: Vec<usize>,
+    ) -> PyResult<()> {
+        let entries: Vec<ServoEntry> = servos
+            .iter()
+            .map(|&(board, servo, joint)| ServoEntry {
+                board,
+                servo,
+                joint,
+            })
+            .collect();
+        let b = BankBridge::new(
+            &self.core,
+            center,
+            &qadr,
+            &scale,
+            &entries,
+            &rotors,
+            &group_boards,
+        )
+        .map_err(bridge_err)?;
+        self.bridge = Some(b);
+        Ok(())
+    }
+
+    /// One bridge tick: snapshot the joints of `qpos`, then write the servo targets (rad) of
+    /// changed boards into `targets` and their ESC duties into `duties`; returns
+    /// `(targets_changed, duties_changed)`.
+    fn bridge_tick(
+        &mut self,
+        qpos: &Bound<'_, PyArray1<f64>>,
+        targets: &Bound<'_, PyArray1<f64>>,
+        duties: &Bound<'_, PyArray1<f64>>,
+    ) -> PyResult<(bool, bool)> {
+        let bridge = self
+            .bridge
+            .as_mut()
+            .ok_or_else(|| err("bridge_tick: no bridge attached".into()))?;
+        let qpos = qpos.try_readonly()?;
+        let mut targets = targets.try_readwrite()?;
+        let mut duties = duties.try_readwrite()?;
+        let qpos = qpos
+            .as_slice()
+            .map_err(|_| err("qpos: must be C-contiguous".into()))?;
+        let targets = targets
+            .as_slice_mut()
+            .map_err(|_| err("targets: must be C-contiguous".into()))?;
+        let duties = duties
+            .as_slice_mut()
+            .map_err(|_| err("duties: must be C-contiguous".into()))?;
+        bridge.snapshot(qpos).map_err(bridge_err)?;
+        let c = bridge
+            .couple(&self.core, targets, duties)
+            .map_err(bridge_err)?;
+        Ok((c.targets, c.duties))
+    }
+
+    /// Push the last bridge snapshot's present positions to the servos (once per snapshot).
+    fn bridge_push_positions(&mut self) -> PyResult<()> {
+        if let Some(b) = self.bridge.as_mut() {
+            b.push_positions(&mut self.core).map_err(bridge_err)?;
+        }
+        Ok(())
     }
 
     /// Advance to `now` (s) with the python-can messages drained from the bus (in order);

@@ -298,6 +298,30 @@ class NeuronBankNode:
         self.boards = [NeuronBoardView(self, k, s) for k, s in enumerate(specs)]
         self._fed: list[tuple[Any, list[int], list[int], list[int]]] | None = []
         self._feed_epochs: dict[int, int] = {}
+        #: The plant bridge's coupling runs in the core (:meth:`attach_bridge`).
+        self._bridged = False
+
+    def attach_bridge(
+        self,
+        center: int,
+        qadr: Sequence[int],
+        scale: Sequence[float],
+        servos: Sequence[tuple[int, int, int]],
+        rotors: Sequence[tuple[int, int]],
+        group_boards: Sequence[int],
+    ) -> None:
+        """Run the plant bridge's per-millisecond coupling in the core (``NeuronBank.
+        attach_bridge``; see :class:`rdm.nodes.plant_bridge.PlantBridge`): the present positions
+        of the bridge's last snapshot are pushed when the boards need them."""
+        self._core.attach_bridge(
+            int(center), list(qadr), list(scale), list(servos), list(rotors), list(group_boards)
+        )
+        self._bridged = True
+
+    def bridge_tick(self, qpos: Any, targets: Any, duties: Any) -> tuple[bool, bool]:
+        """Snapshot + goals -> ``targets`` + ESC outputs -> ``duties`` (``NeuronBank.
+        bridge_tick``); returns ``(targets_changed, duties_changed)``."""
+        return self._core.bridge_tick(qpos, targets, duties)
 
     def _feeds_changed(self) -> None:
         self._fed = None  # rebuilt at the next tick
@@ -319,6 +343,8 @@ class NeuronBankNode:
         # The reference servo reads its plant feed when it first needs the position in a new
         # feed epoch; the feed's values are fixed within an epoch, so pushing them before the
         # frames are handled gives the same positions.
+        if self._bridged:
+            self._core.bridge_push_positions()
         fed = self._fed
         if fed is None:
             fed = self._fed = self._build_feeds()
@@ -338,7 +364,7 @@ class NeuronBankNode:
         """Drain the bus, run every board at ``now``, send their frames in order."""
         if self._wire is not None:  # the Rust wire to the Rust master (docs/canwire.md)
             wire = self._wire.wire
-            if self._fed != [] and (
+            if (self._fed != [] or self._bridged) and (
                 wire.neurons_pending_non_pwm() or self._core.sent_frames_heard()
             ):
                 self._push_positions()
@@ -351,7 +377,7 @@ class NeuronBankNode:
         # Positions are only read while handling a frame other than a PWM broadcast (MOTOR
         # device, id < 0x100): servo words, requests, board configs, or a frame a board sent
         # last tick that another board accepts (colliding slave ids).
-        if self._fed != [] and (
+        if (self._fed != [] or self._bridged) and (
             any(m.arbitration_id >= 0x100 for m in messages) or self._core.sent_frames_heard()
         ):
             self._push_positions()

@@ -212,6 +212,10 @@ class PlantBridge:
         mocap_sink: ``f(now, position, quaternion_wxyz)`` of the foot frame.
         truth_sink: ``f(GroundTruth)``.
         *_period: seconds between calls (whole multiples of ``period``; None disables).
+        rust_coupling: when every mapped Neuron is a board of one Rust
+            :class:`rdm.nodes.neuron_bank.NeuronBankNode` and the plant offers its qpos view,
+            run steps 1, 2 and 4 in one core call (``NeuronBank.bridge_tick``, same values;
+            :attr:`rust_coupling` says whether it is on); else the Python path.
     """
 
     def __init__(
@@ -232,6 +236,7 @@ class PlantBridge:
         mocap_period: float | None = 0.01,
         truth_sink: Callable[[object], None] | None = None,
         truth_period: float | None = 0.01,
+        rust_coupling: bool = False,
     ) -> None:
         self.plant = plant
         self.name = name
@@ -290,14 +295,49 @@ class PlantBridge:
         self._targets_changed = False
         self._seen_changes = [-1] * len(self._servo_map)  # every board is read at first
         self._feed = _JointFeed(plant, self.layout.center_ticks, scale)
-        for neuron, servos in self._servo_map:
-            for i, k, _ in servos:
-                neuron.servos[i].feed = (self._feed, k)
+        self._bank = self._rust_bank() if rust_coupling else None
+        #: True when the per-millisecond coupling runs in the Rust Neuron bank.
+        self.rust_coupling = self._bank is not None
+        if self._bank is not None:
+            self._attach_bank(self._bank, scale)
+        else:
+            for neuron, servos in self._servo_map:
+                for i, k, _ in servos:
+                    neuron.servos[i].feed = (self._feed, k)
         self._duties = np.full(len(plant.rotor_names), 0.5)
         self._voltage: float | None = None
         self._foot_body = plant.model.body(plant.description.foot_frame).id
         self.time_mismatches = 0
         self.ticks = 0
+
+    def _rust_bank(self):
+        """The one Rust bank every mapped Neuron belongs to, if the plant has a qpos view."""
+        if (
+            getattr(self.plant, "_v_qpos", None) is None
+            or getattr(self.plant, "_qadr", None) is None
+        ):
+            return None
+        banks = {
+            id(getattr(n, "_bank", None)): getattr(n, "_bank", None) for n, _ in self._servo_map
+        }
+        banks.update(
+            {id(getattr(n, "_bank", None)): getattr(n, "_bank", None) for _, n in self._rotor_map}
+        )
+        if len(banks) != 1:
+            return None
+        bank = next(iter(banks.values()))
+        return bank if callable(getattr(bank, "bridge_tick", None)) else None
+
+    def _attach_bank(self, bank, scale: np.ndarray) -> None:
+        servos = [(n._k, i, k) for n, entries in self._servo_map for i, k, _ in entries]
+        bank.attach_bridge(
+            self.layout.center_ticks,
+            np.asarray(self.plant._qadr).tolist(),
+            scale.tolist(),
+            servos,
+            [(r, n._k) for r, n in self._rotor_map],
+            [n._k for n, _ in self._servo_map],
+        )
 
     def tick(self, now: float) -> None:
         """Couple plant and mirrors at ``now`` (see the module doc)."""
@@ -305,6 +345,32 @@ class PlantBridge:
         self.ticks += 1
         if abs(plant.time - now) > 0.5 * self.period:
             self.time_mismatches += 1
+        if self._bank is not None:
+            self._tick_rust(now)
+        else:
+            self._couple(now)
+        self._sample(now)
+
+    def _tick_rust(self, now: float) -> None:
+        """Steps 1-4 with the Rust bank: the same values and plant calls as :meth:`_couple`."""
+        plant = self.plant
+        duties = self._duties
+        targets_changed, changed = self._bank.bridge_tick(plant._v_qpos, self._targets, duties)
+        if targets_changed:
+            plant.set_servo_targets(self._targets)
+        volts = self._battery(now) if callable(self._battery) else self._battery
+        if volts != self._voltage:
+            self._voltage = volts
+            plant.set_battery_voltage(volts)
+            for sink in self._battery_sinks:
+                sink(volts)
+            changed = True
+        if changed:
+            plant.set_rotor_duties(duties)
+
+    def _couple(self, now: float) -> None:
+        """Steps 1-4 in Python (the reference; any Neuron mirrors)."""
+        plant = self.plant
         # 1. Present positions: a snapshot of the plant's joints at ``now``; each servo reads
         # (and converts) it only when its Neuron needs it (state report, torque-on, config).
         self._feed.snapshot()
@@ -350,6 +416,10 @@ class PlantBridge:
                     changed = True
         if changed:
             plant.set_rotor_duties(duties)
+
+    def _sample(self, now: float) -> None:
+        """Steps 5-7: the readings due at ``now``."""
+        plant = self.plant
         # Sampling schedule: the n-th tick (from 0) samples a reading when n % ratio == 0.
         n = self._sample_count
         self._sample_count = n + 1

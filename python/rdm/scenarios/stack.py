@@ -157,6 +157,10 @@ class StackOptions:
     #: the same bytes, docs/canwire.md). The channel then admits no other python-can endpoint
     #: (CanWireError); False keeps the in-process python-can channel.
     can_wire: bool = True
+    #: With neuron_backend "rust": the plant bridge's per-millisecond coupling (joint snapshot,
+    #: goals -> servo targets, ESC outputs -> rotor duties) runs in the Rust bank in one call
+    #: (byte-identical files, tests/test_bridge_rust.py); False keeps the Python path.
+    rust_bridge: bool = True
     #: Rotor (ESC + motor) first-order lag [s]; None = the plant's default (0.05 s).
     #: ASSUMPTION 0.01 s: with 0.05 s the LQI roll loop (I_xx = 0.004 kg m^2) is unstable.
     esc_tau: float | None = 0.01
@@ -279,6 +283,7 @@ def make_bridge(
         wrench_period=1.0 / opt.leptrino_rate_hz,
         truth_sink=truth_sink,
         truth_period=opt.truth_period,
+        rust_coupling=opt.rust_bridge,
     )
 
 

@@ -4,6 +4,7 @@
 //! frame for frame: same decoding (and error reasons), same replies, same byte order, so a
 //! simulated run writes the same CAN log with either implementation.
 
+pub mod bank_bridge;
 pub mod can_master;
 pub mod can_wire;
 pub mod neuron_bank;
