@@ -358,15 +358,20 @@ class PlantBridge:
         targets_changed, changed = self._bank.bridge_tick(plant._v_qpos, self._targets, duties)
         if targets_changed:
             plant.set_servo_targets(self._targets)
-        volts = self._battery(now) if callable(self._battery) else self._battery
-        if volts != self._voltage:
-            self._voltage = volts
-            plant.set_battery_voltage(volts)
-            for sink in self._battery_sinks:
-                sink(volts)
-            changed = True
-        if changed:
+        if self._apply_battery(now) or changed:
             plant.set_rotor_duties(duties)
+
+    def _apply_battery(self, now: float) -> bool:
+        """Apply the battery voltage of ``now`` if it changed (plant ESCs, then the sinks);
+        True if it did: the duties must be re-commanded."""
+        volts = self._battery(now) if callable(self._battery) else self._battery
+        if volts == self._voltage:
+            return False
+        self._voltage = volts
+        self.plant.set_battery_voltage(volts)
+        for sink in self._battery_sinks:
+            sink(volts)
+        return True
 
     def _couple(self, now: float) -> None:
         """Steps 1-4 in Python (the reference; any Neuron mirrors)."""
@@ -399,15 +404,8 @@ class PlantBridge:
             plant.set_servo_targets(targets)
         # The plant's ESCs convert a duty at the voltage they hold when commanded: a new
         # voltage is applied first and re-commands the duties.
-        volts = self._battery(now) if callable(self._battery) else self._battery
+        changed = self._apply_battery(now)
         duties = self._duties
-        changed = False
-        if volts != self._voltage:
-            self._voltage = volts
-            plant.set_battery_voltage(volts)
-            for sink in self._battery_sinks:
-                sink(volts)
-            changed = True
         if changed_neurons:
             for r, neuron in self._rotor_map:
                 d = neuron.esc.duty
