@@ -360,27 +360,27 @@ class NeuronBankNode:
         for board, c in zip(self.boards, self._core.changes(), strict=True):
             board.changes[0] = c
 
+    def _push_positions_if_read(self, non_pwm_pending: bool) -> None:
+        """Positions are only read while handling a frame other than a PWM broadcast (MOTOR
+        device, id < 0x100): servo words, requests, board configs, or a frame a board sent
+        last tick that another board accepts (colliding slave ids)."""
+        if (self._fed != [] or self._bridged) and (
+            non_pwm_pending or self._core.sent_frames_heard()
+        ):
+            self._push_positions()
+
     def tick(self, now: float) -> None:
         """Drain the bus, run every board at ``now``, send their frames in order."""
         if self._wire is not None:  # the Rust wire to the Rust master (docs/canwire.md)
             wire = self._wire.wire
-            if (self._fed != [] or self._bridged) and (
-                wire.neurons_pending_non_pwm() or self._core.sent_frames_heard()
-            ):
-                self._push_positions()
+            self._push_positions_if_read(wire.neurons_pending_non_pwm())
             boards = self.boards
             for k in self._core.tick_wire(now, self._wire.clock(), wire):
                 boards[k].tx_count += 1
             self._refresh_changes()
             return
         messages = list(drain(self.bus))
-        # Positions are only read while handling a frame other than a PWM broadcast (MOTOR
-        # device, id < 0x100): servo words, requests, board configs, or a frame a board sent
-        # last tick that another board accepts (colliding slave ids).
-        if (self._fed != [] or self._bridged) and (
-            any(m.arbitration_id >= 0x100 for m in messages) or self._core.sent_frames_heard()
-        ):
-            self._push_positions()
+        self._push_positions_if_read(any(m.arbitration_id >= 0x100 for m in messages))
         out = self._core.tick(now, messages)
         if out:
             bus = self.bus

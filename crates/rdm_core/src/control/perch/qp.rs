@@ -714,7 +714,8 @@ impl PerchQp {
     }
 
     /// `b` of the scaled problem, as built for the last solved tick (see [`Self::a_csc`]);
-    /// after a [`PerchStatus::RateLimited`] tick, with the rate rows of eq. (48) opened.
+    /// after a tick that tried the rate relaxation (status [`PerchStatus::RateLimited`], or
+    /// `Infeasible` with `relax_rate_limit` on), with the rate rows of eq. (48) opened.
     pub fn b(&self) -> &[f64] {
         &self.b
     }
