@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import math
+import operator
 import os
 from collections.abc import Mapping
 from typing import Any, BinaryIO
@@ -31,6 +32,8 @@ from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 from .json_record import encode_record
 
 CHUNK_SIZE = 64 * 1024
+#: Per dataclass type: (field names, attrgetter of them all) for :meth:`McapLogger.log_truth`.
+_FIELD_GETTERS: dict[type, tuple[tuple[str, ...], Any]] = {}
 _SEPARATOR = "=" * 80
 
 
@@ -201,8 +204,13 @@ class McapLogger:
 
     def log_truth(self, truth: Any, topic: str = "/plant/ground_truth") -> None:
         """Log a :class:`rdm.plant.GroundTruth` (every field) at its own time."""
-        fields = {k: getattr(truth, k) for k in truth.__dataclass_fields__}
-        self.log_json(topic, float(truth.time), fields)
+        getter = _FIELD_GETTERS.get(type(truth))
+        if getter is None:
+            keys = tuple(truth.__dataclass_fields__)
+            getter = _FIELD_GETTERS[type(truth)] = (keys, operator.attrgetter(*keys))
+        keys, values = getter
+        # attrgetter: every field in one C call, in field order (as the dict comprehension).
+        self.log_json(topic, float(truth.time), dict(zip(keys, values(truth), strict=True)))
 
     # ------------------------------------------------------------------ end
     def finish(self) -> None:
