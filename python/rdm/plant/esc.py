@@ -50,7 +50,8 @@ class EscParams:
         if not math.isfinite(duty) or duty <= IDLE_DUTY:
             return 0.0
         x = 100.0 * min(duty, 1.0)
-        f = (0.1 * self.p2 * x * x + 0.1 * self.p1 * x + self.p0) / self.v_factor(voltage)
+        # v_factor(voltage) inline (the same expression; this runs per rotor every ms)
+        f = (0.1 * self.p2 * x * x + 0.1 * self.p1 * x + self.p0) / (self.v_ref / voltage) ** 2
         return min(max(f, 0.0), self.thrust_max)
 
     def duty_for_thrust(self, thrust: float, voltage: float) -> float:
@@ -126,8 +127,13 @@ class Esc:
         if not math.isfinite(duty):
             self.rejected += 1
             duty = IDLE_DUTY
-        self.duty = min(max(duty, IDLE_DUTY), 1.0)
-        self._target = self.params.steady_thrust(self.duty, self.voltage)
+        self.duty = d = min(max(duty, IDLE_DUTY), 1.0)
+        target = self.params.steady_thrust(d, self.voltage)
+        store = self._store  # the ``_target`` setter, inline (per rotor every ms)
+        if store is None:
+            self._own_target = target
+        else:
+            store.set_target(self._slot, target)
 
     def command_thrust(self, thrust: float) -> None:
         """Command a steady thrust [N] directly (clamped to [0, thrust_max]), bypassing PWM."""

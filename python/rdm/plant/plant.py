@@ -296,8 +296,14 @@ class Plant:
     # ---------------------------------------------------------------------- commands
     def set_rotor_duties(self, duties: Sequence[float] | np.ndarray) -> None:
         """PWM duty per rotor in [0.5, 1] (0.5 stops the motor); goes through the ESC model."""
-        for esc, duty in zip(self.escs, _vector(duties, len(self.escs), "duties"), strict=True):
-            esc.command_duty(float(duty))
+        escs = self.escs
+        n = len(escs)
+        if type(duties) is np.ndarray and duties.dtype == np.float64 and duties.shape == (n,):
+            values = duties.tolist()  # the bridge's duty array: the same floats as below
+        else:
+            values = _vector(duties, n, "duties").tolist()
+        for esc, duty in zip(escs, values, strict=True):
+            esc.command_duty(duty)
 
     def set_rotor_thrusts(self, thrusts: Sequence[float] | np.ndarray) -> None:
         """Steady thrust command per rotor [N] (the ESC lag still applies)."""
