@@ -186,6 +186,9 @@ class Plant:
         )
         for i, e in enumerate(self.escs):
             e.attach(self._rotors, i)
+        #: Every ESC keeps its state in ``self._rotors`` at its rotor index: duty commands
+        #: may go to the core in one call (``escs`` must not be replaced afterwards).
+        self._duties_in_core = True
         self.ceiling_effects = (
             [ParametricCeilingEffect(radius=r.radius) for r in desc.rotors]
             if ceiling_effect is None
@@ -302,8 +305,18 @@ class Plant:
             values = duties.tolist()  # the bridge's duty array: the same floats as below
         else:
             values = _vector(duties, n, "duties").tolist()
+        if self._duties_in_core and all(e._v_factor is not None for e in escs):
+            # Every ESC's clamp, count and duty -> thrust map in one Rust call (the same
+            # numbers and counters as the loop below, tests/test_sampler_fast_paths.py).
+            self._rotors.command_duties(values)
+            return
         for esc, duty in zip(escs, values, strict=True):
             esc.command_duty(duty)
+
+    def set_rotor_duties_plain(self, duties: Sequence[float] | np.ndarray) -> None:
+        """:meth:`set_rotor_duties` one ``Esc.command_duty`` at a time (the reference)."""
+        for esc, duty in zip(self.escs, _vector(duties, len(self.escs), "duties"), strict=True):
+            esc.command_duty(float(duty))
 
     def set_rotor_thrusts(self, thrusts: Sequence[float] | np.ndarray) -> None:
         """Steady thrust command per rotor [N] (the ESC lag still applies)."""
