@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import struct
 
 import numpy as np
 import pytest
@@ -335,3 +336,48 @@ def test_mocap_node_equals_the_array_formula():
         assert _same(pos, p) and _same(vel, v)
         assert all(type(x) is float for x in pos + vel)
         assert _same(yaw, quaternion_yaw(gt.base_quaternion))
+
+
+# ------------------------------------------------------------------------------- MCAP
+@pytest.mark.parametrize("chunk_size", [64 * 1024, 700, 1])
+def test_fast_message_records_give_the_same_file(tmp_path, chunk_size):
+    files = {}
+    for fast in (True, False):
+        rng = np.random.default_rng(chunk_size)  # the same messages for both paths
+        path = tmp_path / f"{fast}.mcap"
+        with McapLogger(path, chunk_size=chunk_size, fast_messages=fast) as log:
+            assert (log._fast is not None) is fast
+            t = 0.0
+            for k in range(600):
+                t += float(rng.choice([0.0, 0.001, 0.0105]))
+                topic = ["/plant/ground_truth", "/onboard/status", "/x/y"][k % 3]
+                n = int(rng.integers(0, 300))
+                log.log_json(topic, t, {"t": t, "v": rng.standard_normal(n), "k": k})
+                if k == 300:
+                    log.log_json("/late", 0.5 * t, {"late": True})  # earlier time: min/max
+            with pytest.raises(ValueError):
+                log.log_json("/x/y", -1.0, {"t": -1.0})
+            counted = log.messages
+        files[fast] = path.read_bytes()
+        assert counted == 601
+    assert files[True] == files[False]
+    with open(tmp_path / "True.mcap", "rb") as f:
+        reader = make_reader(f)
+        stats = reader.get_summary().statistics
+        msgs = list(reader.iter_messages())
+    assert stats.message_count == len(msgs) == 601
+
+
+def test_fast_message_records_fail_as_the_library(tmp_path):
+    # A time beyond uint64 ns: the library's own error, on the write and again on finish
+    # (its statistics already hold the time), on both paths.
+    counters = []
+    for fast in (True, False):
+        log = McapLogger(tmp_path / f"{fast}.mcap", fast_messages=fast)
+        log.log_json("/x", 1.0, {"t": 1.0})
+        with pytest.raises(struct.error):
+            log.log_json("/x", 2e10, {"t": 1.0})
+        with pytest.raises(struct.error):
+            log.finish()
+        counters.append((log.messages, dict(log._seq)))
+    assert counters[0] == counters[1] == (1, {1: 2})

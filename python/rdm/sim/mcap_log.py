@@ -30,6 +30,7 @@ from rdm.protocol.rosserial.msgdef import MsgSpec
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 
 from .json_record import encode_record
+from .mcap_fast import chunk_message_writer
 
 CHUNK_SIZE = 64 * 1024
 #: Per dataclass type: (field names, attrgetter of them all) for :meth:`McapLogger.log_truth`.
@@ -111,11 +112,14 @@ class McapLogger:
         *,
         chunk_size: int = CHUNK_SIZE,
         compression: CompressionType = CompressionType.ZSTD,
+        fast_messages: bool = True,
     ) -> None:
         self.path = path
         self._file: BinaryIO = open(path, "wb")  # noqa: SIM115
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=compression)
         self._writer.start(profile="ros1", library="rdm")
+        #: The writer's message path in fewer calls (same bytes), None: ``add_message``.
+        self._fast = chunk_message_writer(self._writer) if fast_messages else None
         self._registry = registry
         self._channels: dict[str, tuple[int, str]] = {}  # topic -> (channel id, kind)
         self._schemas: dict[tuple[str, str], int] = {}
@@ -175,9 +179,13 @@ class McapLogger:
         ns = round(t * 1e9)
         seq = self._seq.get(cid, 0)
         self._seq[cid] = seq + 1
-        self._writer.add_message(
-            channel_id=cid, log_time=ns, publish_time=ns, sequence=seq, data=data
-        )
+        fast = self._fast
+        if fast is not None:
+            fast.add(cid, ns, seq, data)
+        else:
+            self._writer.add_message(
+                channel_id=cid, log_time=ns, publish_time=ns, sequence=seq, data=data
+            )
         self.messages += 1
 
     def log_ros1(self, topic: str, type_name: str, t: float, message: Any) -> None:
