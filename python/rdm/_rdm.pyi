@@ -643,6 +643,10 @@ class WrenchNoiseCore:
     def sample(
         self, ideal: _Seq[float], normals: _Seq[float]
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+    def sample_at(
+        self, sensordata: np.ndarray, force_adr: int, torque_adr: int, normals: _Seq[float]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`sample` of the 3 + 3 ideal values at the addresses (ValueError outside)."""
 
 class ImuNoiseCore:
     def __init__(
@@ -661,6 +665,15 @@ class ImuNoiseCore:
         mag: _Seq[float],
         normals: _Seq[float],
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]: ...
+    def sample_at(
+        self,
+        sensordata: np.ndarray,
+        gyro_adr: int,
+        accel_adr: int,
+        mag_adr: int,
+        normals: _Seq[float],
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+        """:meth:`sample` of the 3 x 3 ideal values at the addresses (ValueError outside)."""
 
 def leptrino_force_frame(
     wrench: _Seq[float],
@@ -707,6 +720,16 @@ class RotorPlantCore:
     ) -> None: ...
     def applied(self) -> list[float]: ...
     def set_applied(self, values: list[float]) -> None: ...
+    def set_esc_map(
+        self, i: int, p2: float, p1: float, p0: float, thrust_max: float, v_factor: float
+    ) -> None: ...
+    def set_esc_v_factor(self, i: int, v_factor: float) -> None: ...
+    def duty(self, i: int) -> float: ...
+    def set_duty(self, i: int, value: float) -> None: ...
+    def rejected(self, i: int) -> int: ...
+    def set_rejected(self, i: int, value: int) -> None: ...
+    def command_duties(self, duties: list[float]) -> None:
+        """``Esc.command_duty`` of every rotor in one call (ValueError on a wrong count)."""
 
 # --- canwire ---
 class CanMasterError(RdmError): ...
@@ -768,3 +791,8 @@ class CanWire:
 
 # NeuronBank.tick_wire(now, stamp, wire) -> list[int] (board index of each reply), added by
 # canwire in crates/rdm_py/src/neuron_bank.rs.
+
+# --- samplers ---
+def json_record(values: object) -> str | None:
+    """A flat dict record (plain str keys; None, bool, float, int, str, 1-D float64 arrays,
+    lists of floats) as compact ``json.dumps`` text, NaN/inf as ``null``; None otherwise."""

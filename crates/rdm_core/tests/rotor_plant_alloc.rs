@@ -4,6 +4,8 @@
 
 use std::alloc::System;
 
+use rdm_core::sim::esc_duty::EscDuty;
+use rdm_core::sim::json_text::push_ascii_json_string;
 use rdm_core::sim::rotor_plant::{CeilingRatio, RotorPlant};
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 
@@ -35,6 +37,9 @@ fn rotor_step_allocates_nothing() {
     let mut xpos = [0.0; 8 * 3];
     let mut xmat = [0.0; 8 * 9];
     let mut ctrl = [0.0; 7];
+    let mut escs = [EscDuty::new(0.0798, -6.63, 12.36, 20.0, 1.2); 4];
+    // Capacity for every string below: pushing into it must not reallocate.
+    let mut text = String::with_capacity(4096);
     let region = Region::new(GLOBAL);
     let mut checksum = 0.0;
     for k in 0..5000usize {
@@ -43,6 +48,14 @@ fn rotor_step_allocates_nothing() {
             xmat[s * 9 + 8] = specials[(k + s) % specials.len()].min(1.0);
         }
         xpos[3 * 3 + 2] = specials[k % specials.len()];
+        for (i, e) in escs.iter_mut().enumerate() {
+            let target = e.command(0.45 + 0.1 * specials[(k + i) % specials.len()]);
+            plant.set_target(i, target);
+        }
+        if k % 500 == 0 {
+            text.clear();
+            push_ascii_json_string("perched \u{e9}\"\n\u{1F600}", &mut text);
+        }
         plant.step(&xpos, &xmat, &mut ctrl);
         let _ = bad.step(&xpos, &xmat, &mut ctrl);
         checksum += plant

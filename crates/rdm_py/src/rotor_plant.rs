@@ -7,12 +7,15 @@
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::exceptions::{PyIndexError, PyValueError};
 use pyo3::prelude::*;
+use rdm_core::sim::esc_duty::EscDuty;
 use rdm_core::sim::rotor_plant::{CeilingRatio, RotorPlant, RotorPlantStatus};
 
 /// ESC state, ceiling models and rotor controls of one plant (see `rdm.plant.Plant`).
 #[pyclass(module = "rdm._rdm")]
 struct RotorPlantCore {
     inner: RotorPlant,
+    /// Per rotor: the duty -> thrust map and last duty of its ESC (``Esc`` reads them here).
+    escs: Vec<EscDuty>,
     site_xpos: Py<PyArray2<f64>>,
     site_xmat: Py<PyArray2<f64>>,
     ctrl: Py<PyArray1<f64>>,
@@ -71,8 +74,10 @@ impl RotorPlantCore {
                 "actuator_ids: must have one entry per site id",
             ));
         }
+        let n = site_ids.len();
         Ok(Self {
             inner: RotorPlant::new(&site_ids, &actuator_ids, ceiling_height),
+            escs: vec![EscDuty::new(0.0, 0.0, 0.0, 0.0, 1.0); n],
             site_xpos,
             site_xmat,
             ctrl,
@@ -155,6 +160,77 @@ impl RotorPlantCore {
             .set_ceiling(i, model)
             .then_some(())
             .ok_or_else(|| index_error("i", i))
+    }
+
+    /// Set rotor ``i``'s ESC map (``EscParams`` p2, p1, p0, thrust_max; ``v_factor`` =
+    /// ``(v_ref / voltage) ** 2`` computed by Python).
+    fn set_esc_map(
+        &mut self,
+        i: usize,
+        p2: f64,
+        p1: f64,
+        p0: f64,
+        thrust_max: f64,
+        v_factor: f64,
+    ) -> PyResult<()> {
+        let e = self.escs.get_mut(i).ok_or_else(|| index_error("i", i))?;
+        (e.p2, e.p1, e.p0, e.thrust_max, e.v_factor) = (p2, p1, p0, thrust_max, v_factor);
+        Ok(())
+    }
+
+    /// Set rotor ``i``'s voltage factor ``(v_ref / voltage) ** 2``.
+    fn set_esc_v_factor(&mut self, i: usize, v_factor: f64) -> PyResult<()> {
+        let e = self.escs.get_mut(i).ok_or_else(|| index_error("i", i))?;
+        e.v_factor = v_factor;
+        Ok(())
+    }
+
+    /// Last commanded (clamped) duty of rotor ``i``.
+    fn duty(&self, i: usize) -> PyResult<f64> {
+        self.escs
+            .get(i)
+            .map(|e| e.duty)
+            .ok_or_else(|| index_error("i", i))
+    }
+
+    /// Set rotor ``i``'s last duty (a thrust command's equivalent duty).
+    fn set_duty(&mut self, i: usize, value: f64) -> PyResult<()> {
+        let e = self.escs.get_mut(i).ok_or_else(|| index_error("i", i))?;
+        e.duty = value;
+        Ok(())
+    }
+
+    /// Non-finite commands rotor ``i`` replaced by a stop.
+    fn rejected(&self, i: usize) -> PyResult<u64> {
+        self.escs
+            .get(i)
+            .map(|e| e.rejected)
+            .ok_or_else(|| index_error("i", i))
+    }
+
+    /// Set rotor ``i``'s rejected-command count.
+    fn set_rejected(&mut self, i: usize, value: u64) -> PyResult<()> {
+        let e = self.escs.get_mut(i).ok_or_else(|| index_error("i", i))?;
+        e.rejected = value;
+        Ok(())
+    }
+
+    /// Command one duty per rotor (``Esc.command_duty`` of each, in rotor order): clamp,
+    /// count non-finite values, new target thrusts. ValueError if the count is wrong
+    /// (nothing changes then).
+    fn command_duties(&mut self, duties: Vec<f64>) -> PyResult<()> {
+        if duties.len() != self.escs.len() {
+            return Err(PyValueError::new_err(format!(
+                "duties: expected {} values, got {}",
+                self.escs.len(),
+                duties.len()
+            )));
+        }
+        for (i, (e, d)) in self.escs.iter_mut().zip(&duties).enumerate() {
+            let target = e.command(*d);
+            self.inner.set_target(i, target);
+        }
+        Ok(())
     }
 
     /// Thrusts of the last apply/step, ceiling effect included [N].

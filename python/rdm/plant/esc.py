@@ -50,7 +50,8 @@ class EscParams:
         if not math.isfinite(duty) or duty <= IDLE_DUTY:
             return 0.0
         x = 100.0 * min(duty, 1.0)
-        f = (0.1 * self.p2 * x * x + 0.1 * self.p1 * x + self.p0) / self.v_factor(voltage)
+        # v_factor(voltage) inline (the same expression; this runs per rotor every ms)
+        f = (0.1 * self.p2 * x * x + 0.1 * self.p1 * x + self.p0) / (self.v_ref / voltage) ** 2
         return min(max(f, 0.0), self.thrust_max)
 
     def duty_for_thrust(self, thrust: float, voltage: float) -> float:
@@ -62,34 +63,112 @@ class EscParams:
 
 
 class _ThrustStore(Protocol):
-    """Where an attached ESC keeps its present and target thrust (``RotorPlantCore``)."""
+    """Where an attached ESC keeps its state (``RotorPlantCore``): present and target thrust,
+    the duty map and last duty, the rejected count."""
 
     def thrust(self, i: int) -> float: ...
     def target(self, i: int) -> float: ...
     def set_thrust(self, i: int, value: float) -> None: ...
     def set_target(self, i: int, value: float) -> None: ...
+    def set_esc_map(
+        self, i: int, p2: float, p1: float, p0: float, thrust_max: float, v_factor: float
+    ) -> None: ...
+    def set_esc_v_factor(self, i: int, v_factor: float) -> None: ...
+    def duty(self, i: int) -> float: ...
+    def set_duty(self, i: int, value: float) -> None: ...
+    def rejected(self, i: int) -> int: ...
+    def set_rejected(self, i: int, value: int) -> None: ...
+
+
+def _v_factor_or_none(params: EscParams, voltage: float) -> float | None:
+    """``params.v_factor(voltage)``, None where Python raises (0 V, overflow)."""
+    try:
+        return params.v_factor(voltage)
+    except (ZeroDivisionError, OverflowError):
+        return None
 
 
 class Esc:
     """One ESC + motor + propeller: duty or thrust in, lagged thrust out."""
 
     def __init__(self, params: EscParams | None = None, voltage: float | None = None) -> None:
-        self.params = params or EscParams()
-        self.voltage = self.params.v_ref if voltage is None else voltage
-        # The thrusts live in a store: the Esc's own slots, or a plant's rotor core (one
-        # source of truth for the plant's per-step work and for Python readers/writers).
+        # The state lives in a store: the Esc's own slots, or a plant's rotor core (one
+        # source of truth for the plant's per-step work, its one-call duty commands and
+        # Python readers/writers).
         self._store: _ThrustStore | None = None
         self._slot = 0
         self._own_target = 0.0
         self._own_thrust = 0.0
+        self._own_duty = IDLE_DUTY
+        self._own_rejected = 0
+        self._params = params or EscParams()
+        self._voltage = self._params.v_ref if voltage is None else voltage
+        #: (v_ref / voltage) ** 2, None where Python cannot compute it.
+        self._v_factor = _v_factor_or_none(self._params, self._voltage)
         self.duty = IDLE_DUTY
         self.rejected = 0  # count of non-finite commands replaced by a stop
 
     def attach(self, store: _ThrustStore, slot: int) -> None:
-        """Keep the thrusts in ``store`` at ``slot`` from now on (the present values move)."""
-        thrust, target = self._thrust, self._target
+        """Keep the state in ``store`` at ``slot`` from now on (the present values move)."""
+        thrust, target, duty, rejected = self._thrust, self._target, self.duty, self.rejected
         self._store, self._slot = store, slot
-        self._thrust, self._target = thrust, target
+        self._thrust, self._target, self.duty, self.rejected = thrust, target, duty, rejected
+        self._push_map()
+
+    def _push_map(self) -> None:
+        store = self._store
+        if store is not None:
+            p = self._params
+            vf = math.nan if self._v_factor is None else self._v_factor
+            store.set_esc_map(self._slot, p.p2, p.p1, p.p0, p.thrust_max, vf)
+
+    @property
+    def params(self) -> EscParams:
+        """The duty map and lag parameters."""
+        return self._params
+
+    @params.setter
+    def params(self, value: EscParams) -> None:
+        self._params = value
+        self._v_factor = _v_factor_or_none(value, self._voltage)
+        self._push_map()
+
+    @property
+    def voltage(self) -> float:
+        """Battery voltage [V] of the duty -> thrust map."""
+        return self._voltage
+
+    @voltage.setter
+    def voltage(self, value: float) -> None:
+        self._voltage = value
+        self._v_factor = _v_factor_or_none(self._params, value)
+        self._push_map()
+
+    @property
+    def duty(self) -> float:
+        """The last commanded duty (after the clamp)."""
+        store = self._store
+        return self._own_duty if store is None else store.duty(self._slot)
+
+    @duty.setter
+    def duty(self, value: float) -> None:
+        if self._store is None:
+            self._own_duty = value
+        else:
+            self._store.set_duty(self._slot, value)
+
+    @property
+    def rejected(self) -> int:
+        """Non-finite commands replaced by a stop."""
+        store = self._store
+        return self._own_rejected if store is None else store.rejected(self._slot)
+
+    @rejected.setter
+    def rejected(self, value: int) -> None:
+        if self._store is None:
+            self._own_rejected = value
+        else:
+            self._store.set_rejected(self._slot, value)
 
     @property
     def _thrust(self) -> float:
@@ -126,8 +205,13 @@ class Esc:
         if not math.isfinite(duty):
             self.rejected += 1
             duty = IDLE_DUTY
-        self.duty = min(max(duty, IDLE_DUTY), 1.0)
-        self._target = self.params.steady_thrust(self.duty, self.voltage)
+        self.duty = d = min(max(duty, IDLE_DUTY), 1.0)
+        target = self.params.steady_thrust(d, self.voltage)
+        store = self._store  # the ``_target`` setter, inline (per rotor every ms)
+        if store is None:
+            self._own_target = target
+        else:
+            store.set_target(self._slot, target)
 
     def command_thrust(self, thrust: float) -> None:
         """Command a steady thrust [N] directly (clamped to [0, thrust_max]), bypassing PWM."""

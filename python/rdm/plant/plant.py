@@ -168,6 +168,11 @@ class Plant:
         self._v_ctrl = d.ctrl
         self._v_qpos = d.qpos
         self._v_sensordata = d.sensordata
+        self._v_qvel = d.qvel
+        self._v_xpos = d.xpos
+        self._v_xquat = d.xquat
+        self._v_xmat = d.xmat
+        self._v_subtree_com = d.subtree_com
         self._rotor_site_list = self._rotor_site.tolist()
         self._qadr_list = self._qadr.tolist()
         acts = self._rotor_act.tolist()
@@ -181,6 +186,9 @@ class Plant:
         )
         for i, e in enumerate(self.escs):
             e.attach(self._rotors, i)
+        #: Every ESC keeps its state in ``self._rotors`` at its rotor index: duty commands
+        #: may go to the core in one call (``escs`` must not be replaced afterwards).
+        self._duties_in_core = True
         self.ceiling_effects = (
             [ParametricCeilingEffect(radius=r.radius) for r in desc.rotors]
             if ceiling_effect is None
@@ -291,6 +299,22 @@ class Plant:
     # ---------------------------------------------------------------------- commands
     def set_rotor_duties(self, duties: Sequence[float] | np.ndarray) -> None:
         """PWM duty per rotor in [0.5, 1] (0.5 stops the motor); goes through the ESC model."""
+        escs = self.escs
+        n = len(escs)
+        if type(duties) is np.ndarray and duties.dtype == np.float64 and duties.shape == (n,):
+            values = duties.tolist()  # the bridge's duty array: the same floats as below
+        else:
+            values = _vector(duties, n, "duties").tolist()
+        if self._duties_in_core and all(e._v_factor is not None for e in escs):
+            # Every ESC's clamp, count and duty -> thrust map in one Rust call (the same
+            # numbers and counters as the loop below, tests/test_sampler_fast_paths.py).
+            self._rotors.command_duties(values)
+            return
+        for esc, duty in zip(escs, values, strict=True):
+            esc.command_duty(duty)
+
+    def set_rotor_duties_plain(self, duties: Sequence[float] | np.ndarray) -> None:
+        """:meth:`set_rotor_duties` one ``Esc.command_duty`` at a time (the reference)."""
         for esc, duty in zip(self.escs, _vector(duties, len(self.escs), "duties"), strict=True):
             esc.command_duty(float(duty))
 
@@ -440,6 +464,15 @@ class Plant:
         """One noisy IMU sample in the IMU frame (root link, at the processor)."""
         if self._stale:
             self.sync()
+        g, a, m = self._imu_adr
+        # One Rust call reads the three ideal values from the sensordata view (the same
+        # numbers as :meth:`imu_plain`, tests/test_sampler_fast_paths.py).
+        return self.imu_model.sample_at(self._v_sensordata, g, a, m)
+
+    def imu_plain(self) -> ImuReading:
+        """:meth:`imu` through the Python list path (the reference of the Rust read)."""
+        if self._stale:
+            self.sync()
         sd = self._v_sensordata
         g, a, m = self._imu_adr
         return self.imu_model.sample_lists(
@@ -461,6 +494,16 @@ class Plant:
 
     def wrench(self, sensor: str) -> WrenchReading:
         """One noisy sample of a wrench sensor (``foot_wrench``, ``end_effector_wrench``)."""
+        adr = self._wrench_adr.get(sensor)
+        if adr is None:
+            raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
+        if self._stale:
+            self.sync()
+        f, t = adr
+        return self.wrench_models[sensor].sample_at(self._v_sensordata, f, t)
+
+    def wrench_plain(self, sensor: str) -> WrenchReading:
+        """:meth:`wrench` through the Python list path (the reference of the Rust read)."""
         adr = self._wrench_adr.get(sensor)
         if adr is None:
             raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
@@ -511,6 +554,46 @@ class Plant:
     def _ground_truth(self) -> GroundTruth:
         d = self._fresh()
         points, force, torque, zmp, slip, yaw = self._tracker.measure(d)
+        fb = self._foot_body
+        ee = self._ee_body
+        # Cached views (stable for the data's lifetime): MjData attribute access builds a
+        # new numpy view on each call, which costs more than the copies themselves.
+        xpos = self._v_xpos
+        if self.options.fixed_base:
+            lin = np.zeros(3)
+            ang = np.zeros(3)
+        else:
+            qvel = self._v_qvel
+            lin = qvel[0:3].copy()
+            ang = qvel[3:6].copy()
+        ee_quat = np.zeros(4)
+        mujoco.mju_mat2Quat(ee_quat, self._v_xmat[ee])
+        return GroundTruth.from_values(
+            float(d.time),
+            xpos[fb].copy(),
+            self._v_xquat[fb].copy(),
+            lin,
+            ang,
+            self._v_qpos[self._qadr],  # fancy indexing copies
+            self._v_qvel[self._vadr],
+            self._v_subtree_com[fb].copy(),
+            xpos[ee].copy(),
+            ee_quat,
+            np.array(self._rotors.applied(), dtype=float),
+            points > 0,
+            points,
+            force,
+            torque,
+            zmp,
+            slip,
+            yaw,
+        )
+
+    def _ground_truth_plain(self) -> GroundTruth:
+        """The reference form of :meth:`_ground_truth` (fresh MjData views, keyword
+        construction), for tests/test_sampler_fast_paths.py."""
+        d = self._fresh()
+        points, force, torque, zmp, slip, yaw = self._tracker.measure_plain(d)
         fb = self._foot_body
         if self.options.fixed_base:
             lin = np.zeros(3)

@@ -154,6 +154,16 @@ class ImuModel:
         g, a, m, saturated = self._core.sample(gyro, accel, mag, self._normals.take(9))
         return ImuReading(g, a, m, saturated)
 
+    def sample_at(
+        self, sensordata: np.ndarray, gyro_adr: int, accel_adr: int, mag_adr: int
+    ) -> ImuReading:
+        """:meth:`sample_lists` of the three ideal values read from ``sensordata`` (MuJoCo's
+        array) at their addresses, in one Rust call; ValueError if one lies outside it."""
+        g, a, m, saturated = self._core.sample_at(
+            sensordata, gyro_adr, accel_adr, mag_adr, self._normals.take(9)
+        )
+        return ImuReading(g, a, m, saturated)
+
     def sample_lists_plain(
         self, gyro: list[float], accel: list[float], mag: list[float]
     ) -> ImuReading:
@@ -262,6 +272,14 @@ class WrenchSensorModel:
     def sample_list(self, wrench: list[float]) -> WrenchReading:
         """:meth:`sample` of the six floats (Fx, Fy, Fz, Mx, My, Mz)."""
         force, torque, saturated = self._core.sample(wrench, self._normals.take(6))
+        return WrenchReading(force, torque, saturated)
+
+    def sample_at(self, sensordata: np.ndarray, force_adr: int, torque_adr: int) -> WrenchReading:
+        """:meth:`sample_list` of the ideal force and torque read from ``sensordata`` (MuJoCo's
+        array) at their addresses, in one Rust call; ValueError if one lies outside it."""
+        force, torque, saturated = self._core.sample_at(
+            sensordata, force_adr, torque_adr, self._normals.take(6)
+        )
         return WrenchReading(force, torque, saturated)
 
     def sample_list_plain(self, wrench: list[float]) -> WrenchReading:

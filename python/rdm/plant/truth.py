@@ -41,6 +41,27 @@ class GroundTruth:
     # (kept through contact gaps < 0.1 s; zero when there is no contact anchor)
     foot_slip_yaw: float  # rotation about the ceiling normal since first contact [rad]
 
+    @classmethod
+    def from_values(cls, *values: object) -> GroundTruth:
+        """An instance from every field's value in field order, without the frozen
+        ``__init__``'s per-field ``object.__setattr__`` (the same object: equal, same
+        ``__dict__``); for the plant's 100 Hz record."""
+        if len(values) != len(_TRUTH_FIELDS):
+            raise TypeError(
+                f"GroundTruth.from_values: {len(values)} values for {len(_TRUTH_FIELDS)} fields"
+            )
+        truth = object.__new__(cls)
+        truth.__dict__.update(zip(_TRUTH_FIELDS, values, strict=True))
+        return truth
+
+
+_TRUTH_FIELDS = tuple(GroundTruth.__dataclass_fields__)
+#: Read-only constants of the no-contact measurement.
+_ZEROS3 = np.zeros(3)
+_ZEROS3.flags.writeable = False
+_NAN2 = np.full(2, np.nan)
+_NAN2.flags.writeable = False
+
 
 def _yaw_about(normal: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> float:
     """Angle of the rotation r0 -> r1 about ``normal`` (x axes projected on the plane)."""
@@ -72,6 +93,7 @@ class FootContactTracker:
         self._anchor_pos: np.ndarray | None = None
         self._anchor_rot: np.ndarray | None = None
         self._buf = np.zeros(6)
+        self._views: tuple = (None, None, None)  # (data, its xpos, its xmat)
         self._plate_geoms = frozenset(np.flatnonzero(model.geom_bodyid == plate_body).tolist())
 
     def update(self, data: mujoco.MjData) -> None:
@@ -101,7 +123,36 @@ class FootContactTracker:
     def measure(
         self, data: mujoco.MjData
     ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """(points, force, torque, zmp, slip, slip_yaw) for the present contacts."""
+        """(points, force, torque, zmp, slip, slip_yaw) for the present contacts.
+
+        No contact at all (a flying robot): the numbers :meth:`measure_plain` gives for an
+        empty contact list, with fewer numpy calls (tests/test_sampler_fast_paths.py)."""
+        if data.ncon:
+            return self.measure_plain(data)
+        if self._views[0] is not data:
+            self._views = (data, data.xpos, data.xmat)  # stable for the data's lifetime
+        _, xpos, xmat = self._views
+        pb = self._plate_body
+        rot = xmat[pb].reshape(3, 3)
+        # The plain form's -(rot.T @ zeros) for the force and the torque: one product.
+        force = -(rot.T @ _ZEROS3)
+        torque = force.copy()
+        if self._anchor_pos is not None or self._last_contact_time != -math.inf:
+            self._track(data, False)
+        zmp = _NAN2.copy()
+        if self._anchor_pos is None or self._anchor_rot is None:
+            return 0, force, torque, zmp, np.zeros(2), 0.0
+        origin = xpos[pb]
+        anchor_rot = self._anchor_rot
+        slip = (origin - self._anchor_pos)[:2]
+        yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
+        return 0, force, torque, zmp, slip.copy(), yaw
+
+    def measure_plain(
+        self, data: mujoco.MjData
+    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """(points, force, torque, zmp, slip, slip_yaw) for the present contacts (the
+        reference form, any contact list)."""
         m = self._model
         origin = data.xpos[self._plate_body]
         rot = data.xmat[self._plate_body].reshape(3, 3)

@@ -94,16 +94,25 @@ class MocapNode:
         self.plant = plant
         self.onboard = onboard
         self.period = period
-        self._last: np.ndarray | None = None
+        self._last: list[float] | None = None
         self.enabled = True
 
     def tick(self, now: float) -> None:
         gt = self.plant.ground_truth()
-        p = np.asarray(gt.cog_position, dtype=float)
-        v = np.zeros(3) if self._last is None else (p - self._last) / self.period
+        # Plain floats: the same IEEE operations as the array form ``(p - last) / period``,
+        # and lists of floats take the onboard node's cheap validation path.
+        p = np.asarray(gt.cog_position, dtype=float).reshape(-1).tolist()
+        last = self._last
+        if last is None:
+            v = [0.0] * len(p)
+        else:
+            period = self.period
+            v = [(a - b) / period for a, b in zip(p, last, strict=True)]
         self._last = p
         if self.enabled:
-            self.onboard.set_mocap(p, v, quaternion_yaw(gt.base_quaternion))
+            w, x, y, z = np.asarray(gt.base_quaternion, dtype=float).reshape(-1).tolist()
+            yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+            self.onboard.set_mocap(p, v, yaw)
 
 
 class ScriptNode:

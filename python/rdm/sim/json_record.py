@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from rdm._rdm import json_float_list
+from rdm._rdm import json_float_list, json_record
 
 #: Keys json.dumps writes as they are (no escapes under ensure_ascii).
 _PLAIN_KEY = re.compile(r"[A-Za-z0-9_ ./:+-]*")
@@ -44,7 +44,20 @@ def _float(v: float) -> str:
 
 
 def encode_record(values: Mapping[str, Any]) -> str | None:
-    """``values`` as compact JSON text, or None when a value is outside the fast path."""
+    """``values`` as compact JSON text, or None when a value is outside the fast path.
+
+    A dict goes to Rust in one call (``rdm._rdm.json_record``: plain keys; None, bool, float,
+    int, str, 1-D float64 arrays, lists of floats); what it declines takes
+    :func:`encode_record_plain` (the same text, tests/test_sampler_fast_paths.py)."""
+    if type(values) is dict:
+        text = json_record(values)
+        if text is not None:
+            return text
+    return encode_record_plain(values)
+
+
+def encode_record_plain(values: Mapping[str, Any]) -> str | None:
+    """The Python form of :func:`encode_record` (the reference of the Rust path)."""
     parts = []
     for k, v in values.items():
         key = _key(k)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import math
+import operator
 import os
 from collections.abc import Mapping
 from typing import Any, BinaryIO
@@ -29,8 +30,11 @@ from rdm.protocol.rosserial.msgdef import MsgSpec
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 
 from .json_record import encode_record
+from .mcap_fast import chunk_message_writer
 
 CHUNK_SIZE = 64 * 1024
+#: Per dataclass type: (field names, attrgetter of them all) for :meth:`McapLogger.log_truth`.
+_FIELD_GETTERS: dict[type, tuple[tuple[str, ...], Any]] = {}
 _SEPARATOR = "=" * 80
 
 
@@ -108,11 +112,14 @@ class McapLogger:
         *,
         chunk_size: int = CHUNK_SIZE,
         compression: CompressionType = CompressionType.ZSTD,
+        fast_messages: bool = True,
     ) -> None:
         self.path = path
         self._file: BinaryIO = open(path, "wb")  # noqa: SIM115
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=compression)
         self._writer.start(profile="ros1", library="rdm")
+        #: The writer's message path in fewer calls (same bytes), None: ``add_message``.
+        self._fast = chunk_message_writer(self._writer) if fast_messages else None
         self._registry = registry
         self._channels: dict[str, tuple[int, str]] = {}  # topic -> (channel id, kind)
         self._schemas: dict[tuple[str, str], int] = {}
@@ -172,9 +179,13 @@ class McapLogger:
         ns = round(t * 1e9)
         seq = self._seq.get(cid, 0)
         self._seq[cid] = seq + 1
-        self._writer.add_message(
-            channel_id=cid, log_time=ns, publish_time=ns, sequence=seq, data=data
-        )
+        fast = self._fast
+        if fast is not None:
+            fast.add(cid, ns, seq, data)
+        else:
+            self._writer.add_message(
+                channel_id=cid, log_time=ns, publish_time=ns, sequence=seq, data=data
+            )
         self.messages += 1
 
     def log_ros1(self, topic: str, type_name: str, t: float, message: Any) -> None:
@@ -201,8 +212,13 @@ class McapLogger:
 
     def log_truth(self, truth: Any, topic: str = "/plant/ground_truth") -> None:
         """Log a :class:`rdm.plant.GroundTruth` (every field) at its own time."""
-        fields = {k: getattr(truth, k) for k in truth.__dataclass_fields__}
-        self.log_json(topic, float(truth.time), fields)
+        getter = _FIELD_GETTERS.get(type(truth))
+        if getter is None:
+            keys = tuple(truth.__dataclass_fields__)
+            getter = _FIELD_GETTERS[type(truth)] = (keys, operator.attrgetter(*keys))
+        keys, values = getter
+        # attrgetter: every field in one C call, in field order (as the dict comprehension).
+        self.log_json(topic, float(truth.time), dict(zip(keys, values(truth), strict=True)))
 
     # ------------------------------------------------------------------ end
     def finish(self) -> None:

@@ -3,6 +3,8 @@
 //! the Python reference forms in `rdm.plant.sensors` / `rdm.protocol.leptrino` operation for
 //! operation, so a run gives the same bytes with either.
 
+pub mod esc_duty;
+pub mod json_text;
 pub mod leptrino_stream;
 pub mod python_float_repr;
 pub mod rotor_plant;
