@@ -5,9 +5,10 @@ and the chunk's message index, then writes the record through six ``RecordBuilde
 placeholder length, a seek back, the real length). :class:`ChunkMessageWriter` does the same
 bookkeeping on the same objects and writes the record with one ``struct.pack`` and the data:
 the file is byte-identical (tests/test_sampler_fast_paths.py compares whole files). It reaches
-into the writer's private state (``mcap`` 1.x names); when that is not there, or the writer
-does not chunk, :func:`chunk_message_writer` returns None and the caller keeps
-``Writer.add_message``.
+into the writer's private state, so it is used only with the ``mcap`` releases it was checked
+against (``VERIFIED_MCAP``, by the whole-file test); with any other release, or when that state
+is not there, or the writer does not chunk, :func:`chunk_message_writer` returns None and the
+caller keeps ``Writer.add_message``.
 """
 
 from __future__ import annotations
@@ -15,8 +16,13 @@ from __future__ import annotations
 import struct
 from typing import Any
 
+import mcap
 from mcap.records import MessageIndex
 from mcap.writer import Writer
+
+#: ``mcap`` releases (major.minor) whose writer internals this module mirrors; checked by the
+#: whole-file comparison in tests/test_sampler_fast_paths.py. Add one only after that test.
+VERIFIED_MCAP = ("1.6",)
 
 #: Opcode, record length, channel id, sequence, log time, publish time (MCAP Message record).
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")
@@ -83,7 +89,10 @@ class ChunkMessageWriter:
 
 
 def chunk_message_writer(writer: Writer) -> ChunkMessageWriter | None:
-    """The fast message writer of ``writer``, or None (no chunking, other ``mcap`` internals)."""
+    """The fast message writer of ``writer``, or None (no chunking, an unverified ``mcap``)."""
+    version = getattr(mcap, "__version__", "")
+    if ".".join(version.split(".")[:2]) not in VERIFIED_MCAP:
+        return None
     stats = getattr(writer, "_Writer__statistics", None)
     chunk = getattr(writer, "_Writer__chunk_builder", None)
     size = getattr(writer, "_Writer__chunk_size", None)
