@@ -188,7 +188,7 @@ class OnboardNode:
         self.servos_torque_on = False
         self._torque_sent_at: float | None = None
         # messages rebuilt only when their content changed (same object -> same bytes)
-        self._gains_msg: tuple[bytes, Any] | None = None
+        self._gains_msg: tuple[tuple[bytes, str, tuple[int, ...]], Any] | None = None
         self._p_matrix_msg: tuple[Any, Any] | None = None
 
     # ------------------------------------------------------------------ inputs from outside
@@ -334,7 +334,7 @@ class OnboardNode:
         self.counts[f"rx:{event.topic}"] += 1
         if event.topic == "imu":
             q = [float(v) for v in msg.quaternion]
-            if not all(math.isfinite(v) for v in q) or abs(math.fsum(v * v for v in q) - 1) > 0.1:
+            if not all(map(math.isfinite, q)) or abs(math.fsum([v * v for v in q]) - 1) > 0.1:
                 self.counts["imu_invalid"] += 1
                 return
             x, y, z, w = q
@@ -551,7 +551,7 @@ class OnboardNode:
     def _send_gains(self) -> None:
         wire = self.control.gains_wire
         assert wire is not None
-        key = wire.tobytes() + f"{wire.dtype.str}{wire.shape}".encode()
+        key = (wire.tobytes(), wire.dtype.str, wire.shape)
         if self._gains_msg is None or self._gains_msg[0] != key:
             term = self._msg["rpy_term"]
             names = ("roll_p", "roll_i", "roll_d", "pitch_p", "pitch_i", "pitch_d", "yaw_d")
@@ -564,18 +564,20 @@ class OnboardNode:
         self._publish("rpy/gain", self._gains_msg[1])
 
     def _send_servo_targets(self, targets: np.ndarray) -> None:
-        q = np.array(targets, dtype=float)
+        # a list of the same Python floats float(q[j]) gives (element writes: same values)
+        q = np.array(targets, dtype=float).tolist()
         if self.arming.flying and self.last_alpha_beta is not None:
             alpha, beta = self.last_alpha_beta
             for i, (ja, jb) in enumerate(self.control.vectoring_joints):
-                q[ja], q[jb] = alpha[i], beta[i]
+                q[ja], q[jb] = float(alpha[i]), float(beta[i])
         smap = self.config.servo_map
-        n = min(smap.n_joints, q.size)
+        n = min(smap.n_joints, len(q))
+        to_raw = smap.to_raw
         self._publish(
             "servo/target_states",
             self._msg["servo/target_states"].new(
-                index=[smap.servo_index[j] for j in range(n)],
-                angles=[smap.to_raw(j, float(q[j])) for j in range(n)],
+                index=list(smap.servo_index[:n]),
+                angles=[to_raw(j, q[j]) for j in range(n)],
             ),
         )
 

@@ -30,6 +30,11 @@ from rdm.nodes.onboard_config import OnboardConfig
 
 INT16_MIN, INT16_MAX = -32768, 32767
 
+try:  # the ufunc np.clip ends in for float arrays, without its Python dispatch layers
+    from numpy._core.umath import clip as _clip
+except ImportError:  # numpy < 2
+    _clip = np.clip
+
 
 def to_wire(value: float) -> tuple[int, bool]:
     """Spinal's ``x * 1000`` int16 (truncated toward zero as the C++ cast, saturated);
@@ -178,7 +183,7 @@ class ControlPipeline:
         imu = cog_rot.T @ np.asarray(frames[self.config.imu_link], dtype=float)[:3, :3]
         g = self.config.gravity
         hover = np.linalg.lstsq(qbar, [o["mass"] * g, 0.0, 0.0, 0.0], rcond=None)[0]
-        if not (np.all(np.isfinite(qbar)) and np.all(np.isfinite(hover))):
+        if not (np.isfinite(qbar).all() and np.isfinite(hover).all()):
             self.counts["model_non_finite"] += 1
             return False
         self.terms = ModelTerms(
@@ -223,7 +228,7 @@ class ControlPipeline:
             self.counts["lqi_failed"] += 1
             self.lqi.reset()  # next attempt is cold
             return False
-        if not np.all(np.isfinite(res.gains)):
+        if not np.isfinite(res.gains).all():
             self.counts["lqi_failed"] += 1
             return False
         self.counts["lqi_ok"] += 1
@@ -357,8 +362,8 @@ class ControlPipeline:
             self.perch_thrust = np.maximum(self.perch_thrust - self._delta_perch, 0.0)
         total = flight + self.perch_thrust
         if self.config.clip_base_thrust:
-            total = np.clip(total, 0.0, self.thrust_max)
-        if not np.all(np.isfinite(total)):  # cannot happen with finite inputs; never send NaN
+            total = _clip(total, 0.0, self.thrust_max)
+        if not np.isfinite(total).all():  # cannot happen with finite inputs; never send NaN
             self.counts["non_finite_command"] += 1
             return None
         return ControlCommand(

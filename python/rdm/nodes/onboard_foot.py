@@ -51,6 +51,10 @@ class FootSensorReader:
         # and rated values are moderate: raw counts are int16, so every wrench is then finite
         # and the plain path's non-finite check can never drop a sample.
         self._skip_older = all(abs(v) < _MODERATE for v in (*self.offset, *self.model.rated))
+        #: the leading run of OK-sample frames of each read is de-framed in one Rust call
+        #: (:meth:`rdm.protocol.leptrino.LeptrinoStreamParser.feed_ok_samples`); False: every
+        #: frame through ``feed`` (the plain form the tests compare with)
+        self.fast_scan = True
 
     def poll(self, now: float) -> None:
         """Read what arrived, keep the newest sample, (re-)send DATA_START when due."""
@@ -62,7 +66,16 @@ class FootSensorReader:
         if data:
             self.counts["bytes"] += len(data)
         newest: bytes | None = None  # a well-formed OK sample not converted yet
-        for event in self.parser.feed(data):
+        if self._skip_older and self.fast_scan:
+            # the leading run of OK samples, scanned in Rust: what the loop below does for
+            # each of them (one sample each, newest wins), summed
+            count, newest, events = self.parser.feed_ok_samples(data)
+            if count:
+                self.stamp = now
+                self.counts["samples"] += count
+        else:
+            events = self.parser.feed(data)
+        for event in events:
             if event.error is not None:
                 self.counts[f"frame_{event.error.reason}"] += 1
                 continue
@@ -132,12 +145,5 @@ class FootSensorReader:
             self.counts["write_error"] += 1
 
 
-def _is_ok_sample(payload: bytes) -> bool:
-    """True when :func:`rdm.protocol.leptrino.parse_response` would return a
-    :class:`~rdm.protocol.leptrino.ForceData` with result OK for ``payload``."""
-    return (
-        len(payload) == lp.FORCE_PAYLOAD_LEN
-        and payload[0] == lp.FORCE_PAYLOAD_LEN
-        and payload[2] == lp.Command.DATA_START
-        and payload[3] == lp.Result.OK
-    )
+#: True when a de-framed payload parses to an OK ForceData (kept under its old name).
+_is_ok_sample = lp.is_ok_sample

@@ -1,0 +1,207 @@
+"""Second round of the onboard node's fast paths (docs/lockstep.md, "Session 6: the onboard
+tick"): each against its plain form, on real and random input, including corrupt bytes.
+
+* ``LeptrinoStreamParser.feed_ok_samples`` (the Rust scan of the leading run of OK-sample
+  frames) against ``feed`` byte-at-a-time and chunked: same payloads, events, counters and
+  parser state; golden frames from ``firmware_protocol/leptrino/vectors.json``;
+* ``FootSensorReader`` with ``fast_scan`` on and off: same counts (in the same order),
+  wrench, stamp and bytes written;
+* the float clip the control step uses against ``np.clip`` (signed zeros, NaN, inf).
+"""
+
+from __future__ import annotations
+
+import json
+import random
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rdm import _rdm
+from rdm.nodes.onboard_control import _clip
+from rdm.nodes.onboard_foot import FootSensorReader
+from rdm.protocol import leptrino as lp
+
+VECTORS = Path(__file__).resolve().parents[1] / "firmware_protocol" / "leptrino" / "vectors.json"
+
+
+def _state(p: lp.LeptrinoStreamParser) -> tuple:
+    return (p.frames, dict(p.errors), p.discarded_bytes, p._state, bytes(p._buf), p._start, p._pos)
+
+
+def _event_key(e: lp.StreamEvent) -> tuple:
+    return (e.offset, e.payload, None if e.error is None else e.error.reason)
+
+
+def _random_stream(rng: random.Random, n: int = 400) -> list[bytes]:
+    """Samples (some with DLE bytes to stuff), result errors, acks, bad BCC, truncated frames,
+    DLE STX restarts, bad escapes, over-long payloads and junk; one piece each."""
+    out: list[bytes] = []
+    for _ in range(n):
+        kind = rng.random()
+        raw = tuple(rng.choice([16, 0x1010, -4080, rng.randint(-32768, 32767)]) for _ in range(6))
+        sample = lp.encode_response(lp.ForceData(raw, rng.choice([16, 25]), rng.choice([0, 16])))
+        if kind < 0.6:
+            out.append(sample)
+        elif kind < 0.65:
+            out.append(lp.encode_response(lp.ForceData(raw, 20, 0, result=1)))
+        elif kind < 0.7:
+            out.append(lp.encode_response(lp.Ack(lp.Command.DATA_STOP, lp.Result.OK, 0)))
+        elif kind < 0.75:
+            f = bytearray(sample)
+            f[-1] ^= 0x21
+            out.append(bytes(f))
+        elif kind < 0.8:
+            out.append(sample[: rng.randint(1, len(sample) - 1)])
+        elif kind < 0.84:
+            out.append(sample[:8] + b"\x10\x02" + sample[2:])
+        elif kind < 0.88:
+            out.append(sample[:6] + b"\x10\x55" + sample[6:])
+        elif kind < 0.9:
+            out.append(b"\x10\x02" + bytes([7]) * 300 + b"\x10\x03\x00")
+        elif kind < 0.93:
+            f = bytearray(sample)
+            f[4] = 0x33  # another command byte
+            out.append(bytes(f))
+        else:
+            out.append(bytes(rng.randint(0, 255) for _ in range(rng.randint(1, 5))))
+    return out
+
+
+def _chunks(pieces: list[bytes], rng: random.Random) -> list[bytes]:
+    """Runs of whole pieces (as a UART read delivers them), now and then cut anywhere."""
+    out, i = [], 0
+    while i < len(pieces):
+        n = rng.randint(1, 30)
+        chunk = b"".join(pieces[i : i + n])
+        i += n
+        if rng.random() < 0.3:
+            cut = rng.randint(0, len(chunk))
+            out += [chunk[:cut], chunk[cut:]]
+        else:
+            out.append(chunk)
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_feed_ok_samples_matches_feed(seed):
+    rng = random.Random(seed)
+    data = _random_stream(rng)
+    fast, plain, bytewise = (lp.LeptrinoStreamParser() for _ in range(3))
+    summarised = 0
+    for chunk in _chunks(data, rng):
+        count, newest, rest = fast.feed_ok_samples(chunk)
+        want = plain.feed(chunk)
+        # the summarised run is a prefix of OK-sample payload events, newest last
+        head, tail = want[:count], want[count:]
+        assert all(e.error is None and lp.is_ok_sample(e.payload) for e in head)
+        assert newest == (head[-1].payload if head else None)
+        assert [_event_key(e) for e in rest] == [_event_key(e) for e in tail]
+        assert _state(fast) == _state(plain)
+        summarised += count
+    for b in b"".join(data):
+        bytewise.feed(bytes([b]))
+    assert _state(fast)[:3] == _state(bytewise)[:3]
+    assert summarised > 20
+    assert fast.errors["bcc"] > 0 and fast.errors["restart"] > 0 and fast.discarded_bytes > 0
+
+
+def test_feed_ok_samples_accepts_what_parse_response_accepts():
+    """Independent check of the Rust classification: every payload it summarises parses to
+    an OK ForceData, and every chunk of whole OK samples is summarised in full."""
+    rng = random.Random(11)
+    for _ in range(300):
+        raws = [tuple(rng.randint(-32768, 32767) for _ in range(6)) for _ in range(25)]
+        chunk = b"".join(lp.encode_response(lp.ForceData(r, 25, 0)) for r in raws)
+        end, count, last_start, payload = _rdm.leptrino_ok_sample_run(chunk)
+        assert (end, count) == (len(chunk), 25)
+        resp = lp.parse_response(payload)
+        assert isinstance(resp, lp.ForceData) and resp.result == lp.Result.OK
+        assert resp.raw == raws[-1]
+        assert chunk[last_start:] == lp.encode_response(lp.ForceData(raws[-1], 25, 0))
+
+
+def test_feed_ok_samples_on_golden_frames():
+    vectors = json.loads(VECTORS.read_text())["vectors"]
+    for v in vectors:
+        frame, payload = bytes.fromhex(v["frame"]), bytes.fromhex(v["payload"])
+        parser, ref = lp.LeptrinoStreamParser(), lp.LeptrinoStreamParser()
+        count, newest, rest = parser.feed_ok_samples(frame + frame)
+        want = ref.feed(frame + frame)
+        assert [e.payload for e in want] == [payload, payload]
+        if lp.is_ok_sample(payload):
+            assert (count, newest, rest) == (2, payload, [])
+        else:
+            assert count == 0 and [_event_key(e) for e in rest] == [_event_key(e) for e in want]
+        assert _state(parser) == _state(ref)
+    assert any(lp.is_ok_sample(bytes.fromhex(v["payload"])) for v in vectors)
+
+
+def test_feed_ok_samples_while_not_idle_takes_the_plain_path():
+    sample = lp.encode_response(lp.ForceData((1, 2, 3, 4, 5, 6), 25, 0))
+    fast, plain = lp.LeptrinoStreamParser(), lp.LeptrinoStreamParser()
+    for p in (fast, plain):
+        p.feed(sample[:7])  # mid-frame
+    count, newest, rest = fast.feed_ok_samples(sample[7:] + sample * 2)
+    want = plain.feed(sample[7:] + sample * 2)
+    assert count == 0 and newest is None
+    assert [_event_key(e) for e in rest] == [_event_key(e) for e in want]
+    assert _state(fast) == _state(plain)
+
+
+def test_ok_sample_run_on_bad_input():
+    assert _rdm.leptrino_ok_sample_run(b"") == (0, 0, 0, None)
+    assert _rdm.leptrino_ok_sample_run(b"\x10") == (0, 0, 0, None)
+    assert _rdm.leptrino_ok_sample_run(b"\x10\x02" + b"\x10" * 99) == (0, 0, 0, None)
+    with pytest.raises(TypeError):
+        _rdm.leptrino_ok_sample_run("not bytes")
+
+
+class _Bytes:
+    def __init__(self) -> None:
+        self.pending = b""
+        self.written: list[bytes] = []
+
+    def read_available(self) -> bytes:
+        data, self.pending = self.pending, b""
+        return data
+
+    def write(self, data: bytes) -> int:
+        self.written.append(bytes(data))
+        return len(data)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_foot_reader_fast_scan_matches_plain(seed):
+    rng = random.Random(100 + seed)
+    data = _random_stream(rng, 600)
+    fast_link, plain_link = _Bytes(), _Bytes()
+    fast, plain = FootSensorReader(fast_link), FootSensorReader(plain_link)
+    plain.fast_scan = False
+    for k, chunk in enumerate(_chunks(data, rng) + [b""] * 50):
+        fast_link.pending = plain_link.pending = chunk
+        now = 0.025 * k
+        fast.poll(now)
+        plain.poll(now)
+        assert list(fast.counts.items()) == list(plain.counts.items())
+        assert fast.stamp == plain.stamp
+        if plain.wrench is None:
+            assert fast.wrench is None
+        else:
+            assert fast.wrench.tobytes() == plain.wrench.tobytes()
+        assert _state(fast.parser) == _state(plain.parser)
+    assert fast_link.written == plain_link.written
+    assert fast.counts["samples"] > 100 and fast.counts["start_sent"] > 1
+
+
+def test_clip_is_np_clip_bitwise():
+    rng = np.random.default_rng(3)
+    hi = np.array([10.0, 12.0, 9.5, 11.0])
+    specials = [0.0, -0.0, np.nan, np.inf, -np.inf, 10.0, 12.0, -1e-300]
+    for _ in range(500):
+        x = rng.normal(size=4) * 8.0
+        for i in range(4):
+            if rng.random() < 0.3:
+                x[i] = specials[rng.integers(len(specials))]
+        assert _clip(x, 0.0, hi).tobytes() == np.clip(x, 0.0, hi).tobytes()
