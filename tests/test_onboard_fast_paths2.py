@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from rdm import _rdm
-from rdm.nodes.onboard_control import _clip
+from rdm.nodes.onboard_control import _all_finite, _clip
 from rdm.nodes.onboard_foot import FootSensorReader
 from rdm.protocol import leptrino as lp
 
@@ -205,3 +205,57 @@ def test_clip_is_np_clip_bitwise():
             if rng.random() < 0.3:
                 x[i] = specials[rng.integers(len(specials))]
         assert _clip(x, 0.0, hi).tobytes() == np.clip(x, 0.0, hi).tobytes()
+
+
+def test_all_finite_is_np_all_isfinite():
+    rng = np.random.default_rng(4)
+    shapes = [(0,), (4,), (4, 0), (4, 4, 3), (2, 3)]
+    for _ in range(300):
+        a = rng.normal(size=shapes[rng.integers(len(shapes))])
+        if a.size and rng.random() < 0.5:
+            a.flat[rng.integers(a.size)] = rng.choice([np.nan, np.inf, -np.inf])
+        assert _all_finite(a) is bool(np.all(np.isfinite(a)))
+
+
+def test_imu_converted_when_read_matches_every_message():
+    """The node keeps the newest valid quaternion/gyro and converts on read: the same values
+    as converting every message (independent: quaternion_to_euler / np.array of the last
+    valid one), invalid ones counted and skipped, non-tuple gyro through ``_vector``."""
+    from rdm.nodes.onboard import OnboardNode, quaternion_to_euler
+    from rdm.protocol.rosserial.events import MessageReceived
+    from rdm.protocol.rosserial.registry import spinal_registry
+
+    imu = spinal_registry().msg("spinal/Imu")
+    node = OnboardNode(_Bytes())
+    assert node.imu_euler is None and node.imu_gyro is None
+    rng = random.Random(9)
+    want_euler = want_gyro = None
+    invalid = 0
+    for k in range(400):
+        q = [rng.uniform(-1, 1) for _ in range(4)]
+        norm = sum(v * v for v in q) ** 0.5
+        q = [v / norm for v in q]
+        if rng.random() < 0.15:
+            q[rng.randrange(4)] = rng.choice([float("nan"), 3.0])
+        gyro = [rng.uniform(-2, 2) for _ in range(3)]
+        if rng.random() < 0.15:
+            gyro[rng.randrange(3)] = float("inf")
+        msg = imu.new(quaternion=q, gyro=gyro)
+        if k % 7 == 0:  # a numpy gyro takes _vector's numpy path
+            msg = imu.new(quaternion=q, gyro=np.array(gyro, dtype=np.float32))
+        node._on_event(MessageReceived("imu", "spinal/Imu", 100, msg))
+        ok_q = all(np.isfinite(q)) and abs(sum(v * v for v in q) - 1) <= 0.1
+        if not ok_q:
+            invalid += 1
+        else:
+            want_euler = quaternion_to_euler(*[float(v) for v in msg.quaternion])
+            g = np.asarray(msg.gyro, dtype=float)
+            if np.all(np.isfinite(g)):
+                want_gyro = g
+        if rng.random() < 0.3:
+            assert node.imu_euler == want_euler
+            if want_gyro is None:
+                assert node.imu_gyro is None
+            else:
+                assert node.imu_gyro.tobytes() == want_gyro.tobytes()
+    assert node.counts["imu_invalid"] == invalid > 0

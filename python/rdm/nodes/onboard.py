@@ -172,8 +172,12 @@ class OnboardNode:
         self._mocap: tuple[np.ndarray, np.ndarray, float | None] | None = None
         self._mocap_stamp: float | None = None
         self._mocap_lost_since: float | None = None
-        self.imu_euler: tuple[float, float, float] | None = None
-        self.imu_gyro: np.ndarray | None = None
+        # IMU: the newest valid quaternion / gyro of each tick's messages, converted only when
+        # read (imu_euler, imu_gyro): several arrive per tick and all but the last are unused
+        self._imu_quat: list[float] | None = None
+        self._imu_euler: tuple[float, float, float] | None = None
+        self._gyro_src: Sequence[float] | None = None
+        self._imu_gyro: np.ndarray | None = None
         self.battery_voltage: float | None = None
         self.last_command: ControlCommand | None = None
         self.last_alpha_beta: tuple[tuple[float, ...], tuple[float, ...]] | None = None
@@ -322,6 +326,21 @@ class OnboardNode:
             self.foot.stop()
 
     # ------------------------------------------------------------------------ receiving
+    @property
+    def imu_euler(self) -> tuple[float, float, float] | None:
+        """Roll, pitch, yaw of the newest valid ``imu`` quaternion (None before one)."""
+        if self._imu_euler is None and self._imu_quat is not None:
+            x, y, z, w = self._imu_quat
+            self._imu_euler = quaternion_to_euler(x, y, z, w)
+        return self._imu_euler
+
+    @property
+    def imu_gyro(self) -> np.ndarray | None:
+        """The newest valid ``imu`` gyro vector [rad/s] (None before one)."""
+        if self._gyro_src is not None:
+            self._imu_gyro, self._gyro_src = np.array(self._gyro_src), None
+        return self._imu_gyro
+
     def _on_event(self, event: Any) -> None:
         if isinstance(event, SyncLost):
             self.counts["sync_lost"] += 1
@@ -337,11 +356,15 @@ class OnboardNode:
             if not all(map(math.isfinite, q)) or abs(math.fsum([v * v for v in q]) - 1) > 0.1:
                 self.counts["imu_invalid"] += 1
                 return
-            x, y, z, w = q
-            self.imu_euler = quaternion_to_euler(x, y, z, w)
-            g = _vector(msg.gyro, 3)
-            if g is not None:
-                self.imu_gyro = g
+            self._imu_quat, self._imu_euler = q, None
+            g = msg.gyro
+            if type(g) in (tuple, list) and len(g) == 3 and all(type(v) is float for v in g):
+                if all(map(math.isfinite, g)):  # what _vector accepts; converted when read
+                    self._gyro_src = g
+            else:
+                arr = _vector(g, 3)
+                if arr is not None:
+                    self._gyro_src, self._imu_gyro = None, arr
         elif event.topic == "servo/states":
             self._on_servo_states(msg)
         elif event.topic == "servo/torque_states":

@@ -36,6 +36,11 @@ except ImportError:  # numpy < 2
     _clip = np.clip
 
 
+def _all_finite(a: np.ndarray) -> bool:
+    """``np.all(np.isfinite(a))`` without numpy's Python-level reduction wrappers."""
+    return bool(np.logical_and.reduce(np.isfinite(a), axis=None))
+
+
 def to_wire(value: float) -> tuple[int, bool]:
     """Spinal's ``x * 1000`` int16 (truncated toward zero as the C++ cast, saturated);
     returns (value, saturated)."""
@@ -183,7 +188,7 @@ class ControlPipeline:
         imu = cog_rot.T @ np.asarray(frames[self.config.imu_link], dtype=float)[:3, :3]
         g = self.config.gravity
         hover = np.linalg.lstsq(qbar, [o["mass"] * g, 0.0, 0.0, 0.0], rcond=None)[0]
-        if not (np.isfinite(qbar).all() and np.isfinite(hover).all()):
+        if not (_all_finite(qbar) and _all_finite(hover)):
             self.counts["model_non_finite"] += 1
             return False
         self.terms = ModelTerms(
@@ -228,7 +233,7 @@ class ControlPipeline:
             self.counts["lqi_failed"] += 1
             self.lqi.reset()  # next attempt is cold
             return False
-        if not np.isfinite(res.gains).all():
+        if not _all_finite(res.gains):
             self.counts["lqi_failed"] += 1
             return False
         self.counts["lqi_ok"] += 1
@@ -363,7 +368,7 @@ class ControlPipeline:
         total = flight + self.perch_thrust
         if self.config.clip_base_thrust:
             total = _clip(total, 0.0, self.thrust_max)
-        if not np.isfinite(total).all():  # cannot happen with finite inputs; never send NaN
+        if not _all_finite(total):  # cannot happen with finite inputs; never send NaN
             self.counts["non_finite_command"] += 1
             return None
         return ControlCommand(
