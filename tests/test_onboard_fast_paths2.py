@@ -259,3 +259,78 @@ def test_imu_converted_when_read_matches_every_message():
             else:
                 assert node.imu_gyro.tobytes() == want_gyro.tobytes()
     assert node.counts["imu_invalid"] == invalid > 0
+
+
+@pytest.mark.parametrize("offset", [(0.0,) * 6, (10.0, -3.0, 0.5, 1e4, -2e4, 7.25), (1e99,) * 6])
+def test_take_matches_parse_response_and_to_wrench(offset):
+    reader = FootSensorReader(_Bytes(), offset=offset)
+    rated = np.array(lp.MODELS["CFS034CA301U"].rated)
+    rng = random.Random(21)
+    for _ in range(500):
+        raw = tuple(rng.randint(-32768, 32767) for _ in range(6))
+        payload = lp.encode_response(lp.ForceData(raw, rng.randint(-5, 80), 3))
+        payload = lp.LeptrinoStreamParser().feed(payload)[0].payload
+        reader._take(payload)
+        assert reader.wrench.tobytes() == reader._take_reference(payload).tobytes()
+        want = (np.array(raw, dtype=float) - np.array(offset)) * rated / 10000.0
+        np.testing.assert_allclose(reader.wrench, want, rtol=1e-15, atol=0)
+
+
+def test_foot_reader_wrong_offset_length_takes_the_plain_path():
+    reader = FootSensorReader(_Bytes(), offset=(0.0,) * 5)
+    assert not reader._skip_older
+    reader.link.pending = lp.encode_response(lp.ForceData((1, 2, 3, 4, 5, 6), 20, 0))
+    with pytest.raises(lp.LeptrinoError):
+        reader.poll(0.0)
+
+
+def test_floats_is_float_of_each():
+    from rdm.nodes.onboard import _floats
+
+    rng = np.random.default_rng(8)
+    for a in (
+        rng.normal(size=4),
+        np.array([0.0, -0.0, np.nan, 1e308]),
+        rng.normal(size=4).astype(np.float32),
+        [1, 2.5],
+    ):
+        got, want = _floats(a), [float(v) for v in a]
+        assert [type(v) for v in got] == [float] * len(want)
+        assert np.array(got).tobytes() == np.array(want).tobytes()
+
+
+def test_model_cache_of_recent_q_matches_evaluating_every_tick():
+    """q flickering between a few servo readings (and a bad q now and then): the cached terms
+    and pinv message equal an evaluation at every tick, counters included."""
+    from rdm.model import Robot
+    from rdm.nodes.onboard_config import OnboardConfig
+    from rdm.nodes.onboard_control import MODEL_CACHE_SIZE, ControlPipeline
+
+    robot = Robot.default()
+    cfg = OnboardConfig()
+    fast, plain = ControlPipeline(robot, cfg), ControlPipeline(robot, cfg)
+    plain.reuse_model = False
+    rng = np.random.default_rng(12)
+    base = rng.uniform(-0.3, 0.3, size=robot.n_q)
+    pool = [base + 0.0015 * rng.integers(-2, 3, size=robot.n_q) for _ in range(6)]
+    bad = base.copy()
+    bad[1] = np.nan
+    q_live = np.zeros(robot.n_q)
+    cached_hits = 0
+    for k in range(400):
+        q = bad if k % 37 == 5 else pool[rng.integers(len(pool))]
+        before = fast._model_key
+        cached_hits += before != q.tobytes() and q.tobytes() in fast._model_cache
+        q_live[:] = q
+        assert fast.update_model(q_live) == plain.update_model(q_live.copy())
+        for name in ("q", "inertia", "allocation", "allocation_bar", "foot_allocation"):
+            assert getattr(fast.terms, name).tobytes() == getattr(plain.terms, name).tobytes()
+        for name in ("link_rotations", "hover_thrust", "imu_to_cog"):
+            assert getattr(fast.terms, name).tobytes() == getattr(plain.terms, name).tobytes()
+        assert fast.terms.mass == plain.terms.mass
+        if rng.random() < 0.8:
+            assert fast.p_matrix_wire() == plain.p_matrix_wire()
+        assert fast.desire_coordinate() == plain.desire_coordinate()
+        assert fast.counts == plain.counts
+        assert len(fast._model_cache) <= MODEL_CACHE_SIZE
+    assert cached_hits > 50 and plain.counts["model_error"] > 5

@@ -80,6 +80,13 @@ def _vector(value: Any, n: int) -> np.ndarray | None:
     return v
 
 
+def _floats(values: Any) -> list[float]:
+    """``[float(v) for v in values]``; a float64 array's ``tolist`` gives the same floats."""
+    if type(values) is np.ndarray and values.dtype == np.float64 and values.ndim == 1:
+        return values.tolist()
+    return [float(v) for v in values]
+
+
 def _scalar(value: Any) -> float | None:
     try:
         v = float(value)
@@ -506,7 +513,7 @@ class OnboardNode:
             self._publish(
                 "four_axes/command",
                 self._msg["four_axes/command"].new(
-                    angles=list(c.angles), base_thrust=[float(v) for v in c.base_thrust]
+                    angles=list(c.angles), base_thrust=_floats(c.base_thrust)
                 ),
             )
         if targets is not None:

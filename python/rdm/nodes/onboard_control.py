@@ -29,6 +29,8 @@ from rdm.control.position import PositionController
 from rdm.nodes.onboard_config import OnboardConfig
 
 INT16_MIN, INT16_MAX = -32768, 32767
+#: How many recent q's model terms :meth:`ControlPipeline.update_model` keeps.
+MODEL_CACHE_SIZE = 4
 
 try:  # the ufunc np.clip ends in for float arrays, without its Python dispatch layers
     from numpy._core.umath import clip as _clip
@@ -162,15 +164,23 @@ class ControlPipeline:
         #: the present q is bit-for-bit the one they were computed at (False: always compute)
         self.reuse_model = True
         self._model_key: bytes | None = None
+        #: the last few q's model terms and pinv wire message: the present q flickers between
+        #: a handful of servo readings, each seen again within a few ticks
+        self._model_cache: dict[bytes, tuple[ModelTerms, tuple | None, bool]] = {}
         self._p_matrix: tuple[list[tuple[int, int, int]], list[int]] | None = None
         self._p_matrix_saturated = False
 
     # -- 1. model ------------------------------------------------------------------------
     def update_model(self, q: np.ndarray) -> bool:
         """Evaluate the model at q; on failure keep the last terms (counted)."""
-        if self.reuse_model and self._model_key is not None:
-            qa = np.asarray(q, dtype=float)
-            if qa.tobytes() == self._model_key:
+        if self.reuse_model:
+            key = np.asarray(q, dtype=float).tobytes()
+            if key == self._model_key:
+                return True
+            hit = self._model_cache.get(key)
+            if hit is not None:  # the terms an evaluation at this q gives (deterministic)
+                self.terms, self._p_matrix, self._p_matrix_saturated = hit
+                self._model_key = key
                 return True
         self._model_key = None
         self._p_matrix = None
@@ -203,7 +213,18 @@ class ControlPipeline:
             imu,
         )
         self._model_key = self.terms.q.tobytes()
+        self._remember_model()
         return True
+
+    def _remember_model(self) -> None:
+        """Keep the present terms (and pinv message, if built) under the present q."""
+        if self._model_key is None or self.terms is None:
+            return
+        cache = self._model_cache
+        cache.pop(self._model_key, None)
+        cache[self._model_key] = (self.terms, self._p_matrix, self._p_matrix_saturated)
+        while len(cache) > MODEL_CACHE_SIZE:
+            del cache[next(iter(cache))]  # the oldest
 
     def desire_coordinate(self) -> tuple[float, float, float] | None:
         """ZYX (roll, pitch, yaw) of C<-IMU link, the firmware's ``from_euler`` order, so that
@@ -278,6 +299,7 @@ class ControlPipeline:
             self.counts["pinv_saturated"] += 1
         if self._model_key is not None:  # the terms are the ones at the keyed q
             self._p_matrix, self._p_matrix_saturated = (rows, inertia), sat
+            self._remember_model()
         return rows, inertia
 
     # -- 3-5. one control step -------------------------------------------------------------
