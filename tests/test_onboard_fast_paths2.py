@@ -334,3 +334,91 @@ def test_model_cache_of_recent_q_matches_evaluating_every_tick():
         assert fast.counts == plain.counts
         assert len(fast._model_cache) <= MODEL_CACHE_SIZE
     assert cached_hits > 50 and plain.counts["model_error"] > 5
+
+
+def test_servo_states_cache_matches_the_loop():
+    """Repeated, partial, unknown-index and duplicate-index ``servo/states`` readings: the
+    node with the reading cache ends every message with the same present q, seen flags,
+    joint targets and counters (in the same order) as the node that loops every time."""
+    from rdm.nodes.onboard import OnboardNode
+    from rdm.protocol.rosserial.registry import spinal_registry
+
+    reg = spinal_registry()
+    states, unit = reg.msg("spinal/ServoStates"), reg.msg("spinal/ServoState")
+    fast, plain = OnboardNode(_Bytes()), OnboardNode(_Bytes())
+    plain.reuse_servo_states = False
+    n = len(fast.config.servo_map.servo_index)
+    rng = random.Random(31)
+    readings = []
+    for _ in range(12):
+        idx = list(range(n))
+        kind = rng.random()
+        if kind < 0.2:
+            idx = idx[: rng.randint(1, n - 1)]  # partial
+        elif kind < 0.3:
+            idx = [*idx, 99]  # unknown index
+        elif kind < 0.4:
+            idx = [*idx, idx[2]]  # a joint twice
+        readings.append([(i, rng.randint(1800, 2300)) for i in idx])
+    for k in range(600):
+        reading = readings[rng.randrange(len(readings))]
+        if k == 0:
+            reading = readings[0][:3]  # partial first: the hold waits for every joint
+        msg = states.new(servos=[unit.new(index=i, angle=a) for i, a in reading])
+        fast._on_servo_states(msg)
+        plain._on_servo_states(msg)
+        assert fast.present_q.tobytes() == plain.present_q.tobytes()
+        assert fast._seen.tobytes() == plain._seen.tobytes()
+        assert (fast.joint_targets is None) == (plain.joint_targets is None)
+        if plain.joint_targets is not None:
+            assert fast.joint_targets.tobytes() == plain.joint_targets.tobytes()
+        assert list(fast.counts.items()) == list(plain.counts.items())
+        if k % 50 == 0:  # someone else moves present_q: the cached writes still apply
+            fast.present_q[:] = plain.present_q[:] = rng.random()
+    assert fast.counts["servo_unknown_index"] > 0 and fast.counts["servo_states_partial"] > 0
+    assert 0 < len(fast._servo_cache) <= 8
+    # independent: a full reading gives sign * (raw - zero) * scale per joint
+    smap = fast.config.servo_map
+    full = [(i, 2000 + 7 * i) for i in range(n)]
+    for _ in range(2):  # second time from the cache
+        fast._on_servo_states(states.new(servos=[unit.new(index=i, angle=a) for i, a in full]))
+        for i, a in full:
+            j = smap.servo_index.index(i)
+            if j < fast.robot.n_q:
+                want = smap.angle_sign[j] * (a - smap.zero_point[j]) * smap.angle_scale[j]
+                assert fast.present_q[j] == want
+
+
+def test_position_step_outputs_match_position_command():
+    """``step_outputs`` (what the pipeline reads) carries the values ``step`` wraps, on
+    random inputs; bad input raises the same error from both."""
+    from rdm.control.position import PositionControlError, PositionController
+    from rdm.model import Robot
+    from rdm.nodes.onboard_config import OnboardConfig
+    from rdm.nodes.onboard_control import ControlPipeline
+
+    pipe = ControlPipeline(Robot.default(), OnboardConfig())
+    rng = np.random.default_rng(17)
+    a, b = PositionController(), PositionController()
+    for k in range(300):
+        q = rng.uniform(-0.4, 0.4, size=pipe.robot.n_q)
+        assert pipe.update_model(q)
+        rot = pipe.terms.link_rotations
+        args = [rng.normal(size=2) for _ in range(4)]
+        yaw, dt = float(rng.uniform(-3, 3)), 0.025
+        if k % 40 == 7:
+            args[0] = np.array([np.nan, 0.0])
+            with pytest.raises(PositionControlError) as e1:
+                a.step(*args, yaw, rot, dt)
+            with pytest.raises(PositionControlError) as e2:
+                b.step_outputs(*args, yaw, rot, dt)
+            assert str(e1.value) == str(e2.value)
+            continue
+        cmd, out = a.step(*args, yaw, rot, dt), b.step_outputs(*args, yaw, rot, dt)
+        assert cmd.acceleration.tobytes() == out["acceleration"].tobytes()
+        assert (cmd.roll, cmd.pitch) == (out["roll"], out["pitch"])
+        assert cmd.alpha == tuple(out["alpha"]) and cmd.beta == tuple(out["beta"])
+        assert cmd.direction.tobytes() == np.array(out["direction"], dtype=float).tobytes()
+        assert [float(d[2]) for d in out["direction"]] == [float(v) for v in cmd.direction[:, 2]]
+        assert cmd.integral_clamped == out["integral_clamped"]
+        assert a.integral.tobytes() == b.integral.tobytes()

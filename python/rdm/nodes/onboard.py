@@ -46,6 +46,8 @@ from rdm.protocol.rosserial.server import PayloadTooLarge, ServerSession, TopicN
 
 #: ``spinal/FlightConfigCmd`` INTEGRATION_CONTROL_ON_CMD.
 INTEGRATION_CONTROL_ON = 160
+#: How many distinct ``servo/states`` readings the node keeps the joint writes of.
+SERVO_CACHE_SIZE = 8
 #: Topics the node publishes (Spinal subscribes).
 PUBLISHED_TOPICS = (
     "uav_info",
@@ -201,6 +203,11 @@ class OnboardNode:
         # messages rebuilt only when their content changed (same object -> same bytes)
         self._gains_msg: tuple[tuple[bytes, str, tuple[int, ...]], Any] | None = None
         self._p_matrix_msg: tuple[Any, Any] | None = None
+        #: ``servo/states`` readings seen before (the servos hold still for many messages) are
+        #: applied from their cached joint writes; False: every message through the loop
+        self.reuse_servo_states = True
+        self._servo_cache: dict[tuple, tuple[np.ndarray, np.ndarray, int, bool]] = {}
+        self._servo_cache_map: ServoMap | None = None
 
     # ------------------------------------------------------------------ inputs from outside
     def set_mocap(
@@ -392,17 +399,52 @@ class OnboardNode:
 
     def _on_servo_states(self, msg: Any) -> None:
         smap = self.config.servo_map
+        key = None
+        if self.reuse_servo_states:
+            if smap is not self._servo_cache_map:
+                self._servo_cache.clear()
+                self._servo_cache_map = smap
+            try:
+                key = tuple([(s.index, s.angle) for s in msg.servos])
+                hit = self._servo_cache.get(key)
+            except (TypeError, AttributeError):  # not hashable / not servo entries: plain path
+                key = hit = None
+            if hit is not None:
+                # a reading seen before: the same joint writes and counts as the loop below
+                joints, values, n_unknown, partial = hit
+                self.present_q[joints] = values
+                self._seen[joints] = True
+                if n_unknown:
+                    self.counts["servo_unknown_index"] += n_unknown
+                if partial:
+                    self.counts["servo_states_partial"] += 1
+                self._hold_present_q()
+                return
         covered = set()
+        joints, values, n_unknown = [], [], 0
         for s in msg.servos:
             joint = smap.joint_of(int(s.index))
             if joint is None or joint >= self.robot.n_q:
                 self.counts["servo_unknown_index"] += 1
+                n_unknown += 1
                 continue
-            self.present_q[joint] = smap.to_rad(joint, int(s.angle))
+            value = smap.to_rad(joint, int(s.angle))
+            self.present_q[joint] = value
             self._seen[joint] = True
             covered.add(joint)
-        if len(covered) != self.robot.n_q:
+            joints.append(joint)
+            values.append(value)
+        partial = len(covered) != self.robot.n_q
+        if partial:
             self.counts["servo_states_partial"] += 1
+        if key is not None and len(covered) == len(joints):  # no joint written twice
+            cache = self._servo_cache
+            cache[key] = (np.array(joints, dtype=np.intp), np.array(values), n_unknown, partial)
+            if len(cache) > SERVO_CACHE_SIZE:
+                del cache[next(iter(cache))]  # the oldest
+        self._hold_present_q()
+
+    def _hold_present_q(self) -> None:
         if self.joint_targets is None and self._trajectory is None and self._seen.all():
             self.joint_targets = self.present_q.copy()  # hold where the arm is
 

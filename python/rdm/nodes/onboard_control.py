@@ -343,7 +343,9 @@ class ControlPipeline:
         held = self.perching
         position = state.position[:2]
         velocity = np.zeros(2) if held else state.velocity[:2]
-        pos = self.position.step(
+        # the core's outputs as it returns them (floats and lists of floats): the values
+        # PositionController.step wraps in a PositionCommand, without building one
+        pos = self.position.step_outputs(
             position,
             velocity,
             position if held else setpoint.position[:2],
@@ -353,13 +355,14 @@ class ControlPipeline:
             dt,
         )
         alpha, beta, applied = [], [], []
+        vectoring, min_nz = self.config.vectoring, self.config.vectoring_min_nz
+        direction, pos_alpha, pos_beta = pos["direction"], pos["alpha"], pos["beta"]
         for i, (ja, jb) in enumerate(self.vectoring_joints):
-            n = np.asarray(pos.direction)[i]
-            ok = self.config.vectoring and abs(float(n[2])) >= self.config.vectoring_min_nz
-            if not ok and self.config.vectoring:
+            ok = vectoring and abs(float(direction[i][2])) >= min_nz
+            if not ok and vectoring:
                 self.counts["vectoring_singular"] += 1
-            alpha.append(float(pos.alpha[i]) if ok else float(joint_targets[ja]))
-            beta.append(float(pos.beta[i]) if ok else float(joint_targets[jb]))
+            alpha.append(float(pos_alpha[i]) if ok else float(joint_targets[ja]))
+            beta.append(float(pos_beta[i]) if ok else float(joint_targets[jb]))
             applied.append(ok)
         ff = t.hover_thrust if self.config.feed_forward == "hover" else np.zeros(n_rot)
         # Perched, the altitude loop is held too (zero error, integral kept): λ_flight keeps
@@ -394,7 +397,7 @@ class ControlPipeline:
             self.counts["non_finite_command"] += 1
             return None
         return ControlCommand(
-            (float(pos.roll), float(pos.pitch), float(yaw_term)),
+            (float(pos["roll"]), float(pos["pitch"]), float(yaw_term)),
             total,
             flight,
             self.perch_thrust.copy(),
