@@ -422,3 +422,41 @@ def test_position_step_outputs_match_position_command():
         assert [float(d[2]) for d in out["direction"]] == [float(v) for v in cmd.direction[:, 2]]
         assert cmd.integral_clamped == out["integral_clamped"]
         assert a.integral.tobytes() == b.integral.tobytes()
+
+
+def test_desire_coordinate_message_rebuilt_with_the_model_terms():
+    """The cached ``desire_coordinate`` message encodes as one built from scratch from the
+    present terms, across q changes and returns to an earlier q (cached terms)."""
+    from rdm.model import Robot
+    from rdm.nodes.onboard import OnboardNode
+    from rdm.protocol.rosserial.registry import spinal_registry
+
+    robot = Robot.default()
+    codec = spinal_registry().msg("spinal/DesireCoord")
+    node = OnboardNode(_Bytes(), robot=robot)
+    rng = np.random.default_rng(5)
+    pool = [rng.uniform(-0.3, 0.3, size=robot.n_q) for _ in range(3)]
+    builds = set()
+    for k in range(30):
+        node.present_q[:] = pool[rng.integers(3)]
+        node._control(0.025 * k)
+        roll, pitch, yaw = node.control.desire_coordinate()
+        # independent: ZYX angles of the IMU link's rotation in the CoG frame, from the model
+        o = robot.evaluate(node.present_q)
+        rot = (
+            np.asarray(o["frames"]["cog"])[:3, :3].T
+            @ np.asarray(o["frames"][node.config.imu_link])[:3, :3]
+        )
+        np.testing.assert_allclose(
+            [roll, pitch, yaw],
+            [
+                np.arctan2(rot[2, 1], rot[2, 2]),
+                -np.arcsin(rot[2, 0]),
+                np.arctan2(rot[1, 0], rot[0, 0]),
+            ],
+            atol=1e-12,
+        )
+        fresh = codec.new(roll=roll, pitch=pitch, yaw=yaw)
+        assert codec.encode(node._desire_msg[1]) == codec.encode(fresh)
+        builds.add(id(node._desire_msg[1]))
+    assert 3 <= len(builds) < 30  # rebuilt on change only

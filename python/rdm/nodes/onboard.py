@@ -203,6 +203,7 @@ class OnboardNode:
         # messages rebuilt only when their content changed (same object -> same bytes)
         self._gains_msg: tuple[tuple[bytes, str, tuple[int, ...]], Any] | None = None
         self._p_matrix_msg: tuple[Any, Any] | None = None
+        self._desire_msg: tuple[Any, Any] | None = None
         #: ``servo/states`` readings seen before (the servos hold still for many messages) are
         #: applied from their cached joint writes; False: every message through the loop
         self.reuse_servo_states = True
@@ -528,13 +529,16 @@ class OnboardNode:
                 )
                 cached = self._p_matrix_msg = (pm, msg)
             self._publish("p_matrix_pseudo_inverse_inertia", cached[1])
-        desire = ctl.desire_coordinate() if self.config.send_desire_coordinate else None
-        if desire is not None:
-            roll, pitch, yaw = desire
-            self._publish(
-                "desire_coordinate",
-                self._msg["desire_coordinate"].new(roll=roll, pitch=pitch, yaw=yaw),
-            )
+        if self.config.send_desire_coordinate and ctl.terms is not None:
+            cached_desire = self._desire_msg
+            if cached_desire is None or cached_desire[0] is not ctl.terms:
+                # a function of the model terms alone: rebuilt when they change
+                desire = ctl.desire_coordinate()
+                assert desire is not None
+                roll, pitch, yaw = desire
+                msg = self._msg["desire_coordinate"].new(roll=roll, pitch=pitch, yaw=yaw)
+                cached_desire = self._desire_msg = (ctl.terms, msg)
+            self._publish("desire_coordinate", cached_desire[1])
         targets = self._current_joint_targets(now)
         dt = self.period
         if self._last_control is not None:
