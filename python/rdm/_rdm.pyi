@@ -768,3 +768,7 @@ class CanWire:
 
 # NeuronBank.tick_wire(now, stamp, wire) -> list[int] (board index of each reply), added by
 # canwire in crates/rdm_py/src/neuron_bank.rs.
+
+# --- onboardtick ---
+def leptrino_ok_sample_run(data: bytes) -> tuple[int, int, int, bytes | None]:
+    """(end, count, last_start, last_payload) of the leading run of whole OK-sample frames."""
