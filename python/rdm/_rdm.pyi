@@ -796,3 +796,7 @@ class CanWire:
 def json_record(values: object) -> str | None:
     """A flat dict record (plain str keys; None, bool, float, int, str, 1-D float64 arrays,
     lists of floats) as compact ``json.dumps`` text, NaN/inf as ``null``; None otherwise."""
+
+# --- onboardtick ---
+def leptrino_ok_sample_run(data: bytes) -> tuple[int, int, int, bytes | None]:
+    """(end, count, last_start, last_payload) of the leading run of whole OK-sample frames."""

@@ -4,7 +4,7 @@
 
 use std::alloc::System;
 
-use rdm_core::sim::leptrino_stream::encode_force_frame;
+use rdm_core::sim::leptrino_stream::{encode_force_frame, ok_sample_run};
 use rdm_core::sim::sensor_noise::{ImuNoiseModel, WrenchNoiseModel};
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 
@@ -45,6 +45,9 @@ fn sensor_models_and_frame_encoder_allocate_nothing() {
         checksum += i.values[1][1];
         if let Ok(f) = encode_force_frame(&[x; 6], &rated, (k % 40000) as i64, 0, 0, 0) {
             frames += f.as_bytes().len();
+            // host-side scan of the frame, whole and cut (a stack buffer, no allocation)
+            let b = f.as_bytes();
+            frames += ok_sample_run(b).count + ok_sample_run(&b[..b.len() / 2]).end;
         }
         let _ = encode_force_frame(&ideal, &rated, 250, 0, 0, 0);
     }

@@ -11,6 +11,7 @@ mod errors;
 mod estimate;
 mod gains;
 mod json_log;
+mod leptrino_scan;
 mod lqi;
 mod model;
 mod neuron_bank;
@@ -39,5 +40,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     json_log::register(m)?;
     rotor_plant::register(m)?;
     can_master::register(m)?;
+    leptrino_scan::register(m)?;
     Ok(())
 }

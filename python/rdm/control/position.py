@@ -49,18 +49,8 @@ class PositionController:
         dt: float,
     ) -> PositionCommand:
         """One step; ``link_rotations`` (N_VECTORING, 3, 3) is the rotation eq. (36) applies."""
-
-        def vec(a: np.ndarray) -> np.ndarray:
-            return np.ascontiguousarray(a, dtype=float)
-
-        out = self._core.step(
-            vec(position),
-            vec(velocity),
-            vec(target_position),
-            vec(target_velocity),
-            float(target_yaw),
-            vec(link_rotations),
-            float(dt),
+        out = self.step_outputs(
+            position, velocity, target_position, target_velocity, target_yaw, link_rotations, dt
         )
         return PositionCommand(
             acceleration=out["acceleration"],
@@ -70,6 +60,30 @@ class PositionController:
             beta=tuple(out["beta"]),
             direction=np.asarray(out["direction"]),
             integral_clamped=out["integral_clamped"],
+        )
+
+    def step_outputs(
+        self,
+        position: np.ndarray,
+        velocity: np.ndarray,
+        target_position: np.ndarray,
+        target_velocity: np.ndarray,
+        target_yaw: float,
+        link_rotations: np.ndarray,
+        dt: float,
+    ) -> dict:
+        """:meth:`step` as the core returns it: a dict with ``acceleration`` (array), ``roll``,
+        ``pitch`` (floats), ``alpha``, ``beta`` (lists of floats), ``direction`` (list of
+        [x, y, z] lists), ``integral_clamped``; no :class:`PositionCommand` is built."""
+        vec = np.ascontiguousarray
+        return self._core.step(
+            vec(position, dtype=float),
+            vec(velocity, dtype=float),
+            vec(target_position, dtype=float),
+            vec(target_velocity, dtype=float),
+            float(target_yaw),
+            vec(link_rotations, dtype=float),
+            float(dt),
         )
 
     @property

@@ -46,6 +46,8 @@ from rdm.protocol.rosserial.server import PayloadTooLarge, ServerSession, TopicN
 
 #: ``spinal/FlightConfigCmd`` INTEGRATION_CONTROL_ON_CMD.
 INTEGRATION_CONTROL_ON = 160
+#: How many distinct ``servo/states`` readings the node keeps the joint writes of.
+SERVO_CACHE_SIZE = 8
 #: Topics the node publishes (Spinal subscribes).
 PUBLISHED_TOPICS = (
     "uav_info",
@@ -78,6 +80,13 @@ def _vector(value: Any, n: int) -> np.ndarray | None:
     if v.shape != (n,) or not np.all(np.isfinite(v)):
         return None
     return v
+
+
+def _floats(values: Any) -> list[float]:
+    """``[float(v) for v in values]``; a float64 array's ``tolist`` gives the same floats."""
+    if type(values) is np.ndarray and values.dtype == np.float64 and values.ndim == 1:
+        return values.tolist()
+    return [float(v) for v in values]
 
 
 def _scalar(value: Any) -> float | None:
@@ -172,8 +181,12 @@ class OnboardNode:
         self._mocap: tuple[np.ndarray, np.ndarray, float | None] | None = None
         self._mocap_stamp: float | None = None
         self._mocap_lost_since: float | None = None
-        self.imu_euler: tuple[float, float, float] | None = None
-        self.imu_gyro: np.ndarray | None = None
+        # IMU: the newest valid quaternion / gyro of each tick's messages, converted only when
+        # read (imu_euler, imu_gyro): several arrive per tick and all but the last are unused
+        self._imu_quat: list[float] | None = None
+        self._imu_euler: tuple[float, float, float] | None = None
+        self._gyro_src: Sequence[float] | None = None
+        self._imu_gyro: np.ndarray | None = None
         self.battery_voltage: float | None = None
         self.last_command: ControlCommand | None = None
         self.last_alpha_beta: tuple[tuple[float, ...], tuple[float, ...]] | None = None
@@ -188,8 +201,14 @@ class OnboardNode:
         self.servos_torque_on = False
         self._torque_sent_at: float | None = None
         # messages rebuilt only when their content changed (same object -> same bytes)
-        self._gains_msg: tuple[bytes, Any] | None = None
+        self._gains_msg: tuple[tuple[bytes, str, tuple[int, ...]], Any] | None = None
         self._p_matrix_msg: tuple[Any, Any] | None = None
+        self._desire_msg: tuple[Any, Any] | None = None
+        #: ``servo/states`` readings seen before (the servos hold still for many messages) are
+        #: applied from their cached joint writes; False: every message through the loop
+        self.reuse_servo_states = True
+        self._servo_cache: dict[tuple, tuple[np.ndarray, np.ndarray, int, bool]] = {}
+        self._servo_cache_map: ServoMap | None = None
 
     # ------------------------------------------------------------------ inputs from outside
     def set_mocap(
@@ -322,6 +341,21 @@ class OnboardNode:
             self.foot.stop()
 
     # ------------------------------------------------------------------------ receiving
+    @property
+    def imu_euler(self) -> tuple[float, float, float] | None:
+        """Roll, pitch, yaw of the newest valid ``imu`` quaternion (None before one)."""
+        if self._imu_euler is None and self._imu_quat is not None:
+            x, y, z, w = self._imu_quat
+            self._imu_euler = quaternion_to_euler(x, y, z, w)
+        return self._imu_euler
+
+    @property
+    def imu_gyro(self) -> np.ndarray | None:
+        """The newest valid ``imu`` gyro vector [rad/s] (None before one)."""
+        if self._gyro_src is not None:
+            self._imu_gyro, self._gyro_src = np.array(self._gyro_src), None
+        return self._imu_gyro
+
     def _on_event(self, event: Any) -> None:
         if isinstance(event, SyncLost):
             self.counts["sync_lost"] += 1
@@ -334,14 +368,18 @@ class OnboardNode:
         self.counts[f"rx:{event.topic}"] += 1
         if event.topic == "imu":
             q = [float(v) for v in msg.quaternion]
-            if not all(math.isfinite(v) for v in q) or abs(math.fsum(v * v for v in q) - 1) > 0.1:
+            if not all(map(math.isfinite, q)) or abs(math.fsum([v * v for v in q]) - 1) > 0.1:
                 self.counts["imu_invalid"] += 1
                 return
-            x, y, z, w = q
-            self.imu_euler = quaternion_to_euler(x, y, z, w)
-            g = _vector(msg.gyro, 3)
-            if g is not None:
-                self.imu_gyro = g
+            self._imu_quat, self._imu_euler = q, None
+            g = msg.gyro
+            if type(g) in (tuple, list) and len(g) == 3 and all(type(v) is float for v in g):
+                if all(map(math.isfinite, g)):  # what _vector accepts; converted when read
+                    self._gyro_src = g
+            else:
+                arr = _vector(g, 3)
+                if arr is not None:
+                    self._gyro_src, self._imu_gyro = None, arr
         elif event.topic == "servo/states":
             self._on_servo_states(msg)
         elif event.topic == "servo/torque_states":
@@ -362,17 +400,52 @@ class OnboardNode:
 
     def _on_servo_states(self, msg: Any) -> None:
         smap = self.config.servo_map
+        key = None
+        if self.reuse_servo_states:
+            if smap is not self._servo_cache_map:
+                self._servo_cache.clear()
+                self._servo_cache_map = smap
+            try:
+                key = tuple([(s.index, s.angle) for s in msg.servos])
+                hit = self._servo_cache.get(key)
+            except (TypeError, AttributeError):  # not hashable / not servo entries: plain path
+                key = hit = None
+            if hit is not None:
+                # a reading seen before: the same joint writes and counts as the loop below
+                joints, values, n_unknown, partial = hit
+                self.present_q[joints] = values
+                self._seen[joints] = True
+                if n_unknown:
+                    self.counts["servo_unknown_index"] += n_unknown
+                if partial:
+                    self.counts["servo_states_partial"] += 1
+                self._hold_present_q()
+                return
         covered = set()
+        joints, values, n_unknown = [], [], 0
         for s in msg.servos:
             joint = smap.joint_of(int(s.index))
             if joint is None or joint >= self.robot.n_q:
                 self.counts["servo_unknown_index"] += 1
+                n_unknown += 1
                 continue
-            self.present_q[joint] = smap.to_rad(joint, int(s.angle))
+            value = smap.to_rad(joint, int(s.angle))
+            self.present_q[joint] = value
             self._seen[joint] = True
             covered.add(joint)
-        if len(covered) != self.robot.n_q:
+            joints.append(joint)
+            values.append(value)
+        partial = len(covered) != self.robot.n_q
+        if partial:
             self.counts["servo_states_partial"] += 1
+        if key is not None and len(covered) == len(joints):  # no joint written twice
+            cache = self._servo_cache
+            cache[key] = (np.array(joints, dtype=np.intp), np.array(values), n_unknown, partial)
+            if len(cache) > SERVO_CACHE_SIZE:
+                del cache[next(iter(cache))]  # the oldest
+        self._hold_present_q()
+
+    def _hold_present_q(self) -> None:
         if self.joint_targets is None and self._trajectory is None and self._seen.all():
             self.joint_targets = self.present_q.copy()  # hold where the arm is
 
@@ -456,13 +529,16 @@ class OnboardNode:
                 )
                 cached = self._p_matrix_msg = (pm, msg)
             self._publish("p_matrix_pseudo_inverse_inertia", cached[1])
-        desire = ctl.desire_coordinate() if self.config.send_desire_coordinate else None
-        if desire is not None:
-            roll, pitch, yaw = desire
-            self._publish(
-                "desire_coordinate",
-                self._msg["desire_coordinate"].new(roll=roll, pitch=pitch, yaw=yaw),
-            )
+        if self.config.send_desire_coordinate and ctl.terms is not None:
+            cached_desire = self._desire_msg
+            if cached_desire is None or cached_desire[0] is not ctl.terms:
+                # a function of the model terms alone: rebuilt when they change
+                desire = ctl.desire_coordinate()
+                assert desire is not None
+                roll, pitch, yaw = desire
+                msg = self._msg["desire_coordinate"].new(roll=roll, pitch=pitch, yaw=yaw)
+                cached_desire = self._desire_msg = (ctl.terms, msg)
+            self._publish("desire_coordinate", cached_desire[1])
         targets = self._current_joint_targets(now)
         dt = self.period
         if self._last_control is not None:
@@ -483,7 +559,7 @@ class OnboardNode:
             self._publish(
                 "four_axes/command",
                 self._msg["four_axes/command"].new(
-                    angles=list(c.angles), base_thrust=[float(v) for v in c.base_thrust]
+                    angles=list(c.angles), base_thrust=_floats(c.base_thrust)
                 ),
             )
         if targets is not None:
@@ -551,7 +627,7 @@ class OnboardNode:
     def _send_gains(self) -> None:
         wire = self.control.gains_wire
         assert wire is not None
-        key = wire.tobytes() + f"{wire.dtype.str}{wire.shape}".encode()
+        key = (wire.tobytes(), wire.dtype.str, wire.shape)
         if self._gains_msg is None or self._gains_msg[0] != key:
             term = self._msg["rpy_term"]
             names = ("roll_p", "roll_i", "roll_d", "pitch_p", "pitch_i", "pitch_d", "yaw_d")
@@ -564,18 +640,20 @@ class OnboardNode:
         self._publish("rpy/gain", self._gains_msg[1])
 
     def _send_servo_targets(self, targets: np.ndarray) -> None:
-        q = np.array(targets, dtype=float)
+        # a list of the same Python floats float(q[j]) gives (element writes: same values)
+        q = np.array(targets, dtype=float).tolist()
         if self.arming.flying and self.last_alpha_beta is not None:
             alpha, beta = self.last_alpha_beta
             for i, (ja, jb) in enumerate(self.control.vectoring_joints):
-                q[ja], q[jb] = alpha[i], beta[i]
+                q[ja], q[jb] = float(alpha[i]), float(beta[i])
         smap = self.config.servo_map
-        n = min(smap.n_joints, q.size)
+        n = min(smap.n_joints, len(q))
+        to_raw = smap.to_raw
         self._publish(
             "servo/target_states",
             self._msg["servo/target_states"].new(
-                index=[smap.servo_index[j] for j in range(n)],
-                angles=[smap.to_raw(j, float(q[j])) for j in range(n)],
+                index=list(smap.servo_index[:n]),
+                angles=[to_raw(j, q[j]) for j in range(n)],
             ),
         )
 

@@ -29,6 +29,21 @@ from rdm.control.position import PositionController
 from rdm.nodes.onboard_config import OnboardConfig
 
 INT16_MIN, INT16_MAX = -32768, 32767
+#: How many recent q's model terms :meth:`ControlPipeline.update_model` keeps.
+MODEL_CACHE_SIZE = 4
+
+try:  # the ufunc np.clip ends in for float arrays, without its Python dispatch layers
+    from numpy._core.umath import clip as _clip
+except ImportError:  # numpy < 2
+    _clip = np.clip
+
+
+def _all_finite(a: np.ndarray) -> bool:
+    """``bool(np.all(np.isfinite(a)))``; a float64 array's elements checked as the Python
+    floats ``tolist`` gives (the same values; numpy's reduction costs more on tiny arrays)."""
+    if type(a) is np.ndarray and a.dtype == np.float64 and a.size <= 16:
+        return all(map(math.isfinite, a.ravel().tolist()))
+    return bool(np.logical_and.reduce(np.isfinite(a), axis=None))
 
 
 def to_wire(value: float) -> tuple[int, bool]:
@@ -152,15 +167,23 @@ class ControlPipeline:
         #: the present q is bit-for-bit the one they were computed at (False: always compute)
         self.reuse_model = True
         self._model_key: bytes | None = None
+        #: the last few q's model terms and pinv wire message: the present q flickers between
+        #: a handful of servo readings, each seen again within a few ticks
+        self._model_cache: dict[bytes, tuple[ModelTerms, tuple | None, bool]] = {}
         self._p_matrix: tuple[list[tuple[int, int, int]], list[int]] | None = None
         self._p_matrix_saturated = False
 
     # -- 1. model ------------------------------------------------------------------------
     def update_model(self, q: np.ndarray) -> bool:
         """Evaluate the model at q; on failure keep the last terms (counted)."""
-        if self.reuse_model and self._model_key is not None:
-            qa = np.asarray(q, dtype=float)
-            if qa.tobytes() == self._model_key:
+        if self.reuse_model:
+            key = np.asarray(q, dtype=float).tobytes()
+            if key == self._model_key:
+                return True
+            hit = self._model_cache.get(key)
+            if hit is not None:  # the terms an evaluation at this q gives (deterministic)
+                self.terms, self._p_matrix, self._p_matrix_saturated = hit
+                self._model_key = key
                 return True
         self._model_key = None
         self._p_matrix = None
@@ -178,7 +201,7 @@ class ControlPipeline:
         imu = cog_rot.T @ np.asarray(frames[self.config.imu_link], dtype=float)[:3, :3]
         g = self.config.gravity
         hover = np.linalg.lstsq(qbar, [o["mass"] * g, 0.0, 0.0, 0.0], rcond=None)[0]
-        if not (np.all(np.isfinite(qbar)) and np.all(np.isfinite(hover))):
+        if not (_all_finite(qbar) and _all_finite(hover)):
             self.counts["model_non_finite"] += 1
             return False
         self.terms = ModelTerms(
@@ -193,7 +216,18 @@ class ControlPipeline:
             imu,
         )
         self._model_key = self.terms.q.tobytes()
+        self._remember_model()
         return True
+
+    def _remember_model(self) -> None:
+        """Keep the present terms (and pinv message, if built) under the present q."""
+        if self._model_key is None or self.terms is None:
+            return
+        cache = self._model_cache
+        cache.pop(self._model_key, None)
+        cache[self._model_key] = (self.terms, self._p_matrix, self._p_matrix_saturated)
+        while len(cache) > MODEL_CACHE_SIZE:
+            del cache[next(iter(cache))]  # the oldest
 
     def desire_coordinate(self) -> tuple[float, float, float] | None:
         """ZYX (roll, pitch, yaw) of C<-IMU link, the firmware's ``from_euler`` order, so that
@@ -223,7 +257,7 @@ class ControlPipeline:
             self.counts["lqi_failed"] += 1
             self.lqi.reset()  # next attempt is cold
             return False
-        if not np.all(np.isfinite(res.gains)):
+        if not _all_finite(res.gains):
             self.counts["lqi_failed"] += 1
             return False
         self.counts["lqi_ok"] += 1
@@ -268,6 +302,7 @@ class ControlPipeline:
             self.counts["pinv_saturated"] += 1
         if self._model_key is not None:  # the terms are the ones at the keyed q
             self._p_matrix, self._p_matrix_saturated = (rows, inertia), sat
+            self._remember_model()
         return rows, inertia
 
     # -- 3-5. one control step -------------------------------------------------------------
@@ -311,7 +346,9 @@ class ControlPipeline:
         held = self.perching
         position = state.position[:2]
         velocity = np.zeros(2) if held else state.velocity[:2]
-        pos = self.position.step(
+        # the core's outputs as it returns them (floats and lists of floats): the values
+        # PositionController.step wraps in a PositionCommand, without building one
+        pos = self.position.step_outputs(
             position,
             velocity,
             position if held else setpoint.position[:2],
@@ -321,13 +358,14 @@ class ControlPipeline:
             dt,
         )
         alpha, beta, applied = [], [], []
+        vectoring, min_nz = self.config.vectoring, self.config.vectoring_min_nz
+        direction, pos_alpha, pos_beta = pos["direction"], pos["alpha"], pos["beta"]
         for i, (ja, jb) in enumerate(self.vectoring_joints):
-            n = np.asarray(pos.direction)[i]
-            ok = self.config.vectoring and abs(float(n[2])) >= self.config.vectoring_min_nz
-            if not ok and self.config.vectoring:
+            ok = vectoring and abs(float(direction[i][2])) >= min_nz
+            if not ok and vectoring:
                 self.counts["vectoring_singular"] += 1
-            alpha.append(float(pos.alpha[i]) if ok else float(joint_targets[ja]))
-            beta.append(float(pos.beta[i]) if ok else float(joint_targets[jb]))
+            alpha.append(float(pos_alpha[i]) if ok else float(joint_targets[ja]))
+            beta.append(float(pos_beta[i]) if ok else float(joint_targets[jb]))
             applied.append(ok)
         ff = t.hover_thrust if self.config.feed_forward == "hover" else np.zeros(n_rot)
         # Perched, the altitude loop is held too (zero error, integral kept): λ_flight keeps
@@ -357,12 +395,12 @@ class ControlPipeline:
             self.perch_thrust = np.maximum(self.perch_thrust - self._delta_perch, 0.0)
         total = flight + self.perch_thrust
         if self.config.clip_base_thrust:
-            total = np.clip(total, 0.0, self.thrust_max)
-        if not np.all(np.isfinite(total)):  # cannot happen with finite inputs; never send NaN
+            total = _clip(total, 0.0, self.thrust_max)
+        if not _all_finite(total):  # cannot happen with finite inputs; never send NaN
             self.counts["non_finite_command"] += 1
             return None
         return ControlCommand(
-            (float(pos.roll), float(pos.pitch), float(yaw_term)),
+            (float(pos["roll"]), float(pos["pitch"]), float(yaw_term)),
             total,
             flight,
             self.perch_thrust.copy(),

@@ -11,6 +11,7 @@ raised.
 from __future__ import annotations
 
 import math
+import struct
 from collections import Counter
 from collections.abc import Sequence
 from typing import Protocol
@@ -19,6 +20,8 @@ import numpy as np
 
 from rdm.protocol import leptrino as lp
 
+#: The six int16 force/moment counts at the start of a sample's body.
+_RAW_COUNTS = struct.Struct("<6h")
 #: |offset|, |rated| below this keep (raw - offset) * rated / 10000 finite for int16 raw.
 _MODERATE = 1e100
 
@@ -50,7 +53,13 @@ class FootSensorReader:
         # Every sample of a batch but the newest is only counted (see poll). Exact when offset
         # and rated values are moderate: raw counts are int16, so every wrench is then finite
         # and the plain path's non-finite check can never drop a sample.
-        self._skip_older = all(abs(v) < _MODERATE for v in (*self.offset, *self.model.rated))
+        self._skip_older = len(self.offset) == len(self.model.rated) == 6 and all(
+            abs(v) < _MODERATE for v in (*self.offset, *self.model.rated)
+        )
+        #: the leading run of OK-sample frames of each read is de-framed in one Rust call
+        #: (:meth:`rdm.protocol.leptrino.LeptrinoStreamParser.feed_ok_samples`); False: every
+        #: frame through ``feed`` (the plain form the tests compare with)
+        self.fast_scan = True
 
     def poll(self, now: float) -> None:
         """Read what arrived, keep the newest sample, (re-)send DATA_START when due."""
@@ -62,7 +71,16 @@ class FootSensorReader:
         if data:
             self.counts["bytes"] += len(data)
         newest: bytes | None = None  # a well-formed OK sample not converted yet
-        for event in self.parser.feed(data):
+        if self._skip_older and self.fast_scan:
+            # the leading run of OK samples, scanned in Rust: what the loop below does for
+            # each of them (one sample each, newest wins), summed
+            count, newest, events = self.parser.feed_ok_samples(data)
+            if count:
+                self.stamp = now
+                self.counts["samples"] += count
+        else:
+            events = self.parser.feed(data)
+        for event in events:
             if event.error is not None:
                 self.counts[f"frame_{event.error.reason}"] += 1
                 continue
@@ -107,9 +125,18 @@ class FootSensorReader:
             self.counts["other_responses"] += 1
 
     def _take(self, payload: bytes) -> None:
-        """Convert a sample :func:`_is_ok_sample` accepted (stamp and count already set)."""
+        """Convert a sample :func:`_is_ok_sample` accepted (stamp and count already set): its
+        six counts are the first fields :func:`~rdm.protocol.leptrino.parse_response` unpacks,
+        converted as :func:`~rdm.protocol.leptrino.to_wrench` does."""
+        raw = _RAW_COUNTS.unpack_from(payload, lp.HEADER_LEN)
+        scale = lp.RAW_AT_RATED
+        pairs = zip(raw, self.offset, self.model.rated, strict=True)
+        self.wrench = np.array([(r - o) * k / scale for r, o, k in pairs], dtype=float)
+
+    def _take_reference(self, payload: bytes) -> np.ndarray:
+        """:meth:`_take`'s value through ``parse_response`` + ``to_wrench`` (tests compare)."""
         resp = lp.parse_response(payload)
-        self.wrench = np.array(lp.to_wrench(resp.raw, self.model, self.offset), dtype=float)
+        return np.array(lp.to_wrench(resp.raw, self.model, self.offset), dtype=float)
 
     def _start(self, now: float) -> None:
         try:
@@ -132,12 +159,5 @@ class FootSensorReader:
             self.counts["write_error"] += 1
 
 
-def _is_ok_sample(payload: bytes) -> bool:
-    """True when :func:`rdm.protocol.leptrino.parse_response` would return a
-    :class:`~rdm.protocol.leptrino.ForceData` with result OK for ``payload``."""
-    return (
-        len(payload) == lp.FORCE_PAYLOAD_LEN
-        and payload[0] == lp.FORCE_PAYLOAD_LEN
-        and payload[2] == lp.Command.DATA_START
-        and payload[3] == lp.Result.OK
-    )
+#: True when a de-framed payload parses to an OK ForceData (kept under its old name).
+_is_ok_sample = lp.is_ok_sample

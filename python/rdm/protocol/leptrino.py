@@ -24,6 +24,11 @@ from typing import Any
 DLE, STX, ETX = 0x10, 0x02, 0x03
 DLE_BYTE = bytes([DLE])
 #: A whole frame from its DLE STX: stuffed payload (plain bytes or DLE DLE), DLE ETX, BCC.
+try:  # the Rust scan of whole OK-sample frames (LeptrinoStreamParser.feed_ok_samples)
+    from rdm._rdm import leptrino_ok_sample_run as _ok_sample_run
+except ImportError:  # pure-Python use: feed_ok_samples falls back to feed
+    _ok_sample_run = None
+
 _WHOLE_FRAME = re.compile(rb"\x10\x02((?:[^\x10]|\x10\x10)*)\x10\x03(.)", re.S)
 #: Leptrino's receiver drops frames whose unstuffed payload exceeds this.
 MAX_PAYLOAD = 255
@@ -120,6 +125,26 @@ class LeptrinoStreamParser:
     def _fail(self, reason: str, message: str) -> StreamEvent:
         self.errors[reason] += 1
         return StreamEvent(self._start, None, LeptrinoError(reason, message))
+
+    def feed_ok_samples(
+        self, data: bytes | bytearray
+    ) -> tuple[int, bytes | None, list[StreamEvent]]:
+        """:meth:`feed`, with the leading run of whole frames that each carry an OK sample
+        (a payload :func:`is_ok_sample` accepts) summarised instead of returned one by one:
+        ``(count, newest payload of the run or None, events of the rest of the chunk)``.
+        Parser state and counters end as after :meth:`feed`; the run is scanned in Rust
+        (``rdm._rdm.leptrino_ok_sample_run``) when the parser is idle, else count is 0."""
+        data = bytes(data)
+        if self._state is _State.IDLE and _ok_sample_run is not None:
+            end, count, last_start, payload = _ok_sample_run(data)
+            if count:
+                # what feed's whole-frame path leaves behind after the run's last frame
+                self.frames += count
+                self._start = self._pos + last_start
+                self._pos += end
+                self._buf[:] = payload
+                return count, payload, self.feed(data[end:]) if end < len(data) else []
+        return 0, None, self.feed(data)
 
     def feed(self, data: bytes | bytearray) -> list[StreamEvent]:
         """Consume bytes; return the frames (and framing errors) completed by them."""
@@ -357,6 +382,19 @@ Response = Ack | ProductInfo | RatedValues | DigitalFilter | ForceData
 _DATA_FMT = "<6hhBx"
 #: Payload length of a continuous-output sample: header + 6 raw counts, temperature, status.
 FORCE_PAYLOAD_LEN = HEADER_LEN + struct.calcsize(_DATA_FMT)
+
+
+def is_ok_sample(payload: bytes) -> bool:
+    """True when :func:`parse_response` returns a :class:`ForceData` with result OK for
+    ``payload`` (length, command and result bytes of a continuous-output sample)."""
+    return (
+        len(payload) == FORCE_PAYLOAD_LEN
+        and payload[0] == FORCE_PAYLOAD_LEN
+        and payload[2] == Command.DATA_START
+        and payload[3] == Result.OK
+    )
+
+
 _INFO_SIZES = (PRODUCT_NAME_SIZE, SERIAL_SIZE, FIRMWARE_VERSION_SIZE, OUTPUT_RATE_SIZE)
 
 

@@ -126,6 +126,83 @@ pub fn encode_force_frame(
     Ok(frame)
 }
 
+/// Result code of a successful response.
+pub const RESULT_OK: u8 = 0x00;
+
+/// The leading run of whole OK-sample frames of a byte chunk (host side, see
+/// [`ok_sample_run`]): how far it reaches and the newest sample of it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OkSampleRun {
+    /// Bytes of the chunk the run covers (0: the chunk does not start with such a frame).
+    pub end: usize,
+    /// Frames in the run.
+    pub count: usize,
+    /// Offset in the chunk of the newest frame's first byte (its `DLE`).
+    pub last_start: usize,
+    /// Unstuffed payload of the newest frame (all zero when `count` is 0).
+    pub last_payload: [u8; FORCE_PAYLOAD_LEN],
+}
+
+/// One whole frame at the start of `data` that is an OK sample: `DLE STX`, a stuffed payload
+/// of exactly [`FORCE_PAYLOAD_LEN`] bytes with header (len, *, [`DATA_START`], [`RESULT_OK`]),
+/// `DLE ETX`, a matching BCC. Returns the frame length and the payload, else None.
+fn ok_sample_frame(data: &[u8]) -> Option<(usize, [u8; FORCE_PAYLOAD_LEN])> {
+    if data.first() != Some(&DLE) || data.get(1) != Some(&STX) {
+        return None;
+    }
+    let mut payload = [0u8; FORCE_PAYLOAD_LEN];
+    let mut n = 0;
+    let mut i = 2;
+    let mut bcc = ETX;
+    loop {
+        let b = *data.get(i)?;
+        let byte = if b == DLE {
+            match *data.get(i + 1)? {
+                DLE => {
+                    i += 2;
+                    DLE
+                }
+                ETX => break,
+                _ => return None, // DLE STX restart or a bad escape: not a plain whole frame
+            }
+        } else {
+            i += 1;
+            b
+        };
+        *payload.get_mut(n)? = byte; // longer than a sample: not one
+        n += 1;
+        bcc ^= byte;
+    }
+    let check = *data.get(i + 2)?;
+    let is_sample = n == FORCE_PAYLOAD_LEN
+        && usize::from(payload[0]) == FORCE_PAYLOAD_LEN
+        && payload[2] == DATA_START
+        && payload[3] == RESULT_OK
+        && check == bcc;
+    is_sample.then_some((i + 3, payload))
+}
+
+/// Host-side fast scan of a Leptrino byte chunk read while the de-framer is idle: the
+/// longest prefix made of back-to-back whole frames that each carry an OK sample (the frames
+/// `rdm.protocol.leptrino.LeptrinoStreamParser` would return, one by one, as well-formed
+/// payloads that parse to an OK `ForceData`). Stops at the first byte that starts anything
+/// else, which the caller de-frames the plain way. Allocates nothing, never panics.
+pub fn ok_sample_run(data: &[u8]) -> OkSampleRun {
+    let mut run = OkSampleRun {
+        end: 0,
+        count: 0,
+        last_start: 0,
+        last_payload: [0u8; FORCE_PAYLOAD_LEN],
+    };
+    while let Some((len, payload)) = data.get(run.end..).and_then(ok_sample_frame) {
+        run.last_start = run.end;
+        run.last_payload = payload;
+        run.end += len;
+        run.count += 1;
+    }
+    run
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -162,5 +239,33 @@ mod tests {
             encode_force_frame(&[0.0; 6], &rated, 0, 256, 0, 0),
             Err(ForceFrameError::Byte)
         );
+    }
+
+    #[test]
+    fn ok_sample_run_stops_at_anything_else() {
+        let a = encode_force_frame(&[0.1; 6], &[1.0; 6], 250, 0, 0, 0).unwrap();
+        // a count of 0x10 in a low byte forces DLE stuffing
+        let b = encode_force_frame(&[16.0 / 10000.0; 6], &[1.0; 6], 16, 0, 0, 0).unwrap();
+        let err = encode_force_frame(&[0.1; 6], &[1.0; 6], 250, 0, 0, 1).unwrap();
+        let mut data = Vec::new();
+        data.extend_from_slice(a.as_bytes());
+        data.extend_from_slice(b.as_bytes());
+        let two = data.len();
+        data.extend_from_slice(err.as_bytes());
+        data.extend_from_slice(a.as_bytes());
+        let run = ok_sample_run(&data);
+        assert_eq!(
+            (run.end, run.count, run.last_start),
+            (two, 2, a.as_bytes().len())
+        );
+        assert_eq!(run.last_payload[4], 16);
+        // a truncated frame or a bad BCC ends the run too
+        assert_eq!(ok_sample_run(&data[..two - 1]).count, 1);
+        let mut bad = a.as_bytes().to_vec();
+        if let Some(last) = bad.last_mut() {
+            *last ^= 1;
+        }
+        assert_eq!(ok_sample_run(&bad).end, 0);
+        assert_eq!(ok_sample_run(&[]).count, 0);
     }
 }
