@@ -189,6 +189,8 @@ class RustCanMaster:
     # ------------------------------------------------------------------ commands
     def set_motor_duties(self, duties: Sequence[float]) -> None:
         """Duties 0.5 (stop) .. 1.0 of motors 0..motor_number-1 (sent as ``duty*2000-1000``)."""
+        if type(duties) is list and self._core.try_set_motor_duties(duties):
+            return  # a valid list of floats, applied in one call; otherwise the checks below
         n = self.motor_number
         if len(duties) != n:
             raise ValueError(f"set_motor_duties: {len(duties)} duties for {n}")
@@ -251,6 +253,15 @@ class RustCanMaster:
             for i in range(row[6]):
                 out[(row[0], i)] = ServoEntryView(self, k, i)
         return out
+
+    def servo_keys(self) -> list[tuple[int, int]]:
+        """The keys of :attr:`servo_states` in the same order, in one core call."""
+        return self._core.servo_keys()
+
+    def servo_reports(self) -> list[tuple[bool, int, int, int, int, bool]]:
+        """``(send_data_flag, angle, temperature, current, error, torque_enable)`` of every
+        servo in :attr:`servo_states` order, in one core call (the Spinal servo reports)."""
+        return self._core.servo_reports()
 
     @property
     def slaves(self) -> list[int]:

@@ -506,12 +506,24 @@ class SpinalMirror:
         if self.pwm_test is not None:
             duties = (self.pwm_test + [IDLE_DUTY] * n)[:n]
         elif n and n == self.core.motor_number and n <= N_ROTORS:
-            duties = [min(1.0, max(IDLE_DUTY, float(d))) for d in out.duty[:n]]
+            # tolist: the same Python floats as float() of each element, in one call
+            duties = [min(1.0, max(IDLE_DUTY, d)) for d in out.duty.tolist()[:n]]
         else:
             duties = [IDLE_DUTY] * n
         self.duties = duties
 
     def _can(self, now_ms: int) -> None:
+        if self._master_was_running and now_ms == self._can_ms + 1:  # type: ignore[operator]
+            # The steady state: one new ms, the model adopted; the loop below for t = now_ms.
+            master = self.master
+            if master.state is MasterState.RUNNING:
+                duties = self.duties
+                if duties is not self._duties_to_master and len(duties) == master.motor_number:
+                    master.set_motor_duties(duties)
+                    self._duties_to_master = duties
+            master.tick_ms(now_ms)
+            self._can_ms = now_ms
+            return
         start = now_ms if self._can_ms is None else self._can_ms + 1
         start = max(start, now_ms - MAX_CAN_CATCH_UP_MS + 1)
         for t in range(start, now_ms + 1):
@@ -575,9 +587,9 @@ class SpinalMirror:
                 self._msg.imu.new(
                     stamp=stamp,
                     acc=list(self.acc),
-                    gyro=[float(v) for v in out.angular_velocity],
+                    gyro=out.angular_velocity.tolist(),
                     mag=list(self.mag),
-                    quaternion=[float(v) for v in out.quaternion],
+                    quaternion=out.quaternion.tolist(),
                 ),
             )
         if (
