@@ -223,6 +223,17 @@ impl CanMaster {
             .map_err(master_err)
     }
 
+    /// `set_servo_target` for each `(slave, index, value)` in order (one call for a whole
+    /// `servo/target_states`); stops at the first error, which it raises.
+    fn set_servo_target_list(&mut self, targets: Vec<(u8, u8, i32)>) -> PyResult<()> {
+        for (slave, index, value) in targets {
+            self.core
+                .set_servo_target(slave, index, value)
+                .map_err(master_err)?;
+        }
+        Ok(())
+    }
+
     fn set_servo_torque(&mut self, slave: u8, index: u8, enable: bool) -> PyResult<()> {
         self.core
             .set_servo_torque(slave, index, enable)

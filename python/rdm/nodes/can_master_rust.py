@@ -199,8 +199,8 @@ class RustCanMaster:
                 raise ValueError(f"set_motor_duties: duties[{i}]={d!r} not in 0.5..1.0")
         self._core.set_motor_duties([float(d) for d in duties])
 
-    def _position(self, slave: int, index: int) -> tuple[int, int]:
-        for k, row in enumerate(self._core.neurons()):
+    def _position(self, slave: int, index: int, rows: list[tuple] | None = None) -> tuple[int, int]:
+        for k, row in enumerate(self._core.neurons() if rows is None else rows):
             if row[0] == slave and 0 <= index < row[6]:
                 return k, index
         raise KeyError(f"no servo {index} on Neuron {slave}")
@@ -213,13 +213,13 @@ class RustCanMaster:
         """Goal positions (raw ticks, 15-bit signed) keyed by ``(slave, index)``; all checked
         before any is applied."""
         checked = []
+        rows = self._core.neurons()  # one table snapshot for every check (nothing changes it)
         for (slave, index), value in targets.items():
             if not isinstance(value, int) or not WORD_VALUE_MIN <= value <= WORD_VALUE_MAX:
                 raise ValueError(f"servo ({slave}, {index}) target {value!r} not a 15-bit int")
-            self._position(slave, index)
+            self._position(slave, index, rows)
             checked.append((slave, index, value))
-        for slave, index, value in checked:
-            self._core.set_servo_target(slave, index, value)
+        self._core.set_servo_target_list(checked)
 
     def set_servo_torque(self, slave: int, index: int, enable: bool) -> None:
         """Torque enable of one servo (refused while force-off; off invalidates the goal)."""

@@ -169,6 +169,7 @@ class SpinalMirror:
         registry: TypeRegistry | None = None,
         layout: Any = None,
         master_backend: str = "python",
+        fast_paths: bool = True,
         **spinal_options: Any,
     ) -> None:
         if not (isinstance(rate_hz, (int, float)) and 0 < rate_hz <= MAX_RATE_HZ):
@@ -190,7 +191,9 @@ class SpinalMirror:
         else:
             raise ValueError(f"SpinalMirror: master_backend {master_backend!r}: 'python' or 'rust'")
         self.core = SpinalStep(self.rate_hz, **spinal_options)
-        self.servos = ServoBridge(self.master)
+        # fast_paths=False keeps the plain per-ms path (the reference of the fast one).
+        self._fast = bool(fast_paths)
+        self.servos = ServoBridge(self.master, fast=self._fast)
         reg = registry or spinal_registry()
         self.session = ClientSession.from_layout(
             layout,
@@ -253,6 +256,7 @@ class SpinalMirror:
         self._last_pub: dict[str, int] = {}
         self._next_pub_ms = -(2**62)  # earliest ms a publisher can be due (see _publish)
         self._duties_to_master: list[float] | None = None
+        self._battery_due_ms = -(2**62)  # first ms _battery samples again
 
     # ---------------------------------------------------------------- inputs from outside
     def set_imu_sample(
@@ -276,11 +280,23 @@ class SpinalMirror:
         self._now_s = max(self._now_s, float(now))
         self.now_ms = now_ms
         self._receive(now_ms)
-        self._battery(now_ms)
-        self._control(self._now_s)
-        self._can(now_ms)
-        self._forward_can_events()
-        self._publish(now_ms)
+        if self._fast:
+            # Each skip below is exactly the early return of the method it guards.
+            if now_ms >= self._battery_due_ms:
+                self._battery(now_ms)
+            next_control = self._next_control
+            if next_control is None or self._now_s >= next_control - 1e-9:
+                self._control(self._now_s)
+            self._can(now_ms)
+            self._forward_can_events()
+            if now_ms >= self._next_pub_ms:
+                self._publish(now_ms)
+        else:
+            self._battery(now_ms)
+            self._control(self._now_s)
+            self._can(now_ms)
+            self._forward_can_events()
+            self._publish(now_ms)
         self.uart.send(self.session.take_output())
 
     def close(self) -> None:
@@ -463,6 +479,7 @@ class SpinalMirror:
         if last is not None and now_ms - last < BATTERY_SAMPLE_MS:
             return
         self._last_pub["_battery_sample"] = now_ms
+        self._battery_due_ms = now_ms + BATTERY_SAMPLE_MS
         sample = self.battery_input * self.adc_scale
         if not math.isfinite(sample):
             self.counters.rejected["battery_non_finite"] += 1
@@ -513,7 +530,8 @@ class SpinalMirror:
         self.duties = duties
 
     def _can(self, now_ms: int) -> None:
-        if self._master_was_running and now_ms == self._can_ms + 1:  # type: ignore[operator]
+        can_ms = self._can_ms
+        if self._fast and self._master_was_running and can_ms is not None and now_ms == can_ms + 1:
             # The steady state: one new ms, the model adopted; the loop below for t = now_ms.
             master = self.master
             if master.state is MasterState.RUNNING:
