@@ -1,0 +1,141 @@
+"""The Spinal mirror's per-ms fast paths against its plain (reference) path (docs/lockstep.md,
+"Session 6: the Spinal mirror's per-tick cost").
+
+* A whole lockstep hover stack run twice, once with every fast path off (mirror, servo bridge,
+  Rust master duty hand-over): the UART, CAN and MCAP bytes and every counter are equal.
+* The servo bridge's one-call table (Rust ``servo_keys`` / ``servo_reports``) against the view
+  path on a running master: same messages, same rejections (bad index, wrong length).
+* The Rust master's duty hand-over (``try_set_motor_duties``) against the Python checks on
+  random and bad input (NaN, inf, out of range, ints, numpy floats, wrong lengths).
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rdm.nodes.spinal_servo_bridge import MirrorRejection, ServoBridge
+
+pytest.importorskip("mujoco")
+
+TICKS = 2600  # past the 2 s CAN boot: the master runs, servos report, duties flow
+
+
+def _stack(base: str):
+    from rdm.scenarios.common import sim_stack_options
+    from rdm.scenarios.hover import HOVER_Z, make_script
+    from rdm.scenarios.stack import build_stack
+
+    opts = sim_stack_options(0, "inproc", speed=None)
+    return build_stack("fastpaths", base, opts, make_script(np.array([0.483, 0.0, HOVER_Z])))
+
+
+def _run(base: str, fast: bool) -> tuple[dict[str, bytes], dict]:
+    stack = _stack(base)
+    spinal = stack.spinal
+    spinal._fast = fast
+    spinal.servos._fast = fast
+    spinal.master.fast = fast
+    stack.loop.run_ticks(TICKS)
+    diag = spinal.diagnostics()
+    stack.close()
+    paths = sorted(p for p in Path(base).rglob("*") if p.is_file())
+    files = {str(p.relative_to(base)): p.read_bytes() for p in paths}
+    return files, diag
+
+
+def test_stack_logs_and_counters_equal_with_and_without_fast_paths() -> None:
+    with tempfile.TemporaryDirectory() as a, tempfile.TemporaryDirectory() as b:
+        fast_files, fast_diag = _run(a, True)
+        plain_files, plain_diag = _run(b, False)
+    assert fast_diag == plain_diag
+    assert fast_diag["published"]["servo/states"] > 0  # the servo reports ran
+    assert fast_diag["received"]["servo/target_states"] > 0
+    assert sorted(fast_files) == sorted(plain_files)
+    uart = [k for k in fast_files if k.endswith(".bin")]
+    assert uart and all(fast_files[k] for k in uart)
+    for name in fast_files:
+        assert fast_files[name] == plain_files[name], name
+
+
+@pytest.fixture(scope="module")
+def running_stack():
+    with tempfile.TemporaryDirectory() as base:
+        stack = _stack(base)
+        stack.loop.run_ticks(TICKS)
+        yield stack
+        stack.close()
+
+
+def test_servo_bridge_fast_equals_view_path(running_stack) -> None:
+    spinal = running_stack.spinal
+    master = spinal.master
+    fast, plain = ServoBridge(master, fast=True), ServoBridge(master, fast=False)
+    assert fast._fast and not plain._fast
+    # Independent: the keys and fields read one view at a time.
+    views = list(master.servo_states.items())
+    assert fast._keys() == [k for k, _ in views] == plain._keys()
+    assert [r[1] for r in fast._reports()] == [v.angle for _, v in views]
+    codec, stamp = spinal._msg, spinal.session.now(spinal.now_ms)
+    assert fast.states(codec, stamp) == plain.states(codec, stamp) is not None
+    assert fast.torque_states(codec) == plain.torque_states(codec) is not None
+    n = len(views)
+    msg_type = spinal.session.registry.msg("spinal/ServoControlCmd")
+    for index, angles in (([0], [2048]), ([n], [1]), ([-1], [1]), ([0, 1], [5])):
+        msg = msg_type.new(index=index, angles=angles)
+        outcomes = []
+        for bridge in (fast, plain):
+            try:
+                outcomes.append(bridge._resolve("servo/target_states", msg.index, msg.angles))
+            except MirrorRejection as exc:
+                outcomes.append((exc.reason, str(exc)))
+        assert outcomes[0] == outcomes[1]
+
+
+def _reference_check(duties, n: int) -> str | None:
+    """The Python master's rule, re-stated: the error text, or None when accepted."""
+    if len(duties) != n:
+        return f"set_motor_duties: {len(duties)} duties for {n}"
+    for i, d in enumerate(duties):
+        if not isinstance(d, (int, float)) or not math.isfinite(d) or not 0.5 <= d <= 1.0:
+            return f"set_motor_duties: duties[{i}]={d!r} not in 0.5..1.0"
+    return None
+
+
+def test_duty_hand_over_fast_equals_checks(running_stack) -> None:
+    master = running_stack.spinal.master
+    n = master.motor_number
+    assert n > 0
+    rng = np.random.default_rng(7)
+    cases: list = [[0.5] * n, [1.0] * n, [0.75] * (n + 1), [0.75] * (n - 1), []]
+    for _ in range(300):
+        d = rng.uniform(0.3, 1.2, n).tolist()
+        k = int(rng.integers(n))
+        kind = int(rng.integers(6))
+        if kind == 1:
+            d[k] = math.nan
+        elif kind == 2:
+            d[k] = math.inf
+        elif kind == 3:
+            d[k] = 1  # an int: accepted by the checks, not by the one-call path
+        elif kind == 4:
+            d[k] = np.float64(0.8)  # a float subclass
+        cases.append(d)
+    for duties in cases:
+        expected = _reference_check(duties, n)
+        outcomes = []
+        for fast in (True, False):
+            master.fast = fast
+            try:
+                master.set_motor_duties(list(duties))
+                outcomes.append(None)
+            except ValueError as exc:
+                outcomes.append(str(exc))
+        master.fast = True
+        assert outcomes == [expected, expected], duties
+        exact = len(duties) == n and all(type(d) is float for d in duties) and expected is None
+        assert master._core.try_set_motor_duties(list(duties)) is exact
