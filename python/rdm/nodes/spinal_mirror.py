@@ -291,12 +291,15 @@ class SpinalMirror:
             self._forward_can_events()
             if now_ms >= self._next_pub_ms:
                 self._publish(now_ms)
-        else:
-            self._battery(now_ms)
-            self._control(self._now_s)
-            self._can(now_ms)
-            self._forward_can_events()
-            self._publish(now_ms)
+            data = self.session.take_output()
+            if data or self.uart.pending:  # else UartPump.send has nothing to do
+                self.uart.send(data)
+            return
+        self._battery(now_ms)  # the plain path: every step every ms
+        self._control(self._now_s)
+        self._can(now_ms)
+        self._forward_can_events()
+        self._publish(now_ms)
         self.uart.send(self.session.take_output())
 
     def close(self) -> None:
@@ -590,11 +593,67 @@ class SpinalMirror:
             return
         if now_ms < self._next_pub_ms:
             return  # no publisher due (exact: the earliest time any _due below fires)
+        if self._fast:
+            self._next_pub_ms = self._publish_due_fast(now_ms)
+            return
         self._publish_due(now_ms)
         last = self._last_pub
         self._next_pub_ms = min(
             _next_due(last, key, period, strict) for key, period, strict in _PUBLISHERS
         )
+
+    def _publish_due_fast(self, now_ms: int) -> int:
+        """:meth:`_publish_due` with the five ``_due`` checks inline (same order, same
+        ``_last_pub`` updates); returns the first ms a publisher is due again."""
+        last = self._last_pub
+        get = last.get
+        stamp = None
+        t = get("imu")
+        if t is None or now_ms - t >= IMU_PUB_MS:
+            last["imu"] = t = now_ms
+            stamp = self.session.now(now_ms)
+            out = self.last_output
+            self._publish_topic(
+                "imu",
+                self._msg.imu.new(
+                    stamp=stamp,
+                    acc=list(self.acc),
+                    gyro=out.angular_velocity.tolist(),
+                    mag=list(self.mag),
+                    quaternion=out.quaternion.tolist(),
+                ),
+            )
+        next_ms = t + IMU_PUB_MS
+        t = get("battery_voltage_status")
+        if t is None or now_ms - t > BATTERY_PUB_MS:
+            last["battery_voltage_status"] = t = now_ms
+            if self.battery_voltage is not None:
+                self._publish_topic(
+                    "battery_voltage_status", self._msg.float32.new(data=self.battery_voltage)
+                )
+        next_ms = min(next_ms, t + BATTERY_PUB_MS + 1)
+        t = get("motor_pwms")
+        if t is None or now_ms - t > MOTOR_PWMS_PUB_MS:
+            last["motor_pwms"] = t = now_ms
+            values = [int(d * 2000.0) for d in self.duties]
+            self._publish_topic("motor_pwms", self._msg.pwms.new(motor_value=values))
+        next_ms = min(next_ms, t + MOTOR_PWMS_PUB_MS + 1)
+        t = get("servo/states")
+        if t is None or now_ms - t >= SERVO_STATES_PUB_MS:
+            last["servo/states"] = t = now_ms
+            if stamp is None:
+                stamp = self.session.now(now_ms)
+            msg = self.servos.states(self._msg, stamp)
+            if msg is not None:
+                self._publish_topic("servo/states", msg)
+        next_ms = min(next_ms, t + SERVO_STATES_PUB_MS)
+        t = get("servo/torque_states")
+        if t is None or now_ms - t >= SERVO_TORQUE_PUB_MS:
+            last["servo/torque_states"] = t = now_ms
+            msg = self.servos.torque_states(self._msg)
+            if msg is not None:
+                self._publish_topic("servo/torque_states", msg)
+        return min(next_ms, t + SERVO_TORQUE_PUB_MS)
 
     def _publish_due(self, now_ms: int) -> None:
         out = self.last_output
