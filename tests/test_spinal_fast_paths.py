@@ -139,3 +139,86 @@ def test_duty_hand_over_fast_equals_checks(running_stack) -> None:
         assert outcomes == [expected, expected], duties
         exact = len(duties) == n and all(type(d) is float for d in duties) and expected is None
         assert master._core.try_set_motor_duties(list(duties)) is exact
+
+
+def _outcome(call, *args):
+    """None, or the type name and text of what ``call(*args)`` raised."""
+    try:
+        call(*args)
+    except Exception as exc:  # the type and text are what is compared
+        return type(exc).__name__, str(exc)
+    return None
+
+
+def _gains_array(step, rows) -> None:
+    step.set_gains_wire(np.array(rows, dtype=np.int64).reshape(-1, 7))
+
+
+def _pinv_array(step, pinv, inertia) -> None:
+    step.set_pinv_inertia_wire(np.array(pinv, dtype=np.int16), inertia)
+
+
+def test_gain_and_pinv_rows_equal_array_setters() -> None:
+    from rdm.control.attitude import SpinalStep
+    from rdm.nodes.spinal_mirror import _applied
+
+    rng = np.random.default_rng(3)
+    cases = [rng.integers(-33000, 33000, (4, 7)).tolist() for _ in range(40)]
+    cases += [[[1] * 7] * 3, [], [[1.5] * 7] * 4, [[2**70] + [0] * 6] * 4]
+    converted = 0
+    for rows in cases:
+        a, b = SpinalStep(200.0), SpinalStep(200.0)
+        a.set_uav_info(4, 32)
+        b.set_uav_info(4, 32)
+        try:
+            applied = _applied(a.set_gains_wire_rows, rows)
+            fast = None
+        except ValueError as exc:
+            applied, fast = True, (type(exc).__name__, str(exc))
+        if not applied:
+            assert rows in cases[-2:]  # floats, > int64: the mirror takes the array path
+            continue
+        converted += 1
+        assert fast == _outcome(_gains_array, b, rows), rows
+        assert np.array_equal(a.thrust_gains, b.thrust_gains)
+        assert a.counters == b.counters
+    assert converted == len(cases) - 2
+    for _ in range(40):
+        pinv = rng.integers(-32768, 32768, (int(rng.integers(3, 6)), 3)).tolist()
+        inertia = rng.integers(-32768, 32768, 6).tolist()
+        a, b = SpinalStep(200.0), SpinalStep(200.0)
+        a.set_uav_info(4, 32)
+        b.set_uav_info(4, 32)
+        fast = _outcome(a.set_pinv_inertia_wire_rows, pinv, inertia)
+        assert fast == _outcome(_pinv_array, b, pinv, inertia)
+        assert a.counters == b.counters
+
+
+def test_servo_targets_checks_equal_position_lookup(running_stack) -> None:
+    master = running_stack.spinal.master
+    keys = master.servo_keys()
+    assert keys == list(master.servo_states)
+    for targets in (
+        {keys[0]: 2048, keys[-1]: 100},
+        {(keys[0][0], 99): 1},
+        {(200, 0): 1},
+        {keys[0]: 1 << 20},
+        {keys[0]: 1.5},
+    ):
+        expected = None
+        for (slave, index), value in targets.items():  # the documented rule, re-stated
+            if not isinstance(value, int) or not -(2**14) <= value < 2**14:
+                expected = (
+                    "ValueError",
+                    f"servo ({slave}, {index}) target {value!r} not a 15-bit int",
+                )
+                break
+            try:
+                master._position(slave, index)
+            except KeyError as exc:
+                expected = ("KeyError", str(exc))
+                break
+        assert _outcome(master.set_servo_targets, targets) == expected
+        if expected is None:
+            for (slave, index), value in targets.items():
+                assert master.servo(slave, index).goal_position == value

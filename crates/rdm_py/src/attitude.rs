@@ -277,6 +277,13 @@ macro_rules! controller_pymethods {
                 self.ctrl().set_gains_wire(&terms).map_err(rejected)
             }
 
+            /// `set_gains_wire` from a list of rows of 7 ints (roll p/i/d, pitch p/i/d, yaw d):
+            /// the same terms without a numpy array on the way.
+            fn set_gains_wire_rows(&mut self, rows: Vec<[i64; 7]>) -> PyResult<()> {
+                let terms = wire::wire_term_rows(&rows)?;
+                self.ctrl().set_gains_wire(&terms).map_err(rejected)
+            }
+
             /// `torque_allocation_matrix_inv` in wire form: int16 rows (motor_number, 3).
             fn set_torque_allocation_inv_wire(&mut self, rows: PyReadonlyArray2<'_, i16>) -> PyResult<()> {
                 let rows = three_rows(&rows, "rows")?;
@@ -294,6 +301,11 @@ macro_rules! controller_pymethods {
             fn set_pinv_inertia_wire(&mut self, pinv: PyReadonlyArray2<'_, i16>, inertia: [i16; 6]) -> PyResult<()> {
                 let rows = three_rows(&pinv, "pinv")?;
                 self.ctrl().set_pinv_inertia_wire(&rows, inertia).map_err(rejected)
+            }
+
+            /// `set_pinv_inertia_wire` from a list of int16 rows `(r, p, y)` (no numpy array).
+            fn set_pinv_inertia_wire_rows(&mut self, pinv: Vec<[i16; 3]>, inertia: [i16; 6]) -> PyResult<()> {
+                self.ctrl().set_pinv_inertia_wire(&pinv, inertia).map_err(rejected)
             }
 
             /// `desire_coordinate`: roll, pitch, yaw of the control frame.

@@ -201,8 +201,8 @@ class RustCanMaster:
                 raise ValueError(f"set_motor_duties: duties[{i}]={d!r} not in 0.5..1.0")
         self._core.set_motor_duties([float(d) for d in duties])
 
-    def _position(self, slave: int, index: int, rows: list[tuple] | None = None) -> tuple[int, int]:
-        for k, row in enumerate(self._core.neurons() if rows is None else rows):
+    def _position(self, slave: int, index: int) -> tuple[int, int]:
+        for k, row in enumerate(self._core.neurons()):
             if row[0] == slave and 0 <= index < row[6]:
                 return k, index
         raise KeyError(f"no servo {index} on Neuron {slave}")
@@ -215,11 +215,12 @@ class RustCanMaster:
         """Goal positions (raw ticks, 15-bit signed) keyed by ``(slave, index)``; all checked
         before any is applied."""
         checked = []
-        rows = self._core.neurons()  # one table snapshot for every check (nothing changes it)
+        known = set(self._core.servo_keys())  # what _position finds, in one call
         for (slave, index), value in targets.items():
             if not isinstance(value, int) or not WORD_VALUE_MIN <= value <= WORD_VALUE_MAX:
                 raise ValueError(f"servo ({slave}, {index}) target {value!r} not a 15-bit int")
-            self._position(slave, index, rows)
+            if (slave, index) not in known:
+                raise KeyError(f"no servo {index} on Neuron {slave}")
             checked.append((slave, index, value))
         self._core.set_servo_target_list(checked)
 

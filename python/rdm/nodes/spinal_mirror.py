@@ -28,6 +28,7 @@ from typing import Any
 import can
 import numpy as np
 
+from rdm._rdm import RdmError
 from rdm.control.attitude import ARM_OFF, N_ROTORS, CommandRejectedError, SpinalStep
 from rdm.nodes.base import to_ms
 from rdm.nodes.can_master import BOOT_DELAY_MS, IDLE_DUTY, CanMaster, MasterState
@@ -105,6 +106,20 @@ def _floats(values: Sequence[float]) -> tuple[float, ...]:
     if isinstance(values, np.ndarray) and values.dtype == np.float64:
         return tuple(values.tolist())
     return tuple(float(v) for v in values)
+
+
+def _applied(setter: Any, *args: Any) -> bool:
+    """Call a core ``*_rows`` setter (plain Python ints, no numpy array); False when its
+    arguments do not convert (floats, out-of-range ints, wrong lengths: nothing applied), so
+    that the caller's array path runs and decides as the reference does. The core's own
+    rejections (:class:`RdmError`) are the reference's and propagate."""
+    try:
+        setter(*args)
+    except RdmError:
+        raise
+    except (TypeError, OverflowError, ValueError):
+        return False
+    return True
 
 
 def rejection_reason(text: str) -> str:
@@ -354,6 +369,13 @@ class SpinalMirror:
         self.core.four_axis_command([float(a) for a in msg.angles], base, self._now_s)
 
     def _on_gain(self, msg: Any) -> None:
+        if self._fast:
+            rows = [
+                (m.roll_p, m.roll_i, m.roll_d, m.pitch_p, m.pitch_i, m.pitch_d, m.yaw_d)
+                for m in msg.motors
+            ]
+            if _applied(self.core.set_gains_wire_rows, rows):
+                return
         terms = np.array(
             [
                 [m.roll_p, m.roll_i, m.roll_d, m.pitch_p, m.pitch_i, m.pitch_d, m.yaw_d]
@@ -364,6 +386,11 @@ class SpinalMirror:
         self.core.set_gains_wire(terms)
 
     def _on_pinv_inertia(self, msg: Any) -> None:
+        if self._fast:
+            pinv = [(u.r, u.p, u.y) for u in msg.pseudo_inverse]
+            inertia = [int(v) for v in msg.inertia]
+            if _applied(self.core.set_pinv_inertia_wire_rows, pinv, inertia):
+                return
         rows = np.array([[u.r, u.p, u.y] for u in msg.pseudo_inverse], dtype=np.int16).reshape(
             -1, 3
         )
