@@ -42,6 +42,10 @@ class ServoBridge:
         keys = getattr(master, "servo_keys", None)
         reports = getattr(master, "servo_reports", None)
         self._fast = fast and keys is not None and reports is not None
+        #: Fast path: the last ``spinal/ServoState`` built per servo with its field values;
+        #: reused while the values repeat (a message is only encoded, never changed).
+        self._state_msgs: list[tuple[tuple, Any]] = []
+        self._state_codec: Any = None  # the codec those messages come from
 
     def table(self) -> list[tuple[tuple[int, int], ServoEntry]]:
         """Every servo in index order (empty until the master runs)."""
@@ -120,14 +124,40 @@ class ServoBridge:
     def states(self, codec: Any, stamp: Any) -> Any | None:
         """A ``spinal/ServoStates`` of the servos with send_data_flag, or None if there are none."""
         new = codec.servo_state.new
-        servos = [
-            new(index=i, angle=angle, temp=temp, load=load, error=error)
-            for i, (send, angle, temp, load, error, _torque) in enumerate(self._reports())
-            if send
-        ]
+        if self._fast:
+            if codec.servo_state is not self._state_codec:
+                self._state_codec, self._state_msgs = codec.servo_state, []
+            servos = self._states_reused(new)
+        else:
+            servos = [
+                new(index=i, angle=angle, temp=temp, load=load, error=error)
+                for i, (send, angle, temp, load, error, _torque) in enumerate(self._reports())
+                if send
+            ]
         if not servos:
             return None
         return codec.servo_states.new(stamp=stamp, servos=servos)
+
+    def _states_reused(self, new: Any) -> list[Any]:
+        """The ``servos`` list of :meth:`states`, reusing each servo's last message while its
+        values are unchanged (same fields, same bytes; fewer objects built at 50 Hz)."""
+        cache = self._state_msgs
+        out = []
+        for i, (send, angle, temp, load, error, _torque) in enumerate(self._reports()):
+            if not send:
+                continue
+            values = (i, angle, temp, load, error)
+            if i < len(cache):
+                kept, msg = cache[i]
+                if kept != values:
+                    msg = new(index=i, angle=angle, temp=temp, load=load, error=error)
+                    cache[i] = (values, msg)
+            else:
+                msg = new(index=i, angle=angle, temp=temp, load=load, error=error)
+                cache.extend([((), None)] * (i - len(cache)))
+                cache.append((values, msg))
+            out.append(msg)
+        return out
 
     def torque_states(self, codec: Any) -> Any | None:
         """A ``spinal/ServoTorqueStates`` of every servo, or None if there are none."""
