@@ -322,3 +322,29 @@ def test_uart_pump_fast_send_on_a_pty_loses_and_reorders_nothing() -> None:
         assert bytes(received) == b"".join(sends)
         assert pump.bytes_out == len(received) and pump.write_errors == 0
         assert held > 0  # the queue held a remainder at some point
+
+
+def test_four_axis_command_list_equals_array_setter() -> None:
+    from rdm.control.attitude import ARM_ON, SpinalStep
+
+    rng = np.random.default_rng(9)
+    accepted = 0
+    for k in range(60):
+        n = int(rng.integers(3, 6))
+        base = rng.uniform(-1.0, 12.0, n).tolist()
+        if k % 7 == 3:
+            base[0] = math.nan
+        angles = rng.uniform(-0.5, 0.5, 3).tolist()
+        a, b = SpinalStep(200.0), SpinalStep(200.0)
+        for s in (a, b):
+            s.set_uav_info(4, 32)
+            s.set_pwm_info_hydrus_example()
+            s.flight_config(ARM_ON, 0.0)
+        fast = _outcome(a.four_axis_command_list, angles, base, 0.01)
+        plain = _outcome(b.four_axis_command, angles, np.asarray(base, dtype=np.float64), 0.01)
+        assert fast == plain
+        accepted += fast is None
+        assert np.array_equal(a.base_thrust, b.base_thrust)
+        assert np.array_equal(a.target_angles, b.target_angles)
+        assert a.counters == b.counters
+    assert 0 < accepted < 60  # both accepted and rejected commands were compared

@@ -265,6 +265,11 @@ macro_rules! controller_pymethods {
                 self.ctrl().four_axis_command(angles, base, now_s).map_err(rejected)
             }
 
+            /// `four_axis_command` with the base thrust as a list (no numpy array on the way).
+            fn four_axis_command_list(&mut self, angles: [f64; 3], base_thrust: Vec<f64>, now_s: f64) -> PyResult<()> {
+                self.ctrl().four_axis_command(angles, &base_thrust, now_s).map_err(rejected)
+            }
+
             /// `rpy/gain` from a gain set of shape (N_ROTORS, 4, 3).
             fn set_gains(&mut self, gains: PyReadonlyArray3<'_, f64>) -> PyResult<()> {
                 let set = wire::gain_set(&gains)?;

@@ -191,7 +191,7 @@ class RustCanMaster:
     # ------------------------------------------------------------------ commands
     def set_motor_duties(self, duties: Sequence[float]) -> None:
         """Duties 0.5 (stop) .. 1.0 of motors 0..motor_number-1 (sent as ``duty*2000-1000``)."""
-        if self.fast and type(duties) is list and self._core.try_set_motor_duties(duties):
+        if self.try_set_motor_duties(duties):
             return  # a valid list of floats, applied in one call; otherwise the checks below
         n = self.motor_number
         if len(duties) != n:
@@ -200,6 +200,12 @@ class RustCanMaster:
             if not isinstance(d, (int, float)) or not math.isfinite(d) or not 0.5 <= d <= 1.0:
                 raise ValueError(f"set_motor_duties: duties[{i}]={d!r} not in 0.5..1.0")
         self._core.set_motor_duties([float(d) for d in duties])
+
+    def try_set_motor_duties(self, duties: Sequence[float]) -> bool:
+        """:meth:`set_motor_duties` in one core call when ``duties`` is a list of exactly
+        :attr:`motor_number` Python floats in 0.5..1.0: True if applied; False (nothing
+        applied) otherwise or when :attr:`fast` is off."""
+        return self.fast and type(duties) is list and self._core.try_set_motor_duties(duties)
 
     def _position(self, slave: int, index: int) -> tuple[int, int]:
         for k, row in enumerate(self._core.neurons()):

@@ -209,6 +209,8 @@ class SpinalMirror:
         # fast_paths=False keeps the plain per-ms path (the reference of the fast one).
         self._fast = bool(fast_paths)
         self.servos = ServoBridge(self.master, fast=self._fast)
+        #: The Rust master's one-call duty hand-over (None: the Python master).
+        self._try_duties = getattr(self.master, "try_set_motor_duties", None)
         reg = registry or spinal_registry()
         self.session = ClientSession.from_layout(
             layout,
@@ -365,6 +367,15 @@ class SpinalMirror:
 
     # ---------------------------------------------------------------- subscribers
     def _on_four_axis_command(self, msg: Any) -> None:
+        if self._fast:
+            try:
+                angles = [float(a) for a in msg.angles]
+            except (TypeError, ValueError):
+                angles = None  # the array path below raises as the reference does
+            if angles is not None and _applied(
+                self.core.four_axis_command_list, angles, msg.base_thrust, self._now_s
+            ):
+                return
         base = np.asarray(msg.base_thrust, dtype=np.float64)
         self.core.four_axis_command([float(a) for a in msg.angles], base, self._now_s)
 
@@ -566,9 +577,12 @@ class SpinalMirror:
             master = self.master
             if master.state is MasterState.RUNNING:
                 duties = self.duties
-                if duties is not self._duties_to_master and len(duties) == master.motor_number:
-                    master.set_motor_duties(duties)
-                    self._duties_to_master = duties
+                if duties is not self._duties_to_master:
+                    if self._try_duties is not None and self._try_duties(duties):
+                        self._duties_to_master = duties  # valid floats, applied in one call
+                    elif len(duties) == master.motor_number:
+                        master.set_motor_duties(duties)
+                        self._duties_to_master = duties
             master.tick_ms(now_ms)
             self._can_ms = now_ms
             return
