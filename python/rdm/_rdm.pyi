@@ -800,3 +800,16 @@ def json_record(values: object) -> str | None:
 # --- onboardtick ---
 def leptrino_ok_sample_run(data: bytes) -> tuple[int, int, int, bytes | None]:
     """(end, count, last_start, last_payload) of the leading run of whole OK-sample frames."""
+
+# --- spinaltick ---
+# Added methods of classes above (a stub cannot reopen a class; rdm.nodes.* call them):
+# CanMaster.servo_reports() -> list[tuple[bool, int, int, int, int, bool]]
+#     (send_data_flag, angle, temperature, current, error, torque_enable) per servo, table order
+# CanMaster.servo_keys() -> list[tuple[int, int]]           (slave, position) per servo
+# CanMaster.try_set_motor_duties(duties: list[float]) -> bool
+#     applies and returns True only for exactly motor_number valid Python floats
+# CanMaster.set_servo_target_list(targets: list[tuple[int, int, int]]) -> None
+# SpinalStep / AttitudeController .set_gains_wire_rows(rows: list[tuple[int, ...]]) -> None
+#     rows of 7 ints, as set_gains_wire without the array
+# SpinalStep / AttitudeController .set_pinv_inertia_wire_rows(
+#     pinv: list[tuple[int, int, int]], inertia: Sequence[int]) -> None

@@ -265,6 +265,11 @@ macro_rules! controller_pymethods {
                 self.ctrl().four_axis_command(angles, base, now_s).map_err(rejected)
             }
 
+            /// `four_axis_command` with the base thrust as a list (no numpy array on the way).
+            fn four_axis_command_list(&mut self, angles: [f64; 3], base_thrust: Vec<f64>, now_s: f64) -> PyResult<()> {
+                self.ctrl().four_axis_command(angles, &base_thrust, now_s).map_err(rejected)
+            }
+
             /// `rpy/gain` from a gain set of shape (N_ROTORS, 4, 3).
             fn set_gains(&mut self, gains: PyReadonlyArray3<'_, f64>) -> PyResult<()> {
                 let set = wire::gain_set(&gains)?;
@@ -274,6 +279,13 @@ macro_rules! controller_pymethods {
             /// `rpy/gain` in wire form: int array (motor_number or 1, 7).
             fn set_gains_wire(&mut self, terms: PyReadonlyArray2<'_, i64>) -> PyResult<()> {
                 let terms = wire::wire_terms(&terms)?;
+                self.ctrl().set_gains_wire(&terms).map_err(rejected)
+            }
+
+            /// `set_gains_wire` from a list of rows of 7 ints (roll p/i/d, pitch p/i/d, yaw d):
+            /// the same terms without a numpy array on the way.
+            fn set_gains_wire_rows(&mut self, rows: Vec<[i64; 7]>) -> PyResult<()> {
+                let terms = wire::wire_term_rows(&rows)?;
                 self.ctrl().set_gains_wire(&terms).map_err(rejected)
             }
 
@@ -294,6 +306,11 @@ macro_rules! controller_pymethods {
             fn set_pinv_inertia_wire(&mut self, pinv: PyReadonlyArray2<'_, i16>, inertia: [i16; 6]) -> PyResult<()> {
                 let rows = three_rows(&pinv, "pinv")?;
                 self.ctrl().set_pinv_inertia_wire(&rows, inertia).map_err(rejected)
+            }
+
+            /// `set_pinv_inertia_wire` from a list of int16 rows `(r, p, y)` (no numpy array).
+            fn set_pinv_inertia_wire_rows(&mut self, pinv: Vec<[i16; 3]>, inertia: [i16; 6]) -> PyResult<()> {
+                self.ctrl().set_pinv_inertia_wire(&pinv, inertia).map_err(rejected)
             }
 
             /// `desire_coordinate`: roll, pitch, yaw of the control frame.

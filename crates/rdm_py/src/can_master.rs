@@ -3,7 +3,7 @@
 
 use pyo3::create_exception;
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyList, PyTuple};
+use pyo3::types::{PyBytes, PyFloat, PyList, PyTuple};
 use rdm_core::firmware::can_master::{
     CanMaster as CoreMaster, EventKind, MasterError, MasterState, ServoEntry, RX_ERROR_NAMES,
 };
@@ -49,6 +49,8 @@ fn state_index(s: MasterState) -> u8 {
 pub struct CanMaster {
     core: CoreMaster,
     rx: Vec<RxFrame>,
+    /// Scratch of `try_set_motor_duties` (reused, no allocation per call).
+    duties: Vec<f64>,
 }
 
 fn servo_tuple<'py>(py: Python<'py>, slave: u8, s: &ServoEntry) -> PyResult<Bound<'py, PyTuple>> {
@@ -99,6 +101,7 @@ impl CanMaster {
         CanMaster {
             core: CoreMaster::new(boot_delay_ms, start_ms),
             rx: Vec::with_capacity(256),
+            duties: Vec::with_capacity(16),
         }
     }
 
@@ -196,10 +199,39 @@ impl CanMaster {
         self.core.set_motor_duties(&duties).map_err(master_err)
     }
 
+    /// The duty hand-over without a Python-side check: applies `duties` and returns True when
+    /// it is a list of exactly `motor_number` Python floats (not subclasses), each finite in
+    /// 0.5..1.0; otherwise applies nothing and returns False (the caller then runs its own
+    /// checks, which name the fault).
+    fn try_set_motor_duties(&mut self, duties: &Bound<'_, PyList>) -> bool {
+        if duties.len() != self.core.motor_number {
+            return false;
+        }
+        self.duties.clear();
+        for item in duties.iter() {
+            match item.cast_exact::<PyFloat>() {
+                Ok(f) => self.duties.push(f.value()),
+                Err(_) => return false,
+            }
+        }
+        self.core.set_motor_duties(&self.duties).is_ok()
+    }
+
     fn set_servo_target(&mut self, slave: u8, index: u8, value: i32) -> PyResult<()> {
         self.core
             .set_servo_target(slave, index, value)
             .map_err(master_err)
+    }
+
+    /// `set_servo_target` for each `(slave, index, value)` in order (one call for a whole
+    /// `servo/target_states`); stops at the first error, which it raises.
+    fn set_servo_target_list(&mut self, targets: Vec<(u8, u8, i32)>) -> PyResult<()> {
+        for (slave, index, value) in targets {
+            self.core
+                .set_servo_target(slave, index, value)
+                .map_err(master_err)?;
+        }
+        Ok(())
     }
 
     fn set_servo_torque(&mut self, slave: u8, index: u8, enable: bool) -> PyResult<()> {
@@ -271,6 +303,38 @@ impl CanMaster {
             }
         }
         Ok(list)
+    }
+
+    /// The servo report fields of every servo, in `servo_table` order: `[(send_data_flag,
+    /// angle, temperature, current, error, torque_enable), ...]` (what `servo/states` and
+    /// `servo/torque_states` carry; one call instead of a 24-field tuple per servo).
+    fn servo_reports(&self) -> Vec<(bool, i16, u8, i16, u8, bool)> {
+        let mut out = Vec::with_capacity(32);
+        for n in self.core.neurons() {
+            for s in n.servos() {
+                out.push((
+                    s.send_data_flag,
+                    s.angle,
+                    s.temperature,
+                    s.current,
+                    s.error,
+                    s.torque_enable,
+                ));
+            }
+        }
+        out
+    }
+
+    /// `(slave, position)` of every servo in `servo_table` order (the keys of
+    /// `RustCanMaster.servo_states`).
+    fn servo_keys(&self) -> Vec<(u8, usize)> {
+        let mut out = Vec::with_capacity(32);
+        for n in self.core.neurons() {
+            for i in 0..n.servos().len() {
+                out.push((n.slave, i));
+            }
+        }
+        out
     }
 
     /// IMU: `[(slave, [gyro, acc, mag] each (x, y, z) raw or None, stamp_ms), ...]` in order

@@ -145,6 +145,8 @@ class RustCanMaster:
         self.tx_errors = 0
         self._events: list[LogEvent] = []
         self._pending_events = 0
+        #: False: every duty list goes through the Python checks (the reference path).
+        self.fast = True
 
     @property
     def bus(self) -> can.BusABC:
@@ -189,6 +191,8 @@ class RustCanMaster:
     # ------------------------------------------------------------------ commands
     def set_motor_duties(self, duties: Sequence[float]) -> None:
         """Duties 0.5 (stop) .. 1.0 of motors 0..motor_number-1 (sent as ``duty*2000-1000``)."""
+        if self.try_set_motor_duties(duties):
+            return  # a valid list of floats, applied in one call; otherwise the checks below
         n = self.motor_number
         if len(duties) != n:
             raise ValueError(f"set_motor_duties: {len(duties)} duties for {n}")
@@ -196,6 +200,12 @@ class RustCanMaster:
             if not isinstance(d, (int, float)) or not math.isfinite(d) or not 0.5 <= d <= 1.0:
                 raise ValueError(f"set_motor_duties: duties[{i}]={d!r} not in 0.5..1.0")
         self._core.set_motor_duties([float(d) for d in duties])
+
+    def try_set_motor_duties(self, duties: Sequence[float]) -> bool:
+        """:meth:`set_motor_duties` in one core call when ``duties`` is a list of exactly
+        :attr:`motor_number` Python floats in 0.5..1.0: True if applied; False (nothing
+        applied) otherwise or when :attr:`fast` is off."""
+        return self.fast and type(duties) is list and self._core.try_set_motor_duties(duties)
 
     def _position(self, slave: int, index: int) -> tuple[int, int]:
         for k, row in enumerate(self._core.neurons()):
@@ -211,13 +221,14 @@ class RustCanMaster:
         """Goal positions (raw ticks, 15-bit signed) keyed by ``(slave, index)``; all checked
         before any is applied."""
         checked = []
+        known = set(self._core.servo_keys())  # what _position finds, in one call
         for (slave, index), value in targets.items():
             if not isinstance(value, int) or not WORD_VALUE_MIN <= value <= WORD_VALUE_MAX:
                 raise ValueError(f"servo ({slave}, {index}) target {value!r} not a 15-bit int")
-            self._position(slave, index)
+            if (slave, index) not in known:
+                raise KeyError(f"no servo {index} on Neuron {slave}")
             checked.append((slave, index, value))
-        for slave, index, value in checked:
-            self._core.set_servo_target(slave, index, value)
+        self._core.set_servo_target_list(checked)
 
     def set_servo_torque(self, slave: int, index: int, enable: bool) -> None:
         """Torque enable of one servo (refused while force-off; off invalidates the goal)."""
@@ -251,6 +262,15 @@ class RustCanMaster:
             for i in range(row[6]):
                 out[(row[0], i)] = ServoEntryView(self, k, i)
         return out
+
+    def servo_keys(self) -> list[tuple[int, int]]:
+        """The keys of :attr:`servo_states` in the same order, in one core call."""
+        return self._core.servo_keys()
+
+    def servo_reports(self) -> list[tuple[bool, int, int, int, int, bool]]:
+        """``(send_data_flag, angle, temperature, current, error, torque_enable)`` of every
+        servo in :attr:`servo_states` order, in one core call (the Spinal servo reports)."""
+        return self._core.servo_reports()
 
     @property
     def slaves(self) -> list[int]:

@@ -28,6 +28,7 @@ from typing import Any
 import can
 import numpy as np
 
+from rdm._rdm import RdmError
 from rdm.control.attitude import ARM_OFF, N_ROTORS, CommandRejectedError, SpinalStep
 from rdm.nodes.base import to_ms
 from rdm.nodes.can_master import BOOT_DELAY_MS, IDLE_DUTY, CanMaster, MasterState
@@ -107,6 +108,20 @@ def _floats(values: Sequence[float]) -> tuple[float, ...]:
     return tuple(float(v) for v in values)
 
 
+def _applied(setter: Any, *args: Any) -> bool:
+    """Call a core ``*_rows`` setter (plain Python ints, no numpy array); False when its
+    arguments do not convert (floats, out-of-range ints, wrong lengths: nothing applied), so
+    that the caller's array path runs and decides as the reference does. The core's own
+    rejections (:class:`RdmError`) are the reference's and propagate."""
+    try:
+        setter(*args)
+    except RdmError:
+        raise
+    except (TypeError, OverflowError, ValueError):
+        return False
+    return True
+
+
 def rejection_reason(text: str) -> str:
     """Counter key for a :class:`CommandRejectedError` message of the core."""
     lowered = text.lower()
@@ -169,6 +184,7 @@ class SpinalMirror:
         registry: TypeRegistry | None = None,
         layout: Any = None,
         master_backend: str = "python",
+        fast_paths: bool = True,
         **spinal_options: Any,
     ) -> None:
         if not (isinstance(rate_hz, (int, float)) and 0 < rate_hz <= MAX_RATE_HZ):
@@ -190,7 +206,11 @@ class SpinalMirror:
         else:
             raise ValueError(f"SpinalMirror: master_backend {master_backend!r}: 'python' or 'rust'")
         self.core = SpinalStep(self.rate_hz, **spinal_options)
-        self.servos = ServoBridge(self.master)
+        # fast_paths=False keeps the plain per-ms path (the reference of the fast one).
+        self._fast = bool(fast_paths)
+        self.servos = ServoBridge(self.master, fast=self._fast)
+        #: The Rust master's one-call duty hand-over (None: the Python master).
+        self._try_duties = getattr(self.master, "try_set_motor_duties", None)
         reg = registry or spinal_registry()
         self.session = ClientSession.from_layout(
             layout,
@@ -253,6 +273,7 @@ class SpinalMirror:
         self._last_pub: dict[str, int] = {}
         self._next_pub_ms = -(2**62)  # earliest ms a publisher can be due (see _publish)
         self._duties_to_master: list[float] | None = None
+        self._battery_due_ms = -(2**62)  # first ms _battery samples again
 
     # ---------------------------------------------------------------- inputs from outside
     def set_imu_sample(
@@ -276,7 +297,22 @@ class SpinalMirror:
         self._now_s = max(self._now_s, float(now))
         self.now_ms = now_ms
         self._receive(now_ms)
-        self._battery(now_ms)
+        if self._fast:
+            # Each skip below is exactly the early return of the method it guards.
+            if now_ms >= self._battery_due_ms:
+                self._battery(now_ms)
+            next_control = self._next_control
+            if next_control is None or self._now_s >= next_control - 1e-9:
+                self._control(self._now_s)
+            self._can(now_ms)
+            self._forward_can_events()
+            if now_ms >= self._next_pub_ms:
+                self._publish(now_ms)
+            data = self.session.take_output()
+            if data or self.uart.pending:  # else UartPump.send has nothing to do
+                self.uart.send(data)
+            return
+        self._battery(now_ms)  # the plain path: every step every ms
         self._control(self._now_s)
         self._can(now_ms)
         self._forward_can_events()
@@ -331,10 +367,26 @@ class SpinalMirror:
 
     # ---------------------------------------------------------------- subscribers
     def _on_four_axis_command(self, msg: Any) -> None:
+        if self._fast:
+            try:
+                angles = [float(a) for a in msg.angles]
+            except (TypeError, ValueError):
+                angles = None  # the array path below raises as the reference does
+            if angles is not None and _applied(
+                self.core.four_axis_command_list, angles, msg.base_thrust, self._now_s
+            ):
+                return
         base = np.asarray(msg.base_thrust, dtype=np.float64)
         self.core.four_axis_command([float(a) for a in msg.angles], base, self._now_s)
 
     def _on_gain(self, msg: Any) -> None:
+        if self._fast:
+            rows = [
+                (m.roll_p, m.roll_i, m.roll_d, m.pitch_p, m.pitch_i, m.pitch_d, m.yaw_d)
+                for m in msg.motors
+            ]
+            if _applied(self.core.set_gains_wire_rows, rows):
+                return
         terms = np.array(
             [
                 [m.roll_p, m.roll_i, m.roll_d, m.pitch_p, m.pitch_i, m.pitch_d, m.yaw_d]
@@ -345,6 +397,11 @@ class SpinalMirror:
         self.core.set_gains_wire(terms)
 
     def _on_pinv_inertia(self, msg: Any) -> None:
+        if self._fast:
+            pinv = [(u.r, u.p, u.y) for u in msg.pseudo_inverse]
+            inertia = [int(v) for v in msg.inertia]
+            if _applied(self.core.set_pinv_inertia_wire_rows, pinv, inertia):
+                return
         rows = np.array([[u.r, u.p, u.y] for u in msg.pseudo_inverse], dtype=np.int16).reshape(
             -1, 3
         )
@@ -463,6 +520,7 @@ class SpinalMirror:
         if last is not None and now_ms - last < BATTERY_SAMPLE_MS:
             return
         self._last_pub["_battery_sample"] = now_ms
+        self._battery_due_ms = now_ms + BATTERY_SAMPLE_MS
         sample = self.battery_input * self.adc_scale
         if not math.isfinite(sample):
             self.counters.rejected["battery_non_finite"] += 1
@@ -506,12 +564,28 @@ class SpinalMirror:
         if self.pwm_test is not None:
             duties = (self.pwm_test + [IDLE_DUTY] * n)[:n]
         elif n and n == self.core.motor_number and n <= N_ROTORS:
-            duties = [min(1.0, max(IDLE_DUTY, float(d))) for d in out.duty[:n]]
+            # tolist: the same Python floats as float() of each element, in one call
+            duties = [min(1.0, max(IDLE_DUTY, d)) for d in out.duty.tolist()[:n]]
         else:
             duties = [IDLE_DUTY] * n
         self.duties = duties
 
     def _can(self, now_ms: int) -> None:
+        can_ms = self._can_ms
+        if self._fast and self._master_was_running and can_ms is not None and now_ms == can_ms + 1:
+            # The steady state: one new ms, the model adopted; the loop below for t = now_ms.
+            master = self.master
+            if master.state is MasterState.RUNNING:
+                duties = self.duties
+                if duties is not self._duties_to_master:
+                    if self._try_duties is not None and self._try_duties(duties):
+                        self._duties_to_master = duties  # valid floats, applied in one call
+                    elif len(duties) == master.motor_number:
+                        master.set_motor_duties(duties)
+                        self._duties_to_master = duties
+            master.tick_ms(now_ms)
+            self._can_ms = now_ms
+            return
         start = now_ms if self._can_ms is None else self._can_ms + 1
         start = max(start, now_ms - MAX_CAN_CATCH_UP_MS + 1)
         for t in range(start, now_ms + 1):
@@ -560,11 +634,67 @@ class SpinalMirror:
             return
         if now_ms < self._next_pub_ms:
             return  # no publisher due (exact: the earliest time any _due below fires)
+        if self._fast:
+            self._next_pub_ms = self._publish_due_fast(now_ms)
+            return
         self._publish_due(now_ms)
         last = self._last_pub
         self._next_pub_ms = min(
             _next_due(last, key, period, strict) for key, period, strict in _PUBLISHERS
         )
+
+    def _publish_due_fast(self, now_ms: int) -> int:
+        """:meth:`_publish_due` with the five ``_due`` checks inline (same order, same
+        ``_last_pub`` updates); returns the first ms a publisher is due again."""
+        last = self._last_pub
+        get = last.get
+        stamp = None
+        t = get("imu")
+        if t is None or now_ms - t >= IMU_PUB_MS:
+            last["imu"] = t = now_ms
+            stamp = self.session.now(now_ms)
+            out = self.last_output
+            self._publish_topic(
+                "imu",
+                self._msg.imu.new(
+                    stamp=stamp,
+                    acc=list(self.acc),
+                    gyro=out.angular_velocity.tolist(),
+                    mag=list(self.mag),
+                    quaternion=out.quaternion.tolist(),
+                ),
+            )
+        next_ms = t + IMU_PUB_MS
+        t = get("battery_voltage_status")
+        if t is None or now_ms - t > BATTERY_PUB_MS:
+            last["battery_voltage_status"] = t = now_ms
+            if self.battery_voltage is not None:
+                self._publish_topic(
+                    "battery_voltage_status", self._msg.float32.new(data=self.battery_voltage)
+                )
+        next_ms = min(next_ms, t + BATTERY_PUB_MS + 1)
+        t = get("motor_pwms")
+        if t is None or now_ms - t > MOTOR_PWMS_PUB_MS:
+            last["motor_pwms"] = t = now_ms
+            values = [int(d * 2000.0) for d in self.duties]
+            self._publish_topic("motor_pwms", self._msg.pwms.new(motor_value=values))
+        next_ms = min(next_ms, t + MOTOR_PWMS_PUB_MS + 1)
+        t = get("servo/states")
+        if t is None or now_ms - t >= SERVO_STATES_PUB_MS:
+            last["servo/states"] = t = now_ms
+            if stamp is None:
+                stamp = self.session.now(now_ms)
+            msg = self.servos.states(self._msg, stamp)
+            if msg is not None:
+                self._publish_topic("servo/states", msg)
+        next_ms = min(next_ms, t + SERVO_STATES_PUB_MS)
+        t = get("servo/torque_states")
+        if t is None or now_ms - t >= SERVO_TORQUE_PUB_MS:
+            last["servo/torque_states"] = t = now_ms
+            msg = self.servos.torque_states(self._msg)
+            if msg is not None:
+                self._publish_topic("servo/torque_states", msg)
+        return min(next_ms, t + SERVO_TORQUE_PUB_MS)
 
     def _publish_due(self, now_ms: int) -> None:
         out = self.last_output
@@ -575,9 +705,9 @@ class SpinalMirror:
                 self._msg.imu.new(
                     stamp=stamp,
                     acc=list(self.acc),
-                    gyro=[float(v) for v in out.angular_velocity],
+                    gyro=out.angular_velocity.tolist(),
                     mag=list(self.mag),
-                    quaternion=[float(v) for v in out.quaternion],
+                    quaternion=out.quaternion.tolist(),
                 ),
             )
         if (

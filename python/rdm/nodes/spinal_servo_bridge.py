@@ -29,10 +29,23 @@ def _int16(value: int) -> int:
 
 
 class ServoBridge:
-    """Applies servo commands from the UART to a :class:`CanMaster`; builds servo reports."""
+    """Applies servo commands from the UART to a :class:`CanMaster`; builds servo reports.
 
-    def __init__(self, master: CanMaster) -> None:
+    With a master that offers ``servo_keys()`` and ``servo_reports()`` (the Rust master,
+    :class:`rdm.nodes.can_master_rust.RustCanMaster`) and ``fast=True``, the table is read
+    in one call instead of one entry view per servo field; ``fast=False`` keeps the plain
+    path (the reference the fast one is tested against: same messages, same rejections).
+    """
+
+    def __init__(self, master: CanMaster, *, fast: bool = True) -> None:
         self.master = master
+        keys = getattr(master, "servo_keys", None)
+        reports = getattr(master, "servo_reports", None)
+        self._fast = fast and keys is not None and reports is not None
+        #: Fast path: the last ``spinal/ServoState`` built per servo with its field values;
+        #: reused while the values repeat (a message is only encoded, never changed).
+        self._state_msgs: list[tuple[tuple, Any]] = []
+        self._state_codec: Any = None  # the codec those messages come from
 
     def table(self) -> list[tuple[tuple[int, int], ServoEntry]]:
         """Every servo in index order (empty until the master runs)."""
@@ -45,17 +58,45 @@ class ServoBridge:
             raise MirrorRejection(
                 "wrong_length", f"{topic}: {len(index)} indices but {len(values)} values"
             )
-        table = self.table()
-        if not table:
+        keys = self._keys()
+        if not keys:
             raise MirrorRejection("servo_not_ready", f"{topic}: no servo enumerated on CAN")
         out = []
         for i, value in zip(index, values, strict=True):
-            if not 0 <= i < len(table):
+            if not 0 <= i < len(keys):
                 raise MirrorRejection(
-                    "servo_index", f"{topic}: servo index {i} not in 0..{len(table) - 1}"
+                    "servo_index", f"{topic}: servo index {i} not in 0..{len(keys) - 1}"
                 )
-            out.append((table[i][0], int(value)))
+            out.append((keys[i], int(value)))
         return out
+
+    def _keys(self) -> list[tuple[int, int]]:
+        """``(slave, index)`` of every servo in index order (empty until the master runs)."""
+        if self.master.state is not MasterState.RUNNING:
+            return []
+        if self._fast:
+            return self.master.servo_keys()
+        return [key for key, _entry in self.table()]
+
+    def _reports(self) -> list[tuple[bool, int, int, int, int, bool]]:
+        """``(send_data_flag, angle, temperature, current, error, torque_enable)`` of every
+        servo in index order, each clamped to its message field (empty until running)."""
+        if self.master.state is not MasterState.RUNNING:
+            return []
+        if self._fast:
+            # The Rust table holds i16 / u8 values: the clamps below are the identity there.
+            return self.master.servo_reports()
+        return [
+            (
+                bool(e.send_data_flag),
+                _int16(e.angle),
+                max(0, min(255, e.temperature)),
+                _int16(e.current),
+                max(0, min(255, e.error)),
+                bool(e.torque_enable),
+            )
+            for _key, e in self.table()
+        ]
 
     def target_states(self, msg: Any) -> None:
         """``servo/target_states`` (``spinal/ServoControlCmd``): goal positions, raw ticks."""
@@ -82,25 +123,45 @@ class ServoBridge:
 
     def states(self, codec: Any, stamp: Any) -> Any | None:
         """A ``spinal/ServoStates`` of the servos with send_data_flag, or None if there are none."""
-        state_codec = codec.servo_state
-        servos = [
-            state_codec.new(
-                index=i,
-                angle=_int16(entry.angle),
-                temp=max(0, min(255, entry.temperature)),
-                load=_int16(entry.current),
-                error=max(0, min(255, entry.error)),
-            )
-            for i, (_key, entry) in enumerate(self.table())
-            if entry.send_data_flag
-        ]
+        new = codec.servo_state.new
+        if self._fast:
+            if codec.servo_state is not self._state_codec:
+                self._state_codec, self._state_msgs = codec.servo_state, []
+            servos = self._states_reused(new)
+        else:
+            servos = [
+                new(index=i, angle=angle, temp=temp, load=load, error=error)
+                for i, (send, angle, temp, load, error, _torque) in enumerate(self._reports())
+                if send
+            ]
         if not servos:
             return None
         return codec.servo_states.new(stamp=stamp, servos=servos)
 
+    def _states_reused(self, new: Any) -> list[Any]:
+        """The ``servos`` list of :meth:`states`, reusing each servo's last message while its
+        values are unchanged (same fields, same bytes; fewer objects built at 50 Hz)."""
+        cache = self._state_msgs
+        out = []
+        for i, (send, angle, temp, load, error, _torque) in enumerate(self._reports()):
+            if not send:
+                continue
+            values = (i, angle, temp, load, error)
+            if i < len(cache):
+                kept, msg = cache[i]
+                if kept != values:
+                    msg = new(index=i, angle=angle, temp=temp, load=load, error=error)
+                    cache[i] = (values, msg)
+            else:
+                msg = new(index=i, angle=angle, temp=temp, load=load, error=error)
+                cache.extend([((), None)] * (i - len(cache)))
+                cache.append((values, msg))
+            out.append(msg)
+        return out
+
     def torque_states(self, codec: Any) -> Any | None:
         """A ``spinal/ServoTorqueStates`` of every servo, or None if there are none."""
-        table = self.table()
-        if not table:
+        reports = self._reports()
+        if not reports:
             return None
-        return codec.torque_states.new(torque_enable=[int(e.torque_enable) for _k, e in table])
+        return codec.torque_states.new(torque_enable=[int(r[5]) for r in reports])

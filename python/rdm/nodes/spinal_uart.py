@@ -22,8 +22,13 @@ class UartPump:
     """Non-blocking reads and writes on a :class:`rdm.link.serial.SerialLink` (or any object
     with ``read_available()`` and ``port``/``write``)."""
 
-    def __init__(self, link: Any, max_pending: int = DEFAULT_MAX_PENDING) -> None:
+    def __init__(
+        self, link: Any, max_pending: int = DEFAULT_MAX_PENDING, *, fast: bool = True
+    ) -> None:
         self.link = link
+        #: With nothing queued, :meth:`send` writes ``data`` itself (no copy through the
+        #: queue); False keeps the plain queue-then-pump path (same bytes, same counters).
+        self.fast = fast
         self.max_pending = max_pending
         self.pending = bytearray()
         self.bytes_in = 0
@@ -50,6 +55,15 @@ class UartPump:
 
     def send(self, data: bytes) -> None:
         """Queue ``data`` and write as much as the port takes now."""
+        if self.fast and data and not self.pending and type(data) is bytes:
+            if len(data) > self.max_pending:
+                self.bytes_discarded += len(data)
+                return
+            n = self._write(data)
+            if n < len(data):
+                self.pending += data[n:]
+            self.bytes_out += n
+            return
         if data:
             self.pending += data
         if len(self.pending) > self.max_pending:
@@ -62,20 +76,24 @@ class UartPump:
         """Write queued bytes the port accepts without blocking; returns bytes written."""
         if not self.pending:
             return 0
+        n = self._write(bytes(self.pending))
+        del self.pending[:n]
+        self.bytes_out += n
+        return n
+
+    def _write(self, data: bytes) -> int:
+        """Write what the port takes now of ``data``: bytes written (0 if none, or on a port
+        error, counted)."""
         try:
             if self._fd is not None:
                 _, writable, _ = select.select([], [self._fd], [], 0)
                 if not writable:
                     return 0
                 try:
-                    n = os.write(self._fd, bytes(self.pending))
+                    return os.write(self._fd, data)
                 except BlockingIOError:
                     return 0
-            else:
-                n = self.link.write(bytes(self.pending))
+            return self.link.write(data)
         except (OSError, ValueError):
             self.write_errors += 1
             return 0
-        del self.pending[:n]
-        self.bytes_out += n
-        return n

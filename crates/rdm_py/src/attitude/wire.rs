@@ -29,6 +29,21 @@ pub(crate) fn gain_array<'py>(
     Ok(crate::gains::gain_set_to_array(py, set))
 }
 
+/// Rows of 7 integers (a list of tuples) into wire terms; the same checks and messages as
+/// [`wire_terms`].
+pub(crate) fn wire_term_rows(rows: &[[i64; 7]]) -> PyResult<Vec<RollPitchYawTermWire>> {
+    let mut out = Vec::with_capacity(rows.len());
+    for row in rows {
+        let mut v = [0i16; 7];
+        for (dst, &x) in v.iter_mut().zip(row.iter()) {
+            *dst = i16::try_from(x)
+                .map_err(|_| RdmError::new_err(format!("terms: {x} is outside int16")))?;
+        }
+        out.push(RollPitchYawTermWire::from_array(v));
+    }
+    Ok(out)
+}
+
 /// An (n, 7) integer array into wire terms.
 pub(crate) fn wire_terms(terms: &PyReadonlyArray2<'_, i64>) -> PyResult<Vec<RollPitchYawTermWire>> {
     if terms.ndim() != 2 || terms.shape()[1] != 7 {
