@@ -256,6 +256,16 @@ class _SpinalControllerMessages:
     def set_pinv_inertia_wire(self, pinv: npt.NDArray[np.int16], inertia: Any) -> None: ...
     def set_desire_coordinate(self, roll: float, pitch: float, yaw: float) -> None: ...
     def set_attitude_control(self, enabled: bool) -> None: ...
+    def set_gains_wire_rows(self, rows: list[tuple[int, ...]]) -> None:
+        """``set_gains_wire`` from rows of 7 ints (no array)."""
+    def set_pinv_inertia_wire_rows(
+        self, pinv: list[tuple[int, int, int]], inertia: list[int]
+    ) -> None:
+        """``set_pinv_inertia_wire`` from int rows (no array)."""
+    def four_axis_command_list(
+        self, angles: tuple[float, float, float], base_thrust: list[float], now_s: float
+    ) -> None:
+        """``four_axis_command`` from plain floats (no array)."""
     @property
     def armed(self) -> bool: ...
     @property
@@ -760,6 +770,14 @@ class CanMaster:
     def rx_errors(self) -> list[tuple[str, int]]: ...
     def rx_kinds(self) -> list[tuple[str, int]]: ...
     def set_motor_duties(self, duties: list[float]) -> None: ...
+    def try_set_motor_duties(self, duties: list[float]) -> bool:
+        """Apply and return True only for exactly ``motor_number`` valid Python floats."""
+    def servo_reports(self) -> list[tuple[bool, int, int, int, int, bool]]:
+        """(send_data_flag, angle, temperature, current, error, torque_enable) per servo."""
+    def servo_keys(self) -> list[tuple[int, int]]:
+        """(slave, position) per servo, table order."""
+    def set_servo_target_list(self, targets: list[tuple[int, int, int]]) -> None:
+        """``set_servo_target`` for each (slave, index, value)."""
     def set_servo_target(self, slave: int, index: int, value: int) -> None: ...
     def set_servo_torque(self, slave: int, index: int, enable: bool) -> None: ...
     def set_servo_current(self, slave: int, index: int, value: int) -> None: ...
@@ -800,16 +818,3 @@ def json_record(values: object) -> str | None:
 # --- onboardtick ---
 def leptrino_ok_sample_run(data: bytes) -> tuple[int, int, int, bytes | None]:
     """(end, count, last_start, last_payload) of the leading run of whole OK-sample frames."""
-
-# --- spinaltick ---
-# Added methods of classes above (a stub cannot reopen a class; rdm.nodes.* call them):
-# CanMaster.servo_reports() -> list[tuple[bool, int, int, int, int, bool]]
-#     (send_data_flag, angle, temperature, current, error, torque_enable) per servo, table order
-# CanMaster.servo_keys() -> list[tuple[int, int]]           (slave, position) per servo
-# CanMaster.try_set_motor_duties(duties: list[float]) -> bool
-#     applies and returns True only for exactly motor_number valid Python floats
-# CanMaster.set_servo_target_list(targets: list[tuple[int, int, int]]) -> None
-# SpinalStep / AttitudeController .set_gains_wire_rows(rows: list[tuple[int, ...]]) -> None
-#     rows of 7 ints, as set_gains_wire without the array
-# SpinalStep / AttitudeController .set_pinv_inertia_wire_rows(
-#     pinv: list[tuple[int, int, int]], inertia: Sequence[int]) -> None
