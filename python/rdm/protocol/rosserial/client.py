@@ -28,16 +28,18 @@ from rdm.protocol.rosserial.events import (
     Configured,
     DroppedMessage,
     FrameRejected,
-    MessageReceived,
     ServiceHandled,
     SessionEvent,
     SyncLost,
     TimeSynced,
+    message_received,
 )
 from rdm.protocol.rosserial.framing import BadFrame, Frame, FrameParser, encode_frame
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_msgs_dir, spinal_registry
 from rdm.protocol.rosserial.services import DeviceServiceServer, ServiceHandler
-from rdm.protocol.rosserial.timesync import ClientClock, tick_diff
+from rdm.protocol.rosserial.timesync import ClientClock
+
+_MASK = 0xFFFFFFFF  # MCU ticks are uint32
 
 
 class SlotError(ValueError):
@@ -93,6 +95,8 @@ class ClientSession:
         self._time = self.registry.msg("std_msgs/Time")
         self._topic_info = self.registry.msg("rosserial_msgs/TopicInfo")
         self._log = self.registry.msg("rosserial_msgs/Log")
+        self._publisher_cache: dict[str, ClientEndpoint] = {}  # name -> first plain slot
+        self._cached_slots = 0  # len(publishers) when the cache was filled
 
     # -- slot set-up (advertise / subscribe / advertiseService) ---------------------------
     def _new_pub(self, name: str, type_: str, md5: str, codec: MessageCodec, ep: C.Endpoint):
@@ -221,8 +225,15 @@ class ClientSession:
 
     def publisher(self, name: str) -> ClientEndpoint:
         """The plain publisher slot of topic ``name``."""
+        slot = self._publisher_cache.get(name)
+        if slot is not None and slot.service is None and self._cached_slots == len(self.publishers):
+            return slot
         for p in self.publishers:
             if p.name == name and p.service is None:
+                if self._cached_slots != len(self.publishers):
+                    self._publisher_cache.clear()  # slots added or removed: look up afresh
+                    self._cached_slots = len(self.publishers)
+                self._publisher_cache[name] = p
                 return p
         raise KeyError(f"no publisher {name!r}")
 
@@ -292,10 +303,22 @@ class ClientSession:
     def spin(self, data: bytes, now_ms: int) -> list[SessionEvent]:
         """One ``spinOnce``: bytes received since the last call, at MCU tick ``now_ms``."""
         events: list[SessionEvent] = []
-        if tick_diff(now_ms, self._last_sync_receive_time) > C.SYNC_LOSS_MS and self.configured:
+        # tick_diff inlined (uint32 difference): this runs every MCU millisecond
+        if self.configured and (now_ms - self._last_sync_receive_time) & _MASK > C.SYNC_LOSS_MS:
             self.configured = False
             self.counts["sync_lost"] += 1
             events.append(SyncLost("no time answer for 11 s"))
+        parser = self.parser
+        if not data and parser._started is None and not parser._buf:
+            pass  # idle parser, no bytes: feed would return no event and change nothing
+        else:
+            events = self._receive(data, now_ms, events)
+        if self.configured and (now_ms - self._last_sync_time) & _MASK > C.TIME_REQUEST_INTERVAL_MS:
+            self._request_sync_time(now_ms)
+            self._last_sync_time = now_ms
+        return events
+
+    def _receive(self, data: bytes, now_ms: int, events: list[SessionEvent]) -> list[SessionEvent]:
         for item in self.parser.feed(data, now_ms):
             if isinstance(item, BadFrame):
                 events.append(FrameRejected(item))
@@ -303,13 +326,12 @@ class ClientSession:
                     self._request_sync_time(now_ms)
             elif isinstance(item, Frame):
                 events.extend(self._dispatch(item, now_ms))
-        if self.configured and tick_diff(now_ms, self._last_sync_time) > C.TIME_REQUEST_INTERVAL_MS:
-            self._request_sync_time(now_ms)
-            self._last_sync_time = now_ms
         return events
 
     def _dispatch(self, frame: Frame, now_ms: int) -> list[SessionEvent]:
         tid = frame.topic_id
+        if tid >= C.FIRST_USER_TOPIC_ID:  # none of the reserved ids below: a user topic
+            return self._dispatch_user(frame, tid)
         if tid == C.TopicId.PUBLISHER:  # the server's topic request
             self._request_sync_time(now_ms)
             self._negotiate_topics()
@@ -327,6 +349,9 @@ class ClientSession:
         if tid == C.TopicId.TX_STOP:
             self.configured = False
             return [SyncLost("TX_STOP from server")]
+        return self._dispatch_user(frame, tid)
+
+    def _dispatch_user(self, frame: Frame, tid: int) -> list[SessionEvent]:
         index = tid - C.FIRST_USER_TOPIC_ID
         if not 0 <= index < len(self.subscribers):
             return self._drop(frame, "unknown topic id")
@@ -343,7 +368,7 @@ class ClientSession:
                 return self._drop(frame, f"service handler of {slot.name!r} failed: {exc!r}")
             self._send(slot.service.response_id, payload)
             return [ServiceHandled(slot.name, msg, response)]
-        return [MessageReceived(slot.name, slot.type, tid, msg)]
+        return [message_received(slot.name, slot.type, tid, msg)]
 
     def _drop(self, frame: Frame, reason: str) -> list[SessionEvent]:
         self.counts["rx_dropped"] += 1

@@ -28,7 +28,6 @@ from rdm.protocol.rosserial.events import (
     DroppedMessage,
     FrameRejected,
     LogReceived,
-    MessageReceived,
     ServiceReady,
     ServiceResponse,
     ServiceTimeout,
@@ -36,10 +35,14 @@ from rdm.protocol.rosserial.events import (
     SyncLost,
     TopicRefused,
     TopicRegistered,
+    message_received,
 )
 from rdm.protocol.rosserial.framing import BadFrame, Frame, FrameParser, encode_frame
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 from rdm.protocol.rosserial.services import PendingCall, RemoteService, ServiceError
+
+_TIME_ID = int(C.TopicId.TIME)  # plain ints: compared for every received frame
+_LOG_ID = int(C.TopicId.LOG)
 
 
 class TopicNotNegotiated(KeyError):
@@ -206,7 +209,7 @@ class ServerSession:
         tid = frame.topic_id
         if tid in (0, 1, 2, 3):
             return self._setup(frame, now)
-        if tid == C.TopicId.TIME:
+        if tid == _TIME_ID:
             self._tx.append(
                 encode_frame(
                     C.TopicId.TIME, self._time.encode(self._time.new(data=self.time_source(now)))
@@ -215,7 +218,7 @@ class ServerSession:
             self._sync_deadline = now + self.timeout_interval
             self.counts["time_requests"] += 1
             return []
-        if tid == C.TopicId.LOG:
+        if tid == _LOG_ID:
             try:
                 log = self._log.decode(frame.payload)
             except DecodeError as exc:
@@ -228,7 +231,7 @@ class ServerSession:
             except DecodeError as exc:
                 return self._drop(frame, f"payload does not decode as {remote.type}: {exc}")
             self.counts["rx_messages"] += 1
-            return [MessageReceived(remote.name, remote.type, tid, msg)]
+            return [message_received(remote.name, remote.type, tid, msg)]
         for service in self.services.values():
             if service.response_id == tid:
                 try:
