@@ -19,6 +19,7 @@ from __future__ import annotations
 import struct
 from collections import Counter
 from dataclasses import dataclass
+from typing import Any
 
 from rdm.protocol.rosserial.checksums import (
     byte_sum,
@@ -172,6 +173,11 @@ class FrameParser:
 
     def feed(self, data: bytes, now: float = 0.0) -> list[ParseEvent]:
         """Consume ``data`` received at ``now``; return the events it completes."""
+        return self._feed(data, now, False)
+
+    def _feed(self, data: bytes, now: float, raw: bool) -> list[Any]:
+        """:meth:`feed`; with ``raw`` good frames come as ``(topic_id, payload, offset)``
+        tuples (the sessions' hot path, which builds a :class:`Frame` only when needed)."""
         started = self._started
         buf = self._buf
         if not data and started is None and not buf:
@@ -227,7 +233,10 @@ class FrameParser:
                     payload = bytes(buf[pos + 7 : pos + 7 + n])
                     lo, hi = buf[pos + 5], buf[pos + 6]  # topic id
                     if (lo + hi + byte_sum(payload) + buf[pos + 7 + n]) % 256 == 255:
-                        events.append(_new_frame(lo | (hi << 8), payload, base + pos))
+                        if raw:
+                            events.append((lo | (hi << 8), payload, base + pos))
+                        else:
+                            events.append(_new_frame(lo | (hi << 8), payload, base + pos))
                         counts["frames"] += 1
                     else:
                         reason = "message_checksum"
@@ -247,6 +256,12 @@ class FrameParser:
 class PlainFrameParser(FrameParser):
     """The reference form of :meth:`FrameParser.feed` (kept reachable for the tests that
     compare it with the fast one): the same events and counters, step by step."""
+
+    def _feed(self, data: bytes, now: float, raw: bool) -> list[Any]:
+        events = self.feed(data, now)
+        if not raw:
+            return events
+        return [(e.topic_id, e.payload, e.offset) if isinstance(e, Frame) else e for e in events]
 
     def feed(self, data: bytes, now: float = 0.0) -> list[ParseEvent]:
         """Consume ``data`` received at ``now``; return the events it completes."""
