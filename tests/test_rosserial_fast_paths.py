@@ -295,14 +295,18 @@ def _stream(rng: random.Random) -> bytes:
     return b"".join(parts)
 
 
+@pytest.mark.parametrize("native", [True, False])
 @pytest.mark.parametrize("rescan", [True, False])
-@pytest.mark.parametrize("max_payload", [512, 1022, 40])
-def test_parser_same_events_counters_and_pending_as_plain(rescan, max_payload):
+@pytest.mark.parametrize("max_payload", [512, 1022, 40, 0])
+def test_parser_same_events_counters_and_pending_as_plain(native, rescan, max_payload):
+    """The Rust scan (native) and the Python loop against the reference parser."""
     rng = random.Random(max_payload * 2 + rescan)
     for trial in range(120):
         data = _stream(rng)
-        timeout = rng.choice([None, 20])
+        timeout = rng.choice([None, 20, 0.5])
         fast = FrameParser(max_payload, timeout, rescan=rescan)
+        assert fast.native is True or not native  # the extension has the scanner
+        fast.native = native
         plain = PlainFrameParser(max_payload, timeout, rescan=rescan)
         now, i = 0, 0
         while i <= len(data):
@@ -313,8 +317,21 @@ def test_parser_same_events_counters_and_pending_as_plain(rescan, max_payload):
             assert fast.pending == plain.pending and fast.in_frame == plain.in_frame
             i += max(step, 1)
         assert fast.poll(now + 100) == plain.poll(now + 100)
+        for raw in (True, False):  # the sessions' raw form too
+            tail = encode_frame(150, b"ab") + b"\xff\xfe\x05"
+            assert fast._feed(tail, now + 101, raw) == plain._feed(tail, now + 101, raw)
         assert dict(fast.counts) == dict(plain.counts)
         assert list(fast.counts) == list(plain.counts)  # same insertion order too
+
+
+def test_native_scanner_is_used_and_odd_max_payload_takes_the_python_loop():
+    parser = FrameParser(512)
+    assert parser.native  # built with the extension that has rosserial_scan
+    frame = encode_frame(150, b"xyz")
+    for odd in (512.0, -1, True):
+        fast, plain = FrameParser(odd), PlainFrameParser(odd)  # type: ignore[arg-type]
+        assert fast.feed(frame + frame[:3]) == plain.feed(frame + frame[:3])
+        assert dict(fast.counts) == dict(plain.counts) and fast.pending == plain.pending
 
 
 def _pair(registry: TypeRegistry, plain_parser: bool) -> tuple[ClientSession, ServerSession]:

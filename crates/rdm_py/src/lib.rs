@@ -18,6 +18,7 @@ mod perch;
 mod planner;
 mod position;
 mod qp;
+mod rosserial;
 mod rotor_plant;
 mod sensor_sim;
 
@@ -39,5 +40,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     json_log::register(m)?;
     rotor_plant::register(m)?;
     can_master::register(m)?;
+    rosserial::register(m)?;
     Ok(())
 }

@@ -80,6 +80,11 @@ def _new_frame(topic_id: int, payload: bytes, offset: int) -> Frame:
     return frame
 
 
+try:
+    from rdm._rdm import rosserial_scan as _native_scan
+except ImportError:  # an extension built before the scanner: the Python loop
+    _native_scan = None
+
 _HEADER = struct.Struct("<BBHBH")  # FF FE len(u16) len_chk topic(u16)
 
 
@@ -143,6 +148,7 @@ class FrameParser:
         self.frame_timeout = frame_timeout
         self.rescan = rescan
         self.counts: Counter[str] = Counter()
+        self.native = _native_scan is not None  # the Rust scan; False: the Python loop
         self._buf = bytearray()
         self._base = 0  # stream offset of _buf[0]
         self._started: float | None = None  # time the current candidate's 0xFF was seen
@@ -182,6 +188,56 @@ class FrameParser:
         buf = self._buf
         if not data and started is None and not buf:
             return []  # idle: nothing buffered, no timer running, nothing new
+        max_payload = self.max_payload
+        if not (self.native and max_payload.__class__ is int and max_payload >= 0):
+            return self._feed_python(data, now, raw)
+        # The scan runs in Rust (rdm_core::firmware::rosserial_frame); the frame timer, the
+        # buffer, the counters and the event objects stay here, in the reference's order.
+        events: list[Any] = []
+        counts = self.counts
+        base = self._base
+        pos = 0
+        timeout = self.frame_timeout
+        if started is not None and timeout is not None and now - started > timeout:
+            pos = 1 if self.rescan else len(buf)
+            events.append(BadFrame("timeout", base, bytes(buf)))
+            counts["timeout"] += 1
+            started = None
+        buf += data
+        items, pos, frames, clean, broke, reset = _native_scan(
+            buf, pos, base, max_payload, self.rescan
+        )
+        if clean and not events:
+            if frames:
+                counts["frames"] += frames
+            events = items if raw else [_new_frame(*item) for item in items]
+        else:
+            for item in items:
+                kind = item[0]
+                if kind.__class__ is not str:
+                    events.append(item if raw else _new_frame(*item))
+                    counts["frames"] += 1
+                elif kind == "skip":
+                    events.append(SkippedBytes(item[1], item[2]))
+                    counts["skipped_bytes"] += len(item[2])
+                else:
+                    events.append(BadFrame(kind, item[1], item[2]))
+                    counts[kind] += 1
+        if broke:  # an incomplete candidate: its timer runs from its first 0xFF
+            if reset or started is None:
+                started = now
+        elif reset:
+            started = None
+        del buf[:pos]
+        self._base = base + pos
+        self._started = started
+        return events
+
+    def _feed_python(self, data: bytes, now: float, raw: bool) -> list[Any]:
+        """:meth:`_feed` without the Rust scanner (no extension, or a ``max_payload`` that is
+        not a non-negative int)."""
+        started = self._started
+        buf = self._buf
         # The loop of :class:`PlainFrameParser` with the attributes in locals and the header
         # checksum inlined; tests compare the two on valid, corrupt and random streams.
         events: list[ParseEvent] = []
