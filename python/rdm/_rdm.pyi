@@ -768,3 +768,13 @@ class CanWire:
 
 # NeuronBank.tick_wire(now, stamp, wire) -> list[int] (board index of each reply), added by
 # canwire in crates/rdm_py/src/neuron_bank.rs.
+
+# --- rosrs ---
+def rosserial_scan(
+    buf: bytearray, pos: int, base: int, max_payload: int, rescan: bool
+) -> tuple[list[tuple[Any, ...]], int, int, bool, bool, bool]:
+    """Scan a rosserial receive buffer from ``pos`` (``base``: stream offset of ``buf[0]``).
+
+    Returns ``(events, pos, frames, clean, broke, reset)``: good frames as
+    ``(topic_id, payload, offset)``, other events as ``(kind, offset, data)`` with kind
+    ``"skip"`` or the reject reason; used by ``rdm.protocol.rosserial.framing.FrameParser``."""
