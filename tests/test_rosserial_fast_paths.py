@@ -266,6 +266,11 @@ def test_encode_frame_matches_reference_and_errors():
         assert encode_frame(topic, payload) == encode_frame_plain(topic, payload)
         assert encode_frame(topic, bytearray(payload)) == encode_frame_plain(topic, payload)
     assert encode_frame(150, [1, 2, 3]) == encode_frame_plain(150, [1, 2, 3])
+    odd: list[tuple[Any, Any]] = [(150.0, b"ab"), (150, [1, 300]), (150, ["a"]), (150, iter(b""))]
+    for topic, payload in odd:  # the (topic, length) header cache is warm for 150 / 2 bytes
+        assert _outcome(lambda t=topic, p=payload: encode_frame(t, p)) == _outcome(
+            lambda t=topic, p=payload: encode_frame_plain(t, p)
+        )
     for topic, payload in ((-1, b""), (65536, b""), (1, bytes(65536))):
         with pytest.raises(FrameError) as fast_err:
             encode_frame(topic, payload)

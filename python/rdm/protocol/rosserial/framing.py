@@ -88,25 +88,32 @@ except ImportError:  # an extension built before the scanner: the Python loop
 _HEADER = struct.Struct("<BBHBH")  # FF FE len(u16) len_chk topic(u16)
 
 
+_HEADERS: dict[tuple[int, int], bytes] = {}  # (topic id, length) -> header bytes already built
+_HEADERS_MAX = 4096
+
+
 def encode_frame(topic_id: int, payload: bytes) -> bytes:
     """Build one v2 frame."""
+    if payload.__class__ is bytes:
+        header = _HEADERS.get((topic_id, len(payload)))
+        if header is not None:  # this topic id and length passed the checks below before
+            chk = 255 - (((topic_id & 0xFF) + (topic_id >> 8) + byte_sum(payload)) % 256)
+            return b"".join((header, payload, _CHECKSUM_BYTE[chk]))
     if not 0 <= topic_id <= 0xFFFF:
         raise FrameError(f"topic_id {topic_id} outside 0..65535")
-    if payload.__class__ is not bytes:
-        payload = bytes(payload)  # what the reference form accepts (bytearray, ints, ...)
     n = len(payload)
     if n > 0xFFFF:
         raise FrameError(f"payload of {n} bytes does not fit the uint16 length field")
+    if payload.__class__ is not bytes:
+        payload = bytes(payload)  # what the reference form accepts (bytearray, ints, ...)
     # checksums as in checksums.py, inlined: this runs for every frame either end sends
     length_chk = 255 - (((n & 0xFF) + (n >> 8)) % 256)
     message_chk = 255 - (((topic_id & 0xFF) + (topic_id >> 8) + byte_sum(payload)) % 256)
-    return b"".join(
-        (
-            _HEADER.pack(SYNC, PROTOCOL_VERSION, n, length_chk, topic_id),
-            payload,
-            _CHECKSUM_BYTE[message_chk],
-        )
-    )
+    header = _HEADER.pack(SYNC, PROTOCOL_VERSION, n, length_chk, topic_id)
+    if len(_HEADERS) >= _HEADERS_MAX:
+        _HEADERS.clear()
+    _HEADERS[(topic_id, n)] = header
+    return b"".join((header, payload, _CHECKSUM_BYTE[message_chk]))
 
 
 _CHECKSUM_BYTE = [bytes((i,)) for i in range(256)]
