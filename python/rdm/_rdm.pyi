@@ -818,3 +818,13 @@ def json_record(values: object) -> str | None:
 # --- onboardtick ---
 def leptrino_ok_sample_run(data: bytes) -> tuple[int, int, int, bytes | None]:
     """(end, count, last_start, last_payload) of the leading run of whole OK-sample frames."""
+
+# --- rosrs ---
+def rosserial_scan(
+    buf: bytearray, pos: int, base: int, max_payload: int, rescan: bool
+) -> tuple[list[tuple[Any, ...]], int, int, bool, bool, bool]:
+    """Scan a rosserial receive buffer from ``pos`` (``base``: stream offset of ``buf[0]``).
+
+    Returns ``(events, pos, frames, clean, broke, reset)``: good frames as
+    ``(topic_id, payload, offset)``, other events as ``(kind, offset, data)`` with kind
+    ``"skip"`` or the reject reason; used by ``rdm.protocol.rosserial.framing.FrameParser``."""

@@ -19,6 +19,7 @@ mod perch;
 mod planner;
 mod position;
 mod qp;
+mod rosserial;
 mod rotor_plant;
 mod sensor_sim;
 
@@ -41,5 +42,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     rotor_plant::register(m)?;
     can_master::register(m)?;
     leptrino_scan::register(m)?;
+    rosserial::register(m)?;
     Ok(())
 }

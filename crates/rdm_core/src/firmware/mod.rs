@@ -12,4 +12,5 @@ pub mod neuron_board;
 pub mod neuron_frame;
 pub mod neuron_servo;
 pub mod neuron_tx;
+pub mod rosserial_frame;
 pub mod spinal_frame;

@@ -28,16 +28,24 @@ from rdm.protocol.rosserial.events import (
     Configured,
     DroppedMessage,
     FrameRejected,
-    MessageReceived,
     ServiceHandled,
     SessionEvent,
     SyncLost,
     TimeSynced,
+    message_received,
 )
-from rdm.protocol.rosserial.framing import BadFrame, Frame, FrameParser, encode_frame
+from rdm.protocol.rosserial.framing import (
+    BadFrame,
+    Frame,
+    FrameParser,
+    _new_frame,
+    encode_frame,
+)
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_msgs_dir, spinal_registry
 from rdm.protocol.rosserial.services import DeviceServiceServer, ServiceHandler
-from rdm.protocol.rosserial.timesync import ClientClock, tick_diff
+from rdm.protocol.rosserial.timesync import ClientClock
+
+_MASK = 0xFFFFFFFF  # MCU ticks are uint32
 
 
 class SlotError(ValueError):
@@ -93,6 +101,8 @@ class ClientSession:
         self._time = self.registry.msg("std_msgs/Time")
         self._topic_info = self.registry.msg("rosserial_msgs/TopicInfo")
         self._log = self.registry.msg("rosserial_msgs/Log")
+        self._publisher_cache: dict[str, ClientEndpoint] = {}  # name -> first plain slot
+        self._cached_slots = 0  # len(publishers) when the cache was filled
 
     # -- slot set-up (advertise / subscribe / advertiseService) ---------------------------
     def _new_pub(self, name: str, type_: str, md5: str, codec: MessageCodec, ep: C.Endpoint):
@@ -221,8 +231,15 @@ class ClientSession:
 
     def publisher(self, name: str) -> ClientEndpoint:
         """The plain publisher slot of topic ``name``."""
+        slot = self._publisher_cache.get(name)
+        if slot is not None and slot.service is None and self._cached_slots == len(self.publishers):
+            return slot
         for p in self.publishers:
             if p.name == name and p.service is None:
+                if self._cached_slots != len(self.publishers):
+                    self._publisher_cache.clear()  # slots added or removed: look up afresh
+                    self._cached_slots = len(self.publishers)
+                self._publisher_cache[name] = p
                 return p
         raise KeyError(f"no publisher {name!r}")
 
@@ -248,7 +265,9 @@ class ClientSession:
     def publish(self, name: str, msg: Any) -> int:
         """Publish on a plain topic; returns frame bytes queued, 0 if not configured, -1 if
         dropped (too large, TX ring full)."""
-        slot = self.publisher(name)
+        slot = self._publisher_cache.get(name)  # publisher(name), inlined for the hit
+        if slot is None or slot.service is not None or self._cached_slots != len(self.publishers):
+            slot = self.publisher(name)
         return self._send(slot.topic_id, slot.codec.encode(msg))
 
     def log(self, level: int, text: str) -> int:
@@ -259,6 +278,8 @@ class ClientSession:
 
     def take_output(self) -> bytes:
         """Drain the TX ring: the bytes to write to the wire, frames back to back."""
+        if not self._tx:
+            return b""  # most MCU milliseconds send nothing (the ring is empty, _tx_used 0)
         out = b"".join(self._tx)
         self._tx.clear()
         self._tx_used = 0
@@ -292,24 +313,39 @@ class ClientSession:
     def spin(self, data: bytes, now_ms: int) -> list[SessionEvent]:
         """One ``spinOnce``: bytes received since the last call, at MCU tick ``now_ms``."""
         events: list[SessionEvent] = []
-        if tick_diff(now_ms, self._last_sync_receive_time) > C.SYNC_LOSS_MS and self.configured:
+        # tick_diff inlined (uint32 difference): this runs every MCU millisecond
+        if self.configured and (now_ms - self._last_sync_receive_time) & _MASK > C.SYNC_LOSS_MS:
             self.configured = False
             self.counts["sync_lost"] += 1
             events.append(SyncLost("no time answer for 11 s"))
-        for item in self.parser.feed(data, now_ms):
-            if isinstance(item, BadFrame):
-                events.append(FrameRejected(item))
-                if item.reason == "version" and not self.configured:
-                    self._request_sync_time(now_ms)
-            elif isinstance(item, Frame):
-                events.extend(self._dispatch(item, now_ms))
-        if self.configured and tick_diff(now_ms, self._last_sync_time) > C.TIME_REQUEST_INTERVAL_MS:
+        parser = self.parser
+        if not data and parser._started is None and not parser._buf:
+            pass  # idle parser, no bytes: feed would return no event and change nothing
+        else:
+            events = self._receive(data, now_ms, events)
+        if self.configured and (now_ms - self._last_sync_time) & _MASK > C.TIME_REQUEST_INTERVAL_MS:
             self._request_sync_time(now_ms)
             self._last_sync_time = now_ms
         return events
 
+    def _receive(self, data: bytes, now_ms: int, events: list[SessionEvent]) -> list[SessionEvent]:
+        # good frames come as (topic_id, payload, offset): no Frame object for user topics
+        for item in self.parser._feed(data, now_ms, True):
+            if item.__class__ is tuple:
+                if item[0] >= C.FIRST_USER_TOPIC_ID:
+                    events.extend(self._dispatch_user(*item))
+                else:
+                    events.extend(self._dispatch(_new_frame(*item), now_ms))
+            elif isinstance(item, BadFrame):
+                events.append(FrameRejected(item))
+                if item.reason == "version" and not self.configured:
+                    self._request_sync_time(now_ms)
+        return events
+
     def _dispatch(self, frame: Frame, now_ms: int) -> list[SessionEvent]:
         tid = frame.topic_id
+        if tid >= C.FIRST_USER_TOPIC_ID:  # none of the reserved ids below: a user topic
+            return self._dispatch_user(tid, frame.payload, frame.offset)
         if tid == C.TopicId.PUBLISHER:  # the server's topic request
             self._request_sync_time(now_ms)
             self._negotiate_topics()
@@ -327,24 +363,34 @@ class ClientSession:
         if tid == C.TopicId.TX_STOP:
             self.configured = False
             return [SyncLost("TX_STOP from server")]
+        return self._dispatch_user(tid, frame.payload, frame.offset)
+
+    def _dispatch_user(self, tid: int, payload: bytes, offset: int) -> list[SessionEvent]:
         index = tid - C.FIRST_USER_TOPIC_ID
         if not 0 <= index < len(self.subscribers):
-            return self._drop(frame, "unknown topic id")
+            return self._drop_at(tid, offset, "unknown topic id")
         slot = self.subscribers[index]
         try:
-            msg = slot.codec.decode(frame.payload)
+            msg = slot.codec.decode(payload)
         except DecodeError as exc:
-            return self._drop(frame, f"payload does not decode as {slot.codec.full_name}: {exc}")
+            return self._drop_at(
+                tid, offset, f"payload does not decode as {slot.codec.full_name}: {exc}"
+            )
         if slot.service is not None:
             try:
                 response = slot.service.handler(msg)
                 payload = slot.service.type.response.encode(response)
             except Exception as exc:  # a faulty handler must not stop the link
-                return self._drop(frame, f"service handler of {slot.name!r} failed: {exc!r}")
+                return self._drop_at(
+                    tid, offset, f"service handler of {slot.name!r} failed: {exc!r}"
+                )
             self._send(slot.service.response_id, payload)
             return [ServiceHandled(slot.name, msg, response)]
-        return [MessageReceived(slot.name, slot.type, tid, msg)]
+        return [message_received(slot.name, slot.type, tid, msg)]
 
     def _drop(self, frame: Frame, reason: str) -> list[SessionEvent]:
+        return self._drop_at(frame.topic_id, frame.offset, reason)
+
+    def _drop_at(self, topic_id: int, offset: int, reason: str) -> list[SessionEvent]:
         self.counts["rx_dropped"] += 1
-        return [DroppedMessage(frame.topic_id, reason, frame.offset)]
+        return [DroppedMessage(topic_id, reason, offset)]

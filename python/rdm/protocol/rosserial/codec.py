@@ -9,6 +9,8 @@ the ``.msg`` fields (arrays as lists) and whose class attributes are the ``.msg`
 from __future__ import annotations
 
 import dataclasses
+import keyword
+import operator
 import struct
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -92,6 +94,13 @@ class MessageCodec:
             self._fields.append((f.name, enc, dec))
             self.min_size += size
         self._flat = _FlatLayout.of(spec)
+        self._var = None if self._flat is not None else _VarLayout.of(spec, resolve)
+        if self._var is not None:
+            self._var.bind(self.cls)
+        # the whole-message fast encoder, None when only the per-field path applies
+        self._pack = (
+            self._flat.pack if self._flat else self._var.pack if self._var is not None else None
+        )
 
     # -- message class ------------------------------------------------------------------
     def _default_factory(self, f: Field) -> Callable[[], Any]:
@@ -183,12 +192,16 @@ class MessageCodec:
     # -- public API ------------------------------------------------------------------------
     def encode_into(self, msg: Any, out: bytearray) -> None:
         """Append the serialization of ``msg`` (an instance or any object with the fields)."""
-        flat = self._flat
-        if flat is not None and not isinstance(msg, dict):
-            packed = flat.pack(msg)
+        pack = self._pack
+        if pack is not None and not isinstance(msg, dict):
+            packed = pack(msg)
             if packed is not None:
                 out += packed
                 return
+        self.encode_fields_into(msg, out)
+
+    def encode_fields_into(self, msg: Any, out: bytearray) -> None:
+        """The per-field (reference) path of :meth:`encode_into`; raises the precise error."""
         for name, enc, _ in self._fields:
             try:
                 value = msg[name] if isinstance(msg, dict) else getattr(msg, name)
@@ -198,8 +211,13 @@ class MessageCodec:
 
     def encode(self, msg: Any) -> bytes:
         """Serialize ``msg`` to ROS1 bytes."""
+        pack = self._pack
+        if pack is not None and not isinstance(msg, dict):
+            packed = pack(msg)
+            if packed is not None:
+                return packed
         out = bytearray()
-        self.encode_into(msg, out)
+        self.encode_fields_into(msg, out)
         return bytes(out)
 
     def decode_from(self, buf: bytes, pos: int) -> tuple[Any, int]:
@@ -207,6 +225,15 @@ class MessageCodec:
         flat = self._flat
         if flat is not None and len(buf) - pos >= flat.size:
             return self.cls(*flat.unpack(buf, pos)), pos + flat.size
+        var = self._var
+        if var is not None:
+            done = var.unpack(buf, pos)
+            if done is not None:
+                return done
+        return self.decode_fields_from(buf, pos)
+
+    def decode_fields_from(self, buf: bytes, pos: int) -> tuple[Any, int]:
+        """The per-field (reference) path of :meth:`decode_from`; raises the precise error."""
         values = {}
         for name, _, dec in self._fields:
             values[name], pos = dec(buf, pos)
@@ -214,6 +241,9 @@ class MessageCodec:
 
     def decode(self, data: bytes) -> Any:
         """Decode exactly one message; trailing bytes are an error."""
+        flat = self._flat
+        if flat is not None and len(data) == flat.size:
+            return self.cls(*flat.unpack(data, 0))  # the common case, without the calls below
         buf = bytes(data)
         msg, pos = self.decode_from(buf, 0)
         if pos != len(buf):
@@ -225,78 +255,264 @@ class MessageCodec:
         return self.cls(**fields)
 
 
+def _attr(var: str, name: str) -> str:
+    """Source text reading field ``name`` of ``var`` (attribute syntax when it is legal)."""
+    if name.isidentifier() and not keyword.iskeyword(name):
+        return f"{var}.{name}"
+    return f"_getattr({var}, {name!r})"
+
+
+def _generate(src: str, env: dict[str, Any], name: str) -> Any:
+    """Compile generated source ``src`` in ``env`` and return the function ``name``."""
+    namespace = {"_getattr": getattr, "_TIMES": (RosTime, RosDuration), **env}
+    exec(compile(src, f"<rosserial codec {name}>", "exec"), namespace)  # from .msg names
+    return namespace[name]
+
+
+def _fixed_parts(fields: list[Field]) -> tuple[list[tuple[str, str, int | None]], str] | None:
+    """``(name, kind, n)`` parts and struct body of fixed-size fields, or None if one is not:
+    kind ``v`` primitive scalar, ``a`` fixed primitive array, ``t``/``d`` time/duration."""
+    parts: list[tuple[str, str, int | None]] = []
+    fmt = ""
+    for f in fields:
+        if f.base_type in ("time", "duration") and f.array_len is None:
+            parts.append((f.name, "t" if f.base_type == "time" else "d", None))
+            fmt += "II" if f.base_type == "time" else "ii"
+        elif f.is_primitive and f.base_type in _STRUCT_CODE:
+            code = _STRUCT_CODE[f.base_type]
+            if f.array_len is None:
+                parts.append((f.name, "v", None))
+                fmt += code
+            elif f.array_len >= 0:
+                parts.append((f.name, "a", f.array_len))
+                fmt += f"{f.array_len}{code}"
+            else:
+                return None
+        else:
+            return None
+    return parts, fmt
+
+
+def _pack_lines(parts: list[tuple[str, str, int | None]], first: int) -> tuple[list[str], str]:
+    """Generated lines reading fixed parts into ``v<i>`` and checking them (return None on a
+    value the single struct must not take), and the ``*``-argument text packing them."""
+    lines, args = [], []
+    for i, (name, kind, n) in enumerate(parts, first):
+        lines.append(f"v{i} = {_attr('msg', name)}")
+        if kind == "v":
+            args.append(f"v{i}")
+        else:
+            check = f"len(v{i}) != {n}" if kind == "a" else f"not isinstance(v{i}, _TIMES)"
+            lines.append(f"if {check}:\n        return None")
+            args.append(f"*v{i}")
+    return lines, ", ".join(args)
+
+
+def _unpack_exprs(parts: list[tuple[str, str, int | None]], first: int) -> list[str]:
+    """Generated expressions turning flat tuple ``v`` (from index ``first``) into field values."""
+    exprs, i = [], first
+    for _, kind, n in parts:
+        if kind == "v":
+            exprs.append(f"v[{i}]")
+            i += 1
+        elif kind == "a":
+            assert n is not None
+            items = ", ".join(f"v[{j}]" for j in range(i, i + n))
+            exprs.append(f"[{items}]" if n <= 16 else f"list(v[{i}:{i + n}])")
+            i += n
+        else:
+            exprs.append(f"{'RosTime' if kind == 't' else 'RosDuration'}(v[{i}], v[{i + 1}])")
+            i += 2
+    return exprs
+
+
 class _FlatLayout:
     """One ``struct`` for a message made only of fixed-size fields (primitive scalars, fixed
     primitive arrays, ``time``/``duration``): a single pack/unpack instead of one per field.
     Same bytes and values as the per-field path, which still handles every error case
-    (:meth:`pack` returns None for anything it does not take, the caller falls back)."""
+    (:meth:`pack` returns None for anything it does not take, the caller falls back).
+    ``pack``/``unpack`` are generated per message type (straight-line code, no field loop)."""
 
     def __init__(self, parts: list[tuple[str, str, int | None]], fmt: str) -> None:
         self.parts = parts  # (field name, kind: "v" value / "a" array / "t" time / "d", n)
         self.struct = struct.Struct(fmt)
         self.size = self.struct.size
         self.scalars_only = all(kind == "v" for _, kind, _ in parts)
-        steps, i = [], 0  # (kind, first index in the flat tuple, array length)
-        for _, kind, n in parts:
-            steps.append((kind, i, n))
-            i += n if kind == "a" else (1 if kind == "v" else 2)
-        self.steps = tuple(steps)
+        lines, args = _pack_lines(parts, 0)
+        body = "\n    ".join(lines)
+        self.pack: Callable[[Any], bytes | None] = _generate(
+            f"def pack(msg):\n  try:\n    {body}\n    return _pack({args})\n"
+            "  except Exception:  # the per-field path raises the precise error\n    return None\n",
+            {"_pack": self.struct.pack},
+            "pack",
+        )
+        self.unpack: Callable[[bytes, int], tuple[Any, ...]]
+        if self.scalars_only:
+            self.unpack = self.struct.unpack_from  # the field values in field order
+        else:
+            exprs = ", ".join(_unpack_exprs(parts, 0))
+            self.unpack = _generate(
+                f"def unpack(buf, pos):\n    v = _unpack_from(buf, pos)\n    return ({exprs},)\n",
+                {
+                    "_unpack_from": self.struct.unpack_from,
+                    "RosTime": RosTime,
+                    "RosDuration": RosDuration,
+                },
+                "unpack",
+            )
 
     @classmethod
     def of(cls, spec: MsgSpec) -> _FlatLayout | None:
-        parts: list[tuple[str, str, int | None]] = []
-        fmt = "<"
-        for f in spec.fields:
-            if f.base_type in ("time", "duration") and f.array_len is None:
-                parts.append((f.name, "t" if f.base_type == "time" else "d", None))
-                fmt += "II" if f.base_type == "time" else "ii"
-            elif f.is_primitive and f.base_type in _STRUCT_CODE:
-                code = _STRUCT_CODE[f.base_type]
-                if f.array_len is None:
-                    parts.append((f.name, "v", None))
-                    fmt += code
-                elif f.array_len >= 0:
-                    parts.append((f.name, "a", f.array_len))
-                    fmt += f"{f.array_len}{code}"
-                else:
-                    return None
-            else:
-                return None
-        return cls(parts, fmt) if parts else None
-
-    def unpack(self, buf: bytes, pos: int) -> tuple[Any, ...] | list[Any]:
-        """The field values in field order (the message class takes them positionally)."""
-        flat = self.struct.unpack_from(buf, pos)
-        if self.scalars_only:
-            return flat
-        values: list[Any] = []
-        for kind, i, n in self.steps:
-            if kind == "v":
-                values.append(flat[i])
-            elif kind == "a":
-                values.append(list(flat[i : i + n]))
-            else:
-                values.append((RosTime if kind == "t" else RosDuration)(flat[i], flat[i + 1]))
-        return values
-
-    def pack(self, msg: Any) -> bytes | None:
-        try:
-            args: list[Any] = []
-            for name, kind, n in self.parts:
-                value = getattr(msg, name)
-                if kind == "v":
-                    args.append(value)
-                elif kind == "a":
-                    if len(value) != n:
-                        return None
-                    args.extend(value)
-                elif isinstance(value, (RosTime, RosDuration)):
-                    args.extend(value)
-                else:
-                    return None
-            return self.struct.pack(*args)
-        except Exception:  # the per-field path raises the precise error
+        found = _fixed_parts(spec.fields)
+        if found is None or not found[0]:
             return None
+        return cls(found[0], "<" + found[1])
+
+
+class _VarLayout:
+    """Generated whole-message pack/unpack for messages with variable-length arrays of
+    primitives or of flat scalar-only nested messages (``spinal/ServoStates``, ``Pwms``,
+    ``FourAxisCommand``, ...) mixed with fixed-size fields: one ``struct`` per array-length
+    combination instead of a closure per field and element. Same bytes and values as the
+    per-field path; anything it does not take (wrong types, out-of-range values, truncated
+    input) makes it return None and the caller runs the per-field path, which raises the
+    precise error."""
+
+    _CACHE_MAX = 64  # distinct array-length combinations kept per type
+
+    def __init__(self, full_name: str, segments: list[tuple[Any, ...]]) -> None:
+        self.full_name = full_name
+        self._segments = segments
+        self._structs: dict[tuple[int, ...], struct.Struct] = {}
+        env: dict[str, Any] = {
+            "_structs": self._structs,
+            "_make": self._make,
+            "_u32": _U32.unpack_from,
+            "RosTime": RosTime,
+            "RosDuration": RosDuration,
+        }
+        pack_lines: list[str] = []
+        unpack_lines: list[str] = ["end = len(buf)"]
+        args: list[str] = []
+        counts: list[str] = []
+        values: list[str] = []
+        for k, seg in enumerate(segments):
+            if seg[0] == "fixed":
+                parts, fmt = seg[1], seg[2]
+                lines, text = _pack_lines(parts, 100 * k)
+                pack_lines += lines
+                args.append(text)
+                st = struct.Struct("<" + fmt)
+                env[f"_fixed{k}"] = st.unpack_from
+                unpack_lines += [
+                    f"if end - pos < {st.size}:\n        return None",
+                    f"v = _fixed{k}(buf, pos)",
+                    f"pos += {st.size}",
+                ]
+                for j, expr in enumerate(_unpack_exprs(parts, 0)):
+                    unpack_lines.append(f"f{k}_{j} = {expr}")
+                    values.append(f"f{k}_{j}")
+                continue
+            name, size = seg[1], seg[3]
+            pack_lines += [f"a{k} = {_attr('msg', name)}", f"n{k} = len(a{k})"]
+            counts.append(f"n{k}")
+            unpack_lines += [
+                "if end - pos < 4:\n        return None",
+                f"n{k} = _u32(buf, pos)[0]",
+                "pos += 4",
+                f"if n{k} * {size} > end - pos:\n        return None",
+            ]
+            values.append(f"f{k}")
+            if seg[0] == "prim":
+                args.append(f"n{k}, *a{k}")
+                unpack_lines += [
+                    f"f{k} = list(_unpack_from('<%d{seg[2]}' % n{k}, buf, pos))",
+                    f"pos += n{k} * {size}",
+                ]
+                env["_unpack_from"] = struct.unpack_from
+            else:  # array of nested messages
+                nested: MessageCodec = seg[2]
+                names = [f.name for f in nested.spec.fields]
+                env[f"_get{k}"] = operator.attrgetter(*names)
+                env[f"_iter{k}"] = nested._flat.struct.iter_unpack  # type: ignore[union-attr]
+                env[f"_cls{k}"] = nested.cls
+                grab = "append" if len(names) == 1 else "extend"
+                pack_lines.append(f"e{k} = []\n    for e in a{k}:\n        e{k}.{grab}(_get{k}(e))")
+                args.append(f"n{k}, *e{k}")
+                unpack_lines += [
+                    f"stop = pos + n{k} * {size}",
+                    f"f{k} = [_cls{k}(*t) for t in _iter{k}(buf[pos:stop])]",
+                    "pos = stop",
+                ]
+        key = f"({', '.join(counts)},)"
+        pack_lines += [
+            f"st = _structs.get({key})",
+            f"if st is None:\n        st = _make({key})",
+            f"return st.pack({', '.join(a for a in args if a)})",
+        ]
+        body = "\n    ".join(pack_lines)
+        self.pack: Callable[[Any], bytes | None] = _generate(
+            f"def pack(msg):\n  try:\n    {body}\n"
+            "  except Exception:  # the per-field path raises the precise error\n    return None\n",
+            env,
+            "pack",
+        )
+        unpack_lines.append(f"return _cls({', '.join(values)}), pos")
+        env["_cls"] = None  # bound in bind()
+        self._unpack_src = "def unpack(buf, pos):\n    " + "\n    ".join(unpack_lines) + "\n"
+        self._env = env
+        self.unpack: Callable[[bytes, int], tuple[Any, int] | None] = lambda buf, pos: None
+
+    def bind(self, cls: type) -> _VarLayout:
+        """Generate the decoder for message class ``cls`` (built after the layout)."""
+        self._env["_cls"] = cls
+        self.unpack = _generate(self._unpack_src, self._env, "unpack")
+        return self
+
+    def _make(self, counts: tuple[int, ...]) -> struct.Struct:
+        fmt, it = "<", iter(counts)
+        for seg in self._segments:
+            if seg[0] == "fixed":
+                fmt += seg[2]
+                continue
+            n = next(it)
+            fmt += "I" + (f"{n}{seg[2]}" if seg[0] == "prim" else seg[4] * n)
+        if len(self._structs) >= self._CACHE_MAX:
+            self._structs.clear()
+        st = self._structs[counts] = struct.Struct(fmt)
+        return st
+
+    @classmethod
+    def of(cls, spec: MsgSpec, resolve: Callable[[str], MessageCodec]) -> _VarLayout | None:
+        segments: list[tuple[Any, ...]] = []
+        run: list[Field] = []
+        has_var = False
+        for f in [*spec.fields, None]:
+            if f is not None and f.array_len != -1:
+                run.append(f)
+                continue
+            if run:
+                found = _fixed_parts(run)
+                if found is None:
+                    return None
+                segments.append(("fixed", found[0], found[1]))
+                run = []
+            if f is None:
+                break
+            has_var = True
+            if f.is_primitive and f.base_type in _STRUCT_CODE:
+                code = _STRUCT_CODE[f.base_type]
+                segments.append(("prim", f.name, code, struct.calcsize("<" + code)))
+                continue
+            if f.is_primitive or f.base_type in ("time", "duration", "string"):
+                return None
+            nested = resolve(f.base_type)
+            flat = nested._flat
+            if flat is None or not flat.scalars_only:
+                return None
+            body = flat.struct.format[1:]
+            segments.append(("nested", f.name, nested, flat.size, body))
+        return cls(spec.full_name, segments) if has_var else None
 
 
 def _scalar_default(base: str) -> Any:

@@ -19,6 +19,17 @@ class MessageReceived:
     message: Any
 
 
+def message_received(topic: str, type_: str, topic_id: int, message: Any) -> MessageReceived:
+    """``MessageReceived(...)`` without the frozen-dataclass ``__init__`` (one per message)."""
+    event = object.__new__(MessageReceived)
+    fields = event.__dict__
+    fields["topic"] = topic
+    fields["type"] = type_
+    fields["topic_id"] = topic_id
+    fields["message"] = message
+    return event
+
+
 @dataclass(frozen=True)
 class TopicRegistered:
     """Server: a TopicInfo accepted (``endpoint`` is the :class:`Endpoint` it came on)."""

@@ -16,10 +16,17 @@ frame's 0xFF, so a valid frame hidden behind garbage or a truncated frame is sti
 
 from __future__ import annotations
 
+import struct
 from collections import Counter
 from dataclasses import dataclass
+from typing import Any
 
-from rdm.protocol.rosserial.checksums import length_checksum, length_ok, message_checksum
+from rdm.protocol.rosserial.checksums import (
+    byte_sum,
+    length_checksum,
+    length_ok,
+    message_checksum,
+)
 from rdm.protocol.rosserial.constants import FRAME_OVERHEAD, PROTOCOL_VERSION, SYNC
 
 BAD_FRAME_REASONS = ("version", "length_checksum", "oversize", "message_checksum", "timeout")
@@ -62,8 +69,58 @@ class SkippedBytes:
 ParseEvent = Frame | BadFrame | SkippedBytes
 
 
+def _new_frame(topic_id: int, payload: bytes, offset: int) -> Frame:
+    """``Frame(topic_id, payload, offset)`` without the frozen-dataclass ``__init__`` (which
+    sets each field through ``object.__setattr__``); the parser makes one per good frame."""
+    frame = object.__new__(Frame)
+    fields = frame.__dict__
+    fields["topic_id"] = topic_id
+    fields["payload"] = payload
+    fields["offset"] = offset
+    return frame
+
+
+try:
+    from rdm._rdm import rosserial_scan as _native_scan
+except ImportError:  # an extension built before the scanner: the Python loop
+    _native_scan = None
+
+_HEADER = struct.Struct("<BBHBH")  # FF FE len(u16) len_chk topic(u16)
+
+
+_HEADERS: dict[tuple[int, int], bytes] = {}  # (topic id, length) -> header bytes already built
+_HEADERS_MAX = 4096
+
+
 def encode_frame(topic_id: int, payload: bytes) -> bytes:
     """Build one v2 frame."""
+    if payload.__class__ is bytes:
+        header = _HEADERS.get((topic_id, len(payload)))
+        if header is not None:  # this topic id and length passed the checks below before
+            chk = 255 - (((topic_id & 0xFF) + (topic_id >> 8) + byte_sum(payload)) % 256)
+            return b"".join((header, payload, _CHECKSUM_BYTE[chk]))
+    if not 0 <= topic_id <= 0xFFFF:
+        raise FrameError(f"topic_id {topic_id} outside 0..65535")
+    n = len(payload)
+    if n > 0xFFFF:
+        raise FrameError(f"payload of {n} bytes does not fit the uint16 length field")
+    if payload.__class__ is not bytes:
+        payload = bytes(payload)  # what the reference form accepts (bytearray, ints, ...)
+    # checksums as in checksums.py, inlined: this runs for every frame either end sends
+    length_chk = 255 - (((n & 0xFF) + (n >> 8)) % 256)
+    message_chk = 255 - (((topic_id & 0xFF) + (topic_id >> 8) + byte_sum(payload)) % 256)
+    header = _HEADER.pack(SYNC, PROTOCOL_VERSION, n, length_chk, topic_id)
+    if len(_HEADERS) >= _HEADERS_MAX:
+        _HEADERS.clear()
+    _HEADERS[(topic_id, n)] = header
+    return b"".join((header, payload, _CHECKSUM_BYTE[message_chk]))
+
+
+_CHECKSUM_BYTE = [bytes((i,)) for i in range(256)]
+
+
+def encode_frame_plain(topic_id: int, payload: bytes) -> bytes:
+    """Reference form of :func:`encode_frame` (byte by byte from checksums.py)."""
     if not 0 <= topic_id <= 0xFFFF:
         raise FrameError(f"topic_id {topic_id} outside 0..65535")
     n = len(payload)
@@ -98,6 +155,7 @@ class FrameParser:
         self.frame_timeout = frame_timeout
         self.rescan = rescan
         self.counts: Counter[str] = Counter()
+        self.native = _native_scan is not None  # the Rust scan; False: the Python loop
         self._buf = bytearray()
         self._base = 0  # stream offset of _buf[0]
         self._started: float | None = None  # time the current candidate's 0xFF was seen
@@ -125,6 +183,148 @@ class FrameParser:
     def poll(self, now: float = 0.0) -> list[ParseEvent]:
         """Apply the frame timeout at time ``now`` without new bytes."""
         return self.feed(b"", now)
+
+    def feed(self, data: bytes, now: float = 0.0) -> list[ParseEvent]:
+        """Consume ``data`` received at ``now``; return the events it completes."""
+        return self._feed(data, now, False)
+
+    def _feed(self, data: bytes, now: float, raw: bool) -> list[Any]:
+        """:meth:`feed`; with ``raw`` good frames come as ``(topic_id, payload, offset)``
+        tuples (the sessions' hot path, which builds a :class:`Frame` only when needed)."""
+        started = self._started
+        buf = self._buf
+        if not data and started is None and not buf:
+            return []  # idle: nothing buffered, no timer running, nothing new
+        max_payload = self.max_payload
+        if not (self.native and max_payload.__class__ is int and max_payload >= 0):
+            return self._feed_python(data, now, raw)
+        # The scan runs in Rust (rdm_core::firmware::rosserial_frame); the frame timer, the
+        # buffer, the counters and the event objects stay here, in the reference's order.
+        events: list[Any] = []
+        counts = self.counts
+        base = self._base
+        pos = 0
+        timeout = self.frame_timeout
+        if started is not None and timeout is not None and now - started > timeout:
+            pos = 1 if self.rescan else len(buf)
+            events.append(BadFrame("timeout", base, bytes(buf)))
+            counts["timeout"] += 1
+            started = None
+        buf += data
+        items, pos, frames, clean, broke, reset = _native_scan(
+            buf, pos, base, max_payload, self.rescan
+        )
+        if clean and not events:
+            if frames:
+                counts["frames"] += frames
+            events = items if raw else [_new_frame(*item) for item in items]
+        else:
+            for item in items:
+                kind = item[0]
+                if kind.__class__ is not str:
+                    events.append(item if raw else _new_frame(*item))
+                    counts["frames"] += 1
+                elif kind == "skip":
+                    events.append(SkippedBytes(item[1], item[2]))
+                    counts["skipped_bytes"] += len(item[2])
+                else:
+                    events.append(BadFrame(kind, item[1], item[2]))
+                    counts[kind] += 1
+        if broke:  # an incomplete candidate: its timer runs from its first 0xFF
+            if reset or started is None:
+                started = now
+        elif reset:
+            started = None
+        del buf[:pos]
+        self._base = base + pos
+        self._started = started
+        return events
+
+    def _feed_python(self, data: bytes, now: float, raw: bool) -> list[Any]:
+        """:meth:`_feed` without the Rust scanner (no extension, or a ``max_payload`` that is
+        not a non-negative int)."""
+        started = self._started
+        buf = self._buf
+        # The loop of :class:`PlainFrameParser` with the attributes in locals and the header
+        # checksum inlined; tests compare the two on valid, corrupt and random streams.
+        events: list[ParseEvent] = []
+        counts = self.counts
+        base = self._base
+        pos = 0
+        if (
+            started is not None
+            and self.frame_timeout is not None
+            and now - started > self.frame_timeout
+        ):
+            used = 1 if self.rescan else len(buf)
+            events.append(BadFrame("timeout", base, bytes(buf)))
+            counts["timeout"] += 1
+            pos = used
+            started = None
+        buf += data
+        end = len(buf)
+        max_payload = self.max_payload
+        while pos < end:
+            if buf[pos] != 0xFF:  # SYNC
+                nxt = buf.find(0xFF, pos)
+                stop = end if nxt < 0 else nxt
+                events.append(SkippedBytes(base + pos, bytes(buf[pos:stop])))
+                counts["skipped_bytes"] += stop - pos
+                pos = stop
+                continue
+            if started is None:
+                started = now
+            if end - pos < 2:
+                break
+            reason = ""
+            used = 0
+            if buf[pos + 1] != 0xFE:  # PROTOCOL_VERSION
+                reason, used = "version", 2
+            elif end - pos < 7:
+                break
+            else:
+                lo, hi = buf[pos + 2], buf[pos + 3]
+                n = lo | (hi << 8)
+                if (lo + hi + buf[pos + 4]) % 256 != 255:
+                    reason, used = "length_checksum", 5
+                elif n > max_payload:
+                    reason, used = "oversize", 5
+                elif end - pos < n + 8:  # FRAME_OVERHEAD
+                    break
+                else:
+                    used = n + 8
+                    payload = bytes(buf[pos + 7 : pos + 7 + n])
+                    lo, hi = buf[pos + 5], buf[pos + 6]  # topic id
+                    if (lo + hi + byte_sum(payload) + buf[pos + 7 + n]) % 256 == 255:
+                        if raw:
+                            events.append((lo | (hi << 8), payload, base + pos))
+                        else:
+                            events.append(_new_frame(lo | (hi << 8), payload, base + pos))
+                        counts["frames"] += 1
+                    else:
+                        reason = "message_checksum"
+            if reason:
+                events.append(BadFrame(reason, base + pos, bytes(buf[pos : pos + used])))
+                counts[reason] += 1
+                if self.rescan:
+                    used = 1
+            pos += used
+            started = None
+        del buf[:pos]
+        self._base = base + pos
+        self._started = started
+        return events
+
+
+class PlainFrameParser(FrameParser):
+    """The reference form of :meth:`FrameParser.feed` (kept reachable for the tests that
+    compare it with the fast one): the same events and counters, step by step."""
+
+    def _feed(self, data: bytes, now: float, raw: bool) -> list[Any]:
+        events = self.feed(data, now)
+        if not raw:
+            return events
+        return [(e.topic_id, e.payload, e.offset) if isinstance(e, Frame) else e for e in events]
 
     def feed(self, data: bytes, now: float = 0.0) -> list[ParseEvent]:
         """Consume ``data`` received at ``now``; return the events it completes."""

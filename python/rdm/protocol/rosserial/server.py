@@ -28,7 +28,6 @@ from rdm.protocol.rosserial.events import (
     DroppedMessage,
     FrameRejected,
     LogReceived,
-    MessageReceived,
     ServiceReady,
     ServiceResponse,
     ServiceTimeout,
@@ -36,10 +35,20 @@ from rdm.protocol.rosserial.events import (
     SyncLost,
     TopicRefused,
     TopicRegistered,
+    message_received,
 )
-from rdm.protocol.rosserial.framing import BadFrame, Frame, FrameParser, encode_frame
+from rdm.protocol.rosserial.framing import (
+    BadFrame,
+    Frame,
+    FrameParser,
+    _new_frame,
+    encode_frame,
+)
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 from rdm.protocol.rosserial.services import PendingCall, RemoteService, ServiceError
+
+_TIME_ID = int(C.TopicId.TIME)  # plain ints: compared for every received frame
+_LOG_ID = int(C.TopicId.LOG)
 
 
 class TopicNotNegotiated(KeyError):
@@ -129,6 +138,8 @@ class ServerSession:
 
     def take_output(self) -> bytes:
         """Bytes to write to the device."""
+        if not self._tx:
+            return b""
         out = b"".join(self._tx)
         self._tx.clear()
         return out
@@ -175,11 +186,19 @@ class ServerSession:
         if not self.active:
             self.counts["rx_while_closed"] += len(data)
         else:
-            for item in self.parser.feed(data, now):
-                if isinstance(item, BadFrame):
+            # good frames come as (topic_id, payload, offset): no Frame object for user topics
+            inbound = self.inbound
+            for item in self.parser._feed(data, now, True):
+                if item.__class__ is tuple:
+                    tid = item[0]
+                    # none of the reserved ids (0-3 setup, 7 log, 10 time): a device topic
+                    remote = inbound.get(tid) if tid > _LOG_ID and tid != _TIME_ID else None
+                    if remote is not None:
+                        events.extend(self._deliver(tid, item[1], item[2], remote))
+                    else:
+                        events.extend(self._dispatch(_new_frame(*item), now))
+                elif isinstance(item, BadFrame):
                     events.append(FrameRejected(item))
-                elif isinstance(item, Frame):
-                    events.extend(self._dispatch(item, now))
         events.extend(self.poll(now))
         return events
 
@@ -204,9 +223,14 @@ class ServerSession:
 
     def _dispatch(self, frame: Frame, now: float) -> list[SessionEvent]:
         tid = frame.topic_id
+        if tid > _LOG_ID and tid != _TIME_ID:  # none of the reserved branches below applies
+            remote = self.inbound.get(tid)
+            if remote is not None:
+                return self._deliver(tid, frame.payload, frame.offset, remote)
+            return self._dispatch_rest(frame, tid)
         if tid in (0, 1, 2, 3):
             return self._setup(frame, now)
-        if tid == C.TopicId.TIME:
+        if tid == _TIME_ID:
             self._tx.append(
                 encode_frame(
                     C.TopicId.TIME, self._time.encode(self._time.new(data=self.time_source(now)))
@@ -215,7 +239,7 @@ class ServerSession:
             self._sync_deadline = now + self.timeout_interval
             self.counts["time_requests"] += 1
             return []
-        if tid == C.TopicId.LOG:
+        if tid == _LOG_ID:
             try:
                 log = self._log.decode(frame.payload)
             except DecodeError as exc:
@@ -223,12 +247,23 @@ class ServerSession:
             return [LogReceived(log.level, log.msg)]
         remote = self.inbound.get(tid)
         if remote is not None:
-            try:
-                msg = remote.codec.decode(frame.payload)
-            except DecodeError as exc:
-                return self._drop(frame, f"payload does not decode as {remote.type}: {exc}")
-            self.counts["rx_messages"] += 1
-            return [MessageReceived(remote.name, remote.type, tid, msg)]
+            return self._deliver(tid, frame.payload, frame.offset, remote)
+        return self._dispatch_rest(frame, tid)
+
+    def _deliver(
+        self, tid: int, payload: bytes, offset: int, remote: RemoteTopic
+    ) -> list[SessionEvent]:
+        try:
+            msg = remote.codec.decode(payload)
+        except DecodeError as exc:
+            self.counts["rx_dropped"] += 1  # as _drop
+            reason = f"payload does not decode as {remote.type}: {exc}"
+            return [DroppedMessage(tid, reason, offset)]
+        self.counts["rx_messages"] += 1
+        return [message_received(remote.name, remote.type, tid, msg)]
+
+    def _dispatch_rest(self, frame: Frame, tid: int) -> list[SessionEvent]:
+        """Service responses, then unknown topic ids."""
         for service in self.services.values():
             if service.response_id == tid:
                 try:

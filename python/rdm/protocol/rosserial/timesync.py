@@ -49,5 +49,7 @@ class ClientClock:
         difference (the firmware's uint32 arithmetic would jump back 49.7 days at a wrap)."""
         if not self.synced:
             return RosTime.from_ns((now_ms & _MASK) * 1_000_000)
-        elapsed = signed_tick_diff(now_ms, self._sync_tick)
-        return RosTime.from_ns(max(0, self._sync_ns + elapsed * 1_000_000))
+        # signed_tick_diff and RosTime.from_ns inlined: the mirror stamps 200+ messages a second
+        elapsed = ((now_ms - self._sync_tick + 2**31) & _MASK) - 2**31
+        ns = self._sync_ns + elapsed * 1_000_000
+        return RosTime(*divmod(ns, 1_000_000_000)) if ns > 0 else RosTime(0, 0)
