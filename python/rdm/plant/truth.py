@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from itertools import chain
 
 import mujoco
 import numpy as np
@@ -119,7 +120,7 @@ class FootContactTracker:
                     geom.__array_interface__["data"][0],
                     geom,
                 )
-            in_contact = not self._plate_geoms.isdisjoint(cached[3].ravel().tolist())
+            in_contact = not self._plate_geoms.isdisjoint(chain.from_iterable(cached[3].tolist()))
         elif self._anchor_pos is None and self._last_contact_time == -math.inf:
             return  # no contact and nothing to release: _track would change nothing
         else:
@@ -158,7 +159,6 @@ class FootContactTracker:
 
     def reset(self) -> None:
         """Forget the first-contact anchor."""
-        self._geom_view = (None, 0, 0, None)
         self._last_contact_time = -math.inf
         self._anchor_pos = None
         self._anchor_rot = None
@@ -255,7 +255,6 @@ class FootContactTracker:
     ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """(points, force, torque, zmp, slip, slip_yaw) for the present contacts (the
         reference form, any contact list)."""
-        self._check_view(data)
         m = self._model
         origin = data.xpos[self._plate_body]
         rot = data.xmat[self._plate_body].reshape(3, 3)
