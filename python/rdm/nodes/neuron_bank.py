@@ -300,6 +300,8 @@ class NeuronBankNode:
         self._feed_epochs: dict[int, int] = {}
         #: The plant bridge's coupling runs in the core (:meth:`attach_bridge`).
         self._bridged = False
+        #: The core's counters as last copied into the boards (None: copy at the next tick).
+        self._last_changes: list[int] | None = None
 
     def attach_bridge(
         self,
@@ -357,6 +359,16 @@ class NeuronBankNode:
             self._core.set_positions(boards, servos, [ticks[j] for j in joints])
 
     def _refresh_changes(self) -> None:
+        # Most milliseconds no board's counter moves: one list comparison instead of a
+        # write per board (the same counters as :meth:`_refresh_changes_plain`).
+        changes = self._core.changes()
+        if changes != self._last_changes:
+            self._last_changes = changes
+            for board, c in zip(self.boards, changes, strict=True):
+                board.changes[0] = c
+
+    def _refresh_changes_plain(self) -> None:
+        """:meth:`_refresh_changes` writing every board's counter (the reference)."""
         for board, c in zip(self.boards, self._core.changes(), strict=True):
             board.changes[0] = c
 

@@ -277,6 +277,8 @@ class PlantBridge:
                 raise ValueError(f"PlantBridge: plant has no wrench sensor {key!r}")
         self._mocap_sink = mocap_sink
         self._truth_sink = truth_sink
+        #: ``Plant.wrench_force_torque`` when the plant has it (else ``Plant.wrench``)
+        self._wrench_read = getattr(plant, "wrench_force_torque", None)
         # Ticks between samples (each reading fires on the first tick, then every n-th).
         self._imu_n = _ratio(imu_period, period, "imu_period") or 1
         self._wrench_n = _ratio(wrench_period, period, "wrench_period") or 1
@@ -428,9 +430,14 @@ class PlantBridge:
             for neuron in self._imu_neurons:
                 neuron.set_imu(r.gyro, r.accel, r.mag)
         if self._wrench_on and n % self._wrench_n == 0:
-            for key, sink in self._wrench_sinks.items():
-                w = plant.wrench(key)
-                sink(w.force, w.torque)
+            read = self._wrench_read
+            if read is not None:  # rdm.plant.Plant: no WrenchReading (the same values)
+                for key, sink in self._wrench_sinks.items():
+                    sink(*read(key))
+            else:
+                for key, sink in self._wrench_sinks.items():
+                    w = plant.wrench(key)
+                    sink(w.force, w.torque)
         if self._mocap_on and n % self._mocap_n == 0:
             d = plant.data
             self._mocap_sink(now, d.xpos[self._foot_body].copy(), d.xquat[self._foot_body].copy())

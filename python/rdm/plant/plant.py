@@ -502,6 +502,20 @@ class Plant:
         f, t = adr
         return self.wrench_models[sensor].sample_at(self._v_sensordata, f, t)
 
+    def wrench_force_torque(self, sensor: str) -> tuple[np.ndarray, np.ndarray]:
+        """(force, torque) of :meth:`wrench` without the :class:`WrenchReading` (the bridge's
+        1 kHz foot-sensor read): the same normals and numbers."""
+        adr = self._wrench_adr.get(sensor)
+        if adr is None:
+            raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
+        if self._stale:
+            self.sync()
+        model = self.wrench_models[sensor]
+        force, torque, _ = model._core.sample_at(
+            self._v_sensordata, adr[0], adr[1], model._normals.take(6)
+        )
+        return force, torque
+
     def wrench_plain(self, sensor: str) -> WrenchReading:
         """:meth:`wrench` through the Python list path (the reference of the Rust read)."""
         adr = self._wrench_adr.get(sensor)

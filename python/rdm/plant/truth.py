@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from itertools import chain
 
 import mujoco
 import numpy as np
@@ -95,15 +96,57 @@ class FootContactTracker:
         self._buf = np.zeros(6)
         self._views: tuple = (None, None, None)  # (data, its xpos, its xmat)
         self._plate_geoms = frozenset(np.flatnonzero(model.geom_bodyid == plate_body).tolist())
+        #: (data, ncon, address, ``data.contact.geom`` view) of the last contact list read
+        self._geom_view: tuple = (None, 0, 0, None)
+        #: Times a cached contact view was found pointing elsewhere (see :meth:`update`).
+        self.view_misses = 0
+        self._bodyids: list[int] | None = None
 
     def update(self, data: mujoco.MjData) -> None:
-        """Per-step bookkeeping of the first-contact anchor (cheap: no contact forces)."""
+        """Per-step bookkeeping of the first-contact anchor (cheap: no contact forces).
+
+        MuJoCo keeps the contact list at the start of mjData's arena, so the
+        ``data.contact.geom`` view (~5 us to build through the bindings) is built again only
+        when ``ncon`` changes; the same pairs as :meth:`update_plain` (re-checked against a
+        fresh view at every :meth:`measure`, tests/test_plant_fast_paths2.py)."""
+        ncon = data.ncon
+        if ncon:
+            cached = self._geom_view
+            if cached[1] != ncon or cached[0] is not data:
+                geom = data.contact.geom
+                cached = self._geom_view = (
+                    data,
+                    ncon,
+                    geom.__array_interface__["data"][0],
+                    geom,
+                )
+            in_contact = not self._plate_geoms.isdisjoint(chain.from_iterable(cached[3].tolist()))
+        elif self._anchor_pos is None and self._last_contact_time == -math.inf:
+            return  # no contact and nothing to release: _track would change nothing
+        else:
+            in_contact = False
+        self._track(data, in_contact)
+
+    def update_plain(self, data: mujoco.MjData) -> None:
+        """:meth:`update` reading a fresh contact list every step (the reference)."""
         in_contact = False
         if data.ncon:
             in_contact = not self._plate_geoms.isdisjoint(data.contact.geom.ravel().tolist())
         elif self._anchor_pos is None and self._last_contact_time == -math.inf:
-            return  # no contact and nothing to release: _track would change nothing
+            return
         self._track(data, in_contact)
+
+    def _check_view(self, data: mujoco.MjData) -> None:
+        """Drop the cached contact view if the list has moved (counted in ``view_misses``)."""
+        cached = self._geom_view
+        if (
+            cached[0] is data
+            and cached[1] == data.ncon
+            and cached[1]
+            and data.contact.geom.__array_interface__["data"][0] != cached[2]
+        ):
+            self.view_misses += 1
+            self._geom_view = (None, 0, 0, None)
 
     def _track(self, data: mujoco.MjData, in_contact: bool) -> None:
         if in_contact:
@@ -128,7 +171,7 @@ class FootContactTracker:
         No contact at all (a flying robot): the numbers :meth:`measure_plain` gives for an
         empty contact list, with fewer numpy calls (tests/test_sampler_fast_paths.py)."""
         if data.ncon:
-            return self.measure_plain(data)
+            return self.measure_contacts(data)
         if self._views[0] is not data:
             self._views = (data, data.xpos, data.xmat)  # stable for the data's lifetime
         _, xpos, xmat = self._views
@@ -147,6 +190,65 @@ class FootContactTracker:
         slip = (origin - self._anchor_pos)[:2]
         yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
         return 0, force, torque, zmp, slip.copy(), yaw
+
+    def measure_contacts(
+        self, data: mujoco.MjData
+    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """:meth:`measure_plain` reading the contact list as three arrays (geom pairs,
+        frames, positions) instead of one ``data.contact[i]`` object per contact: the same
+        per-contact numpy operations in the same order, so the same numbers
+        (tests/test_plant_fast_paths2.py)."""
+        self._check_view(data)
+        m = self._model
+        pb = self._plate_body
+        env = self._env_geoms
+        bodyid = self._bodyid_list()
+        origin = data.xpos[pb]
+        rot = data.xmat[pb].reshape(3, 3)
+        force_w = np.zeros(3)
+        torque_w = np.zeros(3)
+        cop_num = np.zeros(3)
+        normal_sum = 0.0
+        points = 0
+        contact = data.contact
+        pairs = contact.geom.tolist()
+        frames = contact.frame
+        positions = contact.pos
+        buf = self._buf
+        for i, (g1, g2) in enumerate(pairs):
+            if bodyid[g1] == pb and g2 in env:
+                sign = -1.0
+            elif bodyid[g2] == pb and g1 in env:
+                sign = 1.0
+            else:
+                continue
+            mujoco.mj_contactForce(m, data, i, buf)
+            frame = frames[i].reshape(3, 3)
+            f = sign * (frame.T @ buf[:3])
+            t = sign * (frame.T @ buf[3:])
+            pos = positions[i]
+            force_w += f
+            torque_w += t + np.cross(pos - origin, f)
+            n = abs(buf[0])
+            cop_num += n * (pos - origin)
+            normal_sum += n
+            points += 1
+        force = -(rot.T @ force_w)
+        torque = -(rot.T @ torque_w)
+        self._track(data, points > 0)
+        zmp = (rot.T @ (cop_num / normal_sum))[:2] if normal_sum > 0 else np.full(2, np.nan)
+        if self._anchor_pos is None or self._anchor_rot is None:
+            return points, force, torque, zmp, np.zeros(2), 0.0
+        anchor_rot = self._anchor_rot
+        slip = (origin - self._anchor_pos)[:2]
+        yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
+        return points, force, torque, zmp, slip.copy(), yaw
+
+    def _bodyid_list(self) -> list[int]:
+        ids = self._bodyids
+        if ids is None:
+            ids = self._bodyids = self._model.geom_bodyid.tolist()
+        return ids
 
     def measure_plain(
         self, data: mujoco.MjData
