@@ -755,6 +755,11 @@ class CanMaster:
         """(state_index, pending_events, frames to send) after receiving ``messages``."""
     def tick_wire(self, now_ms: int, stamp: float, wire: CanWire) -> tuple[int, int, int, int]:
         """(state_index, pending_events, frames_sent, log_len) on a wire."""
+    def tick_wire_steady(self, now_ms: int, stamp: float, wire: CanWire, drain_at: int) -> int:
+        """``tick_wire``; frames sent if running, no event pending and log_len < drain_at,
+        else -1 (the tuple is then in ``last_wire_tick``)."""
+    @property
+    def last_wire_tick(self) -> tuple[int, int, int, int]: ...
     @property
     def state_index(self) -> int: ...
     @property

@@ -51,6 +51,8 @@ pub struct CanMaster {
     rx: Vec<RxFrame>,
     /// Scratch of `try_set_motor_duties` (reused, no allocation per call).
     duties: Vec<f64>,
+    /// `tick_wire`'s tuple of the last `tick_wire_steady` call.
+    last_wire: (u8, usize, usize, usize),
 }
 
 fn servo_tuple<'py>(py: Python<'py>, slave: u8, s: &ServoEntry) -> PyResult<Bound<'py, PyTuple>> {
@@ -102,6 +104,7 @@ impl CanMaster {
             core: CoreMaster::new(boot_delay_ms, start_ms),
             rx: Vec::with_capacity(256),
             duties: Vec::with_capacity(16),
+            last_wire: (0, 0, 0, 0),
         }
     }
 
@@ -144,6 +147,34 @@ impl CanMaster {
         let sent = out.len();
         let events = self.core.events().count();
         (state_index(self.core.state), events, sent, w.core.log_len())
+    }
+
+    /// [`tick_wire`] for the steady state, with one int back instead of a tuple: the frames
+    /// sent when the master is (still) running, has no pending event and its wire log holds
+    /// fewer than `drain_at` frames; otherwise -1, and [`last_wire_tick`] holds `tick_wire`'s
+    /// tuple of this tick. Exactly `tick_wire`'s effect on the master and the wire.
+    fn tick_wire_steady(
+        &mut self,
+        now_ms: i64,
+        stamp: f64,
+        wire: &Bound<'_, CanWire>,
+        drain_at: usize,
+    ) -> i64 {
+        let result = self.tick_wire(now_ms, stamp, wire);
+        self.last_wire = result;
+        let (state, events, sent, logged) = result;
+        if state == state_index(MasterState::Running) && events == 0 && logged < drain_at {
+            i64::try_from(sent).unwrap_or(i64::MAX)
+        } else {
+            -1
+        }
+    }
+
+    /// `tick_wire`'s `(state_index, pending_events, frames_sent, log_len)` of the last
+    /// [`tick_wire_steady`] call (zeros before the first).
+    #[getter]
+    fn last_wire_tick(&self) -> (u8, usize, usize, usize) {
+        self.last_wire
     }
 
     /// Phase index: 0 booting, 1 enumerating, 2 configuring, 3 running, 4 disabled.

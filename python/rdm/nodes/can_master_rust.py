@@ -169,13 +169,7 @@ class RustCanMaster:
         link = self._wire
         if link is not None:
             link.check_alone()
-            state, self._pending_events, sent, logged = self._core.tick_wire(
-                now_ms, link.clock(), link.wire
-            )
-            self.state = _STATES[state]
-            self.tx_count += sent
-            if logged >= DRAIN_AT:
-                link.drain()
+            self.apply_wire_tick(self._core.tick_wire(now_ms, link.clock(), link.wire))
             return
         messages = list(drain(self._bus))
         state, self._pending_events, out = self._core.tick_ms(now_ms, messages)
@@ -187,6 +181,26 @@ class RustCanMaster:
                     self.tx_count += 1
                 else:
                     self.tx_errors += 1
+
+    def apply_wire_tick(self, result: tuple[int, int, int, int]) -> None:
+        """Take the core's ``tick_wire`` result ``(state, pending_events, sent, log_len)``:
+        phase, events to fetch, frames counted, the wire log drained when long."""
+        state, self._pending_events, sent, logged = result
+        self.state = _STATES[state]
+        self.tx_count += sent
+        if logged >= DRAIN_AT:
+            self._wire.drain()
+
+    @property
+    def wire(self) -> CanWireLink | None:
+        """The :class:`CanWireLink` this master ticks on (None on a python-can bus)."""
+        return self._wire
+
+    @property
+    def core(self) -> _rdm.CanMaster:
+        """The Rust master (for callers that run :meth:`tick_ms`'s wire path inline, such as
+        ``SpinalMirror``'s steady-state tick; the result goes to :meth:`apply_wire_tick`)."""
+        return self._core
 
     # ------------------------------------------------------------------ commands
     def set_motor_duties(self, duties: Sequence[float]) -> None:

@@ -22,6 +22,7 @@ import math
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from math import floor as _floor
 from types import SimpleNamespace
 from typing import Any
 
@@ -30,6 +31,8 @@ import numpy as np
 
 from rdm._rdm import RdmError
 from rdm.control.attitude import ARM_OFF, N_ROTORS, CommandRejectedError, SpinalStep
+from rdm.link.can_wire import DRAIN_AT
+from rdm.link.inproc_can import SimClock
 from rdm.nodes.base import to_ms
 from rdm.nodes.can_master import BOOT_DELAY_MS, IDLE_DUTY, CanMaster, MasterState
 from rdm.nodes.spinal_servo_bridge import MirrorRejection, ServoBridge
@@ -274,6 +277,13 @@ class SpinalMirror:
         self._next_pub_ms = -(2**62)  # earliest ms a publisher can be due (see _publish)
         self._duties_to_master: list[float] | None = None
         self._battery_due_ms = -(2**62)  # first ms _battery samples again
+        self._idle_lo = self._idle_hi = 0  # ClientSession.idle_window after the last spin
+        # The Rust master on a CanWireLink: tick's steady-state CAN ms in one core call.
+        wire = getattr(self.master, "wire", None) if master_backend == "rust" else None
+        self._wire_link = wire if self._fast else None
+        self._wire_channel = None if wire is None else wire._ch
+        self._tick_wire_steady = None if wire is None else self.master.core.tick_wire_steady
+        self._core_try_duties = None if wire is None else self.master.core.try_set_motor_duties
 
     # ---------------------------------------------------------------- inputs from outside
     def set_imu_sample(
@@ -291,28 +301,86 @@ class SpinalMirror:
     # ---------------------------------------------------------------- node interface
     def tick(self, now: float) -> None:
         """Advance to ``now`` (s): UART in, due control steps, CAN ms ticks, publish, UART out."""
+        if not self._fast:
+            self._tick_plain(now)
+            return
+        # The plain tick with every step's own "nothing to do" check inline, so that an idle
+        # ms (no UART byte, no control step or publisher due, one steady CAN ms) costs one
+        # Rust call and a few comparisons. Each skip is exactly the guarded step's no-op.
+        now_ms = _floor(now * 1000.0 + 1e-6)  # to_ms(now)
+        last_ms = self.now_ms
+        if last_ms is not None and now_ms < last_ms:
+            now_ms = last_ms  # time never goes back
+        if now.__class__ is not float:
+            now = float(now)
+        if now > self._now_s:  # max(self._now_s, now)
+            self._now_s = now
+        self.now_ms = now_ms
+        inbox = self.uart.inbox
+        if inbox is None or inbox or not self._idle_lo <= now_ms < self._idle_hi:
+            self._receive(now_ms)  # else: no byte to read and spin(b"") would do nothing
+        if now_ms >= self._battery_due_ms:
+            self._battery(now_ms)
+        next_control = self._next_control
+        if next_control is None or self._now_s >= next_control - 1e-9:
+            self._control(self._now_s)
+        can_ms = self._can_ms
+        link = self._wire_link
+        master = self.master
+        if (
+            link is not None
+            and can_ms is not None
+            and now_ms == can_ms + 1
+            and self._master_was_running
+            and master.state is MasterState.RUNNING
+            and master._wire is link
+            and (
+                self.duties is self._duties_to_master
+                or (master.fast and self._try_wire_duties(self.duties))
+            )
+        ):
+            # _can's steady state with no new duties, and RustCanMaster.tick_ms's wire path,
+            # in one core call: the same checks, stamp, frames, counters and log drain.
+            ch = self._wire_channel
+            if len(ch.buses) != 1 or ch.taps:
+                link.check_alone()  # raises CanWireError
+            clock = ch.clock
+            stamp = clock.now if clock.__class__ is SimClock else clock()
+            sent = self._tick_wire_steady(now_ms, stamp, link.wire, DRAIN_AT)
+            self._can_ms = now_ms
+            if sent >= 0:  # still running, no event pending, the log short
+                master.tx_count += sent
+                master._pending_events = 0
+                if master._events:
+                    self._forward_can_events()
+            else:
+                master.apply_wire_tick(master.core.last_wire_tick)
+                self._forward_can_events()
+        else:
+            self._can(now_ms)
+            self._forward_can_events()
+        if now_ms >= self._next_pub_ms:
+            self._publish(now_ms)
+        if self.session.pending_frames or self.uart.pending:  # else send has nothing to do
+            self.uart.send(self.session.take_output())
+
+    def _try_wire_duties(self, duties: list[float]) -> bool:
+        """_can's steady-state hand-over of a new duty list when the core takes it in one
+        call (``RustCanMaster.try_set_motor_duties``); False: nothing applied, _can decides."""
+        if duties.__class__ is list and self._core_try_duties(duties):
+            self._duties_to_master = duties
+            return True
+        return False
+
+    def _tick_plain(self, now: float) -> None:
+        """The reference tick: every step every ms (``fast_paths=False``)."""
         now_ms = to_ms(now)
         if self.now_ms is not None and now_ms < self.now_ms:
             now_ms = self.now_ms  # time never goes back
         self._now_s = max(self._now_s, float(now))
         self.now_ms = now_ms
         self._receive(now_ms)
-        if self._fast:
-            # Each skip below is exactly the early return of the method it guards.
-            if now_ms >= self._battery_due_ms:
-                self._battery(now_ms)
-            next_control = self._next_control
-            if next_control is None or self._now_s >= next_control - 1e-9:
-                self._control(self._now_s)
-            self._can(now_ms)
-            self._forward_can_events()
-            if now_ms >= self._next_pub_ms:
-                self._publish(now_ms)
-            data = self.session.take_output()
-            if data or self.uart.pending:  # else UartPump.send has nothing to do
-                self.uart.send(data)
-            return
-        self._battery(now_ms)  # the plain path: every step every ms
+        self._battery(now_ms)
         self._control(self._now_s)
         self._can(now_ms)
         self._forward_can_events()
@@ -342,6 +410,8 @@ class SpinalMirror:
                 self.counters.configured += 1
             elif isinstance(event, SyncLost):
                 self.counters.sync_lost += 1
+        # the ms from here up to hi need no spin while no byte comes (the fast tick's skip)
+        self._idle_lo, self._idle_hi = self.session.idle_window()
 
     def _route(self, topic: str, msg: Any) -> None:
         handler = self._routes.get(topic)

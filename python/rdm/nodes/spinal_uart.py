@@ -14,8 +14,28 @@ import os
 import select
 from typing import Any
 
+from rdm.sim.uart import InProcessUartEnd
+
 #: Bytes kept for a slow peer before the backlog is discarded (8 KiB = Spinal's TX ring).
 DEFAULT_MAX_PENDING = 128 * 64
+#: Wrappers whose ``read_available`` with nothing underneath returns ``b""`` and changes
+#: nothing (module, class name): the capture tap and the stack's cuttable link.
+_PURE_READ_WRAPPERS = {("rdm.sim.uart", "TappedLink"), ("rdm.scenarios.stack", "DroppableLink")}
+_MAX_WRAPPERS = 8
+
+
+def source_inbox(link: Any) -> bytearray | None:
+    """The in-process receive buffer under ``link`` when reading ``link`` with that buffer
+    empty is a no-op returning ``b""`` (a chain of known wrappers over an
+    :class:`rdm.sim.uart.InProcessUartEnd`); None for anything else (ptys, serial ports)."""
+    for _ in range(_MAX_WRAPPERS):
+        cls = type(link)
+        if cls is InProcessUartEnd:
+            return link.inbox
+        if (cls.__module__, cls.__qualname__) not in _PURE_READ_WRAPPERS:
+            return None
+        link = link.link
+    return None
 
 
 class UartPump:
@@ -25,7 +45,7 @@ class UartPump:
     def __init__(
         self, link: Any, max_pending: int = DEFAULT_MAX_PENDING, *, fast: bool = True
     ) -> None:
-        self.link = link
+        self.link = link  # resolves inbox (see the property)
         #: With nothing queued, :meth:`send` writes ``data`` itself (no copy through the
         #: queue); False keeps the plain queue-then-pump path (same bytes, same counters).
         self.fast = fast
@@ -41,6 +61,18 @@ class UartPump:
             self._fd: int | None = port.fileno() if port is not None else None
         except (AttributeError, OSError, ValueError):
             self._fd = None  # URL ports (loop://, socket://) have no usable fd
+
+    @property
+    def link(self) -> Any:
+        """The byte link (assignable: :attr:`inbox` follows it)."""
+        return self._link
+
+    @link.setter
+    def link(self, link: Any) -> None:
+        self._link = link
+        #: :func:`source_inbox` of the link: while it is empty, :meth:`read` returns ``b""``
+        #: and changes nothing (callers may skip it); None when that is not known.
+        self.inbox = source_inbox(link)
 
     def read(self) -> bytes:
         """Everything received so far (``b""`` if nothing or on a port error, counted)."""

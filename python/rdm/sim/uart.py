@@ -155,6 +155,12 @@ class InProcessUartEnd:
     def in_waiting(self) -> int:
         return len(self._inbox)
 
+    @property
+    def inbox(self) -> bytearray:
+        """The received bytes not yet read: the live buffer (the same object for the end's
+        life; read it, never change it). Empty means :meth:`read_available` returns ``b""``."""
+        return self._inbox
+
     def read_available(self) -> bytes:
         if not self._inbox:
             return b""

@@ -46,6 +46,7 @@ from rdm.protocol.rosserial.services import DeviceServiceServer, ServiceHandler
 from rdm.protocol.rosserial.timesync import ClientClock
 
 _MASK = 0xFFFFFFFF  # MCU ticks are uint32
+_FOREVER = 2**62  # an idle window without end (unconfigured: spin(b"") never acts)
 
 
 class SlotError(ValueError):
@@ -97,6 +98,9 @@ class ClientSession:
         self._tx_chunks = tx_chunks
         self._tx_chunk_bytes = tx_chunk_bytes
         self._tx: list[bytes] = []  # frames waiting in the TX ring
+        #: The frames :meth:`take_output` will return (the same list for the session's life;
+        #: read it, never change it): empty means ``take_output()`` returns ``b""``.
+        self.pending_frames = self._tx
         self._tx_used = 0  # chunks in use
         self._time = self.registry.msg("std_msgs/Time")
         self._topic_info = self.registry.msg("rosserial_msgs/TopicInfo")
@@ -327,6 +331,22 @@ class ClientSession:
             self._request_sync_time(now_ms)
             self._last_sync_time = now_ms
         return events
+
+    def idle_window(self) -> tuple[int, int]:
+        """``(lo, hi)``: for every int ``lo <= now_ms < hi``, ``spin(b"", now_ms)`` returns no
+        event and changes nothing, until the next :meth:`spin` (only ``spin`` changes what
+        this depends on). Empty (``lo == hi``) while the parser holds part of a frame (its
+        timeout may fire). A caller that reads no byte may skip ``spin`` inside the window."""
+        parser = self.parser
+        if parser._started is not None or parser._buf:
+            return (0, 0)
+        if not self.configured:
+            return (-_FOREVER, _FOREVER)
+        # both uint32 tick checks of spin stay false while 0 <= now - last <= limit
+        receive, sync = self._last_sync_receive_time, self._last_sync_time
+        lo = max(receive, sync)
+        hi = min(receive + C.SYNC_LOSS_MS, sync + C.TIME_REQUEST_INTERVAL_MS) + 1
+        return (lo, hi) if lo < hi else (0, 0)
 
     def _receive(self, data: bytes, now_ms: int, events: list[SessionEvent]) -> list[SessionEvent]:
         # good frames come as (topic_id, payload, offset): no Frame object for user topics
