@@ -257,6 +257,7 @@ class OnboardNode:
         #: as the payload encoded once; False: every message through the codec
         self.direct_tx = True
         self._payloads: dict[str, tuple[Any, Any, bytes]] = {}
+        self._target_ticks: tuple[ServoMap, bytes, list[int]] | None = None
 
     # ------------------------------------------------------------------ inputs from outside
     def set_mocap(
@@ -455,7 +456,7 @@ class OnboardNode:
         self.counts["rx:imu"] += 1
         gx, gy, gz, x, y, z, w = _IMU_GYRO_QUAT.unpack_from(payload, 20)
         q = [x, y, z, w]
-        if not all(map(math.isfinite, q)) or abs(math.fsum([v * v for v in q]) - 1) > 0.1:
+        if not all(map(math.isfinite, q)) or abs(math.fsum((x * x, y * y, z * z, w * w)) - 1) > 0.1:
             self.counts["imu_invalid"] += 1
             return
         self._imu_quat, self._imu_euler = q, None
@@ -790,17 +791,30 @@ class OnboardNode:
 
     def _send_servo_targets(self, targets: np.ndarray) -> None:
         # a list of the same Python floats float(q[j]) gives (element writes: same values)
-        q = np.array(targets, dtype=float).tolist()
+        arr = np.array(targets, dtype=float)
+        q = arr.tolist()
+        written: list[int] = []
         if self.arming.flying and self.last_alpha_beta is not None:
             alpha, beta = self.last_alpha_beta
             for i, (ja, jb) in enumerate(self.control.vectoring_joints):
                 q[ja], q[jb] = float(alpha[i]), float(beta[i])
+                written += (ja, jb)
         smap = self.config.servo_map
         n = min(smap.n_joints, len(q))
         to_raw = smap.to_raw
         if self._direct_remote("servo/target_states", "spinal/ServoControlCmd"):
             index = smap.servo_index[:n]
-            angles = [to_raw(j, q[j]) for j in range(n)]
+            # to_raw is per joint: the targets' ticks (they hold for many ticks) are kept, the
+            # vectoring joints' ticks are redone from the angles written over them
+            key = arr.tobytes()
+            cached = self._target_ticks
+            if cached is None or cached[0] is not smap or cached[1] != key:
+                base = arr.tolist()
+                cached = self._target_ticks = (smap, key, [to_raw(j, base[j]) for j in range(n)])
+            angles = cached[2].copy()
+            for j in written:
+                if j < n:
+                    angles[j] = to_raw(j, q[j])
             try:  # uint8[] index, int16[] angles; out of range: the codec's error below
                 payload = struct.pack(f"<I{len(index)}BI{n}h", len(index), *index, n, *angles)
             except (struct.error, TypeError):
