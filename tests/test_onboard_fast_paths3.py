@@ -424,3 +424,20 @@ def test_perch_zero_hold_and_command_match_the_plain_step():
         assert fast.perch_thrust.tobytes() == plain.perch_thrust.tobytes()
         assert list(fast.counts.items()) == list(plain.counts.items())
     assert fast._perch_zeros is not None
+
+
+def test_lqi_result_is_the_dataclass_the_init_builds():
+    from dataclasses import fields
+
+    from rdm.control.lqi import LqiResult, LqiSynthesizer
+
+    node = OnboardNode(_Bytes())
+    pipe = node.control
+    pipe.update_model(node.present_q)
+    t = pipe.terms
+    res = LqiSynthesizer().synthesize(t.mass, t.inertia, t.allocation_bar)
+    built = LqiResult(**{f.name: getattr(res, f.name) for f in fields(LqiResult)})
+    assert type(res) is LqiResult and repr(res) == repr(built)
+    assert list(res.__dict__) == list(built.__dict__)
+    with pytest.raises(AttributeError):  # still frozen
+        res.method = "x"
