@@ -74,7 +74,9 @@ class LqiSynthesizer:
             np.ascontiguousarray(allocation, dtype=float),
         )
         report = out["report"]
-        return LqiResult(
+        # LqiResult(...) without the frozen-dataclass __init__ (one per control tick)
+        result = object.__new__(LqiResult)
+        result.__dict__.update(
             k=out["k"],
             p=out["p"],
             b=out["b"],
@@ -85,6 +87,7 @@ class LqiSynthesizer:
             fell_back=report["fell_back"],
             relative_residual=report["relative_residual"],
         )
+        return result
 
     def reset(self) -> None:
         """Forget the warm start (next synthesis is cold)."""

@@ -27,6 +27,7 @@ counted in :attr:`OnboardNode.counts` and ignored.
 from __future__ import annotations
 
 import math
+import struct
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -48,6 +49,11 @@ from rdm.protocol.rosserial.server import PayloadTooLarge, ServerSession, TopicN
 INTEGRATION_CONTROL_ON = 160
 #: How many distinct ``servo/states`` readings the node keeps the joint writes of.
 SERVO_CACHE_SIZE = 8
+#: ``spinal/Imu`` payload from byte 20: gyro (3 float32), mag skipped, quaternion (4 float32).
+_IMU_GYRO_QUAT = struct.Struct("<3f12x4f")
+_U32 = struct.Struct("<I")
+#: ``spinal/ServoStates``: stamp (8 bytes), count (uint32), 7 bytes per ``spinal/ServoState``.
+_SERVO_STATES_HEAD, _SERVO_STATE_SIZE = 12, 7
 #: Topics the node publishes (Spinal subscribes).
 PUBLISHED_TOPICS = (
     "uav_info",
@@ -95,6 +101,25 @@ def _scalar(value: Any) -> float | None:
     except (TypeError, ValueError):
         return None
     return v if math.isfinite(v) else None
+
+
+def servo_states_decodes(payload: bytes) -> bool:
+    """Whether ``spinal/ServoStates`` decodes ``payload`` (a stamp, a count and exactly that
+    many 7-byte entries; anything shorter or longer is a decode error)."""
+    n = len(payload)
+    if n < _SERVO_STATES_HEAD:
+        return False
+    return n - _SERVO_STATES_HEAD == _SERVO_STATE_SIZE * _U32.unpack_from(payload, 8)[0]
+
+
+def _four_axis_payload(angles: Sequence[float], base_thrust: Any) -> bytes | None:
+    """``spinal/FourAxisCommand`` bytes (float32[3] angles, float32[] base_thrust) of the
+    values the message would carry; None when they do not pack (the codec raises then)."""
+    thrust = _floats(base_thrust)
+    try:
+        return struct.pack(f"<3fI{len(thrust)}f", *angles, len(thrust), *thrust)
+    except (struct.error, TypeError, OverflowError):
+        return None
 
 
 def default_servo_map(robot: Any) -> ServoMap:
@@ -209,6 +234,30 @@ class OnboardNode:
         self.reuse_servo_states = True
         self._servo_cache: dict[tuple, tuple[np.ndarray, np.ndarray, int, bool]] = {}
         self._servo_cache_map: ServoMap | None = None
+        #: the same entries by the readings' payload bytes after the stamp (deferred path)
+        self._servo_raw: dict[bytes, tuple[np.ndarray, np.ndarray, int, bool]] = {}
+        self._servo_codec = reg.msg("spinal/ServoStates")
+        imu_size = reg.msg("spinal/Imu").fixed_size
+        #: ``imu`` and ``servo/states`` are taken in from their payloads (the session defers
+        #: their decoding; only what the node reads is unpacked); False: decoded messages
+        self.raw_rx = imu_size == 60  # the layout _IMU_GYRO_QUAT reads
+        if self.raw_rx:
+            self.session.deferred.update(
+                {
+                    "imu": ("spinal/Imu", lambda p: len(p) == 60, self._on_imu_payload),
+                    "servo/states": (
+                        "spinal/ServoStates",
+                        servo_states_decodes,
+                        self._on_servo_payload,
+                    ),
+                }
+            )
+        #: commands serialized by the node where the wire form is a plain struct (rpy/gain,
+        #: four_axes/command, servo/target_states) and unchanged messages (pinv, desire) sent
+        #: as the payload encoded once; False: every message through the codec
+        self.direct_tx = True
+        self._payloads: dict[str, tuple[Any, Any, bytes]] = {}
+        self._target_ticks: tuple[ServoMap, bytes, list[int]] | None = None
 
     # ------------------------------------------------------------------ inputs from outside
     def set_mocap(
@@ -305,7 +354,10 @@ class OnboardNode:
             self.counts["uart_read_error"] += 1
             data = b""
         for event in self.session.feed(data, now):
-            self._on_event(event)
+            if event.__class__ is tuple:  # a deferred topic's (handler, payload)
+                event[0](event[1])
+            else:
+                self._on_event(event)
         if self.foot is not None:
             self.foot.poll(now)
         for req in self._requests:
@@ -398,29 +450,72 @@ class OnboardNode:
             else:
                 self.counts["battery_invalid"] += 1
 
-    def _on_servo_states(self, msg: Any) -> None:
+    def _on_imu_payload(self, payload: bytes) -> None:
+        """An ``imu`` message from its payload (one the codec decodes): what ``_on_event`` does
+        with the decoded message, reading only the gyro and the quaternion."""
+        self.counts["rx:imu"] += 1
+        gx, gy, gz, x, y, z, w = _IMU_GYRO_QUAT.unpack_from(payload, 20)
+        q = [x, y, z, w]
+        if not all(map(math.isfinite, q)) or abs(math.fsum((x * x, y * y, z * z, w * w)) - 1) > 0.1:
+            self.counts["imu_invalid"] += 1
+            return
+        self._imu_quat, self._imu_euler = q, None
+        g = [gx, gy, gz]
+        if all(map(math.isfinite, g)):
+            self._gyro_src = g
+
+    def _on_servo_payload(self, payload: bytes) -> None:
+        """A ``servo/states`` message from its payload (one the codec decodes): a reading seen
+        before (same bytes after the stamp) applied from its cached entry, else decoded."""
+        self.counts["rx:servo/states"] += 1
+        body = None
+        if self.reuse_servo_states:
+            self._servo_cache_valid()
+            body = payload[8:]
+            hit = self._servo_raw.get(body)
+            if hit is not None:
+                self._apply_servo_entry(hit)
+                return
+        entry = self._on_servo_states(self._servo_codec.decode(payload))
+        if body is not None and entry is not None:
+            raw = self._servo_raw
+            raw[body] = entry
+            if len(raw) > SERVO_CACHE_SIZE:
+                del raw[next(iter(raw))]  # the oldest
+
+    def _servo_cache_valid(self) -> None:
+        """Forget the cached servo entries when the servo map object changed."""
+        smap = self.config.servo_map
+        if smap is not self._servo_cache_map:
+            self._servo_cache.clear()
+            self._servo_raw.clear()
+            self._servo_cache_map = smap
+
+    def _apply_servo_entry(self, entry: tuple[np.ndarray, np.ndarray, int, bool]) -> None:
+        # a reading seen before: the same joint writes and counts as the loop
+        joints, values, n_unknown, partial = entry
+        self.present_q[joints] = values
+        self._seen[joints] = True
+        if n_unknown:
+            self.counts["servo_unknown_index"] += n_unknown
+        if partial:
+            self.counts["servo_states_partial"] += 1
+        self._hold_present_q()
+
+    def _on_servo_states(self, msg: Any) -> tuple[np.ndarray, np.ndarray, int, bool] | None:
+        """Apply one decoded reading; returns its cache entry (None when not cacheable)."""
         smap = self.config.servo_map
         key = None
         if self.reuse_servo_states:
-            if smap is not self._servo_cache_map:
-                self._servo_cache.clear()
-                self._servo_cache_map = smap
+            self._servo_cache_valid()
             try:
                 key = tuple([(s.index, s.angle) for s in msg.servos])
                 hit = self._servo_cache.get(key)
             except (TypeError, AttributeError):  # not hashable / not servo entries: plain path
                 key = hit = None
             if hit is not None:
-                # a reading seen before: the same joint writes and counts as the loop below
-                joints, values, n_unknown, partial = hit
-                self.present_q[joints] = values
-                self._seen[joints] = True
-                if n_unknown:
-                    self.counts["servo_unknown_index"] += n_unknown
-                if partial:
-                    self.counts["servo_states_partial"] += 1
-                self._hold_present_q()
-                return
+                self._apply_servo_entry(hit)
+                return hit
         covered = set()
         joints, values, n_unknown = [], [], 0
         for s in msg.servos:
@@ -438,12 +533,15 @@ class OnboardNode:
         partial = len(covered) != self.robot.n_q
         if partial:
             self.counts["servo_states_partial"] += 1
+        entry = None
         if key is not None and len(covered) == len(joints):  # no joint written twice
             cache = self._servo_cache
-            cache[key] = (np.array(joints, dtype=np.intp), np.array(values), n_unknown, partial)
+            entry = (np.array(joints, dtype=np.intp), np.array(values), n_unknown, partial)
+            cache[key] = entry
             if len(cache) > SERVO_CACHE_SIZE:
                 del cache[next(iter(cache))]  # the oldest
         self._hold_present_q()
+        return entry
 
     def _hold_present_q(self) -> None:
         if self.joint_targets is None and self._trajectory is None and self._seen.all():
@@ -461,6 +559,39 @@ class OnboardNode:
             return False
         self.published[topic] += 1
         return True
+
+    def _publish_payload(self, topic: str, payload: bytes) -> bool:
+        """:meth:`_publish` of a message already serialized with the topic's codec."""
+        try:
+            self.session.publish_payload(topic, payload)
+        except TopicNotNegotiated:
+            self.counts[f"not_negotiated:{topic}"] += 1
+            return False
+        except PayloadTooLarge:
+            self.counts[f"too_large:{topic}"] += 1
+            return False
+        self.published[topic] += 1
+        return True
+
+    def _publish_same(self, topic: str, msg: Any) -> bool:
+        """:meth:`_publish` of a message object the node never mutates: serialized once per
+        codec (the topic's codec gives the same bytes for the same unchanged message)."""
+        remote = self.session.outbound.get(topic)
+        if remote is None or not self.direct_tx:
+            return self._publish(topic, msg)
+        cached = self._payloads.get(topic)
+        if cached is None or cached[0] is not msg or cached[1] is not remote.codec:
+            cached = self._payloads[topic] = (msg, remote.codec, remote.codec.encode(msg))
+        return self._publish_payload(topic, cached[2])
+
+    def _direct_remote(self, topic: str, type_name: str) -> bool:
+        """Whether ``topic`` may be sent as a payload the node packs itself: fast path on and
+        the device subscribes to it with ``type_name`` (else the codec path, which raises or
+        counts exactly as before)."""
+        if not self.direct_tx:
+            return False
+        remote = self.session.outbound.get(topic)
+        return remote is not None and remote.type == type_name
 
     def _info_message(self, topic: str) -> Any:
         """``uav_info`` or ``motor_info`` from the configuration."""
@@ -528,7 +659,7 @@ class OnboardNode:
                     inertia=inertia,
                 )
                 cached = self._p_matrix_msg = (pm, msg)
-            self._publish("p_matrix_pseudo_inverse_inertia", cached[1])
+            self._publish_same("p_matrix_pseudo_inverse_inertia", cached[1])
         if self.config.send_desire_coordinate and ctl.terms is not None:
             cached_desire = self._desire_msg
             if cached_desire is None or cached_desire[0] is not ctl.terms:
@@ -538,7 +669,7 @@ class OnboardNode:
                 roll, pitch, yaw = desire
                 msg = self._msg["desire_coordinate"].new(roll=roll, pitch=pitch, yaw=yaw)
                 cached_desire = self._desire_msg = (ctl.terms, msg)
-            self._publish("desire_coordinate", cached_desire[1])
+            self._publish_same("desire_coordinate", cached_desire[1])
         targets = self._current_joint_targets(now)
         dt = self.period
         if self._last_control is not None:
@@ -555,15 +686,22 @@ class OnboardNode:
             self.last_command = command
             self.last_alpha_beta = (command.alpha, command.beta)
         if self.arming.flying and self.last_command is not None:
-            c = self.last_command
-            self._publish(
-                "four_axes/command",
-                self._msg["four_axes/command"].new(
-                    angles=list(c.angles), base_thrust=_floats(c.base_thrust)
-                ),
-            )
+            self._send_command(self.last_command)
         if targets is not None:
             self._send_servo_targets(targets)
+
+    def _send_command(self, c: ControlCommand) -> None:
+        if self._direct_remote("four_axes/command", "spinal/FourAxisCommand"):
+            payload = _four_axis_payload(c.angles, c.base_thrust)
+            if payload is not None:
+                self._publish_payload("four_axes/command", payload)
+                return
+        self._publish(
+            "four_axes/command",
+            self._msg["four_axes/command"].new(
+                angles=list(c.angles), base_thrust=_floats(c.base_thrust)
+            ),
+        )
 
     def _flight_step(
         self, now: float, targets: np.ndarray | None, dt: float
@@ -627,6 +765,18 @@ class OnboardNode:
     def _send_gains(self) -> None:
         wire = self.control.gains_wire
         assert wire is not None
+        if (
+            wire.dtype == np.int16
+            and wire.ndim == 2
+            and wire.shape[1] == 7
+            and self._direct_remote("rpy/gain", "spinal/RollPitchYawTerms")
+        ):
+            # count, then 7 int16 per motor (roll_p .. yaw_d): the codec's bytes for the
+            # RollPitchYawTerm messages built below
+            self._publish_payload(
+                "rpy/gain", _U32.pack(wire.shape[0]) + wire.astype("<i2", copy=False).tobytes()
+            )
+            return
         key = (wire.tobytes(), wire.dtype.str, wire.shape)
         if self._gains_msg is None or self._gains_msg[0] != key:
             term = self._msg["rpy_term"]
@@ -641,14 +791,37 @@ class OnboardNode:
 
     def _send_servo_targets(self, targets: np.ndarray) -> None:
         # a list of the same Python floats float(q[j]) gives (element writes: same values)
-        q = np.array(targets, dtype=float).tolist()
+        arr = np.array(targets, dtype=float)
+        q = arr.tolist()
+        written: list[int] = []
         if self.arming.flying and self.last_alpha_beta is not None:
             alpha, beta = self.last_alpha_beta
             for i, (ja, jb) in enumerate(self.control.vectoring_joints):
                 q[ja], q[jb] = float(alpha[i]), float(beta[i])
+                written += (ja, jb)
         smap = self.config.servo_map
         n = min(smap.n_joints, len(q))
         to_raw = smap.to_raw
+        if self._direct_remote("servo/target_states", "spinal/ServoControlCmd"):
+            index = smap.servo_index[:n]
+            # to_raw is per joint: the targets' ticks (they hold for many ticks) are kept, the
+            # vectoring joints' ticks are redone from the angles written over them
+            key = arr.tobytes()
+            cached = self._target_ticks
+            if cached is None or cached[0] is not smap or cached[1] != key:
+                base = arr.tolist()
+                cached = self._target_ticks = (smap, key, [to_raw(j, base[j]) for j in range(n)])
+            angles = cached[2].copy()
+            for j in written:
+                if j < n:
+                    angles[j] = to_raw(j, q[j])
+            try:  # uint8[] index, int16[] angles; out of range: the codec's error below
+                payload = struct.pack(f"<I{len(index)}BI{n}h", len(index), *index, n, *angles)
+            except (struct.error, TypeError):
+                payload = None
+            if payload is not None:
+                self._publish_payload("servo/target_states", payload)
+                return
         self._publish(
             "servo/target_states",
             self._msg["servo/target_states"].new(

@@ -40,8 +40,9 @@ except ImportError:  # numpy < 2
 
 def _all_finite(a: np.ndarray) -> bool:
     """``bool(np.all(np.isfinite(a)))``; a float64 array's elements checked as the Python
-    floats ``tolist`` gives (the same values; numpy's reduction costs more on tiny arrays)."""
-    if type(a) is np.ndarray and a.dtype == np.float64 and a.size <= 16:
+    floats ``tolist`` gives (the same values; numpy's reduction costs more on small arrays,
+    e.g. the 48 LQI gains)."""
+    if type(a) is np.ndarray and a.dtype == np.float64 and a.size <= 64:
         return all(map(math.isfinite, a.ravel().tolist()))
     return bool(np.logical_and.reduce(np.isfinite(a), axis=None))
 
@@ -129,6 +130,16 @@ class ControlCommand:
     yaw_rotor: int | None
 
 
+def _control_command(*values: object) -> ControlCommand:
+    """``ControlCommand(*values)`` without the frozen-dataclass ``__init__`` (one per tick)."""
+    command = object.__new__(ControlCommand)
+    command.__dict__.update(zip(_COMMAND_FIELDS, values, strict=True))
+    return command
+
+
+_COMMAND_FIELDS = tuple(ControlCommand.__dataclass_fields__)
+
+
 class ControlPipeline:
     """Model, LQI, position, PC axes and perching for one robot (no I/O)."""
 
@@ -156,6 +167,11 @@ class ControlPipeline:
         perch_params = {"rotor_thrust_max": list(self.thrust_max), **config.perch_params}
         self.perch = PerchController(config.rate_hz, config.perch_cutoff_hz, **perch_params)
         self._delta_perch = np.asarray(self.perch.params()["thrust_rate_limit"], dtype=float)
+        # with every rate limit > 0, max(x - limit, 0) of an all-(+0.0) array is all +0.0 again
+        self._delta_positive = bool(self._delta_perch.size == robot.n_rotors) and all(
+            v > 0.0 and math.isfinite(v) for v in self._delta_perch.tolist()
+        )
+        self._perch_zeros: np.ndarray | None = None  # perch_thrust while it is that array
         self.terms: ModelTerms | None = None
         self.gains: np.ndarray | None = None  # (N, 4, 3)
         self.gains_wire: np.ndarray | None = None  # (N, 7) int16
@@ -392,14 +408,17 @@ class ControlPipeline:
             self.perch_thrust = np.asarray(result.thrust, dtype=float)
         else:
             # eq. (48)'s rate limit also on the way out of perching (assumption)
-            self.perch_thrust = np.maximum(self.perch_thrust - self._delta_perch, 0.0)
+            if self.perch_thrust is not self._perch_zeros or not self._delta_positive:
+                self.perch_thrust = np.maximum(self.perch_thrust - self._delta_perch, 0.0)
+                if self._delta_positive and max(self.perch_thrust.tolist(), default=1.0) == 0.0:
+                    self._perch_zeros = self.perch_thrust  # all +0.0: stays so (see __init__)
         total = flight + self.perch_thrust
         if self.config.clip_base_thrust:
             total = _clip(total, 0.0, self.thrust_max)
         if not _all_finite(total):  # cannot happen with finite inputs; never send NaN
             self.counts["non_finite_command"] += 1
             return None
-        return ControlCommand(
+        return _control_command(
             (float(pos["roll"]), float(pos["pitch"]), float(yaw_term)),
             total,
             flight,

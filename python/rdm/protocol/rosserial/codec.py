@@ -97,6 +97,9 @@ class MessageCodec:
         self._var = None if self._flat is not None else _VarLayout.of(spec, resolve)
         if self._var is not None:
             self._var.bind(self.cls)
+        #: payload size of a message made only of fixed-size fields (``decode`` accepts exactly
+        #: the payloads of this length), None otherwise
+        self.fixed_size: int | None = None if self._flat is None else self._flat.size
         # the whole-message fast encoder, None when only the per-field path applies
         self._pack = (
             self._flat.pack if self._flat else self._var.pack if self._var is not None else None

@@ -107,6 +107,12 @@ class ServerSession:
         self._sync_deadline = 0.0
         self._reopen_at: float | None = None
         self._tx: list[bytes] = []
+        #: Deferred topics: name -> (type, decodes(payload) -> bool, handler(payload)). A good
+        #: frame on such a topic (that type, a payload ``decodes`` accepts, i.e. exactly the
+        #: payloads the codec decodes) is counted as received and returned from :meth:`feed` as
+        #: a ``(handler, payload)`` tuple in the place of its ``MessageReceived``: the caller
+        #: decodes what it reads. Empty (the default): every message is decoded.
+        self.deferred: dict[str, tuple[str, Callable[[bytes], bool], Callable[[bytes], Any]]] = {}
         self._call_ids = itertools.count(1)
         self._time = self.registry.msg("std_msgs/Time")
         self._topic_info = self.registry.msg("rosserial_msgs/TopicInfo")
@@ -162,6 +168,23 @@ class ServerSession:
         self._tx.append(frame)
         return len(frame)
 
+    def publish_payload(self, topic: str, payload: bytes) -> int:
+        """:meth:`publish` of a message the caller has already serialized with the topic's
+        codec (``outbound[topic].codec.encode(msg)`` bytes): same checks, counters, frame."""
+        try:
+            remote = self.outbound[topic]
+        except KeyError:
+            raise TopicNotNegotiated(topic) from None
+        if len(payload) > remote.buffer_size:
+            self.counts["tx_too_large"] += 1
+            raise PayloadTooLarge(
+                f"{topic}: {len(payload)}-byte payload exceeds the device buffer of "
+                f"{remote.buffer_size} bytes"
+            )
+        frame = encode_frame(remote.topic_id, payload)
+        self._tx.append(frame)
+        return len(frame)
+
     def call_service(self, name: str, request: Any, now: float) -> int:
         """Send a request to a device service; the answer comes as :class:`ServiceResponse`
         (or :class:`ServiceTimeout` after ``service_timeout``). Returns the call id."""
@@ -181,19 +204,26 @@ class ServerSession:
 
     # -- receiving ------------------------------------------------------------------------------
     def feed(self, data: bytes, now: float) -> list[SessionEvent]:
-        """Process bytes received at ``now``, then the timers."""
+        """Process bytes received at ``now``, then the timers. Messages on :attr:`deferred`
+        topics come as ``(handler, payload)`` tuples (see there)."""
         events: list[SessionEvent] = []
         if not self.active:
             self.counts["rx_while_closed"] += len(data)
         else:
             # good frames come as (topic_id, payload, offset): no Frame object for user topics
             inbound = self.inbound
+            deferred = self.deferred
             for item in self.parser._feed(data, now, True):
                 if item.__class__ is tuple:
                     tid = item[0]
                     # none of the reserved ids (0-3 setup, 7 log, 10 time): a device topic
                     remote = inbound.get(tid) if tid > _LOG_ID and tid != _TIME_ID else None
                     if remote is not None:
+                        later = deferred.get(remote.name) if deferred else None
+                        if later is not None and later[0] == remote.type and later[1](item[1]):
+                            self.counts["rx_messages"] += 1  # as _deliver
+                            events.append((later[2], item[1]))  # type: ignore[arg-type]
+                            continue
                         events.extend(self._deliver(tid, item[1], item[2], remote))
                     else:
                         events.extend(self._dispatch(_new_frame(*item), now))
