@@ -17,6 +17,7 @@ import random
 
 import numpy as np
 import pytest
+from fed_byte_link import FedByteLink
 
 from rdm.model import Robot
 from rdm.nodes.onboard import OnboardNode
@@ -111,22 +112,6 @@ def test_model_terms_against_numpy_rederivation():
     np.testing.assert_allclose(qbar @ pipe.terms.hover_thrust, w, atol=1e-9)
 
 
-class _Bytes:
-    """A byte link fed by the test (the sensor side) and recording what the host writes."""
-
-    def __init__(self) -> None:
-        self.pending = b""
-        self.written: list[bytes] = []
-
-    def read_available(self) -> bytes:
-        data, self.pending = self.pending, b""
-        return data
-
-    def write(self, data: bytes) -> int:
-        self.written.append(bytes(data))
-        return len(data)
-
-
 def _stream(rng: random.Random) -> tuple[list[bytes], list[list[tuple[int, ...]]]]:
     """Batches of frames: mostly samples, some acks, result errors, bad BCC, junk; also the
     raw values of the good samples per batch, in order."""
@@ -157,7 +142,7 @@ def _stream(rng: random.Random) -> tuple[list[bytes], list[list[tuple[int, ...]]
 @pytest.mark.parametrize("offset", [(0.0,) * 6, (10.0, -3.0, 0.5, 1e4, -2e4, 7.0)])
 def test_foot_reader_newest_only_matches_every_sample(offset):
     batches, goods = _stream(random.Random(5))
-    fast_link, plain_link = _Bytes(), _Bytes()
+    fast_link, plain_link = FedByteLink(), FedByteLink()
     fast = FootSensorReader(fast_link, offset=offset)
     plain = FootSensorReader(plain_link, offset=offset)
     plain._skip_older = False
@@ -184,7 +169,7 @@ def test_foot_reader_newest_only_matches_every_sample(offset):
 
 
 def test_foot_reader_plain_path_for_a_non_finite_offset():
-    reader = FootSensorReader(_Bytes(), offset=(np.inf, 0, 0, 0, 0, 0))
+    reader = FootSensorReader(FedByteLink(), offset=(np.inf, 0, 0, 0, 0, 0))
     assert not reader._skip_older
     reader.link.pending = lp.encode_response(lp.ForceData((1, 2, 3, 4, 5, 6), 20, 0)) * 3
     reader.poll(0.0)
@@ -204,7 +189,7 @@ def _fresh_gains_bytes(wire: np.ndarray) -> bytes:
 
 
 def test_gains_and_pinv_messages_rebuilt_only_on_change():
-    node = OnboardNode(_Bytes(), robot=ROBOT)
+    node = OnboardNode(FedByteLink(), robot=ROBOT)
     codec = REG.msg("spinal/RollPitchYawTerms")
     rng = np.random.default_rng(3)
     wires = [rng.integers(-3000, 3000, size=(4, 7)).astype(np.int16) for _ in range(3)]

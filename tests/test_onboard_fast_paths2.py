@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fed_byte_link import FedByteLink
 
 from rdm import _rdm
 from rdm.nodes.onboard_control import _all_finite, _clip
@@ -158,25 +159,11 @@ def test_ok_sample_run_on_bad_input():
         _rdm.leptrino_ok_sample_run("not bytes")
 
 
-class _Bytes:
-    def __init__(self) -> None:
-        self.pending = b""
-        self.written: list[bytes] = []
-
-    def read_available(self) -> bytes:
-        data, self.pending = self.pending, b""
-        return data
-
-    def write(self, data: bytes) -> int:
-        self.written.append(bytes(data))
-        return len(data)
-
-
 @pytest.mark.parametrize("seed", range(4))
 def test_foot_reader_fast_scan_matches_plain(seed):
     rng = random.Random(100 + seed)
     data = _random_stream(rng, 600)
-    fast_link, plain_link = _Bytes(), _Bytes()
+    fast_link, plain_link = FedByteLink(), FedByteLink()
     fast, plain = FootSensorReader(fast_link), FootSensorReader(plain_link)
     plain.fast_scan = False
     for k, chunk in enumerate(_chunks(data, rng) + [b""] * 50):
@@ -226,7 +213,7 @@ def test_imu_converted_when_read_matches_every_message():
     from rdm.protocol.rosserial.registry import spinal_registry
 
     imu = spinal_registry().msg("spinal/Imu")
-    node = OnboardNode(_Bytes())
+    node = OnboardNode(FedByteLink())
     assert node.imu_euler is None and node.imu_gyro is None
     rng = random.Random(9)
     want_euler = want_gyro = None
@@ -263,7 +250,7 @@ def test_imu_converted_when_read_matches_every_message():
 
 @pytest.mark.parametrize("offset", [(0.0,) * 6, (10.0, -3.0, 0.5, 1e4, -2e4, 7.25), (1e99,) * 6])
 def test_take_matches_parse_response_and_to_wrench(offset):
-    reader = FootSensorReader(_Bytes(), offset=offset)
+    reader = FootSensorReader(FedByteLink(), offset=offset)
     rated = np.array(lp.MODELS["CFS034CA301U"].rated)
     rng = random.Random(21)
     for _ in range(500):
@@ -277,7 +264,7 @@ def test_take_matches_parse_response_and_to_wrench(offset):
 
 
 def test_foot_reader_wrong_offset_length_takes_the_plain_path():
-    reader = FootSensorReader(_Bytes(), offset=(0.0,) * 5)
+    reader = FootSensorReader(FedByteLink(), offset=(0.0,) * 5)
     assert not reader._skip_older
     reader.link.pending = lp.encode_response(lp.ForceData((1, 2, 3, 4, 5, 6), 20, 0))
     with pytest.raises(lp.LeptrinoError):
@@ -345,7 +332,7 @@ def test_servo_states_cache_matches_the_loop():
 
     reg = spinal_registry()
     states, unit = reg.msg("spinal/ServoStates"), reg.msg("spinal/ServoState")
-    fast, plain = OnboardNode(_Bytes()), OnboardNode(_Bytes())
+    fast, plain = OnboardNode(FedByteLink()), OnboardNode(FedByteLink())
     plain.reuse_servo_states = False
     n = len(fast.config.servo_map.servo_index)
     rng = random.Random(31)
@@ -433,7 +420,7 @@ def test_desire_coordinate_message_rebuilt_with_the_model_terms():
 
     robot = Robot.default()
     codec = spinal_registry().msg("spinal/DesireCoord")
-    node = OnboardNode(_Bytes(), robot=robot)
+    node = OnboardNode(FedByteLink(), robot=robot)
     rng = np.random.default_rng(5)
     pool = [rng.uniform(-0.3, 0.3, size=robot.n_q) for _ in range(3)]
     builds = set()

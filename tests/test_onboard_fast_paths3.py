@@ -18,6 +18,7 @@ import struct
 
 import numpy as np
 import pytest
+from fed_byte_link import FedByteLink
 from onboard_rig import REG, Rig
 
 from rdm.nodes.onboard import OnboardNode, _four_axis_payload, servo_states_decodes
@@ -30,20 +31,6 @@ from rdm.protocol.rosserial.server import ServerSession
 
 IMU, SERVOS = REG.msg("spinal/Imu"), REG.msg("spinal/ServoStates")
 UNIT = REG.msg("spinal/ServoState")
-
-
-class _Bytes:
-    def __init__(self) -> None:
-        self.pending = b""
-        self.written: list[bytes] = []
-
-    def read_available(self) -> bytes:
-        data, self.pending = self.pending, b""
-        return data
-
-    def write(self, data: bytes) -> int:
-        self.written.append(bytes(data))
-        return len(data)
 
 
 def _decodes(codec, payload: bytes) -> bool:
@@ -112,7 +99,7 @@ def _imu_payload(rng: random.Random) -> bytes:
 
 
 def test_imu_payload_handler_matches_the_decoded_message():
-    fast, plain = OnboardNode(_Bytes()), OnboardNode(_Bytes())
+    fast, plain = OnboardNode(FedByteLink()), OnboardNode(FedByteLink())
     rng = random.Random(7)
     for k in range(1500):
         p = _imu_payload(rng)
@@ -129,7 +116,7 @@ def test_imu_payload_handler_matches_the_decoded_message():
 
 
 def test_servo_payload_handler_matches_the_decoded_message():
-    fast, plain = OnboardNode(_Bytes()), OnboardNode(_Bytes())
+    fast, plain = OnboardNode(FedByteLink()), OnboardNode(FedByteLink())
     plain.reuse_servo_states = False
     n = len(fast.config.servo_map.servo_index)
     rng = random.Random(11)
@@ -323,7 +310,7 @@ def test_node_fast_paths_match_plain_over_a_flight():
     every fast path of this round off ticks on the same bytes and inputs: the same UART
     bytes every tick, counters, commands and session counters."""
     cfg = OnboardConfig(lqi_every=1)
-    plain_link = _Bytes()
+    plain_link = FedByteLink()
     plain = OnboardNode(plain_link, config=cfg)
     plain.raw_rx, plain.direct_tx = False, False
     plain.session.deferred.clear()
@@ -389,7 +376,7 @@ def test_perch_zero_hold_and_command_match_the_plain_step():
     through perching on/off, a NaN foot sample and NaN inputs."""
     from rdm.nodes.onboard_control import ControlCommand, ControlPipeline, Setpoint, State
 
-    node = OnboardNode(_Bytes())
+    node = OnboardNode(FedByteLink())
     fast = ControlPipeline(node.robot, node.config)
     plain = ControlPipeline(node.robot, node.config)
     assert fast._delta_positive
@@ -431,7 +418,7 @@ def test_lqi_result_is_the_dataclass_the_init_builds():
 
     from rdm.control.lqi import LqiResult, LqiSynthesizer
 
-    node = OnboardNode(_Bytes())
+    node = OnboardNode(FedByteLink())
     pipe = node.control
     pipe.update_model(node.present_q)
     t = pipe.terms

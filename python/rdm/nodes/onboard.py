@@ -549,21 +549,16 @@ class OnboardNode:
 
     # ------------------------------------------------------------------------- sending
     def _publish(self, topic: str, msg: Any) -> bool:
-        try:
-            self.session.publish(topic, msg)
-        except TopicNotNegotiated:
-            self.counts[f"not_negotiated:{topic}"] += 1
-            return False
-        except PayloadTooLarge:
-            self.counts[f"too_large:{topic}"] += 1
-            return False
-        self.published[topic] += 1
-        return True
+        return self._send(self.session.publish, topic, msg)
 
     def _publish_payload(self, topic: str, payload: bytes) -> bool:
         """:meth:`_publish` of a message already serialized with the topic's codec."""
+        return self._send(self.session.publish_payload, topic, payload)
+
+    def _send(self, publish: Callable[[str, Any], int], topic: str, what: Any) -> bool:
+        """One publish: refusals counted per topic, sends counted in ``published``."""
         try:
-            self.session.publish_payload(topic, payload)
+            publish(topic, what)
         except TopicNotNegotiated:
             self.counts[f"not_negotiated:{topic}"] += 1
             return False

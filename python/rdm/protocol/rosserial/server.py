@@ -157,16 +157,7 @@ class ServerSession:
             remote = self.outbound[topic]
         except KeyError:
             raise TopicNotNegotiated(topic) from None
-        payload = remote.codec.encode(msg)
-        if len(payload) > remote.buffer_size:
-            self.counts["tx_too_large"] += 1
-            raise PayloadTooLarge(
-                f"{topic}: {len(payload)}-byte payload exceeds the device buffer of "
-                f"{remote.buffer_size} bytes"
-            )
-        frame = encode_frame(remote.topic_id, payload)
-        self._tx.append(frame)
-        return len(frame)
+        return self._send_payload(topic, remote, remote.codec.encode(msg))
 
     def publish_payload(self, topic: str, payload: bytes) -> int:
         """:meth:`publish` of a message the caller has already serialized with the topic's
@@ -175,6 +166,10 @@ class ServerSession:
             remote = self.outbound[topic]
         except KeyError:
             raise TopicNotNegotiated(topic) from None
+        return self._send_payload(topic, remote, payload)
+
+    def _send_payload(self, topic: str, remote: Any, payload: bytes) -> int:
+        """Frame a serialized message for the device (refused past its buffer)."""
         if len(payload) > remote.buffer_size:
             self.counts["tx_too_large"] += 1
             raise PayloadTooLarge(
