@@ -524,6 +524,19 @@ class Plant:
         )
         return force, torque
 
+    def wrench_values(self, sensor: str) -> tuple[float, float, float, float, float, float]:
+        """(Fx, Fy, Fz, Mx, My, Mz) of :meth:`wrench` as one tuple of floats (the bridge's
+        1 kHz foot-sensor read into the Leptrino mirror): the same normals and numbers."""
+        adr = self._wrench_adr.get(sensor)
+        if adr is None:
+            raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
+        if self._stale:
+            self.sync()
+        model = self.wrench_models[sensor]
+        return model._core.sample_values_at(
+            self._v_sensordata, adr[0], adr[1], model._normals.take(6)
+        )
+
     def wrench_plain(self, sensor: str) -> WrenchReading:
         """:meth:`wrench` through the Python list path (the reference of the Rust read)."""
         adr = self._wrench_adr.get(sensor)
