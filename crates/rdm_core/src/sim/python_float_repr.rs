@@ -86,6 +86,24 @@ impl PythonFloatRepr {
     /// Append Python's `repr(value)` (finite values; NaN and infinities as Python writes
     /// them: `nan`, `inf`, `-inf`).
     pub fn push_repr(&mut self, value: f64, out: &mut String) {
+        if value.is_finite() && value != 0.0 {
+            // Ryu writes fixed notation for decimal exponents -5..=15, Python for -4..=15,
+            // both with the same digits and `.0` for whole numbers: inside the common range
+            // Ryu's text is Python's (tested against the digit path below).
+            let mut buffer = ryu::Buffer::new();
+            let text = buffer.format_finite(value);
+            let body = text.strip_prefix('-').unwrap_or(text);
+            if !body.contains(['e', 'E']) && !body.starts_with("0.0000") {
+                out.push_str(text);
+                return;
+            }
+        }
+        self.push_repr_with(value, out, Self::shortest_digits);
+    }
+
+    /// `repr(value)` always through the digit path (Ryu digits, Python's layout rules): the
+    /// reference of [`Self::push_repr`]'s direct copy of Ryu's fixed-notation text.
+    pub fn push_repr_digits(&mut self, value: f64, out: &mut String) {
         self.push_repr_with(value, out, Self::shortest_digits);
     }
 
@@ -247,6 +265,9 @@ mod tests {
             writer.push_repr(v, &mut fast);
             writer.push_repr_std(v, &mut plain);
             assert_eq!(fast, plain, "{v:e} bits {:#x}", v.to_bits());
+            fast.clear();
+            writer.push_repr_digits(v, &mut fast);
+            assert_eq!(fast, plain, "digits {v:e} bits {:#x}", v.to_bits());
         }
     }
 
