@@ -657,6 +657,10 @@ class WrenchNoiseCore:
         self, sensordata: np.ndarray, force_adr: int, torque_adr: int, normals: _Seq[float]
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`sample` of the 3 + 3 ideal values at the addresses (ValueError outside)."""
+    def sample_values_at(
+        self, sensordata: np.ndarray, force_adr: int, torque_adr: int, normals: _Seq[float]
+    ) -> tuple[float, float, float, float, float, float]:
+        """The noisy wrench of :meth:`sample_at` as one tuple of six floats."""
 
 class ImuNoiseCore:
     def __init__(
@@ -740,6 +744,23 @@ class RotorPlantCore:
     def set_rejected(self, i: int, value: int) -> None: ...
     def command_duties(self, duties: list[float]) -> None:
         """``Esc.command_duty`` of every rotor in one call (ValueError on a wrong count)."""
+    def set_truth_layout(
+        self,
+        foot_body: int,
+        ee_body: int,
+        qpos_addresses: list[int],
+        dof_addresses: list[int],
+        fixed_base: bool,
+    ) -> None: ...
+    def truth_arrays(
+        self,
+        xpos: np.ndarray,
+        xquat: np.ndarray,
+        qpos: np.ndarray,
+        qvel: np.ndarray,
+        subtree_com: np.ndarray,
+    ) -> tuple[np.ndarray, ...]:
+        """(base pos, base quat, lin vel, ang vel, joint q, joint qd, CoG, EE pos, thrusts)."""
 
 # --- canwire ---
 class CanMasterError(RdmError): ...
@@ -833,3 +854,7 @@ def rosserial_scan(
     Returns ``(events, pos, frames, clean, broke, reset)``: good frames as
     ``(topic_id, payload, offset)``, other events as ``(kind, offset, data)`` with kind
     ``"skip"`` or the reject reason; used by ``rdm.protocol.rosserial.framing.FrameParser``."""
+
+# --- mstruth ---
+# WrenchNoiseCore.sample_values_at and RotorPlantCore.{set_truth_layout, truth_arrays} are
+# stubbed in their classes above (crates/rdm_py/src/{sensor_sim,rotor_plant}.rs).

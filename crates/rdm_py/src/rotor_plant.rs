@@ -7,6 +7,7 @@
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::exceptions::{PyIndexError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::PyTuple;
 use rdm_core::sim::esc_duty::EscDuty;
 use rdm_core::sim::rotor_plant::{CeilingRatio, RotorPlant, RotorPlantStatus};
 
@@ -19,6 +20,50 @@ struct RotorPlantCore {
     site_xpos: Py<PyArray2<f64>>,
     site_xmat: Py<PyArray2<f64>>,
     ctrl: Py<PyArray1<f64>>,
+    /// Where the ground truth reads MjData (see ``set_truth_layout``); None: not set.
+    truth: Option<TruthLayout>,
+}
+
+/// MjData indices of the 100 Hz ground-truth record (``rdm.plant.Plant._ground_truth``).
+#[derive(Clone, Debug)]
+struct TruthLayout {
+    foot_body: usize,
+    ee_body: usize,
+    qpos_addresses: Vec<usize>,
+    dof_addresses: Vec<usize>,
+    fixed_base: bool,
+}
+
+/// Row `row` (3 values) of an (n, 3)-shaped C-contiguous view, or an error naming `what`.
+fn row3(view: &[f64], row: usize, what: &str) -> PyResult<[f64; 3]> {
+    view.get(row * 3..row * 3 + 3)
+        .and_then(|r| <[f64; 3]>::try_from(r).ok())
+        .ok_or_else(|| PyIndexError::new_err(format!("{what}: body {row} out of range")))
+}
+
+/// `view[addresses]` (numpy fancy indexing), or an error naming `what`.
+fn gather<'py>(
+    py: Python<'py>,
+    view: &[f64],
+    addresses: &[usize],
+    what: &str,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let out = PyArray1::<f64>::zeros(py, addresses.len(), false);
+    {
+        let mut w = out.try_readwrite()?;
+        let w = w.as_slice_mut()?;
+        for (dst, &a) in w.iter_mut().zip(addresses) {
+            *dst = *view.get(a).ok_or_else(|| {
+                PyIndexError::new_err(format!("{what}: address {a} out of range"))
+            })?;
+        }
+    }
+    Ok(out)
+}
+
+fn c_slice<'a>(view: &'a numpy::PyReadonlyArrayDyn<'_, f64>, what: &str) -> PyResult<&'a [f64]> {
+    view.as_slice()
+        .map_err(|_| PyValueError::new_err(format!("{what}: must be C-contiguous")))
 }
 
 fn index_error(what: &str, i: usize) -> PyErr {
@@ -81,6 +126,7 @@ impl RotorPlantCore {
             site_xpos,
             site_xmat,
             ctrl,
+            truth: None,
         })
     }
 
@@ -236,6 +282,81 @@ impl RotorPlantCore {
     /// Thrusts of the last apply/step, ceiling effect included [N].
     fn applied(&self) -> Vec<f64> {
         self.inner.applied().to_vec()
+    }
+
+    /// Where :meth:`truth_arrays` reads: the foot and end-effector body ids, the joints'
+    /// qpos and dof addresses (joint order), and whether the base is fixed (zero base
+    /// velocities).
+    fn set_truth_layout(
+        &mut self,
+        foot_body: usize,
+        ee_body: usize,
+        qpos_addresses: Vec<usize>,
+        dof_addresses: Vec<usize>,
+        fixed_base: bool,
+    ) {
+        self.truth = Some(TruthLayout {
+            foot_body,
+            ee_body,
+            qpos_addresses,
+            dof_addresses,
+            fixed_base,
+        });
+    }
+
+    /// The ground truth's MjData copies in one call: (base position, base quaternion, base
+    /// linear velocity, base angular velocity, joint positions, joint velocities, CoG,
+    /// end-effector position, applied thrusts), each a new float64 array holding the same
+    /// values as the numpy copies of ``Plant._ground_truth_plain``.
+    fn truth_arrays<'py>(
+        &self,
+        py: Python<'py>,
+        xpos: numpy::PyReadonlyArrayDyn<'py, f64>,
+        xquat: numpy::PyReadonlyArrayDyn<'py, f64>,
+        qpos: numpy::PyReadonlyArrayDyn<'py, f64>,
+        qvel: numpy::PyReadonlyArrayDyn<'py, f64>,
+        subtree_com: numpy::PyReadonlyArrayDyn<'py, f64>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let layout = self
+            .truth
+            .as_ref()
+            .ok_or_else(|| PyValueError::new_err("set_truth_layout: not called"))?;
+        let xpos = c_slice(&xpos, "xpos")?;
+        let xquat = c_slice(&xquat, "xquat")?;
+        let qpos = c_slice(&qpos, "qpos")?;
+        let qvel = c_slice(&qvel, "qvel")?;
+        let subtree_com = c_slice(&subtree_com, "subtree_com")?;
+        let fb = layout.foot_body;
+        let base_position = row3(xpos, fb, "xpos")?;
+        let base_quaternion: [f64; 4] = xquat
+            .get(fb * 4..fb * 4 + 4)
+            .and_then(|r| <[f64; 4]>::try_from(r).ok())
+            .ok_or_else(|| PyIndexError::new_err(format!("xquat: body {fb} out of range")))?;
+        let (lin, ang) = if layout.fixed_base {
+            ([0.0; 3], [0.0; 3])
+        } else {
+            let v: [f64; 6] = qvel
+                .get(..6)
+                .and_then(|r| <[f64; 6]>::try_from(r).ok())
+                .ok_or_else(|| PyIndexError::new_err("qvel: fewer than 6 base dofs"))?;
+            ([v[0], v[1], v[2]], [v[3], v[4], v[5]])
+        };
+        let cog = row3(subtree_com, fb, "subtree_com")?;
+        let ee_position = row3(xpos, layout.ee_body, "xpos")?;
+        let joints = gather(py, qpos, &layout.qpos_addresses, "qpos")?;
+        let joint_velocities = gather(py, qvel, &layout.dof_addresses, "qvel")?;
+        (
+            PyArray1::from_slice(py, &base_position),
+            PyArray1::from_slice(py, &base_quaternion),
+            PyArray1::from_slice(py, &lin),
+            PyArray1::from_slice(py, &ang),
+            joints,
+            joint_velocities,
+            PyArray1::from_slice(py, &cog),
+            PyArray1::from_slice(py, &ee_position),
+            PyArray1::from_slice(py, self.inner.applied()),
+        )
+            .into_pyobject(py)
     }
 
     /// Overwrite the applied thrusts (computed by the caller's own ceiling models).

@@ -81,6 +81,25 @@ impl WrenchNoiseCore {
         })?;
         Ok(wrench_out(py, &self.inner.sample(&ideal, &normals)))
     }
+
+    /// The noisy (Fx, Fy, Fz, Mx, My, Mz) of :meth:`sample_at` as one tuple of floats (no
+    /// arrays, no saturation flags): the 1 kHz foot-sensor read that goes straight to the
+    /// Leptrino mirror (``LeptrinoSensorNode.set_wrench_values``).
+    fn sample_values_at(
+        &self,
+        sensordata: PyReadonlyArray1<'_, f64>,
+        force_adr: usize,
+        torque_adr: usize,
+        normals: [f64; 6],
+    ) -> PyResult<(f64, f64, f64, f64, f64, f64)> {
+        let ideal = with_slice(&sensordata, |sd| -> PyResult<[f64; 6]> {
+            let f: [f64; 3] = values_at(sd, force_adr, "force_adr")?;
+            let t: [f64; 3] = values_at(sd, torque_adr, "torque_adr")?;
+            Ok([f[0], f[1], f[2], t[0], t[1], t[2]])
+        })?;
+        let v = self.inner.sample(&ideal, &normals).values;
+        Ok((v[0], v[1], v[2], v[3], v[4], v[5]))
+    }
 }
 
 fn wrench_out<'py>(py: Python<'py>, s: &WrenchSample) -> WrenchOut<'py> {

@@ -90,7 +90,13 @@ class LeptrinoSensorNode:
         # Plain floats (numpy arrays -> tolist): the same values, cheaper arithmetic below.
         f = force.tolist() if hasattr(force, "tolist") else force
         t = torque.tolist() if hasattr(torque, "tolist") else torque
-        w = (*f, *t)
+        self.set_wrench_values((*f, *t))
+
+    def set_wrench_values(self, w: tuple[float, ...]) -> None:
+        """:meth:`set_wrench` of one (Fx, Fy, Fz, Mx, My, Mz) tuple (the plant bridge's
+        1 kHz path: ``Plant.wrench_values`` gives it, no arrays in between)."""
+        if type(w) is not tuple:
+            w = tuple(w)
         if len(w) == 6:
             # The common sample: six values inside the limits (NaN and inf fail a chained
             # comparison), which the clip below leaves as they are: keep ``w`` itself.

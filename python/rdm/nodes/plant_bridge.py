@@ -279,6 +279,18 @@ class PlantBridge:
         self._truth_sink = truth_sink
         #: ``Plant.wrench_force_torque`` when the plant has it (else ``Plant.wrench``)
         self._wrench_read = getattr(plant, "wrench_force_torque", None)
+        #: Per sensor, the sink's tuple form when it is a Leptrino mirror's ``set_wrench``
+        #: and the plant gives tuples (``Plant.wrench_values``): no arrays at 1 kHz.
+        self._wrench_values = getattr(plant, "wrench_values", None)
+        self._wrench_tuple_sinks = {
+            key: getattr(getattr(sink, "__self__", None), "set_wrench_values", None)
+            for key, sink in self._wrench_sinks.items()
+            if getattr(sink, "__name__", "") == "set_wrench"
+        }
+        if self._wrench_values is None or any(
+            self._wrench_tuple_sinks.get(key) is None for key in self._wrench_sinks
+        ):
+            self._wrench_tuple_sinks = {}
         # Ticks between samples (each reading fires on the first tick, then every n-th).
         self._imu_n = _ratio(imu_period, period, "imu_period") or 1
         self._wrench_n = _ratio(wrench_period, period, "wrench_period") or 1
@@ -431,7 +443,11 @@ class PlantBridge:
                 neuron.set_imu(r.gyro, r.accel, r.mag)
         if self._wrench_on and n % self._wrench_n == 0:
             read = self._wrench_read
-            if read is not None:  # rdm.plant.Plant: no WrenchReading (the same values)
+            if self._wrench_tuple_sinks:  # Plant -> Leptrino mirror: one tuple of floats
+                values = self._wrench_values
+                for key, sink in self._wrench_tuple_sinks.items():
+                    sink(values(key))
+            elif read is not None:  # rdm.plant.Plant: no WrenchReading (the same values)
                 for key, sink in self._wrench_sinks.items():
                     sink(*read(key))
             else:

@@ -186,6 +186,14 @@ class Plant:
         )
         for i, e in enumerate(self.escs):
             e.attach(self._rotors, i)
+        # Where the ground truth's one-call copy reads MjData (:meth:`_ground_truth`).
+        self._rotors.set_truth_layout(
+            self._foot_body,
+            self._ee_body,
+            self._qadr.tolist(),
+            self._vadr.tolist(),
+            self.options.fixed_base,
+        )
         #: Every ESC keeps its state in ``self._rotors`` at its rotor index: duty commands
         #: may go to the core in one call (``escs`` must not be replaced afterwards).
         self._duties_in_core = True
@@ -516,6 +524,19 @@ class Plant:
         )
         return force, torque
 
+    def wrench_values(self, sensor: str) -> tuple[float, float, float, float, float, float]:
+        """(Fx, Fy, Fz, Mx, My, Mz) of :meth:`wrench` as one tuple of floats (the bridge's
+        1 kHz foot-sensor read into the Leptrino mirror): the same normals and numbers."""
+        adr = self._wrench_adr.get(sensor)
+        if adr is None:
+            raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
+        if self._stale:
+            self.sync()
+        model = self.wrench_models[sensor]
+        return model._core.sample_values_at(
+            self._v_sensordata, adr[0], adr[1], model._normals.take(6)
+        )
+
     def wrench_plain(self, sensor: str) -> WrenchReading:
         """:meth:`wrench` through the Python list path (the reference of the Rust read)."""
         adr = self._wrench_adr.get(sensor)
@@ -568,32 +589,25 @@ class Plant:
     def _ground_truth(self) -> GroundTruth:
         d = self._fresh()
         points, force, torque, zmp, slip, yaw = self._tracker.measure(d)
-        fb = self._foot_body
-        ee = self._ee_body
-        # Cached views (stable for the data's lifetime): MjData attribute access builds a
-        # new numpy view on each call, which costs more than the copies themselves.
-        xpos = self._v_xpos
-        if self.options.fixed_base:
-            lin = np.zeros(3)
-            ang = np.zeros(3)
-        else:
-            qvel = self._v_qvel
-            lin = qvel[0:3].copy()
-            ang = qvel[3:6].copy()
+        # Every MjData copy (and the applied thrusts) in one Rust call over the cached views
+        # (stable for the data's lifetime): the same values as the plain form's numpy copies.
+        pos, quat, lin, ang, qj, vj, cog, ee_pos, thrusts = self._rotors.truth_arrays(
+            self._v_xpos, self._v_xquat, self._v_qpos, self._v_qvel, self._v_subtree_com
+        )
         ee_quat = np.zeros(4)
-        mujoco.mju_mat2Quat(ee_quat, self._v_xmat[ee])
+        mujoco.mju_mat2Quat(ee_quat, self._v_xmat[self._ee_body])  # MuJoCo's own bits
         return GroundTruth.from_values(
             float(d.time),
-            xpos[fb].copy(),
-            self._v_xquat[fb].copy(),
+            pos,
+            quat,
             lin,
             ang,
-            self._v_qpos[self._qadr],  # fancy indexing copies
-            self._v_qvel[self._vadr],
-            self._v_subtree_com[fb].copy(),
-            xpos[ee].copy(),
+            qj,
+            vj,
+            cog,
+            ee_pos,
             ee_quat,
-            np.array(self._rotors.applied(), dtype=float),
+            thrusts,
             points > 0,
             points,
             force,

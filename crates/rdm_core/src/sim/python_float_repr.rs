@@ -39,11 +39,18 @@ impl PythonFloatRepr {
     /// Fill `digits` with the shortest round-trip digits of `magnitude` (> 0, finite) that
     /// Python picks, and return the decimal exponent of the first digit.
     ///
-    /// `{:e}` breaks an exact tie between two shortest candidates upwards; Python's dtoa
-    /// takes the even one. A tie can only have been broken wrongly when the last digit is
-    /// odd: then the correctly rounded (half-even, `{:.N$e}`) string of the same length is
-    /// Python's pick if it still reads back as the same double.
+    /// Ryu gives the shortest digits that read back as the same double, the closest to the
+    /// exact value among them, and breaks an exact tie to the even digit: Python's dtoa mode
+    /// 0 choice (tested against `repr` on random bit patterns, tests/test_truth_fast_paths.py).
     fn shortest_digits(&mut self, magnitude: f64) -> i32 {
+        let mut buffer = ryu::Buffer::new();
+        let text = buffer.format_finite(magnitude);
+        normalise_digits(text, &mut self.digits)
+    }
+
+    /// The reference form of [`Self::shortest_digits`] (std's `{:e}`, then the half-even tie
+    /// check through `{:.N$e}` and a parse): kept to test the Ryu path against.
+    fn shortest_digits_std(&mut self, magnitude: f64) -> i32 {
         self.scratch.clear();
         // Writing into a String cannot fail.
         let _ = write!(self.scratch, "{magnitude:e}");
@@ -60,6 +67,12 @@ impl PythonFloatRepr {
         exponent
     }
 
+    /// `repr(value)` through the std reference digits ([`Self::shortest_digits_std`]), for
+    /// tests of the Ryu path.
+    pub fn push_repr_std(&mut self, value: f64, out: &mut String) {
+        self.push_repr_with(value, out, Self::shortest_digits_std);
+    }
+
     /// Append `repr(value)` for a finite value, `null` (JSON) for NaN and infinities (the
     /// logger's convention: JSON has no NaN).
     pub fn push_json(&mut self, value: f64, out: &mut String) {
@@ -73,6 +86,33 @@ impl PythonFloatRepr {
     /// Append Python's `repr(value)` (finite values; NaN and infinities as Python writes
     /// them: `nan`, `inf`, `-inf`).
     pub fn push_repr(&mut self, value: f64, out: &mut String) {
+        if value.is_finite() && value != 0.0 {
+            // Ryu writes fixed notation for decimal exponents -5..=15, Python for -4..=15,
+            // both with the same digits and `.0` for whole numbers: inside the common range
+            // Ryu's text is Python's (tested against the digit path below).
+            let mut buffer = ryu::Buffer::new();
+            let text = buffer.format_finite(value);
+            let body = text.strip_prefix('-').unwrap_or(text);
+            if !body.contains(['e', 'E']) && !body.starts_with("0.0000") {
+                out.push_str(text);
+                return;
+            }
+        }
+        self.push_repr_with(value, out, Self::shortest_digits);
+    }
+
+    /// `repr(value)` always through the digit path (Ryu digits, Python's layout rules): the
+    /// reference of [`Self::push_repr`]'s direct copy of Ryu's fixed-notation text.
+    pub fn push_repr_digits(&mut self, value: f64, out: &mut String) {
+        self.push_repr_with(value, out, Self::shortest_digits);
+    }
+
+    fn push_repr_with(
+        &mut self,
+        value: f64,
+        out: &mut String,
+        shortest: fn(&mut Self, f64) -> i32,
+    ) {
         if value.is_nan() {
             out.push_str("nan");
             return;
@@ -89,7 +129,7 @@ impl PythonFloatRepr {
             out.push_str("0.0");
             return;
         }
-        let exponent = self.shortest_digits(magnitude);
+        let exponent = shortest(self, magnitude);
         let digits = self.digits.as_str();
         let n = digits.len() as i32;
         if (-4..16).contains(&exponent) {
@@ -128,6 +168,29 @@ impl PythonFloatRepr {
             let _ = write!(out, "{e}");
         }
     }
+}
+
+/// Ryu's text of a positive finite value (`1.0`, `0.00123`, `1.5e-7`, `1e16`) as its
+/// significant digits (into `digits`, no leading or trailing zeros) and the decimal exponent
+/// of the first digit.
+fn normalise_digits(text: &str, digits: &mut String) -> i32 {
+    let (mantissa, exp10) = match text.split_once(['e', 'E']) {
+        Some((m, e)) => (m, e.parse::<i32>().unwrap_or(0)),
+        None => (text, 0),
+    };
+    let (whole, fraction) = mantissa.split_once('.').unwrap_or((mantissa, ""));
+    digits.clear();
+    let mut leading_zeros = 0i32;
+    for c in whole.bytes().chain(fraction.bytes()) {
+        if digits.is_empty() && c == b'0' {
+            leading_zeros += 1;
+        } else {
+            digits.push(char::from(c));
+        }
+    }
+    let kept = digits.trim_end_matches('0').len();
+    digits.truncate(kept);
+    whole.len() as i32 - 1 - leading_zeros + exp10
 }
 
 /// Split `d.ddde-X` into its digits (into `digits`) and its exponent.
@@ -177,6 +240,34 @@ mod tests {
         ];
         for (v, want) in cases {
             assert_eq!(repr(v), want, "{v:e}");
+        }
+    }
+
+    #[test]
+    fn ryu_digits_match_the_std_reference() {
+        // Bit patterns across the whole range (a xorshift walk), and the layout cases above.
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut writer = PythonFloatRepr::new();
+        let (mut fast, mut plain) = (String::new(), String::new());
+        for i in 0..200_000u64 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let v = if i % 4 == 0 {
+                // short decimals and their neighbours: where ties and trailing zeros live
+                let base = (state % 100_000) as f64 / 8.0_f64.powi((state >> 40) as i32 % 9);
+                f64::from_bits(base.to_bits().wrapping_add((state >> 60) % 3))
+            } else {
+                f64::from_bits(state)
+            };
+            fast.clear();
+            plain.clear();
+            writer.push_repr(v, &mut fast);
+            writer.push_repr_std(v, &mut plain);
+            assert_eq!(fast, plain, "{v:e} bits {:#x}", v.to_bits());
+            fast.clear();
+            writer.push_repr_digits(v, &mut fast);
+            assert_eq!(fast, plain, "digits {v:e} bits {:#x}", v.to_bits());
         }
     }
 
