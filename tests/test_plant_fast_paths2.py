@@ -7,20 +7,11 @@ from __future__ import annotations
 import random
 
 import can
-import numpy as np
 import pytest
+from float_bits import same_bits
 from test_neuron_bank import SPECS, Twin
 
 from rdm.plant import Plant
-
-
-def _same(x, y) -> bool:
-    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-    return (
-        x.shape == y.shape
-        and np.array_equal(x, y, equal_nan=True)
-        and np.array_equal(np.signbit(x), np.signbit(y))
-    )
 
 
 def _tracker_state(t) -> tuple:
@@ -43,10 +34,10 @@ def _landing_pair() -> tuple[Plant, Plant]:
     return fast, plain
 
 
-def _measure_same(a: tuple, b: tuple) -> None:
+def _measuresame_bits(a: tuple, b: tuple) -> None:
     assert a[0] == b[0]
     for x, y in zip(a[1:], b[1:], strict=True):
-        assert _same(x, y)
+        assert same_bits(x, y)
 
 
 def test_contact_tracker_and_measurement_equal_the_reference_through_contact_changes():
@@ -69,7 +60,7 @@ def test_contact_tracker_and_measurement_equal_the_reference_through_contact_cha
         if k % 7 == 0:
             a = fast._tracker.measure_contacts(fast._fresh())
             b = plain._tracker.measure_plain(plain._fresh())
-            _measure_same(a, b)
+            _measuresame_bits(a, b)
             assert _tracker_state(fast._tracker) == _tracker_state(plain._tracker), k
     assert len(ncons) > 2 and 0 in ncons  # several contact counts, and flight
     assert anchors == {True, False}
@@ -107,7 +98,7 @@ def test_bridge_wrench_read_equals_the_reference_reading():
         for key in fast.wrench_models:
             force, torque = fast.wrench_force_torque(key)
             ref = plain.wrench_plain(key)
-            assert _same(force, ref.force) and _same(torque, ref.torque), (step, key)
+            assert same_bits(force, ref.force) and same_bits(torque, ref.torque), (step, key)
     for p in pair:
         with pytest.raises(ValueError, match="unknown wrench sensor 'nope'"):
             p.wrench_force_torque("nope")

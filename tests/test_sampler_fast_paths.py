@@ -16,6 +16,7 @@ import struct
 import mcap
 import numpy as np
 import pytest
+from float_bits import same_bits
 from mcap.reader import make_reader
 
 from rdm._rdm import json_record
@@ -26,15 +27,6 @@ from rdm.scenarios.stack import MocapNode, quaternion_yaw
 from rdm.sim.json_record import encode_record, encode_record_plain
 from rdm.sim.mcap_fast import VERIFIED_MCAP
 from rdm.sim.mcap_log import McapLogger, _jsonable
-
-
-def _same(x, y) -> bool:
-    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-    return (
-        x.shape == y.shape
-        and np.array_equal(x, y, equal_nan=True)
-        and np.array_equal(np.signbit(x), np.signbit(y))
-    )
 
 
 def _reference(values: dict) -> str:
@@ -154,11 +146,11 @@ def test_plant_readings_from_sensordata_equal_the_list_path():
         plain.step(1)
         a, b = fast.imu(), plain.imu_plain()
         for x, y in ((a.gyro, b.gyro), (a.accel, b.accel), (a.mag, b.mag)):
-            assert _same(x, y), step
+            assert same_bits(x, y), step
         assert a.saturated == b.saturated
         for key in fast.wrench_models:
             u, w = fast.wrench(key), plain.wrench_plain(key)
-            assert _same(u.force, w.force) and _same(u.torque, w.torque), (step, key)
+            assert same_bits(u.force, w.force) and same_bits(u.torque, w.torque), (step, key)
             assert np.array_equal(u.saturated, w.saturated)
 
 
@@ -177,12 +169,14 @@ def test_sample_at_equals_the_python_form_on_random_and_bad_values():
         adr = rng.integers(0, len(view) - 3, size=3).tolist()
         a = imu_a.sample_at(view, *adr)
         b = imu_b.sample_lists_plain(*(view[i : i + 3].tolist() for i in adr))
-        assert all(_same(x, y) for x, y in ((a.gyro, b.gyro), (a.accel, b.accel), (a.mag, b.mag)))
+        assert all(
+            same_bits(x, y) for x, y in ((a.gyro, b.gyro), (a.accel, b.accel), (a.mag, b.mag))
+        )
         assert a.saturated == b.saturated
         f, t = adr[0], adr[1]
         u = w_a.sample_at(view, f, t)
         w = w_b.sample_list_plain(view[f : f + 3].tolist() + view[t : t + 3].tolist())
-        assert _same(u.force, w.force) and _same(u.torque, w.torque)
+        assert same_bits(u.force, w.force) and same_bits(u.torque, w.torque)
         assert np.array_equal(u.saturated, w.saturated)
     # An address past the end: ValueError naming it, on both paths; the streams stay aligned.
     sd = np.zeros(10)
@@ -197,7 +191,7 @@ def test_sample_at_equals_the_python_form_on_random_and_bad_values():
     with pytest.raises(OverflowError):
         w_a.sample_at(sd, -1, 0)  # negative address: refused by the conversion
     w_b._normals.take(6)
-    assert _same(w_a.sample_at(sd, 0, 3).force, w_b.sample_list_plain([0.0] * 6).force)
+    assert same_bits(w_a.sample_at(sd, 0, 3).force, w_b.sample_list_plain([0.0] * 6).force)
 
 
 # -------------------------------------------------------------------------- ground truth
@@ -212,9 +206,9 @@ def _assert_same_truth(a: GroundTruth, b: GroundTruth) -> None:
         x, y = fa[k], fb[k]
         assert type(x) is type(y), k
         if isinstance(x, np.ndarray):
-            assert x.dtype == y.dtype and _same(x, y), k
+            assert x.dtype == y.dtype and same_bits(x, y), k
         elif isinstance(x, float):
-            assert _same(x, y), k
+            assert same_bits(x, y), k
         else:
             assert x == y, k
 
@@ -271,11 +265,11 @@ def test_duty_commands_in_one_call_equal_one_command_per_esc():
         fast.set_rotor_duties(duties)
         plain.set_rotor_duties_plain(duties)
         for a, b in zip(fast.escs, plain.escs, strict=True):
-            assert _same(a.target_thrust, b.target_thrust), k
-            assert _same(a.duty, b.duty) and a.rejected == b.rejected
+            assert same_bits(a.target_thrust, b.target_thrust), k
+            assert same_bits(a.duty, b.duty) and a.rejected == b.rejected
         fast.step(1)
         plain.step(1)
-        assert _same(fast.rotor_thrusts(), plain.rotor_thrusts())
+        assert same_bits(fast.rotor_thrusts(), plain.rotor_thrusts())
     assert sum(e.rejected for e in fast.escs) > 10
     with pytest.raises(ValueError, match="duties"):
         fast.set_rotor_duties(np.zeros(3))
@@ -335,9 +329,9 @@ def test_mocap_node_equals_the_array_formula():
         v = np.zeros(3) if last is None else (p - last) / 0.01
         last = p
         pos, vel, yaw = rec.calls[-1]
-        assert _same(pos, p) and _same(vel, v)
+        assert same_bits(pos, p) and same_bits(vel, v)
         assert all(type(x) is float for x in pos + vel)
-        assert _same(yaw, quaternion_yaw(gt.base_quaternion))
+        assert same_bits(yaw, quaternion_yaw(gt.base_quaternion))
 
 
 # ------------------------------------------------------------------------------- MCAP

@@ -500,24 +500,25 @@ class Plant:
             raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
         return self._sensor(f"{sensor}_force"), self._sensor(f"{sensor}_torque")
 
-    def wrench(self, sensor: str) -> WrenchReading:
-        """One noisy sample of a wrench sensor (``foot_wrench``, ``end_effector_wrench``)."""
+    def _wrench_address(self, sensor: str) -> tuple[int, int]:
+        """(force, torque) addresses of a wrench sensor in ``sensordata``, the state synced."""
         adr = self._wrench_adr.get(sensor)
         if adr is None:
             raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
         if self._stale:
             self.sync()
+        return adr
+
+    def wrench(self, sensor: str) -> WrenchReading:
+        """One noisy sample of a wrench sensor (``foot_wrench``, ``end_effector_wrench``)."""
+        adr = self._wrench_address(sensor)
         f, t = adr
         return self.wrench_models[sensor].sample_at(self._v_sensordata, f, t)
 
     def wrench_force_torque(self, sensor: str) -> tuple[np.ndarray, np.ndarray]:
         """(force, torque) of :meth:`wrench` without the :class:`WrenchReading` (the bridge's
         1 kHz foot-sensor read): the same normals and numbers."""
-        adr = self._wrench_adr.get(sensor)
-        if adr is None:
-            raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
-        if self._stale:
-            self.sync()
+        adr = self._wrench_address(sensor)
         model = self.wrench_models[sensor]
         force, torque, _ = model._core.sample_at(
             self._v_sensordata, adr[0], adr[1], model._normals.take(6)
@@ -527,11 +528,7 @@ class Plant:
     def wrench_values(self, sensor: str) -> tuple[float, float, float, float, float, float]:
         """(Fx, Fy, Fz, Mx, My, Mz) of :meth:`wrench` as one tuple of floats (the bridge's
         1 kHz foot-sensor read into the Leptrino mirror): the same normals and numbers."""
-        adr = self._wrench_adr.get(sensor)
-        if adr is None:
-            raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
-        if self._stale:
-            self.sync()
+        adr = self._wrench_address(sensor)
         model = self.wrench_models[sensor]
         return model._core.sample_values_at(
             self._v_sensordata, adr[0], adr[1], model._normals.take(6)
@@ -539,11 +536,7 @@ class Plant:
 
     def wrench_plain(self, sensor: str) -> WrenchReading:
         """:meth:`wrench` through the Python list path (the reference of the Rust read)."""
-        adr = self._wrench_adr.get(sensor)
-        if adr is None:
-            raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
-        if self._stale:
-            self.sync()
+        adr = self._wrench_address(sensor)
         sd = self._v_sensordata
         f, t = adr
         return self.wrench_models[sensor].sample_list(
