@@ -133,3 +133,31 @@ class Rig:
 
     def count(self, topic: str, t0: float, t1: float) -> int:
         return sum(1 for t, _ in self.by_topic[topic] if t0 <= t < t1)
+
+
+def servo_readings(rng, n: int, count: int) -> list[list[tuple[int, int]]]:
+    """``count`` random ``servo/states`` readings for ``n`` servos as (index, angle) lists:
+    full, partial, with an unknown index (99) or with a joint twice."""
+    readings = []
+    for _ in range(count):
+        idx = list(range(n))
+        kind = rng.random()
+        if kind < 0.2:
+            idx = idx[: rng.randint(1, n - 1)]  # partial
+        elif kind < 0.3:
+            idx = [*idx, 99]  # unknown index
+        elif kind < 0.4:
+            idx = [*idx, idx[2]]  # a joint twice
+        readings.append([(i, rng.randint(1800, 2300)) for i in idx])
+    return readings
+
+
+def assert_same_servo_state(fast, plain) -> None:
+    """Two onboard nodes hold the same present q, seen flags, joint targets and counters
+    (in the same order)."""
+    assert fast.present_q.tobytes() == plain.present_q.tobytes()
+    assert fast._seen.tobytes() == plain._seen.tobytes()
+    assert (fast.joint_targets is None) == (plain.joint_targets is None)
+    if plain.joint_targets is not None:
+        assert fast.joint_targets.tobytes() == plain.joint_targets.tobytes()
+    assert list(fast.counts.items()) == list(plain.counts.items())

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fed_byte_link import FedByteLink
+from onboard_rig import assert_same_servo_state, servo_readings
 
 from rdm import _rdm
 from rdm.nodes.onboard_control import _all_finite, _clip
@@ -336,17 +337,7 @@ def test_servo_states_cache_matches_the_loop():
     plain.reuse_servo_states = False
     n = len(fast.config.servo_map.servo_index)
     rng = random.Random(31)
-    readings = []
-    for _ in range(12):
-        idx = list(range(n))
-        kind = rng.random()
-        if kind < 0.2:
-            idx = idx[: rng.randint(1, n - 1)]  # partial
-        elif kind < 0.3:
-            idx = [*idx, 99]  # unknown index
-        elif kind < 0.4:
-            idx = [*idx, idx[2]]  # a joint twice
-        readings.append([(i, rng.randint(1800, 2300)) for i in idx])
+    readings = servo_readings(rng, n, 12)
     for k in range(600):
         reading = readings[rng.randrange(len(readings))]
         if k == 0:
@@ -354,12 +345,7 @@ def test_servo_states_cache_matches_the_loop():
         msg = states.new(servos=[unit.new(index=i, angle=a) for i, a in reading])
         fast._on_servo_states(msg)
         plain._on_servo_states(msg)
-        assert fast.present_q.tobytes() == plain.present_q.tobytes()
-        assert fast._seen.tobytes() == plain._seen.tobytes()
-        assert (fast.joint_targets is None) == (plain.joint_targets is None)
-        if plain.joint_targets is not None:
-            assert fast.joint_targets.tobytes() == plain.joint_targets.tobytes()
-        assert list(fast.counts.items()) == list(plain.counts.items())
+        assert_same_servo_state(fast, plain)
         if k % 50 == 0:  # someone else moves present_q: the cached writes still apply
             fast.present_q[:] = plain.present_q[:] = rng.random()
     assert fast.counts["servo_unknown_index"] > 0 and fast.counts["servo_states_partial"] > 0

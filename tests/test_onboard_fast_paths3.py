@@ -19,7 +19,7 @@ import struct
 import numpy as np
 import pytest
 from fed_byte_link import FedByteLink
-from onboard_rig import REG, Rig
+from onboard_rig import REG, Rig, assert_same_servo_state, servo_readings
 
 from rdm.nodes.onboard import OnboardNode, _four_axis_payload, servo_states_decodes
 from rdm.nodes.onboard_config import OnboardConfig
@@ -120,17 +120,7 @@ def test_servo_payload_handler_matches_the_decoded_message():
     plain.reuse_servo_states = False
     n = len(fast.config.servo_map.servo_index)
     rng = random.Random(11)
-    readings = []
-    for _ in range(14):
-        idx = list(range(n))
-        kind = rng.random()
-        if kind < 0.2:
-            idx = idx[: rng.randint(1, n - 1)]
-        elif kind < 0.3:
-            idx = [*idx, 99]
-        elif kind < 0.4:
-            idx = [*idx, idx[2]]
-        readings.append([(i, rng.randint(1800, 2300)) for i in idx])
+    readings = servo_readings(rng, n, 14)
     for k in range(800):
         reading = readings[rng.randrange(len(readings))] if k else readings[0][:3]
         temp = rng.choice([0, 0, 0, 41])  # same (index, angle), other bytes now and then
@@ -140,12 +130,7 @@ def test_servo_payload_handler_matches_the_decoded_message():
         p = SERVOS.encode(msg)
         fast._on_servo_payload(p)
         plain._on_event(MessageReceived("servo/states", "spinal/ServoStates", 102, msg))
-        assert fast.present_q.tobytes() == plain.present_q.tobytes()
-        assert fast._seen.tobytes() == plain._seen.tobytes()
-        assert (fast.joint_targets is None) == (plain.joint_targets is None)
-        if plain.joint_targets is not None:
-            assert fast.joint_targets.tobytes() == plain.joint_targets.tobytes()
-        assert list(fast.counts.items()) == list(plain.counts.items())
+        assert_same_servo_state(fast, plain)
         if k % 60 == 0:  # someone else moves present_q: the cached writes still apply
             fast.present_q[:] = plain.present_q[:] = rng.random()
     assert 0 < len(fast._servo_raw) <= 8
