@@ -20,8 +20,6 @@ import pytest
 
 from rdm.nodes.spinal_servo_bridge import MirrorRejection, ServoBridge
 
-pytest.importorskip("mujoco")
-
 TICKS = 2600  # past the 2 s CAN boot: the master runs, servos report, duties flow
 
 

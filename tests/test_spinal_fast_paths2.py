@@ -225,7 +225,6 @@ def _run(base: str, fast: bool) -> tuple[dict[str, bytes], dict, int]:
 
 
 def test_stack_bytes_and_counters_equal_fast_and_plain_tick() -> None:
-    pytest.importorskip("mujoco")
     with tempfile.TemporaryDirectory() as a, tempfile.TemporaryDirectory() as b:
         fast_files, fast_diag, skipped = _run(a, True)
         plain_files, plain_diag, _ = _run(b, False)
