@@ -214,6 +214,43 @@ def test_trajectory_interpolated_into_servo_targets() -> None:
         rig.close()
 
 
+def _servo_goals(rig: Rig, k: int = -1) -> tuple[float, np.ndarray]:
+    """(time, joint-order angles) of the k-th ``servo/target_states`` the node sent."""
+    t, msg = rig.by_topic["servo/target_states"][k]
+    by_index = dict(zip(msg.index, msg.angles, strict=True))
+    raw = [by_index[i] for i in rig.node.config.servo_map.servo_index]
+    return t, (np.array(raw) - 2048) * 2 * np.pi / 4096
+
+
+@pytest.mark.parametrize("lead", [0.1, 0.35])
+def test_servo_goals_lead_the_trajectory_by_the_configured_time(lead: float) -> None:
+    """``servo_lead_s``: the goals on the wire are the path ``lead`` s ahead of the node's
+    clock (clamped to the path's last point), decoded from the bytes Spinal receives."""
+    rig = make_rig(vectoring=False, servo_lead_s=lead)
+    try:
+        rig.servo_q = np.zeros(10)
+        q_end = np.array([0.4, -0.2, 0.1, 0.3, 0.0, 0.2, 0.0, 0.1, 0.5, -0.1])
+        assert rig.node.set_trajectory([(0.5, np.zeros(10)), (1.5, q_end)])
+        rig.run(0.0, 1.0)
+        t, got = _servo_goals(rig)
+        want = q_end * np.clip((t + lead - 0.5) / 1.0, 0.0, 1.0)
+        assert np.allclose(got, want, atol=2e-3)
+        assert not np.allclose(got, q_end * (t - 0.5), atol=2e-2)  # not the plan at t
+        rig.run(1.0, 1.6)  # past the end: the last point, held
+        assert np.allclose(_servo_goals(rig)[1], q_end, atol=2e-3)
+        assert rig.node.set_joint_targets(np.zeros(10))  # a fixed goal is sent as it is
+        rig.run(1.6, 1.7)
+        assert np.allclose(_servo_goals(rig)[1], 0.0, atol=2e-3)
+    finally:
+        rig.close()
+
+
+@pytest.mark.parametrize("lead", [-0.01, float("nan"), 1.5])
+def test_servo_lead_out_of_range_is_refused(lead: float) -> None:
+    with pytest.raises(ValueError, match="servo_lead_s"):
+        OnboardConfig(servo_lead_s=lead)
+
+
 def test_perched_node_holds_position_and_altitude_loops() -> None:
     """Perched, a mocap error must neither tilt the attitude targets nor change the altitude
     thrust (eq. 20: λ_flight keeps the weight, λ_perch alone presses); flying, the same error

@@ -683,7 +683,13 @@ class OnboardNode:
         if self.arming.flying and self.last_command is not None:
             self._send_command(self.last_command)
         if targets is not None:
-            self._send_servo_targets(targets)
+            lead = self.config.servo_lead_s
+            if lead > 0.0 and self._trajectory is not None:
+                goals = self._current_joint_targets(now + lead)
+                assert goals is not None
+                self._send_servo_targets(goals)
+            else:
+                self._send_servo_targets(targets)
 
     def _send_command(self, c: ControlCommand) -> None:
         if self._direct_remote("four_axes/command", "spinal/FourAxisCommand"):

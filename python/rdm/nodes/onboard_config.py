@@ -153,6 +153,12 @@ class OnboardConfig:
     #: Send ``desire_coordinate`` (False: Spinal controls the IMU link's attitude, correct
     #: only while that link is parallel to the CoG frame, e.g. q1 = 0).
     send_desire_coordinate: bool = True
+    #: Servo goals of a :meth:`OnboardNode.set_trajectory` path are taken this far ahead of
+    #: ``now`` [s]: feed-forward for the joint servos' lag (their time constant plus the
+    #: 40 Hz goal hold and the CAN/RS485 hand-over). 0 = the planned angle at its own time,
+    #: as the paper's feed-forward planner and JSK send it. The control model keeps the plan
+    #: at ``now``. Identify the value on the robot (docs/servolead.md).
+    servo_lead_s: float = 0.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
@@ -173,6 +179,8 @@ class OnboardConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}={v!r} must be finite and > 0")
+        if not (math.isfinite(self.servo_lead_s) and 0.0 <= self.servo_lead_s <= 1.0):
+            raise ValueError(f"servo_lead_s={self.servo_lead_s!r} must be in [0, 1] s")
         if len(self.foot_sensor_offset) != 6:
             raise ValueError("foot_sensor_offset needs 6 values")
 

@@ -17,7 +17,7 @@ import numpy as np
 from rdm.nodes.onboard_config import OnboardConfig
 from rdm.sim import Metric, format_metrics_table, write_summary
 
-from .stack import Stack, StackOptions
+from .stack import SIM_SERVO_LEAD_S, Stack, StackOptions
 
 _PROGRESS: ContextVar[Callable[[Any, float], None] | None] = ContextVar(
     "rdm_sim_progress", default=None
@@ -55,7 +55,9 @@ def sim_stack_options(seed: int, uart: str, **overrides: Any) -> StackOptions:
     kw: dict[str, Any] = {"seed": seed, "uart": uart, "progress": _PROGRESS.get()}
     kw.update(overrides)
     if "onboard" not in kw:
-        kw["onboard"] = OnboardConfig()  # the paper's Table V gains (the core defaults)
+        # the paper's Table V gains (the core defaults); joint goals lead the plan by the
+        # simulated servos' identified lag
+        kw["onboard"] = OnboardConfig(servo_lead_s=SIM_SERVO_LEAD_S)
     return StackOptions(**kw)
 
 

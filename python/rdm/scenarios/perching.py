@@ -41,7 +41,7 @@ from .common import (
     sim_stack_options,
     truth_arrays,
 )
-from .stack import Stack, build_stack
+from .stack import SIM_SERVO_LEAD_S, Stack, build_stack
 
 ARM_AT = 1.5  # s
 CLIMB_Z = 0.8  # m: CoG height of the first hover (arm horizontal)
@@ -109,6 +109,7 @@ def onboard_config(**overrides: Any) -> OnboardConfig:
     kw: dict[str, Any] = {
         "position_gains": dict(POSITION_GAINS),
         "perch_params": dict(PERCH_PARAMS),
+        "servo_lead_s": SIM_SERVO_LEAD_S,
     }
     kw.update(overrides)
     return OnboardConfig(**kw)

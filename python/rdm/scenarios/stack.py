@@ -185,6 +185,14 @@ class StackOptions:
     servo: ServoParams | None = field(default_factory=lambda: ServoParams(kp=150.0, kv=5.0))
 
 
+#: Feed-forward lead of the joint servo goals on a planned path that the scenarios configure
+#: (``OnboardConfig.servo_lead_s``) for the simulated servos above. Identified, not tuned to a
+#: metric: with no lead the joints trail the plan by 50-52 ms in both stages of ``tracking``
+#: (``rdm.scenarios.servo_lag.joint_lags``): the servo's kv/kp = 33 ms, the 40 Hz goal hold
+#: (12.5 ms on average) and the Spinal -> Neuron -> servo hand-over. docs/servolead.md.
+SIM_SERVO_LEAD_S = 0.05
+
+
 @dataclass
 class Stack:
     """The built stack; ``loop.run(seconds)`` advances it. Close with :meth:`close`."""

@@ -47,7 +47,8 @@ from .common import (
 )
 from .perching import HANGING_FLIGHT_GAINS, PERCH_POSTURE, joint_path, onboard_config
 from .push import StagedPerchingScript
-from .stack import Stack, build_stack
+from .servo_lag import joint_lags
+from .stack import SIM_SERVO_LEAD_S, Stack, build_stack
 
 AXES = ("x", "y", "z")
 ANGLES = ("roll", "pitch", "yaw")
@@ -196,6 +197,7 @@ class StageErrors:
     root_std: np.ndarray  # true foot position std over the window [m]
     root_p: np.ndarray  # root position used for the target [m]
     root_r: np.ndarray  # root orientation used for the target
+    joint_lag_s: np.ndarray  # q1..q6: how far the true joints trail the plan [s] (NaN: still)
 
 
 def ee_targets(
@@ -231,6 +233,9 @@ def stage_errors(stack: Stack, robot: Robot, plan: StagePlan | None) -> StageErr
     root_p = a["foot"][pre].mean(axis=0)
     root_r = _wxyz_to_rot(a["quat"][pre][-1]).as_matrix()[0]
     p_ref, r_ref = ee_targets(robot, root_p, root_r, plan_at(plan.points, t[win]))
+    times = np.array([p[0] for p in plan.points])
+    qs = np.array([p[1] for p in plan.points])
+    lags = joint_lags(t[win], a["q"][win, :6], times, qs[:, :6])
     ee_q = np.array([g.end_effector_quaternion for g, w in zip(stack.truth, win, strict=True) if w])
     pos_err = a["ee"][win] - p_ref
     att_err = (_wxyz_to_rot(ee_q) * Rotation.from_matrix(r_ref).inv()).as_rotvec()
@@ -246,6 +251,7 @@ def stage_errors(stack: Stack, robot: Robot, plan: StagePlan | None) -> StageErr
         root_std=np.std(a["foot"][win], axis=0),
         root_p=root_p,
         root_r=root_r,
+        joint_lag_s=lags,
     )
 
 
@@ -369,11 +375,15 @@ def run(
     plots: bool = True,
     flight_posture: str = "straight",
     flight_gains: dict | str | None = "posture",
+    servo_lead_s: float = SIM_SERVO_LEAD_S,
 ) -> ScenarioResult:
     """Run the scenario: it stops after the perched stage, or at ``duration``.
     ``flight_gains``: position gains of the flight stage ("posture": ``FLIGHT_STAGE_GAINS``
-    of ``flight_posture``; None: the run's configuration; a dict: those)."""
-    opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard_config())
+    of ``flight_posture``; None: the run's configuration; a dict: those).
+    ``servo_lead_s``: feed-forward lead of the servo goals (0: the plan at its own time, as
+    the paper's planner sends it; docs/servolead.md)."""
+    onboard = onboard_config(servo_lead_s=servo_lead_s)
+    opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard)
     robot = Robot.default()
     if flight_gains == "posture":
         flight_gains = FLIGHT_STAGE_GAINS.get(flight_posture)
@@ -393,6 +403,7 @@ def run(
         "t_perch": script.t_perch,
         "t_perched_stage": script.t_perched_stage,
         "final_phase": script.phase,
+        "servo_lead_s": servo_lead_s,
     }
     if flight_gains is not None:
         facts["flight_gains"] = dict(flight_gains)
@@ -405,6 +416,8 @@ def run(
                 "pos_max": e.pos_max.tolist(),
                 "att_max": e.att_max.tolist(),
                 "root_std": e.root_std.tolist(),
+                # what is left of the joints' lag behind the plan (q1..q6; NaN: not moved)
+                "joint_lag_s": e.joint_lag_s.tolist(),
             }
     result = ScenarioResult("tracking", stack, metrics_of(stack, errs), facts)
     result.errors = errs  # type: ignore[attr-defined]
