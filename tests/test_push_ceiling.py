@@ -34,7 +34,9 @@ def _closed_form(robot, q6, axis: int) -> float:
         (m[1], push_ceiling.QP_HALF[0]),
         (m[0], push_ceiling.QP_HALF[1]),
     ):
-        bounds.append(k * spare / (abs(c) + k * abs(e[2])))
+        den = abs(c) + k * abs(e[2])
+        if den > 0:  # a row the force does not load bounds nothing
+            bounds.append(k * spare / den)
     if abs(e[2]) > 0:
         bounds.append((spare - 8.0) / abs(e[2]))
     return min(bounds)

@@ -72,14 +72,18 @@ PAPER_FOOT_STD_PERCHED = (0.0009, 0.0011, 0.0004)
 #: pitch moment of 0.57 m x F_z against ~2.7 N m of pitch authority (arm rotors hover at
 #: 3.8 N, 1 N minimum): 1.0 peels the arm rotors to their minimum and the robot flips.
 #: Perched, per axis, in the push posture PERCHED_POSTURE with the 5 Hz foot-wrench filter
-#: (PERCHED_CUTOFF_HZ): (0.1, 0.2, 0.15) holds on seeds 0 and 1 (slip 0.14 / 0.13 mm, min
-#: F_z 3.1 / 2.5 N); y 0.3 and 0.4 hold on seed 0 but lose contact on seed 1 (0.5 / 1.4 mm),
-#: z 0.2 lost contact on seed 0, 1 Hz lags (y 0.4 slips 1.2 mm). The static ceiling of the
-#: perching QP (perch rotors only, push_ceiling.ceiling) there is 1.6 / 6.1 / 3.5 N peak,
-#: i.e. 3 / 36 / 10 % of Table VIII's averages; docs/scenarios.md. (Hanging posture, 1 Hz:
-#: 0.05 held, 0.1 slipped 1.5 mm, 0.2 peeled, 1.0 fell.)
+#: (PERCHED_CUTOFF_HZ): pushes whose peak stays within 80 % of the perching QP's static
+#: ceiling there (perch rotors only, push_ceiling.ceiling: 1.6 / 6.1 / 3.5 N peak, i.e.
+#: 3.1 / 36 / 10 % of Table VIII's averages), y kept at 0.2 (0.3 and 0.4 lost contact on
+#: seed 1): the contact conditions the paper's controller enforces (eqs. 39-44) can hold
+#: them, and the plate does not rock (foot z std 0.02 mm). Beyond the ceiling,
+#: PERCHED_SCALE_BEYOND_CEILING (the previous default) is held too (slip 0.14 mm, contact
+#: kept) but the x push rocks the plate on its edge by up to 80 mrad (foot z std 0.8 mm,
+#: twice Table IX's); docs/scenarios.md. (Hanging posture, 1 Hz: 0.05 held, 0.1 slipped
+#: 1.5 mm, 0.2 peeled, 1.0 fell.)
 FLIGHT_SCALE = (1.0, 0.3, 0.4)
-PERCHED_SCALE = (0.1, 0.2, 0.15)
+PERCHED_SCALE = (0.025, 0.2, 0.08)
+PERCHED_SCALE_BEYOND_CEILING = (0.1, 0.2, 0.15)
 #: Perched push posture (q1..q6), reached by a 4 s joint motion after the perch settled:
 #: the middle link horizontal (q2 = -pi/2) and the tool turned up (q4 = -pi/2), so the end
 #: effector is 0.2 m below the plate (0.4 m out) instead of 1.02 m (hanging posture): the
