@@ -35,13 +35,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--speed", type=_speed, default=None, help="fast | realtime | FACTOR")
     parser.add_argument("--uart", choices=("inproc", "pty"), default="inproc")
+    parser.add_argument(
+        "--backend",
+        choices=("fast", "reference"),
+        default="fast",
+        help="node implementations: fast (Rust Neuron bank and CAN master, the default) or "
+        "reference (Python Neuron mirrors and CAN master on a python-can bus; same bytes)",
+    )
     parser.add_argument("--out", default="runs", help="base folder of the run folder")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
     from rdm.scenarios import SCENARIOS
-    from rdm.scenarios.common import progress_to
+    from rdm.scenarios.common import backend, progress_to
     from rdm.sim import format_metrics_table
 
     sc = SCENARIOS[args.scenario]
@@ -50,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         print("rdm sim: --duration must be > 0", file=sys.stderr)
         return 2
     print(f"rdm sim {sc.name}: {sc.description}", file=sys.stderr)
-    with progress_to(sys.stderr, duration):
+    with progress_to(sys.stderr, duration), backend(args.backend):
         result = sc.run(
             args.out, duration=duration, seed=args.seed, uart=args.uart, speed=args.speed
         )
