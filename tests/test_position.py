@@ -193,3 +193,51 @@ def test_vectoring_thrust_leans_toward_the_lateral_demand(yaw):
     # k_phi = 0 on the arm apparatus (Table V): its thrust stays vertical
     arm = rx(out.alpha[1]) @ ry(out.beta[1]) @ np.array([0.0, 0.0, 1.0])
     np.testing.assert_allclose(arm, [0.0, 0.0, 1.0], atol=1e-12)
+
+
+def _wound(x_pid, y_pid, error=(0.3, -0.2), ticks=40, limit=(1.0, 1.0)):
+    """A controller whose integral was built by ``ticks`` steps at a constant error."""
+    ctrl = pc.PositionController(x_pid=x_pid, y_pid=y_pid, integral_limit=limit)
+    rots = np.stack([np.eye(3)] * 2)
+    for _ in range(ticks):
+        ctrl.step(np.zeros(2), np.zeros(2), np.array(error), np.zeros(2), 0.0, rots, 0.025)
+    return ctrl
+
+
+@pytest.mark.parametrize(
+    ("new_x", "new_y", "new_limit"),
+    [
+        ((1.5, 1.0, 2.0), (0.3, 0.05, 0.8), (1.0, 1.0)),  # the fold gains' kind of switch
+        ((1.0, 0.1, 2.0), (7.0, 0.005, 10.5), (0.05, 1.0)),  # new x limit bounds the action
+        ((1.0, 0.0, 2.0), (3.0, 0.5, 4.0), (1.0, 1.0)),  # no integral on the new x
+    ],
+)
+def test_bumpless_switch_carries_the_integral_action(new_x, new_y, new_limit):
+    """After ``take_integral_action`` the new controller's first output has the old
+    integral action k_I ∫e (bounded by the new limit) plus its own P and D terms, computed
+    here with numpy from the old controller's integral."""
+    old = _wound((4.6, 1.5, 7.0), (7.0, 0.005, 10.5))
+    old_action = np.array([1.5, 0.005]) * old.integral
+    assert np.all(np.abs(old_action) > 1e-3)  # something to carry
+    new = pc.PositionController(x_pid=new_x, y_pid=new_y, integral_limit=new_limit)
+    new.take_integral_action(old)
+    ki = np.array([new_x[1], new_y[1]])
+    want = np.where(ki == 0, 0.0, np.clip(old_action, -np.array(new_limit), new_limit))
+    np.testing.assert_allclose(ki * new.integral, want, rtol=1e-12, atol=1e-15)
+    # the next step (zero velocities: no D term): numpy PI from the carried integral
+    e, dt = np.array([0.01, -0.02]), 0.025
+    rots = np.stack([np.eye(3)] * 2)
+    out = new.step(np.zeros(2), np.zeros(2), e, np.zeros(2), 0.0, rots, dt)
+    kp = np.array([new_x[0], new_y[0]])
+    action = np.clip(ki * new.integral, -np.array(new_limit), new_limit)  # after this step
+    np.testing.assert_allclose(out.acceleration[:2], kp * e + action, rtol=1e-12)
+    carried_then_stepped = np.clip(want + ki * e * dt, -np.array(new_limit), new_limit)
+    np.testing.assert_allclose(action, carried_then_stepped, rtol=1e-12, atol=1e-15)
+    # the old controller is untouched
+    np.testing.assert_allclose(np.array([1.5, 0.005]) * old.integral, old_action)
+
+
+def test_plain_switch_restarts_the_integral():
+    old = _wound((4.6, 1.5, 7.0), (7.0, 0.005, 10.5))
+    new = pc.PositionController(x_pid=(1.0, 0.1, 2.0))
+    assert np.any(old.integral != 0) and np.all(new.integral == 0)

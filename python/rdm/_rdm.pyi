@@ -478,6 +478,8 @@ class PositionController:
     @property
     def integral(self) -> NDArray[np.float64]: ...
     def reset(self) -> None: ...
+    def take_integral_action(self, previous: PositionController) -> None:
+        """Bumpless gain switch: carry ``previous``'s integral action k_I ∫e per axis."""
 
 def vectoring_angles(n: NDArray[np.float64]) -> tuple[float, float]:
     """Eqs. (33)-(34) for a unit direction n: (alpha, beta)."""

@@ -132,6 +132,13 @@ impl PositionController {
     fn reset(&mut self) {
         self.inner.reset();
     }
+
+    /// Bumpless gain switch: takes over ``previous``'s integral action k_I ∫e per axis
+    /// (∫e rescaled by k_I,old / k_I,new, clamped to this controller's limit; 0 where the
+    /// new k_I is 0).
+    fn take_integral_action(&mut self, previous: PyRef<'_, PositionController>) {
+        self.inner.take_integral_action(&previous.inner);
+    }
 }
 
 /// Eqs. (33)-(34) for a unit direction n: returns (alpha, beta).

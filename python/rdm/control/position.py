@@ -94,3 +94,9 @@ class PositionController:
     def reset(self) -> None:
         """Zero the integrators."""
         self._core.reset()
+
+    def take_integral_action(self, previous: PositionController) -> None:
+        """Bumpless gain switch: carry ``previous``'s integral action ``k_I ∫e`` per axis
+        (``∫e`` rescaled by ``k_I,old / k_I,new``, clamped to this controller's
+        ``integral_limit``; 0 on an axis whose new ``k_I`` is 0)."""
+        self._core.take_integral_action(previous._core)

@@ -329,11 +329,16 @@ class ControlPipeline:
             self.counts["perch_entered"] += 1
         self.perching = on
 
-    def set_position_gains(self, gains: dict) -> None:
+    def set_position_gains(self, gains: dict, bumpless: bool = False) -> None:
         """Replace the position controller's gains (keyword overrides of
         :class:`PositionController`, as ``OnboardConfig.position_gains``): a gain schedule per
-        flight posture, as JSK's dynamic reconfigure. The new controller's integral starts at 0."""
-        self.position = PositionController(**gains)
+        flight posture, as JSK's dynamic reconfigure. The new controller's integral starts at
+        0, or with ``bumpless`` carries the old one's integral action ``k_I ∫e`` (no jump of
+        the target tilt at the switch)."""
+        new = PositionController(**gains)
+        if bumpless:
+            new.take_integral_action(self.position)
+        self.position = new
         self.counts["position_gains_set"] += 1
 
     def reset_integrators(self) -> None:

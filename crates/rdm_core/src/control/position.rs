@@ -215,6 +215,31 @@ impl PositionController {
         self.integral = Vector2::zeros();
     }
 
+    /// Bumpless gain switch: carries `previous`'s integral *action* `k_I ∫e` per axis into
+    /// this controller, i.e. `∫e` scaled by `k_I,old / k_I,new` and clamped to this
+    /// controller's `integral_limit`. An axis whose new `k_I` is 0 starts at 0 (no action to
+    /// carry). Without it a gain schedule restarts the integral and the target tilt jumps by
+    /// the old action.
+    pub fn take_integral_action(&mut self, previous: &PositionController) {
+        let pairs = [
+            (previous.gains.x.i, &self.gains.x),
+            (previous.gains.y.i, &self.gains.y),
+        ];
+        for (axis, (old_i, new)) in pairs.into_iter().enumerate() {
+            let action = old_i * previous.integral[axis];
+            self.integral[axis] = if new.i == 0.0 || !action.is_finite() {
+                0.0
+            } else {
+                let bounded = if new.integral_limit.is_finite() {
+                    action.clamp(-new.integral_limit, new.integral_limit)
+                } else {
+                    action
+                };
+                bounded / new.i
+            };
+        }
+    }
+
     /// One step. The integral advances by `e dt` (rectangle rule) and is then clamped so
     /// that `|k_I ∫e| <= integral_limit`.
     pub fn step(&mut self, input: &PositionInput) -> Result<PositionOutput, PositionError> {
