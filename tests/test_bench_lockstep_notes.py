@@ -1,0 +1,21 @@
+"""The lockstep bench's in-flight note: the real-time factor of the ticks after take-off,
+checked on synthetic per-tick times whose factor is known by construction."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rdm.bench import lockstep
+
+
+def test_airborne_note_uses_only_the_ticks_after_take_off():
+    first = round(lockstep.AIRBORNE_FROM_S * 1000)  # 1 ms ticks
+    # 1 ms of wall per tick on the floor (1x), 50 us per tick in the air (20x)
+    ns = np.array([1_000_000] * first + [50_000] * 1500, dtype=np.int64)
+    (note,) = lockstep._airborne_note(ns)
+    assert "20.00x real time" in note and "1.5 simulated s" in note
+
+
+def test_airborne_note_is_empty_for_a_run_that_ends_on_the_floor():
+    ns = np.full(round(lockstep.AIRBORNE_FROM_S * 1000), 1_000_000, dtype=np.int64)
+    assert lockstep._airborne_note(ns) == []
