@@ -129,6 +129,7 @@ def stack_config(seed: int) -> dict[str, Any]:
         "truth_period",
         "esc_tau",
         "battery_voltage",
+        "master_backend",
     )
     cfg = {k: getattr(opt, k) for k in keys}
     cfg["servo"] = None if opt.servo is None else asdict(opt.servo)
@@ -374,6 +375,8 @@ def spinal_main(cfg: dict[str, Any]) -> None:
         boot_delay_ms=opt.boot_delay_ms,
         gyro_calib_duration_s=opt.gyro_calib_duration_s,
         time_matched=opt.spinal_time_matched,
+        # the lockstep's CAN master (Rust by default) on this process's python-can bus
+        master_backend=getattr(opt, "master_backend", "python"),
     )
     imu_in = ImuReceiver(cfg["token"], spinal)
     start = _handshake({"spinal_pty": path})
@@ -388,6 +391,7 @@ def spinal_main(cfg: dict[str, Any]) -> None:
             "imu_samples": imu_in.samples,
             "imu_malformed": imu_in.malformed,
             "diagnostics": spinal.diagnostics(),
+            "can_master": type(spinal.master).__name__,
         }
         _write_report(folder, "spinal", report)
         imu_in.close()
