@@ -52,7 +52,7 @@ def progress_to(stream: TextIO, duration: float) -> Iterator[None]:
 #: :class:`StackOptions` fields of the node implementations: "fast" = the Rust Neuron bank,
 #: Rust CAN master, Rust plant coupling and the in-process CAN wire (the defaults);
 #: "reference" = one Python Neuron mirror per board and the Python CAN master on a python-can
-#: bus. The two give the same bytes on every wire (docs/lockstep.md; ``rdm sim --backend``).
+#: bus. The two give the same bytes on every wire (docs/sim.md; ``rdm sim --backend``).
 BACKENDS: dict[str, dict[str, Any]] = {
     "fast": {},
     "reference": {

@@ -376,7 +376,7 @@ def spinal_main(cfg: dict[str, Any]) -> None:
         gyro_calib_duration_s=opt.gyro_calib_duration_s,
         time_matched=opt.spinal_time_matched,
         # the lockstep's CAN master (Rust by default) on this process's python-can bus
-        master_backend=getattr(opt, "master_backend", "python"),
+        master_backend=opt.master_backend,
     )
     imu_in = ImuReceiver(cfg["token"], spinal)
     start = _handshake({"spinal_pty": path})
