@@ -116,3 +116,16 @@ def test_rdm_onboard_process_arms_and_commands() -> None:
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
+
+
+def test_rdm_onboard_refuses_a_negative_servo_lead() -> None:
+    """``--servo-lead`` reaches the node's configuration: an invalid lead is a clear error
+    (exit 2) before any port is opened."""
+    out = subprocess.run(
+        [sys.executable, "-m", "rdm.cli", "onboard", "--uart", "pty", "--servo-lead", "-0.1"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2
+    assert "servo_lead_s" in out.stderr

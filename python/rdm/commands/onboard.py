@@ -41,6 +41,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--lqi-every", type=int, default=1, help="synthesize LQI gains every N ticks (default 1)"
     )
+    parser.add_argument(
+        "--servo-lead",
+        type=float,
+        default=0.0,
+        help="send trajectory servo goals S s ahead (feed-forward for the servos' lag; "
+        "0 = the paper's; identify it, docs/servolead.md)",
+    )
     parser.add_argument("--control", default=None, help="udp:HOST:PORT for JSON commands")
     parser.add_argument("--arm", action="store_true", help="start the arming sequence at once")
     parser.add_argument("--duration", type=float, default=None, help="stop after this many s")
@@ -128,7 +135,9 @@ def run(args: argparse.Namespace) -> int:
     links: list[SerialLink] = []
     try:
         robot = Robot.shipped(args.robot)
-        config = OnboardConfig(rate_hz=args.rate, lqi_every=args.lqi_every)
+        config = OnboardConfig(
+            rate_hz=args.rate, lqi_every=args.lqi_every, servo_lead_s=args.servo_lead
+        )
         uart, k = _open(args.uart, "uart")
         links.append(uart)
         keep.append(k)
