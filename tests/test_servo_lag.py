@@ -40,3 +40,19 @@ def test_bad_shapes_are_refused() -> None:
         joint_lags(np.zeros(3), np.zeros((4, 2)), PLAN_T, PLAN_Q)
     with pytest.raises(ValueError):
         joint_lags(np.zeros(3), np.zeros((3, 2)), PLAN_T, PLAN_Q, max_lag_s=0.0)
+
+
+def test_the_scenarios_lead_is_configurable_per_block():
+    """``common.servo_lead`` sets the lead every scenario configuration takes; outside it
+    the identified ``SIM_SERVO_LEAD_S``; out-of-range values are refused."""
+    from rdm.scenarios import common, perching
+    from rdm.scenarios.stack import SIM_SERVO_LEAD_S
+
+    assert perching.onboard_config().servo_lead_s == SIM_SERVO_LEAD_S
+    with common.servo_lead(0.0):
+        assert perching.onboard_config().servo_lead_s == 0.0
+        assert common.sim_stack_options(0, "inproc").onboard.servo_lead_s == 0.0
+    assert common.sim_stack_options(0, "inproc").onboard.servo_lead_s == SIM_SERVO_LEAD_S
+    for bad in (-0.01, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="servo lead"), common.servo_lead(bad):
+            pass

@@ -73,6 +73,15 @@ def test_rdm_sim_backends_put_the_same_bytes_on_every_wire(tmp_path):
         assert a.stat().st_size > 0 and a.read_bytes() == b.read_bytes(), rel
 
 
+def test_rdm_sim_servo_lead_reaches_the_onboard_node(tmp_path):
+    out = _sim(["hover", "--duration", "1", "--servo-lead", "0.02", "--out", str(tmp_path)])
+    assert out.returncode in (0, 1), out.stderr
+    summary = json.loads((tmp_path / "hover-seed0" / "summary.json").read_text())
+    assert summary["servo_lead_s"] == 0.02
+    bad = _sim(["hover", "--servo-lead", "-0.1"], timeout=120)
+    assert bad.returncode == 2 and "--servo-lead" in bad.stderr
+
+
 def test_rdm_sim_rejects_unknown_backend():
     out = _sim(["hover", "--backend", "mock"], timeout=120)
     assert out.returncode == 2 and "invalid choice" in out.stderr

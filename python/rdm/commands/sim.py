@@ -21,6 +21,15 @@ def _speed(text: str) -> float | None:
     return v
 
 
+def _servo_lead(text: str) -> float:
+    from rdm.scenarios.common import check_servo_lead
+
+    try:
+        return check_servo_lead(float(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--servo-lead {text!r}: {exc}") from exc
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from rdm.scenarios import DEFAULT_SCENARIO, SCENARIOS
 
@@ -42,13 +51,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="node implementations: fast (Rust Neuron bank and CAN master, the default) or "
         "reference (Python Neuron mirrors and CAN master on a python-can bus; same bytes)",
     )
+    parser.add_argument(
+        "--servo-lead",
+        type=_servo_lead,
+        default=None,
+        help="send planned servo goals S s ahead (default: the scenarios' identified 0.05; "
+        "0 = the paper's feed-forward; docs/servolead.md)",
+    )
     parser.add_argument("--out", default="runs", help="base folder of the run folder")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
     from rdm.scenarios import SCENARIOS
-    from rdm.scenarios.common import backend, progress_to
+    from rdm.scenarios.common import backend, progress_to, scenario_servo_lead, servo_lead
     from rdm.sim import format_metrics_table
 
     sc = SCENARIOS[args.scenario]
@@ -56,8 +72,9 @@ def run(args: argparse.Namespace) -> int:
     if not duration > 0:
         print("rdm sim: --duration must be > 0", file=sys.stderr)
         return 2
+    lead = scenario_servo_lead() if args.servo_lead is None else args.servo_lead
     print(f"rdm sim {sc.name}: {sc.description}", file=sys.stderr)
-    with progress_to(sys.stderr, duration), backend(args.backend):
+    with servo_lead(lead), progress_to(sys.stderr, duration), backend(args.backend):
         result = sc.run(
             args.out, duration=duration, seed=args.seed, uart=args.uart, speed=args.speed
         )

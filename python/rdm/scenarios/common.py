@@ -63,6 +63,33 @@ BACKENDS: dict[str, dict[str, Any]] = {
     },
 }
 _BACKEND: ContextVar[str] = ContextVar("rdm_sim_backend", default="fast")
+_SERVO_LEAD: ContextVar[float] = ContextVar("rdm_sim_servo_lead", default=SIM_SERVO_LEAD_S)
+
+
+def scenario_servo_lead() -> float:
+    """The servo-goal lead [s] the scenarios configure (``OnboardConfig.servo_lead_s``):
+    :data:`SIM_SERVO_LEAD_S`, or the value of an enclosing :func:`servo_lead` block."""
+    return _SERVO_LEAD.get()
+
+
+def check_servo_lead(seconds: float) -> float:
+    """``seconds`` as a float if it is a usable servo lead (finite, in [0, 1] s, as
+    ``OnboardConfig`` accepts), else ValueError."""
+    seconds = float(seconds)
+    if not (math.isfinite(seconds) and 0.0 <= seconds <= 1.0):
+        raise ValueError(f"servo lead {seconds!r} s must be in [0, 1]")
+    return seconds
+
+
+@contextmanager
+def servo_lead(seconds: float) -> Iterator[None]:
+    """Every scenario run inside the block sends its servo goals ``seconds`` ahead of the
+    planned joint path (0 = the paper's feed-forward; ``rdm sim --servo-lead``)."""
+    token = _SERVO_LEAD.set(check_servo_lead(seconds))
+    try:
+        yield
+    finally:
+        _SERVO_LEAD.reset(token)
 
 
 @contextmanager
@@ -88,7 +115,7 @@ def sim_stack_options(seed: int, uart: str, **overrides: Any) -> StackOptions:
     if "onboard" not in kw:
         # the paper's Table V gains (the core defaults); joint goals lead the plan by the
         # simulated servos' identified lag
-        kw["onboard"] = OnboardConfig(servo_lead_s=SIM_SERVO_LEAD_S)
+        kw["onboard"] = OnboardConfig(servo_lead_s=scenario_servo_lead())
     return StackOptions(**kw)
 
 
@@ -168,6 +195,7 @@ def finish(result: ScenarioResult, seconds: float, wall_s: float) -> ScenarioRes
         spinal_rejected=dict(st.spinal.counters.rejected),
         onboard_state=st.onboard.state.value,
         backend=_BACKEND.get(),
+        servo_lead_s=st.onboard.config.servo_lead_s,
         # the node classes that ran (what the backend selected)
         nodes={
             "neuron": type(st.neurons[0]).__name__ if st.neurons else None,

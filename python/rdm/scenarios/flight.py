@@ -42,10 +42,11 @@ from .common import (
     finish,
     roll_pitch,
     run_stack,
+    scenario_servo_lead,
     sim_stack_options,
     truth_arrays,
 )
-from .stack import SIM_SERVO_LEAD_S, Stack, build_stack, quaternion_yaw
+from .stack import Stack, build_stack, quaternion_yaw
 
 #: Fig. 9 (A): the joints between links go from 0 to this [rad].
 Q_TARGET = (0.5, -0.5, 0.2, 0.8, 0.6, 0.0)
@@ -426,7 +427,9 @@ def run(
     if duration is not None and duration > plan.duration:
         plan = replace(plan, hold_s=duration - plan.change_end)
     seconds = plan.duration if duration is None else duration
-    onboard = OnboardConfig(send_desire_coordinate=desire_coordinate, servo_lead_s=SIM_SERVO_LEAD_S)
+    onboard = OnboardConfig(
+        send_desire_coordinate=desire_coordinate, servo_lead_s=scenario_servo_lead()
+    )
     opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard)
     robot = Robot.default()
     script_ref: dict[str, FlightScript] = {}

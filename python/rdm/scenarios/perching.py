@@ -38,10 +38,11 @@ from .common import (
     finish,
     roll_pitch,
     run_stack,
+    scenario_servo_lead,
     sim_stack_options,
     truth_arrays,
 )
-from .stack import SIM_SERVO_LEAD_S, Stack, build_stack
+from .stack import Stack, build_stack
 
 ARM_AT = 1.5  # s
 CLIMB_Z = 0.8  # m: CoG height of the first hover (arm horizontal)
@@ -109,7 +110,7 @@ def onboard_config(**overrides: Any) -> OnboardConfig:
     kw: dict[str, Any] = {
         "position_gains": dict(POSITION_GAINS),
         "perch_params": dict(PERCH_PARAMS),
-        "servo_lead_s": SIM_SERVO_LEAD_S,
+        "servo_lead_s": scenario_servo_lead(),
     }
     kw.update(overrides)
     return OnboardConfig(**kw)

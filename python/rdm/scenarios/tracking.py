@@ -42,13 +42,14 @@ from .common import (
     ScenarioResult,
     finish,
     run_stack,
+    scenario_servo_lead,
     sim_stack_options,
     truth_arrays,
 )
 from .perching import HANGING_FLIGHT_GAINS, PERCH_POSTURE, joint_path, onboard_config
 from .push import StagedPerchingScript
 from .servo_lag import joint_lags
-from .stack import SIM_SERVO_LEAD_S, Stack, build_stack
+from .stack import Stack, build_stack
 
 AXES = ("x", "y", "z")
 ANGLES = ("roll", "pitch", "yaw")
@@ -375,13 +376,16 @@ def run(
     plots: bool = True,
     flight_posture: str = "straight",
     flight_gains: dict | str | None = "posture",
-    servo_lead_s: float = SIM_SERVO_LEAD_S,
+    servo_lead_s: float | None = None,
 ) -> ScenarioResult:
     """Run the scenario: it stops after the perched stage, or at ``duration``.
     ``flight_gains``: position gains of the flight stage ("posture": ``FLIGHT_STAGE_GAINS``
     of ``flight_posture``; None: the run's configuration; a dict: those).
-    ``servo_lead_s``: feed-forward lead of the servo goals (0: the plan at its own time, as
-    the paper's planner sends it; docs/servolead.md)."""
+    ``servo_lead_s``: feed-forward lead of the servo goals (None: the scenarios' identified
+    lead, ``common.scenario_servo_lead()``; 0: the plan at its own time, as the paper's
+    planner sends it; docs/servolead.md)."""
+    if servo_lead_s is None:
+        servo_lead_s = scenario_servo_lead()
     onboard = onboard_config(servo_lead_s=servo_lead_s)
     opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard)
     robot = Robot.default()
@@ -403,7 +407,6 @@ def run(
         "t_perch": script.t_perch,
         "t_perched_stage": script.t_perched_stage,
         "final_phase": script.phase,
-        "servo_lead_s": servo_lead_s,
     }
     if flight_gains is not None:
         facts["flight_gains"] = dict(flight_gains)
