@@ -50,6 +50,8 @@ def test_drilling_touches_every_target_and_keeps_the_perch(drilling):
     assert all(math.isfinite(e) for e in errs), f"a target was never touched: {errs}"
     assert max(errs) < 0.01  # paper: about 0.01 m
     _perch_ok(drilling)
+    # the tasks send the planned joint goals at their own time (tasks.TASK_SERVO_LEAD_S)
+    assert drilling.facts["servo_lead_s"] == tasks.TASK_SERVO_LEAD_S == 0.0
 
 
 def test_drilling_presses_with_a_small_real_force(drilling):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from contextlib import nullcontext
 
 
 def _speed(text: str) -> float | None:
@@ -55,8 +56,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--servo-lead",
         type=_servo_lead,
         default=None,
-        help="send planned servo goals S s ahead (default: the scenarios' identified 0.05; "
-        "0 = the paper's feed-forward; docs/servolead.md)",
+        help="send planned servo goals S s ahead (default: the scenario's, 0.05 s identified "
+        "on the simulated servos, 0 for the tasks; 0 = the paper's feed-forward; "
+        "docs/servolead.md)",
     )
     parser.add_argument("--out", default="runs", help="base folder of the run folder")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -64,7 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from rdm.scenarios import SCENARIOS
-    from rdm.scenarios.common import backend, progress_to, scenario_servo_lead, servo_lead
+    from rdm.scenarios.common import backend, progress_to, servo_lead
     from rdm.sim import format_metrics_table
 
     sc = SCENARIOS[args.scenario]
@@ -72,9 +74,10 @@ def run(args: argparse.Namespace) -> int:
     if not duration > 0:
         print("rdm sim: --duration must be > 0", file=sys.stderr)
         return 2
-    lead = scenario_servo_lead() if args.servo_lead is None else args.servo_lead
+    # no --servo-lead: each scenario's own default (docs/servolead.md)
+    lead = nullcontext() if args.servo_lead is None else servo_lead(args.servo_lead)
     print(f"rdm sim {sc.name}: {sc.description}", file=sys.stderr)
-    with servo_lead(lead), progress_to(sys.stderr, duration), backend(args.backend):
+    with lead, progress_to(sys.stderr, duration), backend(args.backend):
         result = sc.run(
             args.out, duration=duration, seed=args.seed, uart=args.uart, speed=args.speed
         )

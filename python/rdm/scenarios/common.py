@@ -63,13 +63,15 @@ BACKENDS: dict[str, dict[str, Any]] = {
     },
 }
 _BACKEND: ContextVar[str] = ContextVar("rdm_sim_backend", default="fast")
-_SERVO_LEAD: ContextVar[float] = ContextVar("rdm_sim_servo_lead", default=SIM_SERVO_LEAD_S)
+_SERVO_LEAD: ContextVar[float | None] = ContextVar("rdm_sim_servo_lead", default=None)
 
 
-def scenario_servo_lead() -> float:
-    """The servo-goal lead [s] the scenarios configure (``OnboardConfig.servo_lead_s``):
-    :data:`SIM_SERVO_LEAD_S`, or the value of an enclosing :func:`servo_lead` block."""
-    return _SERVO_LEAD.get()
+def scenario_servo_lead(default: float = SIM_SERVO_LEAD_S) -> float:
+    """The servo-goal lead [s] a scenario configures (``OnboardConfig.servo_lead_s``): the
+    value of an enclosing :func:`servo_lead` block, else the scenario's ``default``
+    (:data:`SIM_SERVO_LEAD_S`; the tasks: 0, see ``tasks.TASK_SERVO_LEAD_S``)."""
+    value = _SERVO_LEAD.get()
+    return default if value is None else value
 
 
 def check_servo_lead(seconds: float) -> float:

@@ -45,12 +45,18 @@ from .common import (
     ScenarioResult,
     finish,
     run_stack,
+    scenario_servo_lead,
     sim_stack_options,
     truth_arrays,
 )
 from .stack import Stack, build_stack
 
 TASKS = ("drilling", "painting", "valve")
+#: Servo-goal lead of the tasks: 0, the paper's feed-forward, which their paths and timing
+#: were tuned and checked with (seeds 0-2). With the scenarios' 0.05 s, seed 1 jams the
+#: valve (the gripper pressed 43 N onto the wheel, 0.1 deg turned, 2.2 mm slip) and misses a
+#: drilling hole by 10.5 mm; not understood yet (docs/servolead.md).
+TASK_SERVO_LEAD_S = 0.0
 EE_SENSOR = "end_effector_wrench"
 #: Hole targets (dx, dy) relative to the nominal foot, on the board top. ASSUMPTION.
 DRILL_TARGETS: tuple[tuple[float, float], ...] = ((0.24, 0.0), (0.30, 0.05), (0.27, -0.05))
@@ -384,7 +390,8 @@ def run_task(
 
     duration = duration_of(task) if duration is None else duration
     if "onboard" not in stack_overrides:
-        stack_overrides["onboard"] = perching.onboard_config()
+        lead = scenario_servo_lead(TASK_SERVO_LEAD_S)
+        stack_overrides["onboard"] = perching.onboard_config(servo_lead_s=lead)
     layout = _valve_layout(Robot.default()) if task == "valve" else obj.TaskLayout()
     stack_overrides.setdefault("scene", obj.scene((task,), layout))
     opts = sim_stack_options(seed, uart, speed=speed, log=log, **stack_overrides)
