@@ -54,8 +54,8 @@ from .stack import Stack, build_stack
 TASKS = ("drilling", "painting", "valve")
 #: Servo-goal lead of the tasks: 0, the paper's feed-forward, which their paths and timing
 #: were tuned and checked with (seeds 0-2). With the scenarios' 0.05 s, seed 1 jams the
-#: valve (the gripper pressed 43 N onto the wheel, 0.1 deg turned, 2.2 mm slip) and misses a
-#: drilling hole by 10.5 mm; not understood yet (docs/servolead.md).
+#: valve (foot normal force 43-53 N once the contacts are on, 0.1 deg turned, 2.2 mm slip)
+#: and misses a drilling hole by 10.5 mm; not understood yet (docs/servolead.md).
 TASK_SERVO_LEAD_S = 0.0
 EE_SENSOR = "end_effector_wrench"
 #: Hole targets (dx, dy) relative to the nominal foot, on the board top. ASSUMPTION.
