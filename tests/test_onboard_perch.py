@@ -196,6 +196,14 @@ def test_bad_input_counted_never_nan_on_wire() -> None:
         rig.close()
 
 
+def _servo_goals(rig: Rig, k: int = -1) -> tuple[float, np.ndarray]:
+    """(time, joint-order angles) of the k-th ``servo/target_states`` the node sent."""
+    t, msg = rig.by_topic["servo/target_states"][k]
+    by_index = dict(zip(msg.index, msg.angles, strict=True))
+    raw = [by_index[i] for i in rig.node.config.servo_map.servo_index]
+    return t, (np.array(raw) - 2048) * 2 * np.pi / 4096
+
+
 def test_trajectory_interpolated_into_servo_targets() -> None:
     rig = make_rig(vectoring=False)
     try:
@@ -203,23 +211,13 @@ def test_trajectory_interpolated_into_servo_targets() -> None:
         q_end = np.array([0.4, -0.2, 0.1, 0.3, 0.0, 0.2, 0.0, 0.1, 0.5, -0.1])
         assert rig.node.set_trajectory([(0.5, np.zeros(10)), (1.5, q_end)])
         rig.run(0.0, 1.0)
-        t, msg = rig.by_topic["servo/target_states"][-1]
-        by_index = dict(zip(msg.index, msg.angles, strict=True))
-        assert sorted(by_index) == list(range(10))  # every servo, once
-        raw = [by_index[i] for i in rig.node.config.servo_map.servo_index]  # joint order
-        got = (np.array(raw) - 2048) * 2 * np.pi / 4096
+        _, msg = rig.by_topic["servo/target_states"][-1]
+        assert sorted(msg.index) == list(range(10))  # every servo, once
+        t, got = _servo_goals(rig)
         want = q_end * (t - 0.5) / 1.0
         assert np.allclose(got, want, atol=2e-3)
     finally:
         rig.close()
-
-
-def _servo_goals(rig: Rig, k: int = -1) -> tuple[float, np.ndarray]:
-    """(time, joint-order angles) of the k-th ``servo/target_states`` the node sent."""
-    t, msg = rig.by_topic["servo/target_states"][k]
-    by_index = dict(zip(msg.index, msg.angles, strict=True))
-    raw = [by_index[i] for i in rig.node.config.servo_map.servo_index]
-    return t, (np.array(raw) - 2048) * 2 * np.pi / 4096
 
 
 @pytest.mark.parametrize("lead", [0.1, 0.35])

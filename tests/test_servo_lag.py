@@ -54,5 +54,5 @@ def test_the_scenarios_lead_is_configurable_per_block():
         assert common.sim_stack_options(0, "inproc").onboard.servo_lead_s == 0.0
     assert common.sim_stack_options(0, "inproc").onboard.servo_lead_s == SIM_SERVO_LEAD_S
     for bad in (-0.01, 1.5, float("nan")):
-        with pytest.raises(ValueError, match="servo lead"), common.servo_lead(bad):
+        with pytest.raises(ValueError, match="servo_lead_s"), common.servo_lead(bad):
             pass

@@ -88,13 +88,6 @@ def test_rdm_sim_rejects_unknown_backend():
 
 
 def test_rdm_sim_rejects_unknown_scenario():
-    env = dict(os.environ, PYTHONPATH=str(Path(rdm.__file__).resolve().parent.parent))
-    out = subprocess.run(
-        [sys.executable, "-m", "rdm.cli", "sim", "no-such-experiment"],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=120,
-    )
+    out = _sim(["no-such-experiment"], timeout=120)
     assert out.returncode == 2
     assert "invalid choice" in out.stderr

@@ -23,7 +23,7 @@ def _speed(text: str) -> float | None:
 
 
 def _servo_lead(text: str) -> float:
-    from rdm.scenarios.common import check_servo_lead
+    from rdm.nodes.onboard_config import check_servo_lead
 
     try:
         return check_servo_lead(float(text))
@@ -33,6 +33,7 @@ def _servo_lead(text: str) -> float:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from rdm.scenarios import DEFAULT_SCENARIO, SCENARIOS
+    from rdm.scenarios.common import BACKENDS
 
     parser.add_argument(
         "scenario",
@@ -47,7 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--uart", choices=("inproc", "pty"), default="inproc")
     parser.add_argument(
         "--backend",
-        choices=("fast", "reference"),
+        choices=sorted(BACKENDS),
         default="fast",
         help="node implementations: fast (Rust Neuron bank and CAN master, the default) or "
         "reference (Python Neuron mirrors and CAN master on a python-can bus; same bytes)",

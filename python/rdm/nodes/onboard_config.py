@@ -86,6 +86,15 @@ class PwmInfoParams:
     motor_info: tuple[tuple[float, ...], ...] = tuple(tuple(r) for r in HYDRUS_MOTOR_INFO)
 
 
+def check_servo_lead(seconds: float) -> float:
+    """``seconds`` as a float if it is a usable servo-goal lead (finite, in [0, 1] s), else
+    ValueError (:attr:`OnboardConfig.servo_lead_s`, ``rdm sim --servo-lead``)."""
+    seconds = float(seconds)
+    if not (math.isfinite(seconds) and 0.0 <= seconds <= 1.0):
+        raise ValueError(f"servo_lead_s={seconds!r} must be in [0, 1] s")
+    return seconds
+
+
 @dataclass(frozen=True)
 class OnboardConfig:
     """All tunables of the onboard node (defaults: paper where it says, else assumptions)."""
@@ -179,8 +188,7 @@ class OnboardConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}={v!r} must be finite and > 0")
-        if not (math.isfinite(self.servo_lead_s) and 0.0 <= self.servo_lead_s <= 1.0):
-            raise ValueError(f"servo_lead_s={self.servo_lead_s!r} must be in [0, 1] s")
+        check_servo_lead(self.servo_lead_s)
         if len(self.foot_sensor_offset) != 6:
             raise ValueError("foot_sensor_offset needs 6 values")
 

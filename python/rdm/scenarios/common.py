@@ -14,7 +14,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from rdm.nodes.onboard_config import OnboardConfig
+from rdm.nodes.onboard_config import OnboardConfig, check_servo_lead
 from rdm.sim import Metric, format_metrics_table, write_summary
 
 from .stack import SIM_SERVO_LEAD_S, Stack, StackOptions
@@ -72,15 +72,6 @@ def scenario_servo_lead(default: float = SIM_SERVO_LEAD_S) -> float:
     (:data:`SIM_SERVO_LEAD_S`; the tasks: 0, see ``tasks.TASK_SERVO_LEAD_S``)."""
     value = _SERVO_LEAD.get()
     return default if value is None else value
-
-
-def check_servo_lead(seconds: float) -> float:
-    """``seconds`` as a float if it is a usable servo lead (finite, in [0, 1] s, as
-    ``OnboardConfig`` accepts), else ValueError."""
-    seconds = float(seconds)
-    if not (math.isfinite(seconds) and 0.0 <= seconds <= 1.0):
-        raise ValueError(f"servo lead {seconds!r} s must be in [0, 1]")
-    return seconds
 
 
 @contextmanager

@@ -98,10 +98,14 @@ def _frames(robot: Robot, q: np.ndarray) -> dict[str, np.ndarray]:
     return {k: np.asarray(fr[k], dtype=float) for k in ("foot", "cog", "end_effector")}
 
 
+def plan_arrays(points: list[tuple[float, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """(times (m,), full q (m, n_q)) of a planned path's samples."""
+    return np.array([p[0] for p in points]), np.array([p[1] for p in points])
+
+
 def plan_at(points: list[tuple[float, np.ndarray]], t: np.ndarray) -> np.ndarray:
     """Planned full q at times ``t``: linear between the samples, held outside (as the node)."""
-    times = np.array([p[0] for p in points])
-    qs = np.array([p[1] for p in points])
+    times, qs = plan_arrays(points)
     return np.column_stack([np.interp(t, times, qs[:, j]) for j in range(qs.shape[1])])
 
 
@@ -234,8 +238,7 @@ def stage_errors(stack: Stack, robot: Robot, plan: StagePlan | None) -> StageErr
     root_p = a["foot"][pre].mean(axis=0)
     root_r = _wxyz_to_rot(a["quat"][pre][-1]).as_matrix()[0]
     p_ref, r_ref = ee_targets(robot, root_p, root_r, plan_at(plan.points, t[win]))
-    times = np.array([p[0] for p in plan.points])
-    qs = np.array([p[1] for p in plan.points])
+    times, qs = plan_arrays(plan.points)
     lags = joint_lags(t[win], a["q"][win, :6], times, qs[:, :6])
     ee_q = np.array([g.end_effector_quaternion for g, w in zip(stack.truth, win, strict=True) if w])
     pos_err = a["ee"][win] - p_ref
