@@ -235,9 +235,3 @@ def test_bumpless_switch_carries_the_integral_action(new_x, new_y, new_limit):
     np.testing.assert_allclose(action, carried_then_stepped, rtol=1e-12, atol=1e-15)
     # the old controller is untouched
     np.testing.assert_allclose(np.array([1.5, 0.005]) * old.integral, old_action)
-
-
-def test_plain_switch_restarts_the_integral():
-    old = _wound((4.6, 1.5, 7.0), (7.0, 0.005, 10.5))
-    new = pc.PositionController(x_pid=(1.0, 0.1, 2.0))
-    assert np.any(old.integral != 0) and np.all(new.integral == 0)
