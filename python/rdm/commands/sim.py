@@ -58,8 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=_servo_lead,
         default=None,
         help="send planned servo goals S s ahead (default: the scenario's, 0.05 s identified "
-        "on the simulated servos, 0 for the tasks; 0 = the paper's feed-forward; "
-        "docs/servolead.md)",
+        "on the simulated servos; 0 = the paper's feed-forward; docs/servolead.md)",
     )
     parser.add_argument("--out", default="runs", help="base folder of the run folder")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")

@@ -69,7 +69,7 @@ _SERVO_LEAD: ContextVar[float | None] = ContextVar("rdm_sim_servo_lead", default
 def scenario_servo_lead(default: float = SIM_SERVO_LEAD_S) -> float:
     """The servo-goal lead [s] a scenario configures (``OnboardConfig.servo_lead_s``): the
     value of an enclosing :func:`servo_lead` block, else the scenario's ``default``
-    (:data:`SIM_SERVO_LEAD_S`; the tasks: 0, see ``tasks.TASK_SERVO_LEAD_S``)."""
+    (:data:`SIM_SERVO_LEAD_S`)."""
     value = _SERVO_LEAD.get()
     return default if value is None else value
 
