@@ -81,9 +81,10 @@ def test_slowed_hanging_approach_stays_bounded(tmp_path):
 def test_slowed_hanging_approach_with_the_configured_gains_grows(tmp_path):
     """The counter-check of the test above: the same slow approach with the configured
     gains (the behaviour before the fold gains) lets the horizontal error grow past 0.5 m
-    within 10 s of the fold's end."""
+    within 11.5 s of the fold's end (seed 0: 0.07 m at 5-6 s, 0.26 m at 8-9 s, 0.77 m at
+    10-11 s; with the uncalibrated IMU the larger bias kick got there by 10 s)."""
     timing = perching.PerchTiming(fold_gains=None, reconfigure_wait_s=6.0, approach_speed=0.02)
-    res = perching.run(tmp_path, duration=23.0, log=False, timing=timing)
+    res = perching.run(tmp_path, duration=24.0, log=False, timing=timing)
     a = truth_arrays(res.stack)
     t = a["t"]
     setpoint = a["cog"][np.searchsorted(t, perching.ARM_AT), :2]

@@ -206,6 +206,15 @@ def _quantize(v: float, lsb: float) -> float:
     return r * lsb
 
 
+def imu_model_of_seed(seed: int, noise: ImuNoise | None = None) -> ImuModel:
+    """The IMU error model that ``rdm.plant.Plant(seed=seed)`` draws (same biases, same
+    stream): the plant seeds its IMU with the first child of ``SeedSequence(seed)``. What a
+    process without the plant (the HIL Spinal process) needs to know the simulated IMU's
+    constant biases, e.g. for the flash calibration (``rdm.scenarios.stack``)."""
+    child = np.random.SeedSequence(seed).spawn(1)[0]
+    return ImuModel(noise or ImuNoise(), np.random.default_rng(child))
+
+
 @dataclass(frozen=True)
 class WrenchNoise:
     """Wrench sensor error model (ASSUMPTION: noise 0.3 % of rated capacity per axis).

@@ -37,6 +37,7 @@ from rdm.nodes.plant_bridge import BusLayout, PlantBridge, default_layout
 from rdm.nodes.servo_model import ServoConfig
 from rdm.nodes.spinal_mirror import SpinalMirror
 from rdm.plant import EscParams, Plant, ServoParams
+from rdm.plant.sensors import imu_model_of_seed
 from rdm.sim import CandumpCapture, McapLogger, RunFolder, open_inproc_uart, open_tapped_pty
 
 
@@ -179,6 +180,14 @@ class StackOptions:
     scene: Callable[[Any], None] | None = None
     #: Called as ``progress(stack, now)`` once per simulated second (``rdm sim``'s display).
     progress: Callable[[Any, float], None] | None = None
+    #: Spinal's flash holds an accelerometer calibration (JSK: ``imu_calib`` CALIB_ACC on a
+    #: level surface, then SAVE_CALIB_DATA; the estimator subtracts the stored bias,
+    #: jsk-wire-protocols.md sec. 3.2): the simulated IMU's constant bias, i.e. the average of
+    #: a long calibration on the level floor, where the simulated robot rests (tilt < 1e-5
+    #: deg). ASSUMPTION: a perfect calibration. False: an empty flash (bias 0, the behaviour
+    #: before); then seed 1's accelerometer bias (-0.13 m/s^2 in y: 0.8 deg of roll) tips the
+    #: perched plate onto its edges (ZMP on the edge 10.5 % of the time, docs/sim.md).
+    imu_acc_calibrated: bool = True
     #: Joint servo model. ASSUMPTION: a stiff position servo (kp 150 N m/rad, kv 5 N m s/rad,
     #: about 1 deg of error at 2.6 N m, torque limited to the stall torque) as a Dynamixel X
     #: holds its goal; the plant's softer default (kp 30) lets q2 sag 0.35 rad at take-off.
@@ -226,6 +235,15 @@ class Stack:
         """Cut (or restore) the Spinal <-> onboard UART in both directions."""
         self.spinal_link.dropped = dropped
         self.onboard_link.dropped = dropped
+
+
+def spinal_flash_calibration(opt: StackOptions | Any) -> dict[str, list[float]]:
+    """Spinal estimator overrides for the calibration its flash holds under ``opt``
+    (``imu_acc_calibrated``: ``acc_bias`` = the bias of the IMU that ``make_plant(opt)``
+    draws); empty for an uncalibrated flash. ``opt`` may be any object with the fields."""
+    if not opt.imu_acc_calibrated:
+        return {}
+    return {"acc_bias": imu_model_of_seed(opt.seed).accel_bias.tolist()}
 
 
 def make_plant(opt: StackOptions) -> tuple[Plant, np.ndarray]:
@@ -349,6 +367,7 @@ def build_stack(
         gyro_calib_duration_s=opt.gyro_calib_duration_s,
         time_matched=opt.spinal_time_matched,
         master_backend=opt.master_backend,
+        **spinal_flash_calibration(opt),
     )
     config = opt.onboard or OnboardConfig()
     from dataclasses import replace

@@ -112,7 +112,7 @@ def stack_config(seed: int) -> dict[str, Any]:
     """The lockstep stack's defaults (:class:`rdm.scenarios.stack.StackOptions`) as plain data
     for the children, so that only the robot process imports MuJoCo and none imports the
     scenarios."""
-    from rdm.scenarios.stack import StackOptions
+    from rdm.scenarios.stack import StackOptions, spinal_flash_calibration
 
     opt = StackOptions(seed=seed)
     keys = (
@@ -133,6 +133,7 @@ def stack_config(seed: int) -> dict[str, Any]:
     )
     cfg = {k: getattr(opt, k) for k in keys}
     cfg["servo"] = None if opt.servo is None else asdict(opt.servo)
+    cfg["spinal_flash"] = spinal_flash_calibration(opt)
     return cfg
 
 
@@ -237,6 +238,7 @@ def robot_main(cfg: dict[str, Any]) -> None:
     folder = Path(cfg["out"])
     stack_cfg = dict(cfg["stack"])
     servo = stack_cfg.pop("servo")
+    stack_cfg.pop("spinal_flash")  # the Spinal process's (its estimator's calibration)
     opt = StackOptions(**stack_cfg, servo=None if servo is None else ServoParams(**servo))
     plant, q0 = make_plant(opt)
 
@@ -377,6 +379,7 @@ def spinal_main(cfg: dict[str, Any]) -> None:
         time_matched=opt.spinal_time_matched,
         # the lockstep's CAN master (Rust by default) on this process's python-can bus
         master_backend=opt.master_backend,
+        **opt.spinal_flash,  # the estimator's flash calibration, as in lockstep
     )
     imu_in = ImuReceiver(cfg["token"], spinal)
     start = _handshake({"spinal_pty": path})
