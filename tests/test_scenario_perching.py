@@ -10,7 +10,7 @@ import pytest
 from mcap.reader import make_reader
 
 from rdm.scenarios import perching
-from rdm.scenarios.common import truth_arrays
+from rdm.scenarios.common import roll_pitch, truth_arrays
 
 #: one arm motion while perched (the default has three) keeps the run short
 SHORT_MOTION = ((3.0, (1.5708, -0.9, 0.3, 0.5, 0.0, 0.0)),)
@@ -98,3 +98,26 @@ def test_infeasible_perching_qp_is_logged_and_the_command_stays_safe(tmp_path):
     for r in logged:
         assert all(0.0 <= b <= 20.0 for b in r["base_thrust"])
     assert not res.stack.spinal.counters.rejected
+
+
+def _settled_tilt_and_edge(res, a) -> tuple[float, float]:
+    """Over the settled perch (from SETTLE_S after the switch): the largest truth roll/pitch
+    of the foot [deg] and the fraction of samples with the ZMP within 1 mm of a y edge."""
+    held = a["t"] >= res.facts["t_perch"] + perching.SETTLE_S
+    tilt = np.degrees(np.abs(roll_pitch(a["quat"][held])).max(axis=1))
+    on_edge = np.abs(a["zmp"][held, 1]) > perching.PLATE_HALF[1] - 1e-3
+    return float(tilt.max()), float(on_edge.mean())
+
+
+@pytest.mark.parametrize("calibrated", [True, False])
+def test_seed_1_plate_lies_flat_with_the_calibrated_imu(tmp_path, calibrated):
+    """Seed 1's accelerometer bias reads as 0.8 deg of roll. With Spinal's flash holding the
+    calibration (the default) the settled plate lies flat; without it the attitude loop
+    rocks the plate on its y edges for seconds after the contact (the counter-check)."""
+    res = perching.run(tmp_path, duration=19.0, seed=1, motion=(), imu_acc_calibrated=calibrated)
+    assert res.facts["t_perch"] is not None
+    tilt, edge = _settled_tilt_and_edge(res, truth_arrays(res.stack))
+    if calibrated:
+        assert tilt < 0.1 and edge < 0.02, (tilt, edge)
+    else:
+        assert tilt > 0.3 and edge > 0.2, (tilt, edge)
