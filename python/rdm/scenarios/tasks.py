@@ -130,13 +130,15 @@ IK_SEED_PAINT = (math.pi / 2, -0.7, 0.0, 1.45, 0.0, 0.0)
 START_AFTER = 0.5  # s after the perching script's hold begins
 #: The task starts only on a settled perch: the foot's roll and pitch (mocap) within
 #: SETTLED_TILT_DEG of level for the last SETTLED_FOR_S. The plan and the objects' placement
-#: use the foot pose of that moment; on seed 1 the plate still rocked on its y edges at the
+#: use the foot pose of that moment; on seed 1 with the uncalibrated IMU
+#: (``StackOptions.imu_acc_calibrated=False``) the plate still rocked on its y edges at the
 #: fixed start (+-1 deg, for ~3 s after the contact), and a plan made from a rolled foot put
 #: the gripper ~10 mm off the handle once the plate lay flat (the valve jammed: foot normal
 #: force 43-53 N, 0.1 deg turned). ASSUMPTION: 0.1 deg, 0.5 s (settled plates read < 0.03 deg).
 SETTLED_TILT_DEG = 0.1
 SETTLED_FOR_S = 0.5
-#: Simulated seconds the task durations allow for that wait (seed 1 waits ~1.5 s).
+#: Simulated seconds the task durations allow for that wait (seed 1 with the uncalibrated
+#: IMU waited up to 1.5 s; with the calibration seeds 0-2 do not wait).
 SETTLE_ALLOWANCE_S = 3.0
 
 
