@@ -5,10 +5,12 @@ reads the resting robot level; without it, the tilt that the bias fakes (closed 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
+from rdm.nodes.onboard_calibration import ImuCalibration
 from rdm.plant import Plant
 from rdm.plant.sensors import imu_model_of_seed
 from rdm.scenarios.common import roll_pitch, sim_stack_options
@@ -35,9 +37,20 @@ def test_flash_calibration_follows_the_option() -> None:
     assert spinal_flash_calibration(off) == {}
 
 
-def _resting_estimate(tmp_path, calibrated: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Spinal's estimated and the true roll/pitch [deg] after 2 s on the floor (never armed),
-    and the plant's accelerometer bias."""
+@dataclass
+class RestingRun:
+    """2 s of the stack on the floor (never armed): Spinal's estimated and the true
+    roll/pitch [deg], the plant's accelerometer bias, what the onboard node read from
+    ``imu_calib`` GET_CALIB_DATA and its counters."""
+
+    estimate: np.ndarray
+    truth: np.ndarray
+    bias: np.ndarray
+    read: ImuCalibration | None
+    counts: dict
+
+
+def _resting_run(tmp_path, calibrated: bool) -> RestingRun:
     opt = sim_stack_options(SEED, "inproc", log=False, imu_acc_calibrated=calibrated)
     stack = build_stack("flash", tmp_path, opt)
     try:
@@ -45,23 +58,47 @@ def _resting_estimate(tmp_path, calibrated: bool) -> tuple[np.ndarray, np.ndarra
         euler = np.degrees(np.asarray(stack.spinal.last_output.euler, dtype=float))
         truth = np.degrees(roll_pitch(stack.plant.ground_truth().base_quaternion[None, :])[0])
         bias = np.asarray(stack.plant.imu_model.accel_bias, dtype=float)
+        reader = stack.onboard.imu_calibration
+        return RestingRun(euler[:2], truth, bias, reader.calibration, dict(reader.counts))
     finally:
         stack.close()
-    return euler[:2], truth, bias
 
 
-def test_calibrated_estimator_reads_the_resting_robot_level(tmp_path) -> None:
-    est, truth, _ = _resting_estimate(tmp_path, calibrated=True)
-    assert np.all(np.abs(truth) < 1e-3)  # the robot rests level on the floor
-    assert np.all(np.abs(est - truth) < 0.05), est
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory) -> RestingRun:
+    return _resting_run(tmp_path_factory.mktemp("on"), calibrated=True)
 
 
-def test_uncalibrated_estimator_reads_the_tilt_the_bias_fakes(tmp_path) -> None:
+@pytest.fixture(scope="module")
+def uncalibrated(tmp_path_factory) -> RestingRun:
+    return _resting_run(tmp_path_factory.mktemp("off"), calibrated=False)
+
+
+def test_calibrated_estimator_reads_the_resting_robot_level(calibrated) -> None:
+    assert np.all(np.abs(calibrated.truth) < 1e-3)  # the robot rests level on the floor
+    assert np.all(np.abs(calibrated.estimate - calibrated.truth) < 0.05), calibrated.estimate
+
+
+def test_uncalibrated_estimator_reads_the_tilt_the_bias_fakes(uncalibrated) -> None:
     """Gravity plus the bias, read as a tilt: roll = atan2(a_y, a_z), pitch =
     atan2(-a_x, hypot(a_y, a_z)) of a = (b_x, b_y, g + b_z)."""
-    est, _, b = _resting_estimate(tmp_path, calibrated=False)
+    b = uncalibrated.bias
     a = np.array([b[0], b[1], G + b[2]])
     roll = math.degrees(math.atan2(a[1], a[2]))
     pitch = math.degrees(math.atan2(-a[0], math.hypot(a[1], a[2])))
     assert abs(roll) > 0.5  # the seed's bias is a visible tilt
-    np.testing.assert_allclose(est, [roll, pitch], atol=0.05)
+    np.testing.assert_allclose(uncalibrated.estimate, [roll, pitch], atol=0.05)
+
+
+def test_onboard_reads_the_flash_calibration_over_the_wire(calibrated, uncalibrated) -> None:
+    """``imu_calib`` GET_CALIB_DATA through rosserial: the accelerometer bias arrives as the
+    float32 of the plant's; an empty flash arrives as zeros and is counted."""
+    got = calibrated.read
+    assert got is not None and got.acc_calibrated
+    want = np.asarray(calibrated.bias, dtype=np.float32).astype(float)
+    np.testing.assert_array_equal(got.acc_bias, want)
+    assert got.mag_scale == (1.0, 1.0, 1.0) and got.mag_bias == (0.0, 0.0, 0.0)
+    assert calibrated.counts.get("imu_acc_uncalibrated", 0) == 0
+    empty = uncalibrated.read
+    assert empty is not None and empty.acc_bias == (0.0, 0.0, 0.0)
+    assert uncalibrated.counts["imu_acc_uncalibrated"] == 1

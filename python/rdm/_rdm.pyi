@@ -325,6 +325,10 @@ class SpinalStep(_SpinalControllerMessages):
         self, now_s: float, gyro: Any, acc: Any, mag: Any, voltage: float
     ) -> SpinalStepOutput: ...
     def restart_gyro_calibration(self) -> None: ...
+    def calibration_data(self) -> list[float]:
+        """GET_CALIB_DATA's 12 floats: gyro bias, accelerometer bias, magnetometer bias and
+        scale."""
+        ...
 
 class PwmConverter:
     """Thrust -> duty conversion as Spinal's pwmConversion."""

@@ -512,6 +512,21 @@ controller_pymethods!(PySpinalStep, {
     fn restart_gyro_calibration(&mut self) {
         self.inner.estimator_mut().restart_gyro_calibration();
     }
+
+    /// The calibration in use as `imu_calib` GET_CALIB_DATA lays it out (12 floats): gyro
+    /// bias (rad/s; zero until the start-up window ends), accelerometer bias (m/s^2, the
+    /// flash's), magnetometer bias and scale.
+    fn calibration_data(&self) -> [f64; 12] {
+        let est = self.inner.estimator();
+        let c = est.config();
+        let g = est.gyro_bias();
+        let mut out = [0.0; 12];
+        out[..3].copy_from_slice(g.as_slice());
+        out[3..6].copy_from_slice(&c.acc_bias);
+        out[6..9].copy_from_slice(&c.mag_bias);
+        out[9..].copy_from_slice(&c.mag_scale);
+        out
+    }
 });
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

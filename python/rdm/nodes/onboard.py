@@ -37,13 +37,15 @@ import numpy as np
 
 from rdm.nodes.bus_layout import can_table, default_neuron_joints
 from rdm.nodes.onboard_arming import ArmingSequencer, FlightState
+from rdm.nodes.onboard_calibration import GET_CALIB_DATA, ImuCalibrationReader
 from rdm.nodes.onboard_config import OnboardConfig, ServoMap
 from rdm.nodes.onboard_control import ControlCommand, ControlPipeline, Setpoint, State
 from rdm.nodes.onboard_foot import ByteLink, FootSensorReader
 from rdm.protocol.rosserial.codec import RosTime
-from rdm.protocol.rosserial.events import MessageReceived, SyncLost
+from rdm.protocol.rosserial.events import MessageReceived, ServiceResponse, SyncLost
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 from rdm.protocol.rosserial.server import PayloadTooLarge, ServerSession, TopicNotNegotiated
+from rdm.protocol.rosserial.services import ServiceError
 
 #: ``spinal/FlightConfigCmd`` INTEGRATION_CONTROL_ON_CMD.
 INTEGRATION_CONTROL_ON = 160
@@ -183,6 +185,9 @@ class OnboardNode:
             )
         }
         self.arming = ArmingSequencer(config.info_period_s, config.command_retry_s)
+        #: Spinal's IMU calibration, read once per handshake (``imu_calib`` GET_CALIB_DATA)
+        self.imu_calibration = ImuCalibrationReader()
+        self._imu_calib_request = reg.srv("spinal/ImuCalib").request
         self.control = ControlPipeline(robot, config)
         self.foot = (
             None
@@ -374,6 +379,7 @@ class OnboardNode:
                     self._publish(topic, self._info_message(topic))
                     for topic in ("uav_info", "motor_info")
                 )
+            self._read_imu_calibration(now)
             self._arming_messages(now)
             self._torque_on(now)
             self._control(now)
@@ -408,11 +414,28 @@ class OnboardNode:
             self._imu_gyro, self._gyro_src = np.array(self._gyro_src), None
         return self._imu_gyro
 
+    def _read_imu_calibration(self, now: float) -> None:
+        """Ask Spinal for its IMU calibration (once per handshake, retried until answered)."""
+        if not self.config.read_imu_calibration or not self.imu_calibration.request(now):
+            return
+        try:
+            self.session.call_service(
+                "imu_calib", self._imu_calib_request.new(command=GET_CALIB_DATA, data=[]), now
+            )
+        except ServiceError:  # not offered (yet) or a call still pending: the retry asks again
+            self.imu_calibration.counts["call_refused"] += 1
+
     def _on_event(self, event: Any) -> None:
         if isinstance(event, SyncLost):
             self.counts["sync_lost"] += 1
             self.arming.link_lost()
             self._announced = False
+            self.imu_calibration.reset()
+            return
+        if isinstance(event, ServiceResponse):
+            if event.service == "imu_calib":
+                r = event.response
+                self.imu_calibration.on_response(bool(r.success), r.data)
             return
         if not isinstance(event, MessageReceived):
             return
@@ -850,6 +873,7 @@ class OnboardNode:
             "arming": dict(self.arming.counts),
             "control": dict(self.control.counts),
             "foot": {} if self.foot is None else dict(self.foot.counts),
+            "imu_calibration": dict(self.imu_calibration.counts),
             "present_q": self.present_q.tolist(),
             "battery_voltage": self.battery_voltage,
             "command": None

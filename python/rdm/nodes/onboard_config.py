@@ -119,6 +119,10 @@ class OnboardConfig:
     rp_integration_height: float = 0.05
     #: Mocap older than this is not used. ASSUMPTION.
     mocap_timeout_s: float = 0.2
+    #: Ask Spinal for its IMU calibration after each handshake (``imu_calib``
+    #: GET_CALIB_DATA; an empty accelerometer calibration is counted as
+    #: ``imu_acc_uncalibrated``, docs/onboard.md). Not JSK behaviour; False: never asks.
+    read_imu_calibration: bool = True
     #: Armed without usable mocap for this long -> FORCE_LANDING. ASSUMPTION.
     mocap_loss_force_landing_s: float = 1.0
     #: Altitude feed-forward: "hover" = least-squares thrust for m g (pinv(Q̄)[m g,0,0,0]),

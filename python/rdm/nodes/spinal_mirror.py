@@ -100,6 +100,7 @@ _LOG_LEVELS = {
     "error": C.LogLevel.ERROR,
     "fatal": C.LogLevel.FATAL,
 }
+_IMU_CALIB_GET = 0  # spinal/ImuCalib GET_CALIB_DATA
 _IMU_CALIB_GYRO = 2  # spinal/ImuCalib CALIB_GYRO
 _MAG_SET = 1  # spinal/MagDeclination SET
 
@@ -539,9 +540,15 @@ class SpinalMirror:
 
     # ---------------------------------------------------------------- services
     def _srv_imu_calib(self, req: Any) -> Any:
-        """CALIB_GYRO restarts the gyro bias calibration; the other commands (flash-stored
-        calibration data) are not mirrored and answer ``success = False``."""
-        if int(req.command) == _IMU_CALIB_GYRO:
+        """GET_CALIB_DATA answers the calibration in use (12 floats: gyro bias, accelerometer
+        bias from the flash, magnetometer bias and scale); CALIB_GYRO restarts the gyro bias
+        calibration; the other commands (calibrating the accelerometer or magnetometer,
+        writing the flash) are not mirrored and answer ``success = False``."""
+        command = int(req.command)
+        if command == _IMU_CALIB_GET:
+            data = list(self.core.calibration_data())
+            return self._srv.imu_calib.new(success=True, data=data)
+        if command == _IMU_CALIB_GYRO:
             self.core.restart_gyro_calibration()
             return self._srv.imu_calib.new(success=True, data=[])
         return self._srv.imu_calib.new(success=False, data=[])
