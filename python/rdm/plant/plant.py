@@ -43,6 +43,7 @@ from rdm.plant.sensors import (
     WrenchNoise,
     WrenchReading,
     WrenchSensorModel,
+    sensor_seed_sequences,
 )
 from rdm.plant.servo import ServoParams, torque_constant
 from rdm.plant.truth import FootContactTracker, GroundTruth
@@ -252,7 +253,7 @@ class Plant:
     # ----------------------------------------------------------------- set-up and reset
     def _seed_sensors(self) -> None:
         sensors = self.description.wrench_sensors
-        seeds = np.random.SeedSequence(self.seed).spawn(1 + len(sensors))
+        seeds = sensor_seed_sequences(self.seed, len(sensors))
         self.imu_model = ImuModel(self._imu_noise, np.random.default_rng(seeds[0]))
         self.wrench_models = {
             key: WrenchSensorModel(spec, self._wrench_noise, np.random.default_rng(s))

@@ -206,13 +206,19 @@ def _quantize(v: float, lsb: float) -> float:
     return r * lsb
 
 
+def sensor_seed_sequences(seed: int | None, n_wrench: int) -> list[np.random.SeedSequence]:
+    """The plant's sensor seeds: the IMU's first, then one per wrench sensor (children of
+    ``SeedSequence(seed)``; a child depends only on its index, not on how many exist)."""
+    return np.random.SeedSequence(seed).spawn(1 + n_wrench)
+
+
 def imu_model_of_seed(seed: int, noise: ImuNoise | None = None) -> ImuModel:
     """The IMU error model that ``rdm.plant.Plant(seed=seed)`` draws (same biases, same
-    stream): the plant seeds its IMU with the first child of ``SeedSequence(seed)``. What a
-    process without the plant (the HIL Spinal process) needs to know the simulated IMU's
-    constant biases, e.g. for the flash calibration (``rdm.scenarios.stack``)."""
-    child = np.random.SeedSequence(seed).spawn(1)[0]
-    return ImuModel(noise or ImuNoise(), np.random.default_rng(child))
+    stream). What a process without the plant (the HIL Spinal process) needs to know the
+    simulated IMU's constant biases, e.g. for the flash calibration
+    (``rdm.scenarios.stack``)."""
+    imu_seed = sensor_seed_sequences(seed, 0)[0]
+    return ImuModel(noise or ImuNoise(), np.random.default_rng(imu_seed))
 
 
 @dataclass(frozen=True)
