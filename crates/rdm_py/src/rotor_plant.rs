@@ -6,8 +6,9 @@
 
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::exceptions::{PyIndexError, PyValueError};
+use pyo3::intern;
 use pyo3::prelude::*;
-use pyo3::types::PyTuple;
+use pyo3::types::{PyDict, PyTuple};
 use rdm_core::sim::esc_duty::EscDuty;
 use rdm_core::sim::rotor_plant::{CeilingRatio, RotorPlant, RotorPlantStatus};
 
@@ -22,7 +23,23 @@ struct RotorPlantCore {
     ctrl: Py<PyArray1<f64>>,
     /// Where the ground truth reads MjData (see ``set_truth_layout``); None: not set.
     truth: Option<TruthLayout>,
+    /// How :meth:`truth_free` builds a record (see ``set_truth_record``); None: not set.
+    record: Option<TruthRecord>,
 }
+
+/// The record class of :meth:`RotorPlantCore.truth_free` (``rdm.plant.truth.GroundTruth``).
+struct TruthRecord {
+    /// ``object.__new__``
+    new: Py<PyAny>,
+    cls: Py<PyAny>,
+    /// The class's field names, in field order (``TRUTH_FIELDS`` of them).
+    fields: Py<PyTuple>,
+    /// The foot plate body (the no-contact measurement's frame).
+    plate_body: usize,
+}
+
+/// Fields of the ground-truth record, in ``GroundTruth`` field order.
+const TRUTH_FIELDS: usize = 18;
 
 /// MjData indices of the 100 Hz ground-truth record (``rdm.plant.Plant._ground_truth``).
 #[derive(Clone, Debug)]
@@ -127,6 +144,7 @@ impl RotorPlantCore {
             site_xmat,
             ctrl,
             truth: None,
+            record: None,
         })
     }
 
@@ -357,6 +375,86 @@ impl RotorPlantCore {
             PyArray1::from_slice(py, self.inner.applied()),
         )
             .into_pyobject(py)
+    }
+
+    /// The record :meth:`truth_free` builds: ``new(cls)`` (``object.__new__``) with its
+    /// ``__dict__`` filled in ``fields`` order (the 18 ``GroundTruth`` fields), and the foot
+    /// plate body whose frame the contact measurement uses.
+    fn set_truth_record(
+        &mut self,
+        py: Python<'_>,
+        new: Py<PyAny>,
+        cls: Py<PyAny>,
+        fields: Py<PyTuple>,
+        plate_body: usize,
+    ) -> PyResult<()> {
+        if fields.bind(py).len() != TRUTH_FIELDS {
+            return Err(PyValueError::new_err(format!(
+                "fields: expected {TRUTH_FIELDS} names, got {}",
+                fields.bind(py).len()
+            )));
+        }
+        self.record = Some(TruthRecord {
+            new,
+            cls,
+            fields,
+            plate_body,
+        });
+        Ok(())
+    }
+
+    /// The whole ground-truth record of a plant with no contact and no contact anchor (the
+    /// flying robot) in one call: the :meth:`truth_arrays` values, the end-effector
+    /// quaternion as zeros (the caller fills it with ``mju_mat2Quat``), no contact, force and
+    /// torque ``-(R.T @ 0)`` = -0.0 each (R the plate's frame), ZMP NaN, slip 0, slip yaw 0:
+    /// the values of ``FootContactTracker.measure`` for an empty contact list. None (nothing
+    /// built) when the plate frame holds a non-finite value: the caller takes its own path.
+    #[allow(clippy::too_many_arguments)]
+    fn truth_free<'py>(
+        &self,
+        py: Python<'py>,
+        time: f64,
+        xpos: numpy::PyReadonlyArrayDyn<'py, f64>,
+        xquat: numpy::PyReadonlyArrayDyn<'py, f64>,
+        xmat: numpy::PyReadonlyArrayDyn<'py, f64>,
+        qpos: numpy::PyReadonlyArrayDyn<'py, f64>,
+        qvel: numpy::PyReadonlyArrayDyn<'py, f64>,
+        subtree_com: numpy::PyReadonlyArrayDyn<'py, f64>,
+    ) -> PyResult<Option<Bound<'py, PyAny>>> {
+        let record = self
+            .record
+            .as_ref()
+            .ok_or_else(|| PyValueError::new_err("set_truth_record: not called"))?;
+        let pb = record.plate_body;
+        let plate = c_slice(&xmat, "xmat")?
+            .get(pb * 9..pb * 9 + 9)
+            .ok_or_else(|| PyIndexError::new_err(format!("xmat: body {pb} out of range")))?;
+        if !plate.iter().all(|v| v.is_finite()) {
+            return Ok(None);
+        }
+        let arrays = self.truth_arrays(py, xpos, xquat, qpos, qvel, subtree_com)?;
+        let obj = record.new.bind(py).call1((record.cls.bind(py),))?;
+        let dict = obj
+            .getattr(intern!(py, "__dict__"))?
+            .cast_into::<PyDict>()
+            .map_err(PyErr::from)?;
+        let fields = record.fields.bind(py);
+        let f = |i: usize| fields.get_item(i);
+        dict.set_item(f(0)?, time)?;
+        // base position .. end-effector position (the truth_arrays order, fields 1..=8)
+        for i in 0..8 {
+            dict.set_item(f(i + 1)?, arrays.get_item(i)?)?;
+        }
+        dict.set_item(f(9)?, PyArray1::<f64>::zeros(py, 4, false))?;
+        dict.set_item(f(10)?, arrays.get_item(8)?)?;
+        dict.set_item(f(11)?, false)?;
+        dict.set_item(f(12)?, 0)?;
+        dict.set_item(f(13)?, PyArray1::from_slice(py, &[-0.0; 3]))?;
+        dict.set_item(f(14)?, PyArray1::from_slice(py, &[-0.0; 3]))?;
+        dict.set_item(f(15)?, PyArray1::from_slice(py, &[f64::NAN; 2]))?;
+        dict.set_item(f(16)?, PyArray1::<f64>::zeros(py, 2, false))?;
+        dict.set_item(f(17)?, 0.0)?;
+        Ok(Some(obj))
     }
 
     /// Overwrite the applied thrusts (computed by the caller's own ceiling models).

@@ -46,7 +46,7 @@ from rdm.plant.sensors import (
     sensor_seed_sequences,
 )
 from rdm.plant.servo import ServoParams, torque_constant
-from rdm.plant.truth import FootContactTracker, GroundTruth
+from rdm.plant.truth import TRUTH_FIELDS, FootContactTracker, GroundTruth
 
 
 def _vector(values: Sequence[float] | np.ndarray, n: int, name: str) -> np.ndarray:
@@ -195,6 +195,9 @@ class Plant:
             self._vadr.tolist(),
             self.options.fixed_base,
         )
+        # The flying robot's whole record in one call (:meth:`_ground_truth`).
+        self._rotors.set_truth_record(object.__new__, GroundTruth, TRUTH_FIELDS, self._plate_body)
+        self._v_ee_xmat = d.xmat[self._ee_body]
         #: Every ESC keeps its state in ``self._rotors`` at its rotor index: duty commands
         #: may go to the core in one call (``escs`` must not be replaced afterwards).
         self._duties_in_core = True
@@ -569,6 +572,10 @@ class Plant:
         return self._rotor_distances()
 
     # ---------------------------------------------------------------------- ground truth
+    #: The flying robot's record through ``RotorPlantCore.truth_free`` (False: always
+    #: :meth:`_ground_truth_arrays`, the path before it).
+    truth_free_record = True
+
     def ground_truth(self) -> GroundTruth:
         """The true state now (see :class:`GroundTruth`). Asked twice for the same state
         (e.g. a logger and a mocap node in one tick), it returns the same object: treat
@@ -581,6 +588,29 @@ class Plant:
         return truth
 
     def _ground_truth(self) -> GroundTruth:
+        d = self._fresh()
+        tracker = self._tracker
+        if self.truth_free_record and d.ncon == 0 and tracker.idle():
+            # No contact and no contact anchor (the flying robot): the whole record in one
+            # Rust call, the numbers :meth:`_ground_truth_arrays` gives (tests/
+            # test_truthlog_truth.py); None when the plate frame is not finite.
+            truth = self._rotors.truth_free(
+                float(d.time),
+                self._v_xpos,
+                self._v_xquat,
+                self._v_xmat,
+                self._v_qpos,
+                self._v_qvel,
+                self._v_subtree_com,
+            )
+            if truth is not None:
+                mujoco.mju_mat2Quat(truth.end_effector_quaternion, self._v_ee_xmat)
+                return truth
+        return self._ground_truth_arrays()
+
+    def _ground_truth_arrays(self) -> GroundTruth:
+        """:meth:`_ground_truth` for any contact state: the tracker's measurement, the
+        MjData copies in one Rust call, the record built without the frozen ``__init__``."""
         d = self._fresh()
         points, force, torque, zmp, slip, yaw = self._tracker.measure(d)
         # Every MjData copy (and the applied thrusts) in one Rust call over the cached views

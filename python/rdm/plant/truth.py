@@ -57,6 +57,8 @@ class GroundTruth:
 
 
 _TRUTH_FIELDS = tuple(GroundTruth.__dataclass_fields__)
+#: The :class:`GroundTruth` field names in field order.
+TRUTH_FIELDS = _TRUTH_FIELDS
 #: Read-only constants of the no-contact measurement.
 _ZEROS3 = np.zeros(3)
 _ZEROS3.flags.writeable = False
@@ -135,6 +137,12 @@ class FootContactTracker:
         elif self._anchor_pos is None and self._last_contact_time == -math.inf:
             return
         self._track(data, in_contact)
+
+    def idle(self) -> bool:
+        """No contact anchor and no contact time to release: :meth:`measure` of an empty
+        contact list then changes nothing and gives fixed numbers (no contact, -(R.T @ 0)
+        force and torque, NaN ZMP, zero slip and yaw)."""
+        return self._anchor_pos is None and self._last_contact_time == -math.inf
 
     def _check_view(self, data: mujoco.MjData) -> None:
         """Drop the cached contact view if the list has moved (counted in ``view_misses``)."""

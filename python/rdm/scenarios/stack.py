@@ -32,6 +32,7 @@ from rdm.nodes.lockstep import Lockstep
 from rdm.nodes.neuron_bank import NeuronBankNode, NeuronSpec
 from rdm.nodes.neuron_mirror import NeuronMirror
 from rdm.nodes.onboard import OnboardNode
+from rdm.nodes.onboard_arming import FlightState
 from rdm.nodes.onboard_config import OnboardConfig
 from rdm.nodes.plant_bridge import BusLayout, PlantBridge, default_layout
 from rdm.nodes.servo_model import ServoConfig
@@ -39,6 +40,8 @@ from rdm.nodes.spinal_mirror import SpinalMirror
 from rdm.plant import EscParams, Plant, ServoParams
 from rdm.plant.sensors import imu_model_of_seed
 from rdm.sim import CandumpCapture, McapLogger, RunFolder, open_inproc_uart, open_tapped_pty
+
+_FLOAT64 = np.dtype(np.float64)
 
 
 def _free_channel() -> str:
@@ -97,8 +100,42 @@ class MocapNode:
         self.period = period
         self._last: list[float] | None = None
         self.enabled = True
+        #: Float64 vectors read with one ``tolist`` and the 3-vector difference written out
+        #: (the same floats as :meth:`tick_plain`, tests/test_truthlog_nodes.py); False:
+        #: always :meth:`tick_plain`.
+        self.fast_paths = True
 
     def tick(self, now: float) -> None:
+        if not self.fast_paths:
+            self.tick_plain(now)
+            return
+        gt = self.plant.ground_truth()
+        p = self._floats(gt.cog_position)
+        last = self._last
+        if last is None:
+            v = [0.0] * len(p)
+        elif len(p) == 3 and len(last) == 3:
+            period = self.period
+            v = [(p[0] - last[0]) / period, (p[1] - last[1]) / period, (p[2] - last[2]) / period]
+        else:
+            period = self.period
+            v = [(a - b) / period for a, b in zip(p, last, strict=True)]
+        self._last = p
+        if self.enabled:
+            w, x, y, z = self._floats(gt.base_quaternion)
+            yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+            self.onboard.set_mocap(p, v, yaw)
+
+    @staticmethod
+    def _floats(value: Any) -> list[float]:
+        """``np.asarray(value, dtype=float).reshape(-1).tolist()``; a float64 vector's
+        ``tolist`` directly (the same floats)."""
+        if type(value) is np.ndarray and value.dtype is _FLOAT64 and value.ndim == 1:
+            return value.tolist()
+        return np.asarray(value, dtype=float).reshape(-1).tolist()
+
+    def tick_plain(self, now: float) -> None:
+        """:meth:`tick` for any array-like truth fields (the reference form)."""
         gt = self.plant.ground_truth()
         # Plain floats: the same IEEE operations as the array form ``(p - last) / period``,
         # and lists of floats take the onboard node's cheap validation path.
@@ -453,12 +490,51 @@ class StatusNode:
 
     def __init__(self, stack: Stack) -> None:
         self.stack = stack
+        #: The record built with fewer calls (the same dict, tests/test_truthlog_nodes.py);
+        #: False: :meth:`record_plain`.
+        self.fast_paths = True
 
     def tick(self, now: float) -> None:
         s = self.stack
+        rec = self.record(now) if self.fast_paths else self.record_plain(now)
+        s.status.append(rec)
+        if s.logger is not None:
+            s.logger.log_json("/onboard/status", now, rec)
+
+    def record(self, now: float) -> dict[str, Any]:
+        """:meth:`record_plain` reading each property once, an enum state's value and a
+        float64 vector's floats directly."""
+        s = self.stack
+        onboard = s.onboard
+        c = onboard.last_command
+        perch = getattr(c, "perch", None) if c is not None else None
+        st = onboard.state
+        if type(st) is FlightState:  # a plain Enum: ``value`` is ``_value_``
+            state = st._value_
+        else:
+            state = st.value if hasattr(st, "value") else str(st)
+        pt = getattr(c, "perch_thrust", None)
+        if type(pt) is np.ndarray and pt.dtype is _FLOAT64 and pt.ndim == 1:
+            perch_thrust: list | None = pt.tolist()
+        else:
+            perch_thrust = _as_list(pt)
+        failsafes = s.spinal.counters.failsafes
+        return {
+            "t": now,
+            "state": state,
+            "base_thrust": list(c.base_thrust) if c is not None else None,
+            "perch_status": _perch_status(perch),
+            "perch_thrust": perch_thrust,
+            "duties": list(s.spinal.duties),
+            "failsafes": sum(failsafes.values()) if hasattr(failsafes, "values") else 0,
+        }
+
+    def record_plain(self, now: float) -> dict[str, Any]:
+        """The status record (the reference form)."""
+        s = self.stack
         c = s.onboard.last_command
         perch = getattr(c, "perch", None) if c is not None else None
-        rec = {
+        return {
             "t": now,
             "state": s.onboard.state.value
             if hasattr(s.onboard.state, "value")
@@ -471,9 +547,6 @@ class StatusNode:
             if hasattr(s.spinal.counters.failsafes, "values")
             else 0,
         }
-        s.status.append(rec)
-        if s.logger is not None:
-            s.logger.log_json("/onboard/status", now, rec)
 
 
 def _perch_status(perch: Any) -> str | None:

@@ -16,6 +16,8 @@ Log times are simulated time in ns. Chunks are small (64 KiB) so a crash loses l
 
 from __future__ import annotations
 
+import contextlib
+import inspect
 import json
 import math
 import operator
@@ -30,11 +32,12 @@ from rdm.protocol.rosserial.msgdef import MsgSpec
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 
 from .json_record import encode_record
-from .mcap_fast import chunk_message_writer
+from .mcap_fast import ChunkBatchWriter, chunk_batch_writer, chunk_message_writer
 
 CHUNK_SIZE = 64 * 1024
-#: Per dataclass type: (field names, attrgetter of them all) for :meth:`McapLogger.log_truth`.
-_FIELD_GETTERS: dict[type, tuple[tuple[str, ...], Any]] = {}
+#: Per dataclass type: (field names, attrgetter of them all, whether the values are the
+#: instance ``__dict__``'s) for :meth:`McapLogger.log_truth`.
+_FIELD_GETTERS: dict[type, tuple[tuple[str, ...], Any, bool]] = {}
 _SEPARATOR = "=" * 80
 
 
@@ -83,6 +86,23 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
+def _field_getter(cls: type) -> tuple[tuple[str, ...], Any, bool]:
+    """(field names, attrgetter of them all, whether an instance's ``__dict__`` holds the
+    values ``attrgetter`` reads: no field is a data descriptor of the class, instances have
+    a ``__dict__``)."""
+    keys = tuple(cls.__dataclass_fields__)  # type: ignore[attr-defined]
+    direct = (
+        cls.__dictoffset__ != 0
+        and cls.__getattribute__ is object.__getattribute__  # type: ignore[comparison-overlap]
+        and not any(
+            hasattr(type(inspect.getattr_static(cls, k, None)), "__set__")
+            or hasattr(type(inspect.getattr_static(cls, k, None)), "__delete__")
+            for k in keys
+        )
+    )
+    return keys, operator.attrgetter(*keys), direct
+
+
 def _schema_of(value: Any) -> dict[str, Any]:
     if isinstance(value, bool):
         return {"type": "boolean"}
@@ -113,13 +133,24 @@ class McapLogger:
         chunk_size: int = CHUNK_SIZE,
         compression: CompressionType = CompressionType.ZSTD,
         fast_messages: bool = True,
+        native_messages: bool = True,
+        background_chunks: bool = False,
     ) -> None:
         self.path = path
         self._file: BinaryIO = open(path, "wb")  # noqa: SIM115
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=compression)
         self._writer.start(profile="ros1", library="rdm")
         #: The writer's message path in fewer calls (same bytes), None: ``add_message``.
-        self._fast = chunk_message_writer(self._writer) if fast_messages else None
+        #: ``native_messages``: the chunk's records built in Rust (:class:`ChunkBatchWriter`,
+        #: closed chunks compressed on a worker thread with ``background_chunks``); else the
+        #: Python form (:class:`rdm.sim.mcap_fast.ChunkMessageWriter`).
+        self._fast: Any = None
+        #: The native writer when it is the one in use (the records' one-call paths).
+        self._batch: ChunkBatchWriter | None = None
+        if fast_messages and native_messages:
+            self._fast = self._batch = chunk_batch_writer(self._writer, background_chunks)
+        if fast_messages and self._fast is None:
+            self._fast = chunk_message_writer(self._writer)
         self._registry = registry
         self._channels: dict[str, tuple[int, str]] = {}  # topic -> (channel id, kind)
         self._schemas: dict[tuple[str, str], int] = {}
@@ -138,7 +169,8 @@ class McapLogger:
         key = (name, encoding)
         sid = self._schemas.get(key)
         if sid is None:
-            sid = self._writer.register_schema(name=name, encoding=encoding, data=data)
+            with self._outside():
+                sid = self._writer.register_schema(name=name, encoding=encoding, data=data)
             self._schemas[key] = sid
         return sid
 
@@ -151,12 +183,13 @@ class McapLogger:
             return known[0]
         text = ros1_definition(self.registry, type_name)
         sid = self._schema(type_name, "ros1msg", text.encode())
-        cid = self._writer.register_channel(
-            topic=topic,
-            message_encoding="ros1",
-            schema_id=sid,
-            metadata={"md5sum": self.registry.md5(type_name)},
-        )
+        with self._outside():
+            cid = self._writer.register_channel(
+                topic=topic,
+                message_encoding="ros1",
+                schema_id=sid,
+                metadata={"md5sum": self.registry.md5(type_name)},
+            )
         self._channels[topic] = (cid, f"ros1:{type_name}")
         return cid
 
@@ -168,24 +201,35 @@ class McapLogger:
         schema = _schema_of(_jsonable(dict(example)))
         name = schema_name or topic.strip("/").replace("/", ".") or "root"
         sid = self._schema(name, "jsonschema", json.dumps(schema, sort_keys=True).encode())
-        cid = self._writer.register_channel(topic=topic, message_encoding="json", schema_id=sid)
+        with self._outside():
+            cid = self._writer.register_channel(topic=topic, message_encoding="json", schema_id=sid)
         self._channels[topic] = (cid, "json")
         return cid
 
+    def _outside(self) -> contextlib.AbstractContextManager[None]:
+        """Around the writer's own calls: the native batch handed over first (see
+        :meth:`ChunkBatchWriter.outside`)."""
+        batch = self._batch
+        return batch.outside() if batch is not None else contextlib.nullcontext()
+
     # ------------------------------------------------------------------ messages
-    def _add(self, cid: int, t: float, data: bytes) -> None:
+    def _time_ns(self, t: float) -> int:
         if not math.isfinite(t) or t < 0:
             raise ValueError(f"McapLogger: time {t!r} must be finite and >= 0")
-        ns = round(t * 1e9)
+        return round(t * 1e9)
+
+    def _add(self, cid: int, t: float, data: bytes) -> None:
+        ns = self._time_ns(t)
         seq = self._seq.get(cid, 0)
         self._seq[cid] = seq + 1
         fast = self._fast
         if fast is not None:
             fast.add(cid, ns, seq, data)
         else:
-            self._writer.add_message(
-                channel_id=cid, log_time=ns, publish_time=ns, sequence=seq, data=data
-            )
+            with self._outside():
+                self._writer.add_message(
+                    channel_id=cid, log_time=ns, publish_time=ns, sequence=seq, data=data
+                )
         self.messages += 1
 
     def log_ros1(self, topic: str, type_name: str, t: float, message: Any) -> None:
@@ -201,6 +245,19 @@ class McapLogger:
         """Log a dict of values (numpy arrays allowed; NaN/inf become null)."""
         known = self._channels.get(topic)
         if known is not None:
+            batch = self._batch
+            if batch is not None:
+                # A flat record straight into the chunk (one Rust call; the text below).
+                cid = known[0]
+                ns = self._time_ns(t)
+                seq = self._seq.get(cid, 0)
+                code = batch.core.add_record(cid, seq, ns, values)
+                if code:
+                    self._seq[cid] = seq + 1
+                    if code != 1:
+                        batch.after(code, cid, ns, seq, b"")
+                    self.messages += 1
+                    return
             # Flat records (the 100 Hz truth and status): the same text, written faster.
             text = encode_record(values)
             if text is not None:
@@ -214,9 +271,24 @@ class McapLogger:
         """Log a :class:`rdm.plant.GroundTruth` (every field) at its own time."""
         getter = _FIELD_GETTERS.get(type(truth))
         if getter is None:
-            keys = tuple(truth.__dataclass_fields__)
-            getter = _FIELD_GETTERS[type(truth)] = (keys, operator.attrgetter(*keys))
-        keys, values = getter
+            getter = _FIELD_GETTERS[type(truth)] = _field_getter(type(truth))
+        keys, values, direct = getter
+        batch = self._batch
+        if direct and batch is not None:
+            known = self._channels.get(topic)
+            if known is not None:
+                # The fields straight from the instance dict into the chunk (one Rust call;
+                # the same text as the dict below, tests/test_truthlog_mcap.py).
+                cid = known[0]
+                ns = self._time_ns(float(truth.time))
+                seq = self._seq.get(cid, 0)
+                code = batch.core.add_fields(cid, seq, ns, truth.__dict__, keys)
+                if code:
+                    self._seq[cid] = seq + 1
+                    if code != 1:
+                        batch.after(code, cid, ns, seq, b"")
+                    self.messages += 1
+                    return
         # attrgetter: every field in one C call, in field order (as the dict comprehension).
         self.log_json(topic, float(truth.time), dict(zip(keys, values(truth), strict=True)))
 
@@ -227,9 +299,14 @@ class McapLogger:
             return
         self._finished = True
         try:
-            self._writer.finish()
+            with self._outside():
+                self._writer.finish()
         finally:
-            self._file.close()
+            try:
+                if self._batch is not None:
+                    self._batch.close()
+            finally:
+                self._file.close()
 
     def __enter__(self) -> McapLogger:
         return self
