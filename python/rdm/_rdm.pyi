@@ -6,6 +6,7 @@ class RdmError(ValueError):
     """Base class of every error raised by rdm's core."""
 
 # --- model ---
+from collections.abc import Callable
 from os import PathLike
 from typing import Any
 
@@ -767,6 +768,26 @@ class RotorPlantCore:
         subtree_com: np.ndarray,
     ) -> tuple[np.ndarray, ...]:
         """(base pos, base quat, lin vel, ang vel, joint q, joint qd, CoG, EE pos, thrusts)."""
+    def set_truth_record(
+        self, new: Callable[[type], Any], cls: type, fields: tuple[str, ...], plate_body: int
+    ) -> None:
+        """The record ``truth_free`` builds: ``new(cls)`` with its ``__dict__`` filled in
+        ``fields`` order (the 18 GroundTruth fields; ValueError otherwise), and the foot plate
+        body of the contact measurement."""
+    def truth_free(
+        self,
+        time: float,
+        xpos: np.ndarray,
+        xquat: np.ndarray,
+        xmat: np.ndarray,
+        qpos: np.ndarray,
+        qvel: np.ndarray,
+        subtree_com: np.ndarray,
+    ) -> Any | None:
+        """The whole ground-truth record of a plant with no contact and no contact anchor:
+        the ``truth_arrays`` values, the EE quaternion as zeros (filled by the caller), no
+        contact, force/torque -0.0, ZMP NaN, slip 0, yaw 0; None if the plate frame is not
+        finite."""
 
 # --- canwire ---
 class CanMasterError(RdmError): ...
@@ -846,6 +867,35 @@ class CanWire:
 def json_record(values: object) -> str | None:
     """A flat dict record (plain str keys; None, bool, float, int, str, 1-D float64 arrays,
     lists of floats) as compact ``json.dumps`` text, NaN/inf as ``null``; None otherwise."""
+
+# --- truthlog ---
+class McapChunkBatch:
+    """Message records of one MCAP chunk in the making (rdm.sim.mcap_fast.ChunkBatchWriter):
+    each add appends one Message record (log time = publish time) and its index entry; the
+    add methods return 0 when they decline (nothing added), 1 when added, 2 when added and
+    the chunk buffer is now over ``chunk_size`` bytes."""
+
+    def __init__(self, chunk_size: int) -> None: ...
+    def set_base(self, base: int) -> None:
+        """The chunk buffer's size the next record follows (call with the batch empty)."""
+    def next_offset(self) -> int:
+        """Chunk buffer offset the next record starts at."""
+    def __len__(self) -> int: ...
+    def add(self, channel: int, sequence: int, time: int, data: bytes) -> int:
+        """One message with ``data`` (bytes) as its payload."""
+    def add_record(self, channel: int, sequence: int, time: int, values: object) -> int:
+        """One message whose payload is the flat dict record as ``json_record`` writes it."""
+    def add_fields(
+        self, channel: int, sequence: int, time: int, attributes: object, keys: object
+    ) -> int:
+        """One message whose payload is ``{k: attributes[k] for k in keys}`` (a dict and a
+        tuple of keys) as ``json_record`` writes it; a missing key declines."""
+    def take(
+        self,
+    ) -> tuple[bytes, int, int, int, list[tuple[int, list[tuple[int, int]]]]] | None:
+        """(records, count, first time, last time, [(channel, [(time, offset), ...])]) of the
+        pending messages (channels in first-message order), emptying the batch; None when
+        empty."""
 
 # --- onboardtick ---
 def leptrino_ok_sample_run(data: bytes) -> tuple[int, int, int, bytes | None]:

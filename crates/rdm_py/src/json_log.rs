@@ -307,7 +307,7 @@ impl McapChunkBatch {
         self.inner.clear();
         let groups = channels
             .into_iter()
-            .map(|(c, list)| Ok((c, PyList::new(py, list)?).into_pyobject(py)?))
+            .map(|(c, list)| (c, PyList::new(py, list)?).into_pyobject(py))
             .collect::<PyResult<Vec<_>>>()?;
         Ok(Some(
             (records, count, first, last, PyList::new(py, groups)?).into_pyobject(py)?,

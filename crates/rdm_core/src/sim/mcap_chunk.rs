@@ -149,11 +149,11 @@ mod tests {
         assert_eq!(b.next_offset(), 7 + MESSAGE_HEAD as u64 + 2);
         assert!(!b.over_size());
         b.push(1, 0, 5, &[0; 60]);
-        assert_eq!(b.entries()[1].offset, 7 + 33 + 2);
+        assert_eq!(b.entries()[1].offset, 7 + 33);
         assert!(b.over_size());
         assert_eq!(b.time_range(), Some((5, 0x0102)));
         b.clear();
         assert!(b.is_empty() && b.time_range().is_none());
-        assert_eq!(b.next_offset(), 7 + 35 + 33 + 60);
+        assert_eq!(b.next_offset(), 7 + 33 + 31 + 60);
     }
 }

@@ -1,0 +1,199 @@
+"""The flying robot's ground-truth record in one Rust call (``RotorPlantCore.truth_free``,
+helper truthlog) against the record built from the tracker's measurement and the MjData copies
+(``Plant._ground_truth_arrays``) and the reference form (``Plant._ground_truth_plain``)."""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+import pytest
+
+from rdm._rdm import RotorPlantCore
+from rdm.plant import Plant
+from rdm.plant.truth import TRUTH_FIELDS, GroundTruth
+
+
+def _assert_same(a: GroundTruth, b: GroundTruth) -> None:
+    assert type(a) is type(b) is GroundTruth
+    assert list(a.__dict__) == list(b.__dict__) == list(TRUTH_FIELDS)
+    for k in TRUTH_FIELDS:
+        x, y = a.__dict__[k], b.__dict__[k]
+        assert type(x) is type(y), k
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype and x.shape == y.shape, k
+            assert x.tobytes() == y.tobytes(), k  # bit for bit (signed zeros, NaN bits)
+            assert x.flags.writeable and x.flags.c_contiguous, k
+        elif isinstance(x, float):
+            assert struct.pack("<d", x) == struct.pack("<d", y), k
+        else:
+            assert x == y, k
+
+
+def _takeoff_plants(fixed_base: bool = False, n: int = 3) -> list[Plant]:
+    plants = []
+    for _ in range(n):
+        p = Plant("rdm", seed=2, ceiling_height=1.6, floor_height=0.0, fixed_base=fixed_base)
+        p.reset(base_position=(0.0, 0.0, 0.05))
+        plants.append(p)
+    return plants
+
+
+@pytest.mark.parametrize("fixed_base", [False, True])
+def test_one_call_record_equals_the_other_forms_through_takeoff_and_flight(fixed_base):
+    # On the floor (contacts, an anchor), lift-off (anchor released after 0.1 s), flight
+    # with changing thrusts and joint targets: the one-call record is taken whenever the
+    # tracker is idle, and every record equals the two other forms on twin plants.
+    fast, arrays, plain = _takeoff_plants(fixed_base)
+    rng = np.random.default_rng(5)
+    used = 0
+    idle_seen = {True: 0, False: 0}
+    for k in range(1200):
+        if k == 200 or (k > 200 and k % 150 == 0):
+            thrusts = rng.uniform(8.0, 11.0, 4)
+            targets = rng.uniform(-0.4, 0.4, len(fast._qadr))
+            for p in (fast, arrays, plain):
+                p.set_rotor_thrusts(thrusts)
+                p.set_servo_targets(targets)
+        for p in (fast, arrays, plain):
+            p.step(1)
+        if k % 4 == 0:
+            idle = fast._fresh().ncon == 0 and fast._tracker.idle()
+            idle_seen[idle] += 1
+            if idle:
+                d = fast._fresh()
+                direct = fast._rotors.truth_free(
+                    float(d.time),
+                    fast._v_xpos,
+                    fast._v_xquat,
+                    fast._v_xmat,
+                    fast._v_qpos,
+                    fast._v_qvel,
+                    fast._v_subtree_com,
+                )
+                assert direct is not None
+                used += 1
+            a = fast._ground_truth()
+            b = arrays._ground_truth_arrays()
+            c = plain._ground_truth_plain()
+            _assert_same(a, b)
+            _assert_same(a, c)
+            # the tracker state stays in step too (the one-call path changes nothing)
+            for p in (arrays, plain):
+                assert p._tracker._last_contact_time == fast._tracker._last_contact_time
+                assert (p._tracker._anchor_pos is None) is (fast._tracker._anchor_pos is None)
+    if not fixed_base:
+        assert idle_seen[True] > 50 and idle_seen[False] > 10  # both paths were exercised
+        assert used == idle_seen[True]
+
+
+def test_records_are_fresh_arrays_not_views_or_shared():
+    (plant,) = _takeoff_plants(n=1)
+    plant.reset(base_position=(0.0, 0.0, 0.8))
+    plant.set_rotor_thrusts([9.0, 9.0, 9.0, 9.0])
+    plant.step(5)
+    a = plant._ground_truth()
+    assert plant._tracker.idle() and a.foot_contact_points == 0
+    b = plant._ground_truth()
+    for k in TRUTH_FIELDS:
+        x, y = a.__dict__[k], b.__dict__[k]
+        if isinstance(x, np.ndarray):
+            assert x is not y and not np.shares_memory(x, y), k
+            assert x.base is None, k  # owns its data: not a view of MjData
+    before = a.base_position.copy()
+    plant.step(20)
+    plant.sync()
+    assert a.base_position.tobytes() == before.tobytes()
+    with pytest.raises(AttributeError):
+        a.time = 1.0  # still a frozen record
+
+
+def test_non_finite_plate_frame_takes_the_measurement_path():
+    plant, ref = _takeoff_plants(n=2)
+    for p in (plant, ref):
+        p.reset(base_position=(0.0, 0.0, 0.8))
+        p.sync()
+    for value in (np.nan, np.inf, -np.inf):
+        for p in (plant, ref):
+            p._data.xmat[p._plate_body][4] = value
+        d = plant._fresh()
+        views = (
+            plant._v_xpos,
+            plant._v_xquat,
+            plant._v_xmat,
+            plant._v_qpos,
+            plant._v_qvel,
+            plant._v_subtree_com,
+        )
+        assert plant._rotors.truth_free(float(d.time), *views) is None
+        a = plant._ground_truth()
+        _assert_same(a, ref._ground_truth_plain())
+        # -(R.T @ 0): NaN in the column of the non-finite entry (R[1, 1])
+        assert np.isnan(a.foot_contact_force[1]) and not np.isnan(a.foot_contact_force[0])
+
+
+def test_the_flag_keeps_the_path_before():
+    fast, slow = _takeoff_plants(n=2)
+    slow.truth_free_record = False
+    calls = []
+    real = slow._rotors
+
+    class Spy:
+        def __getattr__(self, name):
+            if name == "truth_free":
+                calls.append(name)
+            return getattr(real, name)
+
+    for p in (fast, slow):
+        p.reset(base_position=(0.0, 0.0, 0.8))
+        p.step(3)
+    slow._rotors = Spy()
+    try:
+        _assert_same(fast._ground_truth(), slow._ground_truth())
+    finally:
+        slow._rotors = real
+    assert calls == []
+
+
+def test_negated_product_with_zeros_is_negative_zero_for_finite_frames():
+    # The no-contact force and torque are -(R.T @ zeros(3)): numpy's matmul gives +0.0 for
+    # every finite R (the sums start from +0.0), so -0.0; the Rust record writes -0.0.
+    rng = np.random.default_rng(1)
+    zeros = np.zeros(3)
+    for i in range(20_000):
+        r = rng.normal(size=9) * 10.0 ** rng.integers(-300, 300, size=9)
+        if i % 3 == 0:
+            r = -np.abs(r)
+        if i % 7 == 0:
+            r[rng.integers(0, 9, size=4)] = -0.0
+        if i % 11 == 0:
+            r[:] = -0.0
+        rot = r.reshape(3, 3)
+        assert (-(rot.T @ zeros)).tobytes() == np.full(3, -0.0).tobytes()
+
+
+def test_record_setup_and_call_errors():
+    plant = Plant("rdm", seed=0)
+    plant.sync()
+    d = plant._data
+    views = (d.xpos, d.xquat, d.xmat, d.qpos, d.qvel, d.subtree_com)
+    fresh = RotorPlantCore([], [], None, d.site_xpos, d.site_xmat, d.ctrl)
+    with pytest.raises(ValueError, match="set_truth_record"):
+        fresh.truth_free(0.0, *views)
+    with pytest.raises(ValueError, match="fields"):
+        fresh.set_truth_record(object.__new__, GroundTruth, TRUTH_FIELDS[:-1], 0)
+    fresh.set_truth_record(object.__new__, GroundTruth, TRUTH_FIELDS, d.xpos.shape[0])
+    with pytest.raises(IndexError, match="xmat"):
+        fresh.truth_free(0.0, *views)
+    fresh.set_truth_record(object.__new__, GroundTruth, TRUTH_FIELDS, plant._plate_body)
+    with pytest.raises(ValueError, match="set_truth_layout"):
+        fresh.truth_free(0.0, *views)  # the copies' layout is still missing
+    with pytest.raises(ValueError, match="xmat"):
+        plant._rotors.truth_free(0.0, d.xpos, d.xquat, d.xmat[::2], d.qpos, d.qvel, d.subtree_com)
+    with pytest.raises(TypeError):
+        plant._rotors.truth_free(
+            0.0, d.xpos, d.xquat, d.xmat.astype(np.float32), d.qpos, d.qvel, d.subtree_com
+        )
+    # The plant's own record still works after all that on another core.
+    assert math.isfinite(plant._ground_truth().time)
