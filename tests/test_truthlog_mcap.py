@@ -26,8 +26,8 @@ from rdm.sim.mcap_fast import VERIFIED_MCAP, ChunkBatchWriter, ChunkMessageWrite
 MODES = {
     "library": {"fast_messages": False},
     "python": {"native_messages": False},
-    "native": {},
-    "background": {"background_chunks": True},
+    "native": {"background_chunks": False},
+    "background": {},  # the default
 }
 
 pytestmark = pytest.mark.skipif(
@@ -179,7 +179,7 @@ class _FailingFile:
 
 
 def test_a_failed_background_chunk_is_raised_and_stops_the_file(tmp_path):
-    log = McapLogger(tmp_path / "x.mcap", chunk_size=500, background_chunks=True)
+    log = McapLogger(tmp_path / "x.mcap", chunk_size=500)
     batch = log._batch
     assert batch is not None
     failing = _FailingFile(3000)

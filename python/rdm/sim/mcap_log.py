@@ -11,7 +11,9 @@ Two kinds of channel, each with a registered schema (PlotJuggler looks the schem
   arrays of numbers, nested objects).
 
 Log times are simulated time in ns. Chunks are small (64 KiB) so a crash loses little; call
-:meth:`McapLogger.finish` in a ``finally`` (it writes the summary and footer).
+:meth:`McapLogger.finish` in a ``finally`` (it writes the summary and footer). By default a
+full chunk is compressed and written on one worker thread while the caller goes on (the same
+bytes; ``finish`` waits for it): a logger is used from one thread, as before.
 """
 
 from __future__ import annotations
@@ -134,7 +136,7 @@ class McapLogger:
         compression: CompressionType = CompressionType.ZSTD,
         fast_messages: bool = True,
         native_messages: bool = True,
-        background_chunks: bool = False,
+        background_chunks: bool = True,
     ) -> None:
         self.path = path
         self._file: BinaryIO = open(path, "wb")  # noqa: SIM115
