@@ -1,6 +1,7 @@
 """The flying robot's ground-truth record in one Rust call (``RotorPlantCore.truth_free``,
 helper truthlog) against the record built from the tracker's measurement and the MjData copies
-(``Plant._ground_truth_arrays``) and the reference form (``Plant._ground_truth_plain``)."""
+(``Plant._ground_truth_arrays``) and the reference form (``Plant._ground_truth_plain``); the
+contact measurement's float sums against its array and plain forms."""
 
 from __future__ import annotations
 
@@ -9,10 +10,11 @@ import struct
 
 import numpy as np
 import pytest
+from test_plant_physics import _perch_plant, _perch_thrusts
 
 from rdm._rdm import RotorPlantCore
-from rdm.plant import Plant
-from rdm.plant.truth import TRUTH_FIELDS, GroundTruth
+from rdm.plant import NoCeilingEffect, Plant
+from rdm.plant.truth import TRUTH_FIELDS, GroundTruth, _cross3
 
 
 def _assert_same(a: GroundTruth, b: GroundTruth) -> None:
@@ -197,3 +199,87 @@ def test_record_setup_and_call_errors():
         )
     # The plant's own record still works after all that on another core.
     assert math.isfinite(plant._ground_truth().time)
+
+
+# ------------------------------------------------------------ contact measurement, floats
+def test_cross3_equals_numpy_cross_bit_for_bit():
+    rng = np.random.default_rng(9)
+    specials = [0.0, -0.0, np.inf, -np.inf, np.nan, 5e-324, -1e308, 1e308, 1.0]
+    for k in range(30_000):
+        a = rng.standard_normal(3) * 10.0 ** rng.integers(-200, 200, size=3)
+        b = rng.standard_normal(3) * 10.0 ** rng.integers(-200, 200, size=3)
+        if k % 5 == 0:
+            a[rng.integers(0, 3)] = specials[k % len(specials)]
+        if k % 7 == 0:
+            b[rng.integers(0, 3)] = specials[(k // 7) % len(specials)]
+        with np.errstate(all="ignore"):
+            got, want = _cross3(a, b), np.cross(a, b)
+        assert got.dtype == want.dtype and got.shape == (3,)
+        assert got.tobytes() == want.tobytes(), (a, b)
+
+
+def _measures_equal(a: tuple, b: tuple) -> None:
+    assert a[0] == b[0]
+    for x, y in zip(a[1:], b[1:], strict=True):
+        assert type(x) is type(y)
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype and x.tobytes() == y.tobytes()
+        else:
+            assert struct.pack("<d", x) == struct.pack("<d", y)
+
+
+def test_float_contact_sums_equal_the_array_and_plain_forms_when_perched():
+    # Perched on the ceiling (4 plate contacts), pushed sideways and twisted (slip, yaw,
+    # contacts thinning out), then released: three twin plants, one per form.
+    thrust = _perch_thrusts(4.0)
+    plants = [_perch_plant(NoCeilingEffect()) for _ in range(3)]
+    for p in plants:
+        p.reset(base_position=(0.0, 0.0, 2.0 - 5e-4), thrusts=thrust)
+        p.set_rotor_thrusts(thrust)
+    fast, arrays, plain = plants
+    seen = set()
+    for k in range(900):
+        for p in plants:
+            if k == 200:
+                p.apply_body_wrench("foot_plate", force=(0.0, 6.0, 0.0), torque=(0.0, 0.0, 1.5))
+            if k == 500:
+                p.apply_body_wrench("foot_plate", force=(0.0, 0.0, 0.0))
+            if k == 700:
+                p.set_rotor_thrusts(np.zeros(4))
+            p.step(1)
+        if k % 3 == 0:
+            a = fast._tracker.measure_contacts(fast._fresh())
+            b = arrays._tracker.measure_contacts_arrays(arrays._fresh())
+            c = plain._tracker.measure_plain(plain._fresh())
+            _measures_equal(a, b)
+            _measures_equal(a, c)
+            seen.add((a[0], a[5] != 0.0))
+    assert {n for n, _ in seen} == {0, 1, 2, 3, 4}  # perched on 4 points .. released
+    assert any(n > 0 and yaw for n, yaw in seen)  # twisted while in contact
+
+
+def test_a_nan_in_the_contact_sums_takes_the_array_form():
+    thrust = _perch_thrusts(4.0)
+    plants = [_perch_plant(NoCeilingEffect()) for _ in range(2)]
+    for p in plants:
+        p.reset(base_position=(0.0, 0.0, 2.0 - 5e-4), thrusts=thrust)
+        p.set_rotor_thrusts(thrust)
+        p.step(60)
+    fast, ref = plants
+    for p in plants:
+        d = p._fresh()
+        assert d.ncon > 0
+        p._data.contact.pos[0] = [np.nan, 0.0, np.inf]
+    calls = []
+    arrays = fast._tracker.measure_contacts_arrays
+
+    def spy(data):
+        calls.append(1)
+        return arrays(data)
+
+    fast._tracker.measure_contacts_arrays = spy
+    with np.errstate(invalid="ignore"):
+        a = fast._tracker.measure_contacts(fast._data)
+        b = ref._tracker.measure_contacts_arrays(ref._data)
+    assert calls == [1]
+    _measures_equal(a, b)

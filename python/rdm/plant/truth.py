@@ -67,10 +67,33 @@ _NAN2.flags.writeable = False
 
 
 def _yaw_about(normal: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> float:
-    """Angle of the rotation r0 -> r1 about ``normal`` (x axes projected on the plane)."""
+    """Angle of the rotation r0 -> r1 about ``normal`` (x axes projected on the plane);
+    :func:`_yaw_about_plain` with the cross product of :func:`_cross3`."""
+    x0 = r0[:, 0] - normal * (r0[:, 0] @ normal)
+    x1 = r1[:, 0] - normal * (r1[:, 0] @ normal)
+    return math.atan2(float(normal @ _cross3(x0, x1)), float(x0 @ x1))
+
+
+def _yaw_about_plain(normal: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> float:
+    """:func:`_yaw_about` with ``np.cross`` (the reference)."""
     x0 = r0[:, 0] - normal * (r0[:, 0] @ normal)
     x1 = r1[:, 0] - normal * (r1[:, 0] @ normal)
     return math.atan2(float(normal @ np.cross(x0, x1)), float(x0 @ x1))
+
+
+def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross(a, b)`` of two float64 3-vectors: numpy computes each component as
+    ``a1 * b2 - a2 * b1`` (one rounded product, another, a rounded difference), so do Python
+    floats, with the same bits; a NaN in the result (where NaN payloads could differ) takes
+    ``np.cross`` itself (tests/test_truthlog_truth.py)."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    c0 = a1 * b2 - a2 * b1
+    c1 = a2 * b0 - a0 * b2
+    c2 = a0 * b1 - a1 * b0
+    if c0 != c0 or c1 != c1 or c2 != c2:
+        return np.cross(a, b)
+    return np.array((c0, c1, c2))
 
 
 class FootContactTracker:
@@ -202,10 +225,84 @@ class FootContactTracker:
     def measure_contacts(
         self, data: mujoco.MjData
     ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """:meth:`measure_contacts_arrays` with the per-contact sums in Python floats: the
+        contact-frame products (``frame.T @ buf``) stay numpy's, everything after them is
+        the same IEEE operations in the same order on floats (the cross product as numpy
+        writes it: ``a1 * b2 - a2 * b1``, ...), so the same bits; sums holding a NaN (NaN
+        payloads could differ) take :meth:`measure_contacts_arrays` (tests/
+        test_truthlog_truth.py, tests/test_plant_fast_paths2.py)."""
+        self._check_view(data)
+        m = self._model
+        pb = self._plate_body
+        env = self._env_geoms
+        bodyid = self._bodyid_list()
+        contact = data.contact
+        pairs = contact.geom.tolist()
+        frames = contact.frame
+        positions = None
+        buf = self._buf
+        head = buf[:3]
+        tail = buf[3:]
+        origin = data.xpos[pb]
+        o0, o1, o2 = origin.tolist()
+        fx = fy = fz = tx = ty = tz = cx = cy = cz = 0.0
+        normal_sum = 0.0
+        points = 0
+        for i, (g1, g2) in enumerate(pairs):
+            if bodyid[g1] == pb and g2 in env:
+                sign = -1.0
+            elif bodyid[g2] == pb and g1 in env:
+                sign = 1.0
+            else:
+                continue
+            mujoco.mj_contactForce(m, data, i, buf)
+            frame_t = frames[i].reshape(3, 3).T
+            f0, f1, f2 = (frame_t @ head).tolist()
+            t0, t1, t2 = (frame_t @ tail).tolist()
+            f0, f1, f2 = sign * f0, sign * f1, sign * f2
+            if positions is None:
+                positions = contact.pos.tolist()
+            p0, p1, p2 = positions[i]
+            r0, r1, r2 = p0 - o0, p1 - o1, p2 - o2
+            fx += f0
+            fy += f1
+            fz += f2
+            tx += sign * t0 + (r1 * f2 - r2 * f1)
+            ty += sign * t1 + (r2 * f0 - r0 * f2)
+            tz += sign * t2 + (r0 * f1 - r1 * f0)
+            n = abs(buf.item(0))
+            cx += n * r0
+            cy += n * r1
+            cz += n * r2
+            normal_sum += n
+            points += 1
+        sums = (fx, fy, fz, tx, ty, tz, cx, cy, cz, normal_sum)
+        if any(v != v for v in sums):
+            return self.measure_contacts_arrays(data)
+        rot = data.xmat[pb].reshape(3, 3)
+        force = -(rot.T @ np.array((fx, fy, fz)))
+        torque = -(rot.T @ np.array((tx, ty, tz)))
+        self._track(data, points > 0)
+        zmp = (
+            (rot.T @ (np.array((cx, cy, cz)) / normal_sum))[:2]
+            if normal_sum > 0
+            else np.full(2, np.nan)
+        )
+        if self._anchor_pos is None or self._anchor_rot is None:
+            return points, force, torque, zmp, np.zeros(2), 0.0
+        anchor_rot = self._anchor_rot
+        slip = (origin - self._anchor_pos)[:2]
+        yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
+        return points, force, torque, zmp, slip.copy(), yaw
+
+    def measure_contacts_arrays(
+        self, data: mujoco.MjData
+    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """:meth:`measure_plain` reading the contact list as three arrays (geom pairs,
         frames, positions) instead of one ``data.contact[i]`` object per contact: the same
         per-contact numpy operations in the same order, so the same numbers
-        (tests/test_plant_fast_paths2.py)."""
+        (tests/test_plant_fast_paths2.py); the form :meth:`measure_contacts` takes when its
+        float sums hold a NaN."""
         self._check_view(data)
         m = self._model
         pb = self._plate_body
@@ -249,7 +346,7 @@ class FootContactTracker:
             return points, force, torque, zmp, np.zeros(2), 0.0
         anchor_rot = self._anchor_rot
         slip = (origin - self._anchor_pos)[:2]
-        yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
+        yaw = _yaw_about_plain(anchor_rot[:, 2], anchor_rot, rot)
         return points, force, torque, zmp, slip.copy(), yaw
 
     def _bodyid_list(self) -> list[int]:
@@ -299,5 +396,5 @@ class FootContactTracker:
             return points, force, torque, zmp, np.zeros(2), 0.0
         anchor_rot = self._anchor_rot
         slip = (origin - self._anchor_pos)[:2]
-        yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
+        yaw = _yaw_about_plain(anchor_rot[:, 2], anchor_rot, rot)
         return points, force, torque, zmp, slip.copy(), yaw
