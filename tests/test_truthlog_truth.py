@@ -129,8 +129,9 @@ def test_non_finite_plate_frame_takes_the_measurement_path():
             plant._v_subtree_com,
         )
         assert plant._rotors.truth_free(float(d.time), *views) is None
-        a = plant._ground_truth()
-        _assert_same(a, ref._ground_truth_plain())
+        with np.errstate(invalid="ignore"):
+            a = plant._ground_truth()
+            _assert_same(a, ref._ground_truth_plain())
         # -(R.T @ 0): NaN in the column of the non-finite entry (R[1, 1])
         assert np.isnan(a.foot_contact_force[1]) and not np.isnan(a.foot_contact_force[0])
 
