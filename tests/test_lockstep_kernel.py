@@ -62,13 +62,22 @@ def _state(stack: Stack) -> dict:
         "qvel": d.qvel.tobytes(),
         "ctrl": d.ctrl.tobytes(),
         "time": d.time,
+        "tracker": (
+            plant._tracker._last_contact_time,
+            None if plant._tracker._anchor_pos is None else plant._tracker._anchor_pos.tobytes(),
+        ),
     }
 
 
-def _run(tmp: Path, kernel: bool, steps: Steps, **options) -> tuple[dict, dict, dict | None]:
-    """(files by relative path, state, kernel stats) of the hover stack driven by ``steps``."""
+def _run(
+    tmp: Path, kernel: bool, steps: Steps, script=None, **options
+) -> tuple[dict, dict, dict | None]:
+    """(files by relative path, state, kernel stats) of the stack driven by ``steps`` (the
+    hover script unless ``script`` is given)."""
     opts = replace(sim_stack_options(0, "inproc", speed=None, **options), lockstep_kernel=kernel)
-    stack = build_stack("k", tmp, opts, make_script(np.array([0.483, 0.0, HOVER_Z])))
+    if script is None:
+        script = make_script(np.array([0.483, 0.0, HOVER_Z]))
+    stack = build_stack("k", tmp, opts, script)
     assert (stack.loop.kernel is not None) == kernel
     try:
         steps(stack)
@@ -82,10 +91,12 @@ def _run(tmp: Path, kernel: bool, steps: Steps, **options) -> tuple[dict, dict, 
     return files, state, stats
 
 
-def _same(tmp_path: Path, steps: Steps, **options) -> dict:
-    """Run ``steps`` with and without the kernel; assert equal files and state; the stats."""
-    files_k, state_k, stats = _run(tmp_path / "kernel", True, steps, **options)
-    files_p, state_p, _ = _run(tmp_path / "python", False, steps, **options)
+def _same(tmp_path: Path, steps: Steps, make_script_=None, **options) -> dict:
+    """Run ``steps`` with and without the kernel; assert equal files and state; the stats.
+    ``make_script_()`` gives each run its own scenario script (default: hover)."""
+    new = make_script_ or (lambda: None)
+    files_k, state_k, stats = _run(tmp_path / "kernel", True, steps, new(), **options)
+    files_p, state_p, _ = _run(tmp_path / "python", False, steps, new(), **options)
     assert sorted(files_k) == sorted(files_p)
     for name in files_k:
         assert files_k[name] == files_p[name], name
@@ -129,6 +140,23 @@ def test_hover_with_a_cut_uart_same_bytes_and_state(tmp_path: Path) -> None:
     assert fast["leptrino_foot"] > 1500
     assert stats["physics_fast"] == 4000
     assert fast["onboard"] == fast["mocap"] == fast["script"] == 0
+
+
+def test_perching_contacts_same_bytes_and_state(tmp_path: Path) -> None:
+    from rdm.scenarios import perching
+
+    def steps(stack: Stack) -> None:
+        stack.loop.run(16.0)  # flight, the approach, contact at 14.83 s, 1.2 s perched
+
+    stats = _same(
+        tmp_path,
+        steps,
+        lambda: perching.PerchingScript(perching.PERCHED_MOTION),
+        onboard=perching.onboard_config(),
+    )
+    # Perched (1.17 s), the contact tracker only stamps the contact time: the kernel does
+    # it; on the floor before take-off (other geoms touching, the anchor set) it is Python's.
+    assert stats["tracker_fast"] > 1100
 
 
 def test_held_external_wrench_takes_the_python_step(tmp_path: Path) -> None:

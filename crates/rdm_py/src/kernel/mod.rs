@@ -451,6 +451,12 @@ impl LockstepKernel {
         d.set_item("physics_fast", self.physics_fast)?;
         d.set_item("physics_python", self.physics_python)?;
         d.set_item("boundaries", self.boundaries)?;
+        let (tf, tp) = self
+            .plant
+            .as_ref()
+            .map_or((0, 0), |p| (p.tracker_fast, p.tracker_python));
+        d.set_item("tracker_fast", tf)?;
+        d.set_item("tracker_python", tp)?;
         Ok(d)
     }
 }

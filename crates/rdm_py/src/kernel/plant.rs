@@ -50,6 +50,14 @@ pub(crate) struct PlantLink {
     /// The contact tracker has no contact to remember or release (`update` returns at once
     /// while there is no contact).
     tracker_idle: bool,
+    /// `FootContactTracker.kernel_plan`: the cached contact view (its ncon, the geom pairs),
+    /// the plate's geoms, whether the first-contact anchor is set.
+    tracker_view: Option<(i64, Py<numpy::PyArray2<i32>>)>,
+    plate_geoms: Vec<i32>,
+    anchored: bool,
+    /// Tracker updates run here / in Python (diagnostics).
+    pub(crate) tracker_fast: u64,
+    pub(crate) tracker_python: u64,
 }
 
 impl PlantLink {
@@ -101,6 +109,11 @@ impl PlantLink {
             version: 0,
             step_ok: false,
             tracker_idle: false,
+            tracker_view: None,
+            plate_geoms: Vec::new(),
+            anchored: false,
+            tracker_fast: 0,
+            tracker_python: 0,
         })
     }
 
@@ -130,7 +143,37 @@ impl PlantLink {
         let n = &self.names;
         self.tracker_idle =
             n.anchor_pos.is_none(tr)? && n.last_contact_time.f64(tr)? == f64::NEG_INFINITY;
+        let plan = tr.call_method1("kernel_plan", (self.data.bind(py),))?;
+        self.tracker_view = None;
+        if !plan.is_none() {
+            let t = plan.cast::<pyo3::types::PyTuple>()?;
+            self.tracker_view = Some((t.get_item(0)?.extract()?, t.get_item(1)?.extract()?));
+            self.plate_geoms = t.get_item(2)?.extract()?;
+            self.anchored = t.get_item(3)?.extract()?;
+        }
         Ok(())
+    }
+
+    /// `FootContactTracker.update` when it only stamps the contact time (the cached view
+    /// holds this step's contacts, one of them the plate's, the anchor is set); false: the
+    /// Python update must run.
+    fn track_contact(&self, py: Python<'_>, ncon: i64) -> PyResult<bool> {
+        let Some((view_ncon, view)) = &self.tracker_view else {
+            return Ok(false);
+        };
+        if *view_ncon != ncon || !self.anchored {
+            return Ok(false);
+        }
+        let view = view.bind(py).try_readonly()?;
+        let plate = view.as_array().iter().any(|g| self.plate_geoms.contains(g));
+        if !plate {
+            return Ok(false);
+        }
+        let time = self.names.time.f64(self.data.bind(py))?;
+        self.names
+            .last_contact_time
+            .set(self.tracker.bind(py), time)?;
+        Ok(true)
     }
 
     /// Write the flags back (before Python code runs).
@@ -187,9 +230,14 @@ impl PlantLink {
         // FootContactTracker.update: returns at once with no contact and nothing to release.
         let ncon = self.names.ncon.i64(d)?;
         if ncon != 0 || !self.tracker_idle {
-            let tr = self.tracker.bind(py);
-            self.names.update.get(tr)?.call1((d,))?;
-            self.load_tracker(py)?;
+            if ncon != 0 && self.track_contact(py, ncon)? {
+                self.tracker_fast += 1;
+            } else {
+                let tr = self.tracker.bind(py);
+                self.names.update.get(tr)?.call1((d,))?;
+                self.load_tracker(py)?;
+                self.tracker_python += 1;
+            }
         }
         self.stale = true;
         self.needs_step1 = true;
