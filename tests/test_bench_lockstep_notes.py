@@ -19,3 +19,16 @@ def test_airborne_note_uses_only_the_ticks_after_take_off():
 def test_airborne_note_is_empty_for_a_run_that_ends_on_the_floor():
     ns = np.full(round(lockstep.AIRBORNE_FROM_S * 1000), 1_000_000, dtype=np.int64)
     assert lockstep._airborne_note(ns) == []
+
+
+def test_kernel_note_names_the_nodes_run_in_rust_with_their_counts():
+    stats = {
+        "nodes": ["plant_bridge", "onboard"],
+        "fast": [900, 0],
+        "python": [100, 40],
+        "physics_fast": 1000,
+        "physics_python": 0,
+    }
+    (note,) = lockstep._kernel_note(stats)
+    assert note == "lockstep kernel, ticks run in Rust: plant_bridge 900/1000, physics 1000/1000"
+    assert lockstep._kernel_note(None) == ["no lockstep kernel: every tick in Python"]

@@ -914,3 +914,36 @@ def rosserial_scan(
 # --- mstruth ---
 # WrenchNoiseCore.sample_values_at and RotorPlantCore.{set_truth_layout, truth_arrays} are
 # stubbed in their classes above (crates/rdm_py/src/{sensor_sim,rotor_plant}.rs).
+
+# --- lockstep kernel ---
+class LockstepKernel:
+    """The unpaced lockstep loop in Rust with fast paths for the firmware side's steady
+    milliseconds (``rdm.nodes.lockstep_kernel``, docs/kernel.md)."""
+
+    def __init__(
+        self,
+        dt: float,
+        schedule: list[list[int]],
+        ticks: list[Any],
+        physics: Any | None,
+        clock: Any,
+        owner: Any,
+    ) -> None: ...
+    def attach_plant(self, plant: Any, mujoco: Any) -> None: ...
+    def attach_bridge(self, index: int, node: Any, bank: NeuronBank) -> None: ...
+    def attach_bank(
+        self, index: int, node: Any, bank: NeuronBank, wire: CanWire, n_boards: int
+    ) -> None: ...
+    def attach_spinal(
+        self, index: int, node: Any, master: CanMaster, wire: CanWire, drain_at: int
+    ) -> None: ...
+    def attach_leptrino(self, index: int, node: Any) -> None: ...
+    def set_touches(self, index: int, parts: list[str]) -> None:
+        """The parts (``plant``, ``bridge``, ``bank``, ``spinal``, ``leptrino``) node
+        ``index``'s Python tick may change; default all."""
+    def run(self, k0: int, n: int) -> int:
+        """Advance ``n`` base ticks from ``k0``; the next ``k``."""
+    @property
+    def k(self) -> int: ...
+    def stats(self) -> dict[str, Any]:
+        """Ticks per node on the fast path and in Python, physics steps, boundaries."""

@@ -153,7 +153,7 @@ impl CanMaster {
     /// sent when the master is (still) running, has no pending event and its wire log holds
     /// fewer than `drain_at` frames; otherwise -1, and [`last_wire_tick`] holds `tick_wire`'s
     /// tuple of this tick. Exactly `tick_wire`'s effect on the master and the wire.
-    fn tick_wire_steady(
+    pub(crate) fn tick_wire_steady(
         &mut self,
         now_ms: i64,
         stamp: f64,

@@ -11,6 +11,7 @@ mod errors;
 mod estimate;
 mod gains;
 mod json_log;
+mod kernel;
 mod leptrino_scan;
 mod lqi;
 mod model;
@@ -43,5 +44,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     can_master::register(m)?;
     leptrino_scan::register(m)?;
     rosserial::register(m)?;
+    kernel::register(m)?;
     Ok(())
 }

@@ -469,6 +469,73 @@ impl NeuronBank {
 }
 
 /// Register `NeuronBank` and `NeuronBankError`.
+/// Accessors of the lockstep kernel (`crate::kernel`): the same work as the Python-facing
+/// methods above, on slices and the core wire, without Python objects in between.
+impl NeuronBank {
+    /// [`NeuronBank::bridge_tick`] on slices.
+    pub(crate) fn kernel_bridge_tick(
+        &mut self,
+        qpos: &[f64],
+        targets: &mut [f64],
+        duties: &mut [f64],
+    ) -> PyResult<(bool, bool)> {
+        let bridge = self
+            .bridge
+            .as_mut()
+            .ok_or_else(|| err("bridge_tick: no bridge attached".into()))?;
+        bridge.snapshot(qpos).map_err(bridge_err)?;
+        let c = bridge
+            .couple(&self.core, targets, duties)
+            .map_err(bridge_err)?;
+        Ok((c.targets, c.duties))
+    }
+
+    /// [`NeuronBank::bridge_push_positions`].
+    pub(crate) fn kernel_push_positions(&mut self) -> PyResult<()> {
+        self.bridge_push_positions()
+    }
+
+    /// [`NeuronBank::tick_wire`] on the core wire; the sending boards go to `boards`.
+    pub(crate) fn kernel_tick_wire(
+        &mut self,
+        now: f64,
+        stamp: f64,
+        wire: &mut rdm_core::firmware::can_wire::CanWire,
+        boards: &mut Vec<usize>,
+    ) -> PyResult<()> {
+        boards.clear();
+        wire.take_for_neurons(&mut self.rx);
+        let out = self.core.tick(now, &self.rx).map_err(bank_err)?;
+        for e in out {
+            wire.send(
+                rdm_core::firmware::can_wire::Sender::Neurons,
+                stamp,
+                e.frame,
+            );
+            boards.push(e.board);
+        }
+        Ok(())
+    }
+
+    /// [`NeuronBank::sent_frames_heard`].
+    pub(crate) fn kernel_sent_frames_heard(&self) -> bool {
+        self.core.sent_frames_heard()
+    }
+
+    /// Whether the change counters equal `last`; if not, `last` takes them.
+    pub(crate) fn kernel_refresh_changes(&self, last: &mut Vec<u64>) -> bool {
+        let boards = self.core.boards();
+        if boards.len() == last.len()
+            && boards.iter().zip(last.iter()).all(|(b, l)| b.changes == *l)
+        {
+            return true;
+        }
+        last.clear();
+        last.extend(boards.iter().map(|b| b.changes));
+        false
+    }
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add("NeuronBankError", py.get_type::<NeuronBankError>())?;

@@ -14,7 +14,7 @@ use rdm_core::sim::rotor_plant::{CeilingRatio, RotorPlant, RotorPlantStatus};
 
 /// ESC state, ceiling models and rotor controls of one plant (see `rdm.plant.Plant`).
 #[pyclass(module = "rdm._rdm")]
-struct RotorPlantCore {
+pub(crate) struct RotorPlantCore {
     inner: RotorPlant,
     /// Per rotor: the duty -> thrust map and last duty of its ESC (``Esc`` reads them here).
     escs: Vec<EscDuty>,
@@ -88,7 +88,7 @@ fn index_error(what: &str, i: usize) -> PyErr {
 }
 
 impl RotorPlantCore {
-    fn run(&mut self, py: Python<'_>, lag: bool) -> PyResult<()> {
+    pub(crate) fn run(&mut self, py: Python<'_>, lag: bool) -> PyResult<()> {
         let xpos = self.site_xpos.bind(py).try_readonly()?;
         let xmat = self.site_xmat.bind(py).try_readonly()?;
         let mut ctrl = self.ctrl.bind(py).try_readwrite()?;
@@ -467,6 +467,24 @@ impl RotorPlantCore {
             )));
         }
         self.inner.set_applied(&values);
+        Ok(())
+    }
+}
+
+impl RotorPlantCore {
+    /// [`RotorPlantCore::command_duties`] on a slice (the lockstep kernel's duty hand-over).
+    pub(crate) fn kernel_command_duties(&mut self, duties: &[f64]) -> PyResult<()> {
+        if duties.len() != self.escs.len() {
+            return Err(PyValueError::new_err(format!(
+                "duties: expected {} values, got {}",
+                self.escs.len(),
+                duties.len()
+            )));
+        }
+        for (i, (e, d)) in self.escs.iter_mut().zip(duties).enumerate() {
+            let target = e.command(*d);
+            self.inner.set_target(i, target);
+        }
         Ok(())
     }
 }

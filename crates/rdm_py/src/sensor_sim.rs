@@ -40,8 +40,8 @@ fn with_slice<R>(data: &PyReadonlyArray1<'_, f64>, f: impl FnOnce(&[f64]) -> R) 
 
 /// Wrench sensor error model (see `rdm_core::sim::sensor_noise::WrenchNoiseModel`).
 #[pyclass(module = "rdm._rdm", frozen)]
-struct WrenchNoiseCore {
-    inner: WrenchNoiseModel,
+pub(crate) struct WrenchNoiseCore {
+    pub(crate) inner: WrenchNoiseModel,
 }
 
 #[pymethods]
@@ -122,8 +122,8 @@ fn imu_out<'py>(py: Python<'py>, s: &ImuSample) -> ImuOut<'py> {
 
 /// IMU error model (see `rdm_core::sim::sensor_noise::ImuNoiseModel`).
 #[pyclass(module = "rdm._rdm", frozen)]
-struct ImuNoiseCore {
-    inner: ImuNoiseModel,
+pub(crate) struct ImuNoiseCore {
+    pub(crate) inner: ImuNoiseModel,
 }
 
 #[pymethods]

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 
 from rdm._rdm import leptrino_force_frame
 from rdm.protocol import leptrino as lp
+from rdm.sim.uart import InProcessUartEnd, TappedLink
 
 
 class LeptrinoSensorNode:
@@ -199,6 +200,50 @@ class LeptrinoSensorNode:
             self.errors["tx_short"] += 1
         else:
             self.frames_sent += 1
+
+    # ------------------------------------------------------------ lockstep kernel
+    def kernel_plan(self) -> tuple | None:
+        """What ``rdm._rdm.LockstepKernel`` needs to run :meth:`tick` in Rust while no host
+        command is waiting: (streaming, limits, rated, temperature, sensor number, frames
+        sent, wrench, the cached frame of that wrench or None), or None when the tick has
+        no Rust form now (bytes from the host, a UART other than an open in-process pipe
+        whose writes are whole, a temperature or sensor number the Rust encoder does not
+        take) (docs/kernel.md)."""
+        uart = self.uart
+        if type(uart) is not TappedLink or type(uart.link) is not InProcessUartEnd:
+            return None
+        end = uart.link
+        if end.inbox or end.closed or end.peer is None or end.peer.closed:
+            return None
+        temp, no = self.temperature, self.sensor_no
+        if type(temp) is not int or type(no) is not int or not -0x8000 <= temp <= 0x7FFF:
+            return None
+        w = self._wrench
+        cache = self._frame_cache
+        frame = None
+        if cache is not None and cache[0] is w and cache[1] == temp and cache[2] == no:
+            frame = cache[3]
+        rated = tuple(float(v) for v in self.model.rated)
+        return (self.streaming, self._limits, rated, temp, no, self.frames_sent, w, frame)
+
+    def kernel_commit(
+        self, data: bytes, frames: int, wrench: tuple[float, ...], frame: bytes | None
+    ) -> None:
+        """The sample frames of the kernel's ticks (written now, in one write: the bytes the
+        ticks would have written one by one), the wrench last set and its frame."""
+        if data:
+            try:
+                n = self.uart.write(data)
+            except OSError:
+                n = 0
+            if n < len(data):  # not on an open in-process pipe (kernel_plan's condition)
+                self.bytes_dropped += len(data) - n
+                self.errors["tx_short"] += 1
+            else:
+                self.frames_sent += frames
+        self._wrench = wrench
+        if frame is not None:
+            self._frame_cache = (wrench, self.temperature, self.sensor_no, frame)
 
     def close(self) -> None:
         """Close the UART (the node owns it)."""

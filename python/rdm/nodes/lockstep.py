@@ -142,6 +142,9 @@ class Lockstep:
         self._entries: list[_Entry] = []
         self.stats = LockstepStats()
         self._stop = False
+        #: A :class:`rdm._rdm.LockstepKernel` running the unpaced loop in Rust
+        #: (``rdm.nodes.lockstep_kernel.attach_kernel``); None: the Python loop.
+        self.kernel = None
         offsets = dict(offsets or {})
         names = set()
         for node in nodes:
@@ -254,7 +257,10 @@ class Lockstep:
         sim0 = self.time
         next_report = sim0 + self.progress_every
         if self.speed is None and self.progress is None and not self.profile and self._schedule:
-            self._run_fast(int(n))
+            if self.kernel is not None and not self.barriers:
+                self._run_kernel(int(n))
+            else:
+                self._run_fast(int(n))
             self.stats.wall_time += self._wall() - wall0
             return self.stats
         for _ in range(int(n)):
@@ -299,12 +305,24 @@ class Lockstep:
                 if self._stop:
                     break
         finally:
-            self.k = k
-            ticks = self.stats.ticks
-            for e in self._entries:
-                ticks[e.node.name] += _due_count(k0, k, e.every, e.offset)
-            self.stats.base_ticks += k - k0
-            self.stats.sim_time = k * dt
+            self._count(k0, k)
+
+    def _run_kernel(self, n: int) -> None:
+        """:meth:`_run_fast` through :attr:`kernel` (the same ticks in the same order)."""
+        k0 = self.k
+        try:
+            self.kernel.run(k0, n)
+        finally:
+            self._count(k0, self.kernel.k)
+
+    def _count(self, k0: int, k: int) -> None:
+        """Per-node tick counts and totals after the base ticks ``k0 .. k-1`` ran."""
+        self.k = k
+        ticks = self.stats.ticks
+        for e in self._entries:
+            ticks[e.node.name] += _due_count(k0, k, e.every, e.offset)
+        self.stats.base_ticks += k - k0
+        self.stats.sim_time = k * self.dt
 
     def _progress(self, sim: float, sim0: float, wall0: float) -> Progress:
         wall = self._wall() - wall0

@@ -137,6 +137,10 @@ class OnboardNode:
     """The onboard PC (see the module doc). ``uart``/``foot_sensor``: byte links with
     ``read_available()`` and ``write()`` (e.g. :func:`rdm.link.serial.open_serial`)."""
 
+    #: What its tick changes of the lockstep kernel's parts (``rdm.nodes.lockstep_kernel``):
+    #: bytes written into the Spinal and Leptrino UARTs. It never touches the plant.
+    kernel_touches = ("spinal", "leptrino")
+
     name = "onboard"
 
     def __init__(

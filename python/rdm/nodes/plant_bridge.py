@@ -460,6 +460,72 @@ class PlantBridge:
         if self._truth_on and n % self._truth_n == 0:
             self._truth_sink(plant.ground_truth())
 
+    # ------------------------------------------------------------ lockstep kernel
+    #: Set by ``rdm.nodes.lockstep_kernel.attach_kernel``: the Leptrino node whose
+    #: ``set_wrench_values`` and the Spinal mirror whose ``set_imu_sample`` the kernel may
+    #: feed itself when they are this bridge's sinks.
+    kernel_wrench_node: object | None = None
+    kernel_imu_node: object | None = None
+
+    def kernel_plan(self) -> tuple | None:
+        """What ``rdm._rdm.LockstepKernel`` needs to run :meth:`tick` in Rust, or None when
+        this tick has no Rust form now: the Python coupling, a battery voltage that is a
+        function of time or not yet applied, ESCs outside the Rust duty map, or a wrench
+        sink other than the kernel's Leptrino node (docs/kernel.md). Its last item is the
+        IMU path (addresses, noise core, normal stream, the Spinal mirror) when the IMU's
+        only sink is the kernel's Spinal mirror, else None (an IMU ms is then Python's);
+        mocap and truth samples are always Python's. The kernel writes ``ticks``,
+        ``_sample_count`` and ``time_mismatches`` back itself."""
+        plant = self.plant
+        battery = self._battery
+        if self._bank is None or callable(battery) or battery != self._voltage:
+            return None
+        if not (plant._duties_in_core and all(e._v_factor is not None for e in plant.escs)):
+            return None
+        cls = type(plant)
+        adr, core, normals, wrench_n = (0, 0), None, None, 0
+        if self._wrench_on:
+            sinks = self._wrench_tuple_sinks
+            node = self.kernel_wrench_node
+            if len(sinks) != 1 or len(self._wrench_sinks) != 1 or node is None:
+                return None
+            ((key, sink),) = sinks.items()
+            if getattr(sink, "__self__", None) is not node or self._wrench_values is None:
+                return None
+            if getattr(self._wrench_values, "__func__", None) is not cls.wrench_values:
+                return None
+            model = plant.wrench_models[key]
+            adr, core, normals = plant._wrench_adr[key], model._core, model._normals
+            wrench_n = self._wrench_n
+        imu = None
+        sink = self._imu_sink
+        if (
+            self._imu_on
+            and not self._imu_neurons
+            and self.kernel_imu_node is not None
+            and getattr(sink, "__self__", None) is self.kernel_imu_node
+            and getattr(sink, "__name__", "") == "set_imu_sample"
+            and getattr(plant.imu, "__func__", None) is cls.imu
+        ):
+            model = plant.imu_model
+            imu = (plant._imu_adr, model._core, model._normals, self.kernel_imu_node)
+        return (
+            self.ticks,
+            self._sample_count,
+            self.time_mismatches,
+            0.5 * self.period,
+            self._imu_n if self._imu_on else 0,
+            wrench_n,
+            self._mocap_n if self._mocap_on else 0,
+            self._truth_n if self._truth_on else 0,
+            adr,
+            core,
+            normals,
+            self._targets,
+            self._duties,
+            imu,
+        )
+
     @property
     def battery_voltage(self) -> float | None:
         """The last voltage applied."""

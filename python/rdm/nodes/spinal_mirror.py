@@ -814,6 +814,55 @@ class SpinalMirror:
         self.counters.logs[C.LogLevel(level).name.lower()] += 1
         self.session.log(level, text)
 
+    # ---------------------------------------------------------------- lockstep kernel
+    def kernel_plan(self) -> tuple | None:
+        """The window in which :meth:`tick` is only the steady CAN ms, for
+        ``rdm._rdm.LockstepKernel`` (docs/kernel.md): (now_ms, _now_s, idle window lo, hi,
+        battery due ms, next control time, CAN ms, next publisher ms); the kernel runs a
+        tick at ms m itself when m is inside the idle window, before the battery, control and
+        publisher times, and one past the CAN ms. None when no tick can run so: the plain
+        tick, bytes waiting, the master not steady on the wire, events or output pending.
+        The kernel writes ``now_ms``, ``_now_s``, ``_can_ms`` and the master's ``tx_count``
+        and ``_pending_events`` back itself, as the steady tick leaves them."""
+        if not self._fast or self.now_ms is None or self._next_control is None:
+            return None
+        inbox = self.uart.inbox
+        link = self._wire_link
+        master = self.master
+        if inbox is None or inbox or link is None or self._can_ms is None:
+            return None
+        if not self._master_was_running or master.state is not MasterState.RUNNING:
+            return None
+        if master._wire is not link or self.duties is not self._duties_to_master:
+            return None
+        ch = self._wire_channel
+        if len(ch.buses) != 1 or ch.taps or ch.clock.__class__ is not SimClock:
+            return None
+        if master._events or self.session.pending_frames or self.uart.pending:
+            return None
+        return (
+            self.now_ms,
+            self._now_s,
+            self._idle_lo,
+            self._idle_hi,
+            self._battery_due_ms,
+            self._next_control,
+            self._can_ms,
+            self._next_pub_ms,
+        )
+
+    def kernel_finish_wire_tick(self, now_ms: int) -> None:
+        """The rest of a kernel tick whose CAN ms was not steady (``tick_wire_steady`` gave
+        -1): the master takes the tick's result, then events, publishers and output as
+        :meth:`tick` does."""
+        master = self.master
+        master.apply_wire_tick(master.core.last_wire_tick)
+        self._forward_can_events()
+        if now_ms >= self._next_pub_ms:
+            self._publish(now_ms)
+        if self.session.pending_frames or self.uart.pending:
+            self.uart.send(self.session.take_output())
+
     # ---------------------------------------------------------------- diagnostics
     def diagnostics(self) -> dict[str, Any]:
         """A snapshot of every counter (UART, rosserial, control, CAN) as plain data."""

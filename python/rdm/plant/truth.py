@@ -152,6 +152,17 @@ class FootContactTracker:
             in_contact = False
         self._track(data, in_contact)
 
+    def kernel_plan(self, data: mujoco.MjData) -> tuple | None:
+        """For ``rdm._rdm.LockstepKernel``: (ncon of the cached contact view, the view, the
+        plate's geoms, whether the anchor is set) when :meth:`update` would use the cached
+        view for ``data``, else None. With the anchor set and a plate contact in the view,
+        :meth:`update` only stamps ``_last_contact_time`` (the kernel does that itself)."""
+        cached = self._geom_view
+        if cached[0] is not data or not cached[1]:
+            return None
+        anchored = self._anchor_pos is not None and self._anchor_rot is not None
+        return (cached[1], cached[3], sorted(self._plate_geoms), anchored)
+
     def update_plain(self, data: mujoco.MjData) -> None:
         """:meth:`update` reading a fresh contact list every step (the reference)."""
         in_contact = False

@@ -29,6 +29,7 @@ from rdm.link.can import open_can
 from rdm.link.can_wire import CanWireLink, WireCandump
 from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
 from rdm.nodes.lockstep import Lockstep
+from rdm.nodes.lockstep_kernel import attach_kernel
 from rdm.nodes.neuron_bank import NeuronBankNode, NeuronSpec
 from rdm.nodes.neuron_mirror import NeuronMirror
 from rdm.nodes.onboard import OnboardNode
@@ -93,6 +94,8 @@ class MocapNode:
     difference of the true CoG) and the foot-frame yaw, to the onboard node."""
 
     name = "mocap"
+    #: What its tick changes of the lockstep kernel's parts: the plant (its lazy forward).
+    kernel_touches = ("plant",)
 
     def __init__(self, plant: Plant, onboard: OnboardNode, period: float = 0.01) -> None:
         self.plant = plant
@@ -225,6 +228,10 @@ class StackOptions:
     #: before); then seed 1's accelerometer bias (-0.13 m/s^2 in y: 0.8 deg of roll) tips the
     #: perched plate onto its edges (ZMP on the edge 10.5 % of the time, docs/sim.md).
     imu_acc_calibrated: bool = True
+    #: Run the unpaced lockstep loop in Rust (:mod:`rdm.nodes.lockstep_kernel`): the same
+    #: ticks, the same bytes in every log (tests/test_lockstep_kernel.py), the steady
+    #: milliseconds of the firmware side without Python. False: the Python loop.
+    lockstep_kernel: bool = True
     #: Joint servo model. ASSUMPTION: a stiff position servo (kp 150 N m/rad, kv 5 N m s/rad,
     #: about 1 deg of error at 2.6 N m, torque limited to the stall torque) as a Dynamixel X
     #: holds its goal; the plant's softer default (kp 30) lets q2 sag 0.35 rad at take-off.
@@ -468,6 +475,8 @@ def build_stack(
     stack.loop = Lockstep(
         nodes, physics=plant, can_channels=[channel], barriers=barriers, speed=opt.speed
     )
+    if opt.lockstep_kernel and not barriers:
+        attach_kernel(stack.loop, plant)
     stack.closers = [
         onboard.close,
         *([logger.finish] if logger else []),
@@ -487,6 +496,8 @@ class StatusNode:
 
     name = "status"
     period = 0.025
+    #: It only reads the onboard node and the Spinal mirror: no lockstep-kernel part.
+    kernel_touches = ()
 
     def __init__(self, stack: Stack) -> None:
         self.stack = stack

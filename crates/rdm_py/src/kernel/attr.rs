@@ -1,0 +1,45 @@
+//! Typed reads and writes of Python attributes with interned names: the kernel keeps the
+//! nodes' Python-visible state in their own attributes (read when a plan is loaded, written
+//! back before any Python code runs).
+
+use pyo3::prelude::*;
+use pyo3::types::PyString;
+
+/// An attribute name interned once (cheap repeated lookups).
+pub(crate) struct Name(Py<PyString>);
+
+impl Name {
+    pub(crate) fn new(py: Python<'_>, name: &str) -> Self {
+        Name(PyString::intern(py, name).unbind())
+    }
+
+    pub(crate) fn get<'py>(&self, obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+        obj.getattr(self.0.bind(obj.py()))
+    }
+
+    pub(crate) fn set<'py, V: IntoPyObject<'py>>(
+        &self,
+        obj: &Bound<'py, PyAny>,
+        value: V,
+    ) -> PyResult<()> {
+        obj.setattr(self.0.bind(obj.py()), value)
+    }
+
+    pub(crate) fn f64(&self, obj: &Bound<'_, PyAny>) -> PyResult<f64> {
+        self.get(obj)?.extract()
+    }
+
+    pub(crate) fn i64(&self, obj: &Bound<'_, PyAny>) -> PyResult<i64> {
+        self.get(obj)?.extract()
+    }
+
+    /// Python truthiness (`bool(obj.name)`).
+    pub(crate) fn truthy(&self, obj: &Bound<'_, PyAny>) -> PyResult<bool> {
+        self.get(obj)?.is_truthy()
+    }
+
+    /// `obj.name is None`.
+    pub(crate) fn is_none(&self, obj: &Bound<'_, PyAny>) -> PyResult<bool> {
+        Ok(self.get(obj)?.is_none())
+    }
+}

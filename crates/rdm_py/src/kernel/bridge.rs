@@ -1,0 +1,333 @@
+//! The plant bridge's millisecond (`PlantBridge.tick` with the Rust coupling) when no IMU,
+//! mocap or ground-truth sample is due: joints -> Neurons, goals -> servo controls, ESC
+//! outputs -> rotor duties, and the foot wrench sample (lazy forward, noise, Leptrino).
+
+use numpy::PyArrayMethods;
+use pyo3::prelude::*;
+use pyo3::types::{PyList, PyTuple};
+
+use super::attr::Name;
+use super::leptrino::LeptrinoFast;
+use super::plant::PlantLink;
+use crate::neuron_bank::NeuronBank;
+use crate::sensor_sim::{ImuNoiseCore, WrenchNoiseCore};
+
+/// A `NormalStream` (`rdm.plant.sensors`): its `_buf` list read here, `_pos` kept here.
+struct Normals {
+    stream: Py<PyAny>,
+    buf: Py<PyList>,
+    pos: usize,
+}
+
+impl Normals {
+    fn load(stream: Bound<'_, PyAny>) -> PyResult<Self> {
+        Ok(Normals {
+            buf: stream.getattr("_buf")?.cast_into::<PyList>()?.unbind(),
+            pos: stream.getattr("_pos")?.extract()?,
+            stream: stream.unbind(),
+        })
+    }
+
+    /// The next `N` normals (`NormalStream.take(N)`).
+    fn take<const N: usize>(&mut self, py: Python<'_>) -> PyResult<[f64; N]> {
+        let buf = self.buf.bind(py);
+        if self.pos + N <= buf.len() {
+            let mut out = [0.0; N];
+            for (k, o) in out.iter_mut().enumerate() {
+                *o = buf.get_item(self.pos + k)?.extract()?;
+            }
+            self.pos += N;
+            return Ok(out);
+        }
+        // Refill in Python (the stream owns its generator), then follow the stream.
+        let stream = self.stream.bind(py);
+        stream.setattr("_pos", self.pos)?;
+        let out: [f64; N] = stream.call_method1("take", (N,))?.extract()?;
+        self.buf = stream.getattr("_buf")?.cast_into::<PyList>()?.unbind();
+        self.pos = stream.getattr("_pos")?.extract()?;
+        Ok(out)
+    }
+
+    fn flush(&self, py: Python<'_>) -> PyResult<()> {
+        self.stream.bind(py).setattr("_pos", self.pos)
+    }
+}
+
+/// The IMU sample as the kernel takes it: into the Spinal mirror's `gyro`/`acc`/`mag`.
+struct ImuPath {
+    adr: (usize, usize, usize),
+    core: Py<ImuNoiseCore>,
+    normals: Normals,
+    sink: Py<PyAny>,
+}
+
+/// Plan of `PlantBridge.kernel_plan()`.
+struct Plan {
+    ticks: i64,
+    sample_count: i64,
+    time_mismatches: i64,
+    half_period: f64,
+    imu_n: i64,
+    wrench_n: i64,
+    mocap_n: i64,
+    truth_n: i64,
+    /// (force, torque) addresses in sensordata of the foot wrench sensor.
+    wrench_adr: (usize, usize),
+    wrench_core: Option<Py<WrenchNoiseCore>>,
+    wrench_normals: Option<Normals>,
+    /// None: an IMU sample goes to the Python tick.
+    imu: Option<ImuPath>,
+    targets: Py<numpy::PyArray1<f64>>,
+    duties: Py<numpy::PyArray1<f64>>,
+}
+
+struct Names {
+    ticks: Name,
+    sample_count: Name,
+    time_mismatches: Name,
+    gyro: Name,
+    acc: Name,
+    mag: Name,
+}
+
+pub(crate) struct BridgeFast {
+    node: Py<PyAny>,
+    names: Names,
+    bank: Py<NeuronBank>,
+    plan: Option<Plan>,
+    loaded: bool,
+    dirty: bool,
+    scratch: Vec<f64>,
+}
+
+fn due(n: i64, every: i64) -> bool {
+    every > 0 && n % every == 0
+}
+
+impl BridgeFast {
+    pub(crate) fn new(node: &Bound<'_, PyAny>, bank: Py<NeuronBank>) -> Self {
+        let py = node.py();
+        BridgeFast {
+            node: node.clone().unbind(),
+            names: Names {
+                ticks: Name::new(py, "ticks"),
+                sample_count: Name::new(py, "_sample_count"),
+                time_mismatches: Name::new(py, "time_mismatches"),
+                gyro: Name::new(py, "gyro"),
+                acc: Name::new(py, "acc"),
+                mag: Name::new(py, "mag"),
+            },
+            bank,
+            plan: None,
+            loaded: false,
+            dirty: false,
+            scratch: Vec::with_capacity(16),
+        }
+    }
+
+    pub(crate) fn invalidate(&mut self) {
+        self.loaded = false;
+    }
+
+    fn ensure_loaded(&mut self, py: Python<'_>) -> PyResult<()> {
+        if self.loaded {
+            return Ok(());
+        }
+        let plan = self.node.bind(py).call_method0("kernel_plan")?;
+        self.plan = if plan.is_none() {
+            None
+        } else {
+            let t = plan.cast::<PyTuple>()?;
+            let normals = t.get_item(10)?;
+            let wrench_normals = if normals.is_none() {
+                None
+            } else {
+                Some(Normals::load(normals)?)
+            };
+            let imu = t.get_item(13)?;
+            let imu = if imu.is_none() {
+                None
+            } else {
+                let i = imu.cast::<PyTuple>()?;
+                Some(ImuPath {
+                    adr: i.get_item(0)?.extract()?,
+                    core: i.get_item(1)?.cast_into::<ImuNoiseCore>()?.unbind(),
+                    normals: Normals::load(i.get_item(2)?)?,
+                    sink: i.get_item(3)?.unbind(),
+                })
+            };
+            let core = t.get_item(9)?;
+            Some(Plan {
+                ticks: t.get_item(0)?.extract()?,
+                sample_count: t.get_item(1)?.extract()?,
+                time_mismatches: t.get_item(2)?.extract()?,
+                half_period: t.get_item(3)?.extract()?,
+                imu_n: t.get_item(4)?.extract()?,
+                wrench_n: t.get_item(5)?.extract()?,
+                mocap_n: t.get_item(6)?.extract()?,
+                truth_n: t.get_item(7)?.extract()?,
+                wrench_adr: t.get_item(8)?.extract()?,
+                wrench_core: if core.is_none() {
+                    None
+                } else {
+                    Some(core.cast_into::<WrenchNoiseCore>()?.unbind())
+                },
+                wrench_normals,
+                imu,
+                targets: t.get_item(11)?.extract()?,
+                duties: t.get_item(12)?.extract()?,
+            })
+        };
+        self.loaded = true;
+        Ok(())
+    }
+
+    /// Whether the tick can run here: a plan, and no IMU / mocap / truth sample due.
+    pub(crate) fn ready(&mut self, py: Python<'_>) -> PyResult<bool> {
+        self.ensure_loaded(py)?;
+        let Some(p) = &self.plan else {
+            return Ok(false);
+        };
+        let n = p.sample_count;
+        Ok((p.imu.is_some() || !due(n, p.imu_n)) && !due(n, p.mocap_n) && !due(n, p.truth_n))
+    }
+
+    /// `Plant.imu()` into `SpinalMirror.set_imu_sample` (the sink of the plan).
+    fn imu_sample_of(
+        names: &Names,
+        py: Python<'_>,
+        imu: &mut ImuPath,
+        plant: &mut PlantLink,
+    ) -> PyResult<()> {
+        plant.fresh(py)?;
+        let ideal = {
+            let sd = plant.sensordata.bind(py).try_readonly()?;
+            let sd = sd.as_slice()?;
+            let three = |a: usize| -> PyResult<[f64; 3]> {
+                sd.get(a..a + 3)
+                    .and_then(|s| <[f64; 3]>::try_from(s).ok())
+                    .ok_or_else(|| pyo3::exceptions::PyIndexError::new_err("IMU address"))
+            };
+            [three(imu.adr.0)?, three(imu.adr.1)?, three(imu.adr.2)?]
+        };
+        let normals = imu.normals.take::<9>(py)?;
+        let v = imu.core.get().inner.sample(&ideal, &normals).values;
+        let sink = imu.sink.bind(py);
+        names.gyro.set(sink, PyTuple::new(py, v[0])?)?;
+        names.acc.set(sink, PyTuple::new(py, v[1])?)?;
+        names.mag.set(sink, PyTuple::new(py, v[2])?)?;
+        Ok(())
+    }
+
+    /// The tick at `now` (requires `ready`). Returns the foot wrench sample when the
+    /// Leptrino path did not take it (the caller hands it to the Python node).
+    pub(crate) fn tick(
+        &mut self,
+        py: Python<'_>,
+        now: f64,
+        plant: &mut PlantLink,
+        leptrino: Option<&mut LeptrinoFast>,
+    ) -> PyResult<Option<[f64; 6]>> {
+        let Some(p) = &mut self.plan else {
+            return Err(pyo3::exceptions::PyRuntimeError::new_err(
+                "kernel: bridge tick without a plan",
+            ));
+        };
+        self.dirty = true;
+        p.ticks += 1;
+        if (plant.time(py)? - now).abs() > p.half_period {
+            p.time_mismatches += 1;
+        }
+        // 1-4: the Rust coupling (bank.bridge_tick), then the plant commands it asks for.
+        let (targets_changed, duties_changed) = {
+            let qpos = plant.qpos.bind(py).try_readonly()?;
+            let targets = p.targets.bind(py);
+            let duties = p.duties.bind(py);
+            let mut targets = targets.try_readwrite()?;
+            let mut duties = duties.try_readwrite()?;
+            let bad = || pyo3::exceptions::PyValueError::new_err("bridge arrays: not contiguous");
+            self.bank.bind(py).borrow_mut().kernel_bridge_tick(
+                qpos.as_slice().map_err(|_| bad())?,
+                targets.as_slice_mut().map_err(|_| bad())?,
+                duties.as_slice_mut().map_err(|_| bad())?,
+            )?
+        };
+        if targets_changed {
+            self.scratch.clear();
+            self.scratch
+                .extend_from_slice(p.targets.bind(py).try_readonly()?.as_slice()?);
+            plant.set_servo_targets(py, &self.scratch)?;
+        }
+        if duties_changed {
+            self.scratch.clear();
+            self.scratch
+                .extend_from_slice(p.duties.bind(py).try_readonly()?.as_slice()?);
+            plant.command_duties(py, &self.scratch)?;
+        }
+        // 5-7: the IMU, then the wrench (ready() excluded mocap and truth).
+        let n = p.sample_count;
+        p.sample_count = n + 1;
+        if due(n, p.imu_n) {
+            let imu = p.imu.as_mut().expect("ready() checked the IMU path");
+            Self::imu_sample_of(&self.names, py, imu, plant)?;
+        }
+        if !due(n, p.wrench_n) {
+            return Ok(None);
+        }
+        plant.fresh(py)?;
+        let normals = p
+            .wrench_normals
+            .as_mut()
+            .expect("plan has the normals with the wrench")
+            .take::<6>(py)?;
+        let ideal = {
+            let sd = plant.sensordata.bind(py).try_readonly()?;
+            let sd = sd.as_slice()?;
+            let (f, t) = p.wrench_adr;
+            let get = |i: usize| {
+                sd.get(i).copied().ok_or_else(|| {
+                    pyo3::exceptions::PyIndexError::new_err("wrench address out of range")
+                })
+            };
+            [
+                get(f)?,
+                get(f + 1)?,
+                get(f + 2)?,
+                get(t)?,
+                get(t + 1)?,
+                get(t + 2)?,
+            ]
+        };
+        let core = p
+            .wrench_core
+            .as_ref()
+            .expect("plan has the core with the wrench");
+        let w = core.get().inner.sample(&ideal, &normals).values;
+        let taken = match leptrino {
+            Some(l) => l.set_wrench(py, w)?,
+            None => false,
+        };
+        Ok(if taken { None } else { Some(w) })
+    }
+
+    /// Write the counters and the normal stream's position back.
+    pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
+        if !self.dirty {
+            return Ok(());
+        }
+        if let Some(p) = &self.plan {
+            if let Some(n) = &p.wrench_normals {
+                n.flush(py)?;
+            }
+            if let Some(imu) = &p.imu {
+                imu.normals.flush(py)?;
+            }
+            let node = self.node.bind(py);
+            self.names.ticks.set(node, p.ticks)?;
+            self.names.sample_count.set(node, p.sample_count)?;
+            self.names.time_mismatches.set(node, p.time_mismatches)?;
+        }
+        self.dirty = false;
+        Ok(())
+    }
+}

@@ -1,0 +1,478 @@
+//! `LockstepKernel`: the lockstep loop of `rdm.nodes.lockstep.Lockstep` in Rust.
+//!
+//! It runs the same base ticks in the same order as `Lockstep._run_fast`: per millisecond,
+//! every due node's `tick(t)` in list order, then one physics step. For the nodes of the
+//! simulated stack that spend most milliseconds in a steady state (plant bridge, Neuron
+//! bank, Spinal's idle CAN ms, Leptrino streaming, the plant step) it runs that state here,
+//! on the Rust cores the Python nodes already use; everything else (a node outside its
+//! steady state, the onboard PC, loggers, scripts) is the node's own Python `tick`.
+//!
+//! Exactness rule: the Python-visible state a fast path changes is written back (`flush`)
+//! before any Python code runs, and every plan is re-read (`invalidate`) after, so Python
+//! code always sees what the plain loop would have left. Each node's `kernel_plan` (Python)
+//! says when its fast path applies; `kernel_commit` takes the state back.
+
+mod attr;
+mod bank;
+mod bridge;
+mod leptrino;
+mod plant;
+mod spinal;
+
+use pyo3::prelude::*;
+
+use crate::can_master::{CanMaster, CanWire};
+use crate::neuron_bank::NeuronBank;
+use bank::BankFast;
+use bridge::BridgeFast;
+use leptrino::LeptrinoFast;
+use plant::PlantLink;
+use spinal::{SpinalFast, SpinalTick};
+
+/// What a Python call may change, as a mask of the fast parts it invalidates.
+const PLANT: u8 = 1;
+const BRIDGE: u8 = 2;
+const BANK: u8 = 4;
+const SPINAL: u8 = 8;
+const LEPTRINO: u8 = 16;
+const ALL: u8 = PLANT | BRIDGE | BANK | SPINAL | LEPTRINO;
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Python,
+    Bridge,
+    Bank,
+    Spinal,
+    Leptrino,
+}
+
+/// Ticks that ran on a fast path and in Python, per node (diagnostics).
+#[derive(Clone, Default)]
+struct Counts {
+    fast: Vec<u64>,
+    python: Vec<u64>,
+}
+
+/// The lockstep loop with fast paths (see the module doc).
+#[pyclass(module = "rdm._rdm", unsendable)]
+pub struct LockstepKernel {
+    dt: f64,
+    schedule: Vec<Vec<usize>>,
+    ticks: Vec<Py<PyAny>>,
+    kinds: Vec<Kind>,
+    /// Per node, the parts its Python tick may change (default: all).
+    touches: Vec<u8>,
+    physics: Option<Py<PyAny>>,
+    clock: Py<PyAny>,
+    owner: Py<PyAny>,
+    k: i64,
+    clock_t: Option<f64>,
+    plant: Option<PlantLink>,
+    bridge: Option<BridgeFast>,
+    bank: Option<BankFast>,
+    spinal: Option<SpinalFast>,
+    leptrino: Option<LeptrinoFast>,
+    counts: Counts,
+    physics_fast: u64,
+    physics_python: u64,
+    boundaries: u64,
+}
+
+impl LockstepKernel {
+    fn flush_all(&mut self, py: Python<'_>) -> PyResult<()> {
+        if let Some(p) = self.plant.as_mut() {
+            p.flush(py)?;
+        }
+        if let Some(b) = self.bridge.as_mut() {
+            b.flush(py)?;
+        }
+        if let Some(b) = self.bank.as_mut() {
+            b.flush(py)?;
+        }
+        if let Some(s) = self.spinal.as_mut() {
+            s.flush(py)?;
+        }
+        if let Some(l) = self.leptrino.as_mut() {
+            l.flush(py)?;
+        }
+        Ok(())
+    }
+
+    /// Forget the plans of the parts in `mask` (Python code may have changed them).
+    fn invalidate(&mut self, mask: u8) {
+        if mask & PLANT != 0 {
+            if let Some(p) = self.plant.as_mut() {
+                p.invalidate();
+            }
+        }
+        if mask & BRIDGE != 0 {
+            if let Some(b) = self.bridge.as_mut() {
+                b.invalidate();
+            }
+        }
+        if mask & BANK != 0 {
+            if let Some(b) = self.bank.as_mut() {
+                b.invalidate();
+            }
+        }
+        if mask & SPINAL != 0 {
+            if let Some(s) = self.spinal.as_mut() {
+                s.invalidate();
+            }
+        }
+        if mask & LEPTRINO != 0 {
+            if let Some(l) = self.leptrino.as_mut() {
+                l.invalidate();
+            }
+        }
+    }
+
+    /// Before Python code runs at time `t`: every deferred state written, the clock set.
+    fn enter_python(&mut self, py: Python<'_>, t: f64) -> PyResult<()> {
+        self.boundaries += 1;
+        self.flush_all(py)?;
+        if self.clock_t != Some(t) {
+            self.clock.bind(py).setattr("now", t)?;
+            self.clock_t = Some(t);
+        }
+        Ok(())
+    }
+
+    /// After Python code ran: the plans of the parts it may have changed are re-read on
+    /// their next use.
+    fn leave_python(&mut self, mask: u8) {
+        self.invalidate(mask);
+    }
+
+    fn python_tick(&mut self, py: Python<'_>, i: usize, t: f64) -> PyResult<()> {
+        self.enter_python(py, t)?;
+        let r = self.ticks[i].bind(py).call1((t,));
+        self.leave_python(self.touches[i]);
+        r?;
+        if let Some(c) = self.counts.python.get_mut(i) {
+            *c += 1;
+        }
+        Ok(())
+    }
+
+    /// Node `i`'s tick at `t` on its fast path; false: not in its steady state now.
+    fn fast_tick(&mut self, py: Python<'_>, i: usize, t: f64) -> PyResult<bool> {
+        match self.kinds[i] {
+            Kind::Python => Ok(false),
+            Kind::Bridge => {
+                let ready = match (self.bridge.as_mut(), self.plant.as_mut()) {
+                    (Some(b), Some(p)) => b.ready(py)? && p.sync_ready(py)?,
+                    _ => false,
+                };
+                if !ready {
+                    return Ok(false);
+                }
+                let (b, p) = (self.bridge.as_mut().unwrap(), self.plant.as_mut().unwrap());
+                let left = b.tick(py, t, p, self.leptrino.as_mut())?;
+                if let Some(w) = left {
+                    // The Leptrino node's own checks (outside the limits, non-finite).
+                    self.enter_python(py, t)?;
+                    let r = self.leptrino_node(py).and_then(|n| {
+                        n.call_method1("set_wrench_values", (pyo3::types::PyTuple::new(py, w)?,))
+                    });
+                    self.leave_python(LEPTRINO);
+                    r?;
+                }
+                Ok(true)
+            }
+            Kind::Bank => {
+                let Some(b) = self.bank.as_mut() else {
+                    return Ok(false);
+                };
+                if !b.ready(py)? {
+                    return Ok(false);
+                }
+                b.tick(py, t)?;
+                Ok(true)
+            }
+            Kind::Spinal => {
+                let Some(s) = self.spinal.as_mut() else {
+                    return Ok(false);
+                };
+                if !s.ready(py, t)? {
+                    return Ok(false);
+                }
+                match s.tick(py, t)? {
+                    SpinalTick::Done => {}
+                    SpinalTick::Finish(now_ms) => {
+                        self.enter_python(py, t)?;
+                        let r = self.spinal.as_ref().unwrap().finish(py, now_ms);
+                        self.leave_python(SPINAL);
+                        r?;
+                    }
+                }
+                Ok(true)
+            }
+            Kind::Leptrino => {
+                let Some(l) = self.leptrino.as_mut() else {
+                    return Ok(false);
+                };
+                if !l.ready(py)? {
+                    return Ok(false);
+                }
+                l.tick(py)
+            }
+        }
+    }
+
+    fn leptrino_node<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let i = self
+            .kinds
+            .iter()
+            .position(|k| *k == Kind::Leptrino)
+            .ok_or_else(|| pyo3::exceptions::PyRuntimeError::new_err("kernel: no Leptrino node"))?;
+        self.ticks[i].bind(py).getattr("__self__")
+    }
+
+    fn physics_step(&mut self, py: Python<'_>, t: f64) -> PyResult<()> {
+        let Some(physics) = self.physics.as_ref().map(|p| p.clone_ref(py)) else {
+            return Ok(());
+        };
+        if let Some(p) = self.plant.as_mut() {
+            if p.step_ready(py)? {
+                p.step(py)?;
+                self.physics_fast += 1;
+                return Ok(());
+            }
+        }
+        self.enter_python(py, t)?;
+        let r = physics.bind(py).call1((1,));
+        self.leave_python(PLANT);
+        r?;
+        self.physics_python += 1;
+        Ok(())
+    }
+
+    fn run_inner(&mut self, py: Python<'_>, n: i64) -> PyResult<()> {
+        let cycle = self.schedule.len();
+        for _ in 0..n {
+            let k = self.k;
+            let t = k as f64 * self.dt;
+            let slot = usize::try_from(k).unwrap_or(0) % cycle;
+            let mut stop = false;
+            for j in 0..self.schedule[slot].len() {
+                let i = self.schedule[slot][j];
+                if self.fast_tick(py, i, t)? {
+                    if let Some(c) = self.counts.fast.get_mut(i) {
+                        *c += 1;
+                    }
+                } else {
+                    self.python_tick(py, i, t)?;
+                    stop |= self.owner.bind(py).getattr("_stop")?.is_truthy()?;
+                }
+            }
+            self.physics_step(py, t)?;
+            self.k = k + 1;
+            if stop {
+                break;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[pymethods]
+impl LockstepKernel {
+    /// `schedule[r]`: indices of the nodes due at base ticks `k` with `k % len(schedule) ==
+    /// r`, in tick order; `ticks[i]`: node `i`'s `tick`; `physics`: the physics `step` (or
+    /// None); `clock`: the `SimClock` the loop sets; `owner`: the `Lockstep` (its `_stop`).
+    #[new]
+    fn new(
+        dt: f64,
+        schedule: Vec<Vec<usize>>,
+        ticks: Vec<Py<PyAny>>,
+        physics: Option<Py<PyAny>>,
+        clock: Py<PyAny>,
+        owner: Py<PyAny>,
+    ) -> PyResult<Self> {
+        if schedule.is_empty() || !(dt.is_finite() && dt > 0.0) {
+            return Err(pyo3::exceptions::PyValueError::new_err(
+                "LockstepKernel: empty schedule or bad dt",
+            ));
+        }
+        if schedule.iter().flatten().any(|&i| i >= ticks.len()) {
+            return Err(pyo3::exceptions::PyValueError::new_err(
+                "LockstepKernel: schedule names a node index out of range",
+            ));
+        }
+        let n = ticks.len();
+        Ok(LockstepKernel {
+            dt,
+            schedule,
+            kinds: vec![Kind::Python; n],
+            touches: vec![ALL; n],
+            ticks,
+            physics,
+            clock,
+            owner,
+            k: 0,
+            clock_t: None,
+            plant: None,
+            bridge: None,
+            bank: None,
+            spinal: None,
+            leptrino: None,
+            counts: Counts {
+                fast: vec![0; n],
+                python: vec![0; n],
+            },
+            physics_fast: 0,
+            physics_python: 0,
+            boundaries: 0,
+        })
+    }
+
+    /// The plant (`rdm.plant.Plant`) the physics step and the bridge drive; `mujoco` is the
+    /// module whose `mj_step1`/`mj_step2`/`mj_forward` it calls.
+    fn attach_plant(
+        &mut self,
+        plant: &Bound<'_, PyAny>,
+        mujoco: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        self.plant = Some(PlantLink::new(plant.py(), plant, mujoco)?);
+        Ok(())
+    }
+
+    /// Node `index` is a `PlantBridge` coupled through `bank` (needs `attach_plant`).
+    fn attach_bridge(
+        &mut self,
+        index: usize,
+        node: &Bound<'_, PyAny>,
+        bank: Py<NeuronBank>,
+    ) -> PyResult<()> {
+        self.check_index(index)?;
+        self.bridge = Some(BridgeFast::new(node, bank));
+        self.kinds[index] = Kind::Bridge;
+        self.touches[index] = BRIDGE | PLANT | LEPTRINO;
+        Ok(())
+    }
+
+    /// Node `index` is a `NeuronBankNode` with `n_boards` boards on `wire`.
+    fn attach_bank(
+        &mut self,
+        index: usize,
+        node: &Bound<'_, PyAny>,
+        bank: Py<NeuronBank>,
+        wire: Py<CanWire>,
+        n_boards: usize,
+    ) -> PyResult<()> {
+        self.check_index(index)?;
+        self.bank = Some(BankFast::new(node, bank, wire, n_boards)?);
+        self.kinds[index] = Kind::Bank;
+        self.touches[index] = BANK;
+        Ok(())
+    }
+
+    /// Node `index` is a `SpinalMirror` whose Rust CAN master `master` ticks on `wire`.
+    fn attach_spinal(
+        &mut self,
+        index: usize,
+        node: &Bound<'_, PyAny>,
+        master: Py<CanMaster>,
+        wire: Py<CanWire>,
+        drain_at: usize,
+    ) -> PyResult<()> {
+        self.check_index(index)?;
+        self.spinal = Some(SpinalFast::new(node, master, wire, drain_at));
+        self.kinds[index] = Kind::Spinal;
+        self.touches[index] = SPINAL;
+        Ok(())
+    }
+
+    /// Node `index` is a `LeptrinoSensorNode`.
+    fn attach_leptrino(&mut self, index: usize, node: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.check_index(index)?;
+        self.leptrino = Some(LeptrinoFast::new(node));
+        self.kinds[index] = Kind::Leptrino;
+        self.touches[index] = LEPTRINO;
+        Ok(())
+    }
+
+    /// What node `index`'s Python tick may change, by part name (`"plant"`, `"bridge"`,
+    /// `"bank"`, `"spinal"`, `"leptrino"`); the default is every part. Only the plans of
+    /// these parts are re-read after it ran (a part left out must not change: the logs
+    /// would differ from the Python loop's).
+    fn set_touches(&mut self, index: usize, parts: Vec<String>) -> PyResult<()> {
+        self.check_index(index)?;
+        let mut mask = 0;
+        for p in &parts {
+            mask |= match p.as_str() {
+                "plant" => PLANT,
+                "bridge" => BRIDGE,
+                "bank" => BANK,
+                "spinal" => SPINAL,
+                "leptrino" => LEPTRINO,
+                other => {
+                    return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                        "set_touches: unknown part {other:?}"
+                    )))
+                }
+            };
+        }
+        self.touches[index] = mask;
+        Ok(())
+    }
+
+    /// Advance `n` base ticks from `k0` (fewer if the owner's `_stop` is set by a node);
+    /// returns the next `k`. Every deferred state is written back before it returns, also
+    /// when a node raises (then `k` is the tick that raised).
+    fn run(&mut self, py: Python<'_>, k0: i64, n: i64) -> PyResult<i64> {
+        self.k = k0;
+        self.clock_t = None;
+        self.invalidate(ALL);
+        let r = self.run_inner(py, n);
+        let last_t = (self.k - 1).max(0) as f64 * self.dt;
+        let f = self.flush_all(py);
+        if r.is_ok() && self.k > k0 && self.clock_t != Some(last_t) {
+            self.clock.bind(py).setattr("now", last_t)?;
+        }
+        r?;
+        f?;
+        Ok(self.k)
+    }
+
+    /// The next base tick (after `run`, also when it raised).
+    #[getter]
+    fn k(&self) -> i64 {
+        self.k
+    }
+
+    /// `{"fast": [...], "python": [...], "physics_fast": n, "physics_python": n,
+    /// "boundaries": n}`: ticks per node index on each path.
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let d = pyo3::types::PyDict::new(py);
+        d.set_item("fast", self.counts.fast.clone())?;
+        d.set_item("python", self.counts.python.clone())?;
+        d.set_item("physics_fast", self.physics_fast)?;
+        d.set_item("physics_python", self.physics_python)?;
+        d.set_item("boundaries", self.boundaries)?;
+        let (tf, tp) = self
+            .plant
+            .as_ref()
+            .map_or((0, 0), |p| (p.tracker_fast, p.tracker_python));
+        d.set_item("tracker_fast", tf)?;
+        d.set_item("tracker_python", tp)?;
+        Ok(d)
+    }
+}
+
+impl LockstepKernel {
+    fn check_index(&self, index: usize) -> PyResult<()> {
+        if index >= self.ticks.len() {
+            return Err(pyo3::exceptions::PyIndexError::new_err(format!(
+                "LockstepKernel: node index {index} out of range"
+            )));
+        }
+        Ok(())
+    }
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<LockstepKernel>()?;
+    Ok(())
+}

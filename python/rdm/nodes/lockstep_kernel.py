@@ -1,0 +1,84 @@
+"""The lockstep loop in Rust: :class:`rdm._rdm.LockstepKernel` behind :class:`Lockstep`.
+
+``Lockstep.run*`` without pacing, progress or profile runs its ticks through the kernel when
+one is attached (:func:`attach_kernel`): the same nodes in the same order at the same base
+ticks as ``Lockstep._run_fast``, but the loop itself and the steady milliseconds of the
+simulated firmware side (plant bridge, Neuron bank, Spinal's idle CAN ms, Leptrino
+streaming, the plant step) run in Rust on the cores the Python nodes already use. Every
+other tick is the node's own Python ``tick``. Before any Python code runs, the kernel writes
+back what its fast ticks changed (each node's ``kernel_commit``); after, it re-reads each
+node's ``kernel_plan``. So the logs are the same bytes as without the kernel
+(tests/test_lockstep_kernel.py; docs/kernel.md).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import mujoco
+
+from rdm import _rdm
+from rdm.link.can_wire import DRAIN_AT, CanWireLink
+
+from .leptrino_sensor import LeptrinoSensorNode
+from .lockstep import Lockstep
+from .neuron_bank import NeuronBankNode
+from .plant_bridge import PlantBridge
+from .spinal_mirror import SpinalMirror
+
+
+def kind_of(node: Any) -> str | None:
+    """The fast path a node of this class can have (None: only its Python tick)."""
+    return {
+        PlantBridge: "bridge",
+        NeuronBankNode: "bank",
+        SpinalMirror: "spinal",
+        LeptrinoSensorNode: "leptrino",
+    }.get(type(node))
+
+
+def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKernel:
+    """Attach a kernel to ``loop`` (``loop.kernel``) and give it the fast paths its nodes
+    allow: ``plant`` (an :class:`rdm.plant.Plant`, the loop's physics) steps in the kernel;
+    a :class:`PlantBridge` with the Rust coupling, a :class:`NeuronBankNode` on a
+    :class:`CanWireLink`, a :class:`SpinalMirror` whose Rust master ticks on that wire and a
+    :class:`LeptrinoSensorNode` get their steady ticks run there. After any other node's
+    Python tick every plan is re-read, unless its class declares what it may change in
+    ``kernel_touches`` (part names: "plant", "bridge", "bank", "spinal", "leptrino"; e.g.
+    the mocap node reads the plant, the onboard node writes into the Spinal and Leptrino
+    UARTs). Returns the kernel."""
+    nodes = loop.nodes
+    index = {id(n): i for i, n in enumerate(nodes)}
+    schedule = [[index[id(e.node)] for e in slot] for slot in loop._schedule]
+    if not schedule:
+        raise ValueError("attach_kernel: the loop has no precomputed schedule")
+    physics = loop.physics.step if loop.physics is not None else None
+    kernel = _rdm.LockstepKernel(
+        loop.dt, schedule, [n.tick for n in nodes], physics, loop.clock, loop
+    )
+    if plant is not None and plant is loop.physics:
+        kernel.attach_plant(plant, mujoco)
+    leptrino = spinal = None
+    for i, node in enumerate(nodes):
+        cls = type(node)
+        if cls is LeptrinoSensorNode:
+            if leptrino is None:
+                kernel.attach_leptrino(i, node)
+                leptrino = node
+        elif cls is NeuronBankNode and isinstance(node._wire, CanWireLink):
+            kernel.attach_bank(i, node, node._core, node._wire.wire, len(node.boards))
+        elif cls is SpinalMirror and node._wire_link is not None and spinal is None:
+            kernel.attach_spinal(i, node, node.master.core, node._wire_link.wire, DRAIN_AT)
+            spinal = node
+    for i, node in enumerate(nodes):
+        touches = getattr(type(node), "kernel_touches", None)
+        if touches is not None and kind_of(node) is None:
+            kernel.set_touches(i, list(touches))
+    for i, node in enumerate(nodes):
+        bridged = type(node) is PlantBridge and node.rust_coupling
+        if bridged and plant is node.plant and plant is loop.physics:
+            node.kernel_wrench_node = leptrino
+            node.kernel_imu_node = spinal
+            kernel.attach_bridge(i, node, node._bank._core)
+    loop.kernel = kernel
+    return kernel

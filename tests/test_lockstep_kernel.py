@@ -1,0 +1,291 @@
+"""The lockstep loop in Rust (rdm.nodes.lockstep_kernel) against the Python loop.
+
+Oracle: the same stack run with ``StackOptions.lockstep_kernel=False`` (``Lockstep._run_fast``,
+every node's own Python tick). Both runs must write the same bytes in every log file and leave
+every node's Python-visible state the same, while the kernel really runs the fast paths
+(its per-node counts). Faults and the paths that leave the steady state are driven on purpose:
+a cut UART, a held external wrench on the plant, a wrench outside the foot sensor's range, a
+battery voltage that is a function of time, a node that stops the loop or raises.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rdm.nodes.lockstep import Lockstep
+from rdm.nodes.lockstep_kernel import attach_kernel
+from rdm.scenarios.common import sim_stack_options
+from rdm.scenarios.hover import HOVER_Z, make_script
+from rdm.scenarios.stack import Stack, build_stack
+
+Steps = Callable[[Stack], None]
+
+
+def _state(stack: Stack) -> dict:
+    """Every Python-visible counter and clock the kernel's fast paths keep."""
+    plant = stack.plant
+    bank = stack.loop.nodes[1]
+    sensor = stack.sensor
+    bridge = stack.bridge
+    d = plant._data
+    return {
+        "k": stack.loop.k,
+        "ticks": dict(stack.loop.stats.ticks),
+        "clock": stack.loop.clock.now,
+        "spinal": stack.spinal.diagnostics(),
+        "spinal_clock": (stack.spinal.now_ms, stack.spinal._now_s, stack.spinal._can_ms),
+        "spinal_imu": (stack.spinal.gyro, stack.spinal.acc, stack.spinal.mag),
+        "master": (stack.spinal.master.tx_count, stack.spinal.master._pending_events),
+        "boards": [(b.tx_count, b.changes[0], b.rx_count) for b in bank.boards],
+        "bank_changes": bank._last_changes,
+        "bridge": (bridge.ticks, bridge._sample_count, bridge.time_mismatches),
+        "leptrino": (
+            sensor.frames_sent,
+            sensor.bytes_dropped,
+            sensor.saturated_samples,
+            dict(sensor.errors),
+            sensor._wrench,
+        ),
+        "plant_flags": (plant._stale, plant._needs_step1, plant._state_version),
+        "rejected": plant.rejected_commands,
+        "normals": (
+            plant.imu_model._normals._pos,
+            plant.wrench_models["foot_wrench"]._normals._pos,
+        ),
+        "qpos": d.qpos.tobytes(),
+        "qvel": d.qvel.tobytes(),
+        "ctrl": d.ctrl.tobytes(),
+        "time": d.time,
+        "tracker": (
+            plant._tracker._last_contact_time,
+            None if plant._tracker._anchor_pos is None else plant._tracker._anchor_pos.tobytes(),
+        ),
+    }
+
+
+def _run(
+    tmp: Path, kernel: bool, steps: Steps, script=None, **options
+) -> tuple[dict, dict, dict | None]:
+    """(files by relative path, state, kernel stats) of the stack driven by ``steps`` (the
+    hover script unless ``script`` is given)."""
+    opts = replace(sim_stack_options(0, "inproc", speed=None, **options), lockstep_kernel=kernel)
+    if script is None:
+        script = make_script(np.array([0.483, 0.0, HOVER_Z]))
+    stack = build_stack("k", tmp, opts, script)
+    assert (stack.loop.kernel is not None) == kernel
+    try:
+        steps(stack)
+        state = _state(stack)
+        stats = stack.loop.kernel.stats() if kernel else None
+    finally:
+        stack.close()
+    root = Path(stack.folder.root)
+    files = {str(p.relative_to(root)): p.read_bytes() for p in root.rglob("*") if p.is_file()}
+    files = {k: v for k, v in files.items() if not k.startswith("plots")}
+    return files, state, stats
+
+
+def _same(tmp_path: Path, steps: Steps, make_script_=None, **options) -> dict:
+    """Run ``steps`` with and without the kernel; assert equal files and state; the stats.
+    ``make_script_()`` gives each run its own scenario script (default: hover)."""
+    new = make_script_ or (lambda: None)
+    files_k, state_k, stats = _run(tmp_path / "kernel", True, steps, new(), **options)
+    files_p, state_p, _ = _run(tmp_path / "python", False, steps, new(), **options)
+    assert sorted(files_k) == sorted(files_p)
+    for name in files_k:
+        assert files_k[name] == files_p[name], name
+    for key in state_p:
+        assert state_k[key] == state_p[key], key
+    assert stats is not None
+    return stats
+
+
+def _fast_counts(stack_nodes: list[str], stats: dict) -> dict[str, int]:
+    return dict(zip(stack_nodes, stats["fast"], strict=True))
+
+
+NODES = [
+    "plant_bridge",
+    "neurons",
+    "spinal",
+    "mocap",
+    "onboard",
+    "leptrino_foot",
+    "script",
+    "status",
+]
+
+
+def test_hover_with_a_cut_uart_same_bytes_and_state(tmp_path: Path) -> None:
+    def steps(stack: Stack) -> None:
+        stack.loop.run(2.6)
+        stack.drop_uart(True)  # Spinal's fail-safe: the link is lost for 0.4 s
+        stack.loop.run(0.4)
+        stack.drop_uart(False)
+        stack.loop.run(1.0)
+
+    stats = _same(tmp_path, steps)
+    fast = _fast_counts(NODES, stats)
+    # The kernel ran the steady ms itself: most bridge, bank, Leptrino and plant steps, and
+    # a good share of Spinal's ms (its control and publishers stay Python's).
+    assert fast["plant_bridge"] > 3000
+    assert fast["neurons"] == 4000
+    assert fast["spinal"] > 1000
+    assert fast["leptrino_foot"] > 1500
+    assert stats["physics_fast"] == 4000
+    assert fast["onboard"] == fast["mocap"] == fast["script"] == 0
+
+
+def test_perching_contacts_same_bytes_and_state(tmp_path: Path) -> None:
+    from rdm.scenarios import perching
+
+    def steps(stack: Stack) -> None:
+        stack.loop.run(16.0)  # flight, the approach, contact at 14.83 s, 1.2 s perched
+
+    stats = _same(
+        tmp_path,
+        steps,
+        lambda: perching.PerchingScript(perching.PERCHED_MOTION),
+        onboard=perching.onboard_config(),
+    )
+    # Perched (1.17 s), the contact tracker only stamps the contact time: the kernel does
+    # it; on the floor before take-off (other geoms touching, the anchor set) it is Python's.
+    assert stats["tracker_fast"] > 1100
+
+
+def test_held_external_wrench_takes_the_python_step(tmp_path: Path) -> None:
+    def steps(stack: Stack) -> None:
+        stack.loop.run(2.5)
+        stack.plant.apply_body_wrench("end_effector", force=(1.5, 0.0, -0.5))
+        stack.loop.run(0.5)
+        stack.plant.apply_body_wrench("end_effector")  # zero: released
+        stack.loop.run(0.3)
+
+    stats = _same(tmp_path, steps)
+    assert stats["physics_python"] >= 500  # every step while the wrench is held
+    assert stats["physics_fast"] > 2000
+
+
+def test_wrench_outside_the_sensor_range_is_clipped_by_the_python_node(tmp_path: Path) -> None:
+    def steps(stack: Stack) -> None:
+        stack.loop.run(1.0)
+        # A sensor whose range the resting foot load exceeds: every sample is clipped.
+        stack.sensor._limits = (0.05,) * 6
+        stack.loop.run(0.6)
+
+    _same(tmp_path, steps)
+
+
+def test_battery_voltage_of_time_leaves_the_bridge_to_python(tmp_path: Path) -> None:
+    def steps(stack: Stack) -> None:
+        stack.loop.run(1.8)
+        stack.bridge._battery = lambda t: 25.2 if t < 2.2 else 24.6
+        stack.loop.run(0.8)
+
+    stats = _same(tmp_path, steps)
+    assert stats["python"][0] >= 800  # the bridge: Python for every tick with the function
+
+
+def _stopping_script(at: float) -> Callable[[Stack, float], None]:
+    inner = make_script(np.array([0.483, 0.0, HOVER_Z]))
+
+    def script(stack: Stack, now: float) -> None:
+        inner(stack, now)
+        if math.isclose(now, at):
+            stack.loop.stop()
+
+    return script
+
+
+@pytest.mark.parametrize("kernel", [True, False])
+def test_a_node_stops_the_loop_after_its_tick(tmp_path: Path, kernel: bool) -> None:
+    opts = replace(sim_stack_options(0, "inproc", speed=None, log=False), lockstep_kernel=kernel)
+    stack = build_stack("stop", tmp_path, opts, _stopping_script(1.23))
+    try:
+        stack.loop.run(3.0)
+        assert stack.loop.k == 1231  # the ms of the stop ran to its end (physics included)
+        assert stack.loop.stats.ticks["script"] == 124
+        assert stack.loop.clock.now == pytest.approx(1.23)
+    finally:
+        stack.close()
+
+
+class _Boom(RuntimeError):
+    pass
+
+
+def test_a_raising_node_leaves_the_same_state(tmp_path: Path) -> None:
+    def steps(stack: Stack) -> None:
+        stack.loop.run(1.5)
+        inner = stack.mocap.tick
+
+        def tick(now: float) -> None:
+            if now > 1.7:
+                raise _Boom(now)
+            inner(now)
+
+        # The kernel holds the bound ticks it was given: re-attach after the patch, as the
+        # Python loop reads node.tick afresh.
+        stack.mocap.tick = tick
+        if stack.loop.kernel is not None:
+            attach_kernel(stack.loop, stack.plant)
+        with pytest.raises(_Boom):
+            stack.loop.run(1.0)
+
+    _same(tmp_path, steps, log=False)
+
+
+class _Recorder:
+    """A toy node that records what it sees (tick order, the clock at its tick)."""
+
+    def __init__(self, name: str, period: float, log: list, clock_of) -> None:
+        self.name = name
+        self.period = period
+        self._log = log
+        self._clock = clock_of
+
+    def tick(self, now: float) -> None:
+        self._log.append((self.name, now, self._clock().now))
+
+
+class _Physics:
+    def __init__(self, log: list) -> None:
+        self._log = log
+
+    def step(self, n: int = 1) -> None:
+        self._log.append(("physics", n))
+
+
+def _toy(kernel: bool) -> tuple[list, Lockstep]:
+    log: list = []
+    holder: list = []
+    nodes = [
+        _Recorder("a", 0.001, log, lambda: holder[0].clock),
+        _Recorder("b", 0.005, log, lambda: holder[0].clock),
+        _Recorder("c", 0.025, log, lambda: holder[0].clock),
+    ]
+    loop = Lockstep(nodes, physics=_Physics(log), offsets={"b": 2, "c": 7})
+    holder.append(loop)
+    if kernel:
+        attach_kernel(loop)
+    return log, loop
+
+
+def test_python_only_nodes_tick_in_the_same_order_with_the_same_clock() -> None:
+    log_k, loop_k = _toy(True)
+    log_p, loop_p = _toy(False)
+    for loop in (loop_k, loop_p):
+        loop.run_ticks(137)
+        loop.run(0.2)
+    assert log_k == log_p
+    assert loop_k.k == loop_p.k == 337
+    assert loop_k.stats.ticks == loop_p.stats.ticks
+    assert loop_k.clock.now == loop_p.clock.now
+    stats = loop_k.kernel.stats()
+    assert sum(stats["fast"]) == 0 and stats["physics_python"] == 337
