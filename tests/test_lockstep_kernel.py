@@ -230,15 +230,33 @@ def test_a_raising_node_leaves_the_same_state(tmp_path: Path) -> None:
                 raise _Boom(now)
             inner(now)
 
-        # The kernel holds the bound ticks it was given: re-attach after the patch, as the
-        # Python loop reads node.tick afresh.
-        stack.mocap.tick = tick
-        if stack.loop.kernel is not None:
-            attach_kernel(stack.loop, stack.plant)
+        stack.mocap.tick = tick  # read afresh by both loops at the next run
         with pytest.raises(_Boom):
             stack.loop.run(1.0)
 
     _same(tmp_path, steps, log=False)
+
+
+def test_a_wrapped_tick_runs_instead_of_the_fast_path(tmp_path: Path) -> None:
+    calls: list[float] = []
+
+    def steps(stack: Stack) -> None:
+        stack.loop.run(1.0)
+        inner = stack.spinal.tick
+
+        def counting(now: float) -> None:
+            calls.append(now)
+            inner(now)
+
+        stack.spinal.tick = counting
+        stack.loop.run(0.5)
+        del stack.spinal.tick  # the class's own tick again: fast path allowed
+        stack.loop.run(0.5)
+
+    stats = _same(tmp_path, steps, log=False)
+    # Both runs called the wrapper at every Spinal tick of the middle half second.
+    assert len(calls) == 2 * 500
+    assert stats["fast"][2] > 0  # ... and the kernel's Spinal fast path ran outside it
 
 
 class _Recorder:

@@ -941,8 +941,9 @@ class LockstepKernel:
     def set_touches(self, index: int, parts: list[str]) -> None:
         """The parts (``plant``, ``bridge``, ``bank``, ``spinal``, ``leptrino``) node
         ``index``'s Python tick may change; default all."""
-    def run(self, k0: int, n: int) -> int:
-        """Advance ``n`` base ticks from ``k0``; the next ``k``."""
+    def run(self, k0: int, n: int, ticks: list[Any], own: list[bool]) -> int:
+        """Advance ``n`` base ticks from ``k0`` with the nodes' present ``tick``s (``own``:
+        the class's own method, so its fast path may run); the next ``k``."""
     @property
     def k(self) -> int: ...
     def stats(self) -> dict[str, Any]:

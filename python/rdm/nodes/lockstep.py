@@ -308,10 +308,18 @@ class Lockstep:
             self._count(k0, k)
 
     def _run_kernel(self, n: int) -> None:
-        """:meth:`_run_fast` through :attr:`kernel` (the same ticks in the same order)."""
+        """:meth:`_run_fast` through :attr:`kernel` (the same ticks in the same order). The
+        nodes' ``tick`` attributes are read now, as :meth:`_run_fast` reads them: a node
+        whose ``tick`` was replaced (a wrapper) runs the replacement, never its fast path."""
         k0 = self.k
+        nodes = [e.node for e in self._entries]
+        ticks = [node.tick for node in nodes]
+        own = [
+            getattr(tick, "__func__", None) is getattr(type(node), "tick", None)
+            for node, tick in zip(nodes, ticks, strict=True)
+        ]
         try:
-            self.kernel.run(k0, n)
+            self.kernel.run(k0, n, ticks, own)
         finally:
             self._count(k0, self.kernel.k)
 

@@ -60,6 +60,9 @@ pub struct LockstepKernel {
     schedule: Vec<Vec<usize>>,
     ticks: Vec<Py<PyAny>>,
     kinds: Vec<Kind>,
+    /// Per node, whether its fast path may run this `run` (false: its `tick` attribute is
+    /// not the class's own method, e.g. a wrapper a test installed).
+    own_tick: Vec<bool>,
     /// Per node, the parts its Python tick may change (default: all).
     touches: Vec<u8>,
     physics: Option<Py<PyAny>>,
@@ -157,6 +160,9 @@ impl LockstepKernel {
 
     /// Node `i`'s tick at `t` on its fast path; false: not in its steady state now.
     fn fast_tick(&mut self, py: Python<'_>, i: usize, t: f64) -> PyResult<bool> {
+        if !self.own_tick[i] {
+            return Ok(false);
+        }
         match self.kinds[i] {
             Kind::Python => Ok(false),
             Kind::Bridge => {
@@ -305,6 +311,7 @@ impl LockstepKernel {
             dt,
             schedule,
             kinds: vec![Kind::Python; n],
+            own_tick: vec![true; n],
             touches: vec![ALL; n],
             ticks,
             physics,
@@ -419,9 +426,25 @@ impl LockstepKernel {
     }
 
     /// Advance `n` base ticks from `k0` (fewer if the owner's `_stop` is set by a node);
-    /// returns the next `k`. Every deferred state is written back before it returns, also
-    /// when a node raises (then `k` is the tick that raised).
-    fn run(&mut self, py: Python<'_>, k0: i64, n: i64) -> PyResult<i64> {
+    /// returns the next `k`. `ticks[i]` is node `i`'s `tick` now and `own[i]` whether it is
+    /// the class's own method (a node whose `tick` was replaced runs only the replacement).
+    /// Every deferred state is written back before it returns, also when a node raises
+    /// (then `k` is the tick that raised).
+    fn run(
+        &mut self,
+        py: Python<'_>,
+        k0: i64,
+        n: i64,
+        ticks: Vec<Py<PyAny>>,
+        own: Vec<bool>,
+    ) -> PyResult<i64> {
+        if ticks.len() != self.ticks.len() || own.len() != self.ticks.len() {
+            return Err(pyo3::exceptions::PyValueError::new_err(
+                "LockstepKernel.run: one tick and one flag per node",
+            ));
+        }
+        self.ticks = ticks;
+        self.own_tick = own;
         self.k = k0;
         self.clock_t = None;
         self.invalidate(ALL);
