@@ -579,3 +579,85 @@ def test_stack_bytes_and_counters_equal_with_busy_fast_paths_on_and_off(
     assert sorted(fast_files) == sorted(plain_files)
     for name in fast_files:
         assert fast_files[name] == plain_files[name], name
+
+
+# ----------------------------------------------------------------------------- UART chain
+def _chain(base: Path, name: str, cut: bool, tapped: bool) -> tuple[Any, ...]:
+    from rdm.scenarios.stack import DroppableLink
+    from rdm.sim.uart import InProcessUartEnd, TappedLink
+
+    dev, host = InProcessUartEnd("device"), InProcessUartEnd("host")
+    dev.peer, host.peer = host, dev
+    link: Any = dev
+    tap = None
+    if tapped:
+        link = tap = TappedLink(dev, base / f"{name}.tx", base / f"{name}.rx")
+    drop = DroppableLink(link) if cut else None
+    return (drop or link), drop, tap, dev, host
+
+
+def _pump_state(rig: tuple[Any, ...]) -> tuple[Any, ...]:
+    pump, drop, tap, dev, host = rig
+    return (
+        pump.bytes_in,
+        pump.bytes_out,
+        pump.bytes_discarded,
+        pump.write_errors,
+        pump.read_errors,
+        bytes(pump.pending),
+        None if drop is None else (drop.dropped, drop.bytes_lost),
+        None if tap is None else (tap.tx_bytes, tap.rx_bytes),
+        bytes(host.inbox),
+        bytes(dev.inbox),
+    )
+
+
+@pytest.mark.parametrize(
+    ("cut", "tapped"), [(True, True), (False, True), (True, False), (False, False)]
+)
+def test_uart_pump_chain_equals_calls_through_the_wrappers(cut: bool, tapped: bool) -> None:
+    from rdm.nodes.spinal_uart import UartPump
+
+    rng = random.Random(int(cut) * 2 + int(tapped))
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(tmp)
+        rigs = []
+        for name, fast in (("fast", True), ("plain", False)):
+            link, drop, tap, dev, host = _chain(base, name, cut, tapped)
+            pump = UartPump(link, max_pending=300, fast=fast)
+            assert pump._chain == (drop, tap, dev)  # the plain pump has it too, unused
+            rigs.append((pump, drop, tap, dev, host))
+        ops = ["send", "send", "pump", "pc_send", "pc_send", "pc_read", "drop", "peer", "end"]
+        for step in range(3000):
+            op = rng.choice(ops)
+            data = rng.randbytes(rng.choice([0, 1, 7, 70, 400]))
+            outs = []
+            for pump, drop, tap, dev, host in rigs:
+                if step == 2900 and tap is not None:
+                    tap._tx.close()  # captures closed: ValueError on their writes, counted
+                    tap._rx.close()
+                if op == "send":
+                    pump.send(data)
+                elif op == "pump":
+                    outs.append(pump.pump())
+                elif op == "pc_send":
+                    if not host.closed:
+                        host.write(data)
+                    outs.append(pump.read())
+                elif op == "pc_read":
+                    outs.append(host.read_available())
+                elif op == "drop" and drop is not None:
+                    drop.dropped = not drop.dropped
+                elif op == "peer":  # the PC end goes away / comes back: writes are lost
+                    host.closed = not host.closed
+                elif op == "end" and step % 5 == 0:  # our end closed: OSError, counted
+                    dev.closed = not dev.closed
+            assert outs[:1] == outs[1:]
+            assert _pump_state(rigs[0]) == _pump_state(rigs[1])
+        assert rigs[0][0].write_errors > 0 and rigs[0][0].bytes_out > 1000
+        for pump, *_ in rigs:
+            pump.link.close()
+        if tapped:
+            for kind in ("tx", "rx"):
+                fast_bytes = (base / f"fast.{kind}").read_bytes()
+                assert fast_bytes == (base / f"plain.{kind}").read_bytes() and fast_bytes
