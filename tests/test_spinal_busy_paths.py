@@ -11,7 +11,9 @@
 * ``ClientSession.deliver_values`` against a session without it on a random stream: the
   same events (values vs messages), output bytes and counters; ``send_frame`` /
   ``send_payload`` against ``_send`` (too large, ring full, not configured).
-* ``ServoBridge.states_payload`` against encoding ``states()`` on a running Rust master.
+* ``ServoBridge.states_frame`` (the Rust master's table framed in one call) and
+  ``states_payload`` against encoding ``states()``, on a running Rust master and a table
+  stand-in; declines for stamps, topic ids and codecs they do not take.
 * The command handlers from field values against the message handlers on random good and
   bad commands (rejections, logs, counters, core state).
 * The whole hover stack with the fast paths on and off: same bytes in every log and the
@@ -396,11 +398,20 @@ def test_servo_states_payload_equals_encoded_message() -> None:
         try:
             stack.loop.run_ticks(2600)
             bridge = ServoBridge(stack.spinal.master)
+            assert bridge._frame_core is stack.spinal.master.core  # the Rust frame path
             for _ in range(3):
                 payload = bridge.states_payload(codec, stamp)
-                assert isinstance(payload, bytes)
-                assert payload == codec.encode(ServoBridge(stack.spinal.master).states(msgs, stamp))
+                message = ServoBridge(stack.spinal.master).states(msgs, stamp)
+                assert isinstance(payload, bytes) and payload == codec.encode(message)
+                for topic, when in ((160, stamp), (0xFFFF, RosTime(2**32 - 1, 999_999_999))):
+                    frame = bridge.states_frame(codec, when, topic)
+                    message = ServoBridge(stack.spinal.master).states(msgs, when)
+                    assert frame == encode_frame(topic, codec.encode(message))
                 stack.loop.run_ticks(40)
+            for topic, when in ((70000, stamp), (160, RosTime(2**32, 0)), (160, RosTime(-1, 0))):
+                assert bridge.states_frame(codec, when, topic) is False
+            assert bridge.states_frame(codec, (12, 345), 160) is False
+            assert bridge.states_frame(REG.msg("spinal/Pwms"), stamp, 160) is False
             assert (
                 ServoBridge(stack.spinal.master, fast=False).states_payload(codec, stamp) is False
             )
@@ -420,11 +431,14 @@ def test_servo_states_payload_equals_encoded_message() -> None:
             for _ in range(rng.randrange(8))
         ]
         bridge = ServoBridge(_Reports(reports))
+        assert bridge._frame_core is None  # no Rust master: the payload path, framed
         payload = bridge.states_payload(codec, stamp)
+        frame = bridge.states_frame(codec, stamp, 160)
         msg = ServoBridge(_Reports(reports)).states(msgs, stamp)
-        assert (payload is None) == (msg is None)
+        assert (payload is None) == (msg is None) == (frame is None)
         if msg is not None:
             assert payload == codec.encode(msg)
+            assert frame == encode_frame(160, payload)
     bridge = ServoBridge(_Reports([(True, 40000, 0, 0, 0, True)]))  # past int16
     assert bridge.states_payload(codec, stamp) is False
     with pytest.raises(EncodeError):
@@ -550,8 +564,8 @@ def _run(base: str, fast: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[dict, 
         route_values(*args)
 
     spinal._route_values = counting_values
-    states = spinal.servos.states_payload
-    spinal.servos.states_payload = counting("servo_states", states)
+    states = spinal.servos.states_frame
+    spinal.servos.states_frame = counting("servo_states", states)
     stack.loop.run_ticks(3000)
     stack.spinal_link.dropped = True
     stack.loop.run_ticks(700)

@@ -882,6 +882,15 @@ def spinal_duty_list(output: SpinalStepOutput, n: int, idle: float) -> list[floa
     """``[min(1.0, max(idle, d)) for d in output.duty.tolist()[:n]]``, or None when the step
     has events or ``n`` is not in 1..N_ROTORS (the mirror's Python path then decides)."""
 
+def spinal_servo_states_frame(
+    topic_id: int, sec: int, nsec: int, master: CanMaster
+) -> bytes | bool | None:
+    """The whole ``spinal/ServoStates`` frame of the servos with send_data_flag in the
+    master's table (index = position in the table) with stamp ``(sec, nsec)``: the bytes of
+    ``encode_frame(topic_id, codec.encode(ServoBridge.states(...)))``. None when no servo
+    has send_data_flag; False when an argument is not an exact int in range, ``master`` is
+    not a ``CanMaster`` or a reporting servo's index passes 255 (the Python path decides)."""
+
 # --- mstruth ---
 # WrenchNoiseCore.sample_values_at and RotorPlantCore.{set_truth_layout, truth_arrays} are
 # stubbed in their classes above (crates/rdm_py/src/{sensor_sim,rotor_plant}.rs).

@@ -1,15 +1,21 @@
 //! Busy-millisecond helpers of the Spinal mirror (`rdm.nodes.spinal_mirror.SpinalMirror`):
 //! the 200 Hz `spinal/Imu` frame in one call (`rdm_core::firmware::rosserial_frame::
-//! imu_frame`) and a control step's duty list without numpy. Both return None for anything
-//! the Python path would treat differently; the mirror then runs that path (the reference
-//! the tests compare them with).
+//! imu_frame`), the 50 Hz `spinal/ServoStates` frame from the Rust CAN master's servo table,
+//! and a control step's duty list without numpy. Each declines (None or False) anything the
+//! Python path would treat differently; the mirror then runs that path (the reference the
+//! tests compare them with).
 
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyBytes, PyFloat, PyInt, PyList, PyTuple};
-use rdm_core::firmware::rosserial_frame::{client_stamp, imu_frame, ImuValues};
+use rdm_core::firmware::rosserial_frame::{
+    client_stamp, imu_frame, servo_states_frame_len, write_servo_states_frame, ImuValues,
+    ServoStateValues,
+};
 use rdm_core::N_ROTORS;
 
 use crate::attitude::SpinalStepOutput;
+use crate::can_master::CanMaster;
+use crate::errors::RdmError;
 
 /// An exact Python int (not bool, not a subclass) that fits i64.
 fn exact_i64(v: &Bound<'_, PyAny>) -> Option<i64> {
@@ -115,9 +121,77 @@ fn spinal_duty_list<'py>(
     Ok(Some(list))
 }
 
+/// The `spinal/ServoStates` frame of the servos with send_data_flag in `master`'s table
+/// (a `rdm._rdm.CanMaster`; index = position in the whole table, as
+/// `ServoBridge.states`), on `topic_id` with stamp `(sec, nsec)`: the bytes of
+/// `encode_frame(topic_id, codec.encode(states_msg))`. None when no servo has
+/// send_data_flag (no message); False (declined) when an argument is not an exact int in
+/// range, `master` is not a `CanMaster`, or a reporting servo's index passes 255. The
+/// caller checks that the master is running (else the table is not reported at all).
+#[pyfunction]
+fn spinal_servo_states_frame<'py>(
+    py: Python<'py>,
+    topic_id: &Bound<'py, PyAny>,
+    sec: &Bound<'py, PyAny>,
+    nsec: &Bound<'py, PyAny>,
+    master: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let declined = PyBool::new(py, false).to_owned().into_any();
+    let word = |v: &Bound<'py, PyAny>| exact_i64(v).and_then(|x| u32::try_from(x).ok());
+    let (Some(topic), Some(sec), Some(nsec)) = (
+        exact_i64(topic_id).and_then(|x| u16::try_from(x).ok()),
+        word(sec),
+        word(nsec),
+    ) else {
+        return Ok(declined);
+    };
+    let Ok(master) = master.cast_exact::<CanMaster>() else {
+        return Ok(declined);
+    };
+    let Ok(master) = master.try_borrow() else {
+        return Ok(declined);
+    };
+    let core = master.core_ref();
+    let sending = || {
+        core.neurons()
+            .iter()
+            .flat_map(|n| n.servos())
+            .enumerate()
+            .filter(|(_, s)| s.send_data_flag)
+    };
+    let mut n = 0usize;
+    for (i, _) in sending() {
+        if i > usize::from(u8::MAX) {
+            return Ok(declined);
+        }
+        n += 1;
+    }
+    if n == 0 {
+        return Ok(py.None().into_bound(py));
+    }
+    let servos = sending().map(|(i, s)| ServoStateValues {
+        index: u8::try_from(i).unwrap_or(u8::MAX),
+        angle: s.angle,
+        temp: s.temperature,
+        load: s.current,
+        error: s.error,
+    });
+    let frame = PyBytes::new_with(py, servo_states_frame_len(n), |buf| {
+        if write_servo_states_frame(topic, (sec, nsec), servos, buf) {
+            Ok(())
+        } else {
+            Err(RdmError::new_err(
+                "spinal_servo_states_frame: the frame does not fit",
+            ))
+        }
+    })?;
+    Ok(frame.into_any())
+}
+
 /// Add the helpers to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(spinal_imu_frame, m)?)?;
     m.add_function(wrap_pyfunction!(spinal_duty_list, m)?)?;
+    m.add_function(wrap_pyfunction!(spinal_servo_states_frame, m)?)?;
     Ok(())
 }

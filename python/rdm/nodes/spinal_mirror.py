@@ -883,7 +883,7 @@ class SpinalMirror:
             last["servo/states"] = t = now_ms
             if stamp is None:
                 stamp = self.session.now(now_ms)
-            if not self._publish_servo_states_payload(stamp):
+            if not self._publish_servo_states_frame(stamp):
                 msg = self.servos.states(self._msg, stamp)
                 if msg is not None:
                     self._publish_topic("servo/states", msg)
@@ -932,10 +932,10 @@ class SpinalMirror:
             self.counters.published["imu"] += 1
         return True
 
-    def _publish_servo_states_payload(self, stamp: Any) -> bool:
-        """The ``servo/states`` publication packed from the servo table without message
-        objects (``ServoBridge.states_payload``): the same payload, frame and counters.
-        False, having done nothing, when that path does not apply."""
+    def _publish_servo_states_frame(self, stamp: Any) -> bool:
+        """The ``servo/states`` publication built from the servo table without message
+        objects (``ServoBridge.states_frame``): the same frame and counters. False, having
+        done nothing, when that path does not apply."""
         session = self.session
         try:
             slot = session.publisher("servo/states")
@@ -944,10 +944,11 @@ class SpinalMirror:
         codec = slot.codec
         if codec is not self._msg.servo_states:
             return False
-        payload = self.servos.states_payload(codec, stamp)
-        if payload is False:
+        topic_id = slot.topic_id
+        frame = self.servos.states_frame(codec, stamp, topic_id)
+        if frame is False:
             return False
-        if payload is not None and session.send_payload(slot.topic_id, payload) > 0:
+        if frame is not None and session.send_frame(topic_id, frame) > 0:
             self.counters.published["servo/states"] += 1
         return True
 

@@ -13,8 +13,13 @@ import struct
 from collections.abc import Sequence
 from typing import Any
 
+from rdm import _rdm
 from rdm.nodes.can_master import CanMaster, MasterState, ServoEntry
 from rdm.protocol.rosserial.codec import RosTime
+from rdm.protocol.rosserial.framing import encode_frame
+
+#: The whole ServoStates frame from the Rust master's table (None: an older extension).
+_states_frame = getattr(_rdm, "spinal_servo_states_frame", None)
 
 
 class MirrorRejection(ValueError):
@@ -75,6 +80,9 @@ class ServoBridge:
         #: states_payload: the ServoStates codec whose layout was checked, structs per count
         self._payload_codec: Any = None
         self._payload_structs: dict[int, struct.Struct] = {}
+        #: states_frame: the Rust master's core (its table read in the frame call), or None
+        core = getattr(master, "core", None) if self._fast else None
+        self._frame_core = core if type(core) is getattr(_rdm, "CanMaster", None) else None
 
     def table(self) -> list[tuple[tuple[int, int], ServoEntry]]:
         """Every servo in index order (empty until the master runs)."""
@@ -199,6 +207,28 @@ class ServoBridge:
             return st.pack(stamp[0], stamp[1], n, *flat)
         except struct.error:
             return False  # the message path raises its precise error
+
+    def states_frame(self, codec: Any, stamp: Any, topic_id: int) -> bytes | bool | None:
+        """``encode_frame(topic_id, codec.encode(self.states(..., stamp)))``: with the Rust
+        master, the whole frame from its servo table in one call
+        (``rdm._rdm.spinal_servo_states_frame``); else :meth:`states_payload` framed. None
+        when no servo has send_data_flag, False when this path does not apply (as
+        :meth:`states_payload`)."""
+        core = self._frame_core
+        if core is None or _states_frame is None or not self._fast:
+            payload = self.states_payload(codec, stamp)
+            if payload is None or payload is False:
+                return payload
+            return encode_frame(topic_id, payload)
+        if stamp.__class__ is not RosTime:
+            return False
+        if codec is not self._payload_codec:
+            if not _is_servo_states_layout(codec):
+                return False
+            self._payload_codec, self._payload_structs = codec, {}
+        if self.master.state is not MasterState.RUNNING:
+            return None  # no servo reported: no message
+        return _states_frame(topic_id, stamp[0], stamp[1], core)
 
     def _states_reused(self, new: Any) -> list[Any]:
         """The ``servos`` list of :meth:`states`, reusing each servo's last message while its

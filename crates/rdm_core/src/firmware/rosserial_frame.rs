@@ -205,8 +205,7 @@ pub fn client_stamp(now_ms: i64, sync: Option<(i64, i64)>) -> Option<(u32, u32)>
     let ns: i128 = match sync {
         None => (i128::from(now_ms) & MASK) * 1_000_000,
         Some((tick, sync_ns)) => {
-            let elapsed =
-                ((i128::from(now_ms) - i128::from(tick) + (1 << 31)) & MASK) - (1 << 31);
+            let elapsed = ((i128::from(now_ms) - i128::from(tick) + (1 << 31)) & MASK) - (1 << 31);
             let ns = i128::from(sync_ns) + elapsed * 1_000_000;
             if ns > 0 {
                 ns
@@ -251,6 +250,74 @@ pub fn imu_frame(topic: u16, stamp: (u32, u32), values: &ImuValues) -> Option<[u
         words.next()?.copy_from_slice(&float32_of(x)?.to_le_bytes());
     }
     seal_frame(topic, &mut frame).then_some(frame)
+}
+
+/// One `spinal/ServoState` of a `spinal/ServoStates` report.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ServoStateValues {
+    /// The servo's position in the mirror's servo table.
+    pub index: u8,
+    /// Present position, raw ticks.
+    pub angle: i16,
+    /// Temperature.
+    pub temp: u8,
+    /// Present current ("load").
+    pub load: i16,
+    /// Hardware error bits.
+    pub error: u8,
+}
+
+/// Payload bytes of one `spinal/ServoState` (`uint8 index, int16 angle, uint8 temp,
+/// int16 load, uint8 error`).
+pub const SERVO_STATE_LEN: usize = 7;
+
+/// Bytes of a whole `spinal/ServoStates` frame with `n` servos (`time stamp`, the `uint32`
+/// count, the servos).
+pub fn servo_states_frame_len(n: usize) -> usize {
+    FRAME_OVERHEAD + 12 + SERVO_STATE_LEN * n
+}
+
+/// Writes the `spinal/ServoStates` frame of `servos` on `topic` with `stamp = (sec, nsec)`
+/// into `frame`, which must be exactly [`servo_states_frame_len`] of the number of servos
+/// long: the bytes of the Python codec's `encode` and `framing.encode_frame`. False when
+/// the lengths disagree or the payload does not fit the frame's length field (`frame` then
+/// holds no frame).
+pub fn write_servo_states_frame(
+    topic: u16,
+    stamp: (u32, u32),
+    servos: impl IntoIterator<Item = ServoStateValues>,
+    frame: &mut [u8],
+) -> bool {
+    let Some(body) = frame.len().checked_sub(FRAME_OVERHEAD + 12) else {
+        return false;
+    };
+    if body % SERVO_STATE_LEN != 0 {
+        return false;
+    }
+    let n = body / SERVO_STATE_LEN;
+    let Ok(count) = u32::try_from(n) else {
+        return false;
+    };
+    let Some(payload) = frame.get_mut(7..frame.len() - 1) else {
+        return false;
+    };
+    let (head, mut rest) = payload.split_at_mut(12);
+    head[..4].copy_from_slice(&stamp.0.to_le_bytes());
+    head[4..8].copy_from_slice(&stamp.1.to_le_bytes());
+    head[8..].copy_from_slice(&count.to_le_bytes());
+    let mut written = 0usize;
+    for s in servos {
+        if rest.len() < SERVO_STATE_LEN {
+            return false; // more servos than the frame holds
+        }
+        let (item, tail) = rest.split_at_mut(SERVO_STATE_LEN);
+        let [a0, a1] = s.angle.to_le_bytes();
+        let [l0, l1] = s.load.to_le_bytes();
+        item.copy_from_slice(&[s.index, a0, a1, s.temp, l0, l1, s.error]);
+        rest = tail;
+        written += 1;
+    }
+    written == n && seal_frame(topic, frame)
 }
 
 #[cfg(test)]
@@ -402,12 +469,66 @@ mod tests {
         let mut payload = Vec::new();
         payload.extend_from_slice(&12u32.to_le_bytes());
         payload.extend_from_slice(&34u32.to_le_bytes());
-        for x in v.acc.iter().chain(&v.gyro).chain(&v.mag).chain(&v.quaternion) {
+        for x in v
+            .acc
+            .iter()
+            .chain(&v.gyro)
+            .chain(&v.mag)
+            .chain(&v.quaternion)
+        {
             payload.extend_from_slice(&(*x as f32).to_le_bytes());
         }
         assert_eq!(f.to_vec(), frame(153, &payload));
         let mut bad = v;
         bad.quaternion[3] = f64::NAN;
         assert_eq!(imu_frame(153, (0, 0), &bad), None);
+    }
+
+    #[test]
+    fn servo_states_frame_layout() {
+        let servos = [
+            ServoStateValues {
+                index: 0,
+                angle: -2,
+                temp: 40,
+                load: 300,
+                error: 0,
+            },
+            ServoStateValues {
+                index: 3,
+                angle: 2048,
+                temp: 255,
+                load: -32768,
+                error: 8,
+            },
+        ];
+        let mut f = vec![0u8; servo_states_frame_len(2)];
+        assert!(write_servo_states_frame(160, (7, 9), servos, &mut f));
+        let mut payload = vec![7, 0, 0, 0, 9, 0, 0, 0, 2, 0, 0, 0];
+        payload.extend_from_slice(&[0, 0xFE, 0xFF, 40, 0x2C, 0x01, 0]);
+        payload.extend_from_slice(&[3, 0x00, 0x08, 255, 0x00, 0x80, 8]);
+        assert_eq!(f, frame(160, &payload));
+        // too few or too many servos for the buffer
+        assert!(!write_servo_states_frame(
+            160,
+            (7, 9),
+            servos,
+            &mut vec![0u8; servo_states_frame_len(3)]
+        ));
+        assert!(!write_servo_states_frame(
+            160,
+            (7, 9),
+            servos,
+            &mut vec![0u8; servo_states_frame_len(1)]
+        ));
+        assert!(!write_servo_states_frame(
+            160,
+            (7, 9),
+            servos,
+            &mut [0u8; 19]
+        ));
+        let mut empty = vec![0u8; servo_states_frame_len(0)];
+        assert!(write_servo_states_frame(160, (1, 2), [], &mut empty));
+        assert_eq!(empty, frame(160, &[1, 0, 0, 0, 2, 0, 0, 0, 0, 0, 0, 0]));
     }
 }
