@@ -425,7 +425,7 @@ mod tests {
                 *b = (i * 37 + n) as u8;
             }
             assert!(seal_frame(0x1234, &mut f));
-            assert_eq!(f, frame(0x1234, &f[7..7 + n].to_vec()));
+            assert_eq!(f, frame(0x1234, &f[7..7 + n]));
         }
         assert!(!seal_frame(1, &mut [0u8; 7]));
     }
