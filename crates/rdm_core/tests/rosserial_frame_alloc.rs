@@ -5,7 +5,8 @@
 use std::alloc::System;
 
 use rdm_core::firmware::rosserial_frame::{
-    client_stamp, imu_frame, next_candidate, seal_frame, ImuValues, Step, IMU_FRAME_LEN,
+    client_stamp, imu_frame, next_candidate, seal_frame, servo_states_frame_len,
+    write_servo_states_frame, ImuValues, ServoStateValues, Step, IMU_FRAME_LEN,
 };
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 
@@ -61,8 +62,10 @@ fn main() {
             }
         }
     }
-    // the sending side: the 200 Hz Imu frame (stamp, packing, checksums) and a sealed frame
+    // the sending side: the 200 Hz Imu frame (stamp, packing, checksums), a sealed frame
+    // and the 50 Hz ServoStates frame
     let mut sealed = [0u8; 64];
+    let mut servo_buf = [0u8; 128];
     let (mut imu_sum, mut declined) = (0u32, 0u32);
     for k in 0..2000i64 {
         let sync = (k % 3 != 0).then_some((k / 2, 5_000_000_000 + k));
@@ -79,6 +82,16 @@ fn main() {
         }
         sealed[7] = k as u8;
         assert!(seal_frame(7, &mut sealed));
+        let n = (k % 9) as usize;
+        let servos = (0..n).map(|i| ServoStateValues {
+            index: i as u8,
+            angle: (k as i16).wrapping_mul(7),
+            temp: 40,
+            load: -(i as i16),
+            error: 0,
+        });
+        let frame = &mut servo_buf[..servo_states_frame_len(n)];
+        assert!(write_servo_states_frame(160, (k as u32, 0), servos, frame));
     }
     let stats = region.change();
     assert_eq!(
