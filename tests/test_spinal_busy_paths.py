@@ -447,6 +447,62 @@ def test_servo_states_payload_equals_encoded_message() -> None:
     assert bridge.states_payload(REG.msg("spinal/Pwms"), stamp) is False
 
 
+def _goals(master: Any) -> list[int]:
+    return [view.goal_position for view in master.servo_states.values()]
+
+
+def test_servo_targets_in_one_call_equal_the_plain_bridge() -> None:
+    from rdm.nodes.spinal_servo_bridge import MirrorRejection
+
+    rng = random.Random(12)
+    with tempfile.TemporaryDirectory() as base:
+        stack = _stack(base)
+        try:
+            stack.loop.run_ticks(2600)
+            master = stack.spinal.master
+            fast, plain = ServoBridge(master), ServoBridge(master, fast=False)
+            assert fast._frame_core is master.core and plain._frame_core is None
+            n = len(master.servo_keys())
+            taken = 0
+            calls = [0]
+            one_call = fast._targets_in_one_call
+
+            def counting(*args: Any) -> bool:
+                done = one_call(*args)
+                calls[0] += done
+                return done
+
+            fast._targets_in_one_call = counting
+            for case in range(600):
+                k = rng.choice([0, 1, 3, n, n + 2])
+                index = [rng.choice([0, 1, n - 1, rng.randrange(n)]) for _ in range(k)]
+                angles = [rng.randint(-3000, 3000) for _ in range(k)]
+                if case % 7 == 0 and k:
+                    index[rng.randrange(k)] = rng.choice([n, 255, -1])
+                if case % 11 == 0 and k:
+                    angles[rng.randrange(k)] = rng.choice([1 << 14, -(1 << 14) - 1, 32767])
+                if case % 13 == 0:
+                    angles = angles[:-1] if angles else [5]
+                if case % 17 == 0 and k:
+                    angles[0] = True  # an int, not exactly: the plain path takes it
+                start = _goals(master)
+                outcomes = []
+                for bridge in (fast, plain):
+                    master.core.set_servo_target_list(
+                        [(s, i, g) for (s, i), g in zip(master.servo_keys(), start, strict=True)]
+                    )
+                    try:
+                        bridge.target_states_values(index, angles)
+                        outcomes.append(("ok", _goals(master)))
+                    except MirrorRejection as exc:
+                        outcomes.append((exc.reason, str(exc), _goals(master)))
+                assert outcomes[0] == outcomes[1], (index, angles)
+                taken += outcomes[0][0] == "ok"
+            assert calls[0] > 150 and taken > calls[0]  # some only the plain path takes
+        finally:
+            stack.close()
+
+
 # ----------------------------------------------------------------------------- value handlers
 _BUSES = itertools.count()
 

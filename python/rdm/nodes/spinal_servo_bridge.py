@@ -15,6 +15,7 @@ from typing import Any
 
 from rdm import _rdm
 from rdm.nodes.can_master import CanMaster, MasterState, ServoEntry
+from rdm.protocol.neuron.servo import WORD_VALUE_MAX, WORD_VALUE_MIN
 from rdm.protocol.rosserial.codec import RosTime
 from rdm.protocol.rosserial.framing import encode_frame
 
@@ -141,11 +142,44 @@ class ServoBridge:
 
     def target_states_values(self, index: Sequence[int], angles: Sequence[int]) -> None:
         """:meth:`target_states` of a message's ``index`` and ``angles`` fields."""
+        if self._frame_core is not None and self._fast and self._targets_in_one_call(index, angles):
+            return
         pairs = self._resolve("servo/target_states", index, angles)
         try:
             self.master.set_servo_targets(dict(pairs))
         except ValueError as exc:
             raise MirrorRejection("servo_value", f"servo/target_states: {exc}") from exc
+
+    def _targets_in_one_call(self, index: Sequence[int], angles: Sequence[int]) -> bool:
+        """The Rust master's goal positions from ``index``/``angles`` in one core call when
+        every pair is valid: what ``_resolve`` then ``RustCanMaster.set_servo_targets`` do
+        for them (the same core setter per servo; a repeated index sets the same goal again,
+        leaving the last value as the dict of the plain path does). False, nothing
+        applied, for anything else (not running, lengths, an index or value out of range,
+        not an int): the plain path then raises its precise rejection."""
+        if self.master.state is not MasterState.RUNNING or len(index) != len(angles):
+            return False
+        core = self._frame_core
+        keys = core.servo_keys()
+        n = len(keys)
+        targets = []
+        for i, value in zip(index, angles, strict=True):
+            if (
+                i.__class__ is not int
+                or value.__class__ is not int
+                or not 0 <= i < n
+                or not WORD_VALUE_MIN <= value <= WORD_VALUE_MAX
+            ):
+                return False
+            slave, idx = keys[i]
+            targets.append((slave, idx, value))
+        if not targets:
+            return False  # the plain path: nothing to set (or servo_not_ready)
+        try:
+            core.set_servo_target_list(targets)
+        except ValueError as exc:  # the core's own refusal, as set_servo_targets raises it
+            raise MirrorRejection("servo_value", f"servo/target_states: {exc}") from exc
+        return True
 
     def target_current(self, msg: Any) -> None:
         """``servo/target_current``: the ``angles`` field carries the goal current."""
