@@ -911,6 +911,36 @@ def rosserial_scan(
     ``(topic_id, payload, offset)``, other events as ``(kind, offset, data)`` with kind
     ``"skip"`` or the reject reason; used by ``rdm.protocol.rosserial.framing.FrameParser``."""
 
+# --- spinalbusy ---
+def spinal_imu_frame(
+    topic_id: int,
+    now_ms: int,
+    synced: bool,
+    sync_tick: int,
+    sync_ns: int,
+    acc: tuple[float, float, float] | list[float],
+    output: SpinalStepOutput,
+    mag: tuple[float, float, float] | list[float],
+) -> bytes | None:
+    """The Spinal mirror's whole ``spinal/Imu`` frame at MCU tick ``now_ms``: the stamp of a
+    ``ClientClock`` in state (``synced``, ``sync_tick``, ``sync_ns``), ``acc`` and ``mag``,
+    the output's filtered angular velocity and quaternion, as float32; the bytes of
+    ``encode_frame(topic_id, imu_codec.encode(msg))``. None when an argument is not of these
+    exact types, a value is not finite or overflows float32, or the stamp does not fit."""
+
+def spinal_duty_list(output: SpinalStepOutput, n: int, idle: float) -> list[float] | None:
+    """``[min(1.0, max(idle, d)) for d in output.duty.tolist()[:n]]``, or None when the step
+    has events or ``n`` is not in 1..N_ROTORS (the mirror's Python path then decides)."""
+
+def spinal_servo_states_frame(
+    topic_id: int, sec: int, nsec: int, master: CanMaster
+) -> bytes | bool | None:
+    """The whole ``spinal/ServoStates`` frame of the servos with send_data_flag in the
+    master's table (index = position in the table) with stamp ``(sec, nsec)``: the bytes of
+    ``encode_frame(topic_id, codec.encode(ServoBridge.states(...)))``. None when no servo
+    has send_data_flag; False when an argument is not an exact int in range, ``master`` is
+    not a ``CanMaster`` or a reporting servo's index passes 255 (the Python path decides)."""
+
 # --- mstruth ---
 # WrenchNoiseCore.sample_values_at and RotorPlantCore.{set_truth_layout, truth_arrays} are
 # stubbed in their classes above (crates/rdm_py/src/{sensor_sim,rotor_plant}.rs).

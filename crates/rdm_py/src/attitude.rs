@@ -147,7 +147,8 @@ impl ControlOutput {
 /// Output of one `SpinalStep.step`: the controller output plus the estimate.
 #[pyclass(module = "rdm._rdm", frozen)]
 pub struct SpinalStepOutput {
-    inner: SpinalOutput,
+    /// Read by the mirror's busy-ms helpers (`crate::spinal_mirror`).
+    pub(crate) inner: SpinalOutput,
 }
 
 #[pymethods]

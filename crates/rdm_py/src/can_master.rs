@@ -95,6 +95,13 @@ fn servo_tuple<'py>(py: Python<'py>, slave: u8, s: &ServoEntry) -> PyResult<Boun
     PyTuple::new(py, items)
 }
 
+impl CanMaster {
+    /// The core master (read by the Spinal mirror's busy-ms helpers, `crate::spinal_mirror`).
+    pub(crate) fn core_ref(&self) -> &CoreMaster {
+        &self.core
+    }
+}
+
 #[pymethods]
 impl CanMaster {
     #[new]

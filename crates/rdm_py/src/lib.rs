@@ -23,6 +23,7 @@ mod qp;
 mod rosserial;
 mod rotor_plant;
 mod sensor_sim;
+mod spinal_mirror;
 
 #[pymodule]
 fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -45,5 +46,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     leptrino_scan::register(m)?;
     rosserial::register(m)?;
     kernel::register(m)?;
+    spinal_mirror::register(m)?;
     Ok(())
 }

@@ -48,6 +48,13 @@ from rdm.protocol.rosserial.events import (
     SyncLost,
 )
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
+from rdm.protocol.rosserial.timesync import ClientClock
+
+try:  # the busy-ms helpers (crates/rdm_py/src/spinal_mirror.rs); older builds: Python only
+    from rdm._rdm import spinal_duty_list as _duty_list
+    from rdm._rdm import spinal_imu_frame as _imu_frame
+except ImportError:
+    _duty_list = _imu_frame = None
 
 #: Publication periods in HAL ms and whether the firmware compares with ``>`` (strict).
 IMU_PUB_MS = 5  # >= 5 ms (200 Hz), attitude_estimate.h
@@ -100,6 +107,25 @@ _LOG_LEVELS = {
     "error": C.LogLevel.ERROR,
     "fatal": C.LogLevel.FATAL,
 }
+#: The commands the fast path applies from their field values (``_route_values``), with
+#: the message type whose layout those handlers read (a slot of another type or layout is
+#: routed as a message).
+_VALUE_ROUTE_TYPES = {
+    "four_axes/command": "spinal/FourAxisCommand",
+    "rpy/gain": "spinal/RollPitchYawTerms",
+    "p_matrix_pseudo_inverse_inertia": "spinal/PMatrixPseudoInverseWithInertia",
+    "desire_coordinate": "spinal/DesireCoord",
+    "servo/target_states": "spinal/ServoControlCmd",
+}
+#: The ``spinal/Imu`` layout ``rdm._rdm.spinal_imu_frame`` writes (``codec._FlatLayout``).
+_IMU_PARTS = [
+    ("stamp", "t", None),
+    ("acc", "a", 3),
+    ("gyro", "a", 3),
+    ("mag", "a", 3),
+    ("quaternion", "a", 4),
+]
+_IMU_FORMAT = "<II3f3f3f4f"
 _IMU_CALIB_GET = 0  # spinal/ImuCalib GET_CALIB_DATA
 _IMU_CALIB_GYRO = 2  # spinal/ImuCalib CALIB_GYRO
 _MAG_SET = 1  # spinal/MagDeclination SET
@@ -124,6 +150,17 @@ def _applied(setter: Any, *args: Any) -> bool:
     except (TypeError, OverflowError, ValueError):
         return False
     return True
+
+
+def _wire_layout(codec: Any) -> tuple[Any, ...]:
+    """``(name, base type, array length, nested layout)`` of every field of ``codec``,
+    nested types expanded: two codecs with equal layouts decode a payload to the same
+    values."""
+    out = []
+    for f in codec.spec.fields:
+        nested = None if f.is_primitive else _wire_layout(codec._resolve(f.base_type))
+        out.append((f.name, f.base_type, f.array_len, nested))
+    return tuple(out)
 
 
 def rejection_reason(text: str) -> str:
@@ -258,6 +295,31 @@ class SpinalMirror:
             "servo/torque_enable": self.servos.torque_enable,
             "set_adc_scale": self._on_adc_scale,
         }
+        #: The fast path's command handlers taking ``decode_values`` field values instead of
+        #: a message (``_route_values``); each returns False, having applied nothing, when
+        #: the values do not convert (then the message path runs and decides).
+        #: Armed on the session while ``_fast`` is on (``_receive`` follows a change).
+        self._value_routes: dict[str, Any] = {}
+        handlers = {
+            "four_axes/command": self._four_axis_values,
+            "rpy/gain": self._gain_values,
+            "p_matrix_pseudo_inverse_inertia": self._pinv_values,
+            "desire_coordinate": self._desire_values,
+            "servo/target_states": self._servo_targets_values,
+        }
+        builtin = spinal_registry()
+        for slot in self.session.subscribers:
+            type_ = _VALUE_ROUTE_TYPES.get(slot.name)
+            if (
+                type_ is not None
+                and slot.service is None
+                and slot.codec.full_name == type_
+                and _wire_layout(slot.codec) == _wire_layout(builtin.msg(type_))
+                and self._routes.get(slot.name) is not None
+            ):
+                self._value_routes[slot.name] = handlers[slot.name]
+        self._values_armed = False  # whether the session delivers _value_routes as values
+        self._imu_codec: Any = None  # the imu publisher's codec, checked for _imu_frame
         self.counters = MirrorCounters()
         self.gyro = LEVEL_GYRO
         self.acc = LEVEL_ACC
@@ -397,9 +459,14 @@ class SpinalMirror:
 
     # ---------------------------------------------------------------- UART receive
     def _receive(self, now_ms: int) -> None:
+        if self._values_armed is not self._fast:  # the value routes follow fast_paths
+            self.session.deliver_values(self._value_routes if self._fast else ())
+            self._values_armed = self._fast
         data = self.uart.read()
         for event in self.session.spin(data, now_ms):
-            if isinstance(event, MessageReceived):
+            if event.__class__ is tuple:  # (slot, values, payload): see _route_values
+                self._route_values(*event)
+            elif isinstance(event, MessageReceived):
                 self._route(event.topic, event.message)
             elif isinstance(event, ServiceHandled):
                 self.counters.received[event.service] += 1
@@ -421,15 +488,36 @@ class SpinalMirror:
             return
         try:
             handler(msg)
-        except MirrorRejection as exc:
-            self._reject(exc.reason, str(exc), log=True)
-        except CommandRejectedError as exc:
-            # The core emits a "rejected" event for the ones the firmware logs; logged there.
-            self._reject(rejection_reason(str(exc)), str(exc), log=False)
-        except ValueError as exc:  # shapes the core refuses (RdmError), bad arrays
-            self._reject("invalid", f"{topic}: {exc}", log=True)
+        except ValueError as exc:
+            self._route_failed(topic, exc)
         else:
             self.counters.received[topic] += 1
+
+    def _route_failed(self, topic: str, exc: ValueError) -> None:
+        """A handler's rejection: counted (and logged) by kind."""
+        if isinstance(exc, MirrorRejection):
+            self._reject(exc.reason, str(exc), log=True)
+        elif isinstance(exc, CommandRejectedError):
+            # The core emits a "rejected" event for the ones the firmware logs; logged there.
+            self._reject(rejection_reason(str(exc)), str(exc), log=False)
+        else:  # shapes the core refuses (RdmError), bad arrays
+            self._reject("invalid", f"{topic}: {exc}", log=True)
+
+    def _route_values(self, slot: Any, values: tuple[Any, ...], payload: bytes) -> None:
+        """:meth:`_route` of ``slot.codec.decode(payload)`` from its field ``values``
+        (``ClientSession.deliver_values``): the same calls into the core, the same counters
+        and rejections. A handler that declines (False, nothing applied) hands over to the
+        message path."""
+        topic = slot.name
+        try:
+            done = self._value_routes[topic](values)
+        except ValueError as exc:
+            self._route_failed(topic, exc)
+            return
+        if done:
+            self.counters.received[topic] += 1
+        else:
+            self._route(topic, slot.codec.decode(payload))
 
     def _reject(self, reason: str, text: str, log: bool) -> None:
         self.counters.rejected[reason] += 1
@@ -437,6 +525,26 @@ class SpinalMirror:
             self._log(C.LogLevel.ERROR, text)
 
     # ---------------------------------------------------------------- subscribers
+    # The *_values handlers are the fast forms of the _on_* handlers below, from the field
+    # values of ``MessageCodec.decode_values`` (nested messages as tuples); same core calls.
+    def _four_axis_values(self, values: tuple[Any, ...]) -> bool:
+        angles, base = values  # list of 3 floats, list of floats: _on_four_axis_command's
+        return _applied(self.core.four_axis_command_list, angles, base, self._now_s)
+
+    def _gain_values(self, values: tuple[Any, ...]) -> bool:
+        return _applied(self.core.set_gains_wire_rows, values[0])  # the 7-int rows
+
+    def _pinv_values(self, values: tuple[Any, ...]) -> bool:
+        return _applied(self.core.set_pinv_inertia_wire_rows, values[0], values[1])
+
+    def _desire_values(self, values: tuple[Any, ...]) -> bool:
+        self.core.set_desire_coordinate(*values)  # three floats
+        return True
+
+    def _servo_targets_values(self, values: tuple[Any, ...]) -> bool:
+        self.servos.target_states_values(values[0], values[1])
+        return True
+
     def _on_four_axis_command(self, msg: Any) -> None:
         if self._fast:
             try:
@@ -626,6 +734,19 @@ class SpinalMirror:
         out = self.core.step(now, self.gyro, self.acc, self.mag, voltage)
         self.last_output = out
         self.counters.control_steps += 1
+        if self._fast and _duty_list is not None and self.pwm_test is None:
+            # No event and the controller's own duties: the list _step_tail builds, from
+            # the core's output in one call (None: an event or another case, below).
+            n = self.master.motor_number
+            if n == self.core.motor_number:
+                duties = _duty_list(out, n, IDLE_DUTY)
+                if duties is not None:
+                    self.duties = duties
+                    return
+        self._step_tail(out)
+
+    def _step_tail(self, out: Any) -> None:
+        """The events of a control step, then the duty list for the CAN master."""
         for kind, value in out.events:
             if kind == "ack":
                 self.counters.acks[int(value)] += 1
@@ -729,18 +850,19 @@ class SpinalMirror:
         t = get("imu")
         if t is None or now_ms - t >= IMU_PUB_MS:
             last["imu"] = t = now_ms
-            stamp = self.session.now(now_ms)
-            out = self.last_output
-            self._publish_topic(
-                "imu",
-                self._msg.imu.new(
-                    stamp=stamp,
-                    acc=list(self.acc),
-                    gyro=out.angular_velocity.tolist(),
-                    mag=list(self.mag),
-                    quaternion=out.quaternion.tolist(),
-                ),
-            )
+            if not self._publish_imu_frame(now_ms):
+                stamp = self.session.now(now_ms)
+                out = self.last_output
+                self._publish_topic(
+                    "imu",
+                    self._msg.imu.new(
+                        stamp=stamp,
+                        acc=list(self.acc),
+                        gyro=out.angular_velocity.tolist(),
+                        mag=list(self.mag),
+                        quaternion=out.quaternion.tolist(),
+                    ),
+                )
         next_ms = t + IMU_PUB_MS
         t = get("battery_voltage_status")
         if t is None or now_ms - t > BATTERY_PUB_MS:
@@ -761,9 +883,10 @@ class SpinalMirror:
             last["servo/states"] = t = now_ms
             if stamp is None:
                 stamp = self.session.now(now_ms)
-            msg = self.servos.states(self._msg, stamp)
-            if msg is not None:
-                self._publish_topic("servo/states", msg)
+            if not self._publish_servo_states_frame(stamp):
+                msg = self.servos.states(self._msg, stamp)
+                if msg is not None:
+                    self._publish_topic("servo/states", msg)
         next_ms = min(next_ms, t + SERVO_STATES_PUB_MS)
         t = get("servo/torque_states")
         if t is None or now_ms - t >= SERVO_TORQUE_PUB_MS:
@@ -772,6 +895,62 @@ class SpinalMirror:
             if msg is not None:
                 self._publish_topic("servo/torque_states", msg)
         return min(next_ms, t + SERVO_TORQUE_PUB_MS)
+
+    def _publish_imu_frame(self, now_ms: int) -> bool:
+        """The ``imu`` publication of :meth:`_publish_due` as one frame built in Rust
+        (``rdm._rdm.spinal_imu_frame``: stamp, message, frame and checksums): the same bytes,
+        TX ring and counters. False, having done nothing, when that path does not apply (no
+        extension function, another publisher codec or clock class, values it declines)."""
+        session = self.session
+        clock = session.clock
+        if _imu_frame is None or clock.__class__ is not ClientClock:
+            return False
+        try:
+            slot = session.publisher("imu")
+        except KeyError:
+            return False  # the message path raises it
+        codec = slot.codec
+        if codec is not self._imu_codec:
+            flat = codec._flat
+            if flat is None or flat.parts != _IMU_PARTS or flat.struct.format != _IMU_FORMAT:
+                return False
+            self._imu_codec = codec
+        topic_id = slot.topic_id
+        frame = _imu_frame(
+            topic_id,
+            now_ms,
+            clock.synced,
+            clock._sync_tick,
+            clock._sync_ns,
+            self.acc,
+            self.last_output,
+            self.mag,
+        )
+        if frame is None:
+            return False
+        if session.send_frame(topic_id, frame) > 0:
+            self.counters.published["imu"] += 1
+        return True
+
+    def _publish_servo_states_frame(self, stamp: Any) -> bool:
+        """The ``servo/states`` publication built from the servo table without message
+        objects (``ServoBridge.states_frame``): the same frame and counters. False, having
+        done nothing, when that path does not apply."""
+        session = self.session
+        try:
+            slot = session.publisher("servo/states")
+        except KeyError:
+            return False  # the message path raises it (if a servo reports)
+        codec = slot.codec
+        if codec is not self._msg.servo_states:
+            return False
+        topic_id = slot.topic_id
+        frame = self.servos.states_frame(codec, stamp, topic_id)
+        if frame is False:
+            return False
+        if frame is not None and session.send_frame(topic_id, frame) > 0:
+            self.counters.published["servo/states"] += 1
+        return True
 
     def _publish_due(self, now_ms: int) -> None:
         out = self.last_output

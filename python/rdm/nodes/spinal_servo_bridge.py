@@ -9,10 +9,18 @@ carries the servos with send_data_flag; ``servo/torque_states`` carries every se
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Sequence
 from typing import Any
 
+from rdm import _rdm
 from rdm.nodes.can_master import CanMaster, MasterState, ServoEntry
+from rdm.protocol.neuron.servo import WORD_VALUE_MAX, WORD_VALUE_MIN
+from rdm.protocol.rosserial.codec import RosTime
+from rdm.protocol.rosserial.framing import encode_frame
+
+#: The whole ServoStates frame from the Rust master's table (None: an older extension).
+_states_frame = getattr(_rdm, "spinal_servo_states_frame", None)
 
 
 class MirrorRejection(ValueError):
@@ -26,6 +34,30 @@ class MirrorRejection(ValueError):
 
 def _int16(value: int) -> int:
     return max(-32768, min(32767, int(value)))
+
+
+#: One ``spinal/ServoState`` (index, angle, temp, load, error) as the codec packs it.
+_SERVO_STATE_FORMAT = "BhBhB"
+_SERVO_STATE_FIELDS = ["index", "angle", "temp", "load", "error"]
+
+
+def _is_servo_states_layout(codec: Any) -> bool:
+    """Whether ``codec`` packs ``spinal/ServoStates`` as :meth:`ServoBridge.states_payload`
+    does: ``time stamp`` then ``ServoState[] servos`` of the five fields above, through the
+    codec's whole-message layout (``codec._VarLayout``)."""
+    var = getattr(codec, "_var", None)
+    if var is None or getattr(codec, "_flat", None) is not None:
+        return False
+    segments = var._segments
+    if len(segments) != 2 or segments[0] != ("fixed", [("stamp", "t", None)], "II"):
+        return False
+    kind, name, nested, _size, body = segments[1]
+    return (
+        kind == "nested"
+        and name == "servos"
+        and body == _SERVO_STATE_FORMAT
+        and [f.name for f in nested.spec.fields] == _SERVO_STATE_FIELDS
+    )
 
 
 class ServoBridge:
@@ -46,6 +78,12 @@ class ServoBridge:
         #: reused while the values repeat (a message is only encoded, never changed).
         self._state_msgs: list[tuple[tuple, Any]] = []
         self._state_codec: Any = None  # the codec those messages come from
+        #: states_payload: the ServoStates codec whose layout was checked, structs per count
+        self._payload_codec: Any = None
+        self._payload_structs: dict[int, struct.Struct] = {}
+        #: states_frame: the Rust master's core (its table read in the frame call), or None
+        core = getattr(master, "core", None) if self._fast else None
+        self._frame_core = core if type(core) is getattr(_rdm, "CanMaster", None) else None
 
     def table(self) -> list[tuple[tuple[int, int], ServoEntry]]:
         """Every servo in index order (empty until the master runs)."""
@@ -100,11 +138,48 @@ class ServoBridge:
 
     def target_states(self, msg: Any) -> None:
         """``servo/target_states`` (``spinal/ServoControlCmd``): goal positions, raw ticks."""
-        pairs = self._resolve("servo/target_states", msg.index, msg.angles)
+        self.target_states_values(msg.index, msg.angles)
+
+    def target_states_values(self, index: Sequence[int], angles: Sequence[int]) -> None:
+        """:meth:`target_states` of a message's ``index`` and ``angles`` fields."""
+        if self._frame_core is not None and self._fast and self._targets_in_one_call(index, angles):
+            return
+        pairs = self._resolve("servo/target_states", index, angles)
         try:
             self.master.set_servo_targets(dict(pairs))
         except ValueError as exc:
             raise MirrorRejection("servo_value", f"servo/target_states: {exc}") from exc
+
+    def _targets_in_one_call(self, index: Sequence[int], angles: Sequence[int]) -> bool:
+        """The Rust master's goal positions from ``index``/``angles`` in one core call when
+        every pair is valid: what ``_resolve`` then ``RustCanMaster.set_servo_targets`` do
+        for them (the same core setter per servo; a repeated index sets the same goal again,
+        leaving the last value as the dict of the plain path does). False, nothing
+        applied, for anything else (not running, lengths, an index or value out of range,
+        not an int): the plain path then raises its precise rejection."""
+        if self.master.state is not MasterState.RUNNING or len(index) != len(angles):
+            return False
+        core = self._frame_core
+        keys = core.servo_keys()
+        n = len(keys)
+        targets = []
+        for i, value in zip(index, angles, strict=True):
+            if (
+                i.__class__ is not int
+                or value.__class__ is not int
+                or not 0 <= i < n
+                or not WORD_VALUE_MIN <= value <= WORD_VALUE_MAX
+            ):
+                return False
+            slave, idx = keys[i]
+            targets.append((slave, idx, value))
+        if not targets:
+            return False  # the plain path: nothing to set (or servo_not_ready)
+        try:
+            core.set_servo_target_list(targets)
+        except ValueError as exc:  # the core's own refusal, as set_servo_targets raises it
+            raise MirrorRejection("servo_value", f"servo/target_states: {exc}") from exc
+        return True
 
     def target_current(self, msg: Any) -> None:
         """``servo/target_current``: the ``angles`` field carries the goal current."""
@@ -137,6 +212,57 @@ class ServoBridge:
         if not servos:
             return None
         return codec.servo_states.new(stamp=stamp, servos=servos)
+
+    def states_payload(self, codec: Any, stamp: Any) -> bytes | bool | None:
+        """``codec.encode(self.states(..., stamp))`` without message objects, for the
+        ``spinal/ServoStates`` ``codec``: the payload, None when no servo has send_data_flag
+        (no message), False when this path does not apply (``fast`` off, another layout, a
+        stamp that is not a :class:`RosTime`, a value its field does not take: then build
+        the message with :meth:`states`)."""
+        if not self._fast or stamp.__class__ is not RosTime:
+            return False
+        if codec is not self._payload_codec:
+            if not _is_servo_states_layout(codec):
+                return False
+            self._payload_codec, self._payload_structs = codec, {}
+        flat: list[int] = []
+        for i, (send, angle, temp, load, error, _torque) in enumerate(self._reports()):
+            if send:
+                flat += (i, angle, temp, load, error)
+        n = len(flat) // 5
+        if not n:
+            return None
+        st = self._payload_structs.get(n)
+        if st is None:
+            if len(self._payload_structs) >= 64:
+                self._payload_structs.clear()
+            st = self._payload_structs[n] = struct.Struct("<III" + _SERVO_STATE_FORMAT * n)
+        try:
+            return st.pack(stamp[0], stamp[1], n, *flat)
+        except struct.error:
+            return False  # the message path raises its precise error
+
+    def states_frame(self, codec: Any, stamp: Any, topic_id: int) -> bytes | bool | None:
+        """``encode_frame(topic_id, codec.encode(self.states(..., stamp)))``: with the Rust
+        master, the whole frame from its servo table in one call
+        (``rdm._rdm.spinal_servo_states_frame``); else :meth:`states_payload` framed. None
+        when no servo has send_data_flag, False when this path does not apply (as
+        :meth:`states_payload`)."""
+        core = self._frame_core
+        if core is None or _states_frame is None or not self._fast:
+            payload = self.states_payload(codec, stamp)
+            if payload is None or payload is False:
+                return payload
+            return encode_frame(topic_id, payload)
+        if stamp.__class__ is not RosTime:
+            return False
+        if codec is not self._payload_codec:
+            if not _is_servo_states_layout(codec):
+                return False
+            self._payload_codec, self._payload_structs = codec, {}
+        if self.master.state is not MasterState.RUNNING:
+            return None  # no servo reported: no message
+        return _states_frame(topic_id, stamp[0], stamp[1], core)
 
     def _states_reused(self, new: Any) -> list[Any]:
         """The ``servos`` list of :meth:`states`, reusing each servo's last message while its

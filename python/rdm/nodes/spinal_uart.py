@@ -20,8 +20,15 @@ from rdm.sim.uart import InProcessUartEnd
 DEFAULT_MAX_PENDING = 128 * 64
 #: Wrappers whose ``read_available`` with nothing underneath returns ``b""`` and changes
 #: nothing (module, class name): the capture tap and the stack's cuttable link.
-_PURE_READ_WRAPPERS = {("rdm.sim.uart", "TappedLink"), ("rdm.scenarios.stack", "DroppableLink")}
+_TAPPED = ("rdm.sim.uart", "TappedLink")
+_DROPPABLE = ("rdm.scenarios.stack", "DroppableLink")
+_PURE_READ_WRAPPERS = {_TAPPED, _DROPPABLE}
 _MAX_WRAPPERS = 8
+
+
+def _kind(link: Any) -> tuple[str, str]:
+    cls = type(link)
+    return cls.__module__, cls.__qualname__
 
 
 def source_inbox(link: Any) -> bytearray | None:
@@ -35,6 +42,22 @@ def source_inbox(link: Any) -> bytearray | None:
         if (cls.__module__, cls.__qualname__) not in _PURE_READ_WRAPPERS:
             return None
         link = link.link
+    return None
+
+
+def inproc_chain(link: Any) -> tuple[Any, Any, InProcessUartEnd] | None:
+    """``(droppable, tapped, end)`` when ``link`` is exactly the stack's chain
+    ``[DroppableLink ->] [TappedLink ->] InProcessUartEnd`` (each optional wrapper None when
+    absent; exact classes, no subclass), else None. :meth:`UartPump.read` and
+    :meth:`UartPump._write` then do what the chain's ``read_available`` / ``write`` do
+    without the calls through the wrappers (``UartPump.fast``)."""
+    droppable = tapped = None
+    if _kind(link) == _DROPPABLE:
+        droppable, link = link, link.link
+    if _kind(link) == _TAPPED:
+        tapped, link = link, link.link
+    if type(link) is InProcessUartEnd:
+        return droppable, tapped, link
     return None
 
 
@@ -73,16 +96,42 @@ class UartPump:
         #: :func:`source_inbox` of the link: while it is empty, :meth:`read` returns ``b""``
         #: and changes nothing (callers may skip it); None when that is not known.
         self.inbox = source_inbox(link)
+        #: :func:`inproc_chain` of the link (the fast read / write through it), or None.
+        self._chain = inproc_chain(link)
 
     def read(self) -> bytes:
         """Everything received so far (``b""`` if nothing or on a port error, counted)."""
         try:
-            data = self.link.read_available()
+            chain = self._chain
+            if chain is not None and self.fast:
+                data = self._read_chain(chain)
+            else:
+                data = self.link.read_available()
         except (OSError, ValueError) as exc:  # SerialException is an OSError
             del exc
             self.read_errors += 1
             return b""
         self.bytes_in += len(data)
+        return data
+
+    @staticmethod
+    def _read_chain(chain: tuple[Any, Any, InProcessUartEnd]) -> bytes:
+        """``read_available`` through an :func:`inproc_chain` without the calls through the
+        wrappers (same bytes, counters and captures)."""
+        droppable, tapped, end = chain
+        inbox = end._inbox
+        if inbox:
+            data = bytes(inbox)
+            inbox.clear()
+            if tapped is not None:
+                tapped.rx_bytes += len(data)
+                if tapped._rx is not None:
+                    tapped._rx.write(data)
+        else:
+            data = b""
+        if droppable is not None and droppable.dropped:
+            droppable.bytes_lost += len(data)
+            return b""
         return data
 
     def send(self, data: bytes) -> None:
@@ -117,6 +166,9 @@ class UartPump:
         """Write what the port takes now of ``data``: bytes written (0 if none, or on a port
         error, counted)."""
         try:
+            chain = self._chain
+            if chain is not None and self.fast:
+                return self._write_chain(chain, data)
             if self._fd is not None:
                 _, writable, _ = select.select([], [self._fd], [], 0)
                 if not writable:
@@ -129,3 +181,28 @@ class UartPump:
         except (OSError, ValueError):
             self.write_errors += 1
             return 0
+
+    @staticmethod
+    def _write_chain(chain: tuple[Any, Any, InProcessUartEnd], data: bytes) -> int:
+        """``DroppableLink.write(TappedLink.write(end.write(data)))`` of an
+        :func:`inproc_chain` without the calls through the wrappers (same bytes, counters,
+        captures and ``OSError``)."""
+        droppable, tapped, end = chain
+        n = len(data)
+        if droppable is not None and droppable.dropped:
+            droppable.bytes_lost += n
+            return n
+        if tapped is not None and not data:
+            return 0
+        if end.closed:
+            raise OSError(f"{end.name}: write on a closed in-process UART")
+        peer = end.peer
+        if peer is None or peer.closed:
+            n = 0  # nobody listening: the bytes are lost, as on an unplugged line
+        else:
+            peer._inbox += data
+        if tapped is not None:
+            tapped.tx_bytes += n
+            if tapped._tx is not None and n:
+                tapped._tx.write(data[:n])
+        return n

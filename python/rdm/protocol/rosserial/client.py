@@ -64,6 +64,8 @@ class ClientEndpoint:
     codec: MessageCodec
     endpoint: C.Endpoint
     service: DeviceServiceServer | None = None
+    #: Deliver received messages as field values (:meth:`ClientSession.deliver_values`).
+    values: bool = False
 
 
 class ClientSession:
@@ -107,6 +109,7 @@ class ClientSession:
         self._log = self.registry.msg("rosserial_msgs/Log")
         self._publisher_cache: dict[str, ClientEndpoint] = {}  # name -> first plain slot
         self._cached_slots = 0  # len(publishers) when the cache was filled
+        self._values = False  # a subscriber delivers field values (deliver_values)
 
     # -- slot set-up (advertise / subscribe / advertiseService) ---------------------------
     def _new_pub(self, name: str, type_: str, md5: str, codec: MessageCodec, ep: C.Endpoint):
@@ -247,6 +250,24 @@ class ClientSession:
                 return p
         raise KeyError(f"no publisher {name!r}")
 
+    def deliver_values(self, names: Any) -> list[ClientEndpoint]:
+        """Have exactly the plain subscribers named in ``names`` deliver their messages as
+        field values (an empty ``names``: none). :meth:`spin` then gives a ``(slot, values,
+        payload)`` tuple instead of a :class:`MessageReceived` for a payload that
+        ``slot.codec.decode_values`` takes (``values`` as that method returns them;
+        ``slot.codec.decode(payload)`` is the message the event would carry). Any other
+        payload of the slot takes the usual path (the event, or a drop with its reason), and
+        nothing else changes: same counters, same order of events and of what is sent.
+        Returns the slots marked."""
+        wanted = set(names)
+        marked = []
+        for slot in self.subscribers:
+            slot.values = slot.name in wanted and slot.service is None
+            if slot.values:
+                marked.append(slot)
+        self._values = bool(marked)
+        return marked
+
     # -- sending --------------------------------------------------------------------------
     def _send(self, topic_id: int, payload: bytes) -> int:
         if topic_id >= C.FIRST_USER_TOPIC_ID and not self.configured:
@@ -265,6 +286,32 @@ class ClientSession:
         self._tx_used += chunks
         self.counts["tx_frames"] += 1
         return len(frame)
+
+    def send_frame(self, topic_id: int, frame: bytes) -> int:
+        """:meth:`_send` of a frame built elsewhere: ``frame`` must be
+        ``encode_frame(topic_id, payload)`` (e.g. ``rdm._rdm.spinal_imu_frame``). The same
+        checks, TX ring, counters and return value as ``_send(topic_id, payload)``."""
+        if topic_id >= C.FIRST_USER_TOPIC_ID and not self.configured:
+            self.counts["tx_not_configured"] += 1
+            return 0
+        n = len(frame)
+        if n > self.output_size:
+            self.counts["tx_too_large"] += 1
+            self.log(C.LogLevel.ERROR, C.LOG_DROPPED_TOO_LARGE)
+            return -1
+        chunks = -(-n // self._tx_chunk_bytes)
+        if self._tx_used + chunks > self._tx_chunks:
+            self.counts["tx_ring_full"] += 1  # the firmware drops the frame silently
+            return -1
+        self._tx.append(frame)
+        self._tx_used += chunks
+        self.counts["tx_frames"] += 1
+        return n
+
+    def send_payload(self, topic_id: int, payload: bytes) -> int:
+        """Queue ``payload`` (an encoded message) on ``topic_id``: what :meth:`publish`
+        does after encoding (for callers that pack a payload themselves)."""
+        return self._send(topic_id, payload)
 
     def publish(self, name: str, msg: Any) -> int:
         """Publish on a plain topic; returns frame bytes queued, 0 if not configured, -1 if
@@ -350,9 +397,19 @@ class ClientSession:
 
     def _receive(self, data: bytes, now_ms: int, events: list[SessionEvent]) -> list[SessionEvent]:
         # good frames come as (topic_id, payload, offset): no Frame object for user topics
+        values = self._values
+        subscribers = self.subscribers
         for item in self.parser._feed(data, now_ms, True):
             if item.__class__ is tuple:
                 if item[0] >= C.FIRST_USER_TOPIC_ID:
+                    if values:  # deliver_values: the field values when they decode
+                        index = item[0] - C.FIRST_USER_TOPIC_ID
+                        slot = subscribers[index] if index < len(subscribers) else None
+                        if slot is not None and slot.values:
+                            got = slot.codec.decode_values(item[1])
+                            if got is not None:
+                                events.append((slot, got, item[1]))
+                                continue
                     events.extend(self._dispatch_user(*item))
                 else:
                     events.extend(self._dispatch(_new_frame(*item), now_ms))
