@@ -976,5 +976,9 @@ class LockstepKernel:
         the class's own method, so its fast path may run); the next ``k``."""
     @property
     def k(self) -> int: ...
+    profile: bool
+    """Time every node tick and physics step (``stats()``: ``fast_ns``, ``python_ns``,
+    ``physics_ns``)."""
     def stats(self) -> dict[str, Any]:
-        """Ticks per node on the fast path and in Python, physics steps, boundaries."""
+        """Ticks per node on the fast path and in Python, physics steps, boundaries, contact
+        tracker updates; with ``profile`` the wall ns of each."""

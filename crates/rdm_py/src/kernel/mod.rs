@@ -51,6 +51,10 @@ enum Kind {
 struct Counts {
     fast: Vec<u64>,
     python: Vec<u64>,
+    /// With `profile`: wall ns per node on each path, and of the physics steps.
+    fast_ns: Vec<u64>,
+    python_ns: Vec<u64>,
+    physics_ns: u64,
 }
 
 /// The lockstep loop with fast paths (see the module doc).
@@ -79,6 +83,8 @@ pub struct LockstepKernel {
     physics_fast: u64,
     physics_python: u64,
     boundaries: u64,
+    /// Time every node tick and physics step (`stats()`'s `*_ns`).
+    profile: bool,
 }
 
 impl LockstepKernel {
@@ -152,9 +158,7 @@ impl LockstepKernel {
         let r = self.ticks[i].bind(py).call1((t,));
         self.leave_python(self.touches[i]);
         r?;
-        if let Some(c) = self.counts.python.get_mut(i) {
-            *c += 1;
-        }
+        self.counts.python[i] += 1;
         Ok(())
     }
 
@@ -263,16 +267,25 @@ impl LockstepKernel {
             let mut stop = false;
             for j in 0..self.schedule[slot].len() {
                 let i = self.schedule[slot][j];
+                let t0 = self.profile.then(std::time::Instant::now);
                 if self.fast_tick(py, i, t)? {
-                    if let Some(c) = self.counts.fast.get_mut(i) {
-                        *c += 1;
+                    self.counts.fast[i] += 1;
+                    if let Some(t0) = t0 {
+                        self.counts.fast_ns[i] += elapsed_ns(t0);
                     }
                 } else {
                     self.python_tick(py, i, t)?;
+                    if let Some(t0) = t0 {
+                        self.counts.python_ns[i] += elapsed_ns(t0);
+                    }
                     stop |= self.owner.bind(py).getattr("_stop")?.is_truthy()?;
                 }
             }
+            let t0 = self.profile.then(std::time::Instant::now);
             self.physics_step(py, t)?;
+            if let Some(t0) = t0 {
+                self.counts.physics_ns += elapsed_ns(t0);
+            }
             self.k = k + 1;
             if stop {
                 break;
@@ -327,7 +340,11 @@ impl LockstepKernel {
             counts: Counts {
                 fast: vec![0; n],
                 python: vec![0; n],
+                fast_ns: vec![0; n],
+                python_ns: vec![0; n],
+                physics_ns: 0,
             },
+            profile: false,
             physics_fast: 0,
             physics_python: 0,
             boundaries: 0,
@@ -459,6 +476,19 @@ impl LockstepKernel {
         Ok(self.k)
     }
 
+    /// Time every node tick and physics step from now on (`stats()` then has `fast_ns`,
+    /// `python_ns` per node and `physics_ns`: wall ns, each tick's flush and re-reads
+    /// included in the node that caused them).
+    #[setter]
+    fn set_profile(&mut self, on: bool) {
+        self.profile = on;
+    }
+
+    #[getter]
+    fn profile(&self) -> bool {
+        self.profile
+    }
+
     /// The next base tick (after `run`, also when it raised).
     #[getter]
     fn k(&self) -> i64 {
@@ -480,8 +510,17 @@ impl LockstepKernel {
             .map_or((0, 0), |p| (p.tracker_fast, p.tracker_python));
         d.set_item("tracker_fast", tf)?;
         d.set_item("tracker_python", tp)?;
+        if self.profile {
+            d.set_item("fast_ns", self.counts.fast_ns.clone())?;
+            d.set_item("python_ns", self.counts.python_ns.clone())?;
+            d.set_item("physics_ns", self.counts.physics_ns)?;
+        }
         Ok(d)
     }
+}
+
+fn elapsed_ns(t0: std::time::Instant) -> u64 {
+    u64::try_from(t0.elapsed().as_nanos()).unwrap_or(u64::MAX)
 }
 
 impl LockstepKernel {
