@@ -613,6 +613,9 @@ def _run(base: str, fast: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[dict, 
     spinal.servos._fast = fast
     spinal.master.fast = fast
     spinal.uart.fast = fast
+    # The Python busy paths under test: the lockstep kernel runs only the idle ms (its own
+    # busy ms are compared in tests/test_spinal_kernel_busy.py).
+    spinal.kernel_busy = False
     route_values = spinal._route_values
 
     def counting_values(*args: Any) -> None:

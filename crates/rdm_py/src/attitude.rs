@@ -453,6 +453,27 @@ pub struct PySpinalStep {
     inner: SpinalStep,
 }
 
+impl PySpinalStep {
+    /// [`SpinalStep::step`] without the Python object (the lockstep kernel's control step,
+    /// `crate::kernel::spinal`): the same call `step` makes.
+    pub(crate) fn step_raw(
+        &mut self,
+        now_s: f64,
+        gyro: [f64; 3],
+        acc: [f64; 3],
+        mag: [f64; 3],
+        voltage: f64,
+    ) -> SpinalOutput {
+        self.inner
+            .step(now_s, &ImuSample { gyro, acc, mag }, voltage)
+    }
+
+    /// The controller's motor number (the `motor_number` property).
+    pub(crate) fn motor_count(&self) -> usize {
+        self.inner.controller().motor_number()
+    }
+}
+
 impl ControllerHost for PySpinalStep {
     fn ctrl(&mut self) -> &mut AttitudeController {
         self.inner.controller_mut()

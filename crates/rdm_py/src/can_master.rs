@@ -100,6 +100,13 @@ impl CanMaster {
     pub(crate) fn core_ref(&self) -> &CoreMaster {
         &self.core
     }
+
+    /// `try_set_motor_duties` of a list of these floats (the lockstep kernel's duty
+    /// hand-over, `crate::kernel::spinal`): applies them and returns true when there are
+    /// exactly `motor_number` of them and the core takes them; else applies nothing.
+    pub(crate) fn try_set_duty_slice(&mut self, duties: &[f64]) -> bool {
+        duties.len() == self.core.motor_number && self.core.set_motor_duties(duties).is_ok()
+    }
 }
 
 #[pymethods]

@@ -18,7 +18,7 @@ use crate::can_master::CanMaster;
 use crate::errors::RdmError;
 
 /// An exact Python int (not bool, not a subclass) that fits i64.
-fn exact_i64(v: &Bound<'_, PyAny>) -> Option<i64> {
+pub(crate) fn exact_i64(v: &Bound<'_, PyAny>) -> Option<i64> {
     if v.is_exact_instance_of::<PyInt>() {
         v.extract::<i64>().ok()
     } else {
@@ -27,7 +27,7 @@ fn exact_i64(v: &Bound<'_, PyAny>) -> Option<i64> {
 }
 
 /// Three exact Python floats in a tuple or a list of length 3.
-fn float3(v: &Bound<'_, PyAny>) -> Option<[f64; 3]> {
+pub(crate) fn float3(v: &Bound<'_, PyAny>) -> Option<[f64; 3]> {
     let mut out = [0.0; 3];
     if let Ok(t) = v.cast_exact::<PyTuple>() {
         if t.len() != 3 {
@@ -115,10 +115,73 @@ fn spinal_duty_list<'py>(
     }
     let list = PyList::empty(py);
     for &d in control.duty.iter().take(n) {
-        let m = if d > idle { d } else { idle };
-        list.append(PyFloat::new(py, if m < 1.0 { m } else { 1.0 }))?;
+        list.append(PyFloat::new(py, clamp_duty(d, idle)))?;
     }
     Ok(Some(list))
+}
+
+/// `min(1.0, max(idle, d))` with Python's `max`/`min` (the first argument unless the second
+/// compares greater / smaller: NaN gives `idle`).
+pub(crate) fn clamp_duty(d: f64, idle: f64) -> f64 {
+    let m = if d > idle { d } else { idle };
+    if m < 1.0 {
+        m
+    } else {
+        1.0
+    }
+}
+
+/// What [`servo_states_frame_into`] did.
+pub(crate) enum ServoFrame {
+    /// No servo has send_data_flag: no message.
+    Empty,
+    /// A servo's index passes 255: the Python path decides.
+    Declined,
+    /// The frame, of this many bytes, was appended.
+    Written(usize),
+}
+
+/// The `spinal/ServoStates` frame of `spinal_servo_states_frame` appended to `out` (no
+/// allocation when `out` has the room).
+pub(crate) fn servo_states_frame_into(
+    core: &rdm_core::firmware::can_master::CanMaster,
+    topic: u16,
+    stamp: (u32, u32),
+    out: &mut Vec<u8>,
+) -> ServoFrame {
+    let sending = || {
+        core.neurons()
+            .iter()
+            .flat_map(|n| n.servos())
+            .enumerate()
+            .filter(|(_, s)| s.send_data_flag)
+    };
+    let mut n = 0usize;
+    for (i, _) in sending() {
+        if i > usize::from(u8::MAX) {
+            return ServoFrame::Declined;
+        }
+        n += 1;
+    }
+    if n == 0 {
+        return ServoFrame::Empty;
+    }
+    let servos = sending().map(|(i, s)| ServoStateValues {
+        index: u8::try_from(i).unwrap_or(u8::MAX),
+        angle: s.angle,
+        temp: s.temperature,
+        load: s.current,
+        error: s.error,
+    });
+    let len = servo_states_frame_len(n);
+    let start = out.len();
+    out.resize(start + len, 0);
+    if write_servo_states_frame(topic, stamp, servos, &mut out[start..]) {
+        ServoFrame::Written(len)
+    } else {
+        out.truncate(start);
+        ServoFrame::Declined
+    }
 }
 
 /// The `spinal/ServoStates` frame of the servos with send_data_flag in `master`'s table

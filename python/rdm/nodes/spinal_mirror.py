@@ -87,6 +87,10 @@ _PUBLISHERS = (
 )
 
 
+#: The publishers the lockstep kernel leaves to the Python tick (docs/spinalkernel.md).
+_KERNEL_OTHER_PUBLISHERS = tuple(p for p in _PUBLISHERS if p[0] not in ("imu", "servo/states"))
+
+
 def _next_due(last_pub: dict[str, int], key: str, period_ms: int, strict: bool) -> int:
     """First ms at which ``SpinalMirror._due(key, ...)`` returns True again."""
     last = last_pub.get(key)
@@ -249,6 +253,10 @@ class SpinalMirror:
         self.core = SpinalStep(self.rate_hz, **spinal_options)
         # fast_paths=False keeps the plain per-ms path (the reference of the fast one).
         self._fast = bool(fast_paths)
+        #: The lockstep kernel may run the routine busy ms (control step, battery sample,
+        #: ``imu`` / ``servo/states`` publications) itself (:meth:`kernel_plan`'s busy part);
+        #: False: only the idle ms (the plain kernel path, docs/spinalkernel.md).
+        self.kernel_busy = True
         self.servos = ServoBridge(self.master, fast=self._fast)
         #: The Rust master's one-call duty hand-over (None: the Python master).
         self._try_duties = getattr(self.master, "try_set_motor_duties", None)
@@ -387,6 +395,11 @@ class SpinalMirror:
         next_control = self._next_control
         if next_control is None or self._now_s >= next_control - 1e-9:
             self._control(self._now_s)
+        self._tick_tail(now_ms)
+
+    def _tick_tail(self, now_ms: int) -> None:
+        """:meth:`tick` after the control steps: the CAN ms, publishers and UART output (also
+        the lockstep kernel's continuation of a ms whose control step it ran)."""
         can_ms = self._can_ms
         link = self._wire_link
         master = self.master
@@ -1028,7 +1041,114 @@ class SpinalMirror:
             self._next_control,
             self._can_ms,
             self._next_pub_ms,
+            self._kernel_busy_plan() if self.kernel_busy else None,
         )
+
+    def _kernel_busy_plan(self) -> tuple:
+        """What the kernel needs to run a routine busy ms as :meth:`tick` does (called by
+        :meth:`kernel_plan` when the idle part applies):
+
+        * ``step_core``: the :class:`SpinalStep` when a control step's routine is
+          ``_step``'s fast path (no pwm test, the Rust master's one-call duty hand-over), else
+          None; ``period`` (``1 / rate_hz``) and the idle duty;
+        * the battery filter and sample period;
+        * ``configured``, ``last_output``; ``imu_topic`` when the ``imu`` publication is
+          :meth:`_publish_imu_frame`'s (the checked codec, a :class:`ClientClock`), the
+          clock's sync state; ``servo_topic``/``servo_core`` when ``servo/states`` is
+          :meth:`_publish_servo_states_frame`'s Rust frame; the last publication ms of both
+          and the first ms any other publisher is due;
+        * the TX ring (output size, chunk size, chunks; -1 when not empty) and whether the
+          UART writes any send of up to ``max_pending`` bytes whole (``UartPump.writes_whole``).
+
+        The kernel reads the IMU sample, battery input, ADC scale and battery voltage from
+        the mirror itself when it uses them (another node may set them without a re-read)."""
+        core = self.core
+        step_core = None
+        if (
+            core.__class__ is SpinalStep
+            and _duty_list is not None
+            and self.pwm_test is None
+            and getattr(self.master, "fast", False) is True
+        ):
+            step_core = core
+        session = self.session
+        clock = session.clock
+        imu_topic = None
+        if _imu_frame is not None and clock.__class__ is ClientClock:
+            try:
+                slot = session.publisher("imu")
+            except KeyError:
+                slot = None
+            if slot is not None and slot.codec is self._imu_codec:
+                imu_topic = slot.topic_id
+        servo_topic = servo_core = None
+        try:
+            slot = session.publisher("servo/states")
+        except KeyError:
+            slot = None
+        if slot is not None and slot.codec is self._msg.servo_states:
+            servo_core = self.servos.kernel_frame_core(slot.codec)
+            if servo_core is not None:
+                servo_topic = slot.topic_id
+        last = self._last_pub
+        others = min(_next_due(last, k, period, st) for k, period, st in _KERNEL_OTHER_PUBLISHERS)
+        uart = self.uart
+        return (
+            step_core,
+            1.0 / self.rate_hz,
+            IDLE_DUTY,
+            BATTERY_FILTER,
+            BATTERY_SAMPLE_MS,
+            session.configured,
+            self.last_output,
+            imu_topic,
+            clock.synced,
+            clock._sync_tick,
+            clock._sync_ns,
+            last.get("imu"),
+            IMU_PUB_MS,
+            servo_topic,
+            servo_core,
+            last.get("servo/states"),
+            SERVO_STATES_PUB_MS,
+            others,
+            session.output_size,
+            session._tx_chunk_bytes,
+            session._tx_chunks if session._tx_used == 0 else -1,
+            uart.writes_whole(),
+            uart.max_pending,
+        )
+
+    def kernel_finish_step(self, now_ms: int, tail: bool) -> None:
+        """The rest of a kernel tick whose control step the kernel ran (``last_output``,
+        ``control_steps``, ``_next_control`` and, without ``tail``, ``duties`` written back)
+        but did not finish: with ``tail`` the step had events (``_step_tail``), else the core
+        declined the duty list; then the CAN ms, publishers and output as :meth:`tick`."""
+        if tail:
+            self._step_tail(self.last_output)
+        self._tick_tail(now_ms)
+
+    def kernel_finish_publish(self, now_ms: int) -> None:
+        """The rest of a kernel tick whose publication the kernel declined (a value its
+        frame builders decline, a frame the TX ring or the UART queue would not take): the
+        publishers and output as :meth:`tick`."""
+        if now_ms >= self._next_pub_ms:
+            self._publish(now_ms)
+        if self.session.pending_frames or self.uart.pending:
+            self.uart.send(self.session.take_output())
+
+    def kernel_commit_tx(self, data: bytes, frames: int, imu: int, servo: int) -> None:
+        """The kernel's publications since the last write back: ``frames`` frames queued
+        and taken by ``take_output`` (``imu`` on ``imu``, ``servo`` on ``servo/states``),
+        ``data`` their bytes in order, written in one :meth:`UartPump.send` (whole, as the
+        plan's ``writes_whole`` said: the same bytes and counters as one send per tick)."""
+        self.session.counts["tx_frames"] += frames
+        published = self.counters.published
+        if imu:
+            published["imu"] += imu
+        if servo:
+            published["servo/states"] += servo
+        self.uart.send(data)
 
     def kernel_finish_wire_tick(self, now_ms: int) -> None:
         """The rest of a kernel tick whose CAN ms was not steady (``tick_wire_steady`` gave

@@ -264,6 +264,16 @@ class ServoBridge:
             return None  # no servo reported: no message
         return _states_frame(topic_id, stamp[0], stamp[1], core)
 
+    def kernel_frame_core(self, codec: Any) -> Any:
+        """The Rust master's core when :meth:`states_frame` of ``codec`` with a ``RosTime``
+        stamp is exactly ``rdm._rdm.spinal_servo_states_frame(topic_id, sec, nsec, core)``
+        while the master runs (the lockstep kernel then builds that frame itself); None
+        otherwise (also before the codec's first frame, whose layout check this skips)."""
+        core = self._frame_core
+        if core is None or _states_frame is None or not self._fast:
+            return None
+        return core if codec is self._payload_codec else None
+
     def _states_reused(self, new: Any) -> list[Any]:
         """The ``servos`` list of :meth:`states`, reusing each servo's last message while its
         values are unchanged (same fields, same bytes; fewer objects built at 50 Hz)."""

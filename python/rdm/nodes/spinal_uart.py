@@ -182,6 +182,22 @@ class UartPump:
             self.write_errors += 1
             return 0
 
+    def writes_whole(self) -> bool:
+        """Whether :meth:`send` of any ``bytes`` of 1 to :attr:`max_pending` bytes writes
+        them all now, through the fast chain, with nothing left pending: the fast in-process
+        chain with nothing queued and the line cut (the bytes are counted lost) or both ends
+        open. Then several such sends and one send of their bytes joined (up to
+        ``max_pending``) leave the same bytes, counters and captures; this holds until
+        Python code changes the chain (the lockstep kernel's deferred Spinal output)."""
+        chain = self._chain
+        if chain is None or not self.fast or self.pending:
+            return False
+        droppable, _tapped, end = chain
+        if droppable is not None and droppable.dropped:
+            return True
+        peer = end.peer
+        return not end.closed and peer is not None and not peer.closed
+
     @staticmethod
     def _write_chain(chain: tuple[Any, Any, InProcessUartEnd], data: bytes) -> int:
         """``DroppableLink.write(TappedLink.write(end.write(data)))`` of an

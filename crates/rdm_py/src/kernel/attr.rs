@@ -13,6 +13,11 @@ impl Name {
         Name(PyString::intern(py, name).unbind())
     }
 
+    /// The interned string (e.g. as a dict key).
+    pub(crate) fn key<'py>(&self, py: Python<'py>) -> &Bound<'py, PyString> {
+        self.0.bind(py)
+    }
+
     pub(crate) fn get<'py>(&self, obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
         obj.getattr(self.0.bind(obj.py()))
     }

@@ -207,14 +207,19 @@ impl LockstepKernel {
                 if !s.ready(py, t)? {
                     return Ok(false);
                 }
-                match s.tick(py, t)? {
-                    SpinalTick::Done => {}
-                    SpinalTick::Finish(now_ms) => {
-                        self.enter_python(py, t)?;
-                        let r = self.spinal.as_ref().unwrap().finish(py, now_ms);
-                        self.leave_python(SPINAL);
-                        r?;
-                    }
+                let tick = s.tick(py, t)?;
+                if !matches!(tick, SpinalTick::Done) {
+                    // The mirror's continuation of this tick, after every part's flush.
+                    self.enter_python(py, t)?;
+                    let s = self.spinal.as_ref().unwrap();
+                    let r = match tick {
+                        SpinalTick::Done => Ok(()),
+                        SpinalTick::Finish(now_ms) => s.finish(py, now_ms),
+                        SpinalTick::FinishStep(now_ms, tail) => s.finish_step(py, now_ms, tail),
+                        SpinalTick::FinishPublish(now_ms) => s.finish_publish(py, now_ms),
+                    };
+                    self.leave_python(SPINAL);
+                    r?;
                 }
                 Ok(true)
             }
@@ -510,6 +515,15 @@ impl LockstepKernel {
             .map_or((0, 0), |p| (p.tracker_fast, p.tracker_python));
         d.set_item("tracker_fast", tf)?;
         d.set_item("tracker_python", tp)?;
+        let sc = self.spinal.as_ref().map(|s| s.counts).unwrap_or_default();
+        let spinal = pyo3::types::PyDict::new(py);
+        spinal.set_item("steps", sc.steps)?;
+        spinal.set_item("battery_samples", sc.batteries)?;
+        spinal.set_item("imu_frames", sc.imu_frames)?;
+        spinal.set_item("servo_frames", sc.servo_frames)?;
+        spinal.set_item("finish_step", sc.finish_step)?;
+        spinal.set_item("finish_publish", sc.finish_publish)?;
+        d.set_item("spinal_busy", spinal)?;
         if self.profile {
             d.set_item("fast_ns", self.counts.fast_ns.clone())?;
             d.set_item("python_ns", self.counts.python_ns.clone())?;

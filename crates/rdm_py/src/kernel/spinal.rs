@@ -1,12 +1,29 @@
-//! The Spinal mirror's idle millisecond (`SpinalMirror.tick` with no UART byte, no control
-//! step, battery sample or publisher due and a steady CAN ms): one Rust CAN master tick on
-//! the wire. The mirror's Python state is written back before Python code runs.
+//! The Spinal mirror's routine milliseconds (`SpinalMirror.tick` with no UART byte waiting,
+//! inside the rosserial idle window, one steady CAN ms):
+//!
+//! * the idle ms: one Rust CAN master tick on the wire;
+//! * the busy ms (docs/spinalkernel.md): the battery sample, one control step
+//!   (`SpinalStep.step` on the mirror's IMU sample, the duty list, the duty hand-over to the
+//!   Rust master), the `imu` and `servo/states` publications (frames from the Rust builders,
+//!   `ClientSession.send_frame`'s checks and counters), then the CAN ms; the frames go to a
+//!   buffer written to the UART in one send at the next flush.
+//!
+//! Anything else (an event of the step, a frame the builders or the TX ring decline, a
+//! non-finite battery sample, another publisher, a second control step) is decided before
+//! any state changes (the Python tick runs) or, once the step ran, handed to the mirror's
+//! `kernel_finish_*` continuation. The mirror's Python state is written back before Python
+//! code runs.
 
 use pyo3::prelude::*;
-use pyo3::types::PyTuple;
+use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyList, PyTuple};
+use rdm_core::control::attitude::SpinalOutput;
+use rdm_core::firmware::rosserial_frame::{client_stamp, imu_frame, ImuValues};
+use rdm_core::N_ROTORS;
 
 use super::attr::Name;
+use crate::attitude::{PySpinalStep, SpinalStepOutput};
 use crate::can_master::{CanMaster, CanWire};
+use crate::spinal_mirror::{clamp_duty, exact_i64, float3, servo_states_frame_into, ServoFrame};
 
 struct Names {
     now_ms: Name,
@@ -15,6 +32,25 @@ struct Names {
     master: Name,
     tx_count: Name,
     pending_events: Name,
+    next_control: Name,
+    counters: Name,
+    control_steps: Name,
+    last_output: Name,
+    duties: Name,
+    duties_to_master: Name,
+    last_pub: Name,
+    next_pub_ms: Name,
+    battery_due_ms: Name,
+    battery_voltage: Name,
+    battery_input: Name,
+    adc_scale: Name,
+    gyro: Name,
+    acc: Name,
+    mag: Name,
+    imu: Name,
+    servo_states: Name,
+    battery_sample: Name,
+    commit_tx: Name,
 }
 
 /// Plan of `SpinalMirror.kernel_plan()`: the window in which a tick is only the CAN ms.
@@ -27,6 +63,122 @@ struct Plan {
     next_control: f64,
     can_ms: i64,
     next_pub_ms: i64,
+    /// None: busy ms are the Python tick's.
+    busy: Option<Busy>,
+}
+
+/// The busy part of the plan (`SpinalMirror._kernel_busy_plan`), kept up to date here.
+struct Busy {
+    /// The `SpinalStep` when a control step can run here.
+    core: Option<Py<PySpinalStep>>,
+    period: f64,
+    idle_duty: f64,
+    battery_filter: f64,
+    battery_period: i64,
+    configured: bool,
+    /// `last_output is not None`, and its values when it is a `SpinalStepOutput`.
+    has_output: bool,
+    output: Option<SpinalOutput>,
+    imu_topic: Option<u16>,
+    /// `ClientClock`'s sync state as `client_stamp` takes it (None: not synced); false
+    /// when its values are not exact (then `spinal_imu_frame` declines: the Python path).
+    sync: Option<(i64, i64)>,
+    sync_ok: bool,
+    imu_last: Option<i64>,
+    imu_period: i64,
+    servo_topic: Option<u16>,
+    servo_core: Option<Py<CanMaster>>,
+    servo_last: Option<i64>,
+    servo_period: i64,
+    /// First ms another publisher (battery status, motor pwms, torque states) is due.
+    others_next: i64,
+    output_size: usize,
+    chunk_bytes: usize,
+    /// Chunks of the TX ring (None: the ring is not empty).
+    chunks: Option<usize>,
+    writes_whole: bool,
+    max_pending: usize,
+}
+
+/// What `ready` found the tick at `now` to be.
+#[derive(Clone, Copy)]
+enum Decision {
+    Idle,
+    Busy(BusyTick),
+}
+
+#[derive(Clone, Copy)]
+struct BusyTick {
+    /// The battery sample: the new filtered voltage.
+    battery: Option<f64>,
+    step: Option<StepInput>,
+    /// None: `_publish` is a no-op (not configured, no output yet) or not due.
+    publish: Option<Publish>,
+}
+
+/// A control step's input: the IMU sample, the voltage, and the motor number.
+#[derive(Clone, Copy)]
+struct StepInput {
+    gyro: [f64; 3],
+    acc: [f64; 3],
+    mag: [f64; 3],
+    voltage: f64,
+    motors: usize,
+}
+
+/// The publications of a tick: which are due, the stamp, the `imu` sample's acc and mag.
+#[derive(Clone, Copy)]
+struct Publish {
+    imu_due: bool,
+    servo_due: bool,
+    stamp: (u32, u32),
+    acc: [f64; 3],
+    mag: [f64; 3],
+}
+
+/// A duty list: values and length.
+#[derive(Clone, Copy)]
+struct Duties {
+    values: [f64; N_ROTORS],
+    n: usize,
+}
+
+impl Duties {
+    fn list<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        PyList::new(py, self.values.iter().take(self.n).copied())
+    }
+}
+
+/// What the busy ms changed since the last flush.
+#[derive(Default)]
+struct Deferred {
+    steps: i64,
+    next_control: bool,
+    /// The output of the last control step here (its `SpinalStepOutput` is made at flush).
+    output: Option<SpinalOutput>,
+    /// The last duty list (`duties`), whether it is also the one handed over, and the last
+    /// one handed over (`_duties_to_master`).
+    duties: Option<Duties>,
+    duties_handed: bool,
+    handed: Option<Duties>,
+    battery: Option<(i64, f64)>,
+    imu_last: bool,
+    servo_last: bool,
+    next_pub: bool,
+    frames: i64,
+    imu_frames: i64,
+    servo_frames: i64,
+}
+
+/// Busy-ms counts (the kernel's `stats()`).
+#[derive(Clone, Copy, Default)]
+pub(crate) struct BusyCounts {
+    pub(crate) steps: u64,
+    pub(crate) batteries: u64,
+    pub(crate) imu_frames: u64,
+    pub(crate) servo_frames: u64,
+    pub(crate) finish_step: u64,
+    pub(crate) finish_publish: u64,
 }
 
 pub(crate) struct SpinalFast {
@@ -41,6 +193,12 @@ pub(crate) struct SpinalFast {
     /// A steady CAN tick ran since the last flush (the master's pending events are 0).
     steady: bool,
     dirty: bool,
+    decision: Decision,
+    deferred: Deferred,
+    /// Frames not yet written (`kernel_commit_tx`), and this tick's.
+    tx: Vec<u8>,
+    tick_tx: Vec<u8>,
+    pub(crate) counts: BusyCounts,
 }
 
 /// What a tick did.
@@ -49,6 +207,89 @@ pub(crate) enum SpinalTick {
     Done,
     /// The CAN tick left work for Python (`SpinalMirror.kernel_finish_wire_tick(now_ms)`).
     Finish(i64),
+    /// The control step ran here, the rest is Python's
+    /// (`SpinalMirror.kernel_finish_step(now_ms, tail)`).
+    FinishStep(i64, bool),
+    /// Everything up to the publications ran here, they are Python's
+    /// (`SpinalMirror.kernel_finish_publish(now_ms)`).
+    FinishPublish(i64),
+}
+
+fn opt_i64(v: &Bound<'_, PyAny>) -> PyResult<Option<i64>> {
+    if v.is_none() {
+        Ok(None)
+    } else {
+        Ok(Some(v.extract()?))
+    }
+}
+
+fn opt_topic(v: &Bound<'_, PyAny>) -> PyResult<Option<u16>> {
+    Ok(opt_i64(v)?.and_then(|t| u16::try_from(t).ok()))
+}
+
+/// An exact Python float's value.
+fn exact_f64(v: &Bound<'_, PyAny>) -> Option<f64> {
+    v.cast_exact::<PyFloat>().ok().map(|f| f.value())
+}
+
+impl Busy {
+    fn load(t: &Bound<'_, PyTuple>) -> PyResult<Busy> {
+        let core = t.get_item(0)?;
+        let core = if core.is_none() {
+            None
+        } else {
+            Some(core.cast_into::<PySpinalStep>()?.unbind())
+        };
+        let last_output = t.get_item(6)?;
+        let output = last_output
+            .cast_exact::<SpinalStepOutput>()
+            .ok()
+            .map(|o| o.get().inner);
+        // spinal_imu_frame's argument checks: an exact bool, exact ints when synced.
+        let synced = t.get_item(8)?;
+        let (sync, sync_ok) = match synced.cast_exact::<PyBool>() {
+            Ok(s) if s.is_true() => {
+                match (exact_i64(&t.get_item(9)?), exact_i64(&t.get_item(10)?)) {
+                    (Some(tick), Some(ns)) => (Some((tick, ns)), true),
+                    _ => (None, false),
+                }
+            }
+            Ok(_) => (None, true),
+            Err(_) => (None, false),
+        };
+        let servo_core = t.get_item(14)?;
+        let servo_core = if servo_core.is_none() {
+            None
+        } else {
+            Some(servo_core.cast_into_exact::<CanMaster>()?.unbind())
+        };
+        let chunks: i64 = t.get_item(20)?.extract()?;
+        Ok(Busy {
+            core,
+            period: t.get_item(1)?.extract()?,
+            idle_duty: t.get_item(2)?.extract()?,
+            battery_filter: t.get_item(3)?.extract()?,
+            battery_period: t.get_item(4)?.extract()?,
+            configured: t.get_item(5)?.is_truthy()?,
+            has_output: !last_output.is_none(),
+            output,
+            imu_topic: opt_topic(&t.get_item(7)?)?,
+            sync,
+            sync_ok,
+            imu_last: opt_i64(&t.get_item(11)?)?,
+            imu_period: t.get_item(12)?.extract()?,
+            servo_topic: opt_topic(&t.get_item(13)?)?,
+            servo_core,
+            servo_last: opt_i64(&t.get_item(15)?)?,
+            servo_period: t.get_item(16)?.extract()?,
+            others_next: t.get_item(17)?.extract()?,
+            output_size: t.get_item(18)?.extract()?,
+            chunk_bytes: t.get_item(19)?.extract()?,
+            chunks: usize::try_from(chunks).ok(),
+            writes_whole: t.get_item(21)?.is_truthy()?,
+            max_pending: t.get_item(22)?.extract()?,
+        })
+    }
 }
 
 impl SpinalFast {
@@ -68,6 +309,25 @@ impl SpinalFast {
                 master: Name::new(py, "master"),
                 tx_count: Name::new(py, "tx_count"),
                 pending_events: Name::new(py, "_pending_events"),
+                next_control: Name::new(py, "_next_control"),
+                counters: Name::new(py, "counters"),
+                control_steps: Name::new(py, "control_steps"),
+                last_output: Name::new(py, "last_output"),
+                duties: Name::new(py, "duties"),
+                duties_to_master: Name::new(py, "_duties_to_master"),
+                last_pub: Name::new(py, "_last_pub"),
+                next_pub_ms: Name::new(py, "_next_pub_ms"),
+                battery_due_ms: Name::new(py, "_battery_due_ms"),
+                battery_voltage: Name::new(py, "battery_voltage"),
+                battery_input: Name::new(py, "battery_input"),
+                adc_scale: Name::new(py, "adc_scale"),
+                gyro: Name::new(py, "gyro"),
+                acc: Name::new(py, "acc"),
+                mag: Name::new(py, "mag"),
+                imu: Name::new(py, "imu"),
+                servo_states: Name::new(py, "servo/states"),
+                battery_sample: Name::new(py, "_battery_sample"),
+                commit_tx: Name::new(py, "kernel_commit_tx"),
             },
             master,
             wire,
@@ -77,6 +337,11 @@ impl SpinalFast {
             tx_delta: 0,
             steady: false,
             dirty: false,
+            decision: Decision::Idle,
+            deferred: Deferred::default(),
+            tx: Vec::with_capacity(8192),
+            tick_tx: Vec::with_capacity(1024),
+            counts: BusyCounts::default(),
         }
     }
 
@@ -93,6 +358,7 @@ impl SpinalFast {
             None
         } else {
             let t = plan.cast::<PyTuple>()?;
+            let busy = t.get_item(8)?;
             Some(Plan {
                 now_ms: t.get_item(0)?.extract()?,
                 now_s: t.get_item(1)?.extract()?,
@@ -102,6 +368,11 @@ impl SpinalFast {
                 next_control: t.get_item(5)?.extract()?,
                 can_ms: t.get_item(6)?.extract()?,
                 next_pub_ms: t.get_item(7)?.extract()?,
+                busy: if busy.is_none() {
+                    None
+                } else {
+                    Some(Busy::load(busy.cast::<PyTuple>()?)?)
+                },
             })
         };
         self.loaded = true;
@@ -113,7 +384,7 @@ impl SpinalFast {
         (now * 1000.0 + 1e-6).floor() as i64
     }
 
-    /// Whether the tick at `now` is an idle ms this path runs.
+    /// Whether the tick at `now` runs here (then `tick` does it).
     pub(crate) fn ready(&mut self, py: Python<'_>, now: f64) -> PyResult<bool> {
         self.ensure_loaded(py)?;
         let Some(p) = &self.plan else {
@@ -121,16 +392,137 @@ impl SpinalFast {
         };
         let m = Self::to_ms(now);
         let now_s = if now > p.now_s { now } else { p.now_s };
-        Ok(m >= p.now_ms
-            && p.idle_lo <= m
-            && m < p.idle_hi
-            && m < p.battery_due_ms
-            && now_s < p.next_control - 1e-9
-            && m == p.can_ms + 1
-            && m < p.next_pub_ms)
+        if !(m >= p.now_ms && p.idle_lo <= m && m < p.idle_hi && m == p.can_ms + 1) {
+            return Ok(false);
+        }
+        let battery_due = m >= p.battery_due_ms;
+        let control_due = now_s >= p.next_control - 1e-9;
+        let publish_due = m >= p.next_pub_ms;
+        if !battery_due && !control_due && !publish_due {
+            self.decision = Decision::Idle;
+            return Ok(true);
+        }
+        let Some(b) = &p.busy else {
+            return Ok(false);
+        };
+        let node = self.node.bind(py);
+        let n = &self.names;
+        // _battery: the sample (a finite one; else the Python tick counts the rejection).
+        let battery = if battery_due {
+            let input = exact_f64(&n.battery_input.get(node)?);
+            let scale = exact_f64(&n.adc_scale.get(node)?);
+            let (Some(input), Some(scale)) = (input, scale) else {
+                return Ok(false);
+            };
+            let sample = input * scale;
+            if !sample.is_finite() {
+                return Ok(false);
+            }
+            let v = n.battery_voltage.get(node)?;
+            Some(if v.is_none() {
+                sample
+            } else {
+                let Some(v) = exact_f64(&v) else {
+                    return Ok(false);
+                };
+                b.battery_filter * v + (1.0 - b.battery_filter) * sample
+            })
+        } else {
+            None
+        };
+        // _control: exactly one step, on _step's fast path.
+        let step = if control_due {
+            let Some(core) = &b.core else {
+                return Ok(false);
+            };
+            if now_s >= (p.next_control + b.period) - 1e-9 {
+                return Ok(false); // a catch-up step follows: the Python tick
+            }
+            let motors = self.master.bind(py).try_borrow()?.core_ref().motor_number;
+            if motors == 0
+                || motors > N_ROTORS
+                || motors != core.bind(py).try_borrow()?.motor_count()
+            {
+                return Ok(false);
+            }
+            let three = |name: &Name| -> PyResult<Option<[f64; 3]>> {
+                Ok(name.get(node)?.extract::<[f64; 3]>().ok())
+            };
+            let (Some(gyro), Some(acc), Some(mag)) =
+                (three(&n.gyro)?, three(&n.acc)?, three(&n.mag)?)
+            else {
+                return Ok(false);
+            };
+            let voltage = match battery {
+                Some(v) => v,
+                None => {
+                    let v = n.battery_voltage.get(node)?;
+                    let v = if v.is_none() {
+                        n.battery_input.get(node)?
+                    } else {
+                        v
+                    };
+                    match v.extract::<f64>() {
+                        Ok(v) => v,
+                        Err(_) => return Ok(false),
+                    }
+                }
+            };
+            Some(StepInput {
+                gyro,
+                acc,
+                mag,
+                voltage,
+                motors,
+            })
+        } else {
+            None
+        };
+        // _publish: imu and servo/states as their frame paths, nothing else due.
+        let publish = if publish_due && b.configured && (control_due || b.has_output) {
+            let imu_due = b.imu_last.is_none_or(|t| m - t >= b.imu_period);
+            let servo_due = b.servo_last.is_none_or(|t| m - t >= b.servo_period);
+            let imu_ok = b.imu_last.is_some() && b.imu_topic.is_some() && b.sync_ok;
+            let servo_ok = b.servo_last.is_some() && b.servo_topic.is_some();
+            if m >= b.others_next
+                || (imu_due && !imu_ok)
+                || (servo_due && !servo_ok)
+                || (!control_due && b.output.is_none())
+                || b.chunks.is_none()
+                || !b.writes_whole
+            {
+                return Ok(false);
+            }
+            let Some(stamp) = client_stamp(m, b.sync) else {
+                return Ok(false);
+            };
+            let (acc, mag) = if imu_due {
+                match (float3(&n.acc.get(node)?), float3(&n.mag.get(node)?)) {
+                    (Some(a), Some(g)) => (a, g),
+                    _ => return Ok(false),
+                }
+            } else {
+                ([0.0; 3], [0.0; 3])
+            };
+            Some(Publish {
+                imu_due,
+                servo_due,
+                stamp,
+                acc,
+                mag,
+            })
+        } else {
+            None
+        };
+        self.decision = Decision::Busy(BusyTick {
+            battery,
+            step,
+            publish,
+        });
+        Ok(true)
     }
 
-    /// The idle tick at `now` (requires `ready`).
+    /// The tick at `now` (requires `ready`).
     pub(crate) fn tick(&mut self, py: Python<'_>, now: f64) -> PyResult<SpinalTick> {
         let m = Self::to_ms(now);
         let Some(p) = &mut self.plan else {
@@ -142,26 +534,209 @@ impl SpinalFast {
             p.now_s = now;
         }
         p.now_ms = m;
-        p.can_ms = m;
         self.dirty = true;
-        let sent = {
-            let wire = self.wire.bind(py);
-            self.master
-                .bind(py)
-                .borrow_mut()
-                .tick_wire_steady(m, now, wire, self.drain_at)
-        };
-        if sent >= 0 {
-            self.tx_delta += sent;
-            self.steady = true;
+        let decision = std::mem::replace(&mut self.decision, Decision::Idle);
+        if let Decision::Busy(busy) = decision {
+            let b = p.busy.as_mut().ok_or_else(|| {
+                pyo3::exceptions::PyRuntimeError::new_err("kernel: Spinal busy tick without plan")
+            })?;
+            let d = &mut self.deferred;
+            if let Some(v) = busy.battery {
+                p.battery_due_ms = m + b.battery_period;
+                d.battery = Some((m, v));
+                self.counts.batteries += 1;
+            }
+            if let Some(StepInput {
+                gyro,
+                acc,
+                mag,
+                voltage,
+                motors,
+            }) = busy.step
+            {
+                let core = b.core.as_ref().ok_or_else(|| {
+                    pyo3::exceptions::PyRuntimeError::new_err("kernel: Spinal step without core")
+                })?;
+                let out = core
+                    .bind(py)
+                    .try_borrow_mut()?
+                    .step_raw(p.now_s, gyro, acc, mag, voltage);
+                p.next_control += b.period;
+                d.next_control = true;
+                d.steps += 1;
+                d.output = Some(out);
+                b.output = Some(out);
+                b.has_output = true;
+                self.counts.steps += 1;
+                let events = &out.control.events;
+                if !events.is_empty() || events.dropped() > 0 {
+                    self.counts.finish_step += 1;
+                    return Ok(SpinalTick::FinishStep(m, true));
+                }
+                let mut duties = Duties {
+                    values: [0.0; N_ROTORS],
+                    n: motors,
+                };
+                for (v, &x) in duties.values.iter_mut().zip(out.control.duty.iter()) {
+                    *v = clamp_duty(x, b.idle_duty);
+                }
+                d.duties = Some(duties);
+                let handed = self
+                    .master
+                    .bind(py)
+                    .try_borrow_mut()?
+                    .try_set_duty_slice(&duties.values[..motors]);
+                d.duties_handed = handed;
+                if !handed {
+                    self.counts.finish_step += 1;
+                    return Ok(SpinalTick::FinishStep(m, false));
+                }
+                d.handed = Some(duties);
+            }
+            p.can_ms = m;
+            if !Self::can_tick(
+                &self.master,
+                &self.wire,
+                self.drain_at,
+                py,
+                m,
+                now,
+                &mut self.tx_delta,
+                &mut self.steady,
+            ) {
+                return Ok(SpinalTick::Finish(m));
+            }
+            if let Some(Publish {
+                imu_due,
+                servo_due,
+                stamp,
+                acc,
+                mag,
+            }) = busy.publish
+            {
+                self.tick_tx.clear();
+                let mut used = 0usize;
+                let cap = b.chunks.unwrap_or(0);
+                let mut fits = |len: usize| -> bool {
+                    if len > b.output_size || b.chunk_bytes == 0 {
+                        return false;
+                    }
+                    used += len.div_ceil(b.chunk_bytes);
+                    used <= cap
+                };
+                let mut imu_sent = false;
+                if imu_due {
+                    let (Some(out), Some(topic)) = (b.output.as_ref(), b.imu_topic) else {
+                        self.counts.finish_publish += 1;
+                        return Ok(SpinalTick::FinishPublish(m));
+                    };
+                    let estimate = &out.estimate;
+                    let values = ImuValues {
+                        acc,
+                        gyro: estimate.angular_velocity.into(),
+                        mag,
+                        quaternion: estimate.quaternion,
+                    };
+                    match imu_frame(topic, stamp, &values) {
+                        Some(f) if fits(f.len()) => {
+                            self.tick_tx.extend_from_slice(&f);
+                            imu_sent = true;
+                        }
+                        _ => {
+                            self.counts.finish_publish += 1;
+                            return Ok(SpinalTick::FinishPublish(m));
+                        }
+                    }
+                }
+                let mut servo_sent = false;
+                if servo_due {
+                    let (Some(core), Some(topic)) = (b.servo_core.as_ref(), b.servo_topic) else {
+                        self.counts.finish_publish += 1;
+                        return Ok(SpinalTick::FinishPublish(m));
+                    };
+                    let core = core.bind(py).try_borrow()?;
+                    match servo_states_frame_into(core.core_ref(), topic, stamp, &mut self.tick_tx)
+                    {
+                        ServoFrame::Empty => {}
+                        ServoFrame::Written(len) if fits(len) => servo_sent = true,
+                        _ => {
+                            self.counts.finish_publish += 1;
+                            return Ok(SpinalTick::FinishPublish(m));
+                        }
+                    }
+                }
+                if self.tx.len() + self.tick_tx.len() > b.max_pending {
+                    self.counts.finish_publish += 1;
+                    return Ok(SpinalTick::FinishPublish(m));
+                }
+                // Committed: _last_pub, _next_pub_ms, the TX counters, the bytes.
+                if imu_due {
+                    b.imu_last = Some(m);
+                    d.imu_last = true;
+                }
+                if servo_due {
+                    b.servo_last = Some(m);
+                    d.servo_last = true;
+                }
+                let imu_next = b.imu_last.map_or(i64::MIN, |t| t + b.imu_period);
+                let servo_next = b.servo_last.map_or(i64::MIN, |t| t + b.servo_period);
+                p.next_pub_ms = imu_next.min(servo_next).min(b.others_next);
+                d.next_pub = true;
+                let sent = i64::from(imu_sent) + i64::from(servo_sent);
+                d.frames += sent;
+                d.imu_frames += i64::from(imu_sent);
+                d.servo_frames += i64::from(servo_sent);
+                self.counts.imu_frames += u64::from(imu_sent);
+                self.counts.servo_frames += u64::from(servo_sent);
+                self.tx.extend_from_slice(&self.tick_tx);
+            }
+            return Ok(SpinalTick::Done);
+        }
+        p.can_ms = m;
+        if Self::can_tick(
+            &self.master,
+            &self.wire,
+            self.drain_at,
+            py,
+            m,
+            now,
+            &mut self.tx_delta,
+            &mut self.steady,
+        ) {
             Ok(SpinalTick::Done)
         } else {
             Ok(SpinalTick::Finish(m))
         }
     }
 
-    /// Write the mirror's clock and CAN ms, and the master's counters of the steady CAN
-    /// ms, back (`now_ms`, `_now_s`, `_can_ms`; `tx_count`, `_pending_events` = 0).
+    /// The steady CAN ms (`tick_wire_steady`); false: not steady (`Finish`).
+    #[allow(clippy::too_many_arguments)]
+    fn can_tick(
+        master: &Py<CanMaster>,
+        wire: &Py<CanWire>,
+        drain_at: usize,
+        py: Python<'_>,
+        m: i64,
+        now: f64,
+        tx_delta: &mut i64,
+        steady: &mut bool,
+    ) -> bool {
+        let sent = master
+            .bind(py)
+            .borrow_mut()
+            .tick_wire_steady(m, now, wire.bind(py), drain_at);
+        if sent >= 0 {
+            *tx_delta += sent;
+            *steady = true;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Write the mirror's state back: clock and CAN ms (`now_ms`, `_now_s`, `_can_ms`), the
+    /// master's counters of the steady CAN ms (`tx_count`, `_pending_events` = 0) and what
+    /// the busy ms changed (battery, control step, duties, publications, the UART bytes).
     pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
         if !self.dirty {
             return Ok(());
@@ -178,7 +753,60 @@ impl SpinalFast {
                 n.tx_count.set(&master, tx + self.tx_delta)?;
                 n.pending_events.set(&master, 0)?;
             }
+            let d = std::mem::take(&mut self.deferred);
+            let last_pub = if d.battery.is_some() || d.imu_last || d.servo_last {
+                Some(n.last_pub.get(node)?.cast_into::<PyDict>()?)
+            } else {
+                None
+            };
+            if let (Some((ms, v)), Some(last)) = (d.battery, &last_pub) {
+                last.set_item(n.battery_sample.key(py), ms)?;
+                n.battery_due_ms.set(node, p.battery_due_ms)?;
+                n.battery_voltage.set(node, v)?;
+            }
+            if d.steps > 0 {
+                let counters = n.counters.get(node)?;
+                let steps = n.control_steps.i64(&counters)?;
+                n.control_steps.set(&counters, steps + d.steps)?;
+            }
+            if d.next_control {
+                n.next_control.set(node, p.next_control)?;
+            }
+            if let Some(out) = d.output {
+                n.last_output
+                    .set(node, Py::new(py, SpinalStepOutput { inner: out })?)?;
+            }
+            if let Some(duties) = &d.duties {
+                let list = duties.list(py)?;
+                n.duties.set(node, &list)?;
+                if d.duties_handed {
+                    n.duties_to_master.set(node, &list)?;
+                } else if let Some(handed) = &d.handed {
+                    n.duties_to_master.set(node, handed.list(py)?)?;
+                }
+            }
+            if let (Some(b), Some(last)) = (&p.busy, &last_pub) {
+                if d.imu_last {
+                    last.set_item(n.imu.key(py), b.imu_last)?;
+                }
+                if d.servo_last {
+                    last.set_item(n.servo_states.key(py), b.servo_last)?;
+                }
+            }
+            if d.next_pub {
+                n.next_pub_ms.set(node, p.next_pub_ms)?;
+            }
+            if d.frames > 0 {
+                let data = PyBytes::new(py, &self.tx);
+                self.tx.clear();
+                node.call_method1(
+                    n.commit_tx.key(py),
+                    (data, d.frames, d.imu_frames, d.servo_frames),
+                )?;
+            }
         }
+        self.tx.clear();
+        self.deferred = Deferred::default();
         self.tx_delta = 0;
         self.steady = false;
         self.dirty = false;
@@ -190,6 +818,22 @@ impl SpinalFast {
         self.node
             .bind(py)
             .call_method1("kernel_finish_wire_tick", (now_ms,))?;
+        Ok(())
+    }
+
+    /// `SpinalMirror.kernel_finish_step(now_ms, tail)` (after a flush of every part).
+    pub(crate) fn finish_step(&self, py: Python<'_>, now_ms: i64, tail: bool) -> PyResult<()> {
+        self.node
+            .bind(py)
+            .call_method1("kernel_finish_step", (now_ms, tail))?;
+        Ok(())
+    }
+
+    /// `SpinalMirror.kernel_finish_publish(now_ms)` (after a flush of every part).
+    pub(crate) fn finish_publish(&self, py: Python<'_>, now_ms: i64) -> PyResult<()> {
+        self.node
+            .bind(py)
+            .call_method1("kernel_finish_publish", (now_ms,))?;
         Ok(())
     }
 }
