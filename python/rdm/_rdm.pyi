@@ -435,6 +435,15 @@ class LqiSynthesizer:
         self, mass: float, inertia: NDArray[np.float64], allocation: NDArray[np.float64]
     ) -> dict[str, object]:
         """Keys k, p, b, gains, clamp_scales, report. GIL released while solving."""
+    def synthesize_wire(
+        self, mass: float, inertia: NDArray[np.float64], allocation: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.int16] | None, bytes | None, bool, bool, bool]:
+        """The same synthesis as ``synthesize`` as (gains (N_ROTORS, 4, 3), rpy/gain int16
+        terms (N_ROTORS, 7) or None, their RollPitchYawTerms payload or None, every gain
+        finite, fell_back, a clamp scale != 1). A result with terms and finite gains is kept
+        (``kept_result``). GIL released while solving."""
+    def kept_result(self) -> dict[str, object] | None:
+        """The ``synthesize`` dict of the last result ``synthesize_wire`` kept."""
     def reset(self) -> None: ...
     @property
     def has_solution(self) -> bool: ...

@@ -796,10 +796,13 @@ class OnboardNode:
             and self._direct_remote("rpy/gain", "spinal/RollPitchYawTerms")
         ):
             # count, then 7 int16 per motor (roll_p .. yaw_d): the codec's bytes for the
-            # RollPitchYawTerm messages built below
-            self._publish_payload(
-                "rpy/gain", _U32.pack(wire.shape[0]) + wire.astype("<i2", copy=False).tobytes()
-            )
+            # RollPitchYawTerm messages built below (built by the core with these terms)
+            built = self.control.gains_payload
+            if built is not None and built[0] is wire:
+                payload = built[1]
+            else:
+                payload = _U32.pack(wire.shape[0]) + wire.astype("<i2", copy=False).tobytes()
+            self._publish_payload("rpy/gain", payload)
             return
         key = (wire.tobytes(), wire.dtype.str, wire.shape)
         if self._gains_msg is None or self._gains_msg[0] != key:

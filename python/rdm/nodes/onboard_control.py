@@ -175,7 +175,14 @@ class ControlPipeline:
         self.terms: ModelTerms | None = None
         self.gains: np.ndarray | None = None  # (N, 4, 3)
         self.gains_wire: np.ndarray | None = None  # (N, 7) int16
-        self.lqi_result = None
+        #: (gains_wire, its ``rpy/gain`` payload bytes) when the fast LQI path built both
+        self.gains_payload: tuple[np.ndarray, bytes] | None = None
+        #: LQI through :meth:`LqiSynthesizer.synthesize_wire` (gains, wire terms and the
+        #: ``rpy/gain`` payload from one Rust call; :attr:`lqi_result` built when read);
+        #: False: ``synthesize`` + ``gains_to_wire_terms`` (the plain form)
+        self.fast_lqi = True
+        self._lqi_result = None
+        self._lqi_result_kept = False  # lqi_result = the synthesizer's kept result, unbuilt
         self.perching = False
         self.perch_thrust = np.zeros(robot.n_rotors)
         self._ticks = 0
@@ -261,11 +268,25 @@ class ControlPipeline:
     def synthesize_due(self) -> bool:
         return self._ticks % self.config.lqi_every == 0
 
+    @property
+    def lqi_result(self):
+        """The :class:`~rdm.control.lqi.LqiResult` of the last successful synthesis (None
+        before one)."""
+        if self._lqi_result_kept:
+            self._lqi_result, self._lqi_result_kept = self.lqi.kept_result(), False
+        return self._lqi_result
+
+    @lqi_result.setter
+    def lqi_result(self, value) -> None:
+        self._lqi_result, self._lqi_result_kept = value, False
+
     def synthesize(self) -> bool:
         """LQI gains at the current model; on failure keep the last good ones (counted)."""
         t = self.terms
         if t is None:
             return False
+        if self.fast_lqi:
+            return self._synthesize_fast(t)
         try:
             res = self.lqi.synthesize(t.mass, t.inertia, t.allocation_bar)
             wire = np.asarray(gains_to_wire_terms(res.gains), dtype=np.int16)
@@ -284,6 +305,34 @@ class ControlPipeline:
         self.lqi_result = res
         self.gains = np.asarray(res.gains, dtype=float)
         self.gains_wire = wire
+        return True
+
+    def _synthesize_fast(self, t: ModelTerms) -> bool:
+        """:meth:`synthesize` through ``synthesize_wire``: the same solve, checks, counters
+        (in the same order) and attributes; the wire terms and the finite check come from
+        the core, the :class:`LqiResult` is built only when :attr:`lqi_result` is read."""
+        try:
+            gains, wire, payload, finite, fell_back, clamped = self.lqi.synthesize_wire(
+                t.mass, t.inertia, t.allocation_bar
+            )
+        except ValueError:
+            wire = None
+        if wire is None:  # the solve or gains_to_wire_terms raised
+            self.counts["lqi_failed"] += 1
+            self.lqi.reset()  # next attempt is cold
+            return False
+        if not finite:
+            self.counts["lqi_failed"] += 1
+            return False
+        self.counts["lqi_ok"] += 1
+        if fell_back:
+            self.counts["lqi_fell_back"] += 1
+        if clamped:
+            self.counts["gain_clamped"] += 1
+        self._lqi_result, self._lqi_result_kept = None, True
+        self.gains = gains
+        self.gains_wire = wire
+        self.gains_payload = (wire, payload)
         return True
 
     def p_matrix_wire(self) -> tuple[list[tuple[int, int, int]], list[int]] | None:
