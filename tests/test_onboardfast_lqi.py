@@ -307,3 +307,84 @@ def test_perch_result_without_init_matches_the_dataclass():
     # a dict that is not exactly the fields takes the dataclass path (and its errors)
     with pytest.raises(TypeError):
         PerchResult._from({"status": "solved"})
+
+
+def test_lstsq_solution_matches_numpy():
+    from rdm.nodes.onboard_control import _lstsq_solution
+
+    rng = np.random.default_rng(12)
+    cases = []
+    for m, n in ((4, 4), (4, 6), (6, 4), (4, 1), (1, 4)):
+        for k in range(40):
+            a = rng.normal(size=(m, n)) * 10.0 ** rng.integers(-3, 4)
+            if k % 5 == 1:
+                a[:, -1] = a[:, 0]  # rank deficient
+            if k % 9 == 2:
+                a[:] = 0.0
+            cases.append((a, [float(v) for v in rng.normal(size=m)]))
+    # (no NaN/inf matrix: LAPACK's gelsd does not return on those with this OpenBLAS, in
+    # np.linalg.lstsq as in the fast form; the model never hands one over, see update_model)
+    cases.append((rng.normal(size=(4, 4)), [np.float64(1.0), 0.0, 0.0, 0.0]))  # plain path
+    cases.append((rng.normal(size=(4, 4)).astype(np.float32), [1.0, 0.0, 0.0, 0.0]))
+    for a, rhs in cases:
+        ref = np.linalg.lstsq(a, rhs, rcond=None)[0]
+        out = _lstsq_solution(a, rhs)
+        assert out.dtype == ref.dtype and out.shape == ref.shape
+        assert out.tobytes() == ref.tobytes()
+    with pytest.raises(np.linalg.LinAlgError) as got:  # wrong shapes: the wrapper's error
+        _lstsq_solution(np.ones((4, 4)), [1.0, 2.0])
+    with pytest.raises(np.linalg.LinAlgError) as ref_err:
+        np.linalg.lstsq(np.ones((4, 4)), [1.0, 2.0], rcond=None)
+    assert str(got.value) == str(ref_err.value)
+
+
+def test_model_fast_matches_plain():
+    node = OnboardNode(FedByteLink())
+    fast = ControlPipeline(node.robot, node.config)
+    plain = ControlPipeline(node.robot, node.config)
+    plain.fast_model = False
+    for pipe in (fast, plain):
+        pipe.reuse_model = False  # evaluate every time
+    rng = np.random.default_rng(4)
+    q = node.present_q.copy()
+    for k in range(80):
+        q[:6] += rng.normal(scale=0.1, size=6)
+        if k == 40:
+            q[2] = np.nan
+        assert fast.update_model(q) is plain.update_model(q)
+        a, b = fast.terms, plain.terms
+        assert type(a) is type(b)
+        assert list(a.__dict__) == list(b.__dict__)
+        for name, x in a.__dict__.items():
+            y = getattr(b, name)
+            if isinstance(x, np.ndarray):
+                assert x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes()
+            else:
+                assert x == y, name
+        with pytest.raises(AttributeError):  # still frozen
+            a.mass = 1.0
+        q[2] = 0.0 if k == 40 else q[2]
+    assert list(fast.counts.items()) == list(plain.counts.items())
+
+
+def test_trajectory_targets_fast_interp_match_np_interp():
+    node = OnboardNode(FedByteLink())
+    assert node.fast_interp
+    rng = np.random.default_rng(6)
+    n_q = node.robot.n_q
+    for trial in range(5):
+        times = np.cumsum(rng.uniform(0.01, 0.5, size=2 + trial))
+        points = [(float(t), rng.normal(size=n_q)) for t in times]
+        assert node.set_trajectory(points)
+        probes = [times[0] - 1.0, float(times[-1]) + 1.0, *times.tolist()]
+        probes += rng.uniform(times[0] - 0.1, times[-1] + 0.1, size=50).tolist()
+        for now in probes:
+            node.fast_interp = True
+            fast = node._current_joint_targets(now)
+            node.fast_interp = False
+            plain = node._current_joint_targets(now)
+            assert fast.dtype == plain.dtype and fast.shape == plain.shape
+            assert fast.tobytes() == plain.tobytes()
+    node.fast_interp = True
+    assert node.set_joint_targets(np.zeros(6))  # the trajectory is dropped
+    assert node._current_joint_targets(0.0) is node.joint_targets

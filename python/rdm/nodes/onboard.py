@@ -56,6 +56,10 @@ _IMU_GYRO_QUAT = struct.Struct("<3f12x4f")
 _U32 = struct.Struct("<I")
 #: ``spinal/ServoStates``: stamp (8 bytes), count (uint32), 7 bytes per ``spinal/ServoState``.
 _SERVO_STATES_HEAD, _SERVO_STATE_SIZE = 12, 7
+try:  # the C function np.interp ends in for float data (without its Python layers)
+    from numpy._core.multiarray import interp as _compiled_interp
+except ImportError:  # another numpy layout: np.interp throughout
+    _compiled_interp = None
 #: Topics the node publishes (Spinal subscribes).
 PUBLISHED_TOPICS = (
     "uav_info",
@@ -262,6 +266,11 @@ class OnboardNode:
         #: as the payload encoded once; False: every message through the codec
         self.direct_tx = True
         self._payloads: dict[str, tuple[Any, Any, bytes]] = {}
+        #: trajectory targets through the C interpolation ``np.interp`` calls for float data,
+        #: on contiguous copies of the joint columns (made once per trajectory); False:
+        #: ``np.interp`` per joint (the plain form)
+        self.fast_interp = _compiled_interp is not None
+        self._trajectory_columns: tuple[Any, tuple[np.ndarray, ...]] | None = None
         self._target_ticks: tuple[ServoMap, bytes, list[int]] | None = None
 
     # ------------------------------------------------------------------ inputs from outside
@@ -644,8 +653,17 @@ class OnboardNode:
                 self.arming.sent(topic, now)
 
     def _current_joint_targets(self, now: float) -> np.ndarray | None:
-        if self._trajectory is not None:
-            times, qs = self._trajectory
+        trajectory = self._trajectory
+        if trajectory is not None:
+            times, qs = trajectory
+            if self.fast_interp and qs.dtype == np.float64 and qs.ndim == 2:
+                # np.interp(x, xp, fp) of a real fp is compiled_interp(x, xp, fp, None, None)
+                cached = self._trajectory_columns
+                if cached is None or cached[0] is not trajectory:
+                    columns = tuple(np.ascontiguousarray(qs[:, j]) for j in range(qs.shape[1]))
+                    cached = self._trajectory_columns = (trajectory, columns)
+                interp = _compiled_interp
+                return np.array([interp(now, times, column, None, None) for column in cached[1]])
             return np.array([np.interp(now, times, qs[:, j]) for j in range(qs.shape[1])])
         return self.joint_targets
 

@@ -38,6 +38,37 @@ except ImportError:  # numpy < 2
     _clip = np.clip
 
 
+try:  # the gufunc np.linalg.lstsq ends in, and the error handler it installs around it
+    from numpy.linalg import _umath_linalg
+    from numpy.linalg._linalg import _raise_linalgerror_lstsq
+except ImportError:  # another numpy layout: np.linalg.lstsq throughout
+    _umath_linalg = None
+_EPS = np.finfo(np.float64).eps
+
+
+def _lstsq_solution(a: np.ndarray, rhs: list[float]) -> np.ndarray:
+    """``np.linalg.lstsq(a, rhs, rcond=None)[0]`` for a float64 (m, n) ``a`` and m Python
+    floats: the same gufunc call (same LAPACK driver, rcond ``eps * max(m, n)``, error state
+    and LinAlgError), without the wrapper's type dispatch and residual/singular-value work.
+    Anything else goes through ``np.linalg.lstsq``."""
+    if (
+        _umath_linalg is None
+        or a.__class__ is not np.ndarray
+        or a.dtype != np.float64
+        or a.ndim != 2
+        or a.shape[0] != len(rhs)
+        or 0 in a.shape
+        or not all(v.__class__ is float for v in rhs)
+    ):
+        return np.linalg.lstsq(a, rhs, rcond=None)[0]
+    m, n = a.shape
+    b = np.array(rhs)[:, None]
+    handler = _raise_linalgerror_lstsq
+    with np.errstate(call=handler, invalid="call", over="ignore", divide="ignore", under="ignore"):
+        x = _umath_linalg.lstsq(a, b, _EPS * max(n, m), signature="ddd->ddid")[0]
+    return x.squeeze(axis=-1)
+
+
 def _all_finite(a: np.ndarray) -> bool:
     """``bool(np.all(np.isfinite(a)))``; a float64 array's elements checked as the Python
     floats ``tolist`` gives (the same values; numpy's reduction costs more on small arrays,
@@ -130,6 +161,16 @@ class ControlCommand:
     yaw_rotor: int | None
 
 
+def _model_terms(*values: object) -> ModelTerms:
+    """``ModelTerms(*values)`` without the frozen-dataclass ``__init__``."""
+    terms = object.__new__(ModelTerms)
+    terms.__dict__.update(zip(_TERMS_FIELDS, values, strict=True))
+    return terms
+
+
+_TERMS_FIELDS = tuple(ModelTerms.__dataclass_fields__)
+
+
 def _control_command(*values: object) -> ControlCommand:
     """``ControlCommand(*values)`` without the frozen-dataclass ``__init__`` (one per tick)."""
     command = object.__new__(ControlCommand)
@@ -194,6 +235,9 @@ class ControlPipeline:
         #: a handful of servo readings, each seen again within a few ticks
         self._model_cache: dict[bytes, tuple[ModelTerms, tuple | None, bool]] = {}
         self._p_matrix: tuple[list[tuple[int, int, int]], list[int]] | None = None
+        #: a model evaluation's hover thrust through the lstsq gufunc directly and its
+        #: ModelTerms without the frozen __init__; False: np.linalg.lstsq and ModelTerms(...)
+        self.fast_model = True
         self._p_matrix_saturated = False
 
     # -- 1. model ------------------------------------------------------------------------
@@ -223,11 +267,15 @@ class ControlPipeline:
         cog_rot = np.asarray(frames["cog"], dtype=float)[:3, :3]
         imu = cog_rot.T @ np.asarray(frames[self.config.imu_link], dtype=float)[:3, :3]
         g = self.config.gravity
-        hover = np.linalg.lstsq(qbar, [o["mass"] * g, 0.0, 0.0, 0.0], rcond=None)[0]
+        rhs = [o["mass"] * g, 0.0, 0.0, 0.0]
+        if self.fast_model:
+            hover = _lstsq_solution(qbar, rhs)
+        else:
+            hover = np.linalg.lstsq(qbar, rhs, rcond=None)[0]
         if not (_all_finite(qbar) and _all_finite(hover)):
             self.counts["model_non_finite"] += 1
             return False
-        self.terms = ModelTerms(
+        values = (
             np.array(q, dtype=float),
             float(o["mass"]),
             np.asarray(o["inertia"], dtype=float),
@@ -238,6 +286,7 @@ class ControlPipeline:
             hover,
             imu,
         )
+        self.terms = _model_terms(*values) if self.fast_model else ModelTerms(*values)
         self._model_key = self.terms.q.tobytes()
         self._remember_model()
         return True
