@@ -388,3 +388,52 @@ def test_trajectory_targets_fast_interp_match_np_interp():
     node.fast_interp = True
     assert node.set_joint_targets(np.zeros(6))  # the trajectory is dropped
     assert node._current_joint_targets(0.0) is node.joint_targets
+
+
+def test_p_matrix_terms_match_plain():
+    from rdm.control.lqi import gyro_compensation
+    from rdm.nodes.onboard_control import _p_matrix_terms, _p_matrix_terms_plain
+
+    node = OnboardNode(FedByteLink())
+    pipe = node.control
+    rng = np.random.default_rng(9)
+    q = node.present_q.copy()
+    saturated = 0
+    for k in range(60):
+        q[:6] += rng.normal(scale=0.2, size=6)
+        assert pipe.update_model(q)
+        g = gyro_compensation(pipe.terms.allocation_bar, pipe.terms.inertia)
+        if k % 4 == 1:  # large entries: saturated terms
+            g = {key: v * 1e3 if isinstance(v, np.ndarray) else v for key, v in g.items()}
+        fast, plain = _p_matrix_terms(g), _p_matrix_terms_plain(g)
+        assert fast == plain and all(type(v) is int for row in fast[0] for v in row)
+        saturated += fast[2]
+        for bad in (np.nan, np.inf, -np.inf):  # the same error from the same to_wire call
+            spoiled = dict(g, pinv_pitch=g["pinv_pitch"].copy())
+            spoiled["pinv_pitch"][k % len(spoiled["pinv_pitch"])] = bad
+            errors = []
+            for f in (_p_matrix_terms, _p_matrix_terms_plain):
+                with pytest.raises((ValueError, OverflowError)) as e:
+                    f(spoiled)
+                errors.append((type(e.value), str(e.value)))
+            assert errors[0] == errors[1]
+    assert 0 < saturated < 60
+    # anything but float64 arrays of the expected ranks: the plain form
+    odd = dict(g, inertia=g["inertia"].tolist())
+    assert _p_matrix_terms(odd) == _p_matrix_terms_plain(odd)
+
+
+def test_p_matrix_wire_fast_model_matches_plain():
+    node = OnboardNode(FedByteLink())
+    fast = ControlPipeline(node.robot, node.config)
+    plain = ControlPipeline(node.robot, node.config)
+    plain.fast_model = False
+    rng = np.random.default_rng(10)
+    q = node.present_q.copy()
+    for k in range(40):
+        if k % 3:
+            q[:6] += rng.normal(scale=0.05, size=6)
+        for pipe in (fast, plain):
+            pipe.update_model(q)
+        assert fast.p_matrix_wire() == plain.p_matrix_wire()
+    assert list(fast.counts.items()) == list(plain.counts.items())

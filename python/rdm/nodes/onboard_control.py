@@ -161,6 +161,49 @@ class ControlCommand:
     yaw_rotor: int | None
 
 
+def _p_matrix_terms_plain(g: dict) -> tuple[list[tuple[int, int, int]], list[int], bool]:
+    """The pinv rows, the inertia terms (x1000 int16) and whether any saturated, of a
+    ``gyro_compensation`` dict (the plain form of :func:`_p_matrix_terms`)."""
+    sat = False
+    rows = []
+    for r, p, y in zip(g["pinv_roll"], g["pinv_pitch"], g["pinv_yaw"], strict=True):
+        w = [to_wire(float(v)) for v in (r, p, y)]
+        sat |= any(s for _, s in w)
+        rows.append(tuple(v for v, _ in w))
+    i = np.asarray(g["inertia"], dtype=float)
+    comps = [i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[1, 2], i[0, 2]]
+    inertia = []
+    for v in comps:
+        w, s = to_wire(float(v))
+        sat |= s
+        inertia.append(w)
+    return rows, inertia, sat
+
+
+def _p_matrix_terms(g: dict) -> tuple[list[tuple[int, int, int]], list[int], bool]:
+    """:func:`_p_matrix_terms_plain` on the Python floats ``tolist`` gives (the values
+    ``float`` gives of each element): the same ``to_wire`` calls in the same order."""
+    columns = (g["pinv_roll"], g["pinv_pitch"], g["pinv_yaw"], g["inertia"])
+    if not all(
+        c.__class__ is np.ndarray and c.dtype == np.float64 and c.ndim == n
+        for c, n in zip(columns, (1, 1, 1, 2), strict=True)
+    ):
+        return _p_matrix_terms_plain(g)
+    sat = False
+    rows = []
+    for r, p, y in zip(*(c.tolist() for c in columns[:3]), strict=True):
+        (a, sa), (b, sb), (c, sc) = to_wire(r), to_wire(p), to_wire(y)
+        sat = sat or sa or sb or sc
+        rows.append((a, b, c))
+    i = columns[3].tolist()
+    inertia = []
+    for v in (i[0][0], i[1][1], i[2][2], i[0][1], i[1][2], i[0][2]):
+        w, s = to_wire(v)
+        sat = sat or s
+        inertia.append(w)
+    return rows, inertia, sat
+
+
 def _model_terms(*values: object) -> ModelTerms:
     """``ModelTerms(*values)`` without the frozen-dataclass ``__init__``."""
     terms = object.__new__(ModelTerms)
@@ -235,8 +278,9 @@ class ControlPipeline:
         #: a handful of servo readings, each seen again within a few ticks
         self._model_cache: dict[bytes, tuple[ModelTerms, tuple | None, bool]] = {}
         self._p_matrix: tuple[list[tuple[int, int, int]], list[int]] | None = None
-        #: a model evaluation's hover thrust through the lstsq gufunc directly and its
-        #: ModelTerms without the frozen __init__; False: np.linalg.lstsq and ModelTerms(...)
+        #: a model evaluation's hover thrust through the lstsq gufunc directly, its
+        #: ModelTerms without the frozen __init__ and its pinv terms from Python floats;
+        #: False: np.linalg.lstsq, ModelTerms(...) and numpy scalars (the plain forms)
         self.fast_model = True
         self._p_matrix_saturated = False
 
@@ -399,19 +443,10 @@ class ControlPipeline:
         except ValueError:
             self.counts["pinv_failed"] += 1
             return None
-        sat = False
-        rows = []
-        for r, p, y in zip(g["pinv_roll"], g["pinv_pitch"], g["pinv_yaw"], strict=True):
-            w = [to_wire(float(v)) for v in (r, p, y)]
-            sat |= any(s for _, s in w)
-            rows.append(tuple(v for v, _ in w))
-        i = np.asarray(g["inertia"], dtype=float)
-        comps = [i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[1, 2], i[0, 2]]
-        inertia = []
-        for v in comps:
-            w, s = to_wire(float(v))
-            sat |= s
-            inertia.append(w)
+        if self.fast_model:
+            rows, inertia, sat = _p_matrix_terms(g)
+        else:
+            rows, inertia, sat = _p_matrix_terms_plain(g)
         if sat:
             self.counts["pinv_saturated"] += 1
         if self._model_key is not None:  # the terms are the ones at the keyed q
