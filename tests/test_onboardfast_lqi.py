@@ -437,3 +437,47 @@ def test_p_matrix_wire_fast_model_matches_plain():
             pipe.update_model(q)
         assert fast.p_matrix_wire() == plain.p_matrix_wire()
     assert list(fast.counts.items()) == list(plain.counts.items())
+
+
+def test_servo_payload_fast_decode_matches_the_codec():
+    """New ``servo/states`` payloads unpacked with one struct (index, angle) against the
+    codec's decode, both through ``_on_servo_states``: counters, joint state, caches."""
+    import random
+
+    from onboard_rig import REG, assert_same_servo_state, servo_readings
+
+    servos, unit = REG.msg("spinal/ServoStates"), REG.msg("spinal/ServoState")
+    for reuse in (True, False):
+        fast, plain = OnboardNode(FedByteLink()), OnboardNode(FedByteLink())
+        assert fast.fast_servo_decode
+        plain.fast_servo_decode = False
+        for node in (fast, plain):
+            node.reuse_servo_states = reuse
+        n = len(fast.config.servo_map.servo_index)
+        rng = random.Random(13)
+        readings = servo_readings(rng, n, 40)
+        for k in range(600):
+            reading = readings[rng.randrange(len(readings))]
+            if k % 7 == 0:  # fresh angles, extremes of the wire types
+                reading = [
+                    (i, rng.choice([-32768, 32767, rng.randrange(4096)])) for i, _ in reading
+                ]
+            if k % 11 == 0:
+                reading = reading[: rng.randrange(len(reading) + 1)]  # partial / empty
+            entries = [
+                unit.new(index=i, angle=a, temp=rng.randrange(256), load=rng.randrange(-99, 99))
+                for i, a in reading
+            ]
+            payload = servos.encode(servos.new(stamp=(k, 0), servos=entries))
+            fast._on_servo_payload(payload)
+            plain._on_servo_payload(payload)
+            assert_same_servo_state(fast, plain)
+            assert list(fast._servo_cache) == list(plain._servo_cache)
+            assert list(fast._servo_raw) == list(plain._servo_raw)
+        assert fast.counts["servo_unknown_index"] > 0 and fast.counts["servo_states_partial"] > 0
+    # a payload whose count does not match its length: the codec's error on both
+    bad = servos.encode(servos.new(stamp=(0, 0), servos=[unit.new(index=1, angle=5)]))[:-1]
+    for node in (fast, plain):
+        with pytest.raises(Exception) as e:
+            node._on_servo_payload(bad)
+        assert type(e.value).__name__ == "DecodeError"

@@ -31,7 +31,7 @@ import struct
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -56,6 +56,33 @@ _IMU_GYRO_QUAT = struct.Struct("<3f12x4f")
 _U32 = struct.Struct("<I")
 #: ``spinal/ServoStates``: stamp (8 bytes), count (uint32), 7 bytes per ``spinal/ServoState``.
 _SERVO_STATES_HEAD, _SERVO_STATE_SIZE = 12, 7
+#: ``spinal/ServoState``'s index (uint8) and angle (int16); temp, load, error skipped.
+_SERVO_INDEX_ANGLE = struct.Struct("<Bh4x")
+_SERVO_STATE_FIELDS = [
+    ("index", "uint8", None),
+    ("angle", "int16", None),
+    ("temp", "uint8", None),
+    ("load", "int16", None),
+    ("error", "uint8", None),
+]
+
+
+class _ServoReading(NamedTuple):
+    """The two fields of a ``spinal/ServoState`` the node reads."""
+
+    index: int
+    angle: int
+
+
+class _ServoReadings:
+    """What :meth:`OnboardNode._on_servo_states` reads of a decoded ``spinal/ServoStates``."""
+
+    __slots__ = ("servos",)
+
+    def __init__(self, servos: list[_ServoReading]) -> None:
+        self.servos = servos
+
+
 try:  # the C function np.interp ends in for float data (without its Python layers)
     from numpy._core.multiarray import interp as _compiled_interp
 except ImportError:  # another numpy layout: np.interp throughout
@@ -246,6 +273,13 @@ class OnboardNode:
         #: the same entries by the readings' payload bytes after the stamp (deferred path)
         self._servo_raw: dict[bytes, tuple[np.ndarray, np.ndarray, int, bool]] = {}
         self._servo_codec = reg.msg("spinal/ServoStates")
+        #: a new ``servo/states`` payload's servo indices and angles unpacked with one
+        #: ``struct`` (what :meth:`_on_servo_states` reads), when the layout is the one
+        #: ``_SERVO_INDEX_ANGLE`` reads; False: decoded by the codec (the plain form)
+        servo_fields = [
+            (f.name, f.base_type, f.array_len) for f in reg.msg("spinal/ServoState").spec.fields
+        ]
+        self.fast_servo_decode = servo_fields == _SERVO_STATE_FIELDS
         imu_size = reg.msg("spinal/Imu").fixed_size
         #: ``imu`` and ``servo/states`` are taken in from their payloads (the session defers
         #: their decoding; only what the node reads is unpacked); False: decoded messages
@@ -508,7 +542,13 @@ class OnboardNode:
             if hit is not None:
                 self._apply_servo_entry(hit)
                 return
-        entry = self._on_servo_states(self._servo_codec.decode(payload))
+        if self.fast_servo_decode and servo_states_decodes(payload):
+            # the index and angle of each entry, as the codec decodes them (uint8, int16)
+            readings = _SERVO_INDEX_ANGLE.iter_unpack(memoryview(payload)[_SERVO_STATES_HEAD:])
+            msg = _ServoReadings(list(map(_ServoReading._make, readings)))
+        else:
+            msg = self._servo_codec.decode(payload)
+        entry = self._on_servo_states(msg)
         if body is not None and entry is not None:
             raw = self._servo_raw
             raw[body] = entry
