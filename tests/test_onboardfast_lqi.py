@@ -481,3 +481,48 @@ def test_servo_payload_fast_decode_matches_the_codec():
         with pytest.raises(Exception) as e:
             node._on_servo_payload(bad)
         assert type(e.value).__name__ == "DecodeError"
+
+
+def test_servo_target_ticks_written_out_match_to_raw():
+    """``servo/target_states`` with the vectoring joints' ticks computed inline against a
+    node whose servo map is a subclass (the ``ServoMap.to_raw`` calls): the same payloads,
+    counters and errors, for random targets and angles incl. out-of-range and NaN."""
+    from dataclasses import replace as dc_replace
+
+    from rdm.nodes.onboard_arming import FlightState
+    from rdm.nodes.onboard_config import ServoMap
+    from rdm.protocol.rosserial.server import RemoteTopic
+
+    class _Map(ServoMap):
+        pass
+
+    fast = OnboardNode(FedByteLink())
+    smap = fast.config.servo_map
+    plain = OnboardNode(
+        FedByteLink(), config=dc_replace(fast.config, servo_map=_Map(**smap.__dict__))
+    )
+    codec = fast.session.registry.msg("spinal/ServoControlCmd")
+    rng = np.random.default_rng(14)
+    n_vec = len(fast.control.vectoring_joints)
+    for node in (fast, plain):
+        node.session.outbound["servo/target_states"] = RemoteTopic(
+            120, "servo/target_states", "spinal/ServoControlCmd", codec, 512
+        )
+        node.arming.state = FlightState.ARMED
+    for k in range(300):
+        targets = rng.normal(scale=1.0, size=fast.robot.n_q)
+        alpha = tuple(float(v) for v in rng.normal(scale=[0.5, 30.0][k % 7 == 0], size=n_vec))
+        beta = tuple(float(v) for v in rng.normal(scale=0.5, size=n_vec))
+        if k % 29 == 3:
+            alpha = (float("nan"), *alpha[1:])
+        out = []
+        for node in (fast, plain):
+            node.last_alpha_beta = (alpha, beta)
+            try:
+                node._send_servo_targets(targets)
+                out.append(node.session.take_output())
+            except (ValueError, OverflowError) as exc:
+                out.append((type(exc), str(exc)))
+        assert out[0] == out[1]
+    assert list(fast.counts.items()) == list(plain.counts.items())
+    assert fast.published == plain.published and fast.published["servo/target_states"] > 200
