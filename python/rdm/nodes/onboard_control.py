@@ -266,7 +266,8 @@ class ControlPipeline:
         #: False: ``synthesize`` + ``gains_to_wire_terms`` (the plain form)
         self.fast_lqi = True
         self._lqi_result = None
-        self._lqi_result_kept = False  # lqi_result = the synthesizer's kept result, unbuilt
+        #: the synthesizer whose kept result lqi_result is, while not built yet (else None)
+        self._lqi_result_kept = None
         self.perching = False
         self.perch_thrust = np.zeros(robot.n_rotors)
         self._ticks = 0
@@ -365,13 +366,14 @@ class ControlPipeline:
     def lqi_result(self):
         """The :class:`~rdm.control.lqi.LqiResult` of the last successful synthesis (None
         before one)."""
-        if self._lqi_result_kept:
-            self._lqi_result, self._lqi_result_kept = self.lqi.kept_result(), False
+        kept = self._lqi_result_kept
+        if kept is not None:
+            self._lqi_result, self._lqi_result_kept = kept.kept_result(), None
         return self._lqi_result
 
     @lqi_result.setter
     def lqi_result(self, value) -> None:
-        self._lqi_result, self._lqi_result_kept = value, False
+        self._lqi_result, self._lqi_result_kept = value, None
 
     def synthesize(self) -> bool:
         """LQI gains at the current model; on failure keep the last good ones (counted)."""
@@ -422,7 +424,7 @@ class ControlPipeline:
             self.counts["lqi_fell_back"] += 1
         if clamped:
             self.counts["gain_clamped"] += 1
-        self._lqi_result, self._lqi_result_kept = None, True
+        self._lqi_result, self._lqi_result_kept = None, self.lqi
         self.gains = gains
         self.gains_wire = wire
         self.gains_payload = (wire, payload)
