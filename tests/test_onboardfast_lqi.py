@@ -526,3 +526,54 @@ def test_servo_target_ticks_written_out_match_to_raw():
         assert out[0] == out[1]
     assert list(fast.counts.items()) == list(plain.counts.items())
     assert fast.published == plain.published and fast.published["servo/target_states"] > 200
+
+
+def test_evaluate_control_is_what_evaluate_gives():
+    from rdm.model import Robot
+
+    node = OnboardNode(FedByteLink())
+    robot = node.robot
+    frame = node.config.imu_link
+    other = Robot.default()  # a second workspace for the plain evaluation
+    rng = np.random.default_rng(15)
+    q = node.present_q.copy()
+    for _k in range(60):
+        q[:6] += rng.normal(scale=0.3, size=6)
+        lean = robot.evaluate_control(q, frame)
+        full = other.evaluate(q)
+        ref = (
+            full["mass"],
+            full["inertia"],
+            full["allocation"],
+            full["allocation_bar"],
+            full["foot_in_cog"],
+            full["unit_parent_rotations"],
+            full["frames"]["cog"],
+            full["frames"][frame],
+        )
+        assert type(lean) is tuple and len(lean) == len(ref)
+        assert type(lean[0]) is float and lean[0] == ref[0]
+        for a, b in zip(lean[1:], ref[1:], strict=True):
+            if isinstance(b, list):
+                assert type(a) is list and len(a) == len(b)
+                pairs = list(zip(a, b, strict=True))
+            else:
+                pairs = [(a, b)]
+            for x, y in pairs:
+                assert x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes()
+    bad = q.copy()
+    bad[0] = np.nan
+    for f in (lambda: robot.evaluate_control(bad, frame), lambda: other.evaluate(bad)):
+        with pytest.raises(ValueError):
+            f()
+    with pytest.raises(ValueError):
+        robot.evaluate_control(q, "no-such-frame")
+
+    # a robot whose evaluate is overridden keeps the plain path
+    class _Robot(Robot):
+        def evaluate(self, q, base_pose=None):
+            return super().evaluate(q, base_pose)
+
+    custom = ControlPipeline(_Robot.default(), node.config)
+    assert custom._evaluate_control is None
+    assert ControlPipeline(robot, node.config)._evaluate_control is not None

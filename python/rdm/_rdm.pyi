@@ -75,6 +75,22 @@ class Robot:
         (N x 3), rotor_directions (N x 3), frames (name -> 4x4 world pose), foot_in_cog
         (4x4), unit_parent_rotations (list of 3x3, C<-L_i), aerial_zmp (2,), zmp_margin,
         zmp_inside, zmp_degenerate, rho (eq. 65)."""
+    def evaluate_control(
+        self, q: npt.ArrayLike, frame: str
+    ) -> tuple[
+        float,
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        list[NDArray[np.float64]],
+        NDArray[np.float64],
+        NDArray[np.float64],
+    ]:
+        """What the onboard pipeline reads of ``evaluate(q)`` (the same arrays): mass,
+        inertia, allocation, allocation_bar, foot_in_cog, unit_parent_rotations,
+        frames["cog"], frames[frame]. Errors as ``evaluate``; ModelError for an unknown
+        frame."""
     def aerial_zmp_from_thrusts(
         self, q: npt.ArrayLike, thrusts: npt.ArrayLike, base_pose: _Pose = None
     ) -> dict[str, Any] | None: ...

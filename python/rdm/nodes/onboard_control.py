@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rdm import _rdm
 from rdm.control.attitude import gains_to_wire_terms
 from rdm.control.lqi import LqiSynthesizer, PcAxisController, gyro_compensation
 from rdm.control.perch import PerchController, PerchResult
@@ -204,6 +205,19 @@ def _p_matrix_terms(g: dict) -> tuple[list[tuple[int, int, int]], list[int], boo
     return rows, inertia, sat
 
 
+#: ``Robot.evaluate_control``'s tuple, named as the ``evaluate`` keys it stands for
+_CONTROL_KEYS = (
+    "mass",
+    "inertia",
+    "allocation",
+    "allocation_bar",
+    "foot_in_cog",
+    "unit_parent_rotations",
+    "cog_pose",
+    "imu_pose",
+)
+
+
 def _model_terms(*values: object) -> ModelTerms:
     """``ModelTerms(*values)`` without the frozen-dataclass ``__init__``."""
     terms = object.__new__(ModelTerms)
@@ -279,10 +293,20 @@ class ControlPipeline:
         #: a handful of servo readings, each seen again within a few ticks
         self._model_cache: dict[bytes, tuple[ModelTerms, tuple | None, bool]] = {}
         self._p_matrix: tuple[list[tuple[int, int, int]], list[int]] | None = None
-        #: a model evaluation's hover thrust through the lstsq gufunc directly, its
-        #: ModelTerms without the frozen __init__ and its pinv terms from Python floats;
-        #: False: np.linalg.lstsq, ModelTerms(...) and numpy scalars (the plain forms)
+        #: a model evaluation through ``Robot.evaluate_control``, its hover thrust through
+        #: the lstsq gufunc directly, its ModelTerms without the frozen __init__ and its pinv
+        #: terms from Python floats; False: ``evaluate``, np.linalg.lstsq, ModelTerms(...)
+        #: and numpy scalars (the plain forms)
         self.fast_model = True
+        #: ``Robot.evaluate_control`` (the evaluation's arrays the pipeline reads, without
+        #: every frame's pose) when the robot offers it and its ``evaluate`` is the core's
+        core = _rdm.Robot
+        plain_evaluate = getattr(type(robot), "evaluate", None) is core.evaluate
+        self._evaluate_control = (
+            robot.evaluate_control
+            if plain_evaluate and hasattr(core, "evaluate_control") and isinstance(robot, core)
+            else None
+        )
         self._p_matrix_saturated = False
 
     # -- 1. model ------------------------------------------------------------------------
@@ -299,8 +323,14 @@ class ControlPipeline:
                 return True
         self._model_key = None
         self._p_matrix = None
+        lean = self.fast_model and self._evaluate_control is not None
         try:
-            o = self.robot.evaluate(q)
+            if lean:  # the same arrays of the same evaluation, without the rest of the dict
+                o = dict(
+                    zip(_CONTROL_KEYS, self._evaluate_control(q, self.config.imu_link), strict=True)
+                )
+            else:
+                o = self.robot.evaluate(q)
         except ValueError:
             self.counts["model_error"] += 1
             return False
@@ -308,9 +338,13 @@ class ControlPipeline:
         full = np.asarray(o["allocation"], dtype=float)
         qfoot = foot_allocation(full, np.asarray(o["foot_in_cog"], dtype=float))
         rotations = np.array([np.asarray(r).T for r in o["unit_parent_rotations"]])
-        frames = o["frames"]  # poses in the foot frame
-        cog_rot = np.asarray(frames["cog"], dtype=float)[:3, :3]
-        imu = cog_rot.T @ np.asarray(frames[self.config.imu_link], dtype=float)[:3, :3]
+        if lean:
+            cog_pose, imu_pose = o["cog_pose"], o["imu_pose"]
+        else:
+            frames = o["frames"]  # poses in the foot frame
+            cog_pose, imu_pose = frames["cog"], frames[self.config.imu_link]
+        cog_rot = np.asarray(cog_pose, dtype=float)[:3, :3]
+        imu = cog_rot.T @ np.asarray(imu_pose, dtype=float)[:3, :3]
         g = self.config.gravity
         rhs = [o["mass"] * g, 0.0, 0.0, 0.0]
         if self.fast_model:
