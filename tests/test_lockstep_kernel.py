@@ -192,6 +192,23 @@ def test_battery_voltage_of_time_leaves_the_bridge_to_python(tmp_path: Path) -> 
     assert stats["python"][0] >= 800  # the bridge: Python for every tick with the function
 
 
+def test_a_truth_sink_that_changes_a_node_has_its_plans_re_read(tmp_path: Path) -> None:
+    def steps(stack: Stack) -> None:
+        stack.loop.run(1.0)
+        inner = stack.bridge._truth_sink
+
+        def sink(gt) -> None:
+            inner(gt)
+            stack.sensor.temperature += 1  # in every later Leptrino frame
+
+        stack.bridge._truth_sink = sink
+        stack.bridge.kernel_truth_touches = None  # unknown sink: every plan re-read
+        stack.loop.run(0.6)
+
+    stats = _same(tmp_path, steps, log=True)
+    assert stats["fast"][5] > 250  # Leptrino frames kept coming from the kernel
+
+
 def _stopping_script(at: float) -> Callable[[Stack, float], None]:
     inner = make_script(np.array([0.483, 0.0, HOVER_Z]))
 

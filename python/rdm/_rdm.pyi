@@ -76,6 +76,22 @@ class Robot:
         (N x 3), rotor_directions (N x 3), frames (name -> 4x4 world pose), foot_in_cog
         (4x4), unit_parent_rotations (list of 3x3, C<-L_i), aerial_zmp (2,), zmp_margin,
         zmp_inside, zmp_degenerate, rho (eq. 65)."""
+    def evaluate_control(
+        self, q: npt.ArrayLike, frame: str
+    ) -> tuple[
+        float,
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        list[NDArray[np.float64]],
+        NDArray[np.float64],
+        NDArray[np.float64],
+    ]:
+        """What the onboard pipeline reads of ``evaluate(q)`` (the same arrays): mass,
+        inertia, allocation, allocation_bar, foot_in_cog, unit_parent_rotations,
+        frames["cog"], frames[frame]. Errors as ``evaluate``; ModelError for an unknown
+        frame."""
     def aerial_zmp_from_thrusts(
         self, q: npt.ArrayLike, thrusts: npt.ArrayLike, base_pose: _Pose = None
     ) -> dict[str, Any] | None: ...
@@ -436,6 +452,15 @@ class LqiSynthesizer:
         self, mass: float, inertia: NDArray[np.float64], allocation: NDArray[np.float64]
     ) -> dict[str, object]:
         """Keys k, p, b, gains, clamp_scales, report. GIL released while solving."""
+    def synthesize_wire(
+        self, mass: float, inertia: NDArray[np.float64], allocation: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.int16] | None, bytes | None, bool, bool, bool]:
+        """The same synthesis as ``synthesize`` as (gains (N_ROTORS, 4, 3), rpy/gain int16
+        terms (N_ROTORS, 7) or None, their RollPitchYawTerms payload or None, every gain
+        finite, fell_back, a clamp scale != 1). A result with terms and finite gains is kept
+        (``kept_result``). GIL released while solving."""
+    def kept_result(self) -> dict[str, object] | None:
+        """The ``synthesize`` dict of the last result ``synthesize_wire`` kept."""
     def reset(self) -> None: ...
     @property
     def has_solution(self) -> bool: ...

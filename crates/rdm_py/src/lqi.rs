@@ -2,11 +2,14 @@
 
 use nalgebra::{Matrix3, SMatrix, Vector3};
 use numpy::ndarray::{Array1, Array2};
-use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn};
+use numpy::{
+    IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn,
+};
 use pyo3::create_exception;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBytes, PyDict};
 
+use rdm_core::control::attitude::wire::gains_to_wire;
 use rdm_core::control::gains::GainSet;
 use rdm_core::control::lqi::{
     self as core_lqi, Allocation, AllocationInverse, GyroCompensation, LqiConfig, LqiError,
@@ -249,6 +252,17 @@ fn flight_thrust<'py>(
 #[pyclass(module = "rdm._rdm")]
 struct LqiSynthesizer {
     inner: core_lqi::LqiSynthesizer,
+    /// The last result `synthesize_wire` accepted (wire terms converted, every gain finite).
+    kept: Option<LqiGains>,
+}
+
+/// Whether every entry of the gain set is finite.
+fn gain_set_finite(set: &GainSet) -> bool {
+    set.iter().all(|g| {
+        [g.roll, g.pitch, g.yaw, g.z]
+            .iter()
+            .all(|p| p.p.is_finite() && p.i.is_finite() && p.d.is_finite())
+    })
 }
 
 fn gains_dict<'py>(py: Python<'py>, g: &LqiGains) -> PyResult<Bound<'py, PyDict>> {
@@ -299,7 +313,7 @@ impl LqiSynthesizer {
             config.care.kleinman_tolerance = tolerance;
         }
         let inner = core_lqi::LqiSynthesizer::new(config).map_err(lqi_error)?;
-        Ok(Self { inner })
+        Ok(Self { inner, kept: None })
     }
 
     /// Synthesizes gains for (mass, inertia 3x3, allocation 4xN_ROTORS). GIL released.
@@ -315,6 +329,72 @@ impl LqiSynthesizer {
         let inner = &mut self.inner;
         let result = py.detach(move || inner.synthesize(mass, &inertia, &allocation).copied());
         gains_dict(py, &result.map_err(lqi_error)?)
+    }
+
+    /// The synthesis of `synthesize` (same solver, same result) in the form the onboard
+    /// control tick uses, without the dict of matrices: returns `(gains, wire, payload,
+    /// finite, fell_back, clamped)` with `gains` the (N_ROTORS, 4, 3) gain array, `wire`
+    /// the `rpy/gain` int16 (N_ROTORS, 7) terms of `gains_to_wire_terms(gains)` and
+    /// `payload` their `spinal/RollPitchYawTerms` bytes (uint32 count, then the int16 terms
+    /// little-endian), both None when a term does not convert (NaN/inf); `finite`: every
+    /// gain is finite; `fell_back` as in the report; `clamped`: a `clamp_scales` factor is
+    /// not 1. A result with `wire` and `finite` is kept (see `kept_result`). Errors as
+    /// `synthesize`. GIL released while solving.
+    #[allow(clippy::type_complexity)]
+    fn synthesize_wire<'py>(
+        &mut self,
+        py: Python<'py>,
+        mass: f64,
+        inertia: PyReadonlyArray2<'py, f64>,
+        allocation: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<(
+        Bound<'py, PyAny>,
+        Option<Bound<'py, PyAny>>,
+        Option<Bound<'py, PyBytes>>,
+        bool,
+        bool,
+        bool,
+    )> {
+        let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
+        let allocation: Allocation = to_matrix(&allocation, "allocation")?;
+        let inner = &mut self.inner;
+        let result = py
+            .detach(move || inner.synthesize(mass, &inertia, &allocation).copied())
+            .map_err(lqi_error)?;
+        let gains = gain_set_to_py(py, &result.gains);
+        let finite = gain_set_finite(&result.gains);
+        let s = &result.clamp_scales;
+        let clamped = [s.roll_p, s.roll_d, s.pitch_p, s.pitch_d, s.yaw_d]
+            .iter()
+            .any(|&v| v != 1.0);
+        let fell_back = result.report.fell_back;
+        let (wire, payload) = match gains_to_wire(&result.gains) {
+            Ok(terms) => {
+                let mut flat = [0i16; N_ROTORS * 7];
+                let mut bytes = [0u8; 4 + N_ROTORS * 7 * 2];
+                bytes[..4].copy_from_slice(&(N_ROTORS as u32).to_le_bytes());
+                for (r, term) in terms.iter().enumerate() {
+                    for (c, v) in term.to_array().into_iter().enumerate() {
+                        let at = r * 7 + c;
+                        flat[at] = v;
+                        bytes[4 + 2 * at..6 + 2 * at].copy_from_slice(&v.to_le_bytes());
+                    }
+                }
+                let wire = PyArray1::from_slice(py, &flat).reshape([N_ROTORS, 7])?;
+                (Some(wire.into_any()), Some(PyBytes::new(py, &bytes)))
+            }
+            Err(_) => (None, None),
+        };
+        if wire.is_some() && finite {
+            self.kept = Some(result);
+        }
+        Ok((gains, wire, payload, finite, fell_back, clamped))
+    }
+
+    /// The dict `synthesize` returns, for the last result `synthesize_wire` kept (None
+    /// before one).
+    fn kept_result<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        self.kept.as_ref().map(|g| gains_dict(py, g)).transpose()
     }
 
     /// Forgets the warm start.

@@ -4,7 +4,7 @@ use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vect
 use numpy::ndarray::{Array1, Array2};
 use numpy::IntoPyArray;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyTuple};
 
 use rdm_core::model::{
     base_pose_from_zeta, AerialZmp, Frame, Matrix6xN, ModelWorkspace, RobotDescription, StaticLoads,
@@ -348,6 +348,41 @@ impl Robot {
         zmp_dict(py, &d, &zmp)?;
         d.set_item("rho", robot.stability(ws).map_err(model_err)?)?;
         Ok(d)
+    }
+
+    /// What the onboard control pipeline reads of `evaluate(q)` (identity base pose), the
+    /// same arrays from the same evaluation, without the rest of its dict (every frame's
+    /// pose, the ZMP, rho): `(mass, inertia, allocation, allocation_bar, foot_in_cog,
+    /// unit_parent_rotations, frames["cog"], frames[frame])`. Errors as `evaluate` (a bad
+    /// q), and a ModelError naming an unknown `frame`.
+    fn evaluate_control<'py>(
+        &mut self,
+        py: Python<'py>,
+        q: Vec<f64>,
+        frame: &str,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let target = self.robot.frame(frame).map_err(model_err)?;
+        let cog = self.robot.frame("cog").map_err(model_err)?;
+        self.eval(&q, &Isometry3::identity())?;
+        let (robot, ws) = (&self.robot, &self.ws);
+        let alloc =
+            nalgebra::DMatrix::from_fn(6, ws.allocation.ncols(), |i, j| ws.allocation[(i, j)]);
+        let mut unit_rot = Vec::with_capacity(robot.units.len());
+        for u in 0..robot.units.len() {
+            let r = robot.unit_parent_rotation(ws, u).map_err(model_err)?;
+            unit_rot.push(mat3_py(py, r.matrix()));
+        }
+        let items: Vec<Bound<'py, PyAny>> = vec![
+            ws.mass.into_pyobject(py)?.into_any(),
+            mat3_py(py, &ws.inertia),
+            matrix_py(py, &alloc),
+            matrix_py(py, &alloc.rows(2, 4).into_owned()),
+            pose_py(py, &robot.foot_in_cog(ws).map_err(model_err)?),
+            unit_rot.into_pyobject(py)?.into_any(),
+            pose_py(py, &robot.frame_pose(ws, cog).map_err(model_err)?),
+            pose_py(py, &robot.frame_pose(ws, target).map_err(model_err)?),
+        ];
+        PyTuple::new(py, items)
     }
 
     /// Aerial ZMP of eq. (73) for given rotor thrusts; None if no upward thrust.

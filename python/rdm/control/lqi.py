@@ -52,6 +52,25 @@ class LqiResult:
     relative_residual: float
 
 
+def _result(out: dict) -> LqiResult:
+    """``LqiResult`` of the core's dict, without the frozen-dataclass ``__init__`` (one per
+    control tick)."""
+    report = out["report"]
+    result = object.__new__(LqiResult)
+    result.__dict__.update(
+        k=out["k"],
+        p=out["p"],
+        b=out["b"],
+        gains=out["gains"],
+        clamp_scales=out["clamp_scales"],
+        method=report["method"],
+        iterations=report["iterations"],
+        fell_back=report["fell_back"],
+        relative_residual=report["relative_residual"],
+    )
+    return result
+
+
 class LqiSynthesizer:
     """Warm-started LQI synthesizer; ``synthesize`` releases the GIL while solving."""
 
@@ -73,21 +92,27 @@ class LqiSynthesizer:
             np.ascontiguousarray(inertia, dtype=float),
             np.ascontiguousarray(allocation, dtype=float),
         )
-        report = out["report"]
-        # LqiResult(...) without the frozen-dataclass __init__ (one per control tick)
-        result = object.__new__(LqiResult)
-        result.__dict__.update(
-            k=out["k"],
-            p=out["p"],
-            b=out["b"],
-            gains=out["gains"],
-            clamp_scales=out["clamp_scales"],
-            method=report["method"],
-            iterations=report["iterations"],
-            fell_back=report["fell_back"],
-            relative_residual=report["relative_residual"],
+        return _result(out)
+
+    def synthesize_wire(
+        self, mass: float, inertia: np.ndarray, allocation: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray | None, bytes | None, bool, bool, bool]:
+        """:meth:`synthesize` (the same solve and gains) in the form the onboard tick uses:
+        ``(gains, wire, payload, finite, fell_back, clamped)``. ``wire`` is
+        ``gains_to_wire_terms(gains)`` (int16, N_ROTORS x 7) and ``payload`` its
+        ``spinal/RollPitchYawTerms`` bytes, both None where that raises (NaN/inf term);
+        ``finite``: every gain finite; ``clamped``: a clamp scale is not 1. A result with
+        ``wire`` and ``finite`` is kept for :meth:`kept_result`."""
+        return self._core.synthesize_wire(
+            float(mass),
+            np.ascontiguousarray(inertia, dtype=float),
+            np.ascontiguousarray(allocation, dtype=float),
         )
-        return result
+
+    def kept_result(self) -> LqiResult | None:
+        """The :class:`LqiResult` of the last result :meth:`synthesize_wire` kept."""
+        out = self._core.kept_result()
+        return None if out is None else _result(out)
 
     def reset(self) -> None:
         """Forget the warm start (next synthesis is cold)."""

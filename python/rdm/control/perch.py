@@ -63,7 +63,21 @@ class PerchResult:
 
     @classmethod
     def _from(cls, d: dict[str, Any]) -> PerchResult:
+        """``cls(**d)`` of the core's dict; when it holds exactly the fields (it always
+        does), without the frozen-dataclass ``__init__`` (one per perched control tick)."""
+        if d.keys() != _RESULT_FIELDS:
+            return cls(**d)
+        result = object.__new__(cls)
+        result.__dict__.update(d)
+        return result
+
+    @classmethod
+    def _from_plain(cls, d: dict[str, Any]) -> PerchResult:
+        """``cls(**d)`` (the plain form :meth:`_from` is tested against)."""
         return cls(**d)
+
+
+_RESULT_FIELDS = frozenset(PerchResult.__dataclass_fields__)
 
 
 @dataclass(frozen=True)

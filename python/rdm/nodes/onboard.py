@@ -31,7 +31,7 @@ import struct
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -56,6 +56,37 @@ _IMU_GYRO_QUAT = struct.Struct("<3f12x4f")
 _U32 = struct.Struct("<I")
 #: ``spinal/ServoStates``: stamp (8 bytes), count (uint32), 7 bytes per ``spinal/ServoState``.
 _SERVO_STATES_HEAD, _SERVO_STATE_SIZE = 12, 7
+#: ``spinal/ServoState``'s index (uint8) and angle (int16); temp, load, error skipped.
+_SERVO_INDEX_ANGLE = struct.Struct("<Bh4x")
+_SERVO_STATE_FIELDS = [
+    ("index", "uint8", None),
+    ("angle", "int16", None),
+    ("temp", "uint8", None),
+    ("load", "int16", None),
+    ("error", "uint8", None),
+]
+
+
+class _ServoReading(NamedTuple):
+    """The two fields of a ``spinal/ServoState`` the node reads."""
+
+    index: int
+    angle: int
+
+
+class _ServoReadings:
+    """What :meth:`OnboardNode._on_servo_states` reads of a decoded ``spinal/ServoStates``."""
+
+    __slots__ = ("servos",)
+
+    def __init__(self, servos: list[_ServoReading]) -> None:
+        self.servos = servos
+
+
+try:  # the C function np.interp ends in for float data (without its Python layers)
+    from numpy._core.multiarray import interp as _compiled_interp
+except ImportError:  # another numpy layout: np.interp throughout
+    _compiled_interp = None
 #: Topics the node publishes (Spinal subscribes).
 PUBLISHED_TOPICS = (
     "uav_info",
@@ -246,6 +277,13 @@ class OnboardNode:
         #: the same entries by the readings' payload bytes after the stamp (deferred path)
         self._servo_raw: dict[bytes, tuple[np.ndarray, np.ndarray, int, bool]] = {}
         self._servo_codec = reg.msg("spinal/ServoStates")
+        #: a new ``servo/states`` payload's servo indices and angles unpacked with one
+        #: ``struct`` (what :meth:`_on_servo_states` reads), when the layout is the one
+        #: ``_SERVO_INDEX_ANGLE`` reads; False: decoded by the codec (the plain form)
+        servo_fields = [
+            (f.name, f.base_type, f.array_len) for f in reg.msg("spinal/ServoState").spec.fields
+        ]
+        self.fast_servo_decode = servo_fields == _SERVO_STATE_FIELDS
         imu_size = reg.msg("spinal/Imu").fixed_size
         #: ``imu`` and ``servo/states`` are taken in from their payloads (the session defers
         #: their decoding; only what the node reads is unpacked); False: decoded messages
@@ -266,6 +304,11 @@ class OnboardNode:
         #: as the payload encoded once; False: every message through the codec
         self.direct_tx = True
         self._payloads: dict[str, tuple[Any, Any, bytes]] = {}
+        #: trajectory targets through the C interpolation ``np.interp`` calls for float data,
+        #: on contiguous copies of the joint columns (made once per trajectory); False:
+        #: ``np.interp`` per joint (the plain form)
+        self.fast_interp = _compiled_interp is not None
+        self._trajectory_columns: tuple[Any, tuple[np.ndarray, ...]] | None = None
         self._target_ticks: tuple[ServoMap, bytes, list[int]] | None = None
 
     # ------------------------------------------------------------------ inputs from outside
@@ -503,7 +546,13 @@ class OnboardNode:
             if hit is not None:
                 self._apply_servo_entry(hit)
                 return
-        entry = self._on_servo_states(self._servo_codec.decode(payload))
+        if self.fast_servo_decode and servo_states_decodes(payload):
+            # the index and angle of each entry, as the codec decodes them (uint8, int16)
+            readings = _SERVO_INDEX_ANGLE.iter_unpack(memoryview(payload)[_SERVO_STATES_HEAD:])
+            msg = _ServoReadings(list(map(_ServoReading._make, readings)))
+        else:
+            msg = self._servo_codec.decode(payload)
+        entry = self._on_servo_states(msg)
         if body is not None and entry is not None:
             raw = self._servo_raw
             raw[body] = entry
@@ -579,8 +628,18 @@ class OnboardNode:
         return self._send(self.session.publish, topic, msg)
 
     def _publish_payload(self, topic: str, payload: bytes) -> bool:
-        """:meth:`_publish` of a message already serialized with the topic's codec."""
-        return self._send(self.session.publish_payload, topic, payload)
+        """:meth:`_publish` of a message already serialized with the topic's codec
+        (:meth:`_send` written out: one call less for each of the tick's publishes)."""
+        try:
+            self.session.publish_payload(topic, payload)
+        except TopicNotNegotiated:
+            self.counts[f"not_negotiated:{topic}"] += 1
+            return False
+        except PayloadTooLarge:
+            self.counts[f"too_large:{topic}"] += 1
+            return False
+        self.published[topic] += 1
+        return True
 
     def _send(self, publish: Callable[[str, Any], int], topic: str, what: Any) -> bool:
         """One publish: refusals counted per topic, sends counted in ``published``."""
@@ -648,8 +707,17 @@ class OnboardNode:
                 self.arming.sent(topic, now)
 
     def _current_joint_targets(self, now: float) -> np.ndarray | None:
-        if self._trajectory is not None:
-            times, qs = self._trajectory
+        trajectory = self._trajectory
+        if trajectory is not None:
+            times, qs = trajectory
+            if self.fast_interp and qs.dtype == np.float64 and qs.ndim == 2:
+                # np.interp(x, xp, fp) of a real fp is compiled_interp(x, xp, fp, None, None)
+                cached = self._trajectory_columns
+                if cached is None or cached[0] is not trajectory:
+                    columns = tuple(np.ascontiguousarray(qs[:, j]) for j in range(qs.shape[1]))
+                    cached = self._trajectory_columns = (trajectory, columns)
+                interp = _compiled_interp
+                return np.array([interp(now, times, column, None, None) for column in cached[1]])
             return np.array([np.interp(now, times, qs[:, j]) for j in range(qs.shape[1])])
         return self.joint_targets
 
@@ -800,10 +868,13 @@ class OnboardNode:
             and self._direct_remote("rpy/gain", "spinal/RollPitchYawTerms")
         ):
             # count, then 7 int16 per motor (roll_p .. yaw_d): the codec's bytes for the
-            # RollPitchYawTerm messages built below
-            self._publish_payload(
-                "rpy/gain", _U32.pack(wire.shape[0]) + wire.astype("<i2", copy=False).tobytes()
-            )
+            # RollPitchYawTerm messages built below (built by the core with these terms)
+            built = self.control.gains_payload
+            if built is not None and built[0] is wire:
+                payload = built[1]
+            else:
+                payload = _U32.pack(wire.shape[0]) + wire.astype("<i2", copy=False).tobytes()
+            self._publish_payload("rpy/gain", payload)
             return
         key = (wire.tobytes(), wire.dtype.str, wire.shape)
         if self._gains_msg is None or self._gains_msg[0] != key:
@@ -840,9 +911,18 @@ class OnboardNode:
                 base = arr.tolist()
                 cached = self._target_ticks = (smap, key, [to_raw(j, base[j]) for j in range(n)])
             angles = cached[2].copy()
-            for j in written:
-                if j < n:
-                    angles[j] = to_raw(j, q[j])
+            if written and smap.__class__ is ServoMap:
+                # ServoMap.to_raw written out (the same expression, rounding and clamp)
+                zero, sign, scale = smap.zero_point, smap.angle_sign, smap.angle_scale
+                for j in written:
+                    if j < n:
+                        angles[j] = max(
+                            -32768, min(32767, round(zero[j] + sign[j] * q[j] / scale[j]))
+                        )
+            else:
+                for j in written:
+                    if j < n:
+                        angles[j] = to_raw(j, q[j])
             try:  # uint8[] index, int16[] angles; out of range: the codec's error below
                 payload = struct.pack(f"<I{len(index)}BI{n}h", len(index), *index, n, *angles)
             except (struct.error, TypeError):

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rdm import _rdm
 from rdm.control.attitude import gains_to_wire_terms
 from rdm.control.lqi import LqiSynthesizer, PcAxisController, gyro_compensation
 from rdm.control.perch import PerchController, PerchResult
@@ -36,6 +37,37 @@ try:  # the ufunc np.clip ends in for float arrays, without its Python dispatch 
     from numpy._core.umath import clip as _clip
 except ImportError:  # numpy < 2
     _clip = np.clip
+
+
+try:  # the gufunc np.linalg.lstsq ends in, and the error handler it installs around it
+    from numpy.linalg import _umath_linalg
+    from numpy.linalg._linalg import _raise_linalgerror_lstsq
+except ImportError:  # another numpy layout: np.linalg.lstsq throughout
+    _umath_linalg = None
+_EPS = np.finfo(np.float64).eps
+
+
+def _lstsq_solution(a: np.ndarray, rhs: list[float]) -> np.ndarray:
+    """``np.linalg.lstsq(a, rhs, rcond=None)[0]`` for a float64 (m, n) ``a`` and m Python
+    floats: the same gufunc call (same LAPACK driver, rcond ``eps * max(m, n)``, error state
+    and LinAlgError), without the wrapper's type dispatch and residual/singular-value work.
+    Anything else goes through ``np.linalg.lstsq``."""
+    if (
+        _umath_linalg is None
+        or a.__class__ is not np.ndarray
+        or a.dtype != np.float64
+        or a.ndim != 2
+        or a.shape[0] != len(rhs)
+        or 0 in a.shape
+        or not all(v.__class__ is float for v in rhs)
+    ):
+        return np.linalg.lstsq(a, rhs, rcond=None)[0]
+    m, n = a.shape
+    b = np.array(rhs)[:, None]
+    handler = _raise_linalgerror_lstsq
+    with np.errstate(call=handler, invalid="call", over="ignore", divide="ignore", under="ignore"):
+        x = _umath_linalg.lstsq(a, b, _EPS * max(n, m), signature="ddd->ddid")[0]
+    return x.squeeze(axis=-1)
 
 
 def _all_finite(a: np.ndarray) -> bool:
@@ -130,6 +162,72 @@ class ControlCommand:
     yaw_rotor: int | None
 
 
+def _p_matrix_terms_plain(g: dict) -> tuple[list[tuple[int, int, int]], list[int], bool]:
+    """The pinv rows, the inertia terms (x1000 int16) and whether any saturated, of a
+    ``gyro_compensation`` dict (the plain form of :func:`_p_matrix_terms`)."""
+    sat = False
+    rows = []
+    for r, p, y in zip(g["pinv_roll"], g["pinv_pitch"], g["pinv_yaw"], strict=True):
+        w = [to_wire(float(v)) for v in (r, p, y)]
+        sat |= any(s for _, s in w)
+        rows.append(tuple(v for v, _ in w))
+    i = np.asarray(g["inertia"], dtype=float)
+    comps = [i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[1, 2], i[0, 2]]
+    inertia = []
+    for v in comps:
+        w, s = to_wire(float(v))
+        sat |= s
+        inertia.append(w)
+    return rows, inertia, sat
+
+
+def _p_matrix_terms(g: dict) -> tuple[list[tuple[int, int, int]], list[int], bool]:
+    """:func:`_p_matrix_terms_plain` on the Python floats ``tolist`` gives (the values
+    ``float`` gives of each element): the same ``to_wire`` calls in the same order."""
+    columns = (g["pinv_roll"], g["pinv_pitch"], g["pinv_yaw"], g["inertia"])
+    if not all(
+        c.__class__ is np.ndarray and c.dtype == np.float64 and c.ndim == n
+        for c, n in zip(columns, (1, 1, 1, 2), strict=True)
+    ):
+        return _p_matrix_terms_plain(g)
+    sat = False
+    rows = []
+    for r, p, y in zip(*(c.tolist() for c in columns[:3]), strict=True):
+        (a, sa), (b, sb), (c, sc) = to_wire(r), to_wire(p), to_wire(y)
+        sat = sat or sa or sb or sc
+        rows.append((a, b, c))
+    i = columns[3].tolist()
+    inertia = []
+    for v in (i[0][0], i[1][1], i[2][2], i[0][1], i[1][2], i[0][2]):
+        w, s = to_wire(v)
+        sat = sat or s
+        inertia.append(w)
+    return rows, inertia, sat
+
+
+#: ``Robot.evaluate_control``'s tuple, named as the ``evaluate`` keys it stands for
+_CONTROL_KEYS = (
+    "mass",
+    "inertia",
+    "allocation",
+    "allocation_bar",
+    "foot_in_cog",
+    "unit_parent_rotations",
+    "cog_pose",
+    "imu_pose",
+)
+
+
+def _model_terms(*values: object) -> ModelTerms:
+    """``ModelTerms(*values)`` without the frozen-dataclass ``__init__``."""
+    terms = object.__new__(ModelTerms)
+    terms.__dict__.update(zip(_TERMS_FIELDS, values, strict=True))
+    return terms
+
+
+_TERMS_FIELDS = tuple(ModelTerms.__dataclass_fields__)
+
+
 def _control_command(*values: object) -> ControlCommand:
     """``ControlCommand(*values)`` without the frozen-dataclass ``__init__`` (one per tick)."""
     command = object.__new__(ControlCommand)
@@ -175,7 +273,15 @@ class ControlPipeline:
         self.terms: ModelTerms | None = None
         self.gains: np.ndarray | None = None  # (N, 4, 3)
         self.gains_wire: np.ndarray | None = None  # (N, 7) int16
-        self.lqi_result = None
+        #: (gains_wire, its ``rpy/gain`` payload bytes) when the fast LQI path built both
+        self.gains_payload: tuple[np.ndarray, bytes] | None = None
+        #: LQI through :meth:`LqiSynthesizer.synthesize_wire` (gains, wire terms and the
+        #: ``rpy/gain`` payload from one Rust call; :attr:`lqi_result` built when read);
+        #: False: ``synthesize`` + ``gains_to_wire_terms`` (the plain form)
+        self.fast_lqi = True
+        self._lqi_result = None
+        #: the synthesizer whose kept result lqi_result is, while not built yet (else None)
+        self._lqi_result_kept = None
         self.perching = False
         self.perch_thrust = np.zeros(robot.n_rotors)
         self._ticks = 0
@@ -187,6 +293,20 @@ class ControlPipeline:
         #: a handful of servo readings, each seen again within a few ticks
         self._model_cache: dict[bytes, tuple[ModelTerms, tuple | None, bool]] = {}
         self._p_matrix: tuple[list[tuple[int, int, int]], list[int]] | None = None
+        #: a model evaluation through ``Robot.evaluate_control``, its hover thrust through
+        #: the lstsq gufunc directly, its ModelTerms without the frozen __init__ and its pinv
+        #: terms from Python floats; False: ``evaluate``, np.linalg.lstsq, ModelTerms(...)
+        #: and numpy scalars (the plain forms)
+        self.fast_model = True
+        #: ``Robot.evaluate_control`` (the evaluation's arrays the pipeline reads, without
+        #: every frame's pose) when the robot offers it and its ``evaluate`` is the core's
+        core = _rdm.Robot
+        plain_evaluate = getattr(type(robot), "evaluate", None) is core.evaluate
+        self._evaluate_control = (
+            robot.evaluate_control
+            if plain_evaluate and hasattr(core, "evaluate_control") and isinstance(robot, core)
+            else None
+        )
         self._p_matrix_saturated = False
 
     # -- 1. model ------------------------------------------------------------------------
@@ -203,8 +323,14 @@ class ControlPipeline:
                 return True
         self._model_key = None
         self._p_matrix = None
+        lean = self.fast_model and self._evaluate_control is not None
         try:
-            o = self.robot.evaluate(q)
+            if lean:  # the same arrays of the same evaluation, without the rest of the dict
+                o = dict(
+                    zip(_CONTROL_KEYS, self._evaluate_control(q, self.config.imu_link), strict=True)
+                )
+            else:
+                o = self.robot.evaluate(q)
         except ValueError:
             self.counts["model_error"] += 1
             return False
@@ -212,15 +338,23 @@ class ControlPipeline:
         full = np.asarray(o["allocation"], dtype=float)
         qfoot = foot_allocation(full, np.asarray(o["foot_in_cog"], dtype=float))
         rotations = np.array([np.asarray(r).T for r in o["unit_parent_rotations"]])
-        frames = o["frames"]  # poses in the foot frame
-        cog_rot = np.asarray(frames["cog"], dtype=float)[:3, :3]
-        imu = cog_rot.T @ np.asarray(frames[self.config.imu_link], dtype=float)[:3, :3]
+        if lean:
+            cog_pose, imu_pose = o["cog_pose"], o["imu_pose"]
+        else:
+            frames = o["frames"]  # poses in the foot frame
+            cog_pose, imu_pose = frames["cog"], frames[self.config.imu_link]
+        cog_rot = np.asarray(cog_pose, dtype=float)[:3, :3]
+        imu = cog_rot.T @ np.asarray(imu_pose, dtype=float)[:3, :3]
         g = self.config.gravity
-        hover = np.linalg.lstsq(qbar, [o["mass"] * g, 0.0, 0.0, 0.0], rcond=None)[0]
+        rhs = [o["mass"] * g, 0.0, 0.0, 0.0]
+        if self.fast_model:
+            hover = _lstsq_solution(qbar, rhs)
+        else:
+            hover = np.linalg.lstsq(qbar, rhs, rcond=None)[0]
         if not (_all_finite(qbar) and _all_finite(hover)):
             self.counts["model_non_finite"] += 1
             return False
-        self.terms = ModelTerms(
+        values = (
             np.array(q, dtype=float),
             float(o["mass"]),
             np.asarray(o["inertia"], dtype=float),
@@ -231,6 +365,7 @@ class ControlPipeline:
             hover,
             imu,
         )
+        self.terms = _model_terms(*values) if self.fast_model else ModelTerms(*values)
         self._model_key = self.terms.q.tobytes()
         self._remember_model()
         return True
@@ -261,11 +396,26 @@ class ControlPipeline:
     def synthesize_due(self) -> bool:
         return self._ticks % self.config.lqi_every == 0
 
+    @property
+    def lqi_result(self):
+        """The :class:`~rdm.control.lqi.LqiResult` of the last successful synthesis (None
+        before one)."""
+        kept = self._lqi_result_kept
+        if kept is not None:
+            self._lqi_result, self._lqi_result_kept = kept.kept_result(), None
+        return self._lqi_result
+
+    @lqi_result.setter
+    def lqi_result(self, value) -> None:
+        self._lqi_result, self._lqi_result_kept = value, None
+
     def synthesize(self) -> bool:
         """LQI gains at the current model; on failure keep the last good ones (counted)."""
         t = self.terms
         if t is None:
             return False
+        if self.fast_lqi:
+            return self._synthesize_fast(t)
         try:
             res = self.lqi.synthesize(t.mass, t.inertia, t.allocation_bar)
             wire = np.asarray(gains_to_wire_terms(res.gains), dtype=np.int16)
@@ -286,6 +436,34 @@ class ControlPipeline:
         self.gains_wire = wire
         return True
 
+    def _synthesize_fast(self, t: ModelTerms) -> bool:
+        """:meth:`synthesize` through ``synthesize_wire``: the same solve, checks, counters
+        (in the same order) and attributes; the wire terms and the finite check come from
+        the core, the :class:`LqiResult` is built only when :attr:`lqi_result` is read."""
+        try:
+            gains, wire, payload, finite, fell_back, clamped = self.lqi.synthesize_wire(
+                t.mass, t.inertia, t.allocation_bar
+            )
+        except ValueError:
+            wire = None
+        if wire is None:  # the solve or gains_to_wire_terms raised
+            self.counts["lqi_failed"] += 1
+            self.lqi.reset()  # next attempt is cold
+            return False
+        if not finite:
+            self.counts["lqi_failed"] += 1
+            return False
+        self.counts["lqi_ok"] += 1
+        if fell_back:
+            self.counts["lqi_fell_back"] += 1
+        if clamped:
+            self.counts["gain_clamped"] += 1
+        self._lqi_result, self._lqi_result_kept = None, self.lqi
+        self.gains = gains
+        self.gains_wire = wire
+        self.gains_payload = (wire, payload)
+        return True
+
     def p_matrix_wire(self) -> tuple[list[tuple[int, int, int]], list[int]] | None:
         """``p_matrix_pseudo_inverse_inertia``: pinv(Q̄) columns r, p, y per rotor and the
         inertia xx, yy, zz, xy, yz, xz, all x1000 int16."""
@@ -301,19 +479,10 @@ class ControlPipeline:
         except ValueError:
             self.counts["pinv_failed"] += 1
             return None
-        sat = False
-        rows = []
-        for r, p, y in zip(g["pinv_roll"], g["pinv_pitch"], g["pinv_yaw"], strict=True):
-            w = [to_wire(float(v)) for v in (r, p, y)]
-            sat |= any(s for _, s in w)
-            rows.append(tuple(v for v, _ in w))
-        i = np.asarray(g["inertia"], dtype=float)
-        comps = [i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[1, 2], i[0, 2]]
-        inertia = []
-        for v in comps:
-            w, s = to_wire(float(v))
-            sat |= s
-            inertia.append(w)
+        if self.fast_model:
+            rows, inertia, sat = _p_matrix_terms(g)
+        else:
+            rows, inertia, sat = _p_matrix_terms_plain(g)
         if sat:
             self.counts["pinv_saturated"] += 1
         if self._model_key is not None:  # the terms are the ones at the keyed q

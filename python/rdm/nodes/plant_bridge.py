@@ -466,6 +466,9 @@ class PlantBridge:
     #: feed itself when they are this bridge's sinks.
     kernel_wrench_node: object | None = None
     kernel_imu_node: object | None = None
+    #: What the truth sink may change of the kernel's parts (``rdm.nodes.lockstep_kernel``
+    #: part names; the ground truth itself reads the plant). None: every part.
+    kernel_truth_touches: tuple[str, ...] | None = None
 
     def kernel_plan(self) -> tuple | None:
         """What ``rdm._rdm.LockstepKernel`` needs to run :meth:`tick` in Rust, or None when
@@ -474,8 +477,10 @@ class PlantBridge:
         sink other than the kernel's Leptrino node (docs/kernel.md). Its last item is the
         IMU path (addresses, noise core, normal stream, the Spinal mirror) when the IMU's
         only sink is the kernel's Spinal mirror, else None (an IMU ms is then Python's);
-        mocap and truth samples are always Python's. The kernel writes ``ticks``,
-        ``_sample_count`` and ``time_mismatches`` back itself."""
+        mocap samples are always Python's; a truth sample is :meth:`_kernel_truth`, called by
+        the kernel as a Python call that may change the parts of
+        :attr:`kernel_truth_touches`. The kernel writes ``ticks``, ``_sample_count`` and
+        ``time_mismatches`` back itself."""
         plant = self.plant
         battery = self._battery
         if self._bank is None or callable(battery) or battery != self._voltage:
@@ -524,7 +529,15 @@ class PlantBridge:
             self._targets,
             self._duties,
             imu,
+            self._kernel_truth if self._truth_on else None,
+            ["plant", "bridge", "bank", "spinal", "leptrino"]
+            if self.kernel_truth_touches is None
+            else ["plant", *self.kernel_truth_touches],
         )
+
+    def _kernel_truth(self) -> None:
+        """The truth sample of :meth:`_sample` (the kernel calls it when one is due)."""
+        self._truth_sink(self.plant.ground_truth())
 
     @property
     def battery_voltage(self) -> float | None:

@@ -445,6 +445,7 @@ def build_stack(
         foot_sensor=sensor,
         truth_sink=truth_sink,
     )
+    bridge.kernel_truth_touches = ()  # truth_sink only keeps and logs the record
     mocap = MocapNode(plant, onboard, opt.mocap_period)
     status_log: list = []
     nodes: list = [bridge, *neuron_nodes, spinal, mocap, onboard, sensor]

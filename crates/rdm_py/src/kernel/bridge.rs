@@ -77,6 +77,9 @@ struct Plan {
     wrench_normals: Option<Normals>,
     /// None: an IMU sample goes to the Python tick.
     imu: Option<ImuPath>,
+    /// `PlantBridge._kernel_truth` (the ground-truth sample into its sink) and the parts it
+    /// may change; None: a truth sample goes to the Python tick.
+    truth: Option<(Py<PyAny>, u8)>,
     targets: Py<numpy::PyArray1<f64>>,
     duties: Py<numpy::PyArray1<f64>>,
 }
@@ -88,6 +91,13 @@ struct Names {
     gyro: Name,
     acc: Name,
     mag: Name,
+}
+
+/// What a fast bridge tick leaves to Python: the foot wrench when the Leptrino path did not
+/// take it, and the ground-truth call when a truth sample is due (in this order).
+pub(crate) struct BridgeOut {
+    pub(crate) wrench: Option<[f64; 6]>,
+    pub(crate) truth: Option<(Py<PyAny>, u8)>,
 }
 
 pub(crate) struct BridgeFast {
@@ -156,6 +166,13 @@ impl BridgeFast {
                     sink: i.get_item(3)?.unbind(),
                 })
             };
+            let truth = t.get_item(14)?;
+            let truth = if truth.is_none() {
+                None
+            } else {
+                let parts: Vec<String> = t.get_item(15)?.extract()?;
+                Some((truth.unbind(), super::parts_mask(&parts)?))
+            };
             let core = t.get_item(9)?;
             Some(Plan {
                 ticks: t.get_item(0)?.extract()?,
@@ -174,6 +191,7 @@ impl BridgeFast {
                 },
                 wrench_normals,
                 imu,
+                truth,
                 targets: t.get_item(11)?.extract()?,
                 duties: t.get_item(12)?.extract()?,
             })
@@ -189,7 +207,9 @@ impl BridgeFast {
             return Ok(false);
         };
         let n = p.sample_count;
-        Ok((p.imu.is_some() || !due(n, p.imu_n)) && !due(n, p.mocap_n) && !due(n, p.truth_n))
+        Ok((p.imu.is_some() || !due(n, p.imu_n))
+            && !due(n, p.mocap_n)
+            && (p.truth.is_some() || !due(n, p.truth_n)))
     }
 
     /// `Plant.imu()` into `SpinalMirror.set_imu_sample` (the sink of the plan).
@@ -227,7 +247,7 @@ impl BridgeFast {
         now: f64,
         plant: &mut PlantLink,
         leptrino: Option<&mut LeptrinoFast>,
-    ) -> PyResult<Option<[f64; 6]>> {
+    ) -> PyResult<BridgeOut> {
         let Some(p) = &mut self.plan else {
             return Err(pyo3::exceptions::PyRuntimeError::new_err(
                 "kernel: bridge tick without a plan",
@@ -264,15 +284,24 @@ impl BridgeFast {
                 .extend_from_slice(p.duties.bind(py).try_readonly()?.as_slice()?);
             plant.command_duties(py, &self.scratch)?;
         }
-        // 5-7: the IMU, then the wrench (ready() excluded mocap and truth).
+        // 5-7: the IMU, the wrench, the truth (ready() excluded mocap).
         let n = p.sample_count;
         p.sample_count = n + 1;
         if due(n, p.imu_n) {
             let imu = p.imu.as_mut().expect("ready() checked the IMU path");
             Self::imu_sample_of(&self.names, py, imu, plant)?;
         }
+        let truth = if due(n, p.truth_n) {
+            let (call, touches) = p.truth.as_ref().expect("ready() checked the truth path");
+            Some((call.clone_ref(py), *touches))
+        } else {
+            None
+        };
         if !due(n, p.wrench_n) {
-            return Ok(None);
+            return Ok(BridgeOut {
+                wrench: None,
+                truth,
+            });
         }
         plant.fresh(py)?;
         let normals = p
@@ -307,7 +336,10 @@ impl BridgeFast {
             Some(l) => l.set_wrench(py, w)?,
             None => false,
         };
-        Ok(if taken { None } else { Some(w) })
+        Ok(BridgeOut {
+            wrench: if taken { None } else { Some(w) },
+            truth,
+        })
     }
 
     /// Write the counters and the normal stream's position back.

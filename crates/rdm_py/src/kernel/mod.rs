@@ -178,14 +178,21 @@ impl LockstepKernel {
                     return Ok(false);
                 }
                 let (b, p) = (self.bridge.as_mut().unwrap(), self.plant.as_mut().unwrap());
-                let left = b.tick(py, t, p, self.leptrino.as_mut())?;
-                if let Some(w) = left {
+                let out = b.tick(py, t, p, self.leptrino.as_mut())?;
+                if let Some(w) = out.wrench {
                     // The Leptrino node's own checks (outside the limits, non-finite).
                     self.enter_python(py, t)?;
                     let r = self.leptrino_node(py).and_then(|n| {
                         n.call_method1("set_wrench_values", (pyo3::types::PyTuple::new(py, w)?,))
                     });
                     self.leave_python(LEPTRINO);
+                    r?;
+                }
+                if let Some((truth, touches)) = out.truth {
+                    // The ground-truth sample and its sink (the logger): Python's.
+                    self.enter_python(py, t)?;
+                    let r = truth.bind(py).call0();
+                    self.leave_python(touches);
                     r?;
                 }
                 Ok(true)
@@ -428,22 +435,7 @@ impl LockstepKernel {
     /// would differ from the Python loop's).
     fn set_touches(&mut self, index: usize, parts: Vec<String>) -> PyResult<()> {
         self.check_index(index)?;
-        let mut mask = 0;
-        for p in &parts {
-            mask |= match p.as_str() {
-                "plant" => PLANT,
-                "bridge" => BRIDGE,
-                "bank" => BANK,
-                "spinal" => SPINAL,
-                "leptrino" => LEPTRINO,
-                other => {
-                    return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                        "set_touches: unknown part {other:?}"
-                    )))
-                }
-            };
-        }
-        self.touches[index] = mask;
+        self.touches[index] = parts_mask(&parts)?;
         Ok(())
     }
 
@@ -531,6 +523,26 @@ impl LockstepKernel {
         }
         Ok(d)
     }
+}
+
+/// The mask of part names (`set_touches`).
+pub(crate) fn parts_mask(parts: &[String]) -> PyResult<u8> {
+    let mut mask = 0;
+    for p in parts {
+        mask |= match p.as_str() {
+            "plant" => PLANT,
+            "bridge" => BRIDGE,
+            "bank" => BANK,
+            "spinal" => SPINAL,
+            "leptrino" => LEPTRINO,
+            other => {
+                return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                    "unknown kernel part {other:?}"
+                )))
+            }
+        };
+    }
+    Ok(mask)
 }
 
 fn elapsed_ns(t0: std::time::Instant) -> u64 {

@@ -6,7 +6,7 @@
 //! sign-function iteration, which also detects a non-stabilising `K_j` (the closed loop
 //! sign is then not −I) so the caller can fall back to the cold method.
 
-use super::dense::{invert_in_place, norm1};
+use super::dense::{invert_in_place, mul_into, norm1, transpose_into};
 use super::{CareConfig, CareError, CareProblem, GainMatrix, InputWeight, StateMatrix, N_STATE};
 
 /// Step below which the Roberts iteration has converged.
@@ -77,8 +77,104 @@ pub(super) fn solve(
 
 /// Solves `AᵀX + XA + C = 0` for a Hurwitz A (Roberts' sign iteration with determinant
 /// scaling). Returns `None` if A is singular, not Hurwitz, or the bound is hit.
+///
+/// The iterates live in a fixed set of work matrices updated in place; every element is
+/// computed with the same floating-point operations in the same order as
+/// [`lyapunov_reference`] (the plain nalgebra-expression form the tests compare it with), so
+/// the result is bit-for-bit the same.
 fn lyapunov(a: &StateMatrix, c: &StateMatrix, max_iterations: usize) -> Option<StateMatrix> {
     // Invariant: A_kᵀX + XA_k + C_k = 0 for the same X; A_k → sign(A) = −I, C_k → 2X.
+    let mut a_k = *a;
+    let mut c_k = *c;
+    let mut a_inv = StateMatrix::zeros();
+    let mut a_inv_t = StateMatrix::zeros();
+    let mut product = StateMatrix::zeros();
+    let mut congruence = StateMatrix::zeros();
+    let mut change = StateMatrix::zeros();
+    let mut scaling = true;
+    let mut converged = false;
+    for _ in 0..max_iterations {
+        a_inv.copy_from(&a_k);
+        let log_det = invert_in_place(&mut a_inv).ok()?;
+        let scale = if scaling {
+            (-log_det / N_STATE as f64).exp()
+        } else {
+            1.0
+        };
+        if !scale.is_finite() || scale <= 0.0 {
+            return None;
+        }
+        let inverse_scale = 1.0 / scale;
+        // next_a = (a_k * scale + a_inv * (1 / scale)) * 0.5, and next_a - a_k
+        for ((a, d), ai) in a_k
+            .as_mut_slice()
+            .iter_mut()
+            .zip(change.as_mut_slice().iter_mut())
+            .zip(a_inv.as_slice().iter())
+        {
+            let next = (*a * scale + ai * inverse_scale) * 0.5;
+            *d = next - *a;
+            *a = next;
+        }
+        // next_c = (c_k * scale + a_invᵀ c_k a_inv * (1 / scale)) * 0.5
+        transpose_into(&a_inv, &mut a_inv_t);
+        mul_into(&a_inv_t, &c_k, &mut product);
+        mul_into(&product, &a_inv, &mut congruence);
+        for (c, m) in c_k
+            .as_mut_slice()
+            .iter_mut()
+            .zip(congruence.as_slice().iter())
+        {
+            *c = (*c * scale + m * inverse_scale) * 0.5;
+        }
+        let step = norm1(&change);
+        let size = norm1(&a_k);
+        if !size.is_finite() {
+            return None;
+        }
+        if step <= SCALING_OFF * size {
+            scaling = false;
+        }
+        if converged {
+            break;
+        }
+        if step <= LYAPUNOV_STEP_TOLERANCE * size {
+            converged = true;
+        }
+    }
+    lyapunov_result(converged, &a_k, &c_k)
+}
+
+/// The converged iterates' solution `X = C_k / 2` (symmetrized), or `None` when the iteration
+/// did not converge, A was not Hurwitz or X is not finite.
+fn lyapunov_result(converged: bool, a_k: &StateMatrix, c_k: &StateMatrix) -> Option<StateMatrix> {
+    if !converged {
+        return None;
+    }
+    // A non-Hurwitz A converges to a sign matrix other than −I.
+    let mut distance = *a_k;
+    for i in 0..N_STATE {
+        distance[(i, i)] += 1.0;
+    }
+    if norm1(&distance) > 1e-6 {
+        return None;
+    }
+    let x = c_k * 0.5;
+    let x = (x + x.transpose()) * 0.5;
+    if x.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    Some(x)
+}
+
+/// [`lyapunov`] written with nalgebra expressions (a new matrix per operation): the plain
+/// form the fast one is tested against bit for bit.
+#[cfg(test)]
+fn lyapunov_reference(
+    a: &StateMatrix,
+    c: &StateMatrix,
+    max_iterations: usize,
+) -> Option<StateMatrix> {
     let mut a_k = *a;
     let mut c_k = *c;
     let mut scaling = true;
@@ -113,21 +209,84 @@ fn lyapunov(a: &StateMatrix, c: &StateMatrix, max_iterations: usize) -> Option<S
             converged = true;
         }
     }
-    if !converged {
-        return None;
+    lyapunov_result(converged, &a_k, &c_k)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::SMatrix;
+
+    /// A small deterministic generator (no dev-dependency needed inside the crate).
+    struct Lcg(u64);
+
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        }
     }
-    // A non-Hurwitz A converges to a sign matrix other than −I.
-    let mut distance = a_k;
-    for i in 0..N_STATE {
-        distance[(i, i)] += 1.0;
+
+    fn bits<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> Vec<u64> {
+        m.iter().map(|v| v.to_bits()).collect()
     }
-    if norm1(&distance) > 1e-6 {
-        return None;
+
+    #[test]
+    fn mul_into_is_bitwise_nalgebra_product() {
+        let mut g = Lcg(7);
+        for _ in 0..200 {
+            let a = StateMatrix::from_fn(|_, _| g.next() * 1e3);
+            let b = StateMatrix::from_fn(|_, _| g.next() * 1e-2);
+            let mut out = StateMatrix::zeros();
+            mul_into(&a, &b, &mut out);
+            assert_eq!(bits(&out), bits(&(a * b)));
+            let b4 = SMatrix::<f64, 12, 4>::from_fn(|_, _| g.next());
+            let k = SMatrix::<f64, 4, 12>::from_fn(|_, _| g.next() * 50.0);
+            let mut out4 = StateMatrix::zeros();
+            mul_into(&b4, &k, &mut out4);
+            assert_eq!(bits(&out4), bits(&(b4 * k)));
+        }
+        // signed zeros and non-finite values propagate as in the product
+        let mut a = StateMatrix::zeros();
+        a[(0, 0)] = -0.0;
+        a[(1, 1)] = f64::INFINITY;
+        let b = StateMatrix::from_element(-0.0);
+        let mut out = StateMatrix::zeros();
+        mul_into(&a, &b, &mut out);
+        assert_eq!(bits(&out), bits(&(a * b)));
     }
-    let x = c_k * 0.5;
-    let x = (x + x.transpose()) * 0.5;
-    if x.iter().any(|v| !v.is_finite()) {
-        return None;
+
+    #[test]
+    fn lyapunov_is_bitwise_the_reference() {
+        let mut g = Lcg(11);
+        let mut solved = 0;
+        for trial in 0..300 {
+            // Hurwitz-ish: -d I + small noise; some trials not Hurwitz, some singular
+            let shift = [3.0, 1.0, 0.2, -0.5][trial % 4];
+            let noise = [0.1, 1.0, 3.0][trial % 3];
+            let a =
+                StateMatrix::from_fn(|i, j| g.next() * noise - if i == j { shift } else { 0.0 });
+            let m = StateMatrix::from_fn(|_, _| g.next());
+            let c = m * m.transpose() + StateMatrix::identity() * (trial as f64 * 0.01);
+            for bound in [3, 60] {
+                let fast = lyapunov(&a, &c, bound);
+                let plain = lyapunov_reference(&a, &c, bound);
+                assert_eq!(
+                    fast.map(|x| bits(&x)),
+                    plain.map(|x| bits(&x)),
+                    "trial {trial}"
+                );
+                solved += usize::from(fast.is_some());
+            }
+        }
+        assert!(solved > 50, "{solved}");
+        let singular = StateMatrix::zeros();
+        assert!(lyapunov(&singular, &singular, 60).is_none());
+        let mut nan = -StateMatrix::identity();
+        nan[(3, 4)] = f64::NAN;
+        assert!(lyapunov(&nan, &StateMatrix::identity(), 60).is_none());
     }
-    Some(x)
 }
