@@ -27,6 +27,47 @@ from rdm.scenarios.stack import Stack, build_stack
 Steps = Callable[[Stack], None]
 
 
+def _spinal_state(spinal) -> tuple:
+    """The Spinal mirror's busy-ms state the kernel writes back (docs/spinalkernel.md)."""
+    out = spinal.last_output
+    uart = spinal.uart
+    chain = uart._chain
+    links = None
+    if chain is not None:
+        droppable, tapped, end = chain
+        links = (
+            None if droppable is None else (droppable.dropped, droppable.bytes_lost),
+            None if tapped is None else (tapped.tx_bytes, tapped.rx_bytes),
+            None if end.peer is None else bytes(end.peer.inbox),
+        )
+    return (
+        spinal._next_control,
+        spinal.counters.control_steps,
+        None
+        if out is None
+        else (
+            type(out),
+            repr(out.duty),
+            out.quaternion.tobytes(),
+            out.angular_velocity.tobytes(),
+            out.events,
+        ),
+        spinal.duties,
+        spinal.duties is spinal._duties_to_master,
+        spinal._duties_to_master,
+        dict(spinal._last_pub),
+        spinal._next_pub_ms,
+        spinal._battery_due_ms,
+        spinal.battery_voltage,
+        dict(spinal.session.counts),
+        spinal.session._tx_used,
+        list(spinal.session.pending_frames),
+        (uart.bytes_in, uart.bytes_out, uart.bytes_discarded, uart.write_errors, uart.read_errors),
+        bytes(uart.pending),
+        links,
+    )
+
+
 def _state(stack: Stack) -> dict:
     """Every Python-visible counter and clock the kernel's fast paths keep."""
     plant = stack.plant
@@ -41,6 +82,7 @@ def _state(stack: Stack) -> dict:
         "spinal": stack.spinal.diagnostics(),
         "spinal_clock": (stack.spinal.now_ms, stack.spinal._now_s, stack.spinal._can_ms),
         "spinal_imu": (stack.spinal.gyro, stack.spinal.acc, stack.spinal.mag),
+        "spinal_busy": _spinal_state(stack.spinal),
         "master": (stack.spinal.master.tx_count, stack.spinal.master._pending_events),
         "boards": [(b.tx_count, b.changes[0], b.rx_count) for b in bank.boards],
         "bank_changes": bank._last_changes,
@@ -140,6 +182,13 @@ def test_hover_with_a_cut_uart_same_bytes_and_state(tmp_path: Path) -> None:
     assert fast["leptrino_foot"] > 1500
     assert stats["physics_fast"] == 4000
     assert fast["onboard"] == fast["mocap"] == fast["script"] == 0
+    # Spinal's routine busy ms ran in the kernel too (docs/spinalkernel.md): control steps
+    # (most of the 500 after the CAN boot), battery samples, imu and servo/states frames;
+    # the step with an event (the arming ack) went on in Python.
+    busy = stats["spinal_busy"]
+    assert busy["steps"] > 450 and busy["battery_samples"] > 100
+    assert busy["imu_frames"] > 400 and busy["servo_frames"] > 100
+    assert busy["finish_step"] >= 1
 
 
 def test_perching_contacts_same_bytes_and_state(tmp_path: Path) -> None:
@@ -157,6 +206,8 @@ def test_perching_contacts_same_bytes_and_state(tmp_path: Path) -> None:
     # Perched (1.17 s), the contact tracker only stamps the contact time: the kernel does
     # it; on the floor before take-off (other geoms touching, the anchor set) it is Python's.
     assert stats["tracker_fast"] > 1100
+    busy = stats["spinal_busy"]  # Spinal's busy ms in the kernel through the whole flight
+    assert busy["steps"] > 2500 and busy["imu_frames"] > 2000 and busy["servo_frames"] > 500
 
 
 def test_held_external_wrench_takes_the_python_step(tmp_path: Path) -> None:

@@ -1006,4 +1006,7 @@ class LockstepKernel:
     ``physics_ns``)."""
     def stats(self) -> dict[str, Any]:
         """Ticks per node on the fast path and in Python, physics steps, boundaries, contact
-        tracker updates; with ``profile`` the wall ns of each."""
+        tracker updates, the Spinal busy ms run in the kernel (``spinal_busy``: ``steps``,
+        ``battery_samples``, ``imu_frames``, ``servo_frames``, and the hand-overs to the
+        mirror's Python continuations ``finish_step`` / ``finish_publish``); with
+        ``profile`` the wall ns of each."""

@@ -87,15 +87,15 @@ _PUBLISHERS = (
 )
 
 
-#: The publishers the lockstep kernel leaves to the Python tick (docs/spinalkernel.md).
-_KERNEL_OTHER_PUBLISHERS = tuple(p for p in _PUBLISHERS if p[0] not in ("imu", "servo/states"))
+#: ``_next_due`` of a publisher that never published (due at once).
+_NEVER = -(2**62)
 
 
 def _next_due(last_pub: dict[str, int], key: str, period_ms: int, strict: bool) -> int:
     """First ms at which ``SpinalMirror._due(key, ...)`` returns True again."""
     last = last_pub.get(key)
     if last is None:
-        return -(2**62)
+        return _NEVER
     return last + period_ms + (1 if strict else 0)
 
 
@@ -1063,35 +1063,43 @@ class SpinalMirror:
         The kernel reads the IMU sample, battery input, ADC scale and battery voltage from
         the mirror itself when it uses them (another node may set them without a re-read)."""
         core = self.core
-        step_core = None
-        if (
-            core.__class__ is SpinalStep
-            and _duty_list is not None
+        master = self.master
+        step_core = (
+            core
+            if core.__class__ is SpinalStep
             and self.pwm_test is None
-            and getattr(self.master, "fast", False) is True
-        ):
-            step_core = core
+            and _duty_list is not None
+            and getattr(master, "fast", False) is True
+            else None
+        )
         session = self.session
         clock = session.clock
+        # session.publisher(name) for its cache hit, inline (else the lookup itself)
+        cache = session._publisher_cache
+        fresh = session._cached_slots == len(session.publishers)
         imu_topic = None
         if _imu_frame is not None and clock.__class__ is ClientClock:
-            try:
-                slot = session.publisher("imu")
-            except KeyError:
-                slot = None
+            slot = cache.get("imu") if fresh else None
+            if slot is None or slot.service is not None:
+                slot = self._kernel_publisher("imu")
             if slot is not None and slot.codec is self._imu_codec:
                 imu_topic = slot.topic_id
         servo_topic = servo_core = None
-        try:
-            slot = session.publisher("servo/states")
-        except KeyError:
-            slot = None
+        slot = cache.get("servo/states") if fresh else None
+        if slot is None or slot.service is not None:
+            slot = self._kernel_publisher("servo/states")
         if slot is not None and slot.codec is self._msg.servo_states:
             servo_core = self.servos.kernel_frame_core(slot.codec)
             if servo_core is not None:
                 servo_topic = slot.topic_id
-        last = self._last_pub
-        others = min(_next_due(last, k, period, st) for k, period, st in _KERNEL_OTHER_PUBLISHERS)
+        # min(_next_due(...)) of the other publishers, inline
+        get = self._last_pub.get
+        t = get("battery_voltage_status")
+        others = _NEVER if t is None else t + BATTERY_PUB_MS + 1
+        t = get("motor_pwms")
+        others = _NEVER if t is None else min(others, t + MOTOR_PWMS_PUB_MS + 1)
+        t = get("servo/torque_states")
+        others = _NEVER if t is None else min(others, t + SERVO_TORQUE_PUB_MS)
         uart = self.uart
         return (
             step_core,
@@ -1105,11 +1113,11 @@ class SpinalMirror:
             clock.synced,
             clock._sync_tick,
             clock._sync_ns,
-            last.get("imu"),
+            get("imu"),
             IMU_PUB_MS,
             servo_topic,
             servo_core,
-            last.get("servo/states"),
+            get("servo/states"),
             SERVO_STATES_PUB_MS,
             others,
             session.output_size,
@@ -1118,6 +1126,13 @@ class SpinalMirror:
             uart.writes_whole(),
             uart.max_pending,
         )
+
+    def _kernel_publisher(self, name: str) -> Any:
+        """``session.publisher(name)``, None for no such publisher."""
+        try:
+            return self.session.publisher(name)
+        except KeyError:
+            return None
 
     def kernel_finish_step(self, now_ms: int, tail: bool) -> None:
         """The rest of a kernel tick whose control step the kernel ran (``last_output``,

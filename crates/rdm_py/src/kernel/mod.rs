@@ -493,7 +493,10 @@ impl LockstepKernel {
     }
 
     /// `{"fast": [...], "python": [...], "physics_fast": n, "physics_python": n,
-    /// "boundaries": n}`: ticks per node index on each path.
+    /// "boundaries": n, ..., "spinal_busy": {...}}`: ticks per node index on each path;
+    /// `spinal_busy`: the Spinal busy-ms work done here (`steps`, `battery_samples`,
+    /// `imu_frames`, `servo_frames`) and the ticks handed to the mirror's continuations
+    /// (`finish_step`, `finish_publish`).
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
         let d = pyo3::types::PyDict::new(py);
         d.set_item("fast", self.counts.fast.clone())?;

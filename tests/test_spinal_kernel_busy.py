@@ -1,0 +1,118 @@
+"""Spinal's busy milliseconds inside the lockstep kernel (docs/spinalkernel.md).
+
+Oracle: the Python loop (``StackOptions.lockstep_kernel=False``), through
+``test_lockstep_kernel._same``: the same bytes in every log file and the same state of every
+node, the Spinal mirror's busy-ms state included (``_spinal_state``: control clock and
+counter, ``last_output``, duty lists and their identity, ``_last_pub``, publisher and
+battery times, the session's counters and TX ring, the UART pump's and the chain's counters,
+the bytes waiting at the PC's end). The kernel's ``stats()["spinal_busy"]`` shows which of
+its paths ran: routine steps, battery samples and frames, and the hand-overs to Python
+(``finish_step``: a step with an event; ``finish_publish``: a frame the builders, the TX
+ring or the output size decline).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from test_lockstep_kernel import NODES, _fast_counts, _same
+
+from rdm.scenarios.stack import Stack
+
+SPINAL = NODES.index("spinal")
+
+
+def test_kernel_busy_off_is_the_idle_kernel_path(tmp_path: Path) -> None:
+    """``SpinalMirror.kernel_busy = False``: the kernel runs only Spinal's idle ms (the
+    plain kernel path); switched on again, the busy ms come back to the kernel."""
+    counts: list[dict] = []
+
+    def steps(stack: Stack) -> None:
+        stack.spinal.kernel_busy = False
+        stack.loop.run(2.5)
+        if stack.loop.kernel is not None:
+            counts.append(dict(stack.loop.kernel.stats()["spinal_busy"]))
+        stack.spinal.kernel_busy = True
+        stack.loop.run(1.0)
+
+    stats = _same(tmp_path, steps)
+    assert counts == [
+        {
+            "steps": 0,
+            "battery_samples": 0,
+            "imu_frames": 0,
+            "servo_frames": 0,
+            "finish_step": 0,
+            "finish_publish": 0,
+        }
+    ]
+    busy = stats["spinal_busy"]
+    assert busy["steps"] > 180 and busy["imu_frames"] > 150 and busy["battery_samples"] > 40
+    # busy off: every control step and publication was a Python tick
+    assert stats["python"][SPINAL] > 2.5 * 400
+
+
+def test_declined_frames_battery_and_step_events_go_to_python(tmp_path: Path) -> None:
+    """Each hand-over: a TX ring too small for the imu frame and an output size too small
+    for servo/states (``finish_publish``; the session counts ``tx_ring_full`` /
+    ``tx_too_large`` and logs), a non-finite battery sample (the Python tick counts it), a
+    UART cut longer than the command timeout (the fail-safe event of a step:
+    ``finish_step``), then back to routine."""
+    seen: list[tuple] = []
+
+    def steps(stack: Stack) -> None:
+        spinal = stack.spinal
+        session = spinal.session
+        stack.loop.run(2.2)
+        session._tx_chunks = 1  # a 68-byte imu frame needs 2 chunks of 64
+        stack.loop.run(0.05)
+        session._tx_chunks = 128
+        stack.loop.run(0.05)
+        session.output_size = 70  # imu (68) and the log line (69) fit, servo/states not
+        stack.loop.run(0.1)
+        session.output_size = 1024
+        stack.loop.run(0.05)
+        spinal.adc_scale = math.nan  # every battery sample rejected in Python
+        stack.loop.run(0.1)
+        spinal.adc_scale = 1.0
+        stack.loop.run(0.2)
+        stack.drop_uart(True)  # 0.8 s > the 0.5 s command timeout: fail-safe
+        stack.loop.run(0.8)
+        stack.drop_uart(False)
+        stack.loop.run(0.6)
+        seen.append(
+            (
+                session.counts["tx_ring_full"],
+                session.counts["tx_too_large"],
+                spinal.counters.rejected["battery_non_finite"],
+                spinal.counters.failsafes["failsafe_timeout"],
+            )
+        )
+
+    stats = _same(tmp_path, steps, log=False)
+    # the run drove each case (the same counts in both loops: _same compared them)
+    ring_full, too_large, battery, failsafe = seen[0]
+    assert ring_full >= 9 and too_large >= 4 and battery == 5 and failsafe >= 1
+    busy = stats["spinal_busy"]
+    # the declined frames' ms went on in Python (those with a command received were
+    # Python ticks anyway)
+    assert busy["finish_publish"] >= 10
+    assert busy["finish_step"] >= 2  # the arming ack, the fail-safe
+    assert busy["steps"] > 500 and busy["imu_frames"] > 400
+    assert _fast_counts(NODES, stats)["spinal"] > 2000
+
+
+def test_battery_and_imu_set_from_outside_are_read_when_used(tmp_path: Path) -> None:
+    """The bridge sets Spinal's battery input (a voltage of time: the bridge's Python tick,
+    which re-reads no Spinal plan) and IMU sample (every ms, in the kernel): the kernel's
+    battery samples and steps use the values of that moment."""
+
+    def steps(stack: Stack) -> None:
+        stack.loop.run(1.8)
+        stack.bridge._battery = lambda t: 25.2 - 0.7 * math.floor((t - 1.8) / 0.13)
+        stack.loop.run(1.2)
+
+    stats = _same(tmp_path, steps)
+    busy = stats["spinal_busy"]
+    assert busy["battery_samples"] > 50 and busy["steps"] > 200
