@@ -116,3 +116,30 @@ def test_battery_and_imu_set_from_outside_are_read_when_used(tmp_path: Path) -> 
     stats = _same(tmp_path, steps)
     busy = stats["spinal_busy"]
     assert busy["battery_samples"] > 50 and busy["steps"] > 200
+
+
+def test_output_written_by_the_mirrors_commit_method_is_the_same(tmp_path: Path) -> None:
+    """``kernel_tx_direct = False``: the kernel hands its deferred frames to
+    ``SpinalMirror.kernel_commit_tx`` (the plain path of its own write through the UART
+    chain), the line open and cut."""
+    calls: list[int] = []
+
+    def steps(stack: Stack) -> None:
+        spinal = stack.spinal
+        spinal.kernel_tx_direct = False
+        inner = spinal.kernel_commit_tx
+
+        def commit(data: bytes, frames: int, imu: int, servo: int) -> None:
+            calls.append(frames)
+            inner(data, frames, imu, servo)
+
+        spinal.kernel_commit_tx = commit
+        stack.loop.run(2.4)
+        stack.drop_uart(True)
+        stack.loop.run(0.3)
+        stack.drop_uart(False)
+        stack.loop.run(0.5)
+
+    stats = _same(tmp_path, steps)
+    assert stats["spinal_busy"]["imu_frames"] > 250
+    assert sum(calls) == stats["spinal_busy"]["imu_frames"] + stats["spinal_busy"]["servo_frames"]

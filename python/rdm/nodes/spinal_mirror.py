@@ -257,6 +257,9 @@ class SpinalMirror:
         #: ``imu`` / ``servo/states`` publications) itself (:meth:`kernel_plan`'s busy part);
         #: False: only the idle ms (the plain kernel path, docs/spinalkernel.md).
         self.kernel_busy = True
+        #: The kernel writes its deferred output and the TX counters itself, through the
+        #: UART chain (as :meth:`kernel_commit_tx` does); False: it calls that method.
+        self.kernel_tx_direct = True
         self.servos = ServoBridge(self.master, fast=self._fast)
         #: The Rust master's one-call duty hand-over (None: the Python master).
         self._try_duties = getattr(self.master, "try_set_motor_duties", None)
@@ -1058,7 +1061,9 @@ class SpinalMirror:
           :meth:`_publish_servo_states_frame`'s Rust frame; the last publication ms of both
           and the first ms any other publisher is due;
         * the TX ring (output size, chunk size, chunks; -1 when not empty) and whether the
-          UART writes any send of up to ``max_pending`` bytes whole (``UartPump.writes_whole``).
+          UART writes any send of up to ``max_pending`` bytes whole (``UartPump.writes_whole``),
+          and the UART chain (``UartPump._chain``) when the kernel writes the output itself
+          (:attr:`kernel_tx_direct`), else None (it calls :meth:`kernel_commit_tx`).
 
         The kernel reads the IMU sample, battery input, ADC scale and battery voltage from
         the mirror itself when it uses them (another node may set them without a re-read)."""
@@ -1125,6 +1130,7 @@ class SpinalMirror:
             session._tx_chunks if session._tx_used == 0 else -1,
             uart.writes_whole(),
             uart.max_pending,
+            uart._chain if self.kernel_tx_direct else None,
         )
 
     def _kernel_publisher(self, name: str) -> Any:
@@ -1156,7 +1162,9 @@ class SpinalMirror:
         """The kernel's publications since the last write back: ``frames`` frames queued
         and taken by ``take_output`` (``imu`` on ``imu``, ``servo`` on ``servo/states``),
         ``data`` their bytes in order, written in one :meth:`UartPump.send` (whole, as the
-        plan's ``writes_whole`` said: the same bytes and counters as one send per tick)."""
+        plan's ``writes_whole`` said: the same bytes and counters as one send per tick).
+        With :attr:`kernel_tx_direct` the kernel does the same without this call: the
+        counters, then ``UartPump._write_chain``'s effect of a whole write and ``bytes_out``."""
         self.session.counts["tx_frames"] += frames
         published = self.counters.published
         if imu:

@@ -51,6 +51,20 @@ struct Names {
     servo_states: Name,
     battery_sample: Name,
     commit_tx: Name,
+    session: Name,
+    counts: Name,
+    tx_frames: Name,
+    published: Name,
+    uart: Name,
+    bytes_out: Name,
+    dropped: Name,
+    bytes_lost: Name,
+    peer: Name,
+    inbox: Name,
+    extend: Name,
+    tx_bytes: Name,
+    tx_file: Name,
+    write: Name,
 }
 
 /// Plan of `SpinalMirror.kernel_plan()`: the window in which a tick is only the CAN ms.
@@ -98,6 +112,35 @@ struct Busy {
     chunks: Option<usize>,
     writes_whole: bool,
     max_pending: usize,
+    /// The UART chain `(droppable, tapped, end)` when the kernel writes the output itself
+    /// (`SpinalMirror.kernel_tx_direct`); None: `kernel_commit_tx`.
+    chain: Option<Chain>,
+}
+
+/// `UartPump._chain` (`inproc_chain`): the optional cuttable link and capture tap, the
+/// in-process end.
+struct Chain {
+    droppable: Option<Py<PyAny>>,
+    tapped: Option<Py<PyAny>>,
+    end: Py<PyAny>,
+}
+
+impl Chain {
+    fn load(v: &Bound<'_, PyAny>) -> PyResult<Option<Chain>> {
+        if v.is_none() {
+            return Ok(None);
+        }
+        let t = v.cast::<PyTuple>()?;
+        let opt = |i: usize| -> PyResult<Option<Py<PyAny>>> {
+            let x = t.get_item(i)?;
+            Ok(if x.is_none() { None } else { Some(x.unbind()) })
+        };
+        Ok(Some(Chain {
+            droppable: opt(0)?,
+            tapped: opt(1)?,
+            end: t.get_item(2)?.unbind(),
+        }))
+    }
 }
 
 /// What `ready` found the tick at `now` to be.
@@ -288,6 +331,7 @@ impl Busy {
             chunks: usize::try_from(chunks).ok(),
             writes_whole: t.get_item(21)?.is_truthy()?,
             max_pending: t.get_item(22)?.extract()?,
+            chain: Chain::load(&t.get_item(23)?)?,
         })
     }
 }
@@ -328,6 +372,20 @@ impl SpinalFast {
                 servo_states: Name::new(py, "servo/states"),
                 battery_sample: Name::new(py, "_battery_sample"),
                 commit_tx: Name::new(py, "kernel_commit_tx"),
+                session: Name::new(py, "session"),
+                counts: Name::new(py, "counts"),
+                tx_frames: Name::new(py, "tx_frames"),
+                published: Name::new(py, "published"),
+                uart: Name::new(py, "uart"),
+                bytes_out: Name::new(py, "bytes_out"),
+                dropped: Name::new(py, "dropped"),
+                bytes_lost: Name::new(py, "bytes_lost"),
+                peer: Name::new(py, "peer"),
+                inbox: Name::new(py, "_inbox"),
+                extend: Name::new(py, "extend"),
+                tx_bytes: Name::new(py, "tx_bytes"),
+                tx_file: Name::new(py, "_tx"),
+                write: Name::new(py, "write"),
             },
             master,
             wire,
@@ -799,10 +857,15 @@ impl SpinalFast {
             if d.frames > 0 {
                 let data = PyBytes::new(py, &self.tx);
                 self.tx.clear();
-                node.call_method1(
-                    n.commit_tx.key(py),
-                    (data, d.frames, d.imu_frames, d.servo_frames),
-                )?;
+                match p.busy.as_ref().and_then(|b| b.chain.as_ref()) {
+                    Some(chain) => Self::commit_tx(n, node, chain, &data, &d)?,
+                    None => {
+                        node.call_method1(
+                            n.commit_tx.key(py),
+                            (data, d.frames, d.imu_frames, d.servo_frames),
+                        )?;
+                    }
+                }
             }
         }
         self.tx.clear();
@@ -811,6 +874,61 @@ impl SpinalFast {
         self.steady = false;
         self.dirty = false;
         Ok(())
+    }
+
+    /// `SpinalMirror.kernel_commit_tx(data, ...)` without the call: the session's and the
+    /// mirror's counters, then `UartPump.send(data)` of a whole write through the chain
+    /// (`_write_chain`: the cut line counts the bytes lost; else the peer's inbox and the
+    /// capture tap take them) and `bytes_out` (the plan's `writes_whole` held since).
+    fn commit_tx(
+        n: &Names,
+        node: &Bound<'_, PyAny>,
+        chain: &Chain,
+        data: &Bound<'_, PyBytes>,
+        d: &Deferred,
+    ) -> PyResult<()> {
+        let py = node.py();
+        let add = |obj: &Bound<'_, PyAny>, key: &Name, k: i64| -> PyResult<()> {
+            let key = key.key(py);
+            let v: i64 = obj.get_item(key)?.extract()?;
+            obj.set_item(key, v + k)
+        };
+        add(
+            &n.counts.get(&n.session.get(node)?)?,
+            &n.tx_frames,
+            d.frames,
+        )?;
+        let published = n.published.get(&n.counters.get(node)?)?;
+        if d.imu_frames > 0 {
+            add(&published, &n.imu, d.imu_frames)?;
+        }
+        if d.servo_frames > 0 {
+            add(&published, &n.servo_states, d.servo_frames)?;
+        }
+        let len = i64::try_from(data.as_bytes().len()).unwrap_or(i64::MAX);
+        let cut = match &chain.droppable {
+            Some(link) => n.dropped.truthy(link.bind(py))?,
+            None => false,
+        };
+        if let (true, Some(link)) = (cut, &chain.droppable) {
+            let link = link.bind(py);
+            n.bytes_lost.set(link, n.bytes_lost.i64(link)? + len)?;
+        } else {
+            let peer = n.peer.get(chain.end.bind(py))?;
+            n.inbox
+                .get(&peer)?
+                .call_method1(n.extend.key(py), (data,))?;
+            if let Some(tap) = &chain.tapped {
+                let tap = tap.bind(py);
+                n.tx_bytes.set(tap, n.tx_bytes.i64(tap)? + len)?;
+                let file = n.tx_file.get(tap)?;
+                if !file.is_none() {
+                    file.call_method1(n.write.key(py), (data,))?;
+                }
+            }
+        }
+        let uart = n.uart.get(node)?;
+        n.bytes_out.set(&uart, n.bytes_out.i64(&uart)? + len)
     }
 
     /// `SpinalMirror.kernel_finish_wire_tick(now_ms)` (after a flush of every part).
