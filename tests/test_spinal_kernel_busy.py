@@ -143,3 +143,29 @@ def test_output_written_by_the_mirrors_commit_method_is_the_same(tmp_path: Path)
     stats = _same(tmp_path, steps)
     assert stats["spinal_busy"]["imu_frames"] > 250
     assert sum(calls) == stats["spinal_busy"]["imu_frames"] + stats["spinal_busy"]["servo_frames"]
+
+
+def test_a_clock_of_another_class_leaves_the_publications_to_python(tmp_path: Path) -> None:
+    """The kernel's stamps are ``ClientClock.now``'s: with a clock of another class (here a
+    subclass, as the mirror's own imu frame path declines it too) every publication is the
+    Python tick's, while the control steps stay in the kernel."""
+    from rdm.protocol.rosserial.timesync import ClientClock
+
+    class OtherClock(ClientClock):
+        pass
+
+    counts: list[dict] = []
+
+    def steps(stack: Stack) -> None:
+        stack.loop.run(2.4)
+        if stack.loop.kernel is not None:
+            counts.append(dict(stack.loop.kernel.stats()["spinal_busy"]))
+        stack.spinal.session.clock.__class__ = OtherClock
+        stack.loop.run(0.6)
+
+    stats = _same(tmp_path, steps)
+    before, after = counts[0], stats["spinal_busy"]
+    assert before["imu_frames"] > 100 and before["servo_frames"] > 25
+    assert after["imu_frames"] == before["imu_frames"]
+    assert after["servo_frames"] == before["servo_frames"]
+    assert after["steps"] > before["steps"] + 60

@@ -1057,7 +1057,8 @@ class SpinalMirror:
         * the battery filter and sample period;
         * ``configured``, ``last_output``; ``imu_topic`` when the ``imu`` publication is
           :meth:`_publish_imu_frame`'s (the checked codec, a :class:`ClientClock`), the
-          clock's sync state; ``servo_topic``/``servo_core`` when ``servo/states`` is
+          clock's sync state (None unless a :class:`ClientClock`: then no publication
+          here); ``servo_topic``/``servo_core`` when ``servo/states`` is
           :meth:`_publish_servo_states_frame`'s Rust frame; the last publication ms of both
           and the first ms any other publisher is due;
         * the TX ring (output size, chunk size, chunks; -1 when not empty) and whether the
@@ -1083,7 +1084,8 @@ class SpinalMirror:
         cache = session._publisher_cache
         fresh = session._cached_slots == len(session.publishers)
         imu_topic = None
-        if _imu_frame is not None and clock.__class__ is ClientClock:
+        client_clock = clock.__class__ is ClientClock  # the stamps the kernel computes
+        if _imu_frame is not None and client_clock:
             slot = cache.get("imu") if fresh else None
             if slot is None or slot.service is not None:
                 slot = self._kernel_publisher("imu")
@@ -1115,9 +1117,9 @@ class SpinalMirror:
             session.configured,
             self.last_output,
             imu_topic,
-            clock.synced,
-            clock._sync_tick,
-            clock._sync_ns,
+            clock.synced if client_clock else None,
+            clock._sync_tick if client_clock else None,
+            clock._sync_ns if client_clock else None,
             get("imu"),
             IMU_PUB_MS,
             servo_topic,

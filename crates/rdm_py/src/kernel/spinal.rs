@@ -94,8 +94,9 @@ struct Busy {
     has_output: bool,
     output: Option<SpinalOutput>,
     imu_topic: Option<u16>,
-    /// `ClientClock`'s sync state as `client_stamp` takes it (None: not synced); false
-    /// when its values are not exact (then `spinal_imu_frame` declines: the Python path).
+    /// `ClientClock`'s sync state as `client_stamp` takes it (None: not synced); `sync_ok`
+    /// false when the clock is no `ClientClock` or its values are not exact (then
+    /// `spinal_imu_frame` declines): publications are then the Python tick's.
     sync: Option<(i64, i64)>,
     sync_ok: bool,
     imu_last: Option<i64>,
@@ -540,9 +541,10 @@ impl SpinalFast {
         let publish = if publish_due && b.configured && (control_due || b.has_output) {
             let imu_due = b.imu_last.is_none_or(|t| m - t >= b.imu_period);
             let servo_due = b.servo_last.is_none_or(|t| m - t >= b.servo_period);
-            let imu_ok = b.imu_last.is_some() && b.imu_topic.is_some() && b.sync_ok;
+            let imu_ok = b.imu_last.is_some() && b.imu_topic.is_some();
             let servo_ok = b.servo_last.is_some() && b.servo_topic.is_some();
             if m >= b.others_next
+                || !b.sync_ok
                 || (imu_due && !imu_ok)
                 || (servo_due && !servo_ok)
                 || (!control_due && b.output.is_none())
