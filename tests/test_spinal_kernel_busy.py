@@ -16,8 +16,11 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from test_lockstep_kernel import NODES, _fast_counts, _same
+import numpy as np
+from test_lockstep_kernel import NODES, _fast_counts, _same, _spinal_state
 
+from rdm.protocol.rosserial.timesync import ClientClock
+from rdm.scenarios.hover import HOVER_Z, make_script
 from rdm.scenarios.stack import Stack
 
 SPINAL = NODES.index("spinal")
@@ -149,7 +152,6 @@ def test_a_clock_of_another_class_leaves_the_publications_to_python(tmp_path: Pa
     """The kernel's stamps are ``ClientClock.now``'s: with a clock of another class (here a
     subclass, as the mirror's own imu frame path declines it too) every publication is the
     Python tick's, while the control steps stay in the kernel."""
-    from rdm.protocol.rosserial.timesync import ClientClock
 
     class OtherClock(ClientClock):
         pass
@@ -169,3 +171,36 @@ def test_a_clock_of_another_class_leaves_the_publications_to_python(tmp_path: Pa
     assert after["imu_frames"] == before["imu_frames"]
     assert after["servo_frames"] == before["servo_frames"]
     assert after["steps"] > before["steps"] + 60
+
+
+def test_python_code_sees_the_same_spinal_state_at_every_script_tick(tmp_path: Path) -> None:
+    """A scenario script (100 Hz; it may read anything: the kernel writes every part back
+    before it) records the Spinal mirror's busy-ms state each time: the same records in
+    both loops, through the cut and restore of the UART."""
+    records: list[list] = []
+
+    def make() -> object:
+        inner = make_script(np.array([0.483, 0.0, HOVER_Z]))
+        mine: list = []
+        records.append(mine)
+
+        def script(stack: Stack, now: float) -> None:
+            inner(stack, now)
+            sp = stack.spinal
+            mine.append((now, sp.now_ms, sp._now_s, sp._can_ms, _spinal_state(sp)))
+
+        return script
+
+    def steps(stack: Stack) -> None:
+        stack.loop.run(2.5)
+        stack.drop_uart(True)
+        stack.loop.run(0.3)
+        stack.drop_uart(False)
+        stack.loop.run(0.5)
+
+    stats = _same(tmp_path, steps, make)
+    kernel, python = records
+    assert len(kernel) == len(python) == 330
+    for a, b in zip(kernel, python, strict=True):
+        assert a == b, a[0]
+    assert stats["spinal_busy"]["steps"] > 300

@@ -497,8 +497,9 @@ class StatusNode:
 
     name = "status"
     period = 0.025
-    #: It only reads the onboard node and the Spinal mirror: no lockstep-kernel part.
-    kernel_touches = ()
+    #: It reads the onboard node and the Spinal mirror (its duty list, which the lockstep
+    #: kernel's Spinal busy ms defer: docs/spinalkernel.md), and changes neither.
+    kernel_touches = ("spinal",)
 
     def __init__(self, stack: Stack) -> None:
         self.stack = stack

@@ -88,21 +88,32 @@ pub struct LockstepKernel {
 }
 
 impl LockstepKernel {
-    fn flush_all(&mut self, py: Python<'_>) -> PyResult<()> {
-        if let Some(p) = self.plant.as_mut() {
-            p.flush(py)?;
+    /// Write back the deferred state of the parts in `mask`.
+    fn flush(&mut self, py: Python<'_>, mask: u8) -> PyResult<()> {
+        if mask & PLANT != 0 {
+            if let Some(p) = self.plant.as_mut() {
+                p.flush(py)?;
+            }
         }
-        if let Some(b) = self.bridge.as_mut() {
-            b.flush(py)?;
+        if mask & BRIDGE != 0 {
+            if let Some(b) = self.bridge.as_mut() {
+                b.flush(py)?;
+            }
         }
-        if let Some(b) = self.bank.as_mut() {
-            b.flush(py)?;
+        if mask & BANK != 0 {
+            if let Some(b) = self.bank.as_mut() {
+                b.flush(py)?;
+            }
         }
-        if let Some(s) = self.spinal.as_mut() {
-            s.flush(py)?;
+        if mask & SPINAL != 0 {
+            if let Some(s) = self.spinal.as_mut() {
+                s.flush(py)?;
+            }
         }
-        if let Some(l) = self.leptrino.as_mut() {
-            l.flush(py)?;
+        if mask & LEPTRINO != 0 {
+            if let Some(l) = self.leptrino.as_mut() {
+                l.flush(py)?;
+            }
         }
         Ok(())
     }
@@ -136,10 +147,12 @@ impl LockstepKernel {
         }
     }
 
-    /// Before Python code runs at time `t`: every deferred state written, the clock set.
-    fn enter_python(&mut self, py: Python<'_>, t: f64) -> PyResult<()> {
+    /// Before Python code that may read or change the parts in `mask` runs at time `t`:
+    /// their deferred state written, the clock set. (The other parts' deferred state waits:
+    /// that code neither reads nor changes it.)
+    fn enter_python(&mut self, py: Python<'_>, t: f64, mask: u8) -> PyResult<()> {
         self.boundaries += 1;
-        self.flush_all(py)?;
+        self.flush(py, mask)?;
         if self.clock_t != Some(t) {
             self.clock.bind(py).setattr("now", t)?;
             self.clock_t = Some(t);
@@ -147,16 +160,17 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// After Python code ran: the plans of the parts it may have changed are re-read on
-    /// their next use.
+    /// After Python code ran: the plans of the parts in `mask` (what it may have changed;
+    /// the same mask as `enter_python`'s) are re-read on their next use.
     fn leave_python(&mut self, mask: u8) {
         self.invalidate(mask);
     }
 
     fn python_tick(&mut self, py: Python<'_>, i: usize, t: f64) -> PyResult<()> {
-        self.enter_python(py, t)?;
+        let touches = self.touches[i];
+        self.enter_python(py, t, touches)?;
         let r = self.ticks[i].bind(py).call1((t,));
-        self.leave_python(self.touches[i]);
+        self.leave_python(touches);
         r?;
         self.counts.python[i] += 1;
         Ok(())
@@ -181,7 +195,7 @@ impl LockstepKernel {
                 let out = b.tick(py, t, p, self.leptrino.as_mut())?;
                 if let Some(w) = out.wrench {
                     // The Leptrino node's own checks (outside the limits, non-finite).
-                    self.enter_python(py, t)?;
+                    self.enter_python(py, t, LEPTRINO)?;
                     let r = self.leptrino_node(py).and_then(|n| {
                         n.call_method1("set_wrench_values", (pyo3::types::PyTuple::new(py, w)?,))
                     });
@@ -190,7 +204,7 @@ impl LockstepKernel {
                 }
                 if let Some((truth, touches)) = out.truth {
                     // The ground-truth sample and its sink (the logger): Python's.
-                    self.enter_python(py, t)?;
+                    self.enter_python(py, t, touches)?;
                     let r = truth.bind(py).call0();
                     self.leave_python(touches);
                     r?;
@@ -216,8 +230,9 @@ impl LockstepKernel {
                 }
                 let tick = s.tick(py, t)?;
                 if !matches!(tick, SpinalTick::Done) {
-                    // The mirror's continuation of this tick, after every part's flush.
-                    self.enter_python(py, t)?;
+                    // The mirror's continuation of this tick (it reads and changes only
+                    // the mirror: its part is written back first).
+                    self.enter_python(py, t, SPINAL)?;
                     let s = self.spinal.as_ref().unwrap();
                     let r = match tick {
                         SpinalTick::Done => Ok(()),
@@ -262,7 +277,7 @@ impl LockstepKernel {
                 return Ok(());
             }
         }
-        self.enter_python(py, t)?;
+        self.enter_python(py, t, PLANT)?;
         let r = physics.bind(py).call1((1,));
         self.leave_python(PLANT);
         r?;
@@ -429,9 +444,10 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// What node `index`'s Python tick may change, by part name (`"plant"`, `"bridge"`,
-    /// `"bank"`, `"spinal"`, `"leptrino"`); the default is every part. Only the plans of
-    /// these parts are re-read after it ran (a part left out must not change: the logs
+    /// What node `index`'s Python tick may read or change, by part name (`"plant"`,
+    /// `"bridge"`, `"bank"`, `"spinal"`, `"leptrino"`); the default is every part. Only
+    /// these parts' deferred state is written back before it runs, and only their plans are
+    /// re-read after (a part left out must be neither read nor changed by it: the logs
     /// would differ from the Python loop's).
     fn set_touches(&mut self, index: usize, parts: Vec<String>) -> PyResult<()> {
         self.check_index(index)?;
@@ -464,7 +480,7 @@ impl LockstepKernel {
         self.invalidate(ALL);
         let r = self.run_inner(py, n);
         let last_t = (self.k - 1).max(0) as f64 * self.dt;
-        let f = self.flush_all(py);
+        let f = self.flush(py, ALL);
         if r.is_ok() && self.k > k0 && self.clock_t != Some(last_t) {
             self.clock.bind(py).setattr("now", last_t)?;
         }
