@@ -210,6 +210,15 @@ def test_perching_contacts_same_bytes_and_state(tmp_path: Path) -> None:
     assert busy["steps"] > 2500 and busy["imu_frames"] > 2000 and busy["servo_frames"] > 500
 
 
+def test_boot_idle_ms_of_spinal_run_in_the_kernel(tmp_path: Path) -> None:
+    def steps(stack: Stack) -> None:
+        stack.loop.run(1.3)  # before the CAN master runs (it starts at 1.4 s)
+        assert stack.spinal.master.state.value != "running"
+
+    stats = _same(tmp_path, steps)
+    assert stats["fast"][2] > 700  # Spinal's boot ms with nothing but the master's tick
+
+
 def test_held_external_wrench_takes_the_python_step(tmp_path: Path) -> None:
     def steps(stack: Stack) -> None:
         stack.loop.run(2.5)

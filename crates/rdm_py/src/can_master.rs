@@ -187,7 +187,7 @@ impl CanMaster {
     /// `tick_wire`'s `(state_index, pending_events, frames_sent, log_len)` of the last
     /// [`tick_wire_steady`] call (zeros before the first).
     #[getter]
-    fn last_wire_tick(&self) -> (u8, usize, usize, usize) {
+    pub(crate) fn last_wire_tick(&self) -> (u8, usize, usize, usize) {
         self.last_wire
     }
 

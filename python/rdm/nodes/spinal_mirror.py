@@ -1017,6 +1017,8 @@ class SpinalMirror:
         tick at ms m itself when m is inside the idle window, before the battery, control and
         publisher times, and one past the CAN ms. None when no tick can run so: the plain
         tick, bytes waiting, the master not steady on the wire, events or output pending.
+        Before the master first runs, the last item is its phase index (the kernel then runs
+        the idle ms of the boot: a CAN ms that stays in that phase); else None.
         The kernel writes ``now_ms``, ``_now_s``, ``_can_ms`` and the master's ``tx_count``
         and ``_pending_events`` back itself, as the steady tick leaves them."""
         if not self._fast or self.now_ms is None or self._next_control is None:
@@ -1026,15 +1028,21 @@ class SpinalMirror:
         master = self.master
         if inbox is None or inbox or link is None or self._can_ms is None:
             return None
-        if not self._master_was_running or master.state is not MasterState.RUNNING:
+        # Before the master first runs (boot, enumeration, configuration) the tick's CAN ms
+        # is the master's plain tick_ms, with no duty hand-over.
+        boot = not self._master_was_running and master.state is not MasterState.RUNNING
+        if not boot and (not self._master_was_running or master.state is not MasterState.RUNNING):
             return None
-        if master._wire is not link or self.duties is not self._duties_to_master:
+        if master._wire is not link or (not boot and self.duties is not self._duties_to_master):
             return None
         ch = self._wire_channel
         if len(ch.buses) != 1 or ch.taps or ch.clock.__class__ is not SimClock:
             return None
         if master._events or self.session.pending_frames or self.uart.pending:
             return None
+        next_pub = self._next_pub_ms
+        if boot and (not self.session.configured or self.last_output is None):
+            next_pub = 2**62  # _publish returns at once until Python code changes that
         return (
             self.now_ms,
             self._now_s,
@@ -1043,8 +1051,9 @@ class SpinalMirror:
             self._battery_due_ms,
             self._next_control,
             self._can_ms,
-            self._next_pub_ms,
-            self._kernel_busy_plan() if self.kernel_busy else None,
+            next_pub,
+            self._kernel_busy_plan() if self.kernel_busy and not boot else None,
+            master.core.state_index if boot else None,
         )
 
     def _kernel_busy_plan(self) -> tuple:

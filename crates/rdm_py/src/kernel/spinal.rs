@@ -79,6 +79,9 @@ struct Plan {
     next_pub_ms: i64,
     /// None: busy ms are the Python tick's.
     busy: Option<Busy>,
+    /// Before the CAN master first runs: its phase index (booting, enumerating,
+    /// configuring), which a CAN ms here must leave unchanged; None: the steady master.
+    boot_state: Option<u8>,
 }
 
 /// The busy part of the plan (`SpinalMirror._kernel_busy_plan`), kept up to date here.
@@ -432,6 +435,7 @@ impl SpinalFast {
                 } else {
                     Some(Busy::load(busy.cast::<PyTuple>()?)?)
                 },
+                boot_state: t.get_item(9)?.extract()?,
             })
         };
         self.loaded = true;
@@ -658,6 +662,7 @@ impl SpinalFast {
                 &self.master,
                 &self.wire,
                 self.drain_at,
+                None, // busy ms only with the steady master
                 py,
                 m,
                 now,
@@ -757,6 +762,7 @@ impl SpinalFast {
             &self.master,
             &self.wire,
             self.drain_at,
+            p.boot_state,
             py,
             m,
             now,
@@ -769,22 +775,35 @@ impl SpinalFast {
         }
     }
 
-    /// The steady CAN ms (`tick_wire_steady`); false: not steady (`Finish`).
+    /// The CAN ms (`tick_wire_steady`): the steady master's, or, before it first runs
+    /// (`boot_state`), one that stays in that phase with no event and a short log (what
+    /// `RustCanMaster.tick_ms` + `apply_wire_tick` then do: count the frames, pending
+    /// events 0); false: the tick's result is for Python (`Finish`).
     #[allow(clippy::too_many_arguments)]
     fn can_tick(
         master: &Py<CanMaster>,
         wire: &Py<CanWire>,
         drain_at: usize,
+        boot_state: Option<u8>,
         py: Python<'_>,
         m: i64,
         now: f64,
         tx_delta: &mut i64,
         steady: &mut bool,
     ) -> bool {
-        let sent = master
-            .bind(py)
-            .borrow_mut()
-            .tick_wire_steady(m, now, wire.bind(py), drain_at);
+        let mut master = master.bind(py).borrow_mut();
+        let sent = master.tick_wire_steady(m, now, wire.bind(py), drain_at);
+        let sent = match boot_state {
+            None => sent,
+            Some(phase) => {
+                let (state, events, sent, logged) = master.last_wire_tick();
+                if state == phase && events == 0 && logged < drain_at {
+                    i64::try_from(sent).unwrap_or(i64::MAX)
+                } else {
+                    -1
+                }
+            }
+        };
         if sent >= 0 {
             *tx_delta += sent;
             *steady = true;
