@@ -155,18 +155,23 @@ impl PlantLink {
     }
 
     /// `FootContactTracker.update` when it only stamps the contact time (the cached view
-    /// holds this step's contacts, one of them the plate's, the anchor is set); false: the
-    /// Python update must run.
+    /// holds this step's contacts, one of them the plate's, the anchor is set) or changes
+    /// nothing (no plate contact, nothing remembered); false: the Python update must run.
     fn track_contact(&self, py: Python<'_>, ncon: i64) -> PyResult<bool> {
         let Some((view_ncon, view)) = &self.tracker_view else {
             return Ok(false);
         };
-        if *view_ncon != ncon || !self.anchored {
+        if *view_ncon != ncon {
             return Ok(false);
         }
         let view = view.bind(py).try_readonly()?;
         let plate = view.as_array().iter().any(|g| self.plate_geoms.contains(g));
         if !plate {
+            // Contacts without the plate and nothing remembered: `_track(False)` resets a
+            // reset tracker (no change). Anything remembered: Python releases it.
+            return Ok(self.tracker_idle);
+        }
+        if !self.anchored {
             return Ok(false);
         }
         let time = self.names.time.f64(self.data.bind(py))?;
