@@ -43,10 +43,11 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
     a :class:`PlantBridge` with the Rust coupling, a :class:`NeuronBankNode` on a
     :class:`CanWireLink`, a :class:`SpinalMirror` whose Rust master ticks on that wire and a
     :class:`LeptrinoSensorNode` get their steady ticks run there. After any other node's
-    Python tick every plan is re-read, unless its class declares what it may change in
-    ``kernel_touches`` (part names: "plant", "bridge", "bank", "spinal", "leptrino"; e.g.
-    the mocap node reads the plant, the onboard node writes into the Spinal and Leptrino
-    UARTs). Returns the kernel."""
+    Python tick every part is flushed and every plan re-read, unless the node (its class or
+    the instance) declares what it may read or change in ``kernel_touches`` (part names:
+    "plant", "bridge", "bank", "spinal", "leptrino"; e.g. the mocap node reads the plant, the
+    onboard node writes into the Spinal and reads the Leptrino UART, a scenario script
+    declares its own). Returns the kernel."""
     nodes = loop.nodes
     index = {id(n): i for i, n in enumerate(nodes)}
     schedule = [[index[id(e.node)] for e in slot] for slot in loop._schedule]
@@ -71,7 +72,7 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
             kernel.attach_spinal(i, node, node.master.core, node._wire_link.wire, DRAIN_AT)
             spinal = node
     for i, node in enumerate(nodes):
-        touches = getattr(type(node), "kernel_touches", None)
+        touches = getattr(node, "kernel_touches", None)
         if touches is not None and kind_of(node) is None:
             kernel.set_touches(i, list(touches))
     for i, node in enumerate(nodes):

@@ -24,6 +24,7 @@ def make_script(target: np.ndarray):
             stack.onboard.set_target(target, 0.0)
             stack.onboard.arm()
 
+    script.kernel_touches = ()  # type: ignore[attr-defined]  # only the onboard node
     return script
 
 

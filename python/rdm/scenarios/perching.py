@@ -192,6 +192,10 @@ class PerchingScript:
     ``stack`` only needs ``.onboard`` (the onboard node) and whatever ``cog(stack)`` reads:
     the process runner (:mod:`rdm.sim.processes`) passes the onboard node's latest mocap."""
 
+    #: The lockstep kernel's parts it reads or changes (``rdm.nodes.lockstep_kernel``): the
+    #: plant, through ``cog`` (the ground truth); the rest is the onboard node.
+    kernel_touches = ("plant",)
+
     def __init__(
         self,
         motion=PERCHED_MOTION,

@@ -157,14 +157,21 @@ class MocapNode:
 
 
 class ScriptNode:
-    """Runs a scenario's script ``f(now)`` (targets, perch requests, pushes) at its period."""
+    """Runs a scenario's script ``f(now)`` (targets, perch requests, pushes) at its period.
+    ``kernel_touches``: the lockstep kernel's parts the script reads or changes
+    (``rdm.nodes.lockstep_kernel``); None (default): any."""
 
     def __init__(
-        self, fn: Callable[[float], None], period: float = 0.01, name: str = "script"
+        self,
+        fn: Callable[[float], None],
+        period: float = 0.01,
+        name: str = "script",
+        kernel_touches: tuple[str, ...] | None = None,
     ) -> None:
         self.fn = fn
         self.period = period
         self.name = name
+        self.kernel_touches = kernel_touches
 
     def tick(self, now: float) -> None:
         self.fn(now)
@@ -468,7 +475,8 @@ def build_stack(
         status_log,
     )
     if script is not None:
-        nodes.append(ScriptNode(lambda t: script(stack, t), script_period))
+        touches = getattr(script, "kernel_touches", None)  # what the scenario declares
+        nodes.append(ScriptNode(lambda t: script(stack, t), script_period, kernel_touches=touches))
     nodes.append(StatusNode(stack))
     if opt.progress is not None:
         report = opt.progress

@@ -481,14 +481,25 @@ impl SpinalFast {
             if !sample.is_finite() {
                 return Ok(false);
             }
-            let v = n.battery_voltage.get(node)?;
-            Some(if v.is_none() {
-                sample
-            } else {
-                let Some(v) = exact_f64(&v) else {
-                    return Ok(false);
-                };
-                b.battery_filter * v + (1.0 - b.battery_filter) * sample
+            // The low-passed voltage: the one a busy ms here left (not yet written back),
+            // else the mirror's.
+            let v = match self.deferred.battery {
+                Some((_, v)) => Some(v),
+                None => {
+                    let v = n.battery_voltage.get(node)?;
+                    if v.is_none() {
+                        None
+                    } else {
+                        let Some(v) = exact_f64(&v) else {
+                            return Ok(false);
+                        };
+                        Some(v)
+                    }
+                }
+            };
+            Some(match v {
+                None => sample,
+                Some(v) => b.battery_filter * v + (1.0 - b.battery_filter) * sample,
             })
         } else {
             None
@@ -516,7 +527,7 @@ impl SpinalFast {
             else {
                 return Ok(false);
             };
-            let voltage = match battery {
+            let voltage = match battery.or(self.deferred.battery.map(|(_, v)| v)) {
                 Some(v) => v,
                 None => {
                     let v = n.battery_voltage.get(node)?;
