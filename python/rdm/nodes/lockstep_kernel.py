@@ -2,13 +2,13 @@
 
 ``Lockstep.run*`` without pacing, progress or profile runs its ticks through the kernel when
 one is attached (:func:`attach_kernel`): the same nodes in the same order at the same base
-ticks as ``Lockstep._run_fast``, but the loop itself and the steady milliseconds of the
-simulated firmware side (plant bridge, Neuron bank, Spinal's idle CAN ms, Leptrino
-streaming, the plant step) run in Rust on the cores the Python nodes already use. Every
-other tick is the node's own Python ``tick``. Before any Python code runs, the kernel writes
-back what its fast ticks changed (each node's ``kernel_commit``); after, it re-reads each
-node's ``kernel_plan``. So the logs are the same bytes as without the kernel
-(tests/test_lockstep_kernel.py; docs/kernel.md).
+ticks as ``Lockstep._run_fast``, but the loop itself and the routine milliseconds of the
+simulated firmware side (plant bridge, Neuron bank, Spinal's idle, boot and routine busy
+ms, Leptrino streaming, the plant step) run in Rust on the cores the Python nodes already
+use. Every other tick is the node's own Python ``tick``. Before Python code runs, the kernel
+writes back what its fast ticks changed of the parts that code may read or change; after,
+it re-reads those parts' ``kernel_plan``. So the logs are the same bytes as without the
+kernel (tests/test_lockstep_kernel.py, tests/test_spinal_kernel_busy.py; docs/kernel.md).
 """
 
 from __future__ import annotations
