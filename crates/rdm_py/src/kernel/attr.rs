@@ -3,7 +3,7 @@
 //! back before any Python code runs).
 
 use pyo3::prelude::*;
-use pyo3::types::PyString;
+use pyo3::types::{PyString, PyTuple};
 
 /// An attribute name interned once (cheap repeated lookups).
 pub(crate) struct Name(Py<PyString>);
@@ -46,5 +46,15 @@ impl Name {
     /// `obj.name is None`.
     pub(crate) fn is_none(&self, obj: &Bound<'_, PyAny>) -> PyResult<bool> {
         Ok(self.get(obj)?.is_none())
+    }
+}
+
+/// `node.kernel_plan()`: the plan tuple of the node's fast path, or None when it has none now.
+pub(crate) fn read_plan<'py>(node: &Bound<'py, PyAny>) -> PyResult<Option<Bound<'py, PyTuple>>> {
+    let plan = node.call_method0(pyo3::intern!(node.py(), "kernel_plan"))?;
+    if plan.is_none() {
+        Ok(None)
+    } else {
+        Ok(Some(plan.cast_into::<PyTuple>()?))
     }
 }

@@ -3,9 +3,9 @@
 //! replies on the wire; the boards' Python counters written back before Python code runs.
 
 use pyo3::prelude::*;
-use pyo3::types::{PyList, PyTuple};
+use pyo3::types::PyList;
 
-use super::attr::Name;
+use super::attr::{read_plan, Name};
 use crate::can_master::CanWire;
 use crate::neuron_bank::NeuronBank;
 
@@ -69,10 +69,9 @@ impl BankFast {
         if self.loaded {
             return Ok(());
         }
-        let plan = self.node.bind(py).call_method0("kernel_plan")?;
-        self.ok = !plan.is_none();
-        if self.ok {
-            let t = plan.cast::<PyTuple>()?;
+        let plan = read_plan(self.node.bind(py))?;
+        self.ok = plan.is_some();
+        if let Some(t) = plan {
             let last = t.get_item(0)?;
             self.last_changes.clear();
             if !last.is_none() {

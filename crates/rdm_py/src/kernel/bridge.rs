@@ -6,7 +6,7 @@ use numpy::PyArrayMethods;
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PyTuple};
 
-use super::attr::Name;
+use super::attr::{read_plan, Name};
 use super::leptrino::LeptrinoFast;
 use super::plant::PlantLink;
 use crate::neuron_bank::NeuronBank;
@@ -143,11 +143,7 @@ impl BridgeFast {
         if self.loaded {
             return Ok(());
         }
-        let plan = self.node.bind(py).call_method0("kernel_plan")?;
-        self.plan = if plan.is_none() {
-            None
-        } else {
-            let t = plan.cast::<PyTuple>()?;
+        self.plan = if let Some(t) = read_plan(self.node.bind(py))? {
             let normals = t.get_item(10)?;
             let wrench_normals = if normals.is_none() {
                 None
@@ -195,6 +191,8 @@ impl BridgeFast {
                 targets: t.get_item(11)?.extract()?,
                 duties: t.get_item(12)?.extract()?,
             })
+        } else {
+            None
         };
         self.loaded = true;
         Ok(())

@@ -6,6 +6,8 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyTuple};
 use rdm_core::sim::leptrino_stream::encode_force_frame;
 
+use super::attr::read_plan;
+
 /// Plan of `LeptrinoSensorNode.kernel_plan()`.
 struct Plan {
     streaming: bool,
@@ -55,12 +57,10 @@ impl LeptrinoFast {
         if self.loaded {
             return Ok(());
         }
-        let plan = self.node.bind(py).call_method0("kernel_plan")?;
         self.plan = None;
         self.frame_valid = false;
         self.wrench_new = false;
-        if !plan.is_none() {
-            let t = plan.cast::<PyTuple>()?;
+        if let Some(t) = read_plan(self.node.bind(py))? {
             let wrench: [f64; 6] = t.get_item(6)?.extract()?;
             let frame = t.get_item(7)?;
             self.wrench = wrench;

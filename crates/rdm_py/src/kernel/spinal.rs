@@ -20,7 +20,7 @@ use rdm_core::control::attitude::SpinalOutput;
 use rdm_core::firmware::rosserial_frame::{client_stamp, imu_frame, ImuValues};
 use rdm_core::N_ROTORS;
 
-use super::attr::Name;
+use super::attr::{read_plan, Name};
 use crate::attitude::{PySpinalStep, SpinalStepOutput};
 use crate::can_master::{CanMaster, CanWire};
 use crate::spinal_mirror::{clamp_duty, exact_i64, float3, servo_states_frame_into, ServoFrame};
@@ -415,11 +415,7 @@ impl SpinalFast {
         if self.loaded {
             return Ok(());
         }
-        let plan = self.node.bind(py).call_method0("kernel_plan")?;
-        self.plan = if plan.is_none() {
-            None
-        } else {
-            let t = plan.cast::<PyTuple>()?;
+        self.plan = if let Some(t) = read_plan(self.node.bind(py))? {
             let busy = t.get_item(8)?;
             Some(Plan {
                 now_ms: t.get_item(0)?.extract()?,
@@ -437,6 +433,8 @@ impl SpinalFast {
                 },
                 boot_state: t.get_item(9)?.extract()?,
             })
+        } else {
+            None
         };
         self.loaded = true;
         Ok(())
