@@ -15,7 +15,6 @@ use rdm_core::N_ROTORS;
 
 use crate::attitude::SpinalStepOutput;
 use crate::can_master::CanMaster;
-use crate::errors::RdmError;
 
 /// An exact Python int (not bool, not a subclass) that fits i64.
 pub(crate) fn exact_i64(v: &Bound<'_, PyAny>) -> Option<i64> {
@@ -214,41 +213,12 @@ fn spinal_servo_states_frame<'py>(
     let Ok(master) = master.try_borrow() else {
         return Ok(declined);
     };
-    let core = master.core_ref();
-    let sending = || {
-        core.neurons()
-            .iter()
-            .flat_map(|n| n.servos())
-            .enumerate()
-            .filter(|(_, s)| s.send_data_flag)
-    };
-    let mut n = 0usize;
-    for (i, _) in sending() {
-        if i > usize::from(u8::MAX) {
-            return Ok(declined);
-        }
-        n += 1;
+    let mut out = Vec::new();
+    match servo_states_frame_into(master.core_ref(), topic, (sec, nsec), &mut out) {
+        ServoFrame::Empty => Ok(py.None().into_bound(py)),
+        ServoFrame::Declined => Ok(declined),
+        ServoFrame::Written(_) => Ok(PyBytes::new(py, &out).into_any()),
     }
-    if n == 0 {
-        return Ok(py.None().into_bound(py));
-    }
-    let servos = sending().map(|(i, s)| ServoStateValues {
-        index: u8::try_from(i).unwrap_or(u8::MAX),
-        angle: s.angle,
-        temp: s.temperature,
-        load: s.current,
-        error: s.error,
-    });
-    let frame = PyBytes::new_with(py, servo_states_frame_len(n), |buf| {
-        if write_servo_states_frame(topic, (sec, nsec), servos, buf) {
-            Ok(())
-        } else {
-            Err(RdmError::new_err(
-                "spinal_servo_states_frame: the frame does not fit",
-            ))
-        }
-    })?;
-    Ok(frame.into_any())
 }
 
 /// Add the helpers to the module.

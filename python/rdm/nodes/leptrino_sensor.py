@@ -204,8 +204,8 @@ class LeptrinoSensorNode:
     # ------------------------------------------------------------ lockstep kernel
     def kernel_plan(self) -> tuple | None:
         """What ``rdm._rdm.LockstepKernel`` needs to run :meth:`tick` in Rust while no host
-        command is waiting: (streaming, limits, rated, temperature, sensor number, frames
-        sent, wrench, the cached frame of that wrench or None), or None when the tick has
+        command is waiting: (streaming, limits, rated, temperature, sensor number, wrench,
+        the cached frame of that wrench or None), or None when the tick has
         no Rust form now (bytes from the host, a UART other than an open in-process pipe
         whose writes are whole, a temperature or sensor number the Rust encoder does not
         take) (docs/kernel.md)."""
@@ -224,7 +224,7 @@ class LeptrinoSensorNode:
         if cache is not None and cache[0] is w and cache[1] == temp and cache[2] == no:
             frame = cache[3]
         rated = tuple(float(v) for v in self.model.rated)
-        return (self.streaming, self._limits, rated, temp, no, self.frames_sent, w, frame)
+        return (self.streaming, self._limits, rated, temp, no, w, frame)
 
     def kernel_commit(
         self, data: bytes, frames: int, wrench: tuple[float, ...], frame: bytes | None

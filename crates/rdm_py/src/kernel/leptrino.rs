@@ -15,7 +15,6 @@ struct Plan {
     rated: [f64; 6],
     temperature: i64,
     sensor_no: i64,
-    frames_sent: i64,
 }
 
 pub(crate) struct LeptrinoFast {
@@ -61,8 +60,8 @@ impl LeptrinoFast {
         self.frame_valid = false;
         self.wrench_new = false;
         if let Some(t) = read_plan(self.node.bind(py))? {
-            let wrench: [f64; 6] = t.get_item(6)?.extract()?;
-            let frame = t.get_item(7)?;
+            let wrench: [f64; 6] = t.get_item(5)?.extract()?;
+            let frame = t.get_item(6)?;
             self.wrench = wrench;
             if !frame.is_none() {
                 self.frame.clear();
@@ -76,7 +75,6 @@ impl LeptrinoFast {
                 rated: t.get_item(2)?.extract()?,
                 temperature: t.get_item(3)?.extract()?,
                 sensor_no: t.get_item(4)?.extract()?,
-                frames_sent: t.get_item(5)?.extract()?,
             });
         }
         self.loaded = true;
@@ -149,10 +147,10 @@ impl LeptrinoFast {
         if !self.dirty {
             return Ok(());
         }
-        let Some(plan) = &mut self.plan else {
+        if self.plan.is_none() {
             self.dirty = false;
             return Ok(());
-        };
+        }
         let wrench = PyTuple::new(py, self.wrench)?;
         let frame = if self.frame_valid && !self.wrench_new {
             Some(PyBytes::new(py, &self.frame))
@@ -160,7 +158,6 @@ impl LeptrinoFast {
             None
         };
         let data = PyBytes::new(py, &self.out);
-        plan.frames_sent += self.frames;
         self.node
             .bind(py)
             .call_method1("kernel_commit", (data, self.frames, wrench, frame))?;
