@@ -628,18 +628,8 @@ class OnboardNode:
         return self._send(self.session.publish, topic, msg)
 
     def _publish_payload(self, topic: str, payload: bytes) -> bool:
-        """:meth:`_publish` of a message already serialized with the topic's codec
-        (:meth:`_send` written out: one call less for each of the tick's publishes)."""
-        try:
-            self.session.publish_payload(topic, payload)
-        except TopicNotNegotiated:
-            self.counts[f"not_negotiated:{topic}"] += 1
-            return False
-        except PayloadTooLarge:
-            self.counts[f"too_large:{topic}"] += 1
-            return False
-        self.published[topic] += 1
-        return True
+        """:meth:`_publish` of a message already serialized with the topic's codec."""
+        return self._send(self.session.publish_payload, topic, payload)
 
     def _send(self, publish: Callable[[str, Any], int], topic: str, what: Any) -> bool:
         """One publish: refusals counted per topic, sends counted in ``published``."""

@@ -868,17 +868,7 @@ class SpinalMirror:
             last["imu"] = t = now_ms
             if not self._publish_imu_frame(now_ms):
                 stamp = self.session.now(now_ms)
-                out = self.last_output
-                self._publish_topic(
-                    "imu",
-                    self._msg.imu.new(
-                        stamp=stamp,
-                        acc=list(self.acc),
-                        gyro=out.angular_velocity.tolist(),
-                        mag=list(self.mag),
-                        quaternion=out.quaternion.tolist(),
-                    ),
-                )
+                self._publish_topic("imu", self._imu_message(stamp))
         next_ms = t + IMU_PUB_MS
         t = get("battery_voltage_status")
         if t is None or now_ms - t > BATTERY_PUB_MS:
@@ -968,20 +958,21 @@ class SpinalMirror:
             self.counters.published["servo/states"] += 1
         return True
 
-    def _publish_due(self, now_ms: int) -> None:
+    def _imu_message(self, stamp: Any) -> Any:
+        """The ``spinal/Imu`` message of the present sample and estimate."""
         out = self.last_output
+        return self._msg.imu.new(
+            stamp=stamp,
+            acc=list(self.acc),
+            gyro=out.angular_velocity.tolist(),
+            mag=list(self.mag),
+            quaternion=out.quaternion.tolist(),
+        )
+
+    def _publish_due(self, now_ms: int) -> None:
         stamp = self.session.now(now_ms)
         if self._due("imu", now_ms, IMU_PUB_MS, strict=False):
-            self._publish_topic(
-                "imu",
-                self._msg.imu.new(
-                    stamp=stamp,
-                    acc=list(self.acc),
-                    gyro=out.angular_velocity.tolist(),
-                    mag=list(self.mag),
-                    quaternion=out.quaternion.tolist(),
-                ),
-            )
+            self._publish_topic("imu", self._imu_message(stamp))
         if (
             self._due("battery_voltage_status", now_ms, BATTERY_PUB_MS, strict=True)
             and self.battery_voltage is not None

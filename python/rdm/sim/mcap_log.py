@@ -253,12 +253,7 @@ class McapLogger:
                 cid = known[0]
                 ns = self._time_ns(t)
                 seq = self._seq.get(cid, 0)
-                code = batch.core.add_record(cid, seq, ns, values)
-                if code:
-                    self._seq[cid] = seq + 1
-                    if code != 1:
-                        batch.after(code, cid, ns, seq, b"")
-                    self.messages += 1
+                if self._batched(batch, cid, seq, ns, batch.core.add_record(cid, seq, ns, values)):
                     return
             # Flat records (the 100 Hz truth and status): the same text, written faster.
             text = encode_record(values)
@@ -268,6 +263,17 @@ class McapLogger:
         doc = _jsonable(dict(values))
         cid = self.json_channel(topic, doc)
         self._add(cid, t, json.dumps(doc, separators=(",", ":")).encode())
+
+    def _batched(self, batch: Any, cid: int, seq: int, ns: int, code: int) -> bool:
+        """After a batch ``add_*`` call returned ``code``: True when the batch took the
+        message (sequence and count advanced, a full chunk handed on), else False."""
+        if not code:
+            return False
+        self._seq[cid] = seq + 1
+        if code != 1:
+            batch.after(code, cid, ns, seq, b"")
+        self.messages += 1
+        return True
 
     def log_truth(self, truth: Any, topic: str = "/plant/ground_truth") -> None:
         """Log a :class:`rdm.plant.GroundTruth` (every field) at its own time."""
@@ -285,11 +291,7 @@ class McapLogger:
                 ns = self._time_ns(float(truth.time))
                 seq = self._seq.get(cid, 0)
                 code = batch.core.add_fields(cid, seq, ns, truth.__dict__, keys)
-                if code:
-                    self._seq[cid] = seq + 1
-                    if code != 1:
-                        batch.after(code, cid, ns, seq, b"")
-                    self.messages += 1
+                if self._batched(batch, cid, seq, ns, code):
                     return
         # attrgetter: every field in one C call, in field order (as the dict comprehension).
         self.log_json(topic, float(truth.time), dict(zip(keys, values(truth), strict=True)))

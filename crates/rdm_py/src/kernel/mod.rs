@@ -37,6 +37,31 @@ const SPINAL: u8 = 8;
 const LEPTRINO: u8 = 16;
 const ALL: u8 = PLANT | BRIDGE | BANK | SPINAL | LEPTRINO;
 
+/// A fast part as a Python call's boundary handles it: its deferred state written back,
+/// its plan forgotten.
+trait Part {
+    fn flush(&mut self, py: Python<'_>) -> PyResult<()>;
+    fn invalidate(&mut self);
+}
+
+macro_rules! part {
+    ($t:ty) => {
+        impl Part for $t {
+            fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
+                <$t>::flush(self, py)
+            }
+            fn invalidate(&mut self) {
+                <$t>::invalidate(self)
+            }
+        }
+    };
+}
+part!(PlantLink);
+part!(BridgeFast);
+part!(BankFast);
+part!(SpinalFast);
+part!(LeptrinoFast);
+
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Kind {
     Python,
@@ -88,31 +113,22 @@ pub struct LockstepKernel {
 }
 
 impl LockstepKernel {
+    /// Every attached fast part with its mask bit.
+    fn parts(&mut self) -> [(u8, Option<&mut dyn Part>); 5] {
+        [
+            (PLANT, self.plant.as_mut().map(|p| p as &mut dyn Part)),
+            (BRIDGE, self.bridge.as_mut().map(|p| p as &mut dyn Part)),
+            (BANK, self.bank.as_mut().map(|p| p as &mut dyn Part)),
+            (SPINAL, self.spinal.as_mut().map(|p| p as &mut dyn Part)),
+            (LEPTRINO, self.leptrino.as_mut().map(|p| p as &mut dyn Part)),
+        ]
+    }
+
     /// Write back the deferred state of the parts in `mask`.
     fn flush(&mut self, py: Python<'_>, mask: u8) -> PyResult<()> {
-        if mask & PLANT != 0 {
-            if let Some(p) = self.plant.as_mut() {
-                p.flush(py)?;
-            }
-        }
-        if mask & BRIDGE != 0 {
-            if let Some(b) = self.bridge.as_mut() {
-                b.flush(py)?;
-            }
-        }
-        if mask & BANK != 0 {
-            if let Some(b) = self.bank.as_mut() {
-                b.flush(py)?;
-            }
-        }
-        if mask & SPINAL != 0 {
-            if let Some(s) = self.spinal.as_mut() {
-                s.flush(py)?;
-            }
-        }
-        if mask & LEPTRINO != 0 {
-            if let Some(l) = self.leptrino.as_mut() {
-                l.flush(py)?;
+        for (bit, part) in self.parts() {
+            if let (true, Some(part)) = (mask & bit != 0, part) {
+                part.flush(py)?;
             }
         }
         Ok(())
@@ -120,29 +136,9 @@ impl LockstepKernel {
 
     /// Forget the plans of the parts in `mask` (Python code may have changed them).
     fn invalidate(&mut self, mask: u8) {
-        if mask & PLANT != 0 {
-            if let Some(p) = self.plant.as_mut() {
-                p.invalidate();
-            }
-        }
-        if mask & BRIDGE != 0 {
-            if let Some(b) = self.bridge.as_mut() {
-                b.invalidate();
-            }
-        }
-        if mask & BANK != 0 {
-            if let Some(b) = self.bank.as_mut() {
-                b.invalidate();
-            }
-        }
-        if mask & SPINAL != 0 {
-            if let Some(s) = self.spinal.as_mut() {
-                s.invalidate();
-            }
-        }
-        if mask & LEPTRINO != 0 {
-            if let Some(l) = self.leptrino.as_mut() {
-                l.invalidate();
+        for (bit, part) in self.parts() {
+            if let (true, Some(part)) = (mask & bit != 0, part) {
+                part.invalidate();
             }
         }
     }

@@ -273,19 +273,7 @@ class ClientSession:
         if topic_id >= C.FIRST_USER_TOPIC_ID and not self.configured:
             self.counts["tx_not_configured"] += 1
             return 0
-        frame = encode_frame(topic_id, payload)
-        if len(frame) > self.output_size:
-            self.counts["tx_too_large"] += 1
-            self.log(C.LogLevel.ERROR, C.LOG_DROPPED_TOO_LARGE)
-            return -1
-        chunks = -(-len(frame) // self._tx_chunk_bytes)
-        if self._tx_used + chunks > self._tx_chunks:
-            self.counts["tx_ring_full"] += 1  # the firmware drops the frame silently
-            return -1
-        self._tx.append(frame)
-        self._tx_used += chunks
-        self.counts["tx_frames"] += 1
-        return len(frame)
+        return self.send_frame(topic_id, encode_frame(topic_id, payload))
 
     def send_frame(self, topic_id: int, frame: bytes) -> int:
         """:meth:`_send` of a frame built elsewhere: ``frame`` must be
