@@ -204,3 +204,40 @@ def test_python_code_sees_the_same_spinal_state_at_every_script_tick(tmp_path: P
     for a, b in zip(kernel, python, strict=True):
         assert a == b, a[0]
     assert stats["spinal_busy"]["steps"] > 300
+
+
+def test_boot_busy_ms_run_in_the_kernel_with_the_same_state(tmp_path: Path) -> None:
+    """Before the CAN master first runs (booting, enumerating, configuring: 0-1.5 s) the
+    busy ms are the kernel's too: the control step with no duty hand-over (the master's
+    motor number is still 0: an empty duty list, as ``_step_tail``), the imu frames, and
+    servo/states with no message (no servo reported yet). The same bytes and state as the
+    Python loop at the end of the boot, across the switch to RUNNING and after it; the
+    Spinal mirror's Python ticks in the boot are only those with UART bytes."""
+    seen: list[tuple] = []
+
+    def steps(stack: Stack) -> None:
+        stack.loop.run(1.45)
+        spinal = stack.spinal
+        kernel = stack.loop.kernel
+        seen.append(
+            (
+                spinal.master.state.name,
+                spinal.master.motor_number,
+                list(spinal.duties),
+                spinal._last_pub.get("servo/states") is not None,
+                None if kernel is None else dict(kernel.stats()["spinal_busy"]),
+                None if kernel is None else kernel.stats()["python"][SPINAL],
+            )
+        )
+        stack.loop.run(0.35)
+
+    stats = _same(tmp_path, steps)
+    (k_state, k_motors, k_duties, k_servo, k_busy, k_python), py_seen = seen
+    assert (k_state, k_motors, k_duties, k_servo) == py_seen[:4] == ("CONFIGURING", 0, [], True)
+    assert k_busy is not None and k_python is not None
+    # 1.45 s at 200 Hz: every step but the first ones (before the session's first frame)
+    assert k_busy["steps"] > 280 and k_busy["imu_frames"] > 200
+    assert k_busy["finish_step"] == 0 and k_busy["finish_publish"] == 0
+    # the rosserial handshake and the onboard's 40 Hz commands: about 60 ticks, not 580
+    assert k_python < 120
+    assert stats["spinal_busy"]["steps"] > k_busy["steps"] + 60

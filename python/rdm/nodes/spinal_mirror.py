@@ -1043,7 +1043,11 @@ class SpinalMirror:
             self._next_control,
             self._can_ms,
             next_pub,
-            self._kernel_busy_plan() if self.kernel_busy and not boot else None,
+            # In the boot a busy ms needs an output already (else the kernel's step would
+            # make _publish live while next_pub above says never).
+            self._kernel_busy_plan()
+            if self.kernel_busy and (not boot or self.last_output is not None)
+            else None,
             master.core.state_index if boot else None,
         )
 

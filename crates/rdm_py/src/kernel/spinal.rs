@@ -171,6 +171,10 @@ struct StepInput {
     mag: [f64; 3],
     voltage: f64,
     motors: usize,
+    /// The duty list is the clamped controller output (`_duty_list`); false: `motors` idle
+    /// duties (`_step_tail` before the CAN model is adopted: the master's motor number is
+    /// not yet the controller's).
+    from_output: bool,
 }
 
 /// The publications of a tick: which are due, the stamp, the `imu` sample's acc and mag.
@@ -511,10 +515,10 @@ impl SpinalFast {
                 return Ok(false); // a catch-up step follows: the Python tick
             }
             let motors = self.master.bind(py).try_borrow()?.core_ref().motor_number;
-            if motors == 0
-                || motors > N_ROTORS
-                || motors != core.bind(py).try_borrow()?.motor_count()
-            {
+            let from_output = motors != 0 && motors == core.bind(py).try_borrow()?.motor_count();
+            // The steady master: the controller's own duties only. During the boot
+            // `_step_tail` gives `motors` idle duties when the numbers differ (no hand-over).
+            if motors > N_ROTORS || (p.boot_state.is_none() && !from_output) {
                 return Ok(false);
             }
             let three = |name: &Name| -> PyResult<Option<[f64; 3]>> {
@@ -546,6 +550,7 @@ impl SpinalFast {
                 mag,
                 voltage,
                 motors,
+                from_output,
             })
         } else {
             None
@@ -609,6 +614,7 @@ impl SpinalFast {
         p.now_ms = m;
         self.dirty = true;
         let decision = std::mem::replace(&mut self.decision, Decision::Idle);
+        let boot = p.boot_state.is_some();
         if let Decision::Busy(busy) = decision {
             let b = p.busy.as_mut().ok_or_else(|| {
                 pyo3::exceptions::PyRuntimeError::new_err("kernel: Spinal busy tick without plan")
@@ -625,6 +631,7 @@ impl SpinalFast {
                 mag,
                 voltage,
                 motors,
+                from_output,
             }) = busy.step
             {
                 let core = b.core.as_ref().ok_or_else(|| {
@@ -651,27 +658,36 @@ impl SpinalFast {
                     n: motors,
                 };
                 for (v, &x) in duties.values.iter_mut().zip(out.control.duty.iter()) {
-                    *v = clamp_duty(x, b.idle_duty);
+                    *v = if from_output {
+                        clamp_duty(x, b.idle_duty)
+                    } else {
+                        b.idle_duty
+                    };
                 }
                 d.duties = Some(duties);
-                let handed = self
-                    .master
-                    .bind(py)
-                    .try_borrow_mut()?
-                    .try_set_duty_slice(&duties.values[..motors]);
-                d.duties_handed = handed;
-                if !handed {
-                    self.counts.finish_step += 1;
-                    return Ok(SpinalTick::FinishStep(m, false));
+                if boot {
+                    // `_can` before the master runs hands no duties over.
+                    d.duties_handed = false;
+                } else {
+                    let handed = self
+                        .master
+                        .bind(py)
+                        .try_borrow_mut()?
+                        .try_set_duty_slice(&duties.values[..motors]);
+                    d.duties_handed = handed;
+                    if !handed {
+                        self.counts.finish_step += 1;
+                        return Ok(SpinalTick::FinishStep(m, false));
+                    }
+                    d.handed = Some(duties);
                 }
-                d.handed = Some(duties);
             }
             p.can_ms = m;
             if !Self::can_tick(
                 &self.master,
                 &self.wire,
                 self.drain_at,
-                None, // busy ms only with the steady master
+                p.boot_state,
                 py,
                 m,
                 now,
@@ -723,7 +739,9 @@ impl SpinalFast {
                     }
                 }
                 let mut servo_sent = false;
-                if servo_due {
+                // Before the master runs no servo has reported: `states_frame` gives no
+                // message (the publication's time is still taken).
+                if servo_due && !boot {
                     let (Some(core), Some(topic)) = (b.servo_core.as_ref(), b.servo_topic) else {
                         self.counts.finish_publish += 1;
                         return Ok(SpinalTick::FinishPublish(m));
