@@ -274,6 +274,14 @@ def _vector_plain(value, n):
         ("0.5", 1.0, 2.0),
         ("x", 1.0, 2.0),
         None,
+        np.array([0.1, -2.5, 3e-9]),  # float arrays: the ndarray path
+        np.array([0.0, -0.0, np.nan]),
+        np.array([0.0, -np.inf, 1.0]),
+        np.array([1.0, 2.0, 3.0, 4.0])[::2][:3],  # a strided view, length 2
+        np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0])[::2],  # a strided view, length 3
+        np.array([[0.1, 0.2, 0.3]]),
+        np.array([1, 2, 3]),
+        np.array([0.1, 0.2, 0.3], dtype=np.float32),
     ],
 )
 def test_vector_fast_path_equals_numpy_form(value):
@@ -283,3 +291,33 @@ def test_vector_fast_path_equals_numpy_form(value):
     assert (got is None) == (want is None), (got, want)
     if want is not None:
         assert _same(got, want)
+        # a float64 vector stays a view of the caller's memory on both paths (a script that
+        # later writes its setpoint in place moves the target too)
+        assert np.shares_memory(got, value) == np.shares_memory(want, value)
+
+
+def test_setpoint_ramp_distance_is_numpys_norm() -> None:
+    """``SetpointRamp.step``'s distance (``sqrt(d.dot(d))``) against ``np.linalg.norm`` on
+    random vectors, and ``arrived`` against ``np.all(position == goal)``."""
+    from rdm.scenarios.common import SetpointRamp
+
+    rng = np.random.default_rng(3)
+    for _ in range(500):
+        start, goal = rng.normal(size=3) * rng.choice([1e-6, 1.0, 1e3]), rng.normal(size=3)
+        speed, dt = float(rng.uniform(0.01, 2.0)), 0.01
+        ramp = SetpointRamp(start, speed)
+        ramp.set_goal(goal)
+        delta = goal - start
+        dist = float(np.linalg.norm(delta))
+        ramp.step(dt)
+        if dist <= speed * dt:
+            want = goal
+        else:
+            want = start + delta / dist * (speed * dt)
+        assert ramp.position.tobytes() == np.asarray(want, dtype=float).tobytes()
+        assert ramp.arrived == bool(np.all(ramp.position == ramp.goal))
+    ramp = SetpointRamp(np.array([0.0, -0.0, 1.0]), 1.0)
+    ramp.set_goal(np.array([-0.0, 0.0, 1.0]))
+    assert ramp.arrived  # -0.0 == 0.0, as numpy compares
+    ramp.set_goal(np.array([np.nan, 0.0, 1.0]))
+    assert not ramp.arrived

@@ -107,11 +107,18 @@ def quaternion_to_euler(x: float, y: float, z: float, w: float) -> tuple[float, 
     return roll, pitch, yaw
 
 
+_F64 = np.dtype(np.float64)
+
+
 def _vector(value: Any, n: int) -> np.ndarray | None:
     """``value`` as a finite float vector of length n, else None."""
     if type(value) in (tuple, list) and len(value) == n and all(type(v) is float for v in value):
         # the common case (a decoded message field): the same array without numpy's checks
         return np.array(value) if all(map(math.isfinite, value)) else None
+    if type(value) is np.ndarray and value.dtype == _F64 and value.shape == (n,):
+        # a float vector already (a script's setpoint): the same view as below, its values
+        # checked as Python floats (np.isfinite's dispatch costs more than the check)
+        return value.reshape(-1) if all(map(math.isfinite, value.tolist())) else None
     try:
         v = np.asarray(value, dtype=float).reshape(-1)
     except (TypeError, ValueError):
