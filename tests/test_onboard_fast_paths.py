@@ -310,10 +310,8 @@ def test_setpoint_ramp_distance_is_numpys_norm() -> None:
         delta = goal - start
         dist = float(np.linalg.norm(delta))
         ramp.step(dt)
-        if dist <= speed * dt:
-            want = goal
-        else:
-            want = start + delta / dist * (speed * dt)
+        reach = speed * dt
+        want = goal if dist <= reach else start + delta / dist * reach
         assert ramp.position.tobytes() == np.asarray(want, dtype=float).tobytes()
         assert ramp.arrived == bool(np.all(ramp.position == ramp.goal))
     ramp = SetpointRamp(np.array([0.0, -0.0, 1.0]), 1.0)
