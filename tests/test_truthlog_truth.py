@@ -284,3 +284,54 @@ def test_a_nan_in_the_contact_sums_takes_the_array_form():
         b = ref._tracker.measure_contacts_arrays(ref._data)
     assert calls == [1]
     _measures_equal(a, b)
+
+
+def test_resting_on_other_links_takes_the_one_call_record():
+    """The stack's robot on the floor rests on its root and middle links, not the foot
+    plate: contacts the measurement does not sum, so the one-call record (its numbers for
+    an empty contact list) is taken, equal to the two other forms on twin plants; a plate
+    contact (perched on the ceiling) keeps the measurement path."""
+    plants = []
+    for _ in range(3):
+        p = Plant("rdm", seed=0, ceiling_height=1.6, floor_height=0.0)
+        p.reset(base_position=(0.0, 0.0, 0.12))
+        plants.append(p)
+    fast, arrays, plain = plants
+    calls: list[str] = []
+    real = fast._rotors
+
+    class Spy:
+        def __getattr__(self, name):
+            if name == "truth_free":
+                calls.append(name)
+            return getattr(real, name)
+
+    seen = 0
+    for k in range(600):
+        for p in plants:
+            p.step(1)
+        if k % 10 == 9:
+            d = fast._fresh()
+            plate = fast._tracker.plate_contact(d)
+            fast._rotors = Spy()
+            try:
+                a = fast._ground_truth()
+            finally:
+                fast._rotors = real
+            _assert_same(a, arrays._ground_truth_arrays())
+            _assert_same(a, plain._ground_truth_plain())
+            if d.ncon and not plate:
+                seen += 1
+    assert seen > 40  # resting on the floor, the plate free
+    assert len(calls) == 60 and fast._tracker.idle()
+
+    perched = _perch_plant(NoCeilingEffect())
+    twin = _perch_plant(NoCeilingEffect())
+    for p in (perched, twin):
+        p.reset(base_position=(0.0, 0.0, 2.0 - 5e-4), thrusts=_perch_thrusts(4.0))
+        p.step(200)
+    d = perched._fresh()
+    assert d.ncon and perched._tracker.plate_contact(d)
+    a = perched._ground_truth()
+    assert a.foot_contact_points > 0
+    _assert_same(a, twin._ground_truth_plain())

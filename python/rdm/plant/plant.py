@@ -590,10 +590,15 @@ class Plant:
     def _ground_truth(self) -> GroundTruth:
         d = self._fresh()
         tracker = self._tracker
-        if self.truth_free_record and d.ncon == 0 and tracker.idle():
-            # No contact and no contact anchor (the flying robot): the whole record in one
-            # Rust call, the numbers :meth:`_ground_truth_arrays` gives (tests/
-            # test_truthlog_truth.py); None when the plate frame is not finite.
+        if (
+            self.truth_free_record
+            and tracker.idle()
+            and (d.ncon == 0 or not tracker.plate_contact(d))
+        ):
+            # No plate contact and no contact anchor (the flying robot, or one resting on
+            # other links): the whole record in one Rust call, the numbers
+            # :meth:`_ground_truth_arrays` gives (contacts without the plate are not summed;
+            # tests/test_truthlog_truth.py); None when the plate frame is not finite.
             truth = self._rotors.truth_free(
                 float(d.time),
                 self._v_xpos,

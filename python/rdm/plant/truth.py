@@ -178,6 +178,19 @@ class FootContactTracker:
         force and torque, NaN ZMP, zero slip and yaw)."""
         return self._anchor_pos is None and self._last_contact_time == -math.inf
 
+    def plate_contact(self, data: mujoco.MjData) -> bool:
+        """Whether a present contact involves a plate geom (:meth:`measure_contacts` sums
+        only such contacts: without one it gives the numbers of an empty contact list).
+        Runs :meth:`measure`'s view check first (the same ``view_misses``); reads the cached
+        contact view when it is this list's."""
+        self._check_view(data)
+        ncon = data.ncon
+        if not ncon:
+            return False
+        cached = self._geom_view
+        geom = cached[3] if cached[0] is data and cached[1] == ncon else data.contact.geom
+        return not self._plate_geoms.isdisjoint(chain.from_iterable(geom.tolist()))
+
     def _check_view(self, data: mujoco.MjData) -> None:
         """Drop the cached contact view if the list has moved (counted in ``view_misses``)."""
         cached = self._geom_view
