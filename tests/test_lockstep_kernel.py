@@ -386,3 +386,31 @@ def test_python_only_nodes_tick_in_the_same_order_with_the_same_clock() -> None:
     assert loop_k.clock.now == loop_p.clock.now
     stats = loop_k.kernel.stats()
     assert sum(stats["fast"]) == 0 and stats["physics_python"] == 337
+
+
+def test_flight_scenario_script_declares_the_plant_only(tmp_path: Path) -> None:
+    """The configuration-change scenario's script (``flight.make_script``: the ground
+    truth at arming, then the onboard node's target, trajectory and arming) declares
+    ``("plant",)``: kernel and Python loop write the same files and state through the
+    boot, arming (the trajectory loaded) and the take-off."""
+    from rdm.model import Robot
+    from rdm.scenarios import flight
+
+    plan = flight.DEFAULT_PLAN
+    scripts: list = []
+
+    def make() -> object:
+        script = flight.make_script(plan, Robot.default())
+        scripts.append(script)
+        return script
+
+    def steps(stack: Stack) -> None:
+        node = next(n for n in stack.loop.nodes if n.name == "script")
+        assert node.kernel_touches == ("plant",)
+        stack.loop.run(plan.arm_at + plan.takeoff_s + 0.5)
+
+    stats = _same(tmp_path, steps, make)
+    fast = _fast_counts(NODES, stats)
+    assert fast["plant_bridge"] > 2500 and stats["physics_fast"] > 2500
+    refs = [s.flight_script(None).ref for s in scripts]  # made at arming in both runs
+    assert refs[0].cog_at_rest.tobytes() == refs[1].cog_at_rest.tobytes()

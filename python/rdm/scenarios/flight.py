@@ -26,6 +26,7 @@ angles, so it is not used here.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -410,6 +411,29 @@ def plot(stack: Stack, res: dict[str, Any], ref: Reference) -> None:
     )
 
 
+def make_script(plan: FlightPlan, robot: Robot) -> Callable[[Stack, float], None]:
+    """The scenario script: nothing before ``plan.arm_at``, then a :class:`FlightScript`
+    whose take-off ramp starts where the robot rests (the plant's ground truth at arming).
+    ``script.flight_script(stack)`` gives that script (made then if not yet)."""
+    made: dict[str, FlightScript] = {}
+
+    def flight_script(stack: Stack) -> FlightScript:
+        if "s" not in made:
+            cog0 = np.asarray(stack.plant.ground_truth().cog_position, dtype=float)
+            made["s"] = FlightScript(Reference(plan, robot, cog0))
+        return made["s"]
+
+    def script(stack: Stack, now: float) -> None:
+        if now >= plan.arm_at:
+            flight_script(stack)(stack, now)
+
+    script.flight_script = flight_script  # type: ignore[attr-defined]
+    # The lockstep kernel's parts it reads or changes (rdm.nodes.lockstep_kernel): the
+    # plant (the ground truth at arming); the rest is the onboard node.
+    script.kernel_touches = ("plant",)  # type: ignore[attr-defined]
+    return script
+
+
 def run(
     base: str | Path,
     duration: float | None = None,
@@ -432,22 +456,10 @@ def run(
     )
     opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard)
     robot = Robot.default()
-    script_ref: dict[str, FlightScript] = {}
-
-    def script(stack: Stack, now: float) -> None:
-        if now < plan.arm_at:
-            return
-        if "s" not in script_ref:  # the take-off ramp starts where the robot rests
-            cog0 = np.asarray(stack.plant.ground_truth().cog_position, dtype=float)
-            script_ref["s"] = FlightScript(Reference(plan, robot, cog0))
-        script_ref["s"](stack, now)
-
+    script = make_script(plan, robot)
     stack = build_stack("flight", base, opts, script)
     wall = run_stack(stack, seconds)
-    if "s" not in script_ref:  # stopped before arming
-        cog0 = np.asarray(stack.plant.ground_truth().cog_position, dtype=float)
-        script_ref["s"] = FlightScript(Reference(plan, robot, cog0))
-    ref = script_ref["s"].ref
+    ref = script.flight_script(stack).ref  # made here if the run stopped before arming
     margins = rotor_margins(robot, ref.q_target)
     res = analyse(stack, ref)
     metrics = metrics_of(res, stack, margins)
