@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -31,6 +33,26 @@ def _assert_same(a: GroundTruth, b: GroundTruth) -> None:
             assert struct.pack("<d", x) == struct.pack("<d", y), k
         else:
             assert x == y, k
+
+
+@contextmanager
+def _truth_free_calls(plant: Plant) -> Iterator[list[str]]:
+    """The ``truth_free`` calls of ``plant``'s rotor core while the block runs (a spy in
+    front of it)."""
+    calls: list[str] = []
+    real = plant._rotors
+
+    class Spy:
+        def __getattr__(self, name):
+            if name == "truth_free":
+                calls.append(name)
+            return getattr(real, name)
+
+    plant._rotors = Spy()
+    try:
+        yield calls
+    finally:
+        plant._rotors = real
 
 
 def _takeoff_plants(fixed_base: bool = False, n: int = 3) -> list[Plant]:
@@ -139,23 +161,11 @@ def test_non_finite_plate_frame_takes_the_measurement_path():
 def test_the_flag_keeps_the_path_before():
     fast, slow = _takeoff_plants(n=2)
     slow.truth_free_record = False
-    calls = []
-    real = slow._rotors
-
-    class Spy:
-        def __getattr__(self, name):
-            if name == "truth_free":
-                calls.append(name)
-            return getattr(real, name)
-
     for p in (fast, slow):
         p.reset(base_position=(0.0, 0.0, 0.8))
         p.step(3)
-    slow._rotors = Spy()
-    try:
+    with _truth_free_calls(slow) as calls:
         _assert_same(fast._ground_truth(), slow._ground_truth())
-    finally:
-        slow._rotors = real
     assert calls == []
 
 
@@ -297,33 +307,22 @@ def test_resting_on_other_links_takes_the_one_call_record():
         p.reset(base_position=(0.0, 0.0, 0.12))
         plants.append(p)
     fast, arrays, plain = plants
-    calls: list[str] = []
-    real = fast._rotors
-
-    class Spy:
-        def __getattr__(self, name):
-            if name == "truth_free":
-                calls.append(name)
-            return getattr(real, name)
-
-    seen = 0
+    one_call = seen = 0
     for k in range(600):
         for p in plants:
             p.step(1)
         if k % 10 == 9:
             d = fast._fresh()
             plate = fast._tracker.plate_contact(d)
-            fast._rotors = Spy()
-            try:
+            with _truth_free_calls(fast) as calls:
                 a = fast._ground_truth()
-            finally:
-                fast._rotors = real
+            one_call += len(calls)
             _assert_same(a, arrays._ground_truth_arrays())
             _assert_same(a, plain._ground_truth_plain())
             if d.ncon and not plate:
                 seen += 1
     assert seen > 40  # resting on the floor, the plate free
-    assert len(calls) == 60 and fast._tracker.idle()
+    assert one_call == 60 and fast._tracker.idle()
 
     perched = _perch_plant(NoCeilingEffect())
     twin = _perch_plant(NoCeilingEffect())

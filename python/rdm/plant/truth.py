@@ -145,7 +145,7 @@ class FootContactTracker:
                     geom.__array_interface__["data"][0],
                     geom,
                 )
-            in_contact = not self._plate_geoms.isdisjoint(chain.from_iterable(cached[3].tolist()))
+            in_contact = self._plate_in(cached[3])
         elif self._anchor_pos is None and self._last_contact_time == -math.inf:
             return  # no contact and nothing to release: _track would change nothing
         else:
@@ -188,7 +188,12 @@ class FootContactTracker:
         if not ncon:
             return False
         cached = self._geom_view
-        geom = cached[3] if cached[0] is data and cached[1] == ncon else data.contact.geom
+        return self._plate_in(
+            cached[3] if cached[0] is data and cached[1] == ncon else data.contact.geom
+        )
+
+    def _plate_in(self, geom: np.ndarray) -> bool:
+        """Whether a plate geom is in ``geom`` (a ``data.contact.geom`` view: ncon pairs)."""
         return not self._plate_geoms.isdisjoint(chain.from_iterable(geom.tolist()))
 
     def _check_view(self, data: mujoco.MjData) -> None:

@@ -615,10 +615,15 @@ impl SpinalFast {
         self.dirty = true;
         let decision = std::mem::replace(&mut self.decision, Decision::Idle);
         let boot = p.boot_state.is_some();
-        if let Decision::Busy(busy) = decision {
-            let b = p.busy.as_mut().ok_or_else(|| {
-                pyo3::exceptions::PyRuntimeError::new_err("kernel: Spinal busy tick without plan")
-            })?;
+        let busy = match decision {
+            Decision::Busy(busy) => Some(busy),
+            Decision::Idle => None,
+        };
+        let no_plan =
+            || pyo3::exceptions::PyRuntimeError::new_err("kernel: Spinal busy tick without plan");
+        // In `tick`'s order: battery and control step, the CAN ms, the publications.
+        if let Some(busy) = busy {
+            let b = p.busy.as_mut().ok_or_else(no_plan)?;
             let d = &mut self.deferred;
             if let Some(v) = busy.battery {
                 p.battery_due_ms = m + b.battery_period;
@@ -682,110 +687,9 @@ impl SpinalFast {
                     d.handed = Some(duties);
                 }
             }
-            p.can_ms = m;
-            if !Self::can_tick(
-                &self.master,
-                &self.wire,
-                self.drain_at,
-                p.boot_state,
-                py,
-                m,
-                now,
-                &mut self.tx_delta,
-                &mut self.steady,
-            ) {
-                return Ok(SpinalTick::Finish(m));
-            }
-            if let Some(Publish {
-                imu_due,
-                servo_due,
-                stamp,
-                acc,
-                mag,
-            }) = busy.publish
-            {
-                self.tick_tx.clear();
-                let mut used = 0usize;
-                let cap = b.chunks.unwrap_or(0);
-                let mut fits = |len: usize| -> bool {
-                    if len > b.output_size || b.chunk_bytes == 0 {
-                        return false;
-                    }
-                    used += len.div_ceil(b.chunk_bytes);
-                    used <= cap
-                };
-                let mut imu_sent = false;
-                if imu_due {
-                    let (Some(out), Some(topic)) = (b.output.as_ref(), b.imu_topic) else {
-                        self.counts.finish_publish += 1;
-                        return Ok(SpinalTick::FinishPublish(m));
-                    };
-                    let estimate = &out.estimate;
-                    let values = ImuValues {
-                        acc,
-                        gyro: estimate.angular_velocity.into(),
-                        mag,
-                        quaternion: estimate.quaternion,
-                    };
-                    match imu_frame(topic, stamp, &values) {
-                        Some(f) if fits(f.len()) => {
-                            self.tick_tx.extend_from_slice(&f);
-                            imu_sent = true;
-                        }
-                        _ => {
-                            self.counts.finish_publish += 1;
-                            return Ok(SpinalTick::FinishPublish(m));
-                        }
-                    }
-                }
-                let mut servo_sent = false;
-                // Before the master runs no servo has reported: `states_frame` gives no
-                // message (the publication's time is still taken).
-                if servo_due && !boot {
-                    let (Some(core), Some(topic)) = (b.servo_core.as_ref(), b.servo_topic) else {
-                        self.counts.finish_publish += 1;
-                        return Ok(SpinalTick::FinishPublish(m));
-                    };
-                    let core = core.bind(py).try_borrow()?;
-                    match servo_states_frame_into(core.core_ref(), topic, stamp, &mut self.tick_tx)
-                    {
-                        ServoFrame::Empty => {}
-                        ServoFrame::Written(len) if fits(len) => servo_sent = true,
-                        _ => {
-                            self.counts.finish_publish += 1;
-                            return Ok(SpinalTick::FinishPublish(m));
-                        }
-                    }
-                }
-                if self.tx.len() + self.tick_tx.len() > b.max_pending {
-                    self.counts.finish_publish += 1;
-                    return Ok(SpinalTick::FinishPublish(m));
-                }
-                // Committed: _last_pub, _next_pub_ms, the TX counters, the bytes.
-                if imu_due {
-                    b.imu_last = Some(m);
-                    d.imu_last = true;
-                }
-                if servo_due {
-                    b.servo_last = Some(m);
-                    d.servo_last = true;
-                }
-                let imu_next = b.imu_last.map_or(i64::MIN, |t| t + b.imu_period);
-                let servo_next = b.servo_last.map_or(i64::MIN, |t| t + b.servo_period);
-                p.next_pub_ms = imu_next.min(servo_next).min(b.others_next);
-                d.next_pub = true;
-                let sent = i64::from(imu_sent) + i64::from(servo_sent);
-                d.frames += sent;
-                d.imu_frames += i64::from(imu_sent);
-                d.servo_frames += i64::from(servo_sent);
-                self.counts.imu_frames += u64::from(imu_sent);
-                self.counts.servo_frames += u64::from(servo_sent);
-                self.tx.extend_from_slice(&self.tick_tx);
-            }
-            return Ok(SpinalTick::Done);
         }
         p.can_ms = m;
-        if Self::can_tick(
+        if !Self::can_tick(
             &self.master,
             &self.wire,
             self.drain_at,
@@ -796,10 +700,96 @@ impl SpinalFast {
             &mut self.tx_delta,
             &mut self.steady,
         ) {
-            Ok(SpinalTick::Done)
-        } else {
-            Ok(SpinalTick::Finish(m))
+            return Ok(SpinalTick::Finish(m));
         }
+        if let Some(Publish {
+            imu_due,
+            servo_due,
+            stamp,
+            acc,
+            mag,
+        }) = busy.and_then(|busy| busy.publish)
+        {
+            let b = p.busy.as_mut().ok_or_else(no_plan)?;
+            let d = &mut self.deferred;
+            self.tick_tx.clear();
+            let mut used = 0usize;
+            let cap = b.chunks.unwrap_or(0);
+            let mut fits = |len: usize| -> bool {
+                if len > b.output_size || b.chunk_bytes == 0 {
+                    return false;
+                }
+                used += len.div_ceil(b.chunk_bytes);
+                used <= cap
+            };
+            let mut imu_sent = false;
+            if imu_due {
+                let (Some(out), Some(topic)) = (b.output.as_ref(), b.imu_topic) else {
+                    self.counts.finish_publish += 1;
+                    return Ok(SpinalTick::FinishPublish(m));
+                };
+                let estimate = &out.estimate;
+                let values = ImuValues {
+                    acc,
+                    gyro: estimate.angular_velocity.into(),
+                    mag,
+                    quaternion: estimate.quaternion,
+                };
+                match imu_frame(topic, stamp, &values) {
+                    Some(f) if fits(f.len()) => {
+                        self.tick_tx.extend_from_slice(&f);
+                        imu_sent = true;
+                    }
+                    _ => {
+                        self.counts.finish_publish += 1;
+                        return Ok(SpinalTick::FinishPublish(m));
+                    }
+                }
+            }
+            let mut servo_sent = false;
+            // Before the master runs no servo has reported: `states_frame` gives no
+            // message (the publication's time is still taken).
+            if servo_due && !boot {
+                let (Some(core), Some(topic)) = (b.servo_core.as_ref(), b.servo_topic) else {
+                    self.counts.finish_publish += 1;
+                    return Ok(SpinalTick::FinishPublish(m));
+                };
+                let core = core.bind(py).try_borrow()?;
+                match servo_states_frame_into(core.core_ref(), topic, stamp, &mut self.tick_tx) {
+                    ServoFrame::Empty => {}
+                    ServoFrame::Written(len) if fits(len) => servo_sent = true,
+                    _ => {
+                        self.counts.finish_publish += 1;
+                        return Ok(SpinalTick::FinishPublish(m));
+                    }
+                }
+            }
+            if self.tx.len() + self.tick_tx.len() > b.max_pending {
+                self.counts.finish_publish += 1;
+                return Ok(SpinalTick::FinishPublish(m));
+            }
+            // Committed: _last_pub, _next_pub_ms, the TX counters, the bytes.
+            if imu_due {
+                b.imu_last = Some(m);
+                d.imu_last = true;
+            }
+            if servo_due {
+                b.servo_last = Some(m);
+                d.servo_last = true;
+            }
+            let imu_next = b.imu_last.map_or(i64::MIN, |t| t + b.imu_period);
+            let servo_next = b.servo_last.map_or(i64::MIN, |t| t + b.servo_period);
+            p.next_pub_ms = imu_next.min(servo_next).min(b.others_next);
+            d.next_pub = true;
+            let sent = i64::from(imu_sent) + i64::from(servo_sent);
+            d.frames += sent;
+            d.imu_frames += i64::from(imu_sent);
+            d.servo_frames += i64::from(servo_sent);
+            self.counts.imu_frames += u64::from(imu_sent);
+            self.counts.servo_frames += u64::from(servo_sent);
+            self.tx.extend_from_slice(&self.tick_tx);
+        }
+        Ok(SpinalTick::Done)
     }
 
     /// The CAN ms (`tick_wire_steady`): the steady master's, or, before it first runs
