@@ -458,12 +458,16 @@ class LqiSynthesizer:
         """The same synthesis as ``synthesize`` as (gains (N_ROTORS, 4, 3), rpy/gain int16
         terms (N_ROTORS, 7) or None, their RollPitchYawTerms payload or None, every gain
         finite, fell_back, a clamp scale != 1). A result with terms and finite gains is kept
-        (``kept_result``). GIL released while solving."""
+        (``kept_result``). GIL released while solving. While the core reuses a solution
+        (``reused``) the same objects are returned again; the arrays are read-only."""
     def kept_result(self) -> dict[str, object] | None:
         """The ``synthesize`` dict of the last result ``synthesize_wire`` kept."""
     def reset(self) -> None: ...
     @property
     def has_solution(self) -> bool: ...
+    @property
+    def reused(self) -> int:
+        """Calls answered with the last solution: their B-bar bitwise the last solved one."""
 
 class PcAxisController:
     """PC-side altitude P-I-D (base thrust) and yaw P-I (angles[2]) of JSK sec. 4."""

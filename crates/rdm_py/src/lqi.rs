@@ -254,6 +254,24 @@ struct LqiSynthesizer {
     inner: core_lqi::LqiSynthesizer,
     /// The last result `synthesize_wire` accepted (wire terms converted, every gain finite).
     kept: Option<LqiGains>,
+    /// What the last solving `synthesize_wire` returned, handed out again (the same objects,
+    /// read-only arrays) while the core reuses that solution (`reused`).
+    last_wire: Option<WireOut>,
+}
+
+/// `synthesize_wire`'s tuple, kept.
+type WireOut = (
+    Py<PyAny>,
+    Option<Py<PyAny>>,
+    Option<Py<PyBytes>>,
+    bool,
+    bool,
+    bool,
+);
+
+/// Marks a numpy array read-only (`a.flags.writeable = False`).
+fn read_only(array: &Bound<'_, PyAny>) -> PyResult<()> {
+    array.getattr("flags")?.setattr("writeable", false)
 }
 
 /// Whether every entry of the gain set is finite.
@@ -313,7 +331,11 @@ impl LqiSynthesizer {
             config.care.kleinman_tolerance = tolerance;
         }
         let inner = core_lqi::LqiSynthesizer::new(config).map_err(lqi_error)?;
-        Ok(Self { inner, kept: None })
+        Ok(Self {
+            inner,
+            kept: None,
+            last_wire: None,
+        })
     }
 
     /// Synthesizes gains for (mass, inertia 3x3, allocation 4xN_ROTORS). GIL released.
@@ -357,11 +379,32 @@ impl LqiSynthesizer {
     )> {
         let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
         let allocation: Allocation = to_matrix(&allocation, "allocation")?;
+        let reused_before = self.inner.reused();
         let inner = &mut self.inner;
-        let result = py
-            .detach(move || inner.synthesize(mass, &inertia, &allocation).copied())
-            .map_err(lqi_error)?;
+        let result = py.detach(move || inner.synthesize(mass, &inertia, &allocation).copied());
+        let result = match result {
+            Ok(r) => r,
+            Err(e) => {
+                self.last_wire = None;
+                return Err(lqi_error(e));
+            }
+        };
+        if self.inner.reused() != reused_before {
+            if let Some((g, w, b, finite, fell_back, clamped)) = &self.last_wire {
+                return Ok((
+                    g.bind(py).clone(),
+                    w.as_ref().map(|w| w.bind(py).clone()),
+                    b.as_ref().map(|b| b.bind(py).clone()),
+                    *finite,
+                    *fell_back,
+                    *clamped,
+                ));
+            }
+        }
         let gains = gain_set_to_py(py, &result.gains);
+        // Handed out again while the solution is reused: read-only, so no caller can change
+        // what the next call returns.
+        read_only(&gains)?;
         let finite = gain_set_finite(&result.gains);
         let s = &result.clamp_scales;
         let clamped = [s.roll_p, s.roll_d, s.pitch_p, s.pitch_d, s.yaw_d]
@@ -381,6 +424,7 @@ impl LqiSynthesizer {
                     }
                 }
                 let wire = PyArray1::from_slice(py, &flat).reshape([N_ROTORS, 7])?;
+                read_only(wire.as_any())?;
                 (Some(wire.into_any()), Some(PyBytes::new(py, &bytes)))
             }
             Err(_) => (None, None),
@@ -388,6 +432,14 @@ impl LqiSynthesizer {
         if wire.is_some() && finite {
             self.kept = Some(result);
         }
+        self.last_wire = Some((
+            gains.clone().unbind(),
+            wire.as_ref().map(|w| w.clone().unbind()),
+            payload.as_ref().map(|b| b.clone().unbind()),
+            finite,
+            fell_back,
+            clamped,
+        ));
         Ok((gains, wire, payload, finite, fell_back, clamped))
     }
 
@@ -400,6 +452,12 @@ impl LqiSynthesizer {
     /// Forgets the warm start.
     fn reset(&mut self) {
         self.inner.reset();
+    }
+
+    /// Calls answered with the last solution (their B̄ bitwise the last solved one).
+    #[getter]
+    fn reused(&self) -> u64 {
+        self.inner.reused()
     }
 
     /// Whether a previous solution exists (the next synthesis is warm).

@@ -102,7 +102,8 @@ class LqiSynthesizer:
         ``gains_to_wire_terms(gains)`` (int16, N_ROTORS x 7) and ``payload`` its
         ``spinal/RollPitchYawTerms`` bytes, both None where that raises (NaN/inf term);
         ``finite``: every gain finite; ``clamped``: a clamp scale is not 1. A result with
-        ``wire`` and ``finite`` is kept for :meth:`kept_result`."""
+        ``wire`` and ``finite`` is kept for :meth:`kept_result`. A reused solution
+        (:attr:`reused`) returns the same objects again (read-only arrays)."""
         return self._core.synthesize_wire(
             float(mass),
             np.ascontiguousarray(inertia, dtype=float),
@@ -122,3 +123,10 @@ class LqiSynthesizer:
     def has_solution(self) -> bool:
         """Whether the next synthesis is warm-started."""
         return self._core.has_solution
+
+    @property
+    def reused(self) -> int:
+        """Calls answered with the last solution because their B-bar (eq. 25) was bitwise
+        the last solved one: the gains are a function of the problem, not of how often it
+        is solved (``synthesize_wire`` then returns the same read-only objects)."""
+        return self._core.reused

@@ -161,6 +161,12 @@ impl Default for LqiGains {
 }
 
 /// Stateful gain synthesizer: keeps its workspace and the last solution (warm start).
+///
+/// The gains are a function of the problem: A, Q and R are fixed per synthesizer, so a call
+/// whose `B̄(q)` (eq. 25) is bitwise the last solved one returns that solution unchanged
+/// instead of solving again. A re-solve from its own warm start would move the last bits of
+/// the gains each time (Kleinman's fixed point is not exact in floating point) and costs a
+/// whole CARE solve on the 40 Hz tick, while the robot holds a configuration.
 #[derive(Clone, Debug)]
 pub struct LqiSynthesizer {
     config: LqiConfig,
@@ -169,6 +175,7 @@ pub struct LqiSynthesizer {
     r: InputWeight,
     solver: CareSolver,
     last: LqiGains,
+    reused: u64,
 }
 
 impl LqiSynthesizer {
@@ -182,6 +189,7 @@ impl LqiSynthesizer {
             r,
             solver: CareSolver::new(config.care),
             last: LqiGains::default(),
+            reused: 0,
         })
     }
 
@@ -200,7 +208,13 @@ impl LqiSynthesizer {
         self.solver.reset();
     }
 
-    /// Synthesizes the gains for one configuration (warm-started after the first call).
+    /// Calls answered with the last solution because their `B̄` was bitwise the same.
+    pub fn reused(&self) -> u64 {
+        self.reused
+    }
+
+    /// Synthesizes the gains for one configuration (warm-started after the first call; the
+    /// last result itself when `B̄` is bitwise the last solved one, see [`Self::reused`]).
     /// On error the previous gains stay available through [`Self::last`].
     pub fn synthesize(
         &mut self,
@@ -209,6 +223,10 @@ impl LqiSynthesizer {
         allocation: &Allocation,
     ) -> Result<&LqiGains, LqiError> {
         let b = augmented_input_matrix(mass, inertia, allocation)?;
+        if self.solver.has_solution() && same_bits(&b, &self.last.b) {
+            self.reused += 1;
+            return Ok(&self.last);
+        }
         let report = self.solver.solve(&self.a, &b, &self.q, &self.r)?;
         let k = *self.solver.k();
         let mut gains = gain_set_from_k(&k);
@@ -227,4 +245,11 @@ impl LqiSynthesizer {
         };
         Ok(&self.last)
     }
+}
+
+/// Bitwise equality (a NaN never matches; -0.0 and 0.0 differ).
+fn same_bits(a: &InputMatrix, b: &InputMatrix) -> bool {
+    a.iter()
+        .zip(b.iter())
+        .all(|(x, y)| x.to_bits() == y.to_bits())
 }
