@@ -32,3 +32,15 @@ def test_kernel_note_names_the_nodes_run_in_rust_with_their_counts():
     (note,) = lockstep._kernel_note(stats)
     assert note == "lockstep kernel, ticks run in Rust: plant_bridge 900/1000, physics 1000/1000"
     assert lockstep._kernel_note(None) == ["no lockstep kernel: every tick in Python"]
+
+
+def test_the_median_run_is_reported_and_every_run_noted():
+    def run(wall: float) -> lockstep.Run:
+        return (np.zeros(1, dtype=np.int64), wall, wall, None)
+
+    runs = [run(w) for w in (0.30, 0.20, 0.25, 0.40, 0.22)]
+    assert lockstep.median_run(runs)[1] == 0.25
+    assert lockstep.median_run(runs[:4])[1] == 0.25  # even count: the lower middle
+    (note,) = lockstep._runs_note(runs, 4.0)
+    assert note.endswith("13.3x, 20.0x, 16.0x, 10.0x, 18.2x")
+    assert lockstep._runs_note(runs[:1], 4.0) == []
