@@ -95,6 +95,16 @@ def _state(stack: Stack) -> dict:
             sensor._wrench,
         ),
         "plant_flags": (plant._stale, plant._needs_step1, plant._state_version),
+        "sleep": None
+        if plant.sleep is None
+        else (
+            plant.sleep.pending,
+            plant.sleep.allowed,
+            plant.sleep.wakes,
+            plant.sleep._v_last_ctrl.tobytes(),
+            d.tree_asleep.tobytes(),
+            plant.model.tree_sleep_policy.tobytes(),
+        ),
         "rejected": plant.rejected_commands,
         "normals": (
             plant.imu_model._normals._pos,
@@ -217,8 +227,9 @@ def test_boot_idle_ms_of_spinal_run_in_the_kernel(tmp_path: Path) -> None:
 
     stats = _same(tmp_path, steps)
     assert stats["fast"][2] > 700  # Spinal's boot ms with nothing but the master's tick
-    # On the floor other geoms touch it, not the foot plate: the tracker has nothing to do.
-    assert stats["tracker_fast"] > 1000 and stats["tracker_python"] < 50
+    # On the floor other geoms touch it, not the foot plate: the tracker has nothing to do
+    # (and once the resting robot sleeps, from ~0.3 s, MuJoCo makes no contact for it).
+    assert stats["tracker_fast"] > 50 and stats["tracker_python"] < 50
 
 
 def test_held_external_wrench_takes_the_python_step(tmp_path: Path) -> None:

@@ -303,7 +303,9 @@ def test_resting_on_other_links_takes_the_one_call_record():
     contact (perched on the ceiling) keeps the measurement path."""
     plants = []
     for _ in range(3):
-        p = Plant("rdm", seed=0, ceiling_height=1.6, floor_height=0.0)
+        # awake throughout: this test is about the contacts of the resting robot, which a
+        # sleeping robot does not have (rdm.plant.sleep)
+        p = Plant("rdm", seed=0, ceiling_height=1.6, floor_height=0.0, sleep=False)
         p.reset(base_position=(0.0, 0.0, 0.12))
         plants.append(p)
     fast, arrays, plain = plants

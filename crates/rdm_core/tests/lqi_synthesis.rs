@@ -130,19 +130,27 @@ fn a_repeated_problem_is_answered_with_the_last_solution() {
     let mut rng = rng(21);
     let (mass, inertia, allocation) = random_robot(&mut rng);
     let mut synth = LqiSynthesizer::new(LqiConfig::default()).expect("weights");
-    let first = *synth.synthesize(mass, &inertia, &allocation).expect("first");
-    let again = *synth.synthesize(mass, &inertia, &allocation).expect("again");
+    let first = *synth
+        .synthesize(mass, &inertia, &allocation)
+        .expect("first");
+    let again = *synth
+        .synthesize(mass, &inertia, &allocation)
+        .expect("again");
     assert_eq!(synth.reused(), 1);
     assert_eq!(again, first); // the same solution, report included
-    // One ulp of mass is another problem: solved (warm), close to the first.
+                              // One ulp of mass is another problem: solved (warm), close to the first.
     let nudged = f64::from_bits(mass.to_bits() + 1);
-    let solved = *synth.synthesize(nudged, &inertia, &allocation).expect("nudged");
+    let solved = *synth
+        .synthesize(nudged, &inertia, &allocation)
+        .expect("nudged");
     assert_eq!(synth.reused(), 1);
     assert_eq!(solved.report.method, CareMethod::Kleinman);
     assert!((solved.k - first.k).amax() <= 1e-8 * first.k.amax());
     // After a reset the same problem is solved cold.
     synth.reset();
-    let cold = *synth.synthesize(nudged, &inertia, &allocation).expect("cold");
+    let cold = *synth
+        .synthesize(nudged, &inertia, &allocation)
+        .expect("cold");
     assert_eq!(synth.reused(), 1);
     assert_eq!(cold.report.method, CareMethod::SignFunction);
 }

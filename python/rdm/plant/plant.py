@@ -46,6 +46,7 @@ from rdm.plant.sensors import (
     sensor_seed_sequences,
 )
 from rdm.plant.servo import ServoParams, torque_constant
+from rdm.plant.sleep import SLEEP_AVAILABLE, RestingSleep
 from rdm.plant.truth import TRUTH_FIELDS, FootContactTracker, GroundTruth
 
 
@@ -72,6 +73,10 @@ class Plant:
         battery_voltage: battery voltage [V] of the duty -> thrust map.
         scene: edits the MjSpec before it is compiled, to add world objects (the tasks'
             boards, panels, valves); must not touch the robot.
+        sleep: let MuJoCo put the robot to sleep while it rests with unchanged controls
+            (:class:`rdm.plant.sleep.RestingSleep`; a no-op on a MuJoCo without sleeping,
+            and with a ``scene``: with sleeping on, MuJoCo computes the poses of static bodies
+            once, and the tasks move their objects by editing ``model.body_pos``).
     """
 
     def __init__(
@@ -91,6 +96,7 @@ class Plant:
         imu_noise: ImuNoise | None = None,
         wrench_noise: WrenchNoise | None = None,
         scene: Callable[[mujoco.MjSpec], None] | None = None,
+        sleep: bool = True,
     ) -> None:
         if not (math.isfinite(timestep) and timestep > 0):
             raise ValueError(f"timestep: must be > 0, got {timestep}")
@@ -206,6 +212,16 @@ class Plant:
             if ceiling_effect is None
             else [ceiling_effect for _ in desc.rotors]
         )
+        robot_root = m.body_rootid[self._foot_body]
+        robot_trees = [
+            int(m.body_treeid[b]) for b in range(m.nbody) if m.body_rootid[b] == robot_root
+        ]
+        #: The robot's sleep at rest (None: always awake; see :mod:`rdm.plant.sleep`).
+        self.sleep: RestingSleep | None = (
+            RestingSleep(m, d, robot_trees, self._rotor_act.tolist())
+            if sleep and scene is None and SLEEP_AVAILABLE and any(t >= 0 for t in robot_trees)
+            else None
+        )
         self._seed_sensors()
         self.reset()
 
@@ -232,6 +248,8 @@ class Plant:
             self.sync()
         self._needs_step1 = True
         self._state_version += 1  # the caller may change the state: no cached truth
+        if self.sleep is not None:
+            self.sleep.wake_next()
         return self._data
 
     def _fresh(self) -> mujoco.MjData:
@@ -278,6 +296,8 @@ class Plant:
         self._needs_step1 = True
         self._state_version += 1
         mujoco.mj_resetData(m, d)
+        if self.sleep is not None:
+            self.sleep.wake_next()
         q = (
             np.zeros(len(self.joint_names))
             if q0 is None
@@ -367,6 +387,8 @@ class Plant:
         origin = self._fresh().xpos[bid]
         at = origin if point is None else _vector(point, 3, "point")
         self._external[bid] = (f, t, rot.T @ (at - origin))
+        if self.sleep is not None:  # a push wakes the robot in the next step
+            self.sleep.wake_next()
         if not (f.any() or t.any()):
             del self._external[bid]
             self._fresh().xfrc_applied[bid] = 0.0
@@ -435,6 +457,7 @@ class Plant:
         in_core = self._rotors_in_core
         tracker = self._tracker
         step1, step2 = mujoco.mj_step1, mujoco.mj_step2
+        sleep = self.sleep
         for _ in range(int(n)):
             if self._stale or self._needs_step1:
                 step1(m, d)
@@ -451,11 +474,16 @@ class Plant:
                 self._apply_rotor_thrusts()
             if self._external:
                 self._apply_external()
+            if sleep is not None:  # this step's controls written: the sleep rule
+                sleep.before_step2(self._step1_now)
             step2(m, d)
             tracker.update(d)  # contacts of this step's start: keep the slip anchor
         self._stale = True  # the forward pass runs when something reads (see sync)
         self._needs_step1 = True
         self._state_version += 1
+
+    def _step1_now(self) -> None:
+        mujoco.mj_step1(self.model, self._data)
 
     @property
     def time(self) -> float:

@@ -243,6 +243,11 @@ class StackOptions:
     #: about 1 deg of error at 2.6 N m, torque limited to the stall torque) as a Dynamixel X
     #: holds its goal; the plant's softer default (kp 30) lets q2 sag 0.35 rad at take-off.
     servo: ServoParams | None = field(default_factory=lambda: ServoParams(kp=150.0, kv=5.0))
+    #: The resting robot sleeps in MuJoCo until a command, a push or a contact wakes it
+    #: (``Plant(sleep=...)``, :mod:`rdm.plant.sleep`): on the floor during the boot the
+    #: physics then costs almost nothing. False: always awake (the trajectory differs by the
+    #: ~1e-5 the sleeping robot does not creep).
+    plant_sleep: bool = True
 
 
 #: Feed-forward lead of the joint servo goals on a planned path that the scenarios configure
@@ -308,6 +313,7 @@ def make_plant(opt: StackOptions) -> tuple[Plant, np.ndarray]:
         servo=opt.servo,
         esc=None if opt.esc_tau is None else EscParams(tau=opt.esc_tau),
         scene=opt.scene,
+        sleep=opt.plant_sleep,
     )
     q0 = np.zeros(len(plant.joint_names)) if opt.q0 is None else np.asarray(opt.q0, float)
     plant.reset(q0=q0, base_position=opt.base_position)

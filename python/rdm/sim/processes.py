@@ -130,6 +130,7 @@ def stack_config(seed: int) -> dict[str, Any]:
         "esc_tau",
         "battery_voltage",
         "master_backend",
+        "plant_sleep",
     )
     cfg = {k: getattr(opt, k) for k in keys}
     cfg["servo"] = None if opt.servo is None else asdict(opt.servo)

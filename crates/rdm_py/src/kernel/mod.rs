@@ -17,6 +17,7 @@ mod bank;
 mod bridge;
 mod leptrino;
 mod plant;
+mod sleep;
 mod spinal;
 
 use pyo3::prelude::*;

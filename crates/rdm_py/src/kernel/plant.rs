@@ -6,6 +6,7 @@ use numpy::PyArrayMethods;
 use pyo3::prelude::*;
 
 use super::attr::Name;
+use super::sleep::SleepLink;
 use crate::rotor_plant::RotorPlantCore;
 
 struct Names {
@@ -38,6 +39,8 @@ pub(crate) struct PlantLink {
     pub(crate) ctrl: Py<numpy::PyArray1<f64>>,
     /// Servo actuator index per joint (`Plant._servo_act`).
     servo_act: Vec<usize>,
+    /// `Plant.sleep` (the robot's sleep at rest), when the plant has it.
+    sleep: Option<SleepLink>,
     names: Names,
     // ---- plan (read by `load`, written back by `flush`)
     loaded: bool,
@@ -89,6 +92,14 @@ impl PlantLink {
             sensordata: plant.getattr("_v_sensordata")?.extract()?,
             ctrl: plant.getattr("_v_ctrl")?.extract()?,
             servo_act,
+            sleep: {
+                let s = plant.getattr("sleep")?;
+                if s.is_none() {
+                    None
+                } else {
+                    Some(SleepLink::new(py, &s)?)
+                }
+            },
             names: Names {
                 stale: Name::new(py, "_stale"),
                 needs_step1: Name::new(py, "_needs_step1"),
@@ -134,6 +145,9 @@ impl PlantLink {
         let external_empty = n.external.get(p)?.len()? == 0;
         self.step_ok = n.rotors_in_core.truthy(p)? && external_empty;
         self.load_tracker(py)?;
+        if let Some(s) = &mut self.sleep {
+            s.load(py)?;
+        }
         self.loaded = true;
         Ok(())
     }
@@ -183,6 +197,9 @@ impl PlantLink {
 
     /// Write the flags back (before Python code runs).
     pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
+        if let Some(s) = &mut self.sleep {
+            s.flush(py)?;
+        }
         if !self.dirty {
             return Ok(());
         }
@@ -231,6 +248,11 @@ impl PlantLink {
         }
         self.needs_step1 = true;
         self.rotors.bind(py).borrow_mut().run(py, true)?;
+        if let Some(sleep) = &mut self.sleep {
+            // this step's controls written: the sleep rule (a changed control wakes now)
+            let step1 = self.step1.bind(py);
+            sleep.before_step2(py, self.ctrl.bind(py), || step1.call1((m, d)).map(|_| ()))?;
+        }
         self.step2.bind(py).call1((m, d))?;
         // FootContactTracker.update: returns at once with no contact and nothing to release.
         let ncon = self.names.ncon.i64(d)?;

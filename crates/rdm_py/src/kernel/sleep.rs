@@ -1,0 +1,163 @@
+//! `rdm.plant.sleep.RestingSleep` in the kernel's plant step: the robot's trees may sleep
+//! while this step's controls equal the last step's and its rotors are stopped, and a
+//! changed control wakes a sleeping
+//! robot in the same step (`mj_step1` again on the same state, then `mj_step2`). The same
+//! arrays as the Python rule; its flags are read with the plan and written back before any
+//! Python code runs.
+
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::prelude::*;
+
+use super::attr::Name;
+
+struct Names {
+    pending: Name,
+    allowed: Name,
+    wakes: Name,
+}
+
+/// The Python object's arrays and flags as the kernel drives them.
+pub(crate) struct SleepLink {
+    obj: Py<PyAny>,
+    trees: Vec<usize>,
+    rotors: Vec<usize>,
+    allowed_value: i32,
+    never_value: i32,
+    policy: Py<PyArray1<i32>>,
+    tree_asleep: Py<PyArray1<i32>>,
+    last_ctrl: Py<PyArray1<f64>>,
+    names: Names,
+    pending: bool,
+    allowed: bool,
+    wakes: i64,
+    dirty: bool,
+}
+
+impl SleepLink {
+    /// `RestingSleep` `obj` (its `trees`, views and the policy values of `rdm.plant.sleep`).
+    pub(crate) fn new(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let module = py.import("rdm.plant.sleep")?;
+        let names = Names {
+            pending: Name::new(py, "pending"),
+            allowed: Name::new(py, "allowed"),
+            wakes: Name::new(py, "wakes"),
+        };
+        Ok(SleepLink {
+            obj: obj.clone().unbind(),
+            trees: obj.getattr("trees")?.extract()?,
+            rotors: obj.getattr("rotors")?.extract()?,
+            allowed_value: module.getattr("ALLOWED")?.extract()?,
+            never_value: module.getattr("NEVER")?.extract()?,
+            policy: obj.getattr("_v_policy")?.extract()?,
+            tree_asleep: obj.getattr("_v_tree_asleep")?.extract()?,
+            last_ctrl: obj.getattr("_v_last_ctrl")?.extract()?,
+            pending: names.pending.truthy(obj)?,
+            allowed: names.allowed.truthy(obj)?,
+            wakes: names.wakes.i64(obj)?,
+            names,
+            dirty: false,
+        })
+    }
+
+    /// Re-read the flags (Python code may have run).
+    pub(crate) fn load(&mut self, py: Python<'_>) -> PyResult<()> {
+        let obj = self.obj.bind(py);
+        self.pending = self.names.pending.truthy(obj)?;
+        self.allowed = self.names.allowed.truthy(obj)?;
+        self.wakes = self.names.wakes.i64(obj)?;
+        self.dirty = false;
+        Ok(())
+    }
+
+    /// Write the flags back.
+    pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
+        if !self.dirty {
+            return Ok(());
+        }
+        let obj = self.obj.bind(py);
+        self.names.pending.set(obj, self.pending)?;
+        self.names.allowed.set(obj, self.allowed)?;
+        self.names.wakes.set(obj, self.wakes)?;
+        self.dirty = false;
+        Ok(())
+    }
+
+    fn write_policy(&mut self, py: Python<'_>, allowed: bool) -> PyResult<()> {
+        let value = if allowed {
+            self.allowed_value
+        } else {
+            self.never_value
+        };
+        let policy = self.policy.bind(py);
+        let mut policy = policy.try_readwrite()?;
+        let policy = policy.as_slice_mut().map_err(not_contiguous)?;
+        for &t in &self.trees {
+            *policy.get_mut(t).ok_or_else(tree_out_of_range)? = value;
+        }
+        self.allowed = allowed;
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// `RestingSleep.before_step2` with `ctrl` the step's controls; `step1` wakes.
+    pub(crate) fn before_step2(
+        &mut self,
+        py: Python<'_>,
+        ctrl: &Bound<'_, PyArray1<f64>>,
+        step1: impl FnOnce() -> PyResult<()>,
+    ) -> PyResult<()> {
+        let (same, stopped) = {
+            let ctrl = ctrl.try_readonly()?;
+            let ctrl = ctrl.as_slice().map_err(not_contiguous)?;
+            let last = self.last_ctrl.bind(py);
+            let mut last = last.try_readwrite()?;
+            let last = last.as_slice_mut().map_err(not_contiguous)?;
+            if last.len() != ctrl.len() {
+                return Err(pyo3::exceptions::PyValueError::new_err(
+                    "ctrl: size changed",
+                ));
+            }
+            // np.array_equal: element-wise ==
+            let same = !self.pending && ctrl.iter().zip(last.iter()).all(|(a, b)| a == b);
+            if !same {
+                last.copy_from_slice(ctrl);
+            }
+            let stopped = self
+                .rotors
+                .iter()
+                .all(|&r| ctrl.get(r).is_some_and(|&t| t == 0.0));
+            (same, stopped)
+        };
+        if same {
+            if stopped != self.allowed {
+                self.write_policy(py, stopped)?;
+            }
+            return Ok(());
+        }
+        self.pending = false;
+        self.dirty = true;
+        if self.allowed {
+            self.write_policy(py, false)?;
+        }
+        let asleep = {
+            let a = self.tree_asleep.bind(py).try_readonly()?;
+            let a = a.as_slice().map_err(not_contiguous)?;
+            self.trees
+                .iter()
+                .any(|&t| a.get(t).is_some_and(|&v| v >= 0))
+        };
+        if asleep {
+            step1()?;
+            self.wakes += 1;
+        }
+        Ok(())
+    }
+}
+
+fn not_contiguous<E>(_: E) -> PyErr {
+    pyo3::exceptions::PyValueError::new_err("sleep arrays: not contiguous")
+}
+
+fn tree_out_of_range() -> PyErr {
+    pyo3::exceptions::PyIndexError::new_err("sleep: tree index out of range")
+}

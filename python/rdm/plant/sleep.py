@@ -1,0 +1,117 @@
+"""The robot at rest sleeps in MuJoCo, and its own commands wake it.
+
+MuJoCo (3.3.7 and later, ``mjENBL_SLEEP``) can put a kinematic tree to sleep once its
+velocity has stayed under ``opt.sleep_tolerance`` for a few steps, and then skips its dynamics,
+collisions and sensors until something wakes it: a contact with an awake body, an applied
+force (``xfrc_applied``, ``qfrc_applied``) or its sleep policy. It does not watch ``ctrl``,
+so by default MuJoCo never lets an actuated tree sleep. :class:`RestingSleep` adds that watch
+for the robot: in each step, after the plant has written this step's controls (rotor thrusts
+after the ESC lag, servo goals), the policy of the robot's trees is "allowed" when every
+control is the same as in the last step and every rotor is stopped (thrust 0), and "never"
+otherwise. A changed control finds the robot awake in that same step: if it slept,
+``mj_step1`` runs again on the same state, which wakes it and redoes the position stages,
+before ``mj_step2``.
+
+So the robot sleeps only while it rests with its rotors stopped and nothing commanded: on the
+floor during the boot. That is where it saves most. It never sleeps perched (its rotors press
+the plate; a sleeping tree has no contacts, so the perch's ground truth would lose them). The
+sleeping robot is frozen, where the awake one keeps settling by ~1e-5 rad. Every other tree
+(the tasks' objects) keeps the policy "never": they are moved by hand, which would not wake
+them.
+
+ASSUMPTION (docs/plant.md "Sleeping at rest"): a tolerance of 1e-5 (MuJoCo's
+velocity norm weighted by the dof lengths; its default is 1e-3). With the default the robot
+fell asleep 65 ms sooner while a joint still crept, and at the end of the boot it stood 1e-4
+rad from the never-sleeping robot; with 1e-5 the difference is 1e-5.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+
+import mujoco
+import numpy as np
+
+_SLEEP_BIT = getattr(mujoco.mjtEnableBit, "mjENBL_SLEEP", None)
+_POLICY = getattr(mujoco, "mjtSleepPolicy", None)
+
+#: Whether this MuJoCo can put trees to sleep.
+SLEEP_AVAILABLE = _SLEEP_BIT is not None and _POLICY is not None
+ALLOWED = int(_POLICY.mjSLEEP_ALLOWED) if _POLICY is not None else -1
+NEVER = int(_POLICY.mjSLEEP_NEVER) if _POLICY is not None else -1
+#: ``opt.sleep_tolerance`` of a plant with :class:`RestingSleep` (see the module docstring).
+SLEEP_TOLERANCE = 1e-5
+
+
+class RestingSleep:
+    """Sleep of the robot's trees (``trees``) while its controls stay the same.
+
+    The lockstep kernel runs the same rule on the same arrays (``crates/rdm_py/src/kernel/
+    plant.rs``); its Python-visible state is ``pending``, ``allowed`` and ``wakes``.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        trees: Iterable[int],
+        rotors: Iterable[int],
+    ) -> None:
+        if not SLEEP_AVAILABLE:
+            raise RuntimeError(f"MuJoCo {mujoco.__version__} cannot put trees to sleep")
+        self.trees = sorted({int(t) for t in trees if t >= 0})
+        if not self.trees:
+            raise ValueError("RestingSleep: no tree to put to sleep")
+        #: The rotor actuators (``ctrl`` indices): the robot sleeps only with all of them at 0.
+        self.rotors = [int(r) for r in rotors]
+        model.opt.enableflags |= int(_SLEEP_BIT)
+        model.opt.sleep_tolerance = SLEEP_TOLERANCE
+        model.tree_sleep_policy[:] = NEVER  # only the robot may sleep (written below)
+        # Views on the model and data arrays (stable for their lifetime).
+        self._v_policy = model.tree_sleep_policy
+        self._v_tree_asleep = data.tree_asleep
+        self._v_ctrl = data.ctrl
+        #: The controls of the last step (what a step compares its own with).
+        self._v_last_ctrl = np.array(data.ctrl, dtype=float)
+        #: The next step counts as changed (start, reset, an outside change of the state).
+        self.pending = True
+        #: The policy now written for the trees ("allowed" True, "never" False).
+        self.allowed = False
+        #: Steps that found the robot asleep and woke it for a changed control.
+        self.wakes = 0
+        self._write(False)
+
+    def _write(self, allowed: bool) -> None:
+        policy = self._v_policy
+        value = ALLOWED if allowed else NEVER
+        for t in self.trees:
+            policy[t] = value
+        self.allowed = allowed
+
+    def asleep(self) -> bool:
+        """Whether a robot tree is asleep."""
+        asleep = self._v_tree_asleep
+        return any(asleep[t] >= 0 for t in self.trees)
+
+    def wake_next(self) -> None:
+        """Treat the next step as changed (the caller may have changed the state)."""
+        self.pending = True
+
+    def before_step2(self, step1: Callable[[], None]) -> None:
+        """This step's rule, once its controls are written: allowed if they equal the last
+        step's and the rotors are stopped, else never, and a sleeping robot woken now
+        (``step1`` on the same state)."""
+        ctrl = self._v_ctrl
+        last = self._v_last_ctrl
+        if not self.pending and np.array_equal(ctrl, last):
+            stopped = all(ctrl[r] == 0.0 for r in self.rotors)
+            if stopped != self.allowed:
+                self._write(stopped)
+            return
+        self.pending = False
+        np.copyto(last, ctrl)
+        if self.allowed:
+            self._write(False)
+        if self.asleep():
+            step1()  # mj_wake: policy "never" wakes the tree; the same state's stages again
+            self.wakes += 1
