@@ -133,5 +133,21 @@ def test_reset_starts_awake_and_sleep_false_never_sleeps() -> None:
     plant.reset(base_position=(0.0, 0.0, 0.12))
     assert not _asleep(plant)
     never = _resting(False)
-    assert never.model.opt.enableflags & 16 == 0 or never.sleep is None
+    assert never.sleep is None
+    assert never.model.opt.enableflags & int(mujoco.mjtEnableBit.mjENBL_SLEEP) == 0
     assert never._data.qvel.any()  # still settling by ~1e-10: MuJoCo never froze it
+
+
+def test_a_plant_with_a_scene_does_not_sleep() -> None:
+    """The tasks move their static objects through ``model.body_pos``, which a sleeping-enabled
+    MuJoCo would not pick up (it computes static poses once): such a plant stays awake."""
+
+    def scene(spec: mujoco.MjSpec) -> None:
+        spec.worldbody.add_body(name="board", pos=[0.5, 0.0, 0.3]).add_geom(size=[0.1, 0.1, 0.01])
+
+    plant = Plant("rdm", ceiling_height=None, floor_height=0.0, scene=scene)
+    assert plant.sleep is None
+    assert plant.model.opt.enableflags & int(mujoco.mjtEnableBit.mjENBL_SLEEP) == 0
+    plant.reset(base_position=(0.0, 0.0, 0.12))
+    plant.step(600)
+    assert plant._data.ntree_awake == plant.model.ntree
