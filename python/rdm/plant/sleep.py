@@ -1,16 +1,16 @@
 """The robot at rest sleeps in MuJoCo, and its own commands wake it.
 
-MuJoCo (3.3.7 and later, ``mjENBL_SLEEP``) can put a kinematic tree to sleep once its
-velocity has stayed under ``opt.sleep_tolerance`` for a few steps, and then skips its dynamics,
-collisions and sensors until something wakes it: a contact with an awake body, an applied
-force (``xfrc_applied``, ``qfrc_applied``) or its sleep policy. It does not watch ``ctrl``,
-so by default MuJoCo never lets an actuated tree sleep. :class:`RestingSleep` adds that watch
-for the robot: in each step, after the plant has written this step's controls (rotor thrusts
-after the ESC lag, servo goals), the policy of the robot's trees is "allowed" when every
-control is the same as in the last step and every rotor is stopped (thrust 0), and "never"
-otherwise. A changed control finds the robot awake in that same step: if it slept,
-``mj_step1`` runs again on the same state, which wakes it and redoes the position stages,
-before ``mj_step2``.
+MuJoCo (``mjENBL_SLEEP``, in recent releases such as the 4.0 used here) can put a kinematic
+tree to sleep once its velocity has stayed under ``opt.sleep_tolerance`` for a few steps, and
+then skips its dynamics, collisions and sensors until something wakes it: a contact with an
+awake body, an applied force (``xfrc_applied``, ``qfrc_applied``) or its sleep policy. It does
+not watch ``ctrl``, so by default MuJoCo never lets an actuated tree sleep.
+:class:`RestingSleep` adds that watch for the robot: in each step, after the plant has written
+this step's controls (rotor thrusts after the ESC lag, servo goals), the policy of the robot's
+trees is "allowed" when every control is the same as in the last step and every rotor is
+stopped (thrust 0), and "never" otherwise. A changed control finds the robot awake in that same
+step: if it slept, ``mj_step1`` runs again on the same state, which wakes it and redoes the
+position stages, before ``mj_step2``.
 
 So the robot sleeps only while it rests with its rotors stopped and nothing commanded: on the
 floor during the boot. That is where it saves most. It never sleeps perched (its rotors press
