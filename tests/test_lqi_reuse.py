@@ -98,3 +98,19 @@ def test_the_hover_stack_reuses_while_the_configuration_holds(tmp_path) -> None:
         stack.close()
     # 40 Hz from the handshake on: most ticks hold q (joints and vectoring still)
     assert ok > 100 and reused > ok // 2
+
+
+def test_a_solve_through_the_dict_form_is_not_answered_with_older_wire_objects() -> None:
+    """``synthesize`` and ``synthesize_wire`` share the core: a problem solved through the
+    dict form and then asked again through the wire form is that problem's answer, not the
+    objects the wire form kept for an earlier one."""
+    rng = np.random.default_rng(15)
+    first, second = random_robot(rng), random_robot(rng)
+    synth = lqi.LqiSynthesizer()
+    old = synth.synthesize_wire(*first)
+    synth.synthesize(*second)
+    again = synth.synthesize_wire(*second)
+    assert synth.reused == 1
+    fresh = lqi.LqiSynthesizer().synthesize_wire(*second)
+    assert again[0].tobytes() == fresh[0].tobytes() and again[2] == fresh[2]
+    assert again[0] is not old[0] and again[2] != old[2]

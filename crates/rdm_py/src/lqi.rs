@@ -348,8 +348,13 @@ impl LqiSynthesizer {
     ) -> PyResult<Bound<'py, PyDict>> {
         let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
         let allocation: Allocation = to_matrix(&allocation, "allocation")?;
+        let reused_before = self.inner.reused();
         let inner = &mut self.inner;
         let result = py.detach(move || inner.synthesize(mass, &inertia, &allocation).copied());
+        if self.inner.reused() == reused_before {
+            // solved (or failed): the wire objects kept belong to an earlier solution
+            self.last_wire = None;
+        }
         gains_dict(py, &result.map_err(lqi_error)?)
     }
 
