@@ -224,6 +224,7 @@ def test_boot_idle_ms_of_spinal_run_in_the_kernel(tmp_path: Path) -> None:
     def steps(stack: Stack) -> None:
         stack.loop.run(1.3)  # before the CAN master runs (it starts at 1.4 s)
         assert stack.spinal.master.state.value != "running"
+        assert stack.plant.sleep is not None and stack.plant.sleep.asleep()  # resting
 
     stats = _same(tmp_path, steps)
     assert stats["fast"][2] > 700  # Spinal's boot ms with nothing but the master's tick

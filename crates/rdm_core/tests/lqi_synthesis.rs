@@ -137,8 +137,9 @@ fn a_repeated_problem_is_answered_with_the_last_solution() {
         .synthesize(mass, &inertia, &allocation)
         .expect("again");
     assert_eq!(synth.reused(), 1);
-    assert_eq!(again, first); // the same solution, report included
-                              // One ulp of mass is another problem: solved (warm), close to the first.
+    // the same solution, report included
+    assert_eq!(again, first);
+    // One ulp of mass is another problem: solved (warm), close to the first.
     let nudged = f64::from_bits(mass.to_bits() + 1);
     let solved = *synth
         .synthesize(nudged, &inertia, &allocation)

@@ -47,7 +47,7 @@ class RestingSleep:
     """Sleep of the robot's trees (``trees``) while its controls stay the same.
 
     The lockstep kernel runs the same rule on the same arrays (``crates/rdm_py/src/kernel/
-    plant.rs``); its Python-visible state is ``pending``, ``allowed`` and ``wakes``.
+    sleep.rs``); its Python-visible state is ``pending``, ``allowed`` and ``wakes``.
     """
 
     def __init__(
@@ -110,8 +110,11 @@ class RestingSleep:
             return
         self.pending = False
         np.copyto(last, ctrl)
-        if self.allowed:
-            self._write(False)
+        if not self.allowed:
+            # "never" held through the last step: MuJoCo cannot have put the robot to sleep
+            # (and a robot found asleep was woken when "never" was written)
+            return
+        self._write(False)
         if self.asleep():
             step1()  # mj_wake: policy "never" wakes the tree; the same state's stages again
             self.wakes += 1

@@ -1,9 +1,8 @@
 //! `rdm.plant.sleep.RestingSleep` in the kernel's plant step: the robot's trees may sleep
-//! while this step's controls equal the last step's and its rotors are stopped, and a
-//! changed control wakes a sleeping
-//! robot in the same step (`mj_step1` again on the same state, then `mj_step2`). The same
-//! arrays as the Python rule; its flags are read with the plan and written back before any
-//! Python code runs.
+//! while this step's controls equal the last step's and its rotors are stopped, and a changed
+//! control wakes a sleeping robot in the same step (`mj_step1` again on the same state, then
+//! `mj_step2`). The same arrays as the Python rule; its flags are read with the plan (`load`)
+//! and written back before any Python code runs (`flush`).
 
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
@@ -42,6 +41,7 @@ impl SleepLink {
             allowed: Name::new(py, "allowed"),
             wakes: Name::new(py, "wakes"),
         };
+        // the flags come with the plan (`load`, before any step)
         Ok(SleepLink {
             obj: obj.clone().unbind(),
             trees: obj.getattr("trees")?.extract()?,
@@ -51,10 +51,10 @@ impl SleepLink {
             policy: obj.getattr("_v_policy")?.extract()?,
             tree_asleep: obj.getattr("_v_tree_asleep")?.extract()?,
             last_ctrl: obj.getattr("_v_last_ctrl")?.extract()?,
-            pending: names.pending.truthy(obj)?,
-            allowed: names.allowed.truthy(obj)?,
-            wakes: names.wakes.i64(obj)?,
             names,
+            pending: true,
+            allowed: false,
+            wakes: 0,
             dirty: false,
         })
     }
@@ -136,9 +136,12 @@ impl SleepLink {
         }
         self.pending = false;
         self.dirty = true;
-        if self.allowed {
-            self.write_policy(py, false)?;
+        if !self.allowed {
+            // "never" held through the last step: MuJoCo cannot have put the robot to sleep
+            // (and a robot found asleep was woken when "never" was written)
+            return Ok(());
         }
+        self.write_policy(py, false)?;
         let asleep = {
             let a = self.tree_asleep.bind(py).try_readonly()?;
             let a = a.as_slice().map_err(not_contiguous)?;
