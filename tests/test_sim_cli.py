@@ -41,6 +41,56 @@ def test_rdm_sim_hover_json_progress_and_run_folder(tmp_path):
     for rel in ("signals.mcap", "can.log", "summary.json", "metrics.txt"):
         assert (folder / rel).stat().st_size > 0, rel
     assert json.loads((folder / "summary.json").read_text()) == summary
+    # the figure, drawn by the plot worker process, is written before the command returns
+    assert (folder / "plots" / "hover.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_rdm_sim_perching_imports_only_what_it_runs():
+    """The registry imports a scenario's module when it runs: ``rdm sim perching`` does not
+    load the other experiments, scipy.spatial or matplotlib before the figures."""
+    env = dict(os.environ, PYTHONPATH=str(Path(rdm.__file__).resolve().parent.parent))
+    code = (
+        "import sys; from rdm.scenarios import SCENARIOS; import rdm.commands.sim; "
+        "s = SCENARIOS['perching']; d = s.default_duration; r = s.run; "
+        "print(d, r.__module__, sorted(m for m in ('rdm.scenarios.flight', "
+        "'rdm.scenarios.tracking', 'rdm.scenarios.push', 'rdm.scenarios.tasks', "
+        "'scipy.spatial', 'matplotlib') if m in sys.modules))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["30.0", "rdm.scenarios.perching", "[]"]
+
+
+def test_every_registered_scenario_resolves_to_its_module():
+    from rdm.scenarios import (
+        DEFAULT_SCENARIO,
+        SCENARIOS,
+        flight,
+        hover,
+        perching,
+        push,
+        tasks,
+        tracking,
+    )
+
+    assert DEFAULT_SCENARIO in SCENARIOS
+    expect = {
+        "hover": (hover.run, hover.DEFAULT_DURATION),
+        "flight": (flight.run, flight.DEFAULT_DURATION),
+        "perching": (perching.run, perching.DEFAULT_DURATION),
+        "push": (push.run, push.DEFAULT_DURATION),
+        "tracking": (tracking.run, tracking.DEFAULT_DURATION),
+        "drilling": (tasks.run_drilling, tasks.duration_of("drilling")),
+        "painting": (tasks.run_painting, tasks.duration_of("painting")),
+        "valve": (tasks.run_valve, tasks.duration_of("valve")),
+    }
+    assert set(SCENARIOS) == set(expect)
+    for name, (run, duration) in expect.items():
+        sc = SCENARIOS[name]
+        assert sc.name == name and sc.run is run and sc.default_duration == duration, name
+        assert sc.description and "\n" not in sc.description
 
 
 def _sim(args: list[str], timeout: float = 600) -> subprocess.CompletedProcess:

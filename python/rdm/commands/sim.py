@@ -68,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
     from rdm.scenarios import SCENARIOS
     from rdm.scenarios.common import backend, progress_to, servo_lead
     from rdm.sim import format_metrics_table
+    from rdm.sim.plot_worker import plots_in_background
 
     sc = SCENARIOS[args.scenario]
     duration = sc.default_duration if args.duration is None else args.duration
@@ -77,14 +78,24 @@ def run(args: argparse.Namespace) -> int:
     # no --servo-lead: each scenario's own default (docs/servolead.md)
     lead = nullcontext() if args.servo_lead is None else servo_lead(args.servo_lead)
     print(f"rdm sim {sc.name}: {sc.description}", file=sys.stderr)
-    with lead, progress_to(sys.stderr, duration), backend(args.backend):
-        result = sc.run(
-            args.out, duration=duration, seed=args.seed, uart=args.uart, speed=args.speed
-        )
-    if args.json:
-        print(json.dumps(json.loads(result.stack.folder.summary_json.read_text())))
-    else:
-        print(format_metrics_table(result.metrics))
+    # the PNG figures are drawn by a worker process on the other core (docs/sim.md
+    # "Start-up and figures"), waited for before the run folder is named
+    with plots_in_background() as worker:
+        with lead, progress_to(sys.stderr, duration), backend(args.backend):
+            result = sc.run(
+                args.out, duration=duration, seed=args.seed, uart=args.uart, speed=args.speed
+            )
+        if args.json:
+            print(json.dumps(json.loads(result.stack.folder.summary_json.read_text())))
+        else:
+            print(format_metrics_table(result.metrics), flush=True)
+        try:
+            if worker is not None:
+                worker.wait()
+        except Exception as exc:  # reported; the run folder's data is already written
+            print(f"rdm sim: a figure could not be drawn: {exc!r}", file=sys.stderr)
+            return 1
+    if not args.json:
         f = result.facts
         print(f"run folder: {result.folder}")
         print(

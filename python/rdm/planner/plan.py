@@ -7,7 +7,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from rdm import _rdm
 from rdm.planner.core import PlannerSetup, make_core
@@ -51,6 +50,9 @@ def run_core(
     pos = np.array(target[:3])
     quat = None
     if len(target) == 6:
+        # imported here: scipy.spatial costs 0.3 s of start-up, and most targets are points
+        from scipy.spatial.transform import Rotation
+
         quat = list(Rotation.from_euler("xyz", target[3:]).as_quat())
     elif len(target) != 3:
         raise ValueError(f"target: expected 3 or 6 values, got {len(target)}")

@@ -1,65 +1,92 @@
 """Scenario registry: name -> (run function, default duration, one-line description).
 
-Only scenarios that run end to end are listed (no stubs)."""
+Only scenarios that run end to end are listed (no stubs). Each entry names its module and
+imports it only when its ``run`` or ``default_duration`` is asked for: the scenario modules
+pull in scipy, the planner and each other's helpers, and ``rdm sim perching`` (or
+``rdm --help``) should not pay for all of them (docs/sim.md "Start-up")."""
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
-
-from . import flight, hover, perching, push, tasks, tracking
+from typing import Any
 
 
 @dataclass(frozen=True)
 class Scenario:
+    """One experiment: ``run`` is ``module.function``, ``default_duration`` is
+    ``module.duration`` (an attribute, or a function called with ``duration_arg``)."""
+
     name: str
-    run: Callable
-    default_duration: float
+    module: str
+    function: str
     description: str
+    duration: str = "DEFAULT_DURATION"
+    duration_arg: str | None = None
+
+    def _module(self) -> Any:
+        return importlib.import_module(f"rdm.scenarios.{self.module}")
+
+    @property
+    def run(self) -> Callable:
+        """The scenario's run function (imports its module)."""
+        return getattr(self._module(), self.function)
+
+    @property
+    def default_duration(self) -> float:
+        """Simulated seconds of a default run (imports the scenario's module)."""
+        value = getattr(self._module(), self.duration)
+        return float(value(self.duration_arg) if self.duration_arg is not None else value)
 
 
 SCENARIOS: dict[str, Scenario] = {
-    "hover": Scenario(
-        "hover", hover.run, hover.DEFAULT_DURATION, "take-off and hover at 0.4 m through every wire"
-    ),
-    "flight": Scenario(
-        "flight", flight.run, flight.DEFAULT_DURATION, "Fig. 9 configuration change in flight"
-    ),
-    "perching": Scenario(
-        "perching",
-        perching.run,
-        perching.DEFAULT_DURATION,
-        "climb, fold to the hanging posture, perch on the ceiling, move the arm (Fig. 10)",
-    ),
-    "push": Scenario(
-        "push",
-        push.run,
-        push.DEFAULT_DURATION,
-        "end-effector pushed and pulled in x, y, z in flight and perched (Figs. 11-12)",
-    ),
-    "tracking": Scenario(
-        "tracking",
-        tracking.run,
-        tracking.DEFAULT_DURATION,
-        "end-effector pose errors under the same joint motion in flight and perched (Fig. 13)",
-    ),
-    "drilling": Scenario(
-        "drilling",
-        tasks.run_drilling,
-        tasks.duration_of("drilling"),
-        "perch, then drill (point contact) at three targets on a board (Fig. 14 A)",
-    ),
-    "painting": Scenario(
-        "painting",
-        tasks.run_painting,
-        tasks.duration_of("painting"),
-        "perch, then slide a compliant brush over 0.5 m in contact along a panel (Fig. 14 B)",
-    ),
-    "valve": Scenario(
-        "valve",
-        tasks.run_valve,
-        tasks.duration_of("valve"),
-        "perch, then grip a hand-wheel's handle bar and turn it 69 deg with q6 (Fig. 14 C)",
-    ),
+    s.name: s
+    for s in (
+        Scenario("hover", "hover", "run", "take-off and hover at 0.4 m through every wire"),
+        Scenario("flight", "flight", "run", "Fig. 9 configuration change in flight"),
+        Scenario(
+            "perching",
+            "perching",
+            "run",
+            "climb, fold to the hanging posture, perch on the ceiling, move the arm (Fig. 10)",
+        ),
+        Scenario(
+            "push",
+            "push",
+            "run",
+            "end-effector pushed and pulled in x, y, z in flight and perched (Figs. 11-12)",
+        ),
+        Scenario(
+            "tracking",
+            "tracking",
+            "run",
+            "end-effector pose errors under the same joint motion in flight and perched (Fig. 13)",
+        ),
+        Scenario(
+            "drilling",
+            "tasks",
+            "run_drilling",
+            "perch, then drill (point contact) at three targets on a board (Fig. 14 A)",
+            "duration_of",
+            "drilling",
+        ),
+        Scenario(
+            "painting",
+            "tasks",
+            "run_painting",
+            "perch, then slide a compliant brush over 0.5 m in contact along a panel (Fig. 14 B)",
+            "duration_of",
+            "painting",
+        ),
+        Scenario(
+            "valve",
+            "tasks",
+            "run_valve",
+            "perch, then grip a hand-wheel's handle bar and turn it 69 deg with q6 (Fig. 14 C)",
+            "duration_of",
+            "valve",
+        ),
+    )
 }
 DEFAULT_SCENARIO = "perching"

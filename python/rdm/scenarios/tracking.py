@@ -29,14 +29,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from rdm.model import Robot
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels, plot_tracking_errors
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 
 from .common import (
     ScenarioResult,
@@ -221,6 +223,9 @@ def ee_targets(
 
 
 def _wxyz_to_rot(q: np.ndarray) -> Rotation:
+    # scipy.spatial is imported here, at evaluation, not with the module (0.3 s of start-up)
+    from scipy.spatial.transform import Rotation
+
     q = np.atleast_2d(q)
     return Rotation.from_quat(q[:, [1, 2, 3, 0]])
 
@@ -242,6 +247,8 @@ def stage_errors(stack: Stack, robot: Robot, plan: StagePlan | None) -> StageErr
     lags = joint_lags(t[win], a["q"][win, :6], times, qs[:, :6])
     ee_q = np.array([g.end_effector_quaternion for g, w in zip(stack.truth, win, strict=True) if w])
     pos_err = a["ee"][win] - p_ref
+    from scipy.spatial.transform import Rotation
+
     att_err = (_wxyz_to_rot(ee_q) * Rotation.from_matrix(r_ref).inv()).as_rotvec()
     return StageErrors(
         t=t[win],

@@ -5,8 +5,11 @@
 * :func:`plot_tracking_errors` - per-axis tracking errors with a +-band (Fig. 9 (B), (C));
 * :func:`plot_zmp` - the centre of pressure inside the foot plate (Fig. 12 (E)).
 
-Each returns the written path. matplotlib is imported on first use, with the Agg backend, so
-nothing needs a display.
+Each checks its inputs at once and returns the path it writes. matplotlib is imported on
+first use, with the Agg backend, so nothing needs a display. Inside
+:func:`rdm.sim.plot_worker.plots_in_background` the drawing happens in a worker process on
+another core and the file appears when :meth:`~rdm.sim.plot_worker.PlotWorker.wait` returns;
+elsewhere it is written before the function returns.
 """
 
 from __future__ import annotations
@@ -14,8 +17,11 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+
+from rdm.sim.plot_worker import active_worker
 
 
 def _pyplot():
@@ -42,15 +48,33 @@ def plot_panels(
     """One panel per ``(title, {label: values}, ylabel)``, stacked, shared time axis."""
     if not panels:
         raise ValueError("plot_panels: no panels")
-    plt = _pyplot()
     t = np.asarray(t, dtype=float)
-    fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(7.0, 2.2 * len(panels)))
-    axes = np.atleast_1d(axes)
-    for ax, (ptitle, series, ylabel) in zip(axes, panels, strict=True):
+    checked = []
+    for ptitle, series, ylabel in panels:
+        arrays = {}
         for label, values in series.items():
             v = np.asarray(values, dtype=float)
             if v.shape != t.shape:
                 raise ValueError(f"plot_panels: {label!r} has {v.shape} values, time {t.shape}")
+            arrays[label] = v
+        checked.append((ptitle, arrays, ylabel))
+    return _render(draw_panels, path, t, checked, title, xlabel, dpi)
+
+
+def draw_panels(
+    out: Path,
+    t: np.ndarray,
+    panels: list[tuple[str, dict[str, np.ndarray], str]],
+    title: str,
+    xlabel: str,
+    dpi: int,
+) -> None:
+    """Draw :func:`plot_panels`' checked inputs into ``out``."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(7.0, 2.2 * len(panels)))
+    axes = np.atleast_1d(axes)
+    for ax, (ptitle, series, ylabel) in zip(axes, panels, strict=True):
+        for label, v in series.items():
             ax.plot(t, v, label=label, linewidth=1.0)
         ax.set_title(ptitle, fontsize=9)
         ax.set_ylabel(ylabel)
@@ -61,10 +85,8 @@ def plot_panels(
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    out = Path(path)
     fig.savefig(out, dpi=dpi)
     plt.close(fig)
-    return out
 
 
 def plot_tracking_errors(
@@ -81,8 +103,21 @@ def plot_tracking_errors(
     errors = np.asarray(errors, dtype=float)
     if errors.ndim != 2 or errors.shape[1] != len(labels):
         raise ValueError(f"plot_tracking_errors: errors {errors.shape} vs {len(labels)} labels")
-    plt = _pyplot()
     t = np.asarray(t, dtype=float)
+    return _render(draw_tracking_errors, path, t, errors, list(labels), band, ylabel, title)
+
+
+def draw_tracking_errors(
+    out: Path,
+    t: np.ndarray,
+    errors: np.ndarray,
+    labels: list[str],
+    band: float | None,
+    ylabel: str,
+    title: str,
+) -> None:
+    """Draw :func:`plot_tracking_errors`' checked inputs into ``out``."""
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7.0, 2.8))
     for i, label in enumerate(labels):
         ax.plot(t, errors[:, i], label=label, linewidth=1.0)
@@ -96,10 +131,8 @@ def plot_tracking_errors(
     if title:
         ax.set_title(title)
     fig.tight_layout()
-    out = Path(path)
     fig.savefig(out, dpi=110)
     plt.close(fig)
-    return out
 
 
 def plot_zmp(
@@ -113,6 +146,12 @@ def plot_zmp(
     zmp = np.asarray(zmp_xy, dtype=float)
     if zmp.ndim != 2 or zmp.shape[1] != 2:
         raise ValueError(f"plot_zmp: zmp_xy must be (n, 2), got {zmp.shape}")
+    size = (float(plate_size[0]), float(plate_size[1]))
+    return _render(draw_zmp, path, zmp, size, title)
+
+
+def draw_zmp(out: Path, zmp: np.ndarray, plate_size: tuple[float, float], title: str) -> None:
+    """Draw :func:`plot_zmp`'s checked inputs into ``out``."""
     plt = _pyplot()
     ok = np.all(np.isfinite(zmp), axis=1)
     hx, hy = plate_size[0] / 2, plate_size[1] / 2
@@ -125,7 +164,16 @@ def plot_zmp(
     ax.set_title(title, fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    out = Path(path)
     fig.savefig(out, dpi=110)
     plt.close(fig)
+
+
+def _render(draw: Any, path: str | os.PathLike[str], *args: Any) -> Path:
+    """``draw(out, *args)`` here, or in the background worker when one is active."""
+    out = Path(path)
+    worker = active_worker()
+    if worker is not None:
+        worker.submit(draw, out, *args)
+    else:
+        draw(out, *args)
     return out

@@ -1,0 +1,101 @@
+"""PNG figures drawn in a worker process while the simulation runs on this one.
+
+matplotlib costs ~0.6 s to import and ~1 s to lay out and write one figure of
+:func:`rdm.sim.plots.plot_panels`: about as long as the 30 s perching simulation itself on
+this machine, and all of it after the simulation. ``rdm sim`` therefore starts one worker
+process at launch (:func:`plots_in_background`); it imports matplotlib on the second core
+while the single-threaded simulation runs, and draws the figures the scenario hands it
+while the main process evaluates metrics and writes the summary. The figures are the same
+(same matplotlib, same Agg backend, same inputs: ``tests/test_plot_worker.py`` compares the
+pixels).
+
+Inputs are checked in the caller (a bad shape raises there, at once); a drawing error in
+the worker is raised by :meth:`PlotWorker.wait`. A worker that cannot start (no process
+spawning here) leaves the drawing to the caller's process, as without the context.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
+from contextlib import contextmanager
+from contextvars import ContextVar
+from pathlib import Path
+from typing import Any
+
+_ACTIVE: ContextVar[PlotWorker | None] = ContextVar("rdm_plot_worker", default=None)
+
+
+def active_worker() -> PlotWorker | None:
+    """The worker of the enclosing :func:`plots_in_background`, if any."""
+    return _ACTIVE.get()
+
+
+def _warm_up() -> None:
+    """Worker initializer: import matplotlib (Agg) before the first figure is asked for."""
+    from rdm.sim.plots import _pyplot
+
+    _pyplot()
+
+
+def _ready() -> bool:
+    return True
+
+
+class PlotWorker:
+    """One spawned process that draws figures (``draw(out, *args)`` calls) in order."""
+
+    def __init__(self) -> None:
+        # spawn, not fork: the parent may hold threads (MCAP writer) and MuJoCo state
+        self._pool = ProcessPoolExecutor(
+            max_workers=1,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_warm_up,
+        )
+        self._started = self._pool.submit(_ready)  # start the process (and its import) now
+        self._pending: list[tuple[Path, Future]] = []
+        self.drawn: list[Path] = []
+
+    def submit(self, draw: Callable[..., None], out: Path, *args: Any) -> None:
+        """Queue ``draw(out, *args)`` (a module-level function and picklable inputs)."""
+        self._pending.append((out, self._pool.submit(draw, out, *args)))
+
+    def wait(self) -> list[Path]:
+        """Block until every queued figure is written; returns their paths in order. A
+        drawing error (or a dead worker) is raised here, after the other figures finished."""
+        error: BaseException | None = None
+        pending, self._pending = self._pending, []
+        for out, future in pending:
+            try:
+                future.result()
+                self.drawn.append(out)
+            except BaseException as exc:  # re-raised below, after the rest
+                error = error or exc
+        if error is not None:
+            raise error
+        return list(self.drawn)
+
+    def close(self) -> None:
+        """Stop the process (waits for queued figures; :meth:`wait` first to see errors)."""
+        self._pool.shutdown(wait=True, cancel_futures=False)
+
+
+@contextmanager
+def plots_in_background() -> Iterator[PlotWorker | None]:
+    """Inside: the ``rdm.sim.plots`` functions queue their figure to a worker process. On a
+    normal exit the figures are waited for (errors raised); the worker is always stopped.
+    Yields None (figures drawn in this process) when no worker process can be started."""
+    try:
+        worker: PlotWorker | None = PlotWorker()
+    except (OSError, RuntimeError, ImportError):
+        worker = None
+    token = _ACTIVE.set(worker)
+    try:
+        yield worker
+        if worker is not None:
+            worker.wait()
+    finally:
+        _ACTIVE.reset(token)
+        if worker is not None:
+            worker.close()

@@ -1,0 +1,91 @@
+"""The figures of ``rdm sim`` drawn in a worker process (rdm.sim.plot_worker): the same
+pixels as in this process, inputs checked in the caller, drawing errors raised by ``wait``."""
+
+from __future__ import annotations
+
+import os
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+from rdm.sim.plot_worker import active_worker, plots_in_background
+from rdm.sim.plots import plot_panels, plot_tracking_errors, plot_zmp
+
+
+def _figures(folder) -> list:
+    """Three figures, one of each kind, into ``folder``; returns their paths."""
+    t = np.linspace(0.0, 3.0, 301)
+    rng = np.random.default_rng(7)
+    walk = np.cumsum(rng.normal(size=(t.size, 3)), axis=0)
+    zmp = np.c_[0.01 * np.sin(t), 0.02 * np.cos(3 * t)]
+    zmp[10] = np.nan
+    return [
+        plot_panels(
+            folder / "panels.png",
+            t,
+            [("walk", {"a": walk[:, 0], "b": walk[:, 1]}, "m"), ("c", {"c": walk[:, 2]}, "N")],
+            title="three walks",
+        ),
+        plot_tracking_errors(folder / "errors.png", t, walk * 1e-3, ["x", "y", "z"], band=0.01),
+        plot_zmp(folder / "zmp.png", zmp, (0.1, 0.15)),
+    ]
+
+
+def test_the_worker_draws_the_pixels_this_process_draws(tmp_path):
+    here, there = tmp_path / "here", tmp_path / "there"
+    here.mkdir()
+    there.mkdir()
+    local = _figures(here)
+    with plots_in_background() as worker:
+        assert worker is not None and active_worker() is worker
+        # drawn in another process: that process's id is not ours
+        assert worker._pool.submit(os.getpid).result() != os.getpid()
+        remote = _figures(there)
+        drawn = worker.wait()
+    assert active_worker() is None
+    assert drawn == remote
+    for a, b in zip(local, remote, strict=True):
+        assert a.name == b.name
+        pa, pb = mpimg.imread(a), mpimg.imread(b)
+        assert pa.shape == pb.shape and pa.shape[0] > 100
+        np.testing.assert_array_equal(pa, pb)
+
+
+def test_bad_inputs_raise_in_the_caller_and_nothing_is_queued(tmp_path):
+    t = np.linspace(0.0, 1.0, 11)
+    with plots_in_background() as worker:
+        assert worker is not None
+        with pytest.raises(ValueError, match="has"):
+            plot_panels(tmp_path / "a.png", t, [("x", {"short": t[:5]}, "")])
+        with pytest.raises(ValueError, match="labels"):
+            plot_tracking_errors(tmp_path / "b.png", t, np.c_[t, t], ["x"])
+        with pytest.raises(ValueError, match=r"\(n, 2\)"):
+            plot_zmp(tmp_path / "c.png", np.zeros((4, 3)), (0.1, 0.1))
+        assert worker.wait() == []
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_drawing_error_is_raised_by_wait_after_the_other_figures(tmp_path):
+    t = np.linspace(0.0, 1.0, 11)
+    panel = [("x", {"x": t}, "m")]
+    with plots_in_background() as worker:
+        assert worker is not None
+        plot_panels(tmp_path / "missing-folder" / "a.png", t, panel)
+        plot_panels(tmp_path / "b.png", t, panel)
+        with pytest.raises(FileNotFoundError):
+            worker.wait()
+    assert (tmp_path / "b.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not (tmp_path / "missing-folder").exists()
+
+
+def test_leaving_the_context_waits_for_the_figures(tmp_path):
+    with plots_in_background():
+        path = _figures(tmp_path)[0]
+    assert mpimg.imread(path).shape[0] > 100
+
+
+def test_without_the_context_the_figure_is_written_before_return(tmp_path):
+    assert active_worker() is None
+    path = _figures(tmp_path)[0]
+    assert path.stat().st_size > 0
