@@ -4,6 +4,8 @@ pixels as in this process, inputs checked in the caller, drawing errors raised b
 from __future__ import annotations
 
 import os
+import signal
+import time
 
 import matplotlib.image as mpimg
 import numpy as np
@@ -89,3 +91,21 @@ def test_without_the_context_the_figure_is_written_before_return(tmp_path):
     assert active_worker() is None
     path = _figures(tmp_path)[0]
     assert path.stat().st_size > 0
+
+
+def test_figures_a_dead_worker_left_are_drawn_here(tmp_path):
+    t = np.linspace(0.0, 1.0, 11)
+    panel = [("x", {"x": t}, "m")]
+    with plots_in_background() as worker:
+        assert worker is not None
+        pid = worker._pool.submit(os.getpid).result()
+        worker._pool.submit(time.sleep, 30)  # holds the worker: the figures stay queued
+        paths = [plot_panels(tmp_path / f"{k}.png", t, panel) for k in range(2)]
+        os.kill(pid, signal.SIGKILL)
+        assert worker.wait() == paths
+        assert worker.redrawn == 2
+        # the pool is broken now: a later figure is drawn here as well
+        late = plot_panels(tmp_path / "late.png", t, panel)
+        assert worker.wait() == [*paths, late] and worker.redrawn == 3
+    for p in (*paths, late):
+        assert mpimg.imread(p).shape[0] > 100

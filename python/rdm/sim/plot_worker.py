@@ -11,7 +11,9 @@ pixels).
 
 Inputs are checked in the caller (a bad shape raises there, at once); a drawing error in
 the worker is raised by :meth:`PlotWorker.wait`. A worker that cannot start (no process
-spawning here) leaves the drawing to the caller's process, as without the context.
+spawning here) leaves the drawing to the caller's process, as without the context; a worker
+that dies (killed, out of memory) has its unfinished figures drawn again in the caller's
+process by :meth:`PlotWorker.wait` (counted in ``redrawn``), so no figure is lost.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from __future__ import annotations
 import multiprocessing
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from contextvars import ContextVar
 from pathlib import Path
@@ -54,21 +57,35 @@ class PlotWorker:
             initializer=_warm_up,
         )
         self._started = self._pool.submit(_ready)  # start the process (and its import) now
-        self._pending: list[tuple[Path, Future]] = []
+        self._pending: list[tuple[Future | None, Callable[..., None], Path, tuple]] = []
+        #: Every figure written so far (by :meth:`wait`), in order.
         self.drawn: list[Path] = []
+        #: Figures drawn in this process because the worker had died.
+        self.redrawn = 0
 
     def submit(self, draw: Callable[..., None], out: Path, *args: Any) -> None:
         """Queue ``draw(out, *args)`` (a module-level function and picklable inputs)."""
-        self._pending.append((out, self._pool.submit(draw, out, *args)))
+        try:
+            future: Future | None = self._pool.submit(draw, out, *args)
+        except BrokenProcessPool:
+            future = None  # the worker is gone: wait() draws it here
+        self._pending.append((future, draw, out, args))
 
     def wait(self) -> list[Path]:
-        """Block until every queued figure is written; returns their paths in order. A
-        drawing error (or a dead worker) is raised here, after the other figures finished."""
+        """Block until every queued figure is written; returns every written path in order.
+        A drawing error is raised here, after the other figures are written; the figures a
+        dead worker left are drawn in this process."""
         error: BaseException | None = None
         pending, self._pending = self._pending, []
-        for out, future in pending:
+        for future, draw, out, args in pending:
             try:
-                future.result()
+                try:
+                    if future is None:
+                        raise BrokenProcessPool("the plot worker was not running")
+                    future.result()
+                except BrokenProcessPool:
+                    draw(out, *args)
+                    self.redrawn += 1
                 self.drawn.append(out)
             except BaseException as exc:  # re-raised below, after the rest
                 error = error or exc
