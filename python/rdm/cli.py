@@ -20,7 +20,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "decode": ("decode", "decode a UART capture, candump log or Leptrino capture"),
     "design": ("design", "reachability/feasibility sweep reproducing Tables II-III"),
-    "hil": ("hil", "fly the hover scenario with the nodes as separate processes on real ports"),
+    "hil": (
+        "hil",
+        "fly the hover or perching scenario with the nodes as separate processes on real ports",
+    ),
     "model": ("model", "load a robot and print its mass properties, allocation and aerial ZMP"),
     "neuron": ("neuron", "run a Neuron board mirror on a CAN bus"),
     "onboard": (
