@@ -818,6 +818,35 @@ class RotorPlantCore:
         contact, force/torque -0.0, ZMP NaN, slip 0, yaw 0; None if the plate frame is not
         finite."""
 
+# --- plate contact (ground truth) ---
+class PlateContactCore:
+    """The foot plate's contact measurement of ``FootContactTracker.measure_contacts``
+    (rdm.plant.truth): contact sums, foot-frame force, torque and ZMP from MuJoCo's contact
+    views and ``efc_force`` (elliptic cones), the bits of the numpy forms."""
+
+    def __init__(self, geom_body: list[int], environment: list[bool], plate_body: int) -> None:
+        """``geom_body`` = ``model.geom_bodyid``; ``environment[g]``: geom g is an
+        environment surface; ``plate_body``: the foot plate. ValueError on unequal lengths."""
+    def measure(
+        self,
+        geom: np.ndarray,
+        frame: np.ndarray,
+        pos: np.ndarray,
+        efc_address: np.ndarray,
+        dim: np.ndarray,
+        efc_force: np.ndarray,
+        origin: np.ndarray,
+        rot: np.ndarray,
+    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray] | None:
+        """``(points, force, torque, zmp)`` (what the robot applies, foot frame; ZMP NaN
+        without normal force) of the plate's contacts, or None when a sum is NaN.
+        ValueError on mismatched shapes, IndexError on a geom or constraint row out of
+        range."""
+    @staticmethod
+    def yaw_about(r0: np.ndarray, r1: np.ndarray) -> float | None:
+        """The turn from ``r0`` to ``r1`` (row-major, 9 values) about ``r0``'s z axis; None
+        when a value on the way is NaN."""
+
 # --- canwire ---
 class CanMasterError(RdmError): ...
 

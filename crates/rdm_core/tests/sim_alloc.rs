@@ -11,7 +11,14 @@ use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 #[global_allocator]
 static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
 
+/// One test: the allocator's counters are global, and the test harness would run a second
+/// test (and its own bookkeeping) on another thread while a region is measured.
 #[test]
+fn sim_models_allocate_nothing() {
+    sensor_models_and_frame_encoder_allocate_nothing();
+    plate_contact_measure_allocates_nothing();
+}
+
 fn sensor_models_and_frame_encoder_allocate_nothing() {
     let rated = [100.0, 100.0, 200.0, 5.0, 5.0, 4.0];
     let wrench = WrenchNoiseModel::new(rated, [0.1; 6], 0.003, true, 10000.0);
@@ -56,4 +63,43 @@ fn sensor_models_and_frame_encoder_allocate_nothing() {
     assert_eq!(stats.reallocations, 0);
     assert!(checksum.is_finite() || checksum.is_nan());
     assert!(frames > 0);
+}
+
+fn plate_contact_measure_allocates_nothing() {
+    use rdm_core::sim::plate_contact::{yaw_about, ContactRow, PlateContactModel};
+    // set up (allocates): plate body 1, ceiling geom 0, arm geom 2
+    let model = PlateContactModel::new(vec![0, 1, 2], vec![true, false, false], 1);
+    let efc: Vec<f64> = (0..24).map(|i| (i as f64 * 0.7).cos() * 5.0).collect();
+    let rot = [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+    let region = Region::new(GLOBAL);
+    let mut points = 0usize;
+    let mut checksum = 0.0;
+    for k in 0..2000usize {
+        let rows = (0..4i32).map(|i| ContactRow {
+            geom: if i == 3 { [2, 0] } else { [i % 2, 1 - i % 2] },
+            frame: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            pos: [0.01 * f64::from(i), -0.02, 1.6],
+            efc_address: if k % 7 == 0 && i == 1 { -1 } else { i * 4 },
+            dim: 4,
+        });
+        if let Ok(Some(m)) = model.measure(rows, &efc, [0.0, 0.0, 1.6], &rot) {
+            points += m.points;
+            checksum += m.force[0] + m.zmp[1];
+        }
+        checksum += yaw_about(&rot, &rot).unwrap_or(0.0);
+        // an out-of-range row is an error value, not an allocation
+        let bad = [ContactRow {
+            geom: [0, 9],
+            frame: [0.0; 9],
+            pos: [0.0; 3],
+            efc_address: 0,
+            dim: 3,
+        }];
+        assert!(model.measure(bad, &efc, [0.0; 3], &rot).is_err());
+    }
+    let stats = region.change();
+    assert_eq!(stats.allocations, 0, "allocations: {stats:?}");
+    assert_eq!(stats.reallocations, 0);
+    assert_eq!(points, 2000 * 3);
+    assert!(checksum.is_finite());
 }

@@ -18,6 +18,7 @@ mod model;
 mod neuron_bank;
 mod perch;
 mod planner;
+mod plate_contact;
 mod position;
 mod qp;
 mod rosserial;
@@ -38,6 +39,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     bench::register(m)?;
     qp::register(m)?;
     planner::register(m)?;
+    plate_contact::register(m)?;
     neuron_bank::register(m)?;
     sensor_sim::register(m)?;
     json_log::register(m)?;

@@ -13,6 +13,11 @@ from itertools import chain
 import mujoco
 import numpy as np
 
+from rdm import _rdm
+
+#: The cone whose contact forces ``mj_contactForce`` copies from ``efc_force``.
+_ELLIPTIC = mujoco.mjtCone.mjCONE_ELLIPTIC
+
 
 @dataclass(frozen=True)
 class GroundTruth:
@@ -126,6 +131,12 @@ class FootContactTracker:
         #: Times a cached contact view was found pointing elsewhere (see :meth:`update`).
         self.view_misses = 0
         self._bodyids: list[int] | None = None
+        #: :meth:`measure_contacts` in Rust (None: :meth:`measure_contacts_floats`)
+        self._sums_core: _rdm.PlateContactCore | None = _rdm.PlateContactCore(
+            model.geom_bodyid.tolist(),
+            [g in env_geoms for g in range(model.ngeom)],
+            plate_body,
+        )
 
     def update(self, data: mujoco.MjData) -> None:
         """Per-step bookkeeping of the first-contact anchor (cheap: no contact forces).
@@ -254,6 +265,47 @@ class FootContactTracker:
     def measure_contacts(
         self, data: mujoco.MjData
     ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """:meth:`measure_contacts_floats` in Rust (``rdm._rdm.PlateContactCore``: the
+        contact sums, the foot-frame force, torque and ZMP, and the slip yaw, the same IEEE
+        operations in the same order on the ``data.contact`` views and ``efc_force``, so the
+        same bits; tests/test_truthlog_truth.py, tests/test_plate_contact.py). A
+        pyramidal-cone model (whose contact forces need MuJoCo's pyramid decoding) takes
+        :meth:`measure_contacts_floats`; sums holding a NaN take
+        :meth:`measure_contacts_arrays`."""
+        self._check_view(data)
+        core = self._sums_core
+        if core is None or self._model.opt.cone != _ELLIPTIC:
+            return self.measure_contacts_floats(data)
+        contact = data.contact
+        pb = self._plate_body
+        origin = data.xpos[pb]
+        rot = data.xmat[pb]
+        measured = core.measure(
+            contact.geom,
+            contact.frame,
+            contact.pos,
+            contact.efc_address,
+            contact.dim,
+            data.efc_force,
+            origin,
+            rot,
+        )
+        if measured is None:
+            return self.measure_contacts_arrays(data)
+        points, force, torque, zmp = measured
+        self._track(data, points > 0)
+        anchor_pos, anchor_rot = self._anchor_pos, self._anchor_rot
+        if anchor_pos is None or anchor_rot is None:
+            return points, force, torque, zmp, np.zeros(2), 0.0
+        slip = (origin - anchor_pos)[:2]
+        yaw = core.yaw_about(anchor_rot.ravel(), rot)
+        if yaw is None:
+            yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot.reshape(3, 3))
+        return points, force, torque, zmp, slip.copy(), yaw
+
+    def measure_contacts_floats(
+        self, data: mujoco.MjData
+    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """:meth:`measure_contacts_arrays` with the per-contact sums in Python floats: the
         contact-frame products (``frame.T @ buf``) stay numpy's, everything after them is
         the same IEEE operations in the same order on floats (the cross product as numpy
@@ -306,8 +358,19 @@ class FootContactTracker:
             normal_sum += n
             points += 1
         sums = (fx, fy, fz, tx, ty, tz, cx, cy, cz, normal_sum)
+        return self._contact_result(data, points, sums, origin)
+
+    def _contact_result(
+        self, data: mujoco.MjData, points: int, sums: tuple, origin: np.ndarray
+    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """The measurement from the plate's contact sums (world axes; see
+        :meth:`measure_contacts_floats`): foot-frame force and torque, ZMP, the contact
+        anchor's bookkeeping, slip and yaw. Sums holding a NaN take
+        :meth:`measure_contacts_arrays` (NaN payloads could differ)."""
         if any(v != v for v in sums):
             return self.measure_contacts_arrays(data)
+        fx, fy, fz, tx, ty, tz, cx, cy, cz, normal_sum = sums
+        pb = self._plate_body
         rot = data.xmat[pb].reshape(3, 3)
         force = -(rot.T @ np.array((fx, fy, fz)))
         torque = -(rot.T @ np.array((tx, ty, tz)))

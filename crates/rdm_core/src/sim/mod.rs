@@ -7,6 +7,7 @@ pub mod esc_duty;
 pub mod json_text;
 pub mod leptrino_stream;
 pub mod mcap_chunk;
+pub mod plate_contact;
 pub mod python_float_repr;
 pub mod rotor_plant;
 pub mod sensor_noise;

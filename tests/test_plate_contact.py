@@ -1,0 +1,145 @@
+"""The foot plate's contact measurement in Rust (``rdm._rdm.PlateContactCore``, used by
+``FootContactTracker.measure_contacts``): the bits of the numpy forms, the force MuJoCo
+itself puts on the plate, the pyramidal-cone fallback and bad inputs."""
+
+from __future__ import annotations
+
+import struct
+
+import mujoco
+import numpy as np
+import pytest
+from test_plant_physics import _perch_plant, _perch_thrusts
+
+from rdm._rdm import PlateContactCore
+from rdm.plant import NoCeilingEffect
+
+
+def _same(a: tuple, b: tuple) -> None:
+    assert a[0] == b[0]
+    for x, y in zip(a[1:], b[1:], strict=True):
+        assert type(x) is type(y)
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype and x.tobytes() == y.tobytes()
+        else:
+            assert struct.pack("<d", x) == struct.pack("<d", y)
+
+
+def _perched_run(steps: int, every: int):
+    """Twin-free perched run: pressed on the ceiling, pushed and twisted, released; yields
+    the plant every ``every`` steps."""
+    thrust = _perch_thrusts(4.0)
+    plant = _perch_plant(NoCeilingEffect())
+    plant.reset(base_position=(0.0, 0.0, 2.0 - 5e-4), thrusts=thrust)
+    plant.set_rotor_thrusts(thrust)
+    for k in range(steps):
+        if k == 200:
+            plant.apply_body_wrench("foot_plate", force=(0.0, 6.0, 0.0), torque=(0.0, 0.0, 1.5))
+        if k == 500:
+            plant.apply_body_wrench("foot_plate", force=(0.0, 0.0, 0.0))
+        if k == 700:
+            plant.set_rotor_thrusts(np.zeros(4))
+        plant.step(1)
+        if k % every == 0:
+            yield plant
+
+
+def test_the_rust_measurement_has_the_bits_of_the_float_and_array_forms():
+    seen = set()
+    for plant in _perched_run(900, 3):
+        tracker, d = plant._tracker, plant._fresh()
+        # same data, same anchor: each form's bookkeeping (_track) leaves the same state
+        rust = tracker.measure_contacts(d)
+        floats = tracker.measure_contacts_floats(d)
+        arrays = tracker.measure_contacts_arrays(d)
+        _same(rust, floats)
+        _same(rust, arrays)
+        seen.add((rust[0], rust[5] != 0.0))
+    assert {n for n, _ in seen} == {0, 1, 2, 3, 4}
+    assert any(n > 0 and yaw for n, yaw in seen)
+
+
+def test_the_measured_force_is_the_force_mujoco_puts_on_the_plate():
+    """Independent of the contact list: MuJoCo's ``cfrc_ext`` of the plate body (force part,
+    world axes) less the applied push (``xfrc_applied``) is the environment's force on it;
+    the measurement reports the robot's force on the environment in the plate frame."""
+    checked = 0
+    for plant in _perched_run(500, 25):
+        m, d = plant.model, plant._fresh()
+        tracker = plant._tracker
+        points, force, _torque, _zmp, _slip, _yaw = tracker.measure_contacts(d)
+        if points == 0:
+            continue
+        mujoco.mj_rnePostConstraint(m, d)
+        pb = tracker._plate_body
+        on_plate = d.cfrc_ext[pb][3:] - d.xfrc_applied[pb][:3]
+        rot = d.xmat[pb].reshape(3, 3)
+        np.testing.assert_allclose(rot @ -force, on_plate, rtol=1e-9, atol=1e-9)
+        checked += 1
+    assert checked >= 15
+
+
+def test_a_pyramidal_cone_takes_the_float_form():
+    thrust = _perch_thrusts(4.0)
+    plants = []
+    for _ in range(2):
+        p = _perch_plant(NoCeilingEffect())
+        p.model.opt.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+        p.reset(base_position=(0.0, 0.0, 2.0 - 5e-4), thrusts=thrust)
+        p.set_rotor_thrusts(thrust)
+        p.step(80)
+        plants.append(p)
+    fast, plain = plants
+    calls = []
+    core = fast._tracker._sums_core
+
+    class Spy:
+        def measure(self, *args):
+            calls.append(1)
+            return core.measure(*args)
+
+        yaw_about = staticmethod(core.yaw_about)
+
+    fast._tracker._sums_core = Spy()
+    a = fast._tracker.measure_contacts(fast._fresh())
+    b = plain._tracker.measure_plain(plain._fresh())
+    assert a[0] > 0 and calls == []
+    _same(a, b)
+
+
+def _views(n: int = 1):
+    geom = np.zeros((n, 2), dtype=np.int32)
+    geom[:, 1] = 1
+    frame = np.tile(np.eye(3).ravel(), (n, 1))
+    pos = np.zeros((n, 3))
+    return geom, frame, pos, np.zeros(n, dtype=np.int32), np.full(n, 3, dtype=np.int32)
+
+
+def test_bad_inputs_raise_instead_of_reading_out_of_range():
+    core = PlateContactCore([0, 1, 2], [True, False, False], 1)
+    geom, frame, pos, adr, dim = _views()
+    origin, rot = np.zeros(3), np.eye(3).ravel()
+    force = np.array([2.0, 0.1, 0.0])
+    points, f, t, zmp = core.measure(geom, frame, pos, adr, dim, force, origin, rot)
+    assert points == 1 and f.tolist() == [-2.0, -0.1, -0.0] and zmp.tolist() == [0.0, 0.0]
+    with pytest.raises(ValueError, match="flags"):
+        PlateContactCore([0, 1], [True], 1)
+    with pytest.raises(ValueError, match="contact views"):
+        core.measure(geom, frame[:, :8], pos, adr, dim, force, origin, rot)
+    with pytest.raises(ValueError, match="contact views"):
+        core.measure(geom, frame, pos, adr[:0], dim, force, origin, rot)
+    with pytest.raises(IndexError, match="efc_force"):
+        core.measure(geom, frame, pos, adr, dim, force[:2], origin, rot)
+    with pytest.raises(IndexError, match="efc_force"):
+        core.measure(geom, frame, pos, adr, np.full(1, 7, np.int32), force, origin, rot)
+    with pytest.raises(IndexError, match="geom 9"):
+        core.measure(np.array([[9, 1]], np.int32), frame, pos, adr, dim, force, origin, rot)
+    with pytest.raises(ValueError, match="origin"):
+        core.measure(geom, frame, pos, adr, dim, force, origin[:2], rot)
+    with pytest.raises(ValueError, match="r1"):
+        PlateContactCore.yaw_about(rot, rot[:8])
+    # NaN sums are declined (the caller's numpy form decides the payload)
+    assert core.measure(geom, frame, pos, adr, dim, force * np.nan, origin, rot) is None
+    bad = rot.copy()
+    bad[0] = np.nan
+    assert PlateContactCore.yaw_about(rot, bad) is None
