@@ -109,3 +109,16 @@ def test_figures_a_dead_worker_left_are_drawn_here(tmp_path):
         assert worker.wait() == [*paths, late] and worker.redrawn == 3
     for p in (*paths, late):
         assert mpimg.imread(p).shape[0] > 100
+
+
+def test_a_queued_figure_shows_its_inputs_as_they_were_when_queued(tmp_path):
+    t = np.linspace(0.0, 1.0, 101)
+    values = np.sin(6 * t)
+    expected = plot_panels(tmp_path / "expected.png", t, [("x", {"x": values.copy()}, "m")])
+    with plots_in_background() as worker:
+        assert worker is not None
+        worker._pool.submit(time.sleep, 1.0)  # the figure waits in the queue
+        queued = plot_panels(tmp_path / "queued.png", t, [("x", {"x": values}, "m")])
+        values[:] = 0.0  # the caller reuses its buffer
+        worker.wait()
+    np.testing.assert_array_equal(mpimg.imread(queued), mpimg.imread(expected))

@@ -19,6 +19,7 @@ process by :meth:`PlotWorker.wait` (counted in ``redrawn``), so no figure is los
 from __future__ import annotations
 
 import multiprocessing
+import pickle
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -46,6 +47,12 @@ def _ready() -> bool:
     return True
 
 
+def _draw_snapshot(draw: Callable[..., None], out: Path, snapshot: bytes) -> None:
+    """Worker side of :meth:`PlotWorker.submit`: ``draw(out, *inputs)`` of the inputs as
+    they were when the figure was queued."""
+    draw(out, *pickle.loads(snapshot))
+
+
 class PlotWorker:
     """One spawned process that draws figures (``draw(out, *args)`` calls) in order."""
 
@@ -57,19 +64,22 @@ class PlotWorker:
             initializer=_warm_up,
         )
         self._started = self._pool.submit(_ready)  # start the process (and its import) now
-        self._pending: list[tuple[Future | None, Callable[..., None], Path, tuple]] = []
+        self._pending: list[tuple[Future | None, Callable[..., None], Path, bytes]] = []
         #: Every figure written so far (by :meth:`wait`), in order.
         self.drawn: list[Path] = []
         #: Figures drawn in this process because the worker had died.
         self.redrawn = 0
 
     def submit(self, draw: Callable[..., None], out: Path, *args: Any) -> None:
-        """Queue ``draw(out, *args)`` (a module-level function and picklable inputs)."""
+        """Queue ``draw(out, *args)`` (a module-level function and picklable inputs). The
+        inputs are pickled here, at once: the figure shows them as they are now, whatever
+        the caller does with its arrays afterwards."""
+        snapshot = pickle.dumps(args, protocol=pickle.HIGHEST_PROTOCOL)
         try:
-            future: Future | None = self._pool.submit(draw, out, *args)
+            future: Future | None = self._pool.submit(_draw_snapshot, draw, out, snapshot)
         except BrokenProcessPool:
             future = None  # the worker is gone: wait() draws it here
-        self._pending.append((future, draw, out, args))
+        self._pending.append((future, draw, out, snapshot))
 
     def wait(self) -> list[Path]:
         """Block until every queued figure is written; returns every written path in order.
@@ -77,14 +87,14 @@ class PlotWorker:
         dead worker left are drawn in this process."""
         error: BaseException | None = None
         pending, self._pending = self._pending, []
-        for future, draw, out, args in pending:
+        for future, draw, out, snapshot in pending:
             try:
                 try:
                     if future is None:
                         raise BrokenProcessPool("the plot worker was not running")
                     future.result()
                 except BrokenProcessPool:
-                    draw(out, *args)
+                    _draw_snapshot(draw, out, snapshot)
                     self.redrawn += 1
                 self.drawn.append(out)
             except BaseException as exc:  # re-raised below, after the rest
