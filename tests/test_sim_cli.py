@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 import rdm
 
 
@@ -141,3 +143,22 @@ def test_rdm_sim_rejects_unknown_scenario():
     out = _sim(["no-such-experiment"], timeout=120)
     assert out.returncode == 2
     assert "invalid choice" in out.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--duration", "inf"], "--duration 'inf' must be finite and > 0"),
+        (["--duration", "nan"], "--duration 'nan' must be finite and > 0"),
+        (["--duration", "-1"], "--duration '-1' must be finite and > 0"),
+        (["--duration", "ten"], "--duration 'ten': a number of seconds"),
+        (["--seed", "-5"], "--seed '-5' must be >= 0"),
+        (["--seed", "1.5"], "--seed '1.5': an integer"),
+        (["--out", "/proc/rdm-no-such-folder", "--duration", "0.1"], "--out"),
+    ],
+)
+def test_rdm_sim_refuses_bad_arguments_with_a_message_not_a_traceback(args, message):
+    out = _sim(["hover", *args], timeout=120)
+    assert out.returncode == 2, out.stderr
+    assert message in out.stderr
+    assert "Traceback" not in out.stderr

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from contextlib import nullcontext
+from pathlib import Path
 
 
 def _speed(text: str) -> float | None:
@@ -19,6 +21,26 @@ def _speed(text: str) -> float | None:
         raise argparse.ArgumentTypeError(f"--speed {text!r}: fast, realtime or a factor") from exc
     if not v > 0:
         raise argparse.ArgumentTypeError(f"--speed {text!r} must be > 0")
+    return v
+
+
+def _duration(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--duration {text!r}: a number of seconds") from exc
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"--duration {text!r} must be finite and > 0")
+    return v
+
+
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--seed {text!r}: an integer") from exc
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"--seed {text!r} must be >= 0 (numpy's seeds)")
     return v
 
 
@@ -42,8 +64,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=sorted(SCENARIOS),
         help=f"default {DEFAULT_SCENARIO}",
     )
-    parser.add_argument("--duration", type=float, default=None, help="simulated seconds")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--duration", type=_duration, default=None, help="simulated seconds")
+    parser.add_argument("--seed", type=_seed, default=0)
     parser.add_argument("--speed", type=_speed, default=None, help="fast | realtime | FACTOR")
     parser.add_argument("--uart", choices=("inproc", "pty"), default="inproc")
     parser.add_argument(
@@ -74,6 +96,11 @@ def run(args: argparse.Namespace) -> int:
     duration = sc.default_duration if args.duration is None else args.duration
     if not duration > 0:
         print("rdm sim: --duration must be > 0", file=sys.stderr)
+        return 2
+    try:  # the run folder's parent: a clear error now, not a traceback after the start-up
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"rdm sim: --out {args.out!r}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     # no --servo-lead: each scenario's own default (docs/servolead.md)
     lead = nullcontext() if args.servo_lead is None else servo_lead(args.servo_lead)
