@@ -246,6 +246,13 @@ def test_plan_command(tmp_path, capsys):
     assert main(["plan", "--target", "2.5,0,-0.5"]) == 1
     assert json.loads(capsys.readouterr().out)["blocking"] == "rotor_thrust"
     assert main(["plan", "--target", "1,2"]) == 2
+    # non-finite targets and robots the planner cannot load: a message, exit 2, no traceback
+    capsys.readouterr()
+    assert main(["plan", "--target", "nan,0,0"]) == 2
+    assert "must be finite" in capsys.readouterr().err
+    assert main(["plan", "--target", "0.2,0,-0.5,inf,0,0"]) == 2
+    assert main(["plan", "--robot", str(tmp_path / "missing"), "--target", "0.2,0,-0.5"]) == 2
+    assert "rdm plan:" in capsys.readouterr().err
 
 
 def _segment_distance(a0, a1, b0, b1):

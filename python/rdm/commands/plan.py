@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 
 
@@ -26,10 +27,16 @@ def run(args: argparse.Namespace) -> int:
         target = [float(v) for v in args.target.split(",")]
         if len(target) not in (3, 6):
             raise ValueError("expected 3 or 6 comma-separated numbers")
+        if not all(math.isfinite(v) for v in target):
+            raise ValueError(f"{args.target!r}: every number must be finite")
     except ValueError as e:
         print(f"rdm plan: --target: {e}", file=sys.stderr)
         return 2
-    traj = plan(args.robot, target, mode=args.mode)
+    try:
+        traj = plan(args.robot, target, mode=args.mode)
+    except (ValueError, OSError) as e:  # a robot file or setup refused (RdmError: a ValueError)
+        print(f"rdm plan: {e}", file=sys.stderr)
+        return 2
     if args.out:
         traj.save(args.out)
     if args.plot:
