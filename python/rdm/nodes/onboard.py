@@ -261,6 +261,9 @@ class OnboardNode:
         self._imu_gyro: np.ndarray | None = None
         self.battery_voltage: float | None = None
         self.last_command: ControlCommand | None = None
+        #: The joint goals [rad] of the last ``servo/target_states`` sent (the vectoring
+        #: joints' angles written over the plan in flight), in joint order.
+        self.last_servo_goals: list[float] | None = None
         self.last_alpha_beta: tuple[tuple[float, ...], tuple[float, ...]] | None = None
         self._requests: list[str] = []
         self._perch_request = False
@@ -453,6 +456,11 @@ class OnboardNode:
             self.foot.stop()
 
     # ------------------------------------------------------------------------ receiving
+    @property
+    def mocap(self) -> tuple[np.ndarray, np.ndarray, float | None] | None:
+        """The last accepted mocap sample ``(position, velocity, yaw)`` (None before one)."""
+        return self._mocap
+
     @property
     def imu_euler(self) -> tuple[float, float, float] | None:
         """Roll, pitch, yaw of the newest valid ``imu`` quaternion (None before one)."""
@@ -897,6 +905,7 @@ class OnboardNode:
                 written += (ja, jb)
         smap = self.config.servo_map
         n = min(smap.n_joints, len(q))
+        self.last_servo_goals = q[:n]
         to_raw = smap.to_raw
         if self._direct_remote("servo/target_states", "spinal/ServoControlCmd"):
             index = smap.servo_index[:n]

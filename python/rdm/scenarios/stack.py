@@ -507,7 +507,8 @@ def build_stack(
 
 class StatusNode:
     """40 Hz record of what the PC and Spinal report (perching QP status, thrusts, state), to
-    the MCAP (``/onboard/status``, ``/spinal/status``) and to ``stack.status``."""
+    the MCAP (``/onboard/status``) and to ``stack.status``; with a logger also the signals
+    the PC's controller works with (``/onboard/signals``: :meth:`signals`)."""
 
     name = "status"
     period = 0.025
@@ -527,6 +528,40 @@ class StatusNode:
         s.status.append(rec)
         if s.logger is not None:
             s.logger.log_json("/onboard/status", now, rec)
+            s.logger.log_json("/onboard/signals", now, self.signals(now))
+
+    def signals(self, now: float) -> dict[str, Any]:
+        """What the onboard PC's controller saw and commanded at its last tick, for plots
+        beside the ground truth: Spinal's attitude and gyro as received over the UART, the
+        mocap sample and the setpoint it used, its attitude targets, flight thrusts and
+        vectoring angles, the joint angles Spinal reported and the goals sent back, the foot
+        sensor's wrench. A flat record of floats and float lists (None where there is no
+        value yet), read without copies beyond ``tolist``."""
+        o = self.stack.onboard
+        c = o.last_command
+        euler = o.imu_euler
+        mocap = o.mocap
+        sp = o.setpoint
+        foot = o.foot.wrench if o.foot is not None else None
+        goals = o.last_servo_goals
+        return {
+            "t": now,
+            "imu_euler": list(euler) if euler is not None else None,
+            "imu_gyro": _floats_of(o.imu_gyro),
+            "mocap_position": _floats_of(mocap[0]) if mocap is not None else None,
+            "mocap_velocity": _floats_of(mocap[1]) if mocap is not None else None,
+            "mocap_yaw": (float(mocap[2]) if mocap is not None and mocap[2] is not None else None),
+            "setpoint_position": _floats_of(sp.position),
+            "setpoint_velocity": _floats_of(sp.velocity),
+            "setpoint_yaw": float(sp.yaw),
+            "target_angles": list(c.angles) if c is not None else None,
+            "flight_thrust": _floats_of(c.flight_thrust) if c is not None else None,
+            "vectoring_alpha": list(c.alpha) if c is not None else None,
+            "vectoring_beta": list(c.beta) if c is not None else None,
+            "present_q": _floats_of(o.present_q),
+            "servo_goals": list(goals) if goals is not None else None,
+            "foot_wrench": _floats_of(foot),
+        }
 
     def record(self, now: float) -> dict[str, Any]:
         """:meth:`record_plain` reading each property once, an enum state's value and a
@@ -581,6 +616,13 @@ def _perch_status(perch: Any) -> str | None:
         return None
     st = getattr(perch, "status", None)
     return None if st is None else str(getattr(st, "name", st))
+
+
+def _floats_of(v: Any) -> list | None:
+    """A 1-D float64 array's values as Python floats (``tolist``), else :func:`_as_list`."""
+    if type(v) is np.ndarray and v.dtype is _FLOAT64 and v.ndim == 1:
+        return v.tolist()
+    return _as_list(v)
 
 
 def _as_list(v: Any) -> list | None:
