@@ -122,6 +122,7 @@ def test_bad_inputs_raise_instead_of_reading_out_of_range():
     force = np.array([2.0, 0.1, 0.0])
     points, f, t, zmp = core.measure(geom, frame, pos, adr, dim, force, origin, rot)
     assert points == 1 and f.tolist() == [-2.0, -0.1, -0.0] and zmp.tolist() == [0.0, 0.0]
+    assert t.tolist() == [0.0, 0.0, 0.0]  # at the origin, no torsion (dim 3)
     with pytest.raises(ValueError, match="flags"):
         PlateContactCore([0, 1], [True], 1)
     with pytest.raises(ValueError, match="contact views"):
