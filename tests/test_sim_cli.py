@@ -148,12 +148,12 @@ def test_rdm_sim_rejects_unknown_scenario():
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--duration", "inf"], "--duration 'inf' must be finite and > 0"),
-        (["--duration", "nan"], "--duration 'nan' must be finite and > 0"),
-        (["--duration", "-1"], "--duration '-1' must be finite and > 0"),
-        (["--duration", "ten"], "--duration 'ten': a number of seconds"),
-        (["--seed", "-5"], "--seed '-5' must be >= 0"),
-        (["--seed", "1.5"], "--seed '1.5': an integer"),
+        (["--duration", "inf"], "--duration: 'inf' must be finite and > 0"),
+        (["--duration", "nan"], "--duration: 'nan' must be finite and > 0"),
+        (["--duration", "-1"], "--duration: '-1' must be finite and > 0"),
+        (["--duration", "ten"], "--duration: 'ten': not a number"),
+        (["--seed", "-5"], "--seed: '-5' must be >= 0"),
+        (["--seed", "1.5"], "--seed: '1.5': not an integer"),
         (["--out", "/proc/rdm-no-such-folder", "--duration", "0.1"], "--out"),
     ],
 )
@@ -162,3 +162,22 @@ def test_rdm_sim_refuses_bad_arguments_with_a_message_not_a_traceback(args, mess
     assert out.returncode == 2, out.stderr
     assert message in out.stderr
     assert "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["onboard", "--uart", "pty", "--duration", "-1"], "'-1' must be finite and > 0"),
+        (["spinal", "--uart", "pty", "--can", "virtual:x", "--duration", "inf"], "'inf' must"),
+        (["neuron", "--can", "virtual:x", "--duration", "0"], "'0' must be finite and > 0"),
+        (["hil", "--scale", "inf"], "--scale: 'inf' must be finite and > 0"),
+        (["hil", "--seed", "-1"], "--seed: '-1' must be >= 0"),
+    ],
+)
+def test_the_node_commands_refuse_bad_durations_scales_and_seeds(argv, message, capsys):
+    from rdm.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err

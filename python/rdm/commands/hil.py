@@ -24,6 +24,8 @@ import sys
 import time
 from pathlib import Path
 
+from rdm.commands.arg_types import positive_finite, seed
+
 #: The pass criteria of the outcome over the last simulated second: x, y 3 cm and 5 deg (the
 #: lockstep hover test's); z 12 cm (lockstep overshoots to 0.495 m around 4 s and settles
 #: slowly on the Table V altitude integral: 0.095 m worst over 4-5 s).
@@ -62,19 +64,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--duration",
-        type=float,
+        type=positive_finite,
         default=None,
         help="simulated s (default hover 5, perching 17, perching --quick 11)",
     )
     parser.add_argument(
-        "--scale", type=float, default=0.05, help="simulated s per wall s (default 0.05)"
+        "--scale", type=positive_finite, default=0.05, help="simulated s per wall s (default 0.05)"
     )
     parser.add_argument(
         "--free-running",
         action="store_true",
         help="pure scaled wall clock: the controllers do not wait for a slow physics process",
     )
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=seed, default=0)
     parser.add_argument("--out", default=None, help="run folder (default runs/hil-<time>)")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
 

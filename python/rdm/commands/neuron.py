@@ -13,6 +13,7 @@ import signal
 import sys
 import threading
 
+from rdm.commands.arg_types import positive_finite
 from rdm.link.can import CanSpecError, CanUnavailableError, open_can
 from rdm.nodes.base import run_realtime
 from rdm.nodes.neuron_mirror import NeuronMirror
@@ -34,7 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--imu", action="store_true", help="set the IMU send flag")
     parser.add_argument("--no-esc", action="store_true", help="Neurons without an ESC")
     parser.add_argument("--period", type=float, default=0.001, help="tick period, s")
-    parser.add_argument("--duration", type=float, default=None, help="stop after this many s")
+    parser.add_argument(
+        "--duration", type=positive_finite, default=None, help="stop after this many s"
+    )
 
 
 def run(args: argparse.Namespace) -> int:

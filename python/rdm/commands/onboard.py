@@ -25,6 +25,7 @@ import sys
 import threading
 from typing import Any
 
+from rdm.commands.arg_types import positive_finite
 from rdm.link.serial import SerialLink, SerialSpecError, open_pty_pair, open_serial
 from rdm.nodes.base import run_realtime
 
@@ -50,7 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--control", default=None, help="udp:HOST:PORT for JSON commands")
     parser.add_argument("--arm", action="store_true", help="start the arming sequence at once")
-    parser.add_argument("--duration", type=float, default=None, help="stop after this many s")
+    parser.add_argument(
+        "--duration", type=positive_finite, default=None, help="stop after this many s"
+    )
     parser.add_argument(
         "--status-interval", type=float, default=0.0, help="print status every S s (0: at exit)"
     )

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from contextlib import nullcontext
 from pathlib import Path
+
+from rdm.commands.arg_types import positive_finite, seed
 
 
 def _speed(text: str) -> float | None:
@@ -21,26 +22,6 @@ def _speed(text: str) -> float | None:
         raise argparse.ArgumentTypeError(f"--speed {text!r}: fast, realtime or a factor") from exc
     if not v > 0:
         raise argparse.ArgumentTypeError(f"--speed {text!r} must be > 0")
-    return v
-
-
-def _duration(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"--duration {text!r}: a number of seconds") from exc
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"--duration {text!r} must be finite and > 0")
-    return v
-
-
-def _seed(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"--seed {text!r}: an integer") from exc
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"--seed {text!r} must be >= 0 (numpy's seeds)")
     return v
 
 
@@ -64,8 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=sorted(SCENARIOS),
         help=f"default {DEFAULT_SCENARIO}",
     )
-    parser.add_argument("--duration", type=_duration, default=None, help="simulated seconds")
-    parser.add_argument("--seed", type=_seed, default=0)
+    parser.add_argument("--duration", type=positive_finite, default=None, help="simulated seconds")
+    parser.add_argument("--seed", type=seed, default=0)
     parser.add_argument("--speed", type=_speed, default=None, help="fast | realtime | FACTOR")
     parser.add_argument("--uart", choices=("inproc", "pty"), default="inproc")
     parser.add_argument(

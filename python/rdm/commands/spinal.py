@@ -20,6 +20,7 @@ import signal
 import sys
 import threading
 
+from rdm.commands.arg_types import positive_finite
 from rdm.link.can import CanSpecError, CanUnavailableError, open_can
 from rdm.link.serial import SerialSpecError, open_pty_pair, open_serial
 from rdm.nodes.base import run_realtime
@@ -59,7 +60,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="tick period, s (1 ms = the firmware's core task; longer on slow hosts: the CAN "
         "schedule still covers every ms, in bursts)",
     )
-    parser.add_argument("--duration", type=float, default=None, help="stop after this many s")
+    parser.add_argument(
+        "--duration", type=positive_finite, default=None, help="stop after this many s"
+    )
 
 
 def _open_uart(spec: str):
