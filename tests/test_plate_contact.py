@@ -4,25 +4,14 @@ itself puts on the plate, the pyramidal-cone fallback and bad inputs."""
 
 from __future__ import annotations
 
-import struct
-
 import mujoco
 import numpy as np
 import pytest
 from test_plant_physics import _perch_plant, _perch_thrusts
+from test_truthlog_truth import _measures_equal
 
 from rdm._rdm import PlateContactCore
 from rdm.plant import NoCeilingEffect
-
-
-def _same(a: tuple, b: tuple) -> None:
-    assert a[0] == b[0]
-    for x, y in zip(a[1:], b[1:], strict=True):
-        assert type(x) is type(y)
-        if isinstance(x, np.ndarray):
-            assert x.dtype == y.dtype and x.tobytes() == y.tobytes()
-        else:
-            assert struct.pack("<d", x) == struct.pack("<d", y)
 
 
 def _perched_run(steps: int, every: int):
@@ -52,8 +41,8 @@ def test_the_rust_measurement_has_the_bits_of_the_float_and_array_forms():
         rust = tracker.measure_contacts(d)
         floats = tracker.measure_contacts_floats(d)
         arrays = tracker.measure_contacts_arrays(d)
-        _same(rust, floats)
-        _same(rust, arrays)
+        _measures_equal(rust, floats)
+        _measures_equal(rust, arrays)
         seen.add((rust[0], rust[5] != 0.0))
     assert {n for n, _ in seen} == {0, 1, 2, 3, 4}
     assert any(n > 0 and yaw for n, yaw in seen)
@@ -104,7 +93,7 @@ def test_a_pyramidal_cone_takes_the_float_form():
     a = fast._tracker.measure_contacts(fast._fresh())
     b = plain._tracker.measure_plain(plain._fresh())
     assert a[0] > 0 and calls == []
-    _same(a, b)
+    _measures_equal(a, b)
 
 
 def _views(n: int = 1):

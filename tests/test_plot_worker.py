@@ -117,7 +117,11 @@ def test_a_queued_figure_shows_its_inputs_as_they_were_when_queued(tmp_path):
     expected = plot_panels(tmp_path / "expected.png", t, [("x", {"x": values.copy()}, "m")])
     with plots_in_background() as worker:
         assert worker is not None
-        worker._pool.submit(time.sleep, 1.0)  # the figure waits in the queue
+        # the worker sleeps and its call queue (one more item) is full: the figure's call
+        # waits in the executor as a Python object, where a later change to the caller's
+        # buffer would show if the inputs were not pickled when queued
+        for _ in range(3):
+            worker._pool.submit(time.sleep, 0.4)
         queued = plot_panels(tmp_path / "queued.png", t, [("x", {"x": values}, "m")])
         values[:] = 0.0  # the caller reuses its buffer
         worker.wait()

@@ -7,6 +7,8 @@ use pyo3::exceptions::{PyIndexError, PyValueError};
 use pyo3::prelude::*;
 use rdm_core::sim::plate_contact::{yaw_about, ContactRow, PlateContactModel};
 
+use crate::lqi::to_vector;
+
 /// `(points, force, torque, zmp)` of the plate's contacts.
 type MeasureOut<'py> = (
     usize,
@@ -44,8 +46,8 @@ impl PlateContactCore {
     /// elliptic-cone model), ``efc_force``, the plate origin and its row-major rotation
     /// (``data.xmat`` row). Returns ``(points, force, torque, zmp)`` (new float64 arrays:
     /// what the robot applies, foot frame; ZMP NaN without a normal force), or None when a
-    /// sum is NaN. ValueError on mismatched shapes, IndexError on a geom or constraint row
-    /// outside the model / ``efc_force``.
+    /// sum is NaN. ValueError (``RdmError`` for origin / rot) on mismatched shapes, IndexError
+    /// on a geom or constraint row outside the model / ``efc_force``.
     #[allow(clippy::too_many_arguments)]
     fn measure<'py>(
         &self,
@@ -78,8 +80,8 @@ impl PlateContactCore {
                 dim.len()
             )));
         }
-        let origin = fixed::<3>(&origin, "origin")?;
-        let rot = fixed::<9>(&rot, "rot")?;
+        let origin: [f64; 3] = to_vector::<3>(&origin, "origin")?.into();
+        let rot: [f64; 9] = to_vector::<9>(&rot, "rot")?.into();
         let rows = (0..n).map(|i| {
             let mut row = ContactRow {
                 geom: [geom[(i, 0)], geom[(i, 1)]],
@@ -120,24 +122,10 @@ impl PlateContactCore {
         r0: PyReadonlyArray1<'_, f64>,
         r1: PyReadonlyArray1<'_, f64>,
     ) -> PyResult<Option<f64>> {
-        Ok(yaw_about(&fixed::<9>(&r0, "r0")?, &fixed::<9>(&r1, "r1")?))
+        let r0: [f64; 9] = to_vector::<9>(&r0, "r0")?.into();
+        let r1: [f64; 9] = to_vector::<9>(&r1, "r1")?.into();
+        Ok(yaw_about(&r0, &r1))
     }
-}
-
-/// The `N` values of a 1-D float array (strided or not), or a ValueError naming `what`.
-fn fixed<const N: usize>(a: &PyReadonlyArray1<'_, f64>, what: &str) -> PyResult<[f64; N]> {
-    let a = a.as_array();
-    if a.len() != N {
-        return Err(PyValueError::new_err(format!(
-            "{what}: expected {N} values, got {}",
-            a.len()
-        )));
-    }
-    let mut out = [0.0; N];
-    for (o, v) in out.iter_mut().zip(a.iter()) {
-        *o = *v;
-    }
-    Ok(out)
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

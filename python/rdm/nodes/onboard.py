@@ -905,7 +905,7 @@ class OnboardNode:
                 written += (ja, jb)
         smap = self.config.servo_map
         n = min(smap.n_joints, len(q))
-        self.last_servo_goals = q[:n]
+        self.last_servo_goals = q if n == len(q) else q[:n]
         to_raw = smap.to_raw
         if self._direct_remote("servo/target_states", "spinal/ServoControlCmd"):
             index = smap.servo_index[:n]

@@ -358,19 +358,8 @@ class FootContactTracker:
             normal_sum += n
             points += 1
         sums = (fx, fy, fz, tx, ty, tz, cx, cy, cz, normal_sum)
-        return self._contact_result(data, points, sums, origin)
-
-    def _contact_result(
-        self, data: mujoco.MjData, points: int, sums: tuple, origin: np.ndarray
-    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """The measurement from the plate's contact sums (world axes; see
-        :meth:`measure_contacts_floats`): foot-frame force and torque, ZMP, the contact
-        anchor's bookkeeping, slip and yaw. Sums holding a NaN take
-        :meth:`measure_contacts_arrays` (NaN payloads could differ)."""
         if any(v != v for v in sums):
             return self.measure_contacts_arrays(data)
-        fx, fy, fz, tx, ty, tz, cx, cy, cz, normal_sum = sums
-        pb = self._plate_body
         rot = data.xmat[pb].reshape(3, 3)
         force = -(rot.T @ np.array((fx, fy, fz)))
         torque = -(rot.T @ np.array((tx, ty, tz)))

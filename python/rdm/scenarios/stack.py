@@ -575,11 +575,7 @@ class StatusNode:
             state = st._value_
         else:
             state = st.value if hasattr(st, "value") else str(st)
-        pt = getattr(c, "perch_thrust", None)
-        if type(pt) is np.ndarray and pt.dtype is _FLOAT64 and pt.ndim == 1:
-            perch_thrust: list | None = pt.tolist()
-        else:
-            perch_thrust = _as_list(pt)
+        perch_thrust = _floats_of(getattr(c, "perch_thrust", None))
         failsafes = s.spinal.counters.failsafes
         return {
             "t": now,

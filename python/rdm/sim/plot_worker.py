@@ -63,7 +63,7 @@ class PlotWorker:
             mp_context=multiprocessing.get_context("spawn"),
             initializer=_warm_up,
         )
-        self._started = self._pool.submit(_ready)  # start the process (and its import) now
+        self._pool.submit(_ready)  # start the process (and its matplotlib import) now
         self._pending: list[tuple[Future | None, Callable[..., None], Path, bytes]] = []
         #: Every figure written so far (by :meth:`wait`), in order.
         self.drawn: list[Path] = []
