@@ -190,3 +190,34 @@ def test_decode_never_crashes_on_junk(tmp_path, capsys, chunk):
     assert main(["decode", "--json", str(path)]) == 0
     recs = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert recs and not any(r["ok"] for r in recs)
+
+
+def test_a_reader_that_stops_early_ends_the_command_quietly(tmp_path):
+    """``rdm decode x.log | head -1``: the exit status a shell gives a filter killed by SIGPIPE
+    (141), no traceback."""
+    log = tmp_path / "many.log"
+    log.write_text("".join(f"({k / 1000:.6f}) can0 0F#{k % 256:02X}\n" for k in range(50_000)))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rdm.cli", "decode", str(log)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None and proc.stderr is not None
+    first = proc.stdout.readline()
+    proc.stdout.close()  # the reader goes away with ~50k lines still to print
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141
+    assert first.startswith(b"line 1 ")
+    assert "Traceback" not in err and "BrokenPipeError" not in err
+
+
+def test_a_folder_needs_mcap(tmp_path, capsys):
+    assert main(["decode", str(tmp_path)]) == 2
+    assert "--mcap OUT converts a run folder" in capsys.readouterr().err
+    assert main(["decode", str(tmp_path), "--mcap", str(tmp_path / "w.mcap")]) == 2
+    assert "holds no can.log" in capsys.readouterr().err
+    capture = tmp_path / "x.device_tx.bin"
+    capture.write_bytes(bytes.fromhex(GOLDEN["topics"][0]["hex"]))
+    assert main(["decode", str(capture), "--mcap", str(tmp_path / "w.mcap")]) == 2
+    assert "no time index beside it (x.device_tx.bin.idx)" in capsys.readouterr().err
+    assert not (tmp_path / "w.mcap").exists()

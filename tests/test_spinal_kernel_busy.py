@@ -132,9 +132,9 @@ def test_output_written_by_the_mirrors_commit_method_is_the_same(tmp_path: Path)
         spinal.kernel_tx_direct = False
         inner = spinal.kernel_commit_tx
 
-        def commit(data: bytes, frames: int, imu: int, servo: int) -> None:
+        def commit(data: bytes, frames: int, imu: int, servo: int, marks: list) -> None:
             calls.append(frames)
-            inner(data, frames, imu, servo)
+            inner(data, frames, imu, servo, marks)
 
         spinal.kernel_commit_tx = commit
         stack.loop.run(2.4)

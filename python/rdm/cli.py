@@ -9,8 +9,13 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
+
+#: Exit code when stdout's reader closed the pipe early: what a shell reports for a process
+#: killed by SIGPIPE (128 + 13), as `seq 1 1000000 | head -1` leaves in PIPESTATUS.
+BROKEN_PIPE_EXIT = 141
 
 # name -> (module under rdm.commands, one-line help). Keep sorted by name.
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -68,7 +73,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     module = importlib.import_module(f"rdm.commands.{COMMANDS[name][0]}")
     cmd_parser = argparse.ArgumentParser(prog=f"rdm {name}", description=COMMANDS[name][1])
     module.add_arguments(cmd_parser)
-    return int(module.run(cmd_parser.parse_args(argv[1:])) or 0)
+    try:
+        return int(module.run(cmd_parser.parse_args(argv[1:])) or 0)
+    except BrokenPipeError:
+        # The reader of our output went away (`rdm decode x.log | head`): stop quietly, as
+        # a Unix filter does, and keep Python from failing again on the exit-time flush.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return BROKEN_PIPE_EXIT
 
 
 if __name__ == "__main__":

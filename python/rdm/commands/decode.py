@@ -6,6 +6,9 @@ Formats (a registry: name -> file extensions and decoder):
 * ``candump``: a ``candump -l`` log of the Spinal <-> Neuron CAN bus (``rdm.protocol.neuron``);
 * ``leptrino``: a raw Leptrino force/torque sensor capture (``rdm.protocol.leptrino``).
 
+With ``--mcap OUT`` the capture, or every capture of a run folder, is written as an MCAP log
+instead, each message at the simulated time it crossed its wire (:mod:`rdm.sim.wire_mcap`).
+
 The CAN and Leptrino decoders live in other modules and are imported only when asked for.
 """
 
@@ -86,7 +89,9 @@ def detect_format(path: Path) -> str | None:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``rdm decode``."""
-    parser.add_argument("capture", type=Path, help="capture file")
+    parser.add_argument(
+        "capture", type=Path, help="capture file (with --mcap: or a run folder of rdm sim)"
+    )
     parser.add_argument(
         "--format",
         choices=sorted(FORMATS),
@@ -100,6 +105,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--no-layout", action="store_true", help="uart: name topics only from TopicInfo records"
+    )
+    parser.add_argument(
+        "--mcap",
+        type=Path,
+        metavar="OUT",
+        help="write the messages to the MCAP file OUT, each at the time it crossed its wire "
+        "(UART/Leptrino captures need the .idx time index rdm sim writes beside them)",
     )
 
 
@@ -126,9 +138,54 @@ def format_record(rec: dict[str, Any]) -> str:
     return f"{_where(rec)} {rec.get('kind')} {json.dumps(rest, separators=(',', ':'), default=str)}"
 
 
+def _run_mcap(args: argparse.Namespace) -> int:
+    from rdm.sim.capture_index import index_path
+    from rdm.sim.wire_mcap import WireMcapError, run_captures, write_wire_mcap
+
+    path: Path = args.capture
+    if path.is_dir():
+        captures = run_captures(path)
+        if not captures:
+            print(f"rdm decode: {path} holds no can.log or uart/*_tx* capture", file=sys.stderr)
+            return 2
+    elif path.is_file():
+        if detect_format(path) != "candump" and not index_path(path).is_file():
+            print(
+                f"rdm decode: {path} has no time index beside it ({index_path(path).name}); "
+                "rdm sim writes one with every UART and Leptrino capture",
+                file=sys.stderr,
+            )
+            return 2
+        captures = [path]
+    else:
+        print(f"rdm decode: no such file or folder: {path}", file=sys.stderr)
+        return 2
+    try:
+        report = write_wire_mcap(captures, args.mcap)
+    except (WireMcapError, OSError) as exc:
+        print(f"rdm decode: {exc}", file=sys.stderr)
+        return 2
+    for topic, n in sorted(report.messages.items()):
+        print(f"{n:8d}  {topic}")
+    for capture, why in report.skipped:
+        print(f"rdm decode: left out {capture}: {why}", file=sys.stderr)
+    bad = dict(report.errors)
+    print(
+        f"mcap: {report.total} messages on {len(report.messages)} channels to {report.path}, "
+        f"bad records {bad}",
+        file=sys.stderr,
+    )
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """Decode ``args.capture``; exit code 0 on success, 2 on usage or availability errors."""
+    if args.mcap is not None:
+        return _run_mcap(args)
     path: Path = args.capture
+    if path.is_dir():
+        print(f"rdm decode: {path} is a folder; --mcap OUT converts a run folder", file=sys.stderr)
+        return 2
     name = args.format or detect_format(path)
     if name is None:
         print(

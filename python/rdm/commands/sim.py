@@ -7,8 +7,12 @@ import json
 import sys
 from contextlib import nullcontext
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rdm.commands.arg_types import positive_finite, seed
+
+if TYPE_CHECKING:
+    from rdm.sim.run_folder import RunFolder
 
 
 def _speed(text: str) -> float | None:
@@ -65,6 +69,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--out", default="runs", help="base folder of the run folder")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    parser.add_argument(
+        "--wire-mcap",
+        action="store_true",
+        help="also write wire.mcap: every CAN, UART and Leptrino message at the time it crossed "
+        "its wire (decoded after the run, ~10 s per 40 simulated s; rdm decode RUN --mcap)",
+    )
+
+
+def _write_wire_mcap(folder: RunFolder) -> bool:
+    """``wire.mcap`` of the run (``rdm decode RUN --mcap``); false, reported, on failure."""
+    from rdm.sim.wire_mcap import WireMcapError, run_captures, write_wire_mcap
+
+    try:
+        report = write_wire_mcap(run_captures(folder.root), folder.wire_mcap)
+    except (WireMcapError, OSError) as exc:
+        print(f"rdm sim: wire.mcap could not be written: {exc}", file=sys.stderr)
+        return False
+    for capture, why in report.skipped:
+        print(f"rdm sim: wire.mcap leaves out {capture}: {why}", file=sys.stderr)
+    print(
+        f"wire.mcap: {report.total} messages on {len(report.messages)} channels, "
+        f"bad records {dict(report.errors)}",
+        file=sys.stderr,
+    )
+    return True
 
 
 def run(args: argparse.Namespace) -> int:
@@ -97,6 +126,9 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps(json.loads(result.stack.folder.summary_json.read_text())))
         else:
             print(format_metrics_table(result.metrics), flush=True)
+        # while the worker draws: the wire log on this core
+        if args.wire_mcap and not _write_wire_mcap(result.stack.folder):
+            return 1
         try:
             if worker is not None:
                 worker.wait()

@@ -227,13 +227,19 @@ class LeptrinoSensorNode:
         return (self.streaming, self._limits, rated, temp, no, w, frame)
 
     def kernel_commit(
-        self, data: bytes, frames: int, wrench: tuple[float, ...], frame: bytes | None
+        self,
+        data: bytes,
+        frames: int,
+        wrench: tuple[float, ...],
+        frame: bytes | None,
+        marks: Sequence[tuple[float, int]] = (),
     ) -> None:
         """The sample frames of the kernel's ticks (written now, in one write: the bytes the
-        ticks would have written one by one), the wrench last set and its frame."""
+        ticks would have written one by one; ``marks`` each frame's ``(tick time s, end)`` in
+        ``data`` for the capture's time index), the wrench last set and its frame."""
         if data:
             try:
-                n = self.uart.write(data)
+                n = self.uart.write_marked(data, marks)
             except OSError:
                 n = 0
             if n < len(data):  # not on an open in-process pipe (kernel_plan's condition)

@@ -49,6 +49,7 @@ from rdm.protocol.rosserial.events import (
 )
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 from rdm.protocol.rosserial.timesync import ClientClock
+from rdm.sim.capture_index import timed_capture_of
 
 try:  # the busy-ms helpers (crates/rdm_py/src/spinal_mirror.rs); older builds: Python only
     from rdm._rdm import spinal_duty_list as _duty_list
@@ -1164,11 +1165,19 @@ class SpinalMirror:
         if self.session.pending_frames or self.uart.pending:
             self.uart.send(self.session.take_output())
 
-    def kernel_commit_tx(self, data: bytes, frames: int, imu: int, servo: int) -> None:
+    def kernel_commit_tx(
+        self,
+        data: bytes,
+        frames: int,
+        imu: int,
+        servo: int,
+        marks: Sequence[tuple[float, int]] = (),
+    ) -> None:
         """The kernel's publications since the last write back: ``frames`` frames queued
         and taken by ``take_output`` (``imu`` on ``imu``, ``servo`` on ``servo/states``),
         ``data`` their bytes in order, written in one :meth:`UartPump.send` (whole, as the
-        plan's ``writes_whole`` said: the same bytes and counters as one send per tick).
+        plan's ``writes_whole`` said: the same bytes and counters as one send per tick);
+        ``marks`` each tick's ``(time s, end)`` in ``data`` for the capture's time index.
         With :attr:`kernel_tx_direct` the kernel does the same without this call: the
         counters, then ``UartPump._write_chain``'s effect of a whole write and ``bytes_out``."""
         self.session.counts["tx_frames"] += frames
@@ -1177,7 +1186,12 @@ class SpinalMirror:
             published["imu"] += imu
         if servo:
             published["servo/states"] += servo
-        self.uart.send(data)
+        capture = timed_capture_of(self.uart.link) if marks else None
+        if capture is None or self.uart.pending:  # queued bytes first: those take the clock
+            self.uart.send(data)
+        else:
+            with capture.marked(marks):
+                self.uart.send(data)
 
     def kernel_finish_wire_tick(self, now_ms: int) -> None:
         """The rest of a kernel tick whose CAN ms was not steady (``tick_wire_steady`` gave

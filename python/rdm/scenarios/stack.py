@@ -406,13 +406,16 @@ def build_stack(
     else:
         raise ValueError(f"neuron_backend={opt.neuron_backend!r}: 'rust' or 'python'")
     barriers: list = []
+    # The captures' time index (rdm.sim.capture_index): the plant's time is the loop's while
+    # the nodes tick, and the lockstep kernel writes through the same file objects.
+    clock = lambda: plant.time  # noqa: E731
     if opt.uart == "pty":
-        s_dev, s_host, b1 = open_tapped_pty(folder.uart_dir, "spinal", ".bin")
-        f_dev, f_host, b2 = open_tapped_pty(folder.uart_dir, "leptrino_foot", ".lep")
+        s_dev, s_host, b1 = open_tapped_pty(folder.uart_dir, "spinal", ".bin", clock)
+        f_dev, f_host, b2 = open_tapped_pty(folder.uart_dir, "leptrino_foot", ".lep", clock)
         barriers = [b1, b2]
     elif opt.uart == "inproc":
-        s_dev, s_host = open_inproc_uart(folder.uart_dir, "spinal", ".bin")
-        f_dev, f_host = open_inproc_uart(folder.uart_dir, "leptrino_foot", ".lep")
+        s_dev, s_host = open_inproc_uart(folder.uart_dir, "spinal", ".bin", clock)
+        f_dev, f_host = open_inproc_uart(folder.uart_dir, "leptrino_foot", ".lep", clock)
     else:
         raise ValueError(f"uart={opt.uart!r}: 'inproc' or 'pty'")
     spinal_link, onboard_link = DroppableLink(s_dev), DroppableLink(s_host)

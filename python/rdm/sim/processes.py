@@ -35,7 +35,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -150,8 +150,8 @@ def neuron_filters(slave: int) -> list[dict[str, Any]]:
     ]
 
 
-def _tapped_pty(folder: Path, stem: str, ext: str):
-    """(device end with captures, slave link kept open, slave path)."""
+def _tapped_pty(folder: Path, stem: str, ext: str, clock: Callable[[], float]):
+    """(device end with time-indexed captures, slave link kept open, slave path)."""
     from rdm.link.serial import open_pty_pair
     from rdm.sim.uart import TappedLink
 
@@ -159,7 +159,7 @@ def _tapped_pty(folder: Path, stem: str, ext: str):
     slave.peer = None  # each end is closed on its own
     d = folder / "uart"
     d.mkdir(parents=True, exist_ok=True)
-    dev = TappedLink(master, d / f"{stem}.device_tx{ext}", d / f"{stem}.host_tx{ext}")
+    dev = TappedLink(master, d / f"{stem}.device_tx{ext}", d / f"{stem}.host_tx{ext}", clock=clock)
     return dev, slave, slave.port.port
 
 
@@ -250,7 +250,10 @@ def robot_main(cfg: dict[str, Any]) -> None:
         return bus
 
     layout, neurons = make_neurons(plant, q0, open_neuron_bus)
-    lep_dev, lep_slave, lep_path = _tapped_pty(folder, "leptrino_foot", ".lep")
+    loop: Lockstep | None = None
+    lep_dev, lep_slave, lep_path = _tapped_pty(
+        folder, "leptrino_foot", ".lep", lambda: loop.time if loop is not None else 0.0
+    )
     sensor = LeptrinoSensorNode(lep_dev, "CFS034CA301U", rate_hz=opt.leptrino_rate_hz)
     truth: list[tuple] = []
     foot: list[tuple] = []
@@ -269,7 +272,6 @@ def robot_main(cfg: dict[str, Any]) -> None:
             )
         )
 
-    loop: Lockstep | None = None
     imu = ImuSender(cfg["token"], lambda: loop.time if loop is not None else 0.0)
     bridge = make_bridge(
         plant,
@@ -370,7 +372,11 @@ def spinal_main(cfg: dict[str, Any]) -> None:
 
     folder = Path(cfg["out"])
     opt = SimpleNamespace(**cfg["stack"])
-    dev, slave, path = _tapped_pty(folder, "spinal", ".bin")
+    # the captures' times: the shared scaled clock once the start line has set it
+    started: list[ScaledClock] = []
+    dev, slave, path = _tapped_pty(
+        folder, "spinal", ".bin", lambda: started[0].now() if started else 0.0
+    )
     spinal = SpinalMirror(
         dev,
         open_bus(cfg["can"]),
@@ -385,6 +391,7 @@ def spinal_main(cfg: dict[str, Any]) -> None:
     imu_in = ImuReceiver(cfg["token"], spinal)
     start = _handshake({"spinal_pty": path})
     clock, progress = _clock(start, "spinal", cfg["token"])
+    started.append(clock)
     stats = None
     try:
         stats = run_scaled([imu_in, spinal], clock, float(start["duration"]), progress)

@@ -3,9 +3,12 @@
 Layout (names are fixed so tools and docs can rely on them)::
 
     runs/<scenario>-seed<seed>/
-        signals.mcap        every signal (Foxglove / PlotJuggler)
+        signals.mcap        ground truth, the onboard PC's status and controller signals
+                            (Foxglove / PlotJuggler)
+        wire.mcap           with --wire-mcap: every wire message at its time (rdm.sim.wire_mcap)
         can.log             candump -L capture of the Neuron bus (rdm decode can.log)
-        uart/               raw UART byte captures (*.bin rosserial, *.lep Leptrino)
+        uart/               raw UART byte captures (*.bin rosserial, *.lep Leptrino), each with
+                            its time index *.idx (rdm.sim.capture_index)
         plots/              PNG figures
         metrics.txt         the metrics table
         summary.json        metrics + run facts (seed, duration, speed, counters)
@@ -60,6 +63,10 @@ class RunFolder:
     @property
     def mcap(self) -> Path:
         return self.root / "signals.mcap"
+
+    @property
+    def wire_mcap(self) -> Path:
+        return self.root / "wire.mcap"
 
     @property
     def candump(self) -> Path:

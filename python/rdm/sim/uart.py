@@ -23,24 +23,40 @@ from __future__ import annotations
 import os
 import select
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import BinaryIO
 
+from rdm.sim.capture_index import Clock, TimedCaptureFile
+
+
+def _capture_file(
+    path: str | os.PathLike[str] | None, clock: Clock | None
+) -> BinaryIO | TimedCaptureFile | None:
+    if path is None:
+        return None
+    if clock is None:
+        return open(path, "wb")
+    return TimedCaptureFile(path, clock)
+
 
 class TappedLink:
-    """A byte link end that counts and optionally captures its traffic."""
+    """A byte link end that counts and optionally captures its traffic. With ``clock`` (the
+    simulated time in s), each capture gets a time index beside it
+    (:mod:`rdm.sim.capture_index`): ``rdm decode RUN --mcap`` times every message by it."""
 
     def __init__(
         self,
         link,
         tx_path: str | os.PathLike[str] | None = None,
         rx_path: str | os.PathLike[str] | None = None,
+        clock: Clock | None = None,
     ) -> None:
         self.link = link
         self.tx_bytes = 0
         self.rx_bytes = 0
-        self._tx: BinaryIO | None = open(tx_path, "wb") if tx_path is not None else None  # noqa: SIM115
-        self._rx: BinaryIO | None = open(rx_path, "wb") if rx_path is not None else None  # noqa: SIM115
+        self._tx: BinaryIO | TimedCaptureFile | None = _capture_file(tx_path, clock)
+        self._rx: BinaryIO | TimedCaptureFile | None = _capture_file(rx_path, clock)
         port = getattr(link, "port", None)
         if port is not None and hasattr(port, "write_timeout"):
             port.write_timeout = 0  # never block the lockstep loop on a full pty
@@ -61,6 +77,22 @@ class TappedLink:
         self.tx_bytes += n
         if self._tx is not None and n:
             self._tx.write(data[:n])
+        return n
+
+    def write_marked(self, data: bytes, marks: Sequence[tuple[float, int]]) -> int:
+        """:meth:`write` of a batch of ticks' bytes, ``marks`` their ``(time s, end)`` in
+        ``data``: a time-indexed capture keeps each tick's time (a plain one ignores them)."""
+        if not data:
+            return 0
+        n = self.link.write(data)
+        n = len(data) if n is None else int(n)
+        self.tx_bytes += n
+        tx = self._tx
+        if tx is not None and n:
+            if isinstance(tx, TimedCaptureFile):
+                tx.write_marked(data[:n], marks)
+            else:
+                tx.write(data[:n])
         return n
 
     @property
@@ -124,10 +156,14 @@ class PtyPair:
 
 
 def open_tapped_pty(
-    capture_dir: str | os.PathLike[str] | None = None, stem: str = "uart", ext: str = ".bin"
+    capture_dir: str | os.PathLike[str] | None = None,
+    stem: str = "uart",
+    ext: str = ".bin",
+    clock: Clock | None = None,
 ) -> tuple[TappedLink, TappedLink, PtyPair]:
     """A pty pair as (device end, host end, barrier). With ``capture_dir``, the device end's
-    bytes go to ``<stem>.device_tx<ext>`` and the host's to ``<stem>.host_tx<ext>``."""
+    bytes go to ``<stem>.device_tx<ext>`` and the host's to ``<stem>.host_tx<ext>``, each with
+    a time index when ``clock`` is given."""
     from rdm.link.serial import open_pty_pair
 
     device, host = open_pty_pair()
@@ -136,7 +172,9 @@ def open_tapped_pty(
     else:
         d = Path(capture_dir)
         d.mkdir(parents=True, exist_ok=True)
-        dev = TappedLink(device, d / f"{stem}.device_tx{ext}", d / f"{stem}.host_tx{ext}")
+        dev = TappedLink(
+            device, d / f"{stem}.device_tx{ext}", d / f"{stem}.host_tx{ext}", clock=clock
+        )
     hst = TappedLink(host)
     device.peer = None  # each TappedLink closes its own end
     return dev, hst, PtyPair(dev, hst)
@@ -182,10 +220,14 @@ class InProcessUartEnd:
 
 
 def open_inproc_uart(
-    capture_dir: str | os.PathLike[str] | None = None, stem: str = "uart", ext: str = ".bin"
+    capture_dir: str | os.PathLike[str] | None = None,
+    stem: str = "uart",
+    ext: str = ".bin",
+    clock: Clock | None = None,
 ) -> tuple[TappedLink, TappedLink]:
     """An in-process byte pipe as (device end, host end), captured like :func:`open_tapped_pty`
-    (``<stem>.device_tx<ext>``, ``<stem>.host_tx<ext>``). No barrier is needed."""
+    (``<stem>.device_tx<ext>``, ``<stem>.host_tx<ext>``, time-indexed with ``clock``). No
+    barrier is needed."""
     dev, host = InProcessUartEnd("device"), InProcessUartEnd("host")
     dev.peer, host.peer = host, dev
     if capture_dir is None:
@@ -193,6 +235,6 @@ def open_inproc_uart(
     d = Path(capture_dir)
     d.mkdir(parents=True, exist_ok=True)
     return (
-        TappedLink(dev, d / f"{stem}.device_tx{ext}", d / f"{stem}.host_tx{ext}"),
+        TappedLink(dev, d / f"{stem}.device_tx{ext}", d / f"{stem}.host_tx{ext}", clock=clock),
         TappedLink(host),
     )

@@ -3,7 +3,7 @@
 //! Frames go to a buffer written to the UART in one call before Python code runs.
 
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyTuple};
+use pyo3::types::{PyBytes, PyList, PyTuple};
 use rdm_core::sim::leptrino_stream::encode_force_frame;
 
 use super::attr::read_plan;
@@ -26,9 +26,11 @@ pub(crate) struct LeptrinoFast {
     wrench_new: bool,
     frame: Vec<u8>,
     frame_valid: bool,
-    /// Frames not yet written and their count.
+    /// Frames not yet written and their count, and each frame's (tick time s, end in `out`)
+    /// for the capture's time index (`TappedLink.write_marked`).
     out: Vec<u8>,
     frames: i64,
+    marks: Vec<(f64, usize)>,
     dirty: bool,
 }
 
@@ -44,6 +46,7 @@ impl LeptrinoFast {
             frame_valid: false,
             out: Vec::with_capacity(4096),
             frames: 0,
+            marks: Vec::with_capacity(64),
             dirty: false,
         }
     }
@@ -108,9 +111,9 @@ impl LeptrinoFast {
         Ok(true)
     }
 
-    /// The streaming tick (requires `ready`): one sample frame while streaming; false when the
-    /// frame cannot be encoded here (the caller runs the Python tick).
-    pub(crate) fn tick(&mut self, py: Python<'_>) -> PyResult<bool> {
+    /// The streaming tick at `now` (requires `ready`): one sample frame while streaming; false
+    /// when the frame cannot be encoded here (the caller runs the Python tick).
+    pub(crate) fn tick(&mut self, py: Python<'_>, now: f64) -> PyResult<bool> {
         self.ensure_loaded(py)?;
         let Some(plan) = &self.plan else {
             return Ok(false);
@@ -137,6 +140,7 @@ impl LeptrinoFast {
             }
         }
         self.out.extend_from_slice(&self.frame);
+        self.marks.push((now, self.out.len()));
         self.frames += 1;
         self.dirty = true;
         Ok(true)
@@ -158,10 +162,12 @@ impl LeptrinoFast {
             None
         };
         let data = PyBytes::new(py, &self.out);
+        let marks = PyList::new(py, &self.marks)?;
         self.node
             .bind(py)
-            .call_method1("kernel_commit", (data, self.frames, wrench, frame))?;
+            .call_method1("kernel_commit", (data, self.frames, wrench, frame, marks))?;
         self.out.clear();
+        self.marks.clear();
         self.frames = 0;
         self.dirty = false;
         Ok(())

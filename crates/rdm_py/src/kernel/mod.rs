@@ -249,7 +249,7 @@ impl LockstepKernel {
                 if !l.ready(py)? {
                     return Ok(false);
                 }
-                l.tick(py)
+                l.tick(py, t)
             }
         }
     }

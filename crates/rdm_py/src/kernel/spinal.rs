@@ -65,6 +65,7 @@ struct Names {
     tx_bytes: Name,
     tx_file: Name,
     write: Name,
+    write_marked: Name,
 }
 
 /// Plan of `SpinalMirror.kernel_plan()`: the window in which a tick is only the CAN ms.
@@ -249,6 +250,9 @@ pub(crate) struct SpinalFast {
     /// Frames not yet written (`kernel_commit_tx`), and this tick's.
     tx: Vec<u8>,
     tick_tx: Vec<u8>,
+    /// Per publishing tick in `tx`: (its time s, end of its bytes in `tx`), for the capture's
+    /// time index (`TimedCaptureFile.write_marked`).
+    tx_marks: Vec<(f64, usize)>,
     pub(crate) counts: BusyCounts,
 }
 
@@ -394,6 +398,7 @@ impl SpinalFast {
                 tx_bytes: Name::new(py, "tx_bytes"),
                 tx_file: Name::new(py, "_tx"),
                 write: Name::new(py, "write"),
+                write_marked: Name::new(py, "write_marked"),
             },
             master,
             wire,
@@ -407,6 +412,7 @@ impl SpinalFast {
             deferred: Deferred::default(),
             tx: Vec::with_capacity(8192),
             tick_tx: Vec::with_capacity(1024),
+            tx_marks: Vec::with_capacity(64),
             counts: BusyCounts::default(),
         }
     }
@@ -788,6 +794,10 @@ impl SpinalFast {
             self.counts.imu_frames += u64::from(imu_sent);
             self.counts.servo_frames += u64::from(servo_sent);
             self.tx.extend_from_slice(&self.tick_tx);
+            if !self.tick_tx.is_empty() {
+                // m is whole ms: m / 1000 rounds back to them in the index
+                self.tx_marks.push((m as f64 / 1000.0, self.tx.len()));
+            }
         }
         Ok(SpinalTick::Done)
     }
@@ -896,17 +906,24 @@ impl SpinalFast {
                 let data = PyBytes::new(py, &self.tx);
                 self.tx.clear();
                 match p.busy.as_ref().and_then(|b| b.chain.as_ref()) {
-                    Some(chain) => Self::commit_tx(n, node, chain, &data, &d)?,
+                    Some(chain) => Self::commit_tx(n, node, chain, &data, &d, &self.tx_marks)?,
                     None => {
                         node.call_method1(
                             n.commit_tx.key(py),
-                            (data, d.frames, d.imu_frames, d.servo_frames),
+                            (
+                                data,
+                                d.frames,
+                                d.imu_frames,
+                                d.servo_frames,
+                                PyList::new(py, &self.tx_marks)?,
+                            ),
                         )?;
                     }
                 }
             }
         }
         self.tx.clear();
+        self.tx_marks.clear();
         self.deferred = Deferred::default();
         self.tx_delta = 0;
         self.steady = false;
@@ -924,6 +941,7 @@ impl SpinalFast {
         chain: &Chain,
         data: &Bound<'_, PyBytes>,
         d: &Deferred,
+        marks: &[(f64, usize)],
     ) -> PyResult<()> {
         let py = node.py();
         let add = |obj: &Bound<'_, PyAny>, key: &Name, k: i64| -> PyResult<()> {
@@ -961,7 +979,15 @@ impl SpinalFast {
                 n.tx_bytes.set(tap, n.tx_bytes.i64(tap)? + len)?;
                 let file = n.tx_file.get(tap)?;
                 if !file.is_none() {
-                    file.call_method1(n.write.key(py), (data,))?;
+                    // A time-indexed capture takes each tick's bytes at that tick's time.
+                    match file.getattr(n.write_marked.key(py)) {
+                        Ok(write_marked) => {
+                            write_marked.call1((data, PyList::new(py, marks)?))?;
+                        }
+                        Err(_) => {
+                            file.call_method1(n.write.key(py), (data,))?;
+                        }
+                    }
                 }
             }
         }

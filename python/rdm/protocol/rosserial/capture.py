@@ -81,8 +81,12 @@ def decode_uart(
     registry: TypeRegistry | None = None,
     layout: dict[str, Any] | None = None,
     max_payload: int = C.OUTPUT_SIZE - C.FRAME_OVERHEAD,
+    *,
+    raw: bool = False,
 ) -> Iterator[dict[str, Any]]:
-    """Yield one record per frame, bad frame or run of skipped bytes, in stream order."""
+    """Yield one record per frame, bad frame or run of skipped bytes, in stream order.
+    With ``raw``, a decoded frame's record also carries its payload bytes as ``raw`` (the
+    message's ROS1 serialisation)."""
     registry = registry or spinal_registry()
     table = _TopicTable(registry, layout)
     topic_info = registry.msg("rosserial_msgs/TopicInfo")
@@ -110,7 +114,10 @@ def decode_uart(
                 "bytes": item.data.hex(),
             }
         elif isinstance(item, Frame):
-            yield _frame_record(item, table, topic_info)
+            rec = _frame_record(item, table, topic_info)
+            if raw and rec["ok"]:
+                rec["raw"] = item.payload
+            yield rec
     # a frame cut off at the end of the capture
     if parser.in_frame:
         offset, rest = parser.pending

@@ -1,0 +1,227 @@
+"""Every wire message of a run in one MCAP (``rdm decode RUN --mcap``): complete against the
+decoders, timed against python-can's reading of the candump log, rosserial's time sync and the
+Leptrino stream rate, payloads decoded by rosbags (an independent ROS1 implementation)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from collections import Counter
+
+import can
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from rdm.protocol.leptrino import decode_leptrino
+from rdm.protocol.neuron import decode_candump
+from rdm.protocol.rosserial.capture import decode_uart, load_layout
+from rdm.scenarios.common import run_stack, sim_stack_options
+from rdm.scenarios.hover import HOVER_Z, make_script
+from rdm.scenarios.stack import build_stack
+from rdm.sim.capture_index import index_path
+from rdm.sim.wire_mcap import WireMcapError, run_captures, write_wire_mcap
+
+SECONDS = 3.0
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """A 3 s hover run's folder, its wire MCAP and the conversion's report."""
+    base = tmp_path_factory.mktemp("wire")
+    opts = sim_stack_options(0, "inproc", log=True)
+    stack = build_stack("wire", base, opts, make_script(np.array([0.483, 0.0, HOVER_Z])))
+    run_stack(stack, SECONDS)
+    folder = stack.folder.root
+    out = base / "wire.mcap"
+    report = write_wire_mcap(run_captures(folder), out)
+    return folder, out, report, opts
+
+
+def _messages(path, prefix=""):
+    """(topic, schema, log_time, data) of every message, in the file's time order."""
+    with open(path, "rb") as f:
+        return [
+            (ch.topic, schema, m.log_time, m.data)
+            for schema, ch, m in make_reader(f).iter_messages(log_time_order=True)
+            if ch.topic.startswith(prefix)
+        ]
+
+
+class _Ros1:
+    """rosbags' ROS1 deserialiser fed with the schemas the MCAP carries."""
+
+    def __init__(self) -> None:
+        self.store = get_typestore(Stores.ROS1_NOETIC)
+        self.known: set[str] = set()
+
+    def __call__(self, schema, data):
+        pkg, name = schema.name.split("/")
+        key = f"{pkg}/msg/{name}"
+        if key not in self.known:
+            self.store.register(get_types_from_msg(schema.data.decode(), key))
+            self.known.add(key)
+        return self.store.deserialize_ros1(data, key)
+
+
+def test_every_decoded_record_is_one_message(run):
+    folder, out, report, _ = run
+    with open(out, "rb") as f:
+        summary = make_reader(f).get_summary()
+    counts = {
+        summary.channels[cid].topic: n
+        for cid, n in summary.statistics.channel_message_counts.items()
+    }
+    assert counts == dict(report.messages)
+    assert not report.skipped and not report.errors
+    expected = Counter()
+    expected["can"] = sum(1 for _ in decode_candump(folder / "can.log"))
+    for side in ("device_tx", "host_tx"):
+        data = (folder / "uart" / f"spinal.{side}.bin").read_bytes()
+        expected[f"spinal/{side}"] = sum(1 for _ in decode_uart(data, layout=load_layout()))
+        lep = (folder / "uart" / f"leptrino_foot.{side}.lep").read_bytes()
+        expected[f"leptrino_foot/{side}"] = sum(
+            1 for _ in decode_leptrino(lep, from_sensor=side == "device_tx")
+        )
+    got = Counter()
+    for topic, n in counts.items():
+        parts = topic.split("/")
+        got["can" if parts[2] == "can" else f"{parts[2]}/{parts[3]}"] += n
+    assert got == expected
+    assert expected["can"] > 3000 and expected["spinal/device_tx"] > 600
+
+
+def test_can_frames_at_their_candump_times_as_python_can_reads_them(run):
+    folder, out, _, _ = run
+    with can.CanutilsLogReader(str(folder / "can.log")) as reader:
+        theirs = Counter(
+            (round(m.timestamp * 1e6), m.arbitration_id, bytes(m.data).hex()) for m in reader
+        )
+    ours = Counter()
+    for _topic, _schema, log_time, data in _messages(out, "/wire/can/"):
+        rec = json.loads(data)
+        assert log_time % 1000 == 0
+        ours[(log_time // 1000, rec["id"], rec["data"])] += 1
+    assert ours == theirs
+
+
+def test_spinal_stamps_follow_rosserials_time_sync_from_the_index(run):
+    """rosserial's client sets its clock to the host's time plus the whole round trip of the
+    request, so a message's stamp runs ahead of the wire time by (host's time - request
+    time) of the last sync Spinal received, and 0 before the first (Spinal boots at 0)."""
+    _, out, _, _ = run
+    ros1 = _Ros1()
+    requests, responses, stamped = [], [], []
+    for topic, schema, log_time, data in _messages(out, "/wire/spinal/"):
+        if topic == "/wire/spinal/device_tx/rosserial/time":
+            requests.append(log_time)
+        elif topic == "/wire/spinal/host_tx/rosserial/time":
+            t = ros1(schema, data).data
+            responses.append((log_time, t.sec * 10**9 + t.nanosec))
+        elif topic in ("/wire/spinal/device_tx/imu", "/wire/spinal/device_tx/servo/states"):
+            s = ros1(schema, data).stamp
+            stamped.append((topic, log_time, s.sec * 10**9 + s.nanosec))
+    assert len(requests) == len(responses) >= 2
+    syncs = [
+        (received, host - asked)
+        for asked, (received, host) in zip(requests, responses, strict=True)
+    ]
+    assert all(ahead > 0 for _, ahead in syncs)  # the 40 Hz host answers a tick later
+    imu_times = [t for topic, t, _ in stamped if topic.endswith("imu")]
+    assert len(imu_times) > 500
+    assert set(np.diff(imu_times)) == {5_000_000}  # 200 Hz, each at its own tick
+    for _topic, log_time, stamp in stamped:
+        ahead = 0
+        for received, offset in syncs:
+            if received <= log_time:
+                ahead = offset
+        assert stamp - log_time == ahead
+
+
+def test_leptrino_frames_at_the_sensor_rate(run):
+    _, out, _, opts = run
+    times = [t for _, _, t, _ in _messages(out, "/wire/leptrino_foot/device_tx/force_data")]
+    assert len(times) >= SECONDS * opts.leptrino_rate_hz - 2
+    assert set(np.diff(times)) == {round(1e9 / opts.leptrino_rate_hz)}
+
+
+def test_ros1_payloads_decode_in_rosbags_as_on_the_wire(run):
+    folder, out, _, _ = run
+    ros1 = _Ros1()
+    ours = [
+        rec
+        for rec in decode_uart(
+            (folder / "uart" / "spinal.device_tx.bin").read_bytes(), layout=load_layout()
+        )
+        if rec.get("topic") == "imu"
+    ]
+    theirs = [
+        ros1(schema, data)
+        for topic, schema, _, data in _messages(out, "/wire/spinal/device_tx/imu")
+        if topic == "/wire/spinal/device_tx/imu"  # not imu_calib
+    ]
+    assert len(ours) == len(theirs) > 500
+    for rec, msg in zip(ours, theirs, strict=True):
+        f = rec["fields"]
+        assert list(msg.quaternion) == f["quaternion"]
+        assert list(msg.gyro) == f["gyro"] and list(msg.acc) == f["acc"]
+
+
+def test_bad_bytes_go_to_the_errors_channel(run, tmp_path):
+    folder, _, report, _ = run
+    src = folder / "uart" / "spinal.device_tx.bin"
+    capture = tmp_path / src.name
+    data = bytearray(src.read_bytes())
+    data[len(data) // 2] ^= 0xFF  # one byte of one frame: its checksum fails
+    capture.write_bytes(bytes(data))
+    shutil.copy(index_path(src), index_path(capture))
+    bad = write_wire_mcap([capture], tmp_path / "bad.mcap")
+    assert bad.errors[capture.name] >= 1
+    errors = _messages(tmp_path / "bad.mcap", "/wire/spinal/device_tx/errors")
+    assert len(errors) == sum(bad.errors.values())
+    assert "error" in json.loads(errors[0][3])
+    good = sum(n for t, n in report.messages.items() if t.startswith("/wire/spinal/device_tx"))
+    kept = sum(n for t, n in bad.messages.items() if not t.endswith("/errors"))
+    assert good - 2 <= kept < good  # the frame hit (and at most its neighbour) is lost
+
+
+def test_an_index_that_does_not_fit_its_capture_is_refused(run, tmp_path):
+    folder, _, _, _ = run
+    src = folder / "uart" / "spinal.device_tx.bin"
+    capture = tmp_path / src.name
+    capture.write_bytes(src.read_bytes()[:-3])
+    shutil.copy(index_path(src), index_path(capture))
+    with pytest.raises(WireMcapError, match="capture has"):
+        write_wire_mcap([capture], tmp_path / "no.mcap")
+    cli = [sys.executable, "-m", "rdm.cli", "decode", str(capture), "--mcap"]
+    r = subprocess.run([*cli, str(tmp_path / "no.mcap")], capture_output=True, text=True)
+    assert r.returncode == 2 and "capture has" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_rdm_decode_mcap_of_a_run_folder(run, tmp_path):
+    folder, _, report, _ = run
+    out = tmp_path / "cli.mcap"
+    r = subprocess.run(
+        [sys.executable, "-m", "rdm.cli", "decode", str(folder), "--mcap", str(out)],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0, r.stderr
+    assert f"{report.total} messages on {len(report.messages)} channels" in r.stderr
+    assert "/wire/spinal/device_tx/imu" in r.stdout
+    # a capture without its index is left out of a folder and named
+    (folder / "uart" / "spinal.host_tx.bin.idx").rename(tmp_path / "kept.idx")
+    try:
+        r = subprocess.run(
+            [sys.executable, "-m", "rdm.cli", "decode", str(folder), "--mcap", str(out)],
+            capture_output=True,
+            text=True,
+        )
+    finally:
+        (tmp_path / "kept.idx").rename(folder / "uart" / "spinal.host_tx.bin.idx")
+    assert r.returncode == 0
+    assert "left out" in r.stderr and "spinal.host_tx.bin" in r.stderr
+    assert "/wire/spinal/host_tx/" not in r.stdout
