@@ -71,6 +71,7 @@ def test_quick_run_writes_every_case_peer_and_field(
     m = doc["machine"]
     assert m["cpu_model"] and m["logical_cores"] >= 1
     assert len(m["load_average_start"]) == 3 and len(m["load_average_end"]) == 3
+    assert 0.0 <= m["cpu_steal_share"] <= 1.0 and "cpu_ticks_start" not in m
     assert m["wheel_build_profile"] in ("release", "debug")
     for pkg in ("numpy", "scipy", "osqp", "clarabel"):
         assert m["versions"][pkg]

@@ -33,6 +33,36 @@ def load_average() -> list[float] | None:
         return None
 
 
+def cpu_ticks() -> list[int] | None:
+    """The host's CPU time counters since boot, in clock ticks: the first line of
+    ``/proc/stat`` (user, nice, system, idle, iowait, irq, softirq, steal); None where absent."""
+    try:
+        with open("/proc/stat", encoding="ascii") as f:
+            fields = f.readline().split()
+    except OSError:
+        return None
+    if len(fields) < 9 or fields[0] != "cpu":
+        return None
+    try:
+        return [int(v) for v in fields[1:9]]
+    except ValueError:
+        return None
+
+
+def steal_share(start: list[int] | None, end: list[int] | None) -> float | None:
+    """Between two :func:`cpu_ticks` readings, the share of the CPU time this VM's CPUs
+    wanted (everything but idle and iowait) that the hypervisor gave to other guests (steal):
+    on a shared host, why one hour's figures are slower than another's. None without both
+    readings or when no CPU time was wanted."""
+    if start is None or end is None or len(start) != 8 or len(end) != 8:
+        return None
+    delta = [b - a for a, b in zip(start, end, strict=True)]
+    if min(delta) < 0:
+        return None
+    wanted = sum(delta) - delta[3] - delta[4]
+    return delta[7] / wanted if wanted > 0 else None
+
+
 def package_version(name: str) -> str | None:
     """Installed version of a distribution, None if absent."""
     try:
@@ -58,4 +88,7 @@ def machine_info(blas_pinned: bool) -> dict[str, Any]:
         "blas_threads_pinned_before_numpy": blas_pinned,
         "load_average_start": load_average(),
         "load_average_end": None,
+        "cpu_ticks_start": cpu_ticks(),
+        #: filled at the end of the run (:func:`steal_share`)
+        "cpu_steal_share": None,
     }

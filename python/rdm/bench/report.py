@@ -104,13 +104,20 @@ def _target_text(t: Target) -> str:
     return f"{word} {peer} {value} (need >= {t.limit:g}x): {mark}"
 
 
+def _steal_text(share: float | None) -> str:
+    if share is None:
+        return "CPU steal unknown"
+    return f"hypervisor steal {100 * share:.1f} % of the CPU time wanted during the run"
+
+
 def format_text(doc: dict[str, Any]) -> str:
     """The report printed by ``rdm bench``."""
     mach = doc["machine"]
     lines = [
         f"rdm bench  ({doc['command']})",
         f"machine: {mach['cpu_model']}, {mach['logical_cores']} logical cores; "
-        f"load average start {mach['load_average_start']} end {mach['load_average_end']}",
+        f"load average start {mach['load_average_start']} end {mach['load_average_end']}; "
+        + _steal_text(mach.get("cpu_steal_share")),
         "versions: "
         + ", ".join(f"{k} {v}" for k, v in mach["versions"].items())
         + f", Python {mach['python']}; wheel profile {mach['wheel_build_profile']}; "

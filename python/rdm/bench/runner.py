@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from rdm.bench import cases as case_mod
-from rdm.bench.machine import load_average, machine_info
+from rdm.bench.machine import cpu_ticks, load_average, machine_info, steal_share
 from rdm.bench.report import to_json
 
 
@@ -85,4 +85,5 @@ def run_benchmarks(
             m.evaluate_targets()
             results.append((case.name, m))
     machine["load_average_end"] = load_average()
+    machine["cpu_steal_share"] = steal_share(machine.pop("cpu_ticks_start"), cpu_ticks())
     return to_json(results, machine, command, overhead)
