@@ -220,4 +220,8 @@ def test_a_folder_needs_mcap(tmp_path, capsys):
     capture.write_bytes(bytes.fromhex(GOLDEN["topics"][0]["hex"]))
     assert main(["decode", str(capture), "--mcap", str(tmp_path / "w.mcap")]) == 2
     assert "no time index beside it (x.device_tx.bin.idx)" in capsys.readouterr().err
+    notes = tmp_path / "notes.txt"
+    notes.write_text("not a capture")
+    assert main(["decode", str(notes), "--mcap", str(tmp_path / "w.mcap")]) == 2
+    assert "cannot tell the format" in capsys.readouterr().err
     assert not (tmp_path / "w.mcap").exists()

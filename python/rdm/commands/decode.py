@@ -149,6 +149,13 @@ def _run_mcap(args: argparse.Namespace) -> int:
             print(f"rdm decode: {path} holds no can.log or uart/*_tx* capture", file=sys.stderr)
             return 2
     elif path.is_file():
+        if detect_format(path) is None:
+            print(
+                f"rdm decode: cannot tell the format of {path} from its extension "
+                "(--mcap reads it from the name)",
+                file=sys.stderr,
+            )
+            return 2
         if detect_format(path) != "candump" and not index_path(path).is_file():
             print(
                 f"rdm decode: {path} has no time index beside it ({index_path(path).name}); "

@@ -86,13 +86,14 @@ def run_captures(run: str | os.PathLike[str]) -> list[Path]:
 
 
 def _kind_of(path: Path) -> str:
-    if path.suffix in (".log", ".candump"):
-        return "candump"
-    if path.suffix in (".lep", ".leptrino"):
-        return "leptrino"
-    if path.suffix in (".bin", ".raw", ".uart", ".cap"):
-        return "uart"
-    raise WireMcapError(f"{path}: not a capture rdm decode knows (.log, .bin, .lep)")
+    """The capture's format by its extension, as ``rdm decode`` tells it."""
+    from rdm.commands.decode import FORMATS, detect_format
+
+    kind = detect_format(path)
+    if kind is None:
+        known = " ".join(ext for f in FORMATS.values() for ext in f.extensions)
+        raise WireMcapError(f"{path}: not a capture rdm decode knows ({known})")
+    return kind
 
 
 def _link_topic(path: Path) -> str:
