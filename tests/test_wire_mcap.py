@@ -188,17 +188,54 @@ def test_bad_bytes_go_to_the_errors_channel(run, tmp_path):
     assert good - 2 <= kept < good  # the frame hit (and at most its neighbour) is lost
 
 
-def test_an_index_that_does_not_fit_its_capture_is_refused(run, tmp_path):
+def test_a_killed_runs_capture_and_index_keep_every_message(run, tmp_path):
+    """A run killed before it closed its files: the capture and its index each lost their own
+    unwritten tail. Every message is kept; those past the index take its last time."""
+    folder, _, report, _ = run
+    src = folder / "uart" / "spinal.device_tx.bin"
+    full = src.read_bytes()
+    whole = report.messages["/wire/spinal/device_tx/imu"]
+    # the capture lost more: its last frame is cut (an error record), the rest timed
+    short = tmp_path / "a" / src.name
+    short.parent.mkdir()
+    short.write_bytes(full[:-3])
+    shutil.copy(index_path(src), index_path(short))
+    r = write_wire_mcap([short], tmp_path / "a.mcap")
+    assert r.partial == [(short, len(full), len(full) - 3)]
+    assert r.errors[short.name] == 1  # the cut frame
+    assert whole - 1 <= r.messages["/wire/spinal/device_tx/imu"] <= whole
+    # the index lost more: the frames past it are kept, at its last entry's time
+    long_ = tmp_path / "b" / src.name
+    long_.parent.mkdir()
+    long_.write_bytes(full)
+    index = index_path(src).read_bytes()
+    index_path(long_).write_bytes(index[: len(index) - 16 * 40])  # 40 writes of the tail
+    r = write_wire_mcap([long_], tmp_path / "b.mcap")
+    assert r.partial and r.partial[0][2] == len(full) and not r.errors
+    assert r.messages == Counter(
+        {t: n for t, n in report.messages.items() if t.startswith("/wire/spinal/device_tx/")}
+    )
+    times = [t for _, _, t, _ in _messages(tmp_path / "b.mcap", "/wire/spinal/device_tx/imu")]
+    assert times == sorted(times) and times.count(times[-1]) > 5  # the tail at one time
+    cli = [sys.executable, "-m", "rdm.cli", "decode", str(long_), "--mcap"]
+    out = subprocess.run([*cli, str(tmp_path / "c.mcap")], capture_output=True, text=True)
+    assert out.returncode == 0 and "its index covers" in out.stderr
+
+
+def test_an_index_that_is_not_one_is_refused(run, tmp_path):
     folder, _, _, _ = run
     src = folder / "uart" / "spinal.device_tx.bin"
     capture = tmp_path / src.name
-    capture.write_bytes(src.read_bytes()[:-3])
-    shutil.copy(index_path(src), index_path(capture))
-    with pytest.raises(WireMcapError, match="capture has"):
+    shutil.copy(src, capture)
+    index = bytearray(index_path(src).read_bytes())
+    index[8 + 16 * 3 : 8 + 16 * 3 + 8] = (2**62).to_bytes(8, "little")  # a time far ahead
+    index_path(capture).write_bytes(bytes(index))
+    with pytest.raises(WireMcapError, match="goes back in time"):
         write_wire_mcap([capture], tmp_path / "no.mcap")
+    assert not (tmp_path / "no.mcap").exists()  # nothing written
     cli = [sys.executable, "-m", "rdm.cli", "decode", str(capture), "--mcap"]
     r = subprocess.run([*cli, str(tmp_path / "no.mcap")], capture_output=True, text=True)
-    assert r.returncode == 2 and "capture has" in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode == 2 and "goes back in time" in r.stderr and "Traceback" not in r.stderr
 
 
 def test_rdm_decode_mcap_of_a_run_folder(run, tmp_path):

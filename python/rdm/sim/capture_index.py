@@ -163,8 +163,14 @@ class CaptureIndex:
         return self.ends[-1] if self.ends else 0
 
 
-def read_capture_index(capture: str | os.PathLike[str]) -> CaptureIndex:
-    """Read and check the index beside ``capture`` (FileNotFoundError when there is none)."""
+def read_capture_index(
+    capture: str | os.PathLike[str], *, partial_ok: bool = False
+) -> CaptureIndex:
+    """Read and check the index beside ``capture`` (FileNotFoundError when there is none).
+
+    ``partial_ok``: accept an index that covers more or fewer bytes than the capture has, as
+    a run that did not close its files (killed) leaves them: each file lost its own unwritten
+    buffer. The records themselves are still checked."""
     path = index_path(capture)
     raw = path.read_bytes()
     if raw[: len(MAGIC)] != MAGIC:
@@ -186,7 +192,7 @@ def read_capture_index(capture: str | os.PathLike[str]) -> CaptureIndex:
         ends.append(end)
     size = Path(capture).stat().st_size
     index = CaptureIndex(tuple(times), tuple(ends))
-    if index.size != size:
+    if index.size != size and not partial_ok:
         raise CaptureIndexError(f"{path}: indexes {index.size} bytes but the capture has {size}")
     return index
 

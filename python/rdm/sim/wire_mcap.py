@@ -17,8 +17,10 @@ a channel per message kind, each message at the simulated time it crossed its wi
   offset or line and bytes, so nothing on a wire is left out.
 
 UART and Leptrino captures are timed by the index beside each (:mod:`rdm.sim.capture_index`);
-a capture without one is skipped and named in the report (captures of ``rdm hil``'s processes
-have none). Decoding runs in Python: about 10 s for the ~110k CAN frames of a 40 s run.
+a capture without one is skipped and named in the report. A capture and index of a run killed
+before it closed them may disagree in length (each file loses its own unwritten buffer): the
+messages are all kept, those past the index at its last time, and the report names the
+capture (``partial``). Decoding runs in Python: about 10 s for the ~110k CAN frames of a 40 s run.
 """
 
 from __future__ import annotations
@@ -56,6 +58,9 @@ class WireMcapReport:
     errors: Counter[str] = field(default_factory=Counter)
     #: captures left out and why
     skipped: list[tuple[Path, str]] = field(default_factory=list)
+    #: captures whose index covers other than all their bytes: (capture, indexed, size);
+    #: records past the index are timed at its last entry
+    partial: list[tuple[Path, int, int]] = field(default_factory=list)
 
     @property
     def total(self) -> int:
@@ -133,8 +138,11 @@ def _indexed_messages(
 
     base = _link_topic(path)
     registry = spinal_registry()
+    last_ns = index.times_ns[-1] if index.times_ns else 0
     for rec in records:
-        ns = index.time_ns_of(int(rec["offset"]))
+        offset = int(rec["offset"])
+        # past the index (a run killed before it flushed): the index's last time
+        ns = index.time_ns_of(offset) if offset < index.size else last_ns
         if not rec.get("ok"):
             report.errors[path.name] += 1
             yield _Message(ns, f"{base}/errors", None, b"", _error_values(rec))
@@ -155,13 +163,15 @@ def _capture_messages(path: Path, report: WireMcapReport) -> Iterator[_Message] 
     if kind == "candump":
         return _candump_messages(path, report)
     try:
-        index = read_capture_index(path)
+        index = read_capture_index(path, partial_ok=True)
     except FileNotFoundError:
         report.skipped.append((path, "no time index beside it (<capture>.idx)"))
         return None
     except CaptureIndexError as exc:
         raise WireMcapError(str(exc)) from exc
     data = path.read_bytes()
+    if index.size != len(data):
+        report.partial.append((path, index.size, len(data)))
     if kind == "uart":
         from rdm.protocol.rosserial.capture import decode_uart, load_layout
 
