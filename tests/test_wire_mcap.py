@@ -168,6 +168,13 @@ def test_ros1_payloads_decode_in_rosbags_as_on_the_wire(run):
         f = rec["fields"]
         assert list(msg.quaternion) == f["quaternion"]
         assert list(msg.gyro) == f["gyro"] and list(msg.acc) == f["acc"]
+    # every ROS1 channel (handshake, services, commands) is valid ROS1 for rosbags
+    types = set()
+    for _topic, schema, _, data in _messages(out, "/wire/"):
+        if schema.encoding == "ros1msg":
+            types.add(type(ros1(schema, data)).__name__)
+    assert {"spinal__msg__FourAxisCommand", "rosserial_msgs__msg__TopicInfo"} <= types
+    assert len(types) >= 15
 
 
 def test_bad_bytes_go_to_the_errors_channel(run, tmp_path):

@@ -70,14 +70,7 @@ class TappedLink:
         return data
 
     def write(self, data: bytes) -> int:
-        if not data:
-            return 0
-        n = self.link.write(data)
-        n = len(data) if n is None else int(n)
-        self.tx_bytes += n
-        if self._tx is not None and n:
-            self._tx.write(data[:n])
-        return n
+        return self.write_marked(data, ())
 
     def write_marked(self, data: bytes, marks: Sequence[tuple[float, int]]) -> int:
         """:meth:`write` of a batch of ticks' bytes, ``marks`` their ``(time s, end)`` in
@@ -89,7 +82,7 @@ class TappedLink:
         self.tx_bytes += n
         tx = self._tx
         if tx is not None and n:
-            if isinstance(tx, TimedCaptureFile):
+            if marks and isinstance(tx, TimedCaptureFile):
                 tx.write_marked(data[:n], marks)
             else:
                 tx.write(data[:n])

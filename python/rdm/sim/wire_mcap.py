@@ -10,7 +10,9 @@ a channel per message kind, each message at the simulated time it crossed its wi
   ``signals.mcap``'s Spinal channels): the rosserial link, one message per frame, the payload
   as it was on the wire (rosserial payloads are ROS1 serialisations). ``link`` is the capture's
   stem (``spinal``), ``direction`` ``device_tx`` (what Spinal sent) or ``host_tx`` (what the
-  PC sent, timed when Spinal read it); frames of services and the handshake are JSON;
+  PC sent, timed when Spinal read it); rosserial's own frames (handshake, time sync, log)
+  are under ``<link>/<direction>/rosserial/``; a frame with no message type (a topic
+  request) is JSON;
 * ``/wire/leptrino_foot/<direction>/<kind>`` (JSON): the foot sensor's frames and the host's
   commands;
 * ``.../errors`` (JSON): every bad frame, skipped run of bytes or undecodable payload, with its
