@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import bisect
 import contextlib
-import math
 import os
 import struct
 from collections.abc import Callable, Iterator, Sequence
@@ -30,6 +29,9 @@ from typing import BinaryIO
 MAGIC = b"RDMCIDX1"
 INDEX_SUFFIX = ".idx"
 _RECORD = struct.Struct("<qQ")
+
+#: Larger than any simulated time in s (a finite mark's time is below it).
+_FOREVER = 1e300
 
 #: Simulated time in seconds, read at each write.
 Clock = Callable[[], float]
@@ -68,7 +70,7 @@ class TimedCaptureFile:
             raise
         self._index.write(MAGIC)
         self._end = 0
-        self._last_ns: int | None = None
+        self._last_ns = -(2**63)  # before any time
         #: (capture end when staged, marks) of :meth:`marked`, else None
         self._staged: tuple[int, Sequence[tuple[float, int]]] | None = None
 
@@ -79,31 +81,35 @@ class TimedCaptureFile:
         if not n:
             return 0
         start = self._end
-        records: list[tuple[int, int]] = []
+        pack = _RECORD.pack
+        last = self._last_ns  # a clock or mark that steps back is held here: ordered index
+        packed = []
         done = 0  # bytes of data indexed so far
         if self._staged is not None:
             base, marks = self._staged
+            shift = base - start
             for t, end in marks:
-                stop = base + end - start  # the mark's end within data
+                stop = shift + end  # the mark's end within data
                 if stop <= done:
                     continue  # bytes written before, or a mark that does not advance
-                if not math.isfinite(t):
+                if not -_FOREVER < t < _FOREVER:  # NaN or infinite: no time to give
                     break
-                done = min(stop, n)
-                records.append((time_ns(t), start + done))
+                done = stop if stop < n else n
+                ns = round(t * 1e6) * 1000  # time_ns, inline: this runs per kernel tick
+                if ns < last:
+                    ns = last
+                last = ns
+                packed.append(pack(ns, start + done))
                 if done == n:
                     break
         if done < n:
-            records.append((time_ns(self._clock()), start + n))
+            ns = time_ns(self._clock())
+            if ns < last:
+                ns = last
+            last = ns
+            packed.append(pack(ns, start + n))
         self._data.write(data)
         self._end = start + n
-        last = self._last_ns
-        packed = []
-        for ns, end in records:
-            if last is not None and ns < last:
-                ns = last  # a clock or mark that steps back: keep the index ordered
-            last = ns
-            packed.append(_RECORD.pack(ns, end))
         self._last_ns = last
         self._index.write(b"".join(packed))
         return n
@@ -126,8 +132,11 @@ class TimedCaptureFile:
     ) -> int:
         """:meth:`write` of ``data`` with ``marks`` (``(time s, end in data)``, see
         :meth:`marked`)."""
-        with self.marked(marks):
+        self._staged = (self._end, marks)  # marked(), without a generator per batch
+        try:
             return self.write(data)
+        finally:
+            self._staged = None
 
     def flush(self) -> None:
         self._data.flush()
