@@ -176,6 +176,34 @@ def median_run(runs: list[Run]) -> Run:
     return sorted(runs, key=lambda r: r[1])[(len(runs) - 1) // 2]
 
 
+#: Iterations of :func:`reference_ms`'s loop (~0.1 s on this machine).
+REFERENCE_ITERATIONS = 1_000_000
+
+
+def reference_ms(iterations: int = REFERENCE_ITERATIONS) -> float:
+    """Wall ms of a fixed pure-Python loop (integer adds), timed next to each run: the
+    interpreter-bound speed of the machine at that moment (this shared VM's speed swings by
+    ~1.5x within minutes, with or without hypervisor steal; docs/bench.md)."""
+    t0 = time.perf_counter()
+    total = 0
+    for i in range(iterations):
+        total += i
+    if total != iterations * (iterations - 1) // 2:  # the loop's work is used
+        raise RuntimeError("reference loop: wrong sum")
+    return (time.perf_counter() - t0) * 1e3
+
+
+def _reference_note(refs: list[float]) -> list[str]:
+    """The reference loop's times beside the runs'."""
+    if not refs:
+        return []
+    times = ", ".join(f"{r:.0f}" for r in refs)
+    return [
+        f"machine reference before each run ({REFERENCE_ITERATIONS:,} Python integer adds, "
+        f"ms): {times} (the interpreter-bound speed of the machine at each run)"
+    ]
+
+
 def _runs_note(runs: list[Run], sim: float) -> list[str]:
     """Every run's real-time factor, when there was more than one."""
     if len(runs) < 2:
@@ -192,13 +220,18 @@ def run_lockstep(ctx: Context) -> list[Measurement]:
     ctx.progress(
         f"lockstep: {repeats} x {ticks} base ticks ({ticks / 1000:g} simulated s) of the stack"
     )
-    runs = [run_hover_stack(ticks) for _ in range(repeats)]
+    refs: list[float] = []
+    runs: list[Run] = []
+    for _ in range(repeats):
+        refs.append(reference_ms())
+        runs.append(run_hover_stack(ticks))
     ns, wall, cpu, stats = median_run(runs)
     sim = ticks * BASE_TICK_US / 1e6
     notes = [
         f"simulated {sim:g} s in {wall:.2f} wall s ({sim / wall:.2f}x real time), "
         f"{cpu:.2f} CPU s ({sim / cpu:.2f} simulated s per CPU s)",
         *_runs_note(runs, sim),
+        *_reference_note(refs),
         *_airborne_note(ns),
         *_kernel_note(stats),
         "full hover stack from power-on, every byte on its wire, MCAP + candump + UART "
