@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from mcap.reader import make_reader
 
 import rdm
 
@@ -28,6 +29,7 @@ def test_rdm_sim_hover_json_progress_and_run_folder(tmp_path):
             "--out",
             str(tmp_path),
             "--json",
+            "--wire-mcap",
         ],
         capture_output=True,
         text=True,
@@ -45,6 +47,25 @@ def test_rdm_sim_hover_json_progress_and_run_folder(tmp_path):
     assert json.loads((folder / "summary.json").read_text()) == summary
     # the figure, drawn by the plot worker process, is written before the command returns
     assert (folder / "plots" / "hover.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # --wire-mcap: every capture time-indexed, the wire MCAP beside them (stdout stays JSON)
+    captures = sorted((folder / "uart").glob("*_tx.*[!x]"))  # not the .idx files
+    assert [c.name for c in captures] == [
+        "leptrino_foot.device_tx.lep",
+        "leptrino_foot.host_tx.lep",
+        "spinal.device_tx.bin",
+        "spinal.host_tx.bin",
+    ]
+    for capture in captures:
+        assert (capture.parent / (capture.name + ".idx")).stat().st_size > 8, capture
+    with open(folder / "wire.mcap", "rb") as f:
+        summary_ = make_reader(f).get_summary()
+    counts = {
+        summary_.channels[cid].topic: n
+        for cid, n in summary_.statistics.channel_message_counts.items()
+    }
+    assert 590 <= counts["/wire/spinal/device_tx/imu"] <= 600  # 200 Hz over 3 s
+    assert counts["/wire/can/pwm"] > 0
+    assert f"wire.mcap: {sum(counts.values())} messages on {len(counts)} channels" in out.stderr
 
 
 def test_rdm_sim_perching_imports_only_what_it_runs():
