@@ -174,20 +174,9 @@ def _run_mcap(args: argparse.Namespace) -> int:
         return 2
     for topic, n in sorted(report.messages.items()):
         print(f"{n:8d}  {topic}")
-    for capture, why in report.skipped:
-        print(f"rdm decode: left out {capture}: {why}", file=sys.stderr)
-    for capture, indexed, size in report.partial:
-        print(
-            f"rdm decode: {capture}: its index covers {indexed} of {size} bytes (a run that "
-            "did not close its files?); messages past it are timed at its last entry",
-            file=sys.stderr,
-        )
-    bad = dict(report.errors)
-    print(
-        f"mcap: {report.total} messages on {len(report.messages)} channels to {report.path}, "
-        f"bad records {bad}",
-        file=sys.stderr,
-    )
+    for line in report.warnings():
+        print(f"rdm decode: {line}", file=sys.stderr)
+    print(report.summary(), file=sys.stderr)
     return 0
 
 

@@ -86,13 +86,9 @@ def _write_wire_mcap(folder: RunFolder) -> bool:
     except (WireMcapError, OSError) as exc:
         print(f"rdm sim: wire.mcap could not be written: {exc}", file=sys.stderr)
         return False
-    for capture, why in report.skipped:
-        print(f"rdm sim: wire.mcap leaves out {capture}: {why}", file=sys.stderr)
-    print(
-        f"wire.mcap: {report.total} messages on {len(report.messages)} channels, "
-        f"bad records {dict(report.errors)}",
-        file=sys.stderr,
-    )
+    for line in report.warnings():
+        print(f"rdm sim: wire.mcap: {line}", file=sys.stderr)
+    print(report.summary(), file=sys.stderr)
     return True
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import bisect
 import contextlib
+import math
 import os
 import struct
 from collections.abc import Callable, Iterator, Sequence
@@ -29,9 +30,6 @@ from typing import BinaryIO
 MAGIC = b"RDMCIDX1"
 INDEX_SUFFIX = ".idx"
 _RECORD = struct.Struct("<qQ")
-
-#: Larger than any simulated time in s (a finite mark's time is below it).
-_FOREVER = 1e300
 
 #: Simulated time in seconds, read at each write.
 Clock = Callable[[], float]
@@ -87,27 +85,22 @@ class TimedCaptureFile:
         done = 0  # bytes of data indexed so far
         if self._staged is not None:
             base, marks = self._staged
-            shift = base - start
             for t, end in marks:
-                stop = shift + end  # the mark's end within data
+                stop = base + end - start  # the mark's end within data
                 if stop <= done:
                     continue  # bytes written before, or a mark that does not advance
-                if not -_FOREVER < t < _FOREVER:  # NaN or infinite: no time to give
-                    break
+                if not math.isfinite(t):
+                    break  # no time to give: the clock's
                 done = stop if stop < n else n
-                ns = round(t * 1e6) * 1000  # time_ns, inline: this runs per kernel tick
-                if ns < last:
-                    ns = last
-                last = ns
-                packed.append(pack(ns, start + done))
+                ns = time_ns(t)
+                last = ns if ns > last else last
+                packed.append(pack(last, start + done))
                 if done == n:
                     break
         if done < n:
             ns = time_ns(self._clock())
-            if ns < last:
-                ns = last
-            last = ns
-            packed.append(pack(ns, start + n))
+            last = ns if ns > last else last
+            packed.append(pack(last, start + n))
         self._data.write(data)
         self._end = start + n
         self._last_ns = last

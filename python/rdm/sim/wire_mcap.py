@@ -68,6 +68,23 @@ class WireMcapReport:
     def total(self) -> int:
         return sum(self.messages.values())
 
+    def warnings(self) -> list[str]:
+        """One line per capture left out or with an index of another length."""
+        lines = [f"left out {capture}: {why}" for capture, why in self.skipped]
+        lines += [
+            f"{capture}: its index covers {indexed} of {size} bytes (a run that did not close "
+            "its files?); messages past it are timed at its last entry"
+            for capture, indexed, size in self.partial
+        ]
+        return lines
+
+    def summary(self) -> str:
+        """The one-line result: messages, channels, bad records, where."""
+        return (
+            f"{self.path.name}: {self.total} messages on {len(self.messages)} channels, "
+            f"bad records {dict(self.errors)} ({self.path})"
+        )
+
 
 @dataclass(frozen=True)
 class _Message:
