@@ -106,6 +106,9 @@ def _state(stack: Stack) -> dict:
             plant.model.tree_sleep_policy.tobytes(),
         ),
         "rejected": plant.rejected_commands,
+        "contact_gate": None
+        if plant.contact_gate is None
+        else (plant.contact_gate.off, plant.contact_gate.off_steps, plant.contact_gate.on_steps),
         "normals": (
             plant.imu_model._normals._pos,
             plant.wrench_models["foot_wrench"]._normals._pos,

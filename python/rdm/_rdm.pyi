@@ -819,6 +819,52 @@ class RotorPlantCore:
         finite."""
 
 # --- plate contact (ground truth) ---
+class ContactGateCore:
+    """The plant's collision gate (``rdm.plant.contact_gate``): proves from MjData's views that
+    the next position pass can produce no contact and keeps ``mjDSBL_CONTACT`` of the model's
+    ``opt.disableflags`` in step (set: contacts off for that pass)."""
+
+    def __init__(
+        self,
+        dt: float,
+        slack: float,
+        planes: list[tuple[list[float], list[float]]],
+        boxes: list[tuple[list[float], list[float], list[float]]],
+        geoms: list[tuple[int, float, list[float | None]]],
+        free_dof: int,
+        hinges: list[tuple[int, int]],
+        slides: list[int],
+        root_body: int,
+        opt: Any,
+        bit: int,
+        geom_xpos: np.ndarray,
+        xpos: np.ndarray,
+        xanchor: np.ndarray,
+        qvel: np.ndarray,
+    ) -> None:
+        """``planes`` (point, normal) and ``boxes`` (centre, row-major rotation, half sizes)
+        are the static obstacles; ``geoms`` (geom, rbound, margin per obstacle or None); the
+        robot's free joint's first dof, its hinges (joint, dof) and slide dofs; its root body;
+        the model's ``MjOption`` and ``mjDSBL_CONTACT``; the MjData views. ValueError on a
+        bad ``dt`` / ``slack`` or margins that do not match the obstacles."""
+    def read(self) -> tuple[float, float]:
+        """``(clearance, reach)`` [m] of the present views; contact is impossible in the next
+        pass when clearance > reach (NaN: possible)."""
+    def update(self) -> bool:
+        """Decide for the next pass (after ``mj_step2``); True when contacts are now off.
+        ValueError (contacts turned on) when the views are too short."""
+    def enable(self) -> None:
+        """Contacts on now (the state may change outside the steps)."""
+    @property
+    def off(self) -> bool:
+        """True while contacts are off."""
+    @property
+    def off_steps(self) -> int:
+        """Steps after which contacts were off."""
+    @property
+    def on_steps(self) -> int:
+        """Steps after which contacts were on."""
+
 class PlateContactCore:
     """The foot plate's contact measurement of ``FootContactTracker.measure_contacts``
     (rdm.plant.truth): contact sums, foot-frame force, torque and ZMP from MuJoCo's contact

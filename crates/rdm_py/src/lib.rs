@@ -7,6 +7,7 @@ mod attitude;
 mod bench;
 mod can_frame;
 mod can_master;
+mod contact_gate;
 mod errors;
 mod estimate;
 mod gains;
@@ -44,6 +45,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     sensor_sim::register(m)?;
     json_log::register(m)?;
     rotor_plant::register(m)?;
+    contact_gate::register(m)?;
     can_master::register(m)?;
     leptrino_scan::register(m)?;
     rosserial::register(m)?;

@@ -21,8 +21,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from rdm._rdm import RotorPlantCore
+from rdm._rdm import ContactGateCore, RotorPlantCore
 from rdm.plant.ceiling import CeilingEffect, NoCeilingEffect, ParametricCeilingEffect
+from rdm.plant.contact_gate import build_contact_gate
 from rdm.plant.description import RobotDescription, load_robot
 from rdm.plant.esc import Esc, EscParams
 from rdm.plant.mjcf import (
@@ -77,6 +78,9 @@ class Plant:
             (:class:`rdm.plant.sleep.RestingSleep`; a no-op on a MuJoCo without sleeping,
             and with a ``scene``: with sleeping on, MuJoCo computes the poses of static bodies
             once, and the tasks move their objects by editing ``model.body_pos``).
+        contact_gate: skip MuJoCo's collision detection in steps that provably have no
+            contact (:mod:`rdm.plant.contact_gate`; the same numbers either way; not with a
+            ``scene`` or a fixed base).
     """
 
     def __init__(
@@ -97,6 +101,7 @@ class Plant:
         wrench_noise: WrenchNoise | None = None,
         scene: Callable[[mujoco.MjSpec], None] | None = None,
         sleep: bool = True,
+        contact_gate: bool = True,
     ) -> None:
         if not (math.isfinite(timestep) and timestep > 0):
             raise ValueError(f"timestep: must be > 0, got {timestep}")
@@ -222,8 +227,20 @@ class Plant:
             if sleep and scene is None and SLEEP_AVAILABLE and any(t >= 0 for t in robot_trees)
             else None
         )
+        #: The collision gate (None: contacts always on; see :mod:`rdm.plant.contact_gate`).
+        self._contact_gate: ContactGateCore | None = (
+            build_contact_gate(m, d, int(robot_root))
+            if contact_gate and scene is None and not fixed_base
+            else None
+        )
         self._seed_sensors()
         self.reset()
+
+    @property
+    def contact_gate(self) -> ContactGateCore | None:
+        """The collision gate (its ``off_steps`` / ``on_steps`` count the steps after which
+        contacts were off / on), or None."""
+        return self._contact_gate
 
     @property
     def ceiling_effects(self) -> tuple[CeilingEffect, ...]:
@@ -250,6 +267,8 @@ class Plant:
         self._state_version += 1  # the caller may change the state: no cached truth
         if self.sleep is not None:
             self.sleep.wake_next()
+        if self._contact_gate is not None:
+            self._contact_gate.enable()  # a changed state is collided in full
         return self._data
 
     def _fresh(self) -> mujoco.MjData:
@@ -295,6 +314,8 @@ class Plant:
         self._stale = False
         self._needs_step1 = True
         self._state_version += 1
+        if self._contact_gate is not None:
+            self._contact_gate.enable()
         mujoco.mj_resetData(m, d)
         if self.sleep is not None:
             self.sleep.wake_next()
@@ -458,6 +479,7 @@ class Plant:
         tracker = self._tracker
         step1, step2 = mujoco.mj_step1, mujoco.mj_step2
         sleep = self.sleep
+        gate = self._contact_gate
         for _ in range(int(n)):
             if self._stale or self._needs_step1:
                 step1(m, d)
@@ -478,6 +500,8 @@ class Plant:
                 sleep.before_step2(self._step1_now)
             step2(m, d)
             tracker.update(d)  # contacts of this step's start: keep the slip anchor
+            if gate is not None:
+                gate.update()  # contacts off for the next pass if none can occur in it
         self._stale = True  # the forward pass runs when something reads (see sync)
         self._needs_step1 = True
         self._state_version += 1

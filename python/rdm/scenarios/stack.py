@@ -248,6 +248,10 @@ class StackOptions:
     #: physics then costs almost nothing. False: always awake (the trajectory differs by the
     #: ~1e-5 the sleeping robot does not creep).
     plant_sleep: bool = True
+    #: Skip MuJoCo's collision detection in steps that provably have no contact
+    #: (``Plant(contact_gate=...)``, :mod:`rdm.plant.contact_gate`): the same bytes either
+    #: way, ~3 us less per simulated ms in flight. False: collide in every step.
+    plant_contact_gate: bool = True
 
 
 #: Feed-forward lead of the joint servo goals on a planned path that the scenarios configure
@@ -314,6 +318,7 @@ def make_plant(opt: StackOptions) -> tuple[Plant, np.ndarray]:
         esc=None if opt.esc_tau is None else EscParams(tau=opt.esc_tau),
         scene=opt.scene,
         sleep=opt.plant_sleep,
+        contact_gate=opt.plant_contact_gate,
     )
     q0 = np.zeros(len(plant.joint_names)) if opt.q0 is None else np.asarray(opt.q0, float)
     plant.reset(q0=q0, base_position=opt.base_position)

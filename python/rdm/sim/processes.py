@@ -131,6 +131,7 @@ def stack_config(seed: int) -> dict[str, Any]:
         "battery_voltage",
         "master_backend",
         "plant_sleep",
+        "plant_contact_gate",
     )
     cfg = {k: getattr(opt, k) for k in keys}
     cfg["servo"] = None if opt.servo is None else asdict(opt.servo)

@@ -3,6 +3,7 @@
 //! the Python reference forms in `rdm.plant.sensors` / `rdm.protocol.leptrino` operation for
 //! operation, so a run gives the same bytes with either.
 
+pub mod contact_gate;
 pub mod esc_duty;
 pub mod json_text;
 pub mod leptrino_stream;

@@ -7,6 +7,7 @@ use pyo3::prelude::*;
 
 use super::attr::Name;
 use super::sleep::SleepLink;
+use crate::contact_gate::ContactGateCore;
 use crate::rotor_plant::RotorPlantCore;
 
 struct Names {
@@ -32,6 +33,8 @@ pub(crate) struct PlantLink {
     step2: Py<PyAny>,
     forward: Py<PyAny>,
     rotors: Py<RotorPlantCore>,
+    /// `Plant._contact_gate` (None: contacts always on).
+    gate: Option<Py<ContactGateCore>>,
     tracker: Py<PyAny>,
     /// Plant's `_v_qpos`, `_v_sensordata`, `_v_ctrl` (views of MjData, stable for its life).
     pub(crate) qpos: Py<numpy::PyArray1<f64>>,
@@ -87,6 +90,14 @@ impl PlantLink {
                 .getattr("_rotors")?
                 .cast_into::<RotorPlantCore>()?
                 .unbind(),
+            gate: {
+                let g = plant.getattr("_contact_gate")?;
+                if g.is_none() {
+                    None
+                } else {
+                    Some(g.cast_into::<ContactGateCore>()?.unbind())
+                }
+            },
             tracker: plant.getattr("_tracker")?.unbind(),
             qpos: plant.getattr("_v_qpos")?.extract()?,
             sensordata: plant.getattr("_v_sensordata")?.extract()?,
@@ -265,6 +276,9 @@ impl PlantLink {
                 self.load_tracker(py)?;
                 self.tracker_python += 1;
             }
+        }
+        if let Some(gate) = &self.gate {
+            gate.bind(py).borrow_mut().update_now(py)?;
         }
         self.stale = true;
         self.needs_step1 = true;
