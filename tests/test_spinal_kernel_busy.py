@@ -40,6 +40,8 @@ def test_kernel_busy_off_is_the_idle_kernel_path(tmp_path: Path) -> None:
         stack.loop.run(1.0)
 
     stats = _same(tmp_path, steps)
+    assert len(counts) == 1
+    received = counts[0].pop("receive_then_python")
     assert counts == [
         {
             "steps": 0,
@@ -48,12 +50,35 @@ def test_kernel_busy_off_is_the_idle_kernel_path(tmp_path: Path) -> None:
             "servo_frames": 0,
             "finish_step": 0,
             "finish_publish": 0,
+            # the onboard node's commands arrive in ms with a control step: busy, Python's
+            "receive_then_kernel": 0,
         }
     ]
+    assert received > 100  # received in Python, then the rest there too
     busy = stats["spinal_busy"]
     assert busy["steps"] > 180 and busy["imu_frames"] > 150 and busy["battery_samples"] > 40
     # busy off: every control step and publication was a Python tick
     assert stats["python"][SPINAL] > 2.5 * 400
+
+
+def test_kernel_receive_off_runs_the_whole_receiving_tick_in_python(tmp_path: Path) -> None:
+    """``SpinalMirror.kernel_receive = False``: a ms with bytes to read is the mirror's
+    whole tick again (the path before the split); on again, the kernel runs its rest."""
+    seen: list[tuple[int, int]] = []
+
+    def steps(stack: Stack) -> None:
+        stack.spinal.kernel_receive = False
+        stack.loop.run(2.5)
+        kernel = stack.loop.kernel
+        if kernel is not None:
+            b = kernel.stats()["spinal_busy"]
+            seen.append((b["receive_then_kernel"], b["receive_then_python"]))
+        stack.spinal.kernel_receive = True
+        stack.loop.run(1.0)
+
+    stats = _same(tmp_path, steps)
+    assert seen[0][0] == 0 and seen[0][1] > 100
+    assert stats["spinal_busy"]["receive_then_kernel"] > 20
 
 
 def test_declined_frames_battery_and_step_events_go_to_python(tmp_path: Path) -> None:

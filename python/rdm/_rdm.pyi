@@ -1087,5 +1087,7 @@ class LockstepKernel:
         """Ticks per node on the fast path and in Python, physics steps, boundaries, contact
         tracker updates, the Spinal busy ms run in the kernel (``spinal_busy``: ``steps``,
         ``battery_samples``, ``imu_frames``, ``servo_frames``, and the hand-overs to the
-        mirror's Python continuations ``finish_step`` / ``finish_publish``); with
-        ``profile`` the wall ns of each."""
+        mirror's Python continuations ``finish_step`` / ``finish_publish``, and the ms the
+        mirror received in Python with the rest run in the kernel / in Python:
+        ``receive_then_kernel`` / ``receive_then_python``); with ``profile`` the wall ns of
+        each."""

@@ -258,6 +258,9 @@ class SpinalMirror:
         #: ``imu`` / ``servo/states`` publications) itself (:meth:`kernel_plan`'s busy part);
         #: False: only the idle ms (the plain kernel path, docs/spinalkernel.md).
         self.kernel_busy = True
+        #: A ms with bytes to read: this mirror receives them (:meth:`kernel_receive_tick`)
+        #: and the kernel runs the rest of the ms from its plan; False: the whole tick here.
+        self.kernel_receive = True
         #: The kernel writes its deferred output and the TX counters itself, through the
         #: UART chain (as :meth:`kernel_commit_tx` does); False: it calls that method.
         self.kernel_tx_direct = True
@@ -382,6 +385,15 @@ class SpinalMirror:
         # The plain tick with every step's own "nothing to do" check inline, so that an idle
         # ms (no UART byte, no control step or publisher due, one steady CAN ms) costs one
         # Rust call and a few comparisons. Each skip is exactly the guarded step's no-op.
+        now_ms = self._tick_begin(now)
+        inbox = self.uart.inbox
+        if inbox is None or inbox or not self._idle_lo <= now_ms < self._idle_hi:
+            self._receive(now_ms)  # else: no byte to read and spin(b"") would do nothing
+        self._tick_rest(now_ms)
+
+    def _tick_begin(self, now: float) -> int:
+        """:meth:`tick`'s clock: the ms of ``now`` (never before the last one) and ``_now_s``.
+        Calling it again with the same ``now`` changes nothing."""
         now_ms = _floor(now * 1000.0 + 1e-6)  # to_ms(now)
         last_ms = self.now_ms
         if last_ms is not None and now_ms < last_ms:
@@ -391,9 +403,10 @@ class SpinalMirror:
         if now > self._now_s:  # max(self._now_s, now)
             self._now_s = now
         self.now_ms = now_ms
-        inbox = self.uart.inbox
-        if inbox is None or inbox or not self._idle_lo <= now_ms < self._idle_hi:
-            self._receive(now_ms)  # else: no byte to read and spin(b"") would do nothing
+        return now_ms
+
+    def _tick_rest(self, now_ms: int) -> None:
+        """:meth:`tick` after the UART receive: battery, due control steps, the tail."""
         if now_ms >= self._battery_due_ms:
             self._battery(now_ms)
         next_control = self._next_control
@@ -1146,6 +1159,30 @@ class SpinalMirror:
             return self.session.publisher(name)
         except KeyError:
             return None
+
+    def kernel_receive_tick(self, now: float) -> tuple | None:
+        """The lockstep kernel's tick of a ms it cannot run from its plan (bytes to read, the
+        idle window over): :meth:`tick` up to and with its UART receive, then either the rest
+        here (returns None: the whole tick ran) or, when :meth:`kernel_plan` applies after the
+        receive and ``kernel_receive`` is on, nothing more: returns that plan, and the kernel
+        runs the rest (battery, control, CAN ms, publishers, output) as in any ms of its plan,
+        or calls :meth:`kernel_receive_rest` when that ms is not one it runs. The same calls
+        in the same order as :meth:`tick` (docs/spinalkernel.md "Receive, then the kernel")."""
+        if not self._fast:
+            self._tick_plain(now)
+            return None
+        now_ms = self._tick_begin(now)
+        inbox = self.uart.inbox
+        if inbox is None or inbox or not self._idle_lo <= now_ms < self._idle_hi:
+            self._receive(now_ms)
+        plan = self.kernel_plan() if self.kernel_receive else None
+        if plan is None:
+            self._tick_rest(now_ms)
+        return plan
+
+    def kernel_receive_rest(self, now: float) -> None:
+        """The rest of a :meth:`kernel_receive_tick` whose plan the kernel did not run."""
+        self._tick_rest(self._tick_begin(now))
 
     def kernel_finish_step(self, now_ms: int, tail: bool) -> None:
         """The rest of a kernel tick whose control step the kernel ran (``last_output``,

@@ -225,21 +225,7 @@ impl LockstepKernel {
                 if !s.ready(py, t)? {
                     return Ok(false);
                 }
-                let tick = s.tick(py, t)?;
-                if !matches!(tick, SpinalTick::Done) {
-                    // The mirror's continuation of this tick (it reads and changes only
-                    // the mirror: its part is written back first).
-                    self.enter_python(py, t, SPINAL)?;
-                    let s = self.spinal.as_ref().unwrap();
-                    let r = match tick {
-                        SpinalTick::Done => Ok(()),
-                        SpinalTick::Finish(now_ms) => s.finish(py, now_ms),
-                        SpinalTick::FinishStep(now_ms, tail) => s.finish_step(py, now_ms, tail),
-                        SpinalTick::FinishPublish(now_ms) => s.finish_publish(py, now_ms),
-                    };
-                    self.leave_python(SPINAL);
-                    r?;
-                }
+                self.spinal_tick(py, t)?;
                 Ok(true)
             }
             Kind::Leptrino => {
@@ -252,6 +238,61 @@ impl LockstepKernel {
                 l.tick(py, t)
             }
         }
+    }
+
+    /// The Spinal part's tick at `t` (its `ready` said yes), with the mirror's Python
+    /// continuation when the part leaves one.
+    fn spinal_tick(&mut self, py: Python<'_>, t: f64) -> PyResult<()> {
+        let Some(s) = self.spinal.as_mut() else {
+            return Ok(());
+        };
+        let tick = s.tick(py, t)?;
+        if matches!(tick, SpinalTick::Done) {
+            return Ok(());
+        }
+        // The mirror's continuation of this tick (it reads and changes only the mirror:
+        // its part is written back first).
+        self.enter_python(py, t, SPINAL)?;
+        let s = self.spinal.as_ref().unwrap();
+        let r = match tick {
+            SpinalTick::Done => Ok(()),
+            SpinalTick::Finish(now_ms) => s.finish(py, now_ms),
+            SpinalTick::FinishStep(now_ms, tail) => s.finish_step(py, now_ms, tail),
+            SpinalTick::FinishPublish(now_ms) => s.finish_publish(py, now_ms),
+        };
+        self.leave_python(SPINAL);
+        r
+    }
+
+    /// Node `i`, the Spinal mirror, at a ms its part cannot run from its plan: the mirror
+    /// receives in Python (`receive_tick`) and the rest of the ms runs here when the new
+    /// plan allows it, else in Python. True: the rest ran here.
+    fn spinal_receive_tick(&mut self, py: Python<'_>, i: usize, t: f64) -> PyResult<bool> {
+        fn part(k: &mut LockstepKernel) -> PyResult<&mut SpinalFast> {
+            k.spinal.as_mut().ok_or_else(|| {
+                pyo3::exceptions::PyRuntimeError::new_err("kernel: no Spinal part attached")
+            })
+        }
+        let touches = self.touches[i];
+        self.enter_python(py, t, touches)?;
+        let r = part(self).and_then(|s| s.receive_tick(py, t));
+        self.leave_python(touches);
+        if !r? {
+            return Ok(false); // the whole tick ran in Python
+        }
+        // leave_python forgot the plan the mirror handed back: it is this very state's
+        let s = part(self)?;
+        s.keep_plan();
+        if s.ready(py, t)? {
+            s.counts.receive_then_kernel += 1;
+            self.spinal_tick(py, t)?;
+            return Ok(true);
+        }
+        self.enter_python(py, t, touches)?;
+        let r = part(self).and_then(|s| s.receive_rest(py, t));
+        self.leave_python(touches);
+        r?;
+        Ok(false)
     }
 
     fn leptrino_node<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
@@ -297,6 +338,24 @@ impl LockstepKernel {
                     if let Some(t0) = t0 {
                         self.counts.fast_ns[i] += elapsed_ns(t0);
                     }
+                } else if self.kinds[i] == Kind::Spinal && self.own_tick[i] && self.spinal.is_some()
+                {
+                    // received in Python; the rest here (fast) or there (python)
+                    let rest_here = self.spinal_receive_tick(py, i, t)?;
+                    if rest_here {
+                        self.counts.fast[i] += 1;
+                    } else {
+                        self.counts.python[i] += 1;
+                    }
+                    if let Some(t0) = t0 {
+                        let ns = elapsed_ns(t0);
+                        if rest_here {
+                            self.counts.fast_ns[i] += ns;
+                        } else {
+                            self.counts.python_ns[i] += ns;
+                        }
+                    }
+                    stop |= self.owner.bind(py).getattr("_stop")?.is_truthy()?;
                 } else {
                     self.python_tick(py, i, t)?;
                     if let Some(t0) = t0 {
@@ -508,8 +567,10 @@ impl LockstepKernel {
     /// `{"fast": [...], "python": [...], "physics_fast": n, "physics_python": n,
     /// "boundaries": n, ..., "spinal_busy": {...}}`: ticks per node index on each path;
     /// `spinal_busy`: the Spinal busy-ms work done here (`steps`, `battery_samples`,
-    /// `imu_frames`, `servo_frames`) and the ticks handed to the mirror's continuations
-    /// (`finish_step`, `finish_publish`).
+    /// `imu_frames`, `servo_frames`), the ticks handed to the mirror's continuations
+    /// (`finish_step`, `finish_publish`), and the ms the mirror received in Python with the
+    /// rest run here / there (`receive_then_kernel`, `receive_then_python`; a Spinal tick
+    /// counts as fast when its rest ran here).
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
         let d = pyo3::types::PyDict::new(py);
         d.set_item("fast", self.counts.fast.clone())?;
@@ -531,6 +592,8 @@ impl LockstepKernel {
         spinal.set_item("servo_frames", sc.servo_frames)?;
         spinal.set_item("finish_step", sc.finish_step)?;
         spinal.set_item("finish_publish", sc.finish_publish)?;
+        spinal.set_item("receive_then_kernel", sc.receive_then_kernel)?;
+        spinal.set_item("receive_then_python", sc.receive_then_python)?;
         d.set_item("spinal_busy", spinal)?;
         if self.profile {
             d.set_item("fast_ns", self.counts.fast_ns.clone())?;

@@ -231,6 +231,9 @@ pub(crate) struct BusyCounts {
     pub(crate) servo_frames: u64,
     pub(crate) finish_step: u64,
     pub(crate) finish_publish: u64,
+    /// Ms with bytes to read: received in Python, the rest run here / in Python.
+    pub(crate) receive_then_kernel: u64,
+    pub(crate) receive_then_python: u64,
 }
 
 pub(crate) struct SpinalFast {
@@ -241,6 +244,8 @@ pub(crate) struct SpinalFast {
     drain_at: usize,
     plan: Option<Plan>,
     loaded: bool,
+    /// `receive_tick` loaded the plan (kept across the caller's `leave_python`).
+    reloaded: bool,
     tx_delta: i64,
     /// A steady CAN tick ran since the last flush (the master's pending events are 0).
     steady: bool,
@@ -405,6 +410,7 @@ impl SpinalFast {
             drain_at,
             plan: None,
             loaded: false,
+            reloaded: false,
             tx_delta: 0,
             steady: false,
             dirty: false,
@@ -425,7 +431,13 @@ impl SpinalFast {
         if self.loaded {
             return Ok(());
         }
-        self.plan = if let Some(t) = read_plan(self.node.bind(py))? {
+        let plan = read_plan(self.node.bind(py))?;
+        self.load(plan)
+    }
+
+    /// The plan from `SpinalMirror.kernel_plan()`'s tuple (None: no plan).
+    fn load(&mut self, plan: Option<Bound<'_, PyTuple>>) -> PyResult<()> {
+        self.plan = if let Some(t) = plan {
             let busy = t.get_item(8)?;
             Some(Plan {
                 now_ms: t.get_item(0)?.extract()?,
@@ -447,6 +459,40 @@ impl SpinalFast {
             None
         };
         self.loaded = true;
+        Ok(())
+    }
+
+    /// Keep the plan `receive_tick` loaded across the caller's `leave_python` (it was
+    /// read after the mirror's Python code ran: nothing has changed it since).
+    pub(crate) fn keep_plan(&mut self) {
+        self.loaded = self.reloaded;
+        self.reloaded = false;
+    }
+
+    /// A ms this part cannot run from its plan (`ready` false), bytes to read or not:
+    /// `SpinalMirror.kernel_receive_tick(now)` receives them in Python and runs the whole
+    /// tick there (false), or hands back the plan for the rest of the ms, which `ready` then
+    /// judges (true). The caller brackets it as Python code (`enter_python` / `leave_python`).
+    pub(crate) fn receive_tick(&mut self, py: Python<'_>, now: f64) -> PyResult<bool> {
+        let plan = self
+            .node
+            .bind(py)
+            .call_method1(pyo3::intern!(py, "kernel_receive_tick"), (now,))?;
+        if plan.is_none() {
+            self.counts.receive_then_python += 1;
+            return Ok(false);
+        }
+        self.load(Some(plan.cast_into::<PyTuple>()?))?;
+        self.reloaded = true;
+        Ok(true)
+    }
+
+    /// The rest of a `receive_tick` ms that `ready` declined (`kernel_receive_rest`).
+    pub(crate) fn receive_rest(&mut self, py: Python<'_>, now: f64) -> PyResult<()> {
+        self.counts.receive_then_python += 1;
+        self.node
+            .bind(py)
+            .call_method1(pyo3::intern!(py, "kernel_receive_rest"), (now,))?;
         Ok(())
     }
 
