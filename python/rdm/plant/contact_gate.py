@@ -18,7 +18,9 @@ Where it applies: every pair that can collide (``contype``/``conaffinity``) is a
 robot's tree (one free joint at its root, hinges and slides below) against a static plane or
 box. Anything else (explicit ``<pair>`` elements, other moving trees, mesh obstacles, a fixed
 base, the tasks' scenes whose objects move by editing the model) builds no gate: contacts
-stay on, as before.
+stay on, as before. The gate reads the obstacles' poses, sizes, margins and contact bits once,
+from the compiled model: code that edits them later (``model.geom_pos`` of the ceiling, say)
+builds its plant with ``contact_gate=False``.
 
 ASSUMPTION (docs/plant.md "The collision gate"): a slack of 1 cm. It covers what the linear
 bound leaves out over one step (the change of the lever arms, of the rotation) with a wide
