@@ -130,17 +130,22 @@ def test_landing_and_hitting_the_ceiling_are_bit_identical(case: str) -> None:
         assert a == b, f"step {k}"
 
 
-def test_outside_changes_and_reset_turn_contacts_on() -> None:
+def _flying(steps: int) -> tuple[Plant, ContactGateCore]:
+    """A plant dropped at 1 m, ``steps`` steps later (contacts off), and its gate."""
     plant = _plant()
     gate = plant.contact_gate
+    assert gate is not None
     plant.reset(base_position=(0.0, 0.0, 1.0))
-    plant.step(3)
-    assert gate.off
-    flags = plant.model.opt.disableflags
-    assert flags & int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    plant.step(steps)
+    assert gate.off and plant.model.opt.disableflags & BIT
+    return plant, gate
+
+
+def test_outside_changes_and_reset_turn_contacts_on() -> None:
+    plant, gate = _flying(3)
     d = plant.data  # the caller may move the robot into the floor: collide in full
     assert not gate.off
-    assert not plant.model.opt.disableflags & int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    assert not plant.model.opt.disableflags & BIT
     d.qpos[2] = 0.0
     plant.step(1)
     assert plant._data.ncon > 0 and not gate.off
@@ -149,11 +154,7 @@ def test_outside_changes_and_reset_turn_contacts_on() -> None:
 
 
 def test_a_nan_state_keeps_contacts_on() -> None:
-    plant = _plant()
-    gate = plant.contact_gate
-    plant.reset(base_position=(0.0, 0.0, 1.0))
-    plant.step(2)
-    assert gate.off
+    plant, gate = _flying(2)
     plant._data.qvel[0] = np.nan
     assert gate.update() is False and not gate.off
     plant._data.qvel[0] = 0.0

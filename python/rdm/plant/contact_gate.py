@@ -51,21 +51,30 @@ def _collide(m: mujoco.MjModel, a: int, b: int) -> bool:
     )
 
 
+def _tree(m: mujoco.MjModel, root_body: int) -> tuple[set[int], list[int]]:
+    """The bodies of the tree rooted at ``root_body`` and its joints."""
+    tree = {b for b in range(m.nbody) if m.body_rootid[b] == root_body}
+    return tree, [j for j in range(m.njnt) if m.jnt_bodyid[j] in tree]
+
+
+def _static_geoms(m: mujoco.MjModel) -> list[bool]:
+    """Per geom: welded to the world (it never moves)."""
+    return [int(m.body_weldid[m.geom_bodyid[g]]) == 0 for g in range(m.ngeom)]
+
+
 def gate_refusal(m: mujoco.MjModel, root_body: int) -> str | None:
     """Why a model gets no gate (None: it does). ``root_body`` is the robot's root body."""
     if m.npair:
         return "explicit contact pairs"
     if m.opt.disableflags & _CONTACT_BIT:
         return "contacts already disabled"
-    tree = [b for b in range(m.nbody) if m.body_rootid[b] == root_body]
-    joints = [j for j in range(m.njnt) if m.jnt_bodyid[j] in tree]
+    in_tree, joints = _tree(m, root_body)
     free = [j for j in joints if m.jnt_type[j] == _FREE]
     if len(free) != 1 or m.jnt_bodyid[free[0]] != root_body:
         return "the robot's root is not one free joint"
     if any(m.jnt_type[j] not in (_FREE, _HINGE, _SLIDE) for j in joints):
         return "a ball joint in the robot"
-    in_tree = set(tree)
-    static = [int(m.body_weldid[m.geom_bodyid[g]]) == 0 for g in range(m.ngeom)]
+    static = _static_geoms(m)
     for a in range(m.ngeom):
         for b in range(a + 1, m.ngeom):
             if not _collide(m, a, b) or m.geom_bodyid[a] == m.geom_bodyid[b]:
@@ -91,7 +100,7 @@ def build_contact_gate(
         return None
     scratch = mujoco.MjData(m)
     mujoco.mj_kinematics(m, scratch)
-    static = [int(m.body_weldid[m.geom_bodyid[g]]) == 0 for g in range(m.ngeom)]
+    static = _static_geoms(m)
     moving = [g for g in range(m.ngeom) if not static[g]]
     obstacles = [g for g in range(m.ngeom) if static[g] and any(_collide(m, g, k) for k in moving)]
     planes = [o for o in obstacles if m.geom_type[o] == _PLANE]
@@ -112,8 +121,7 @@ def build_contact_gate(
         ]
         if any(x is not None for x in margins):
             geoms.append((g, float(m.geom_rbound[g]), margins))
-    tree = {b for b in range(m.nbody) if m.body_rootid[b] == root_body}
-    joints = [j for j in range(m.njnt) if m.jnt_bodyid[j] in tree]
+    _, joints = _tree(m, root_body)
     free = next(j for j in joints if m.jnt_type[j] == _FREE)
     hinges = [(j, int(m.jnt_dofadr[j])) for j in joints if m.jnt_type[j] == _HINGE]
     slides = [int(m.jnt_dofadr[j]) for j in joints if m.jnt_type[j] == _SLIDE]

@@ -229,9 +229,8 @@ class Plant:
         )
         #: The collision gate (None: contacts always on; see :mod:`rdm.plant.contact_gate`).
         self._contact_gate: ContactGateCore | None = (
-            build_contact_gate(m, d, int(robot_root))
-            if contact_gate and scene is None and not fixed_base
-            else None
+            # a fixed base has no free root: build_contact_gate refuses it
+            build_contact_gate(m, d, int(robot_root)) if contact_gate and scene is None else None
         )
         self._seed_sensors()
         self.reset()

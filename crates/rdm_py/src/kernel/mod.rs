@@ -277,12 +277,11 @@ impl LockstepKernel {
         self.enter_python(py, t, touches)?;
         let r = part(self).and_then(|s| s.receive_tick(py, t));
         self.leave_python(touches);
-        if !r? {
+        let Some(plan) = r? else {
             return Ok(false); // the whole tick ran in Python
-        }
-        // leave_python forgot the plan the mirror handed back: it is this very state's
+        };
         let s = part(self)?;
-        s.keep_plan();
+        s.load_plan(plan)?;
         if s.ready(py, t)? {
             s.counts.receive_then_kernel += 1;
             self.spinal_tick(py, t)?;

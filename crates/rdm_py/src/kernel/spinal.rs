@@ -244,8 +244,6 @@ pub(crate) struct SpinalFast {
     drain_at: usize,
     plan: Option<Plan>,
     loaded: bool,
-    /// `receive_tick` loaded the plan (kept across the caller's `leave_python`).
-    reloaded: bool,
     tx_delta: i64,
     /// A steady CAN tick ran since the last flush (the master's pending events are 0).
     steady: bool,
@@ -410,7 +408,6 @@ impl SpinalFast {
             drain_at,
             plan: None,
             loaded: false,
-            reloaded: false,
             tx_delta: 0,
             steady: false,
             dirty: false,
@@ -462,29 +459,31 @@ impl SpinalFast {
         Ok(())
     }
 
-    /// Keep the plan `receive_tick` loaded across the caller's `leave_python` (it was
-    /// read after the mirror's Python code ran: nothing has changed it since).
-    pub(crate) fn keep_plan(&mut self) {
-        self.loaded = self.reloaded;
-        self.reloaded = false;
-    }
-
     /// A ms this part cannot run from its plan (`ready` false), bytes to read or not:
     /// `SpinalMirror.kernel_receive_tick(now)` receives them in Python and runs the whole
-    /// tick there (false), or hands back the plan for the rest of the ms, which `ready` then
-    /// judges (true). The caller brackets it as Python code (`enter_python` / `leave_python`).
-    pub(crate) fn receive_tick(&mut self, py: Python<'_>, now: f64) -> PyResult<bool> {
+    /// tick there (None), or hands back the plan for the rest of the ms (the caller loads it
+    /// with `load_plan` once its `leave_python` is done; `ready` then judges the ms). The
+    /// caller brackets the call as Python code (`enter_python` / `leave_python`).
+    pub(crate) fn receive_tick<'py>(
+        &mut self,
+        py: Python<'py>,
+        now: f64,
+    ) -> PyResult<Option<Bound<'py, PyTuple>>> {
         let plan = self
             .node
             .bind(py)
             .call_method1(pyo3::intern!(py, "kernel_receive_tick"), (now,))?;
         if plan.is_none() {
             self.counts.receive_then_python += 1;
-            return Ok(false);
+            return Ok(None);
         }
-        self.load(Some(plan.cast_into::<PyTuple>()?))?;
-        self.reloaded = true;
-        Ok(true)
+        Ok(Some(plan.cast_into::<PyTuple>()?))
+    }
+
+    /// The plan `receive_tick` handed back: read after the mirror's Python code ran, and
+    /// nothing has run since.
+    pub(crate) fn load_plan(&mut self, plan: Bound<'_, PyTuple>) -> PyResult<()> {
+        self.load(Some(plan))
     }
 
     /// The rest of a `receive_tick` ms that `ready` declined (`kernel_receive_rest`).
