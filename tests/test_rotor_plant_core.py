@@ -133,3 +133,22 @@ def test_plant_rust_path_equals_python_path_over_a_flight_near_the_ceiling() -> 
     # the ESC objects read and write the core's state
     fast.escs[2]._thrust = 3.25
     assert fast._rotors.thrust(2) == 3.25 and fast.escs[2].thrust == 3.25
+
+
+def test_core_refuses_arrays_it_cannot_read_or_write_without_borrow_tracking() -> None:
+    # the per-step slices skip rust-numpy's borrow checker (crates/rdm_py/src/untracked.rs):
+    # what that checker caught is refused here instead, and nothing is written
+    xpos, xmat = np.zeros((2, 3)), np.zeros((2, 9))
+    shared = np.zeros(2 * 3 + 2)
+    with pytest.raises(ValueError, match="must not share memory"):
+        RotorPlantCore([0, 1], [0, 1], 1.0, shared[:6].reshape(2, 3), xmat, shared[4:6])
+    ctrl = np.full(2, -7.0)
+    ctrl.flags.writeable = False
+    with pytest.raises(ValueError, match="ctrl: not writeable"):
+        RotorPlantCore([0, 1], [0, 1], 1.0, xpos, xmat, ctrl).step()
+    with pytest.raises(ValueError, match="site_xmat: must be C-contiguous"):
+        RotorPlantCore([0, 1], [0, 1], 1.0, xpos, np.asfortranarray(xmat), np.zeros(2)).step()
+    ctrl = np.full(4, -7.0)[::2]  # strided: not contiguous
+    with pytest.raises(ValueError, match="ctrl: must be C-contiguous"):
+        RotorPlantCore([0, 1], [0, 1], 1.0, xpos, xmat, ctrl).step()
+    assert ctrl.tolist() == [-7.0, -7.0]

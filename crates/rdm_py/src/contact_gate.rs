@@ -3,11 +3,13 @@
 //! `mjDSBL_CONTACT` bit of `opt.disableflags` in step with its answer, so the plant's Python
 //! step and the lockstep kernel share one object and one state (`rdm.plant.contact_gate`).
 
-use numpy::{PyArray1, PyArray2, PyArrayMethods};
+use numpy::{PyArray1, PyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::intern;
 use pyo3::prelude::*;
 use rdm_core::sim::contact_gate::{ContactGate, GateReading, MovingGeom, Obstacle, TreeJoint};
+
+use crate::untracked;
 
 /// A plane obstacle: a point and the normal out of the solid.
 type PlaneSpec = ([f64; 3], [f64; 3]);
@@ -35,32 +37,29 @@ pub(crate) struct ContactGateCore {
     on_steps: u64,
 }
 
-fn c_slice<'a>(v: &'a numpy::PyReadonlyArray2<'_, f64>, what: &str) -> PyResult<&'a [f64]> {
-    v.as_slice()
-        .map_err(|_| PyValueError::new_err(format!("{what}: must be C-contiguous")))
-}
-
 impl ContactGateCore {
     fn reading(&self, py: Python<'_>) -> PyResult<GateReading> {
-        let geom_xpos = self.geom_xpos.bind(py).try_readonly()?;
-        let xpos = self.xpos.bind(py).try_readonly()?;
-        let xanchor = self.xanchor.bind(py).try_readonly()?;
-        let qvel = self.qvel.bind(py).try_readonly()?;
-        let xpos = c_slice(&xpos, "xpos")?;
+        let (geom_xpos, xpos, xanchor, qvel) = (
+            self.geom_xpos.bind(py),
+            self.xpos.bind(py),
+            self.xanchor.bind(py),
+            self.qvel.bind(py),
+        );
+        // SAFETY: all four read only, no Python runs while the slices live (untracked.rs).
+        let (geom_xpos, xpos, xanchor, qvel) = unsafe {
+            (
+                untracked::read(geom_xpos, "geom_xpos")?,
+                untracked::read(xpos, "xpos")?,
+                untracked::read(xanchor, "xanchor")?,
+                untracked::read(qvel, "qvel")?,
+            )
+        };
         let root = xpos
             .get(3 * self.root_body..3 * self.root_body + 3)
             .and_then(|r| <[f64; 3]>::try_from(r).ok())
             .ok_or_else(|| PyValueError::new_err("xpos: the root body is out of range"))?;
-        let qvel = qvel
-            .as_slice()
-            .map_err(|_| PyValueError::new_err("qvel: must be C-contiguous"))?;
         self.inner
-            .read(
-                c_slice(&geom_xpos, "geom_xpos")?,
-                root,
-                c_slice(&xanchor, "xanchor")?,
-                qvel,
-            )
+            .read(geom_xpos, root, xanchor, qvel)
             .map_err(|e| PyValueError::new_err(e.to_string()))
     }
 

@@ -26,6 +26,7 @@ mod rosserial;
 mod rotor_plant;
 mod sensor_sim;
 mod spinal_mirror;
+mod untracked;
 
 #[pymodule]
 fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -12,6 +12,8 @@ use pyo3::types::{PyDict, PyTuple};
 use rdm_core::sim::esc_duty::EscDuty;
 use rdm_core::sim::rotor_plant::{CeilingRatio, RotorPlant, RotorPlantStatus};
 
+use crate::untracked;
+
 /// ESC state, ceiling models and rotor controls of one plant (see `rdm.plant.Plant`).
 #[pyclass(module = "rdm._rdm")]
 pub(crate) struct RotorPlantCore {
@@ -89,18 +91,20 @@ fn index_error(what: &str, i: usize) -> PyErr {
 
 impl RotorPlantCore {
     pub(crate) fn run(&mut self, py: Python<'_>, lag: bool) -> PyResult<()> {
-        let xpos = self.site_xpos.bind(py).try_readonly()?;
-        let xmat = self.site_xmat.bind(py).try_readonly()?;
-        let mut ctrl = self.ctrl.bind(py).try_readwrite()?;
-        let xpos = xpos
-            .as_slice()
-            .map_err(|_| PyValueError::new_err("site_xpos: must be C-contiguous"))?;
-        let xmat = xmat
-            .as_slice()
-            .map_err(|_| PyValueError::new_err("site_xmat: must be C-contiguous"))?;
-        let ctrl = ctrl
-            .as_slice_mut()
-            .map_err(|_| PyValueError::new_err("ctrl: must be C-contiguous"))?;
+        let (xpos, xmat, ctrl) = (
+            self.site_xpos.bind(py),
+            self.site_xmat.bind(py),
+            self.ctrl.bind(py),
+        );
+        // SAFETY: ctrl was checked disjoint from the two read arrays at construction, and no
+        // Python runs while the slices live (untracked.rs).
+        let (xpos, xmat, ctrl) = unsafe {
+            (
+                untracked::read(xpos, "site_xpos")?,
+                untracked::read(xmat, "site_xmat")?,
+                untracked::write(ctrl, "ctrl")?,
+            )
+        };
         let status = if lag {
             self.inner.step(xpos, xmat, ctrl)
         } else {
@@ -124,6 +128,7 @@ impl RotorPlantCore {
     #[new]
     #[pyo3(signature = (site_ids, actuator_ids, ceiling_height, site_xpos, site_xmat, ctrl))]
     fn new(
+        py: Python<'_>,
         site_ids: Vec<usize>,
         actuator_ids: Vec<usize>,
         ceiling_height: Option<f64>,
@@ -134,6 +139,14 @@ impl RotorPlantCore {
         if site_ids.len() != actuator_ids.len() {
             return Err(PyValueError::new_err(
                 "actuator_ids: must have one entry per site id",
+            ));
+        }
+        let c = ctrl.bind(py);
+        let apart = untracked::disjoint(c, site_xpos.bind(py))
+            && untracked::disjoint(c, site_xmat.bind(py));
+        if !apart {
+            return Err(PyValueError::new_err(
+                "ctrl: must not share memory with site_xpos or site_xmat",
             ));
         }
         let n = site_ids.len();

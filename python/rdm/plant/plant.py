@@ -37,6 +37,7 @@ from rdm.plant.mjcf import (
     rotor_site,
     servo_actuator,
 )
+from rdm.plant.option_flags import disableflags_address
 from rdm.plant.sensors import (
     ImuModel,
     ImuNoise,
@@ -47,7 +48,7 @@ from rdm.plant.sensors import (
     sensor_seed_sequences,
 )
 from rdm.plant.servo import ServoParams, torque_constant
-from rdm.plant.sleep import SLEEP_AVAILABLE, RestingSleep
+from rdm.plant.sleep import SLEEP_AVAILABLE, SLEEP_ENABLE_BIT, RestingSleep
 from rdm.plant.truth import TRUTH_FIELDS, FootContactTracker, GroundTruth
 
 
@@ -81,6 +82,11 @@ class Plant:
         contact_gate: skip MuJoCo's collision detection in steps that provably have no
             contact (:mod:`rdm.plant.contact_gate`; the same numbers either way; not with a
             ``scene`` or a fixed base).
+        lazy_sensors: compute MuJoCo's sensors only in the forward pass a reading runs
+            (:meth:`sync`), not in every step: ``mjDSBL_SENSOR`` is set while
+            ``mj_step1``/``mj_step2`` run and cleared again after them. Sensors do not act
+            on the dynamics, and every reading of ``sensordata`` goes through :meth:`sync`,
+            so the numbers are the same either way (docs/plant.md "Lazy sensors").
     """
 
     def __init__(
@@ -102,6 +108,7 @@ class Plant:
         scene: Callable[[mujoco.MjSpec], None] | None = None,
         sleep: bool = True,
         contact_gate: bool = True,
+        lazy_sensors: bool = True,
     ) -> None:
         if not (math.isfinite(timestep) and timestep > 0):
             raise ValueError(f"timestep: must be > 0, got {timestep}")
@@ -232,6 +239,20 @@ class Plant:
             # a fixed base has no free root: build_contact_gate refuses it
             build_contact_gate(m, d, int(robot_root)) if contact_gate and scene is None else None
         )
+        sensor_bit = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
+        # A sleeping tree keeps the sensor values of its last computed step, so while a
+        # tree may sleep every step computes them (see step); sleeping outside RestingSleep's
+        # control (a model that enables it itself) keeps them in every step.
+        sleeps_unwatched = self.sleep is None and bool(m.opt.enableflags & SLEEP_ENABLE_BIT)
+        #: The bit set in ``opt.disableflags`` while a step runs (0: sensors in every step,
+        #: also when the model disables them itself).
+        self._sensor_bit = (
+            sensor_bit
+            if lazy_sensors and not m.opt.disableflags & sensor_bit and not sleeps_unwatched
+            else 0
+        )
+        #: Where the kernel writes that bit (None: through ``opt.disableflags``).
+        self._flags_address = disableflags_address(m) if self._sensor_bit else None
         self._seed_sensors()
         self.reset()
 
@@ -473,37 +494,53 @@ class Plant:
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps (readings then refer to the new time)."""
         m, d = self.model, self._data
-        rotors = self._rotors
-        in_core = self._rotors_in_core
         tracker = self._tracker
-        step1, step2 = mujoco.mj_step1, mujoco.mj_step2
-        sleep = self.sleep
         gate = self._contact_gate
+        opt, sensor_bit, sleep = m.opt, self._sensor_bit, self.sleep
         for _ in range(int(n)):
-            if self._stale or self._needs_step1:
-                step1(m, d)
-            # else: a forward pass (sync) already ran on this very state: mj_step1's position
-            # and velocity stages would recompute the same numbers (they do not depend on
-            # ctrl or xfrc_applied), so only mj_step2 runs (bit-identical; docs/plant.md).
-            self._needs_step1 = True
-            # First-order ESC lag, exact discretisation (Esc.update with a cached factor),
-            # then the ceiling-scaled thrusts into ctrl: one Rust call for the shipped models.
-            if in_core:
-                rotors.step()
-            else:
-                rotors.advance_lag()
-                self._apply_rotor_thrusts()
-            if self._external:
-                self._apply_external()
-            if sleep is not None:  # this step's controls written: the sleep rule
-                sleep.before_step2(self._step1_now)
-            step2(m, d)
+            flags = opt.disableflags
+            # Sensors only in the forward pass a reading runs (sync), while the robot cannot
+            # fall asleep in this step (it would keep values no step computed).
+            lazy = sensor_bit and (sleep is None or not sleep.allowed)
+            if lazy:
+                opt.disableflags = flags | sensor_bit
+            try:
+                self._passes(m, d, flags if lazy else None)
+            finally:
+                opt.disableflags = flags
             tracker.update(d)  # contacts of this step's start: keep the slip anchor
             if gate is not None:
                 gate.update()  # contacts off for the next pass if none can occur in it
         self._stale = True  # the forward pass runs when something reads (see sync)
         self._needs_step1 = True
         self._state_version += 1
+
+    def _passes(self, m: mujoco.MjModel, d: mujoco.MjData, lazy_flags: int | None) -> None:
+        """One step's MuJoCo passes with this step's rotor, wrench and sleep writes;
+        ``lazy_flags``: the sensor bit is set, these are the flags without it."""
+        if self._stale or self._needs_step1:
+            mujoco.mj_step1(m, d)
+        # else: a forward pass (sync) already ran on this very state: mj_step1's position
+        # and velocity stages would recompute the same numbers (they do not depend on
+        # ctrl or xfrc_applied), so only mj_step2 runs (bit-identical; docs/plant.md).
+        self._needs_step1 = True
+        # First-order ESC lag, exact discretisation (Esc.update with a cached factor),
+        # then the ceiling-scaled thrusts into ctrl: one Rust call for the shipped models.
+        if self._rotors_in_core:
+            self._rotors.step()
+        else:
+            self._rotors.advance_lag()
+            self._apply_rotor_thrusts()
+        if self._external:
+            self._apply_external()
+        if self.sleep is not None:  # this step's controls written: the sleep rule
+            self.sleep.before_step2(self._step1_now)
+            if lazy_flags is not None and self.sleep.allowed:
+                # the robot may fall asleep in this step: its sensors as mj_step1 gives them
+                m.opt.disableflags = lazy_flags
+                mujoco.mj_sensorPos(m, d)
+                mujoco.mj_sensorVel(m, d)
+        mujoco.mj_step2(m, d)
 
     def _step1_now(self) -> None:
         mujoco.mj_step1(self.model, self._data)

@@ -37,6 +37,8 @@ _POLICY = getattr(mujoco, "mjtSleepPolicy", None)
 
 #: Whether this MuJoCo can put trees to sleep.
 SLEEP_AVAILABLE = _SLEEP_BIT is not None and _POLICY is not None
+#: ``mjENBL_SLEEP`` of ``opt.enableflags`` (0 on a MuJoCo without sleeping).
+SLEEP_ENABLE_BIT = int(_SLEEP_BIT) if _SLEEP_BIT is not None else 0
 ALLOWED = int(_POLICY.mjSLEEP_ALLOWED) if _POLICY is not None else -1
 NEVER = int(_POLICY.mjSLEEP_NEVER) if _POLICY is not None else -1
 #: ``opt.sleep_tolerance`` of a plant with :class:`RestingSleep` (see the module docstring).

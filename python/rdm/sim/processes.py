@@ -132,6 +132,7 @@ def stack_config(seed: int) -> dict[str, Any]:
         "master_backend",
         "plant_sleep",
         "plant_contact_gate",
+        "plant_lazy_sensors",
     )
     cfg = {k: getattr(opt, k) for k in keys}
     cfg["servo"] = None if opt.servo is None else asdict(opt.servo)

@@ -2,7 +2,6 @@
 //! mocap or ground-truth sample is due: joints -> Neurons, goals -> servo controls, ESC
 //! outputs -> rotor duties, and the foot wrench sample (lazy forward, noise, Leptrino).
 
-use numpy::PyArrayMethods;
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PyTuple};
 
@@ -11,6 +10,7 @@ use super::leptrino::LeptrinoFast;
 use super::plant::PlantLink;
 use crate::neuron_bank::NeuronBank;
 use crate::sensor_sim::{ImuNoiseCore, WrenchNoiseCore};
+use crate::untracked;
 
 /// A `NormalStream` (`rdm.plant.sensors`): its `_buf` list read here, `_pos` kept here.
 struct Normals {
@@ -219,8 +219,9 @@ impl BridgeFast {
     ) -> PyResult<()> {
         plant.fresh(py)?;
         let ideal = {
-            let sd = plant.sensordata.bind(py).try_readonly()?;
-            let sd = sd.as_slice()?;
+            let sd = plant.sensordata.bind(py);
+            // SAFETY: read only, no Python runs while `sd` lives (untracked.rs).
+            let sd = unsafe { untracked::read(sd, "sensordata") }?;
             let three = |a: usize| -> PyResult<[f64; 3]> {
                 sd.get(a..a + 3)
                     .and_then(|s| <[f64; 3]>::try_from(s).ok())
@@ -258,28 +259,42 @@ impl BridgeFast {
         }
         // 1-4: the Rust coupling (bank.bridge_tick), then the plant commands it asks for.
         let (targets_changed, duties_changed) = {
-            let qpos = plant.qpos.bind(py).try_readonly()?;
-            let targets = p.targets.bind(py);
-            let duties = p.duties.bind(py);
-            let mut targets = targets.try_readwrite()?;
-            let mut duties = duties.try_readwrite()?;
-            let bad = || pyo3::exceptions::PyValueError::new_err("bridge arrays: not contiguous");
-            self.bank.bind(py).borrow_mut().kernel_bridge_tick(
-                qpos.as_slice().map_err(|_| bad())?,
-                targets.as_slice_mut().map_err(|_| bad())?,
-                duties.as_slice_mut().map_err(|_| bad())?,
-            )?
+            let (qpos, targets, duties) =
+                (plant.qpos.bind(py), p.targets.bind(py), p.duties.bind(py));
+            let apart = untracked::disjoint(targets, duties)
+                && untracked::disjoint(targets, qpos)
+                && untracked::disjoint(duties, qpos);
+            if !apart {
+                return Err(pyo3::exceptions::PyValueError::new_err(
+                    "bridge arrays: targets, duties and qpos must not share memory",
+                ));
+            }
+            // SAFETY: the three buffers are disjoint (checked above); kernel_bridge_tick is
+            // Rust and runs no Python (untracked.rs).
+            let (qpos, targets, duties) = unsafe {
+                (
+                    untracked::read(qpos, "qpos")?,
+                    untracked::write(targets, "bridge targets")?,
+                    untracked::write(duties, "bridge duties")?,
+                )
+            };
+            self.bank
+                .bind(py)
+                .borrow_mut()
+                .kernel_bridge_tick(qpos, targets, duties)?
         };
         if targets_changed {
             self.scratch.clear();
-            self.scratch
-                .extend_from_slice(p.targets.bind(py).try_readonly()?.as_slice()?);
+            // SAFETY: read only, copied out before any Python runs (untracked.rs).
+            let targets = unsafe { untracked::read(p.targets.bind(py), "bridge targets") }?;
+            self.scratch.extend_from_slice(targets);
             plant.set_servo_targets(py, &self.scratch)?;
         }
         if duties_changed {
             self.scratch.clear();
-            self.scratch
-                .extend_from_slice(p.duties.bind(py).try_readonly()?.as_slice()?);
+            // SAFETY: as for the targets.
+            let duties = unsafe { untracked::read(p.duties.bind(py), "bridge duties") }?;
+            self.scratch.extend_from_slice(duties);
             plant.command_duties(py, &self.scratch)?;
         }
         // 5-7: the IMU, the wrench, the truth (ready() excluded mocap).
@@ -308,8 +323,9 @@ impl BridgeFast {
             .expect("plan has the normals with the wrench")
             .take::<6>(py)?;
         let ideal = {
-            let sd = plant.sensordata.bind(py).try_readonly()?;
-            let sd = sd.as_slice()?;
+            let sd = plant.sensordata.bind(py);
+            // SAFETY: read only, no Python runs while `sd` lives (untracked.rs).
+            let sd = unsafe { untracked::read(sd, "sensordata") }?;
             let (f, t) = p.wrench_adr;
             let get = |i: usize| {
                 sd.get(i).copied().ok_or_else(|| {

@@ -16,6 +16,7 @@ mod attr;
 mod bank;
 mod bridge;
 mod leptrino;
+mod option_flags;
 mod plant;
 mod sleep;
 mod spinal;

@@ -6,9 +6,11 @@ use numpy::PyArrayMethods;
 use pyo3::prelude::*;
 
 use super::attr::Name;
+use super::option_flags::OptionFlags;
 use super::sleep::SleepLink;
 use crate::contact_gate::ContactGateCore;
 use crate::rotor_plant::RotorPlantCore;
+use crate::untracked;
 
 struct Names {
     stale: Name,
@@ -22,6 +24,7 @@ struct Names {
     update: Name,
     time: Name,
     rejected_commands: Name,
+    sensor_bit: Name,
 }
 
 /// One MuJoCo plant as the kernel drives it.
@@ -32,6 +35,10 @@ pub(crate) struct PlantLink {
     step1: Py<PyAny>,
     step2: Py<PyAny>,
     forward: Py<PyAny>,
+    sensor_pos: Py<PyAny>,
+    sensor_vel: Py<PyAny>,
+    /// `model.opt.disableflags`, which get `Plant._sensor_bit` while a step runs.
+    flags: OptionFlags,
     rotors: Py<RotorPlantCore>,
     /// `Plant._contact_gate` (None: contacts always on).
     gate: Option<Py<ContactGateCore>>,
@@ -51,6 +58,8 @@ pub(crate) struct PlantLink {
     stale: bool,
     needs_step1: bool,
     version: i64,
+    /// `Plant._sensor_bit` (0: sensors in every step).
+    sensor_bit: i64,
     /// `Plant.step` can run here: rotors in the Rust core, no held external wrench.
     step_ok: bool,
     /// The contact tracker has no contact to remember or release (`update` returns at once
@@ -81,11 +90,18 @@ impl PlantLink {
             .extract()?;
         Ok(PlantLink {
             plant: plant.clone().unbind(),
-            model: model.unbind(),
+            model: model.clone().unbind(),
             data: data.unbind(),
             step1: mujoco.getattr("mj_step1")?.unbind(),
             step2: mujoco.getattr("mj_step2")?.unbind(),
             forward: mujoco.getattr("mj_forward")?.unbind(),
+            sensor_pos: mujoco.getattr("mj_sensorPos")?.unbind(),
+            sensor_vel: mujoco.getattr("mj_sensorVel")?.unbind(),
+            flags: OptionFlags::new(
+                py,
+                plant.getattr("_flags_address")?.extract()?,
+                model.getattr("opt")?.unbind(),
+            ),
             rotors: plant
                 .getattr("_rotors")?
                 .cast_into::<RotorPlantCore>()?
@@ -123,12 +139,14 @@ impl PlantLink {
                 update: Name::new(py, "update"),
                 time: Name::new(py, "time"),
                 rejected_commands: Name::new(py, "rejected_commands"),
+                sensor_bit: Name::new(py, "_sensor_bit"),
             },
             loaded: false,
             dirty: false,
             stale: true,
             needs_step1: true,
             version: 0,
+            sensor_bit: 0,
             step_ok: false,
             tracker_idle: false,
             tracker_view: None,
@@ -153,6 +171,7 @@ impl PlantLink {
         self.stale = n.stale.truthy(p)?;
         self.needs_step1 = n.needs_step1.truthy(p)?;
         self.version = n.state_version.i64(p)?;
+        self.sensor_bit = n.sensor_bit.i64(p)?;
         let external_empty = n.external.get(p)?.len()? == 0;
         self.step_ok = n.rotors_in_core.truthy(p)? && external_empty;
         self.load_tracker(py)?;
@@ -189,8 +208,12 @@ impl PlantLink {
         if *view_ncon != ncon {
             return Ok(false);
         }
-        let view = view.bind(py).try_readonly()?;
-        let plate = view.as_array().iter().any(|g| self.plate_geoms.contains(g));
+        let view = view.bind(py);
+        // SAFETY: read only, no Python runs while the view lives (untracked.rs); a strided
+        // view of MuJoCo's contact structs, hence the array view, not a slice.
+        let plate = unsafe { view.as_array() }
+            .iter()
+            .any(|g| self.plate_geoms.contains(g));
         if !plate {
             // Contacts without the plate and nothing remembered: `_track(False)` resets a
             // reset tracker (no change). Anything remembered: Python releases it.
@@ -252,19 +275,19 @@ impl PlantLink {
     /// `Plant.step(1)` (requires `step_ready`).
     pub(crate) fn step(&mut self, py: Python<'_>) -> PyResult<()> {
         self.ensure_loaded(py)?;
-        let m = self.model.bind(py);
+        // Sensors only in the forward pass a reading runs, while the robot cannot fall
+        // asleep in this step (`Plant.step`, lazy_sensors).
+        let may_sleep = self.sleep.as_ref().is_some_and(|s| s.allowed());
+        if self.sensor_bit == 0 || may_sleep {
+            self.passes(py, None)?;
+        } else {
+            let flags = self.flags.get(py)?;
+            self.flags.set(py, flags | self.sensor_bit)?;
+            let passes = self.passes(py, Some(flags));
+            self.flags.set(py, flags)?;
+            passes?;
+        }
         let d = self.data.bind(py);
-        if self.stale || self.needs_step1 {
-            self.step1.bind(py).call1((m, d))?;
-        }
-        self.needs_step1 = true;
-        self.rotors.bind(py).borrow_mut().run(py, true)?;
-        if let Some(sleep) = &mut self.sleep {
-            // this step's controls written: the sleep rule (a changed control wakes now)
-            let step1 = self.step1.bind(py);
-            sleep.before_step2(py, self.ctrl.bind(py), || step1.call1((m, d)).map(|_| ()))?;
-        }
-        self.step2.bind(py).call1((m, d))?;
         // FootContactTracker.update: returns at once with no contact and nothing to release.
         let ncon = self.names.ncon.i64(d)?;
         if ncon != 0 || !self.tracker_idle {
@@ -284,6 +307,31 @@ impl PlantLink {
         self.needs_step1 = true;
         self.version += 1;
         self.dirty = true;
+        Ok(())
+    }
+
+    /// `Plant._passes`: one step's MuJoCo passes with the rotor and sleep writes;
+    /// `lazy`: the sensor bit is set; the flags without it.
+    fn passes(&mut self, py: Python<'_>, lazy: Option<i64>) -> PyResult<()> {
+        let m = self.model.bind(py);
+        let d = self.data.bind(py);
+        if self.stale || self.needs_step1 {
+            self.step1.bind(py).call1((m, d))?;
+        }
+        self.needs_step1 = true;
+        self.rotors.bind(py).borrow_mut().run(py, true)?;
+        if let Some(sleep) = &mut self.sleep {
+            // this step's controls written: the sleep rule (a changed control wakes now)
+            let step1 = self.step1.bind(py);
+            sleep.before_step2(py, self.ctrl.bind(py), || step1.call1((m, d)).map(|_| ()))?;
+            if let Some(flags) = lazy.filter(|_| sleep.allowed()) {
+                // the robot may fall asleep in this step: its sensors as mj_step1 gives them
+                self.flags.set(py, flags)?;
+                self.sensor_pos.bind(py).call1((m, d))?;
+                self.sensor_vel.bind(py).call1((m, d))?;
+            }
+        }
+        self.step2.bind(py).call1((m, d))?;
         Ok(())
     }
 
@@ -311,11 +359,9 @@ impl PlantLink {
                 .set(p, n + i64::try_from(rejected).unwrap_or(i64::MAX))?;
         }
         self.fresh(py)?;
-        let ctrl = self.ctrl.bind(py);
-        let mut ctrl = ctrl.try_readwrite()?;
-        let ctrl = ctrl
-            .as_slice_mut()
-            .map_err(|_| pyo3::exceptions::PyValueError::new_err("ctrl: not contiguous"))?;
+        // SAFETY: MuJoCo's ctrl, written here only; `targets` is the caller's Rust slice
+        // and no Python runs while `ctrl` lives (untracked.rs).
+        let ctrl = unsafe { untracked::write(self.ctrl.bind(py), "ctrl") }?;
         for (&a, &q) in self.servo_act.iter().zip(targets) {
             if q.is_finite() {
                 *ctrl.get_mut(a).ok_or_else(|| {

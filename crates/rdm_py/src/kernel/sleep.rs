@@ -4,10 +4,11 @@
 //! `mj_step2`). The same arrays as the Python rule; its flags are read with the plan (`load`)
 //! and written back before any Python code runs (`flush`).
 
-use numpy::{PyArray1, PyArrayMethods};
+use numpy::PyArray1;
 use pyo3::prelude::*;
 
 use super::attr::Name;
+use crate::untracked;
 
 struct Names {
     pending: Name,
@@ -33,6 +34,11 @@ pub(crate) struct SleepLink {
 }
 
 impl SleepLink {
+    /// The policy written now is "allowed" (the robot may fall asleep in this step).
+    pub(crate) fn allowed(&self) -> bool {
+        self.allowed
+    }
+
     /// `RestingSleep` `obj` (its `trees`, views and the policy values of `rdm.plant.sleep`).
     pub(crate) fn new(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Self> {
         let module = py.import("rdm.plant.sleep")?;
@@ -88,9 +94,9 @@ impl SleepLink {
         } else {
             self.never_value
         };
-        let policy = self.policy.bind(py);
-        let mut policy = policy.try_readwrite()?;
-        let policy = policy.as_slice_mut().map_err(not_contiguous)?;
+        // SAFETY: MuJoCo's tree sleep policy, written only here, no Python runs while the
+        // slice lives (untracked.rs).
+        let policy = unsafe { untracked::write(self.policy.bind(py), "tree sleep policy") }?;
         for &t in &self.trees {
             *policy.get_mut(t).ok_or_else(tree_out_of_range)? = value;
         }
@@ -107,11 +113,20 @@ impl SleepLink {
         step1: impl FnOnce() -> PyResult<()>,
     ) -> PyResult<()> {
         let (same, stopped) = {
-            let ctrl = ctrl.try_readonly()?;
-            let ctrl = ctrl.as_slice().map_err(not_contiguous)?;
             let last = self.last_ctrl.bind(py);
-            let mut last = last.try_readwrite()?;
-            let last = last.as_slice_mut().map_err(not_contiguous)?;
+            if !untracked::disjoint(ctrl, last) {
+                return Err(pyo3::exceptions::PyValueError::new_err(
+                    "ctrl: shares memory with the last controls",
+                ));
+            }
+            // SAFETY: disjoint buffers (checked above), no Python runs while the slices live
+            // (untracked.rs).
+            let (ctrl, last) = unsafe {
+                (
+                    untracked::read(ctrl, "ctrl")?,
+                    untracked::write(last, "last ctrl")?,
+                )
+            };
             if last.len() != ctrl.len() {
                 return Err(pyo3::exceptions::PyValueError::new_err(
                     "ctrl: size changed",
@@ -143,8 +158,8 @@ impl SleepLink {
         }
         self.write_policy(py, false)?;
         let asleep = {
-            let a = self.tree_asleep.bind(py).try_readonly()?;
-            let a = a.as_slice().map_err(not_contiguous)?;
+            // SAFETY: read only, no Python runs while the slice lives (untracked.rs).
+            let a = unsafe { untracked::read(self.tree_asleep.bind(py), "tree_asleep") }?;
             self.trees
                 .iter()
                 .any(|&t| a.get(t).is_some_and(|&v| v >= 0))
@@ -155,10 +170,6 @@ impl SleepLink {
         }
         Ok(())
     }
-}
-
-fn not_contiguous<E>(_: E) -> PyErr {
-    pyo3::exceptions::PyValueError::new_err("sleep arrays: not contiguous")
 }
 
 fn tree_out_of_range() -> PyErr {
