@@ -178,3 +178,69 @@ def test_write_marked_on_a_plain_capture_writes_the_bytes(tmp_path):
     assert host.read_available() == b"abcdef"
     dev.close()
     assert (tmp_path / "x.device_tx.bin").read_bytes() == b"abcdef"
+
+
+def _random_marks(rng, base_shift: int, n: int) -> list[tuple[float, int]]:
+    marks = []
+    for _ in range(int(rng.integers(0, 14))):
+        kind = rng.random()
+        if kind < 0.05:
+            t = math.nan
+        elif kind < 0.08:
+            t = math.inf
+        else:
+            t = float(rng.uniform(-1.0, 50.0))  # also times that step back
+        marks.append((t, int(rng.integers(-5, n + 10)) + base_shift))
+    return sorted(marks, key=lambda m: m[1]) if rng.random() < 0.8 else marks
+
+
+def test_the_rust_records_are_the_python_loops_over_random_batches(tmp_path):
+    # TimedCaptureFile.write takes its records from Rust; records_plain is the Python loop
+    import numpy as np
+
+    rng = np.random.default_rng(7)
+    clock_t = [0.0]
+    f = TimedCaptureFile(tmp_path / "cap.bin", lambda: clock_t[0])
+    expected = [MAGIC]
+    for _ in range(3000):
+        n = int(rng.integers(1, 40))
+        clock_t[0] = float(rng.uniform(0.0, 60.0))
+        staged = None
+        if rng.random() < 0.7:
+            base = f._end - int(rng.integers(0, 20))  # marks staged before earlier writes
+            staged = (base, _random_marks(rng, f._end - base, n))
+        f._staged = staged
+        records, last = f.records_plain(f._end, n)
+        f.write(bytes(n))
+        f._staged = None
+        expected.append(records)
+        assert f._last_ns == last
+    f.close()
+    written = (tmp_path / "cap.bin.idx").read_bytes()
+    assert written == b"".join(expected)
+    assert len(written) > 16 * 3000  # marks split many writes into several records
+    read_capture_index(tmp_path / "cap.bin")  # ordered, and covers the capture
+
+
+def test_the_rust_records_match_byte_for_byte(tmp_path):
+    from rdm._rdm import capture_index_records
+
+    f = TimedCaptureFile(tmp_path / "c.bin", lambda: 2.0000005)  # a tie: rounds to even
+    f._last_ns = 1_000
+    for staged in (None, (0, [(1.5e-6, 3), (math.nan, 9)]), (4, [(0.0000025, 1), (3.0, 50)])):
+        f._staged = staged
+        want = f.records_plain(5, 10)
+        assert capture_index_records(5, 10, staged, f._clock, 1_000) == want
+    # a clock that cannot be a time: the same errors as Python's round, nothing written
+    with pytest.raises(ValueError, match="NaN"):
+        capture_index_records(0, 4, None, lambda: math.nan, 0)
+    with pytest.raises(OverflowError):
+        capture_index_records(0, 4, None, lambda: math.inf, 0)
+    with pytest.raises(OverflowError, match="int64"):
+        capture_index_records(0, 4, None, lambda: 1e13, 0)
+    called = []
+    assert capture_index_records(0, 4, (0, [(1.0, 4)]), lambda: called.append(1), 0)[1] == (
+        1_000_000_000
+    )
+    assert not called  # the marks covered every byte: no clock read
+    f.close()

@@ -6,7 +6,7 @@ class RdmError(ValueError):
     """Base class of every error raised by rdm's core."""
 
 # --- model ---
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from os import PathLike
 from typing import Any
 
@@ -1002,6 +1002,20 @@ class McapChunkBatch:
         empty."""
 
 # --- onboardtick ---
+def capture_index_records(
+    start: int,
+    n: int,
+    staged: tuple[int, Sequence[tuple[float, int]]] | None,
+    clock: Callable[[], float],
+    last: int,
+) -> tuple[bytes, int]:
+    """``(records, last)`` of a capture write of ``n`` bytes at offset ``start``: 16-byte
+    ``<qQ`` records (time ns, end offset) for the bytes the staged marks ``(base, [(time s,
+    end)])`` cover at their times and one for the rest at ``clock()`` (called only when bytes
+    are left); times never go below ``last``. Raises ValueError / OverflowError for a time
+    that is NaN or outside int64 nanoseconds (``rdm.sim.capture_index.TimedCaptureFile``)."""
+    ...
+
 def leptrino_ok_sample_run(data: bytes) -> tuple[int, int, int, bytes | None]:
     """(end, count, last_start, last_payload) of the leading run of whole OK-sample frames."""
 

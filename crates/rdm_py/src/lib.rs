@@ -7,6 +7,7 @@ mod attitude;
 mod bench;
 mod can_frame;
 mod can_master;
+mod capture_index;
 mod contact_gate;
 mod errors;
 mod estimate;
@@ -49,6 +50,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     contact_gate::register(m)?;
     can_master::register(m)?;
     leptrino_scan::register(m)?;
+    capture_index::register(m)?;
     rosserial::register(m)?;
     kernel::register(m)?;
     spinal_mirror::register(m)?;

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
+from rdm._rdm import capture_index_records
+
 MAGIC = b"RDMCIDX1"
 INDEX_SUFFIX = ".idx"
 _RECORD = struct.Struct("<qQ")
@@ -74,11 +76,22 @@ class TimedCaptureFile:
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
         """Write ``data``: bytes a staged mark covers at its time (:meth:`marked`), the rest at
-        the clock's present time."""
+        the clock's present time. The records come from ``capture_index_records`` (Rust);
+        :meth:`records_plain` is the same loop in Python (its reference in the tests)."""
         n = len(data)
         if not n:
             return 0
         start = self._end
+        records, last = capture_index_records(start, n, self._staged, self._clock, self._last_ns)
+        self._data.write(data)
+        self._end = start + n
+        self._last_ns = last
+        self._index.write(records)
+        return n
+
+    def records_plain(self, start: int, n: int) -> tuple[bytes, int]:
+        """The index records of a write of ``n`` bytes at ``start`` and the new last time,
+        computed in Python (what :meth:`write` gets from Rust); changes nothing."""
         pack = _RECORD.pack
         last = self._last_ns  # a clock or mark that steps back is held here: ordered index
         packed = []
@@ -101,11 +114,7 @@ class TimedCaptureFile:
             ns = time_ns(self._clock())
             last = ns if ns > last else last
             packed.append(pack(last, start + n))
-        self._data.write(data)
-        self._end = start + n
-        self._last_ns = last
-        self._index.write(b"".join(packed))
-        return n
+        return b"".join(packed), last
 
     @contextlib.contextmanager
     def marked(self, marks: Sequence[tuple[float, int]]) -> Iterator[None]:
