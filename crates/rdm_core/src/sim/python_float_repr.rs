@@ -97,6 +97,14 @@ impl PythonFloatRepr {
                 out.push_str(text);
                 return;
             }
+            // Outside it, the same digits in Python's layout (Ryu's text of -x is `-` and its
+            // text of x: what `shortest_digits` would format again).
+            if value.is_sign_negative() {
+                out.push('-');
+            }
+            let exponent = normalise_digits(body, &mut self.digits);
+            self.push_layout(exponent, out);
+            return;
         }
         self.push_repr_with(value, out, Self::shortest_digits);
     }
@@ -130,6 +138,12 @@ impl PythonFloatRepr {
             return;
         }
         let exponent = shortest(self, magnitude);
+        self.push_layout(exponent, out);
+    }
+
+    /// Python's layout of `self.digits` (significant digits, first one at decimal
+    /// `exponent`) after the sign.
+    fn push_layout(&self, exponent: i32, out: &mut String) {
         let digits = self.digits.as_str();
         let n = digits.len() as i32;
         if (-4..16).contains(&exponent) {
@@ -161,11 +175,13 @@ impl PythonFloatRepr {
             }
             out.push('e');
             out.push(if exponent < 0 { '-' } else { '+' });
+            // at least two digits (`e-05`); a double's exponent has at most three
             let e = exponent.unsigned_abs();
-            if e < 10 {
-                out.push('0');
+            if e >= 100 {
+                out.push(char::from(b'0' + (e / 100) as u8));
             }
-            let _ = write!(out, "{e}");
+            out.push(char::from(b'0' + (e / 10 % 10) as u8));
+            out.push(char::from(b'0' + (e % 10) as u8));
         }
     }
 }
@@ -174,14 +190,20 @@ impl PythonFloatRepr {
 /// significant digits (into `digits`, no leading or trailing zeros) and the decimal exponent
 /// of the first digit.
 fn normalise_digits(text: &str, digits: &mut String) -> i32 {
-    let (mantissa, exp10) = match text.split_once(['e', 'E']) {
-        Some((m, e)) => (m, e.parse::<i32>().unwrap_or(0)),
-        None => (text, 0),
+    // bytes, not `split_once`/`parse`: this runs for every float outside -4..=15 of a log
+    let bytes = text.as_bytes();
+    let (mantissa, exp10) = match bytes.iter().position(|&c| c == b'e' || c == b'E') {
+        Some(i) => (&bytes[..i], parse_exponent(&bytes[i + 1..])),
+        None => (bytes, 0),
     };
-    let (whole, fraction) = mantissa.split_once('.').unwrap_or((mantissa, ""));
     digits.clear();
-    let mut leading_zeros = 0i32;
-    for c in whole.bytes().chain(fraction.bytes()) {
+    let (mut whole, mut in_whole, mut leading_zeros) = (0i32, true, 0i32);
+    for &c in mantissa {
+        if c == b'.' {
+            in_whole = false;
+            continue;
+        }
+        whole += i32::from(in_whole);
         if digits.is_empty() && c == b'0' {
             leading_zeros += 1;
         } else {
@@ -190,7 +212,27 @@ fn normalise_digits(text: &str, digits: &mut String) -> i32 {
     }
     let kept = digits.trim_end_matches('0').len();
     digits.truncate(kept);
-    whole.len() as i32 - 1 - leading_zeros + exp10
+    whole - 1 - leading_zeros + exp10
+}
+
+/// Ryu's exponent text (`-7`, `16`) as a number (0 if it is not one, as `parse` gave).
+fn parse_exponent(text: &[u8]) -> i32 {
+    let (negative, digits) = match text.split_first() {
+        Some((b'-', rest)) => (true, rest),
+        Some((b'+', rest)) => (false, rest),
+        _ => (false, text),
+    };
+    if digits.is_empty() || digits.len() > 4 || !digits.iter().all(u8::is_ascii_digit) {
+        return 0;
+    }
+    let value = digits
+        .iter()
+        .fold(0i32, |v, &d| v * 10 + i32::from(d - b'0'));
+    if negative {
+        -value
+    } else {
+        value
+    }
 }
 
 /// Split `d.ddde-X` into its digits (into `digits`) and its exponent.
