@@ -80,9 +80,11 @@ fn gather<'py>(
     Ok(out)
 }
 
-fn c_slice<'a>(view: &'a numpy::PyReadonlyArrayDyn<'_, f64>, what: &str) -> PyResult<&'a [f64]> {
-    view.as_slice()
-        .map_err(|_| PyValueError::new_err(format!("{what}: must be C-contiguous")))
+/// A MuJoCo view read for one truth record without borrow tracking (untracked.rs): read
+/// only, alive through the allocation of the record's arrays, which writes no view.
+fn c_slice<'a>(view: &'a Bound<'_, numpy::PyArrayDyn<f64>>, what: &str) -> PyResult<&'a [f64]> {
+    // SAFETY: read only; no Rust code of this crate writes these views meanwhile.
+    unsafe { untracked::read(view, what) }
 }
 
 fn index_error(what: &str, i: usize) -> PyErr {
@@ -342,21 +344,21 @@ impl RotorPlantCore {
     fn truth_arrays<'py>(
         &self,
         py: Python<'py>,
-        xpos: numpy::PyReadonlyArrayDyn<'py, f64>,
-        xquat: numpy::PyReadonlyArrayDyn<'py, f64>,
-        qpos: numpy::PyReadonlyArrayDyn<'py, f64>,
-        qvel: numpy::PyReadonlyArrayDyn<'py, f64>,
-        subtree_com: numpy::PyReadonlyArrayDyn<'py, f64>,
+        xpos: &Bound<'py, numpy::PyArrayDyn<f64>>,
+        xquat: &Bound<'py, numpy::PyArrayDyn<f64>>,
+        qpos: &Bound<'py, numpy::PyArrayDyn<f64>>,
+        qvel: &Bound<'py, numpy::PyArrayDyn<f64>>,
+        subtree_com: &Bound<'py, numpy::PyArrayDyn<f64>>,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let layout = self
             .truth
             .as_ref()
             .ok_or_else(|| PyValueError::new_err("set_truth_layout: not called"))?;
-        let xpos = c_slice(&xpos, "xpos")?;
-        let xquat = c_slice(&xquat, "xquat")?;
-        let qpos = c_slice(&qpos, "qpos")?;
-        let qvel = c_slice(&qvel, "qvel")?;
-        let subtree_com = c_slice(&subtree_com, "subtree_com")?;
+        let xpos = c_slice(xpos, "xpos")?;
+        let xquat = c_slice(xquat, "xquat")?;
+        let qpos = c_slice(qpos, "qpos")?;
+        let qvel = c_slice(qvel, "qvel")?;
+        let subtree_com = c_slice(subtree_com, "subtree_com")?;
         let fb = layout.foot_body;
         let base_position = row3(xpos, fb, "xpos")?;
         let base_quaternion: [f64; 4] = xquat
@@ -427,19 +429,19 @@ impl RotorPlantCore {
         &self,
         py: Python<'py>,
         time: f64,
-        xpos: numpy::PyReadonlyArrayDyn<'py, f64>,
-        xquat: numpy::PyReadonlyArrayDyn<'py, f64>,
-        xmat: numpy::PyReadonlyArrayDyn<'py, f64>,
-        qpos: numpy::PyReadonlyArrayDyn<'py, f64>,
-        qvel: numpy::PyReadonlyArrayDyn<'py, f64>,
-        subtree_com: numpy::PyReadonlyArrayDyn<'py, f64>,
+        xpos: &Bound<'py, numpy::PyArrayDyn<f64>>,
+        xquat: &Bound<'py, numpy::PyArrayDyn<f64>>,
+        xmat: &Bound<'py, numpy::PyArrayDyn<f64>>,
+        qpos: &Bound<'py, numpy::PyArrayDyn<f64>>,
+        qvel: &Bound<'py, numpy::PyArrayDyn<f64>>,
+        subtree_com: &Bound<'py, numpy::PyArrayDyn<f64>>,
     ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let record = self
             .record
             .as_ref()
             .ok_or_else(|| PyValueError::new_err("set_truth_record: not called"))?;
         let pb = record.plate_body;
-        let plate = c_slice(&xmat, "xmat")?
+        let plate = c_slice(xmat, "xmat")?
             .get(pb * 9..pb * 9 + 9)
             .ok_or_else(|| PyIndexError::new_err(format!("xmat: body {pb} out of range")))?;
         if !plate.iter().all(|v| v.is_finite()) {
