@@ -16,6 +16,7 @@ import mujoco
 import numpy as np
 import pytest
 
+import rdm.plant.plant as plant_module
 from rdm.plant import Plant
 from rdm.plant.option_flags import disableflags_address
 from rdm.scenarios.common import sim_stack_options
@@ -169,3 +170,16 @@ def test_the_lockstep_stack_writes_the_same_bytes_with_and_without_lazy_sensors(
     for name in files:
         assert files[name] == files_plain[name], name
     assert state == state_plain
+
+
+def test_an_address_outside_the_model_is_not_written(tmp_path: Path, monkeypatch) -> None:
+    # the kernel writes the flag through Plant._flags_address only inside the model it
+    # holds; anything else (here a bogus address) falls back to opt.disableflags
+    files, state, _ = _run_hover(tmp_path / "probed", True)
+    monkeypatch.setattr(plant_module, "disableflags_address", lambda model: 8)
+    files_bogus, state_bogus, bit = _run_hover(tmp_path / "bogus", True)
+    assert bit == SENSOR
+    assert sorted(files) == sorted(files_bogus)
+    for name in files:
+        assert files[name] == files_bogus[name], name
+    assert state == state_bogus

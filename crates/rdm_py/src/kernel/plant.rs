@@ -100,6 +100,10 @@ impl PlantLink {
             flags: OptionFlags::new(
                 py,
                 plant.getattr("_flags_address")?.extract()?,
+                model
+                    .getattr("_address")
+                    .ok()
+                    .and_then(|a| a.extract().ok()),
                 model.getattr("opt")?.unbind(),
             ),
             rotors: plant
