@@ -151,3 +151,43 @@ def test_a_plant_with_a_scene_does_not_sleep() -> None:
     plant.reset(base_position=(0.0, 0.0, 0.12))
     plant.step(600)
     assert plant._data.ntree_awake == plant.model.ntree
+
+
+def _wake_and_rest(sleep_module_bit: int, monkeypatch: pytest.MonkeyPatch) -> tuple[list, int]:
+    """Resting, a 0.2 s servo goal ramp ("never" in every step: it wakes), then the goal held
+    until MuJoCo counts down to sleep, and a ramp back started inside that countdown (the
+    step that resets it matters), then rest until it sleeps: states and sleep counters every
+    step, and how often MuJoCo's sleeping was switched."""
+    import rdm.plant.sleep as sleep_module
+
+    monkeypatch.setattr(sleep_module, "_SLEEP_ENABLE", sleep_module_bit)
+    plant = _resting(True)
+    d, trace, switches, on = plant._data, [], 0, None
+    tree = plant.sleep.trees[0] if plant.sleep is not None else 0
+    q = np.zeros(len(plant.joint_names))
+    second = None  # the step the ramp back starts
+    for step in range(7000):
+        counting = -(1 + mujoco.mjMINAWAKE) < d.tree_asleep[tree] < 0
+        if second is None and step > 210 and counting:
+            second = step
+        if 10 <= step < 210 or (second is not None and second <= step < second + 200):
+            q[5] += 0.0015 if second is None else -0.0015
+            plant.set_servo_targets(q)
+        plant.step(1)
+        trace.append(d.qpos.tobytes() + d.qvel.tobytes() + d.tree_asleep.tobytes())
+        now_on = bool(plant.model.opt.enableflags & int(mujoco.mjtEnableBit.mjENBL_SLEEP))
+        switches += on is not None and now_on != on
+        on = now_on
+    assert second is not None and _asleep(plant)  # the countdown was cut, then it slept
+    return trace, switches
+
+
+def test_mujocos_sleeping_off_while_the_robot_cannot_sleep_changes_nothing(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # reference: the flag never switched (a zero bit); then the rule as shipped
+    plain, none = _wake_and_rest(0, monkeypatch)
+    switched, switches = _wake_and_rest(int(mujoco.mjtEnableBit.mjENBL_SLEEP), monkeypatch)
+    assert none == 0 and switches >= 4  # off and on again, twice
+    for k, (a, b) in enumerate(zip(plain, switched, strict=True)):
+        assert a == b, f"step {k}"

@@ -39,6 +39,7 @@ _POLICY = getattr(mujoco, "mjtSleepPolicy", None)
 SLEEP_AVAILABLE = _SLEEP_BIT is not None and _POLICY is not None
 #: ``mjENBL_SLEEP`` of ``opt.enableflags`` (0 on a MuJoCo without sleeping).
 SLEEP_ENABLE_BIT = int(_SLEEP_BIT) if _SLEEP_BIT is not None else 0
+_SLEEP_ENABLE = SLEEP_ENABLE_BIT
 ALLOWED = int(_POLICY.mjSLEEP_ALLOWED) if _POLICY is not None else -1
 NEVER = int(_POLICY.mjSLEEP_NEVER) if _POLICY is not None else -1
 #: ``opt.sleep_tolerance`` of a plant with :class:`RestingSleep` (see the module docstring).
@@ -48,8 +49,15 @@ SLEEP_TOLERANCE = 1e-5
 class RestingSleep:
     """Sleep of the robot's trees (``trees``) while its controls stay the same.
 
+    MuJoCo's sleeping itself (``mjENBL_SLEEP``) is on only while it can matter: while the
+    policy is "allowed", and for one step after "never" is written (MuJoCo resets the robot's
+    countdown to sleep in it). In flight the robot cannot sleep, and MuJoCo's per-object
+    sleep checks (``mj_sleepState`` for every actuator and sensor, ~2.6k instructions a step)
+    are skipped; the numbers are the same (docs/plant.md "Sleeping at rest").
+
     The lockstep kernel runs the same rule on the same arrays (``crates/rdm_py/src/kernel/
-    sleep.rs``); its Python-visible state is ``pending``, ``allowed`` and ``wakes``.
+    sleep.rs``); its Python-visible state is ``pending``, ``allowed``, ``wakes``,
+    ``sleep_on`` and ``settled``.
     """
 
     def __init__(
@@ -66,7 +74,13 @@ class RestingSleep:
             raise ValueError("RestingSleep: no tree to put to sleep")
         #: The rotor actuators (``ctrl`` indices): the robot sleeps only with all of them at 0.
         self.rotors = [int(r) for r in rotors]
+        self._opt = model.opt
         model.opt.enableflags |= int(_SLEEP_BIT)
+        #: ``mjENBL_SLEEP`` is set now.
+        self.sleep_on = True
+        #: A step ran with "never" and sleeping on since the policy was last "allowed" (the
+        #: robot's countdown to sleep is reset): sleeping may go off.
+        self.settled = False
         model.opt.sleep_tolerance = SLEEP_TOLERANCE
         model.tree_sleep_policy[:] = NEVER  # only the robot may sleep (written below)
         # Views on the model and data arrays (stable for their lifetime).
@@ -102,7 +116,22 @@ class RestingSleep:
     def before_step2(self, step1: Callable[[], None]) -> None:
         """This step's rule, once its controls are written: allowed if they equal the last
         step's and the rotors are stopped, else never, and a sleeping robot woken now
-        (``step1`` on the same state)."""
+        (``step1`` on the same state); then MuJoCo's sleeping on or off for ``mj_step2``."""
+        self._policy(step1)
+        if self.allowed:
+            self.settled = False
+            on = True
+        elif self.settled:
+            on = False
+        else:
+            self.settled = True  # this step runs "never" with sleeping still on
+            on = True
+        if on != self.sleep_on:
+            flags = self._opt.enableflags
+            self._opt.enableflags = flags | _SLEEP_ENABLE if on else flags & ~_SLEEP_ENABLE
+            self.sleep_on = on
+
+    def _policy(self, step1: Callable[[], None]) -> None:
         ctrl = self._v_ctrl
         last = self._v_last_ctrl
         if not self.pending and np.array_equal(ctrl, last):

@@ -14,6 +14,9 @@ struct Names {
     pending: Name,
     allowed: Name,
     wakes: Name,
+    sleep_on: Name,
+    settled: Name,
+    enableflags: Name,
 }
 
 /// The Python object's arrays and flags as the kernel drives them.
@@ -26,10 +29,15 @@ pub(crate) struct SleepLink {
     policy: Py<PyArray1<i32>>,
     tree_asleep: Py<PyArray1<i32>>,
     last_ctrl: Py<PyArray1<f64>>,
+    /// `model.opt` and `mjENBL_SLEEP` (MuJoCo's sleeping, on only while it can matter).
+    opt: Py<PyAny>,
+    sleep_bit: i64,
     names: Names,
     pending: bool,
     allowed: bool,
     wakes: i64,
+    sleep_on: bool,
+    settled: bool,
     dirty: bool,
 }
 
@@ -46,6 +54,9 @@ impl SleepLink {
             pending: Name::new(py, "pending"),
             allowed: Name::new(py, "allowed"),
             wakes: Name::new(py, "wakes"),
+            sleep_on: Name::new(py, "sleep_on"),
+            settled: Name::new(py, "settled"),
+            enableflags: Name::new(py, "enableflags"),
         };
         // the flags come with the plan (`load`, before any step)
         Ok(SleepLink {
@@ -57,10 +68,14 @@ impl SleepLink {
             policy: obj.getattr("_v_policy")?.extract()?,
             tree_asleep: obj.getattr("_v_tree_asleep")?.extract()?,
             last_ctrl: obj.getattr("_v_last_ctrl")?.extract()?,
+            opt: obj.getattr("_opt")?.unbind(),
+            sleep_bit: module.getattr("SLEEP_ENABLE_BIT")?.extract()?,
             names,
             pending: true,
             allowed: false,
             wakes: 0,
+            sleep_on: true,
+            settled: false,
             dirty: false,
         })
     }
@@ -71,6 +86,8 @@ impl SleepLink {
         self.pending = self.names.pending.truthy(obj)?;
         self.allowed = self.names.allowed.truthy(obj)?;
         self.wakes = self.names.wakes.i64(obj)?;
+        self.sleep_on = self.names.sleep_on.truthy(obj)?;
+        self.settled = self.names.settled.truthy(obj)?;
         self.dirty = false;
         Ok(())
     }
@@ -84,6 +101,8 @@ impl SleepLink {
         self.names.pending.set(obj, self.pending)?;
         self.names.allowed.set(obj, self.allowed)?;
         self.names.wakes.set(obj, self.wakes)?;
+        self.names.sleep_on.set(obj, self.sleep_on)?;
+        self.names.settled.set(obj, self.settled)?;
         self.dirty = false;
         Ok(())
     }
@@ -107,6 +126,38 @@ impl SleepLink {
 
     /// `RestingSleep.before_step2` with `ctrl` the step's controls; `step1` wakes.
     pub(crate) fn before_step2(
+        &mut self,
+        py: Python<'_>,
+        ctrl: &Bound<'_, PyArray1<f64>>,
+        step1: impl FnOnce() -> PyResult<()>,
+    ) -> PyResult<()> {
+        self.policy(py, ctrl, step1)?;
+        let on = if self.allowed {
+            self.settled = false;
+            true
+        } else if self.settled {
+            false
+        } else {
+            self.settled = true; // this step runs "never" with sleeping still on
+            true
+        };
+        self.dirty = true;
+        if on != self.sleep_on {
+            let opt = self.opt.bind(py);
+            let flags = self.names.enableflags.i64(opt)?;
+            let flags = if on {
+                flags | self.sleep_bit
+            } else {
+                flags & !self.sleep_bit
+            };
+            self.names.enableflags.set(opt, flags)?;
+            self.sleep_on = on;
+        }
+        Ok(())
+    }
+
+    /// `RestingSleep._policy`: the policy of this step, a sleeping robot woken.
+    fn policy(
         &mut self,
         py: Python<'_>,
         ctrl: &Bound<'_, PyArray1<f64>>,
