@@ -6,8 +6,10 @@ from __future__ import annotations
 import math
 import struct
 
+import numpy as np
 import pytest
 
+from rdm._rdm import capture_index_records
 from rdm.sim import TappedLink, open_inproc_uart
 from rdm.sim.capture_index import (
     MAGIC,
@@ -196,8 +198,6 @@ def _random_marks(rng, base_shift: int, n: int) -> list[tuple[float, int]]:
 
 def test_the_rust_records_are_the_python_loops_over_random_batches(tmp_path):
     # TimedCaptureFile.write takes its records from Rust; records_plain is the Python loop
-    import numpy as np
-
     rng = np.random.default_rng(7)
     clock_t = [0.0]
     f = TimedCaptureFile(tmp_path / "cap.bin", lambda: clock_t[0])
@@ -223,8 +223,6 @@ def test_the_rust_records_are_the_python_loops_over_random_batches(tmp_path):
 
 
 def test_the_rust_records_match_byte_for_byte(tmp_path):
-    from rdm._rdm import capture_index_records
-
     f = TimedCaptureFile(tmp_path / "c.bin", lambda: 2.0000005)  # a tie: rounds to even
     f._last_ns = 1_000
     for staged in (None, (0, [(1.5e-6, 3), (math.nan, 9)]), (4, [(0.0000025, 1), (3.0, 50)])):

@@ -8,20 +8,17 @@ and floor, ``mj_kinematics`` of the stepped state), and twin plants / stacks bui
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
+from hover_run_files import hover_run
 
 from rdm._rdm import ContactGateCore
 from rdm.plant import Plant
 from rdm.plant.contact_gate import GATE_SLACK, build_contact_gate, gate_refusal
 from rdm.plant.mjcf import CEILING_GEOM, FLOOR_GEOM
-from rdm.scenarios.common import sim_stack_options
-from rdm.scenarios.hover import HOVER_Z, make_script
-from rdm.scenarios.stack import build_stack
 
 BIT = int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
 
@@ -206,24 +203,17 @@ def test_bad_arguments_are_refused() -> None:
     assert not gate.off
 
 
-def _run_hover(tmp: Path, gate: bool) -> tuple[dict[str, bytes], bytes, tuple[int, int] | None]:
-    opts = replace(sim_stack_options(0, "inproc", speed=None), plant_contact_gate=gate)
-    stack = build_stack("g", tmp, opts, make_script(np.array([0.483, 0.0, HOVER_Z])))
+def _state(stack) -> tuple[bytes, tuple[int, int] | None]:
     assert stack.loop.kernel is not None
-    try:
-        stack.loop.run(3.5)  # the boot on the floor, the take-off, 1 s of flight
-        d = stack.plant._data
-        state = d.qpos.tobytes() + d.qvel.tobytes() + d.ctrl.tobytes()
-        g = stack.plant.contact_gate
-        counts = None if g is None else (g.off_steps, g.on_steps)
-    finally:
-        stack.close()
-    root = Path(stack.folder.root)
-    files = {
-        str(p.relative_to(root)): p.read_bytes()
-        for p in root.rglob("*")
-        if p.is_file() and "plots" not in p.parts
-    }
+    d = stack.plant._data
+    g = stack.plant.contact_gate
+    counts = None if g is None else (g.off_steps, g.on_steps)
+    return d.qpos.tobytes() + d.qvel.tobytes() + d.ctrl.tobytes(), counts
+
+
+def _run_hover(tmp: Path, gate: bool) -> tuple[dict[str, bytes], bytes, tuple[int, int] | None]:
+    # the boot on the floor, the take-off, 1 s of flight
+    files, (state, counts) = hover_run(tmp, "g", 3.5, _state, plant_contact_gate=gate)
     return files, state, counts
 
 

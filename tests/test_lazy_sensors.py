@@ -9,19 +9,16 @@ sensors in every step): bit-equal states and readings, byte-equal logs; the bind
 from __future__ import annotations
 
 import ctypes
-from dataclasses import replace
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
+from hover_run_files import hover_run
 
 import rdm.plant.plant as plant_module
 from rdm.plant import Plant
 from rdm.plant.option_flags import disableflags_address
-from rdm.scenarios.common import sim_stack_options
-from rdm.scenarios.hover import HOVER_Z, make_script
-from rdm.scenarios.stack import build_stack
 
 SENSOR = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
 
@@ -138,25 +135,18 @@ def test_the_probe_declines_what_it_cannot_check() -> None:
     assert plain._flags_address is None  # no bit to write: the kernel keeps the property
 
 
-def _run_hover(tmp: Path, lazy: bool) -> tuple[dict[str, bytes], bytes, int]:
-    opts = replace(sim_stack_options(0, "inproc", speed=None), plant_lazy_sensors=lazy)
-    stack = build_stack("s", tmp, opts, make_script(np.array([0.483, 0.0, HOVER_Z])))
+def _state(stack) -> tuple[bytes, int]:
     assert stack.loop.kernel is not None
-    try:
-        stack.loop.run(3.5)  # the boot on the floor (asleep), the take-off, 1 s of flight
-        d = stack.plant._data
-        state = d.qpos.tobytes() + d.qvel.tobytes() + d.ctrl.tobytes()
-        # sensordata is the present state's after the forward pass a reading runs
-        state += stack.plant.data.sensordata.tobytes()
-        bit = stack.plant._sensor_bit
-    finally:
-        stack.close()
-    root = Path(stack.folder.root)
-    files = {
-        str(p.relative_to(root)): p.read_bytes()
-        for p in root.rglob("*")
-        if p.is_file() and "plots" not in p.parts
-    }
+    d = stack.plant._data
+    state = d.qpos.tobytes() + d.qvel.tobytes() + d.ctrl.tobytes()
+    # sensordata is the present state's after the forward pass a reading runs
+    state += stack.plant.data.sensordata.tobytes()
+    return state, stack.plant._sensor_bit
+
+
+def _run_hover(tmp: Path, lazy: bool) -> tuple[dict[str, bytes], bytes, int]:
+    # the boot on the floor (asleep), the take-off, 1 s of flight
+    files, (state, bit) = hover_run(tmp, "s", 3.5, _state, plant_lazy_sensors=lazy)
     return files, state, bit
 
 

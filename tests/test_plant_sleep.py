@@ -12,6 +12,7 @@ import mujoco
 import numpy as np
 import pytest
 
+import rdm.plant.sleep as sleep_module
 from rdm.plant import EscParams, Plant, ServoParams
 from rdm.plant.sleep import SLEEP_AVAILABLE
 
@@ -158,8 +159,6 @@ def _wake_and_rest(sleep_module_bit: int, monkeypatch: pytest.MonkeyPatch) -> tu
     until MuJoCo counts down to sleep, and a ramp back started inside that countdown (the
     step that resets it matters), then rest until it sleeps: states and sleep counters every
     step, and how often MuJoCo's sleeping was switched."""
-    import rdm.plant.sleep as sleep_module
-
     monkeypatch.setattr(sleep_module, "_SLEEP_ENABLE", sleep_module_bit)
     plant = _resting(True)
     d, trace, switches, on = plant._data, [], 0, None

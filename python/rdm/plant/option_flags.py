@@ -21,8 +21,8 @@ import mujoco
 import numpy as np
 
 #: Bytes of the model struct searched (mjModel's sizes and options lie well inside them,
-#: and the struct itself is several times larger).
-_SEARCH_BYTES = 2048
+#: and the struct itself is several times larger); the kernel takes no address outside.
+SEARCH_BYTES = 2048
 _PROBES = (0x2A5A5A5, 0x1234567, 0x6ED0C0B)
 
 
@@ -32,9 +32,7 @@ def disableflags_address(model: mujoco.MjModel) -> int | None:
     base = getattr(model, "_address", None)
     if not isinstance(base, int) or base == 0:
         return None
-    words = np.frombuffer(
-        (ctypes.c_int32 * (_SEARCH_BYTES // 4)).from_address(base), dtype=np.int32
-    )
+    words = np.frombuffer((ctypes.c_int32 * (SEARCH_BYTES // 4)).from_address(base), dtype=np.int32)
     opt = model.opt
     old = int(opt.disableflags)
     try:

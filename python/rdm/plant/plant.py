@@ -498,16 +498,17 @@ class Plant:
         gate = self._contact_gate
         opt, sensor_bit, sleep = m.opt, self._sensor_bit, self.sleep
         for _ in range(int(n)):
-            flags = opt.disableflags
             # Sensors only in the forward pass a reading runs (sync), while the robot cannot
             # fall asleep in this step (it would keep values no step computed).
-            lazy = sensor_bit and (sleep is None or not sleep.allowed)
-            if lazy:
+            if sensor_bit and (sleep is None or not sleep.allowed):
+                flags = opt.disableflags
                 opt.disableflags = flags | sensor_bit
-            try:
-                self._passes(m, d, flags if lazy else None)
-            finally:
-                opt.disableflags = flags
+                try:
+                    self._passes(m, d, flags)
+                finally:
+                    opt.disableflags = flags
+            else:
+                self._passes(m, d, None)
             tracker.update(d)  # contacts of this step's start: keep the slip anchor
             if gate is not None:
                 gate.update()  # contacts off for the next pass if none can occur in it

@@ -118,14 +118,9 @@ class RestingSleep:
         step's and the rotors are stopped, else never, and a sleeping robot woken now
         (``step1`` on the same state); then MuJoCo's sleeping on or off for ``mj_step2``."""
         self._policy(step1)
-        if self.allowed:
-            self.settled = False
-            on = True
-        elif self.settled:
-            on = False
-        else:
-            self.settled = True  # this step runs "never" with sleeping still on
-            on = True
+        # on while "allowed" and for the first "never" step, which resets MuJoCo's countdown
+        on = self.allowed or not self.settled
+        self.settled = not self.allowed
         if on != self.sleep_on:
             flags = self._opt.enableflags
             self._opt.enableflags = flags | _SLEEP_ENABLE if on else flags & ~_SLEEP_ENABLE

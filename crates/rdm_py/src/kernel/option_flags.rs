@@ -6,9 +6,6 @@ use pyo3::prelude::*;
 
 use super::attr::Name;
 
-/// Bytes of the model `rdm.plant.option_flags` searches (`_SEARCH_BYTES`).
-const PROBED_BYTES: usize = 2048;
-
 pub(crate) enum OptionFlags {
     /// `Plant._flags_address`: the int32 inside the model the link keeps alive.
     Raw(*mut i32),
@@ -18,20 +15,22 @@ pub(crate) enum OptionFlags {
 
 impl OptionFlags {
     /// From `Plant._flags_address` (None: the property of `opt`). The address is used only
-    /// where the probe could have found it: aligned, inside the first bytes of the model the
-    /// link holds (`model._address`), so a plant whose model was swapped after the probe
-    /// falls back to the property instead of writing into freed memory.
+    /// where the probe could have found it: aligned, inside the first `searched` bytes
+    /// (`rdm.plant.option_flags.SEARCH_BYTES`) of the model the link holds (`model._address`),
+    /// so a plant whose model was swapped after the probe falls back to the property
+    /// instead of writing into freed memory.
     pub(crate) fn new(
         py: Python<'_>,
         address: Option<usize>,
         model_address: Option<usize>,
+        searched: usize,
         opt: Py<PyAny>,
     ) -> Self {
         match (address, model_address) {
             (Some(a), Some(base))
                 if a % std::mem::align_of::<i32>() == 0
                     && a >= base
-                    && a + std::mem::size_of::<i32>() <= base + PROBED_BYTES =>
+                    && a + std::mem::size_of::<i32>() <= base + searched =>
             {
                 OptionFlags::Raw(a as *mut i32)
             }

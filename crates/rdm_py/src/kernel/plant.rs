@@ -104,6 +104,9 @@ impl PlantLink {
                     .getattr("_address")
                     .ok()
                     .and_then(|a| a.extract().ok()),
+                py.import("rdm.plant.option_flags")?
+                    .getattr("SEARCH_BYTES")?
+                    .extract()?,
                 model.getattr("opt")?.unbind(),
             ),
             rotors: plant

@@ -132,17 +132,16 @@ impl SleepLink {
         step1: impl FnOnce() -> PyResult<()>,
     ) -> PyResult<()> {
         self.policy(py, ctrl, step1)?;
-        let on = if self.allowed {
-            self.settled = false;
-            true
-        } else if self.settled {
-            false
-        } else {
-            self.settled = true; // this step runs "never" with sleeping still on
-            true
-        };
-        self.dirty = true;
+        // on while "allowed" and for the first "never" step (RestingSleep.before_step2);
+        // after any "never" step the countdown is reset: settled
+        let on = self.allowed || !self.settled;
+        let settled = !self.allowed;
+        if settled != self.settled {
+            self.settled = settled;
+            self.dirty = true;
+        }
         if on != self.sleep_on {
+            self.dirty = true;
             let opt = self.opt.bind(py);
             let flags = self.names.enableflags.i64(opt)?;
             let flags = if on {
