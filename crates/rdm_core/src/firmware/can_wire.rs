@@ -13,6 +13,7 @@ use std::fmt::Write;
 
 use super::neuron_frame::CanFrame;
 use super::neuron_tx::RxFrame;
+use crate::sim::fixed_decimals::push_fixed6;
 
 /// Default capacity of each delivery queue (frames waiting for the other side's tick).
 pub const DEFAULT_QUEUE_CAPACITY: usize = 4096;
@@ -154,7 +155,11 @@ impl CanWire {
         for f in &self.log {
             let floor = *self.log_floor.get_or_insert(f.stamp);
             let stamp = if f.stamp < floor { floor } else { f.stamp };
-            let _ = write!(out, "({stamp:.6}) {channel} ");
+            out.push('(');
+            push_fixed6(out, stamp); // `{stamp:.6}`, the same text
+            out.push_str(") ");
+            out.push_str(channel);
+            out.push(' ');
             // `{:03X}#` and `{:02X}` per byte, without the formatting machinery (the
             // lines are most of a run's capture work); standard ids are 11 bits
             push_hex3(out, u32::from(f.frame.id));

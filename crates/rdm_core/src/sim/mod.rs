@@ -5,6 +5,7 @@
 
 pub mod contact_gate;
 pub mod esc_duty;
+pub mod fixed_decimals;
 pub mod json_text;
 pub mod leptrino_stream;
 pub mod mcap_chunk;
