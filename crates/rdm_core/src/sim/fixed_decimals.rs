@@ -16,7 +16,7 @@ const SCALE: u128 = 1_000_000;
 
 /// Append `format!("{x:.6}")` to `out`.
 pub fn push_fixed6(out: &mut String, x: f64) {
-    if !(x.abs() < FAST_LIMIT) {
+    if !x.is_finite() || x.abs() >= FAST_LIMIT {
         let _ = write!(out, "{x:.6}");
         return;
     }
