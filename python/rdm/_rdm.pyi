@@ -518,6 +518,44 @@ class PositionController:
 def vectoring_angles(n: NDArray[np.float64]) -> tuple[float, float]:
     """Eqs. (33)-(34) for a unit direction n: (alpha, beta)."""
 
+def flight_axes(
+    position_controller: PositionController,
+    pc_axes: PcAxisController,
+    gains: NDArray[np.float64],
+    state_position: NDArray[np.float64],
+    state_velocity: NDArray[np.float64],
+    state_yaw: float,
+    setpoint_position: NDArray[np.float64],
+    setpoint_velocity: NDArray[np.float64],
+    setpoint_yaw: float,
+    link_rotations: NDArray[np.float64],
+    joint_targets: NDArray[np.float64],
+    vectoring_joints: list[tuple[int, int]],
+    feed_forward: NDArray[np.float64],
+    held: bool,
+    vectoring: bool,
+    min_nz: float,
+    dt: float,
+) -> (
+    tuple[
+        float,
+        float,
+        float,
+        tuple[float, ...],
+        tuple[float, ...],
+        tuple[bool, ...],
+        int,
+        NDArray[np.float64],
+        int | None,
+    ]
+    | None
+):
+    """``ControlPipeline.step``'s flight part in one call: the position loop (eqs. 30-36,
+    held at zero error when ``held``), per vectoring unit its angles or the joint targets
+    (``min_nz``), the PC-side z/yaw axes. Returns (roll, pitch, yaw term, alpha, beta,
+    applied, singular units, base thrust, yaw rotor); None, with nothing stepped, for an
+    input it does not read (the caller's plain form then runs)."""
+
 # --- bench ---
 # Rust-side timing loops of `rdm bench` (crates/rdm_py/src/bench.rs): each times every call
 # with std::time::Instant, GIL released, and returns what each step computed.

@@ -11,6 +11,7 @@ mod capture_index;
 mod contact_gate;
 mod errors;
 mod estimate;
+mod flight_axes;
 mod gains;
 mod json_log;
 mod kernel;
@@ -38,6 +39,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     attitude::register(m)?;
     lqi::register(m)?;
     position::register(m)?;
+    flight_axes::register(m)?;
     perch::register(m)?;
     bench::register(m)?;
     qp::register(m)?;

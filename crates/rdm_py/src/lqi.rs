@@ -95,7 +95,7 @@ fn care_error(e: CareError) -> PyErr {
     }
 }
 
-fn lqi_error(e: LqiError) -> PyErr {
+pub(crate) fn lqi_error(e: LqiError) -> PyErr {
     match e {
         LqiError::InvalidInput { argument } => {
             LqiSynthesisError::new_err(format!("invalid argument `{argument}`: {e}"))
@@ -474,8 +474,8 @@ impl LqiSynthesizer {
 
 /// PC-side altitude P-I-D (base thrust) and yaw P-I (`angles[2]`) of sec. 4.
 #[pyclass(module = "rdm._rdm")]
-struct PcAxisController {
-    inner: CorePcAxisController,
+pub(crate) struct PcAxisController {
+    pub(crate) inner: CorePcAxisController,
 }
 
 #[pymethods]

@@ -20,7 +20,7 @@ create_exception!(
     "Position control rejected its input; the message names the argument."
 );
 
-fn position_error(e: PositionError) -> PyErr {
+pub(crate) fn position_error(e: PositionError) -> PyErr {
     match e {
         PositionError::InvalidInput { argument } => {
             PositionControlError::new_err(format!("invalid argument `{argument}`: {e}"))
@@ -30,8 +30,8 @@ fn position_error(e: PositionError) -> PyErr {
 
 /// Horizontal PID position controller with vectoring angles (eqs. 30-36).
 #[pyclass(module = "rdm._rdm")]
-struct PositionController {
-    inner: core_position::PositionController,
+pub(crate) struct PositionController {
+    pub(crate) inner: core_position::PositionController,
 }
 
 #[pymethods]

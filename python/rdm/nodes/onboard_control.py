@@ -308,6 +308,10 @@ class ControlPipeline:
             else None
         )
         self._p_matrix_saturated = False
+        #: the flight part of :meth:`step` (position loop, vectoring choice, PC-side axes)
+        #: through ``_rdm.flight_axes``, one Rust call with the same arithmetic; False:
+        #: :meth:`_flight_axes_plain` (the reference form)
+        self.fast_step = True
 
     # -- 1. model ------------------------------------------------------------------------
     def update_model(self, q: np.ndarray) -> bool:
@@ -529,49 +533,38 @@ class ControlPipeline:
             self.counts["not_ready"] += 1
             return None
         n_rot = self.robot.n_rotors
-        # Perched, the foot cannot translate: a horizontal error would only wind up the PID
-        # and tilt the attitude targets, i.e. press the plate onto an edge. The loop is held
-        # at zero error (φ_d = θ_d = 0, vectoring level; its integral is cleared on entry, see
-        # set_perching). ASSUMPTION (the paper's Fig. 6 shows no position loop when perched).
-        held = self.perching
-        position = state.position[:2]
-        velocity = np.zeros(2) if held else state.velocity[:2]
-        # the core's outputs as it returns them (floats and lists of floats): the values
-        # PositionController.step wraps in a PositionCommand, without building one
-        pos = self.position.step_outputs(
-            position,
-            velocity,
-            position if held else setpoint.position[:2],
-            velocity if held else setpoint.velocity[:2],
-            setpoint.yaw,
-            t.link_rotations,
-            dt,
-        )
-        alpha, beta, applied = [], [], []
-        vectoring, min_nz = self.config.vectoring, self.config.vectoring_min_nz
-        direction, pos_alpha, pos_beta = pos["direction"], pos["alpha"], pos["beta"]
-        for i, (ja, jb) in enumerate(self.vectoring_joints):
-            ok = vectoring and abs(float(direction[i][2])) >= min_nz
-            if not ok and vectoring:
-                self.counts["vectoring_singular"] += 1
-            alpha.append(float(pos_alpha[i]) if ok else float(joint_targets[ja]))
-            beta.append(float(pos_beta[i]) if ok else float(joint_targets[jb]))
-            applied.append(ok)
         ff = t.hover_thrust if self.config.feed_forward == "hover" else np.zeros(n_rot)
-        # Perched, the altitude loop is held too (zero error, integral kept): λ_flight keeps
-        # carrying the weight and λ_perch alone presses the plate (eq. 20); a live z loop would
-        # integrate the pinned height error and cancel λ_perch. ASSUMPTION, like the xy hold.
-        z_err = 0.0 if self.perching else float(setpoint.position[2] - state.position[2])
-        vz_err = 0.0 if self.perching else float(setpoint.velocity[2] - state.velocity[2])
-        base, yaw_term, yaw_rotor = self.pc_axes.step(
-            gains,
-            z_err,
-            vz_err,
-            wrap_angle(setpoint.yaw - state.yaw),
-            np.ascontiguousarray(ff, dtype=float),
-            dt,
-        )
-        flight = np.asarray(base, dtype=float)
+        axes = None
+        if (
+            self.fast_step
+            and self.position.__class__ is PositionController
+            and self.pc_axes.__class__ is PcAxisController
+        ):
+            # the form below in one Rust call (None: an input it does not read; then below)
+            axes = _rdm.flight_axes(
+                self.position._core,
+                self.pc_axes,
+                gains,
+                state.position,
+                state.velocity,
+                state.yaw,
+                setpoint.position,
+                setpoint.velocity,
+                setpoint.yaw,
+                t.link_rotations,
+                joint_targets,
+                self.vectoring_joints,
+                ff,
+                self.perching,
+                self.config.vectoring,
+                self.config.vectoring_min_nz,
+                dt,
+            )
+            if axes is not None and axes[6]:
+                self.counts["vectoring_singular"] += axes[6]
+        if axes is None:
+            axes = self._flight_axes_plain(state, setpoint, joint_targets, ff, dt)
+        roll, pitch, yaw_term, alpha, beta, applied, _, flight, yaw_rotor = axes
         result = None
         if self.perching:
             w = foot_wrench if foot_wrench is not None else np.full(6, np.nan)
@@ -593,13 +586,81 @@ class ControlPipeline:
             self.counts["non_finite_command"] += 1
             return None
         return _control_command(
-            (float(pos["roll"]), float(pos["pitch"]), float(yaw_term)),
+            (roll, pitch, yaw_term),
             total,
             flight,
             self.perch_thrust.copy(),
             result,
+            alpha,
+            beta,
+            applied,
+            yaw_rotor,
+        )
+
+    def _flight_axes_plain(
+        self,
+        state: State,
+        setpoint: Setpoint,
+        joint_targets: np.ndarray,
+        feed_forward: np.ndarray,
+        dt: float,
+    ) -> tuple:
+        """Position loop, vectoring choice and PC-side axes of :meth:`step` (the reference
+        form of ``_rdm.flight_axes``): roll, pitch, yaw term, alpha, beta, applied, the
+        number of singular units (counted here), the base thrust, the yaw rotor."""
+        t, gains = self.terms, self.gains
+        assert t is not None and gains is not None
+        # Perched, the foot cannot translate: a horizontal error would only wind up the PID
+        # and tilt the attitude targets, i.e. press the plate onto an edge. The loop is held
+        # at zero error (φ_d = θ_d = 0, vectoring level; its integral is cleared on entry, see
+        # set_perching). ASSUMPTION (the paper's Fig. 6 shows no position loop when perched).
+        held = self.perching
+        position = state.position[:2]
+        velocity = np.zeros(2) if held else state.velocity[:2]
+        # the core's outputs as it returns them (floats and lists of floats): the values
+        # PositionController.step wraps in a PositionCommand, without building one
+        pos = self.position.step_outputs(
+            position,
+            velocity,
+            position if held else setpoint.position[:2],
+            velocity if held else setpoint.velocity[:2],
+            setpoint.yaw,
+            t.link_rotations,
+            dt,
+        )
+        alpha, beta, applied = [], [], []
+        singular = 0
+        vectoring, min_nz = self.config.vectoring, self.config.vectoring_min_nz
+        direction, pos_alpha, pos_beta = pos["direction"], pos["alpha"], pos["beta"]
+        for i, (ja, jb) in enumerate(self.vectoring_joints):
+            ok = vectoring and abs(float(direction[i][2])) >= min_nz
+            if not ok and vectoring:
+                self.counts["vectoring_singular"] += 1
+                singular += 1
+            alpha.append(float(pos_alpha[i]) if ok else float(joint_targets[ja]))
+            beta.append(float(pos_beta[i]) if ok else float(joint_targets[jb]))
+            applied.append(ok)
+        # Perched, the altitude loop is held too (zero error, integral kept): λ_flight keeps
+        # carrying the weight and λ_perch alone presses the plate (eq. 20); a live z loop would
+        # integrate the pinned height error and cancel λ_perch. ASSUMPTION, like the xy hold.
+        z_err = 0.0 if self.perching else float(setpoint.position[2] - state.position[2])
+        vz_err = 0.0 if self.perching else float(setpoint.velocity[2] - state.velocity[2])
+        base, yaw_term, yaw_rotor = self.pc_axes.step(
+            gains,
+            z_err,
+            vz_err,
+            wrap_angle(setpoint.yaw - state.yaw),
+            np.ascontiguousarray(feed_forward, dtype=float),
+            dt,
+        )
+        return (
+            float(pos["roll"]),
+            float(pos["pitch"]),
+            float(yaw_term),
             tuple(alpha),
             tuple(beta),
             tuple(applied),
+            singular,
+            np.asarray(base, dtype=float),
             yaw_rotor,
         )

@@ -1,0 +1,207 @@
+"""``ControlPipeline.step``'s flight part in one Rust call (``_rdm.flight_axes``) against its
+plain form (``ControlPipeline._flight_axes_plain``): two pipelines, one per form, fed the same
+random sequence of states, setpoints, joint targets and mode switches, give the same commands
+bit for bit, the same controller integrals and the same counters; inputs the Rust call does
+not read fall back to the plain form and leave every controller state as the plain form does.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rdm import _rdm
+from rdm.model import Robot
+from rdm.nodes.onboard_config import OnboardConfig
+from rdm.nodes.onboard_control import ControlPipeline, Setpoint, State
+
+
+def _pipeline(fast: bool, **config: object) -> ControlPipeline:
+    ctl = ControlPipeline(Robot.default(), OnboardConfig(**config))
+    ctl.fast_step = fast
+    return ctl
+
+
+def _ready(ctl: ControlPipeline, q: np.ndarray) -> None:
+    assert ctl.update_model(q)
+    assert ctl.synthesize()
+
+
+def _bits(value: object) -> object:
+    """Every float of a command field as its bit pattern (so -0.0 != 0.0 and NaN == NaN)."""
+    if isinstance(value, np.ndarray):
+        return (value.dtype.str, value.shape, value.tobytes())
+    if isinstance(value, float):
+        return ("f", _float_bits(value))
+    if isinstance(value, tuple | list):
+        return (type(value).__name__, [_bits(v) for v in value])
+    return value
+
+
+def _float_bits(x: float) -> int:
+    return int(np.float64(x).view(np.int64))
+
+
+def _command_bits(c: object) -> object:
+    if c is None:
+        return None
+    return {
+        k: _bits(getattr(c, k))
+        for k in (
+            "angles",
+            "base_thrust",
+            "flight_thrust",
+            "perch_thrust",
+            "alpha",
+            "beta",
+            "vectoring_applied",
+            "yaw_rotor",
+        )
+    }
+
+
+def _state_bits(ctl: ControlPipeline) -> object:
+    return (
+        ctl.position.integral.tobytes(),
+        tuple(_float_bits(v) for v in ctl.pc_axes.integrals),
+        dict(ctl.counts),
+        ctl.perch_thrust.tobytes(),
+    )
+
+
+def _random_inputs(rng: np.random.Generator, n_q: int) -> tuple:
+    scale = rng.choice([1e-3, 0.1, 1.0, 5.0])
+    state = State(
+        rng.normal(0.0, scale, 3), rng.normal(0.0, scale, 3), float(rng.uniform(-4.0, 4.0))
+    )
+    setpoint = Setpoint(
+        rng.normal(0.0, scale, 3), rng.normal(0.0, scale, 3), float(rng.uniform(-4.0, 4.0))
+    )
+    targets = rng.uniform(-1.5, 1.5, n_q)
+    return state, setpoint, targets
+
+
+@pytest.mark.parametrize(
+    "config",
+    [
+        {},
+        {"vectoring_min_nz": 0.9999},  # some units fall back to the joint targets
+        {"vectoring": False},
+        {"feed_forward": "none"},
+    ],
+)
+def test_flight_axes_equal_the_plain_form_over_a_random_sequence(config):
+    rng = np.random.default_rng(16)
+    fast, plain = _pipeline(True, **config), _pipeline(False, **config)
+    n_q = fast.robot.n_q
+    qs = [rng.uniform(-0.8, 0.8, n_q) for _ in range(4)]
+    calls = {"n": 0}
+    real = _rdm.flight_axes
+
+    def counted(*args):
+        calls["n"] += 1
+        out = real(*args)
+        assert out is not None  # every input of this sequence is one the Rust call reads
+        return out
+
+    _rdm.flight_axes = counted
+    try:
+        for k in range(400):
+            if k % 50 == 0:
+                q = qs[(k // 50) % len(qs)]
+                _ready(fast, q)
+                _ready(plain, q)
+            if k % 70 == 35:  # perched stretches: the xy and z loops held
+                on = not fast.perching
+                fast.set_perching(on)
+                plain.set_perching(on)
+            state, setpoint, targets = _random_inputs(rng, n_q)
+            dt = float(rng.choice([0.025, 0.02, 0.031]))
+            foot = rng.normal(0.0, 5.0, 6) if rng.random() < 0.8 else None
+            a = fast.step(state, setpoint, targets, foot, dt)
+            b = plain.step(state, setpoint, targets, foot, dt)
+            assert _command_bits(a) == _command_bits(b), k
+            assert _state_bits(fast) == _state_bits(plain), k
+    finally:
+        _rdm.flight_axes = real
+    assert calls["n"] == 400
+    if config.get("vectoring_min_nz"):
+        assert fast.counts["vectoring_singular"] > 0
+    assert fast.counts["perch_entered"] > 0
+
+
+def test_wrap_of_the_yaw_error_is_the_plain_forms():
+    """Yaw errors across many turns: the Rust sin/cos/atan2 wrap gives Python's floats."""
+    fast, plain = _pipeline(True), _pipeline(False)
+    q = np.zeros(fast.robot.n_q)
+    _ready(fast, q)
+    _ready(plain, q)
+    for yaw in [*np.linspace(-40.0, 40.0, 801).tolist(), math.pi, -math.pi, 1e-300, 3e8]:
+        state = State(np.zeros(3), np.zeros(3), 0.0)
+        setpoint = Setpoint(np.zeros(3), np.zeros(3), yaw)
+        a = fast.step(state, setpoint, q, None, 0.025)
+        b = plain.step(state, setpoint, q, None, 0.025)
+        assert _command_bits(a) == _command_bits(b), yaw
+    assert fast.pc_axes.integrals == plain.pc_axes.integrals
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        "int_position",  # an int vector: the plain form converts it
+        "short_targets",  # a joint vector the units' indices do not fit
+        "nan_setpoint_z",  # the PC axes refuse it (after the position step, as before)
+        "list_velocity",  # a list, not an array: converted by the plain form
+        "zero_dt",  # the PC axes refuse it (the position loop raises first, as before)
+    ],
+)
+def test_inputs_the_rust_call_does_not_read_take_the_plain_form(bad):
+    fast, plain = _pipeline(True), _pipeline(False)
+    q = np.full(fast.robot.n_q, 0.1)
+    _ready(fast, q)
+    _ready(plain, q)
+    state = State(np.array([0.1, -0.2, 1.0]), np.array([0.01, 0.0, -0.1]), 0.2)
+    setpoint = Setpoint(np.array([0.0, 0.0, 1.2]), np.zeros(3), 0.0)
+    targets, dt = q.copy(), 0.025
+    if bad == "int_position":
+        state = State(np.array([0, 1, 1]), state.velocity, state.yaw)
+    elif bad == "short_targets":
+        targets = targets[:2]
+    elif bad == "nan_setpoint_z":
+        setpoint = Setpoint(np.array([0.0, 0.0, np.nan]), np.zeros(3), 0.0)
+    elif bad == "list_velocity":
+        state = State(state.position, [0.01, 0.0, -0.1], state.yaw)
+    elif bad == "zero_dt":
+        dt = 0.0
+    args = (
+        fast.position._core,
+        fast.pc_axes,
+        fast.gains,
+        state.position,
+        state.velocity,
+        state.yaw,
+        setpoint.position,
+        setpoint.velocity,
+        setpoint.yaw,
+        fast.terms.link_rotations,
+        targets,
+        fast.vectoring_joints,
+        fast.terms.hover_thrust,
+        False,
+        True,
+        fast.config.vectoring_min_nz,
+        dt,
+    )
+    before = _state_bits(fast)
+    assert _rdm.flight_axes(*args) is None
+    assert _state_bits(fast) == before  # nothing stepped
+    outcomes = []
+    for ctl in (fast, plain):
+        try:
+            outcomes.append(("ok", _command_bits(ctl.step(state, setpoint, targets, None, dt))))
+        except Exception as e:  # the same exception type from both forms
+            outcomes.append(("raised", type(e)))
+    assert outcomes[0] == outcomes[1]
+    assert _state_bits(fast) == _state_bits(plain)
