@@ -45,28 +45,33 @@ pub fn push_fixed6(out: &mut String, x: f64) {
             quotient
         }
     };
-    if x.is_sign_negative() {
-        out.push('-');
-    }
+    // laid out from the end in one buffer: six decimals, the point, the integer digits
     let micros = micros as u64; // < 1e18
-    push_digits(out, micros / 1_000_000, 1);
-    out.push('.');
-    push_digits(out, micros % 1_000_000, 6);
-}
-
-/// `value` in decimal, zero-padded to at least `width` digits.
-fn push_digits(out: &mut String, mut value: u64, width: usize) {
-    let mut buf = [b'0'; 20];
+    let mut buf = [b'0'; 24];
     let mut i = buf.len();
-    while value > 0 {
+    let mut frac = micros % 1_000_000;
+    for _ in 0..6 {
         i -= 1;
-        buf[i] = b'0' + (value % 10) as u8;
-        value /= 10;
+        buf[i] = b'0' + (frac % 10) as u8;
+        frac /= 10;
     }
-    let start = i.min(buf.len() - width);
-    for &b in &buf[start..] {
-        out.push(char::from(b));
+    i -= 1;
+    buf[i] = b'.';
+    let mut whole = micros / 1_000_000;
+    loop {
+        i -= 1;
+        buf[i] = b'0' + (whole % 10) as u8;
+        whole /= 10;
+        if whole == 0 {
+            break;
+        }
     }
+    if x.is_sign_negative() {
+        i -= 1;
+        buf[i] = b'-';
+    }
+    // ASCII digits, a point and a sign: always UTF-8
+    out.push_str(std::str::from_utf8(&buf[i..]).unwrap_or_default());
 }
 
 #[cfg(test)]
