@@ -518,6 +518,10 @@ class PositionController:
 def vectoring_angles(n: NDArray[np.float64]) -> tuple[float, float]:
     """Eqs. (33)-(34) for a unit direction n: (alpha, beta)."""
 
+def finite_float_vector(value: object, n: int) -> NDArray[np.float64] | _Literal[False] | None:
+    """``value`` if it is a list or tuple of exactly ``n`` exact ``float``s: their float64
+    array when all are finite, else False; None for any other value (the caller decides)."""
+
 def flight_axes(
     position_controller: PositionController,
     pc_axes: PcAxisController,

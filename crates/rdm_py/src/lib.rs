@@ -11,6 +11,7 @@ mod capture_index;
 mod contact_gate;
 mod errors;
 mod estimate;
+mod finite_vector;
 mod flight_axes;
 mod gains;
 mod json_log;
@@ -40,6 +41,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     lqi::register(m)?;
     position::register(m)?;
     flight_axes::register(m)?;
+    finite_vector::register(m)?;
     perch::register(m)?;
     bench::register(m)?;
     qp::register(m)?;

@@ -35,6 +35,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from rdm import _rdm
 from rdm.nodes.bus_layout import can_table, default_neuron_joints
 from rdm.nodes.onboard_arming import ArmingSequencer, FlightState
 from rdm.nodes.onboard_calibration import GET_CALIB_DATA, ImuCalibrationReader
@@ -110,8 +111,21 @@ def quaternion_to_euler(x: float, y: float, z: float, w: float) -> tuple[float, 
 _F64 = np.dtype(np.float64)
 
 
+_finite_float_vector = getattr(_rdm, "finite_float_vector", None)
+
+
 def _vector(value: Any, n: int) -> np.ndarray | None:
     """``value`` as a finite float vector of length n, else None."""
+    if _finite_float_vector is not None:
+        # a list/tuple of n exact floats in one Rust call: the array below, False: not finite
+        got = _finite_float_vector(value, n)
+        if got is not None:
+            return None if got is False else got
+    return _vector_plain(value, n)
+
+
+def _vector_plain(value: Any, n: int) -> np.ndarray | None:
+    """:func:`_vector` without the Rust call (the reference form)."""
     if type(value) in (tuple, list) and len(value) == n and all(type(v) is float for v in value):
         # the common case (a decoded message field): the same array without numpy's checks
         return np.array(value) if all(map(math.isfinite, value)) else None

@@ -1,0 +1,97 @@
+"""The onboard node's input check (``rdm.nodes.onboard._vector``) with its Rust common case
+(``_rdm.finite_float_vector``) against the plain Python form, on lists, tuples and other
+values of every kind: the same None or the same float64 array (values, bits, flags)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rdm import _rdm
+from rdm.nodes.onboard import _vector, _vector_plain
+
+
+class FloatSub(float):
+    """A float subclass: not the exact-float case, the plain form converts it."""
+
+
+def _cases(rng: np.random.Generator) -> list[tuple[object, int]]:
+    specials = [math.nan, math.inf, -math.inf, -0.0, 0.0, 5e-324, 1.7976931348623157e308]
+    out: list[tuple[object, int]] = []
+    for _ in range(3000):
+        n = int(rng.integers(0, 20))
+        values: list[object] = [float(v) for v in rng.normal(0.0, 10.0 ** rng.integers(-5, 6), n)]
+        kind = rng.random()
+        if kind < 0.15 and values:
+            values[int(rng.integers(0, n))] = specials[int(rng.integers(0, len(specials)))]
+        elif kind < 0.25 and values:
+            values[int(rng.integers(0, n))] = int(rng.integers(-3, 3))
+        elif kind < 0.3 and values:
+            values[int(rng.integers(0, n))] = np.float64(1.5)
+        elif kind < 0.35 and values:
+            values[int(rng.integers(0, n))] = FloatSub(2.5)
+        elif kind < 0.38 and values:
+            values[int(rng.integers(0, n))] = True
+        container = list if rng.random() < 0.5 else tuple
+        asked = n if rng.random() < 0.8 else int(rng.integers(0, 20))
+        out.append((container(values), asked))
+    out += [
+        (np.array([1.0, 2.0, 3.0]), 3),
+        (np.array([1, 2, 3]), 3),
+        ("abc", 3),
+        (None, 3),
+        ([[1.0], [2.0], [3.0]], 3),
+        ((1.0, 2.0), 2),
+        ([], 0),
+        ([1.0] * 17, 17),  # beyond the Rust call's 16 slots: the plain form
+        ([1.0] * 16, 16),
+    ]
+    return out
+
+
+def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return (
+        a.dtype == b.dtype
+        and a.shape == b.shape
+        and a.tobytes() == b.tobytes()
+        and a.flags.c_contiguous == b.flags.c_contiguous
+        and a.flags.writeable == b.flags.writeable
+        and a.flags.owndata == b.flags.owndata
+    )
+
+
+def test_vector_equals_its_plain_form_on_random_values():
+    rng = np.random.default_rng(1616)
+    cases = _cases(rng)
+    rust_taken = 0
+    for value, n in cases:
+        got, want = _vector(value, n), _vector_plain(value, n)
+        assert _same(got, want), (value, n, got, want)
+        rust_taken += _rdm.finite_float_vector(value, n) is not None
+    assert rust_taken > 1000  # the Rust call decided many of them
+
+
+@pytest.mark.parametrize(
+    ("value", "n", "expected"),
+    [
+        ([1.0, 2.0, 3.0], 3, "array"),
+        ((1.0, 2.0, 3.0), 3, "array"),
+        ([1.0, math.nan, 3.0], 3, False),
+        ((math.inf,), 1, False),
+        ([1.0, 2.0], 3, None),  # wrong length: the plain form decides
+        ([1.0, 2, 3.0], 3, None),  # an int
+        ([1.0, np.float64(2.0), 3.0], 3, None),  # a float subclass
+        (np.zeros(3), 3, None),  # not a list or tuple
+    ],
+)
+def test_finite_float_vector_states_its_three_answers(value, n, expected):
+    got = _rdm.finite_float_vector(value, n)
+    if expected == "array":
+        assert isinstance(got, np.ndarray) and got.dtype == np.float64
+        assert got.tolist() == list(value)
+    else:
+        assert got is expected
