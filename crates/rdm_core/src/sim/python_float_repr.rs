@@ -93,7 +93,16 @@ impl PythonFloatRepr {
             let mut buffer = ryu::Buffer::new();
             let text = buffer.format_finite(value);
             let body = text.strip_prefix('-').unwrap_or(text);
-            if !body.contains(['e', 'E']) && !body.starts_with("0.0000") {
+            if let Some(at) = body.bytes().position(|c| c == b'e' || c == b'E') {
+                // Ryu's exponent notation (decimal exponents below -5 or above 15, where
+                // Python writes it too, with the same mantissa text): only the exponent's
+                // text differs, Ryu's `e-7` / `e16` against Python's `e-07` / `e+16`.
+                let at = at + (text.len() - body.len());
+                out.push_str(&text[..at]);
+                push_python_exponent(parse_exponent(&text.as_bytes()[at + 1..]), out);
+                return;
+            }
+            if !body.starts_with("0.0000") {
                 out.push_str(text);
                 return;
             }
@@ -173,17 +182,22 @@ impl PythonFloatRepr {
                 out.push('.');
                 out.push_str(&digits[1..]);
             }
-            out.push('e');
-            out.push(if exponent < 0 { '-' } else { '+' });
-            // at least two digits (`e-05`); a double's exponent has at most three
-            let e = exponent.unsigned_abs();
-            if e >= 100 {
-                out.push(char::from(b'0' + (e / 100) as u8));
-            }
-            out.push(char::from(b'0' + (e / 10 % 10) as u8));
-            out.push(char::from(b'0' + (e % 10) as u8));
+            push_python_exponent(exponent, out);
         }
     }
+}
+
+/// Python's exponent text: `e`, the sign, at least two digits (`e-05`, `e+16`, `e-324`; a
+/// double's decimal exponent has at most three).
+fn push_python_exponent(exponent: i32, out: &mut String) {
+    out.push('e');
+    out.push(if exponent < 0 { '-' } else { '+' });
+    let e = exponent.unsigned_abs();
+    if e >= 100 {
+        out.push(char::from(b'0' + (e / 100 % 10) as u8));
+    }
+    out.push(char::from(b'0' + (e / 10 % 10) as u8));
+    out.push(char::from(b'0' + (e % 10) as u8));
 }
 
 /// Ryu's text of a positive finite value (`1.0`, `0.00123`, `1.5e-7`, `1e16`) as its
