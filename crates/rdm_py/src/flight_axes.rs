@@ -76,7 +76,14 @@ fn flight_axes<'py>(
     min_nz: f64,
     dt: f64,
 ) -> PyResult<Option<FlightAxes<'py>>> {
-    // Every input read (or refused) before anything steps.
+    // Every input read (or refused) before anything steps; the controllers borrowed first
+    // (a borrow held elsewhere: the plain form, which reports it as it always has).
+    let (Ok(mut position_controller), Ok(mut pc_axes)) = (
+        position_controller.try_borrow_mut(),
+        pc_axes.try_borrow_mut(),
+    ) else {
+        return Ok(None);
+    };
     let (Some(p), Some(v), Some(sp), Some(sv)) = (
         head::<3>(state_position, 3),
         head::<3>(state_velocity, 3),
@@ -181,7 +188,6 @@ fn flight_axes<'py>(
         dt,
     };
     let out = position_controller
-        .borrow_mut()
         .inner
         .step(&input)
         .map_err(position_error)?;
@@ -201,7 +207,6 @@ fn flight_axes<'py>(
 
     // 4. PC-side axes (their inputs were checked above: this step does not fail)
     let command = pc_axes
-        .borrow_mut()
         .inner
         .step(&gains, &errors, &ff, dt)
         .map_err(lqi_error)?;
