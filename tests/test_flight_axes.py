@@ -7,6 +7,7 @@ not read fall back to the plain form and leave every controller state as the pla
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -205,3 +206,47 @@ def test_inputs_the_rust_call_does_not_read_take_the_plain_form(bad):
             outcomes.append(("raised", type(e)))
     assert outcomes[0] == outcomes[1]
     assert _state_bits(fast) == _state_bits(plain)
+
+
+def test_truth_values_are_taken_as_python_takes_them():
+    """A perching flag or a vectoring switch that is not a bool (an int, numpy's bool) is
+    read by its truth value in both forms, and the Rust call takes it."""
+    rng = np.random.default_rng(7)
+    for perching, vectoring in ((1, np.True_), (0, np.False_), (np.True_, 1)):
+        fast, plain = _pipeline(True), _pipeline(False)
+        q = np.full(fast.robot.n_q, 0.2)
+        _ready(fast, q)
+        _ready(plain, q)
+        for ctl in (fast, plain):
+            ctl.perching = perching
+            ctl.config = dataclasses.replace(ctl.config, vectoring=vectoring)
+        state, setpoint, targets = _random_inputs(rng, fast.robot.n_q)
+        args = (
+            fast.position._core,
+            fast.pc_axes,
+            fast.gains,
+            state.position,
+            state.velocity,
+            state.yaw,
+            setpoint.position,
+            setpoint.velocity,
+            setpoint.yaw,
+            fast.terms.link_rotations,
+            targets,
+            fast.vectoring_joints,
+            fast.terms.hover_thrust,
+            perching,
+            vectoring,
+            fast.config.vectoring_min_nz,
+            0.025,
+        )
+        before = _state_bits(fast)
+        assert _rdm.flight_axes(*args) is not None  # taken: the Rust call reads them
+        fast.position.reset()  # undo that call's integral steps before the comparison
+        fast.pc_axes = type(fast.pc_axes)()
+        plain.pc_axes = type(plain.pc_axes)()
+        assert _state_bits(fast)[0] == before[0]
+        a = fast.step(state, setpoint, targets, None, 0.025)
+        b = plain.step(state, setpoint, targets, None, 0.025)
+        assert _command_bits(a) == _command_bits(b)
+        assert _state_bits(fast) == _state_bits(plain)

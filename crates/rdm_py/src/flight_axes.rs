@@ -71,8 +71,8 @@ fn flight_axes<'py>(
     joint_targets: &Bound<'py, PyAny>,
     vectoring_joints: &Bound<'py, PyAny>,
     feed_forward: &Bound<'py, PyAny>,
-    held: bool,
-    vectoring: bool,
+    held: &Bound<'py, PyAny>,
+    vectoring: &Bound<'py, PyAny>,
     min_nz: f64,
     dt: f64,
 ) -> PyResult<Option<FlightAxes<'py>>> {
@@ -82,6 +82,10 @@ fn flight_axes<'py>(
         position_controller.try_borrow_mut(),
         pc_axes.try_borrow_mut(),
     ) else {
+        return Ok(None);
+    };
+    // truth values as Python's `if` takes them (the plain form's `held` and `vectoring and`)
+    let (Ok(held), Ok(vectoring)) = (held.is_truthy(), vectoring.is_truthy()) else {
         return Ok(None);
     };
     let (Some(p), Some(v), Some(sp), Some(sv)) = (
