@@ -19,6 +19,20 @@ from rdm.nodes.onboard_config import OnboardConfig
 from rdm.nodes.onboard_control import ControlPipeline, Setpoint, State
 
 
+@pytest.fixture
+def rust_results(monkeypatch) -> list:
+    """What every ``_rdm.flight_axes`` call of the test returns, in call order."""
+    results: list = []
+    real = _rdm.flight_axes
+
+    def recorded(*args):
+        results.append(real(*args))
+        return results[-1]
+
+    monkeypatch.setattr(_rdm, "flight_axes", recorded)
+    return results
+
+
 def _pipeline(fast: bool, **config: object) -> ControlPipeline:
     ctl = ControlPipeline(Robot.default(), OnboardConfig(**config))
     ctl.fast_step = fast
@@ -93,41 +107,30 @@ def _random_inputs(rng: np.random.Generator, n_q: int) -> tuple:
         {"feed_forward": "none"},
     ],
 )
-def test_flight_axes_equal_the_plain_form_over_a_random_sequence(config):
+def test_flight_axes_equal_the_plain_form_over_a_random_sequence(config, rust_results):
     rng = np.random.default_rng(16)
     fast, plain = _pipeline(True, **config), _pipeline(False, **config)
     n_q = fast.robot.n_q
     qs = [rng.uniform(-0.8, 0.8, n_q) for _ in range(4)]
-    calls = {"n": 0}
-    real = _rdm.flight_axes
-
-    def counted(*args):
-        calls["n"] += 1
-        out = real(*args)
-        assert out is not None  # every input of this sequence is one the Rust call reads
-        return out
-
-    _rdm.flight_axes = counted
-    try:
-        for k in range(400):
-            if k % 50 == 0:
-                q = qs[(k // 50) % len(qs)]
-                _ready(fast, q)
-                _ready(plain, q)
-            if k % 70 == 35:  # perched stretches: the xy and z loops held
-                on = not fast.perching
-                fast.set_perching(on)
-                plain.set_perching(on)
-            state, setpoint, targets = _random_inputs(rng, n_q)
-            dt = float(rng.choice([0.025, 0.02, 0.031]))
-            foot = rng.normal(0.0, 5.0, 6) if rng.random() < 0.8 else None
-            a = fast.step(state, setpoint, targets, foot, dt)
-            b = plain.step(state, setpoint, targets, foot, dt)
-            assert _command_bits(a) == _command_bits(b), k
-            assert _state_bits(fast) == _state_bits(plain), k
-    finally:
-        _rdm.flight_axes = real
-    assert calls["n"] == 400
+    for k in range(400):
+        if k % 50 == 0:
+            q = qs[(k // 50) % len(qs)]
+            _ready(fast, q)
+            _ready(plain, q)
+        if k % 70 == 35:  # perched stretches: the xy and z loops held
+            on = not fast.perching
+            fast.set_perching(on)
+            plain.set_perching(on)
+        state, setpoint, targets = _random_inputs(rng, n_q)
+        dt = float(rng.choice([0.025, 0.02, 0.031]))
+        foot = rng.normal(0.0, 5.0, 6) if rng.random() < 0.8 else None
+        a = fast.step(state, setpoint, targets, foot, dt)
+        b = plain.step(state, setpoint, targets, foot, dt)
+        assert _command_bits(a) == _command_bits(b), k
+        assert _state_bits(fast) == _state_bits(plain), k
+    # every tick through the Rust call: every input of this sequence is one it reads
+    assert len(rust_results) == 400
+    assert all(r is not None for r in rust_results)
     if config.get("vectoring_min_nz"):
         assert fast.counts["vectoring_singular"] > 0
     assert fast.counts["perch_entered"] > 0
@@ -176,27 +179,8 @@ def test_inputs_the_rust_call_does_not_read_take_the_plain_form(bad):
         state = State(state.position, [0.01, 0.0, -0.1], state.yaw)
     elif bad == "zero_dt":
         dt = 0.0
-    args = (
-        fast.position._core,
-        fast.pc_axes,
-        fast.gains,
-        state.position,
-        state.velocity,
-        state.yaw,
-        setpoint.position,
-        setpoint.velocity,
-        setpoint.yaw,
-        fast.terms.link_rotations,
-        targets,
-        fast.vectoring_joints,
-        fast.terms.hover_thrust,
-        False,
-        True,
-        fast.config.vectoring_min_nz,
-        dt,
-    )
     before = _state_bits(fast)
-    assert _rdm.flight_axes(*args) is None
+    assert fast._flight_axes_rust(state, setpoint, targets, fast.terms.hover_thrust, dt) is None
     assert _state_bits(fast) == before  # nothing stepped
     outcomes = []
     for ctl in (fast, plain):
@@ -208,7 +192,7 @@ def test_inputs_the_rust_call_does_not_read_take_the_plain_form(bad):
     assert _state_bits(fast) == _state_bits(plain)
 
 
-def test_truth_values_are_taken_as_python_takes_them():
+def test_truth_values_are_taken_as_python_takes_them(rust_results):
     """A perching flag or a vectoring switch that is not a bool (an int, numpy's bool) is
     read by its truth value in both forms, and the Rust call takes it."""
     rng = np.random.default_rng(7)
@@ -221,32 +205,10 @@ def test_truth_values_are_taken_as_python_takes_them():
             ctl.perching = perching
             ctl.config = dataclasses.replace(ctl.config, vectoring=vectoring)
         state, setpoint, targets = _random_inputs(rng, fast.robot.n_q)
-        args = (
-            fast.position._core,
-            fast.pc_axes,
-            fast.gains,
-            state.position,
-            state.velocity,
-            state.yaw,
-            setpoint.position,
-            setpoint.velocity,
-            setpoint.yaw,
-            fast.terms.link_rotations,
-            targets,
-            fast.vectoring_joints,
-            fast.terms.hover_thrust,
-            perching,
-            vectoring,
-            fast.config.vectoring_min_nz,
-            0.025,
-        )
-        before = _state_bits(fast)
-        assert _rdm.flight_axes(*args) is not None  # taken: the Rust call reads them
-        fast.position.reset()  # undo that call's integral steps before the comparison
-        fast.pc_axes = type(fast.pc_axes)()
-        plain.pc_axes = type(plain.pc_axes)()
-        assert _state_bits(fast)[0] == before[0]
+        rust_results.clear()
         a = fast.step(state, setpoint, targets, None, 0.025)
         b = plain.step(state, setpoint, targets, None, 0.025)
+        # taken by the Rust call (the fast pipeline's one call; the plain one makes none)
+        assert len(rust_results) == 1 and rust_results[0] is not None
         assert _command_bits(a) == _command_bits(b)
         assert _state_bits(fast) == _state_bits(plain)

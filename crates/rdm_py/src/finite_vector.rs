@@ -9,6 +9,21 @@ use pyo3::types::{PyBool, PyFloat, PyList, PyTuple};
 /// `value` (a `list` or `tuple`, exactly those types) of `n` exact `float`s: their float64
 /// array if all are finite, else False. None when `value` is not of that form (the caller's
 /// other paths decide then).
+/// `slots` from `len` items, each an exact `float`; None if the count or an item differs.
+fn fill<'py>(
+    slots: &mut [f64],
+    len: usize,
+    items: impl Iterator<Item = Bound<'py, PyAny>>,
+) -> Option<()> {
+    if len != slots.len() {
+        return None;
+    }
+    for (slot, item) in slots.iter_mut().zip(items) {
+        *slot = item.cast_exact::<PyFloat>().ok()?.value();
+    }
+    Some(())
+}
+
 #[pyfunction]
 fn finite_float_vector<'py>(
     py: Python<'py>,
@@ -19,22 +34,12 @@ fn finite_float_vector<'py>(
     if n > out.len() {
         return None;
     }
-    let read = |slots: &mut [f64], items: &mut dyn Iterator<Item = Bound<'py, PyAny>>| {
-        for (slot, item) in slots.iter_mut().zip(items) {
-            *slot = item.cast_exact::<PyFloat>().ok()?.value();
-        }
-        Some(())
-    };
+    // exactly a list or a tuple (not a subclass) of exactly n exact floats
+    let slots = &mut out[..n];
     if let Ok(list) = value.cast_exact::<PyList>() {
-        if list.len() != n {
-            return None;
-        }
-        read(&mut out[..n], &mut list.iter())?;
+        fill(slots, list.len(), list.iter())?;
     } else if let Ok(tuple) = value.cast_exact::<PyTuple>() {
-        if tuple.len() != n {
-            return None;
-        }
-        read(&mut out[..n], &mut tuple.iter())?;
+        fill(slots, tuple.len(), tuple.iter())?;
     } else {
         return None;
     }

@@ -6,7 +6,8 @@
 //! (`tests/test_flight_axes.py` compares both forms bit for bit).
 
 use nalgebra::{Matrix3, Vector2};
-use numpy::{PyArray1, PyArray3, PyArrayDyn, PyArrayMethods};
+use numpy::ndarray::{Dimension, Ix1, Ix3, IxDyn};
+use numpy::{PyArray, PyArrayMethods, PyReadonlyArray};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
@@ -33,10 +34,28 @@ type FlightAxes<'py> = (
     Option<usize>,
 );
 
+/// A read-only view of `value` if it is a float64 array of dimension `D` that nothing
+/// borrows for writing; None for anything else.
+fn readonly<'py, D: Dimension>(value: &Bound<'py, PyAny>) -> Option<PyReadonlyArray<'py, f64, D>> {
+    value.cast::<PyArray<f64, D>>().ok()?.try_readonly().ok()
+}
+
+/// Up to `N_VECTORING` `(alpha joint, beta joint)` index pairs of a sequence (a fixed array,
+/// so the 40 Hz call allocates none for them) and how many; None for anything else.
+fn unit_joints(value: &Bound<'_, PyAny>) -> Option<([(usize, usize); N_VECTORING], usize)> {
+    let mut pairs = [(0, 0); N_VECTORING];
+    let mut n = 0;
+    for item in value.try_iter().ok()? {
+        let slot = pairs.get_mut(n)?;
+        *slot = item.ok()?.extract().ok()?;
+        n += 1;
+    }
+    Some((pairs, n))
+}
+
 /// The first `N` values of a float64 vector of exactly `len` values; None for anything else.
 fn head<const N: usize>(value: &Bound<'_, PyAny>, len: usize) -> Option<[f64; N]> {
-    let array = value.cast::<PyArray1<f64>>().ok()?;
-    let view = array.try_readonly().ok()?;
+    let view = readonly::<Ix1>(value)?;
     let v = view.as_array();
     if v.len() != len {
         return None;
@@ -101,43 +120,34 @@ fn flight_axes<'py>(
     else {
         return Ok(None);
     };
-    let Ok(vectoring_joints) = vectoring_joints.extract::<Vec<(usize, usize)>>() else {
+    let Some((joint_pairs, n)) = unit_joints(vectoring_joints) else {
         return Ok(None);
     };
+    let vectoring_joints = &joint_pairs[..n];
     let Some(ff) = head::<N_ROTORS>(feed_forward, N_ROTORS) else {
         return Ok(None);
     };
-    let Ok(rotations) = link_rotations.cast::<PyArray3<f64>>() else {
-        return Ok(None);
-    };
-    let Ok(rotations) = rotations.try_readonly() else {
+    let Some(rotations) = readonly::<Ix3>(link_rotations) else {
         return Ok(None);
     };
     let rotations = rotations.as_array();
     if rotations.shape() != [N_VECTORING, 3, 3] {
         return Ok(None);
     }
-    let Ok(gains) = gains.cast::<PyArrayDyn<f64>>() else {
-        return Ok(None);
-    };
-    let Ok(gains) = gains.try_readonly() else {
+    let Some(gains) = readonly::<IxDyn>(gains) else {
         return Ok(None);
     };
     let Ok(gains) = gain_set_from_view(gains.as_array()) else {
         return Ok(None);
     };
-    let Ok(targets) = joint_targets.cast::<PyArray1<f64>>() else {
-        return Ok(None);
-    };
-    let Ok(targets) = targets.try_readonly() else {
+    let Some(targets) = readonly::<Ix1>(joint_targets) else {
         return Ok(None);
     };
     let targets = targets.as_array();
     let n_targets = targets.len();
-    if vectoring_joints.len() > N_VECTORING
-        || vectoring_joints
-            .iter()
-            .any(|&(a, b)| a >= n_targets || b >= n_targets)
+    if vectoring_joints
+        .iter()
+        .any(|&(a, b)| a >= n_targets || b >= n_targets)
     {
         return Ok(None);
     }
@@ -207,7 +217,6 @@ fn flight_axes<'py>(
         beta[i] = if ok { out.beta[i] } else { targets[jb] };
         applied[i] = ok;
     }
-    let n = vectoring_joints.len();
 
     // 4. PC-side axes (their inputs were checked above: this step does not fail)
     let command = pc_axes

@@ -534,34 +534,9 @@ class ControlPipeline:
             return None
         n_rot = self.robot.n_rotors
         ff = t.hover_thrust if self.config.feed_forward == "hover" else np.zeros(n_rot)
-        axes = None
-        if (
-            self.fast_step
-            and self.position.__class__ is PositionController
-            and self.pc_axes.__class__ is PcAxisController
-        ):
-            # the form below in one Rust call (None: an input it does not read; then below)
-            axes = _rdm.flight_axes(
-                self.position._core,
-                self.pc_axes,
-                gains,
-                state.position,
-                state.velocity,
-                state.yaw,
-                setpoint.position,
-                setpoint.velocity,
-                setpoint.yaw,
-                t.link_rotations,
-                joint_targets,
-                self.vectoring_joints,
-                ff,
-                self.perching,
-                self.config.vectoring,
-                self.config.vectoring_min_nz,
-                dt,
-            )
-            if axes is not None and axes[6]:
-                self.counts["vectoring_singular"] += axes[6]
+        axes = self._flight_axes_rust(state, setpoint, joint_targets, ff, dt)
+        if axes is not None and axes[6]:
+            self.counts["vectoring_singular"] += axes[6]
         if axes is None:
             axes = self._flight_axes_plain(state, setpoint, joint_targets, ff, dt)
         roll, pitch, yaw_term, alpha, beta, applied, _, flight, yaw_rotor = axes
@@ -595,6 +570,46 @@ class ControlPipeline:
             beta,
             applied,
             yaw_rotor,
+        )
+
+    def _flight_axes_rust(
+        self,
+        state: State,
+        setpoint: Setpoint,
+        joint_targets: np.ndarray,
+        feed_forward: np.ndarray,
+        dt: float,
+    ) -> tuple | None:
+        """:meth:`_flight_axes_plain` in one Rust call (``_rdm.flight_axes``, the same tuple;
+        the singular units are not counted here). None, with nothing stepped, when
+        :attr:`fast_step` is off, a controller is not the core's, or an input is one the call
+        does not read: then the plain form runs."""
+        if not (
+            self.fast_step
+            and self.position.__class__ is PositionController
+            and self.pc_axes.__class__ is PcAxisController
+        ):
+            return None
+        t = self.terms
+        assert t is not None
+        return _rdm.flight_axes(
+            self.position._core,
+            self.pc_axes,
+            self.gains,
+            state.position,
+            state.velocity,
+            state.yaw,
+            setpoint.position,
+            setpoint.velocity,
+            setpoint.yaw,
+            t.link_rotations,
+            joint_targets,
+            self.vectoring_joints,
+            feed_forward,
+            self.perching,
+            self.config.vectoring,
+            self.config.vectoring_min_nz,
+            dt,
         )
 
     def _flight_axes_plain(
