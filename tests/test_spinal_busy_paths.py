@@ -623,6 +623,14 @@ def _run(base: str, fast: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[dict, 
         route_values(*args)
 
     spinal._route_values = counting_values
+    command_run = spinal._apply_command_run  # the same routes, a run of frames in one call
+
+    def counting_run(items: list) -> int:
+        done = command_run(items)
+        taken["values"] += done
+        return done
+
+    spinal._apply_command_run = counting_run
     states = spinal.servos.states_frame
     spinal.servos.states_frame = counting("servo_states", states)
     stack.loop.run_ticks(3000)

@@ -458,8 +458,8 @@ class LqiSynthesizer:
         """The same synthesis as ``synthesize`` as (gains (N_ROTORS, 4, 3), rpy/gain int16
         terms (N_ROTORS, 7) or None, their RollPitchYawTerms payload or None, every gain
         finite, fell_back, a clamp scale != 1). A result with terms and finite gains is kept
-        (``kept_result``). GIL released while solving. While the core reuses a solution
-        (``reused``) the same objects are returned again; the arrays are read-only."""
+        (``kept_result``). GIL released while solving. While the same problem is asked
+        again the same objects are returned again; the arrays are read-only."""
     def kept_result(self) -> dict[str, object] | None:
         """The ``synthesize`` dict of the last result ``synthesize_wire`` kept."""
     def reset(self) -> None: ...
@@ -467,7 +467,8 @@ class LqiSynthesizer:
     def has_solution(self) -> bool: ...
     @property
     def reused(self) -> int:
-        """Calls answered with the last solution: their B-bar bitwise the last solved one."""
+        """Calls answered with a kept solution: their B-bar bitwise one of the last four
+        solved."""
 
 class PcAxisController:
     """PC-side altitude P-I-D (base thrust) and yaw P-I (angles[2]) of JSK sec. 4."""
@@ -521,6 +522,39 @@ def vectoring_angles(n: NDArray[np.float64]) -> tuple[float, float]:
 def finite_float_vector(value: object, n: int) -> NDArray[np.float64] | _Literal[False] | None:
     """``value`` if it is a list or tuple of exactly ``n`` exact ``float``s: their float64
     array when all are finite, else False; None for any other value (the caller decides)."""
+
+def servo_target_payload(
+    targets: NDArray[np.float64],
+    vectoring: tuple[Sequence[float], Sequence[float]] | None,
+    pairs: Sequence[tuple[int, int]],
+    zero: Sequence[float],
+    sign: Sequence[float],
+    scale: Sequence[float],
+    index: Sequence[int],
+) -> tuple[list[float], bytes] | None:
+    """The onboard node's servo goals and their ``spinal/ServoControlCmd`` payload: the
+    first ``n = min(len(index), len(targets))`` targets with the vectoring joints ``pairs``
+    overwritten by ``vectoring``'s (alpha, beta) per unit, and the message with each goal as
+    ``round(zero + sign * q / scale)`` ticks saturated to int16. None for anything the Python
+    form treats otherwise (other types, a pair outside the goals, a target Python's ``round``
+    refuses, an index outside uint8)."""
+
+def spinal_apply_commands(
+    items: list[object],
+    kinds: bytes,
+    first_user_id: int,
+    core: SpinalStep,
+    master: CanMaster | None,
+    now_s: float,
+) -> tuple[int, Exception | None]:
+    """Spinal's steady command frames in one call: the leading run of ``items`` (the
+    rosserial parser's good frames, ``(topic_id, payload, offset)``) whose subscriber kind
+    (``kinds[topic_id - first_user_id]``: 1 four_axes/command, 2 rpy/gain, 3 pinv+inertia,
+    4 desire_coordinate, 5 servo/target_states, 0 none) it takes, decoded and applied to
+    ``core`` (and to ``master``'s servo goals) as the mirror's value routes do. Returns
+    ``(n, error)``: the first ``n`` applied; ``error``, when not None, is what item ``n``'s
+    core call raised (that item is done too); otherwise item ``n`` is one it does not take
+    (nothing of it applied)."""
 
 def flight_axes(
     position_controller: PositionController,

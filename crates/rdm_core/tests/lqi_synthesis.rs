@@ -155,3 +155,58 @@ fn a_repeated_problem_is_answered_with_the_last_solution() {
     assert_eq!(synth.reused(), 1);
     assert_eq!(cold.report.method, CareMethod::SignFunction);
 }
+
+#[test]
+fn a_configuration_returned_to_is_answered_with_its_kept_solution() {
+    use rdm_core::control::lqi::KEPT_SOLUTIONS;
+    let mut rng = rng(22);
+    let (mass, inertia, allocation) = random_robot(&mut rng);
+    // Problems one ulp of mass apart, as a joint reading flickering between two counts.
+    let masses: Vec<f64> = (0..KEPT_SOLUTIONS as u64 + 1)
+        .map(|i| f64::from_bits(mass.to_bits() + i))
+        .collect();
+    let mut synth = LqiSynthesizer::new(LqiConfig::default()).expect("weights");
+    let a = *synth
+        .synthesize(masses[0], &inertia, &allocation)
+        .expect("a");
+    let b = *synth
+        .synthesize(masses[1], &inertia, &allocation)
+        .expect("b");
+    assert_eq!((synth.reused(), synth.changes()), (0, 2));
+    // back to the first: its own solution (not a warm re-solve from the second's)
+    let again = *synth
+        .synthesize(masses[0], &inertia, &allocation)
+        .expect("a again");
+    assert_eq!(again, a);
+    assert_eq!((synth.reused(), synth.changes()), (1, 3));
+    assert_eq!(
+        *synth
+            .synthesize(masses[1], &inertia, &allocation)
+            .expect("b again"),
+        b
+    );
+    // the last one again: no change
+    synth
+        .synthesize(masses[1], &inertia, &allocation)
+        .expect("b once more");
+    assert_eq!((synth.reused(), synth.changes()), (3, 4));
+    // KEPT_SOLUTIONS newer problems push the first one out: solved again
+    for m in &masses[2..] {
+        synth.synthesize(*m, &inertia, &allocation).expect("newer");
+    }
+    let solves = synth.changes();
+    let resolved = *synth
+        .synthesize(masses[0], &inertia, &allocation)
+        .expect("a re-solved");
+    assert_eq!(synth.changes(), solves + 1);
+    assert_eq!(synth.reused(), 3);
+    assert_eq!(resolved.report.method, CareMethod::Kleinman);
+    assert!((resolved.k - a.k).amax() <= 1e-8 * a.k.amax());
+    // a reset forgets the kept solutions too: cold
+    synth.reset();
+    let cold = *synth
+        .synthesize(masses[1], &inertia, &allocation)
+        .expect("cold");
+    assert_eq!(cold.report.method, CareMethod::SignFunction);
+    assert_eq!(synth.reused(), 3);
+}

@@ -5,6 +5,8 @@
 mod pwm;
 mod wire;
 
+pub(crate) use wire::wire_term_rows;
+
 use numpy::{
     PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
 };
@@ -27,7 +29,7 @@ create_exception!(
     "A message to the Spinal controller was rejected or ignored; the message names the field."
 );
 
-fn rejected(e: CommandError) -> PyErr {
+pub(crate) fn rejected(e: CommandError) -> PyErr {
     CommandRejectedError::new_err(e.to_string())
 }
 
@@ -454,6 +456,11 @@ pub struct PySpinalStep {
 }
 
 impl PySpinalStep {
+    /// The attitude controller the message methods change (`crate::spinal_commands`).
+    pub(crate) fn controller_mut(&mut self) -> &mut AttitudeController {
+        self.inner.controller_mut()
+    }
+
     /// [`SpinalStep::step`] without the Python object (the lockstep kernel's control step,
     /// `crate::kernel::spinal`): the same call `step` makes.
     pub(crate) fn step_raw(

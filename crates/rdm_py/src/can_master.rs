@@ -101,6 +101,17 @@ impl CanMaster {
         &self.core
     }
 
+    /// `set_servo_target_list` without the Python list (`crate::spinal_commands`): the goals
+    /// in order, stopping at the first the core refuses (as that method does).
+    pub(crate) fn set_targets(&mut self, targets: &[(u8, u8, i32)]) -> PyResult<()> {
+        for &(slave, index, value) in targets {
+            self.core
+                .set_servo_target(slave, index, value)
+                .map_err(master_err)?;
+        }
+        Ok(())
+    }
+
     /// `try_set_motor_duties` of a list of these floats (the lockstep kernel's duty
     /// hand-over, `crate::kernel::spinal`): applies them and returns true when there are
     /// exactly `motor_number` of them and the core takes them; else applies nothing.
@@ -271,12 +282,7 @@ impl CanMaster {
     /// `set_servo_target` for each `(slave, index, value)` in order (one call for a whole
     /// `servo/target_states`); stops at the first error, which it raises.
     fn set_servo_target_list(&mut self, targets: Vec<(u8, u8, i32)>) -> PyResult<()> {
-        for (slave, index, value) in targets {
-            self.core
-                .set_servo_target(slave, index, value)
-                .map_err(master_err)?;
-        }
-        Ok(())
+        self.set_targets(&targets)
     }
 
     fn set_servo_torque(&mut self, slave: u8, index: u8, enable: bool) -> PyResult<()> {

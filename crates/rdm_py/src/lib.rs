@@ -28,6 +28,8 @@ mod qp;
 mod rosserial;
 mod rotor_plant;
 mod sensor_sim;
+mod servo_goals;
+mod spinal_commands;
 mod spinal_mirror;
 mod untracked;
 
@@ -58,5 +60,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     rosserial::register(m)?;
     kernel::register(m)?;
     spinal_mirror::register(m)?;
+    spinal_commands::register(m)?;
+    servo_goals::register(m)?;
     Ok(())
 }

@@ -254,8 +254,8 @@ struct LqiSynthesizer {
     inner: core_lqi::LqiSynthesizer,
     /// The last result `synthesize_wire` accepted (wire terms converted, every gain finite).
     kept: Option<LqiGains>,
-    /// What the last solving `synthesize_wire` returned, handed out again (the same objects,
-    /// read-only arrays) while the core reuses that solution (`reused`).
+    /// What the last `synthesize_wire` returned, handed out again (the same objects,
+    /// read-only arrays) while the core answers with that same result (`changes` unchanged).
     last_wire: Option<WireOut>,
 }
 
@@ -348,11 +348,11 @@ impl LqiSynthesizer {
     ) -> PyResult<Bound<'py, PyDict>> {
         let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
         let allocation: Allocation = to_matrix(&allocation, "allocation")?;
-        let reused_before = self.inner.reused();
+        let changes_before = self.inner.changes();
         let inner = &mut self.inner;
         let result = py.detach(move || inner.synthesize(mass, &inertia, &allocation).copied());
-        if self.inner.reused() == reused_before {
-            // solved (or failed): the wire objects kept belong to an earlier solution
+        if result.is_err() || self.inner.changes() != changes_before {
+            // solved, another kept solution or failed: the wire objects kept are not its own
             self.last_wire = None;
         }
         gains_dict(py, &result.map_err(lqi_error)?)
@@ -384,7 +384,7 @@ impl LqiSynthesizer {
     )> {
         let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
         let allocation: Allocation = to_matrix(&allocation, "allocation")?;
-        let reused_before = self.inner.reused();
+        let changes_before = self.inner.changes();
         let inner = &mut self.inner;
         let result = py.detach(move || inner.synthesize(mass, &inertia, &allocation).copied());
         let result = match result {
@@ -394,7 +394,8 @@ impl LqiSynthesizer {
                 return Err(lqi_error(e));
             }
         };
-        if self.inner.reused() != reused_before {
+        if self.inner.changes() == changes_before {
+            // the last result again: the objects handed out for it
             if let Some((g, w, b, finite, fell_back, clamped)) = &self.last_wire {
                 return Ok((
                     g.bind(py).clone(),
@@ -459,7 +460,8 @@ impl LqiSynthesizer {
         self.inner.reset();
     }
 
-    /// Calls answered with the last solution (their B̄ bitwise the last solved one).
+    /// Calls answered with a kept solution (their B̄ bitwise one of the last
+    /// `KEPT_SOLUTIONS` = 4 solved).
     #[getter]
     fn reused(&self) -> u64 {
         self.inner.reused()

@@ -102,8 +102,8 @@ class LqiSynthesizer:
         ``gains_to_wire_terms(gains)`` (int16, N_ROTORS x 7) and ``payload`` its
         ``spinal/RollPitchYawTerms`` bytes, both None where that raises (NaN/inf term);
         ``finite``: every gain finite; ``clamped``: a clamp scale is not 1. A result with
-        ``wire`` and ``finite`` is kept for :meth:`kept_result`. A reused solution
-        (:attr:`reused`) returns the same objects again (read-only arrays)."""
+        ``wire`` and ``finite`` is kept for :meth:`kept_result`. The last result again
+        (its problem asked again) returns the same objects again (read-only arrays)."""
         return self._core.synthesize_wire(
             float(mass),
             np.ascontiguousarray(inertia, dtype=float),
@@ -116,7 +116,7 @@ class LqiSynthesizer:
         return None if out is None else _result(out)
 
     def reset(self) -> None:
-        """Forget the warm start (next synthesis is cold)."""
+        """Forget the warm start and the kept solutions (next synthesis is cold)."""
         self._core.reset()
 
     @property
@@ -126,7 +126,8 @@ class LqiSynthesizer:
 
     @property
     def reused(self) -> int:
-        """Calls answered with the last solution because their B-bar (eq. 25) was bitwise
-        the last solved one: the gains are a function of the problem, not of how often it
-        is solved (``synthesize_wire`` then returns the same read-only objects)."""
+        """Calls answered with a kept solution because their B-bar (eq. 25) was bitwise
+        one of the last four solved: the gains are a function of the problem, not of how
+        often it is solved (``synthesize_wire`` returns the same read-only objects while
+        the same problem is asked again)."""
         return self._core.reused

@@ -112,6 +112,7 @@ _F64 = np.dtype(np.float64)
 
 
 _finite_float_vector = getattr(_rdm, "finite_float_vector", None)
+_servo_target_payload = getattr(_rdm, "servo_target_payload", None)
 
 
 def _vector(value: Any, n: int) -> np.ndarray | None:
@@ -334,6 +335,9 @@ class OnboardNode:
         self.fast_interp = _compiled_interp is not None
         self._trajectory_columns: tuple[Any, tuple[np.ndarray, ...]] | None = None
         self._target_ticks: tuple[ServoMap, bytes, list[int]] | None = None
+        #: ``servo/target_states`` goals and payload of a :class:`ServoMap` in one Rust call
+        #: (``rdm._rdm.servo_target_payload``); False: :meth:`_send_servo_targets_plain`
+        self.fast_servo_targets = _servo_target_payload is not None
 
     # ------------------------------------------------------------------ inputs from outside
     def set_mocap(
@@ -908,8 +912,33 @@ class OnboardNode:
         self._publish("rpy/gain", self._gains_msg[1])
 
     def _send_servo_targets(self, targets: np.ndarray) -> None:
-        # a list of the same Python floats float(q[j]) gives (element writes: same values)
         arr = np.array(targets, dtype=float)
+        smap = self.config.servo_map
+        if (
+            self.fast_servo_targets
+            and smap.__class__ is ServoMap
+            and self._direct_remote("servo/target_states", "spinal/ServoControlCmd")
+        ):
+            assert _servo_target_payload is not None
+            vectoring = self.last_alpha_beta if self.arming.flying else None
+            done = _servo_target_payload(
+                arr,
+                vectoring,
+                self.control.vectoring_joints,
+                smap.zero_point,
+                smap.angle_sign,
+                smap.angle_scale,
+                smap.servo_index,
+            )
+            if done is not None:  # else the plain form decides (and raises as before)
+                self.last_servo_goals, payload = done
+                self._publish_payload("servo/target_states", payload)
+                return
+        self._send_servo_targets_plain(arr)
+
+    def _send_servo_targets_plain(self, arr: np.ndarray) -> None:
+        """:meth:`_send_servo_targets` of the float64 array of the targets in Python."""
+        # a list of the same Python floats float(q[j]) gives (element writes: same values)
         q = arr.tolist()
         written: list[int] = []
         if self.arming.flying and self.last_alpha_beta is not None:

@@ -29,13 +29,14 @@ from typing import Any
 import can
 import numpy as np
 
+from rdm import _rdm
 from rdm._rdm import RdmError
 from rdm.control.attitude import ARM_OFF, N_ROTORS, CommandRejectedError, SpinalStep
 from rdm.link.can_wire import DRAIN_AT
 from rdm.link.inproc_can import SimClock
 from rdm.nodes.base import to_ms
 from rdm.nodes.can_master import BOOT_DELAY_MS, IDLE_DUTY, CanMaster, MasterState
-from rdm.nodes.spinal_servo_bridge import MirrorRejection, ServoBridge
+from rdm.nodes.spinal_servo_bridge import MirrorRejection, ServoBridge, target_rejection
 from rdm.nodes.spinal_uart import UartPump
 from rdm.protocol.rosserial import constants as C
 from rdm.protocol.rosserial.client import ClientSession
@@ -122,6 +123,15 @@ _VALUE_ROUTE_TYPES = {
     "desire_coordinate": "spinal/DesireCoord",
     "servo/target_states": "spinal/ServoControlCmd",
 }
+#: ``rdm._rdm.spinal_apply_commands``' kind codes of the value-route topics.
+_COMMAND_KINDS = {
+    "four_axes/command": 1,
+    "rpy/gain": 2,
+    "p_matrix_pseudo_inverse_inertia": 3,
+    "desire_coordinate": 4,
+    "servo/target_states": 5,
+}
+_apply_commands = getattr(_rdm, "spinal_apply_commands", None)
 #: The ``spinal/Imu`` layout ``rdm._rdm.spinal_imu_frame`` writes (``codec._FlatLayout``).
 _IMU_PARTS = [
     ("stamp", "t", None),
@@ -334,6 +344,13 @@ class SpinalMirror:
             ):
                 self._value_routes[slot.name] = handlers[slot.name]
         self._values_armed = False  # whether the session delivers _value_routes as values
+        #: Per subscriber index: the ``rdm._rdm.spinal_apply_commands`` kind of its frames
+        #: (0: not one it applies) and its topic, for :meth:`_apply_command_run`.
+        self._command_kinds = bytes(
+            _COMMAND_KINDS[slot.name] if slot.name in self._value_routes else 0
+            for slot in self.session.subscribers
+        )
+        self._command_topics = tuple(slot.name for slot in self.session.subscribers)
         self._imu_codec: Any = None  # the imu publisher's codec, checked for _imu_frame
         self.counters = MirrorCounters()
         self.gyro = LEVEL_GYRO
@@ -491,6 +508,8 @@ class SpinalMirror:
     def _receive(self, now_ms: int) -> None:
         if self._values_armed is not self._fast:  # the value routes follow fast_paths
             self.session.deliver_values(self._value_routes if self._fast else ())
+            runs = self._fast and _apply_commands is not None and any(self._command_kinds)
+            self.session.command_run = self._apply_command_run if runs else None
             self._values_armed = self._fast
         data = self.uart.read()
         for event in self.session.spin(data, now_ms):
@@ -548,6 +567,35 @@ class SpinalMirror:
             self.counters.received[topic] += 1
         else:
             self._route(topic, slot.codec.decode(payload))
+
+    def _apply_command_run(self, items: list) -> int:
+        """``ClientSession.command_run``: the leading steady command frames of ``items``
+        (the parser's good frames) applied in one call, ``rdm._rdm.spinal_apply_commands``:
+        the core calls of :meth:`_route_values` for each, with its counters and rejections.
+        Returns how many frames are done; the session hands the rest to the usual path."""
+        assert _apply_commands is not None
+        n, exc = _apply_commands(
+            items,
+            self._command_kinds,
+            C.FIRST_USER_TOPIC_ID,
+            self.core,
+            self.servos.command_core(),
+            self._now_s,
+        )
+        topics = self._command_topics
+        first = C.FIRST_USER_TOPIC_ID
+        received = self.counters.received
+        for i in range(n):
+            received[topics[items[i][0] - first]] += 1
+        if exc is not None:  # item n's core call raised: routed as _route_values does
+            topic = topics[items[n][0] - first]
+            if not isinstance(exc, ValueError):
+                raise exc
+            if topic == "servo/target_states":
+                exc = target_rejection(exc)
+            self._route_failed(topic, exc)
+            n += 1
+        return n
 
     def _reject(self, reason: str, text: str, log: bool) -> None:
         self.counters.rejected[reason] += 1

@@ -60,6 +60,11 @@ def _is_servo_states_layout(codec: Any) -> bool:
     )
 
 
+def target_rejection(exc: ValueError) -> MirrorRejection:
+    """The rejection of a ``servo/target_states`` whose goals the master core refused."""
+    return MirrorRejection("servo_value", f"servo/target_states: {exc}")
+
+
 class ServoBridge:
     """Applies servo commands from the UART to a :class:`CanMaster`; builds servo reports.
 
@@ -148,7 +153,7 @@ class ServoBridge:
         try:
             self.master.set_servo_targets(dict(pairs))
         except ValueError as exc:
-            raise MirrorRejection("servo_value", f"servo/target_states: {exc}") from exc
+            raise target_rejection(exc) from exc
 
     def _targets_in_one_call(self, index: Sequence[int], angles: Sequence[int]) -> bool:
         """The Rust master's goal positions from ``index``/``angles`` in one core call when
@@ -178,8 +183,16 @@ class ServoBridge:
         try:
             core.set_servo_target_list(targets)
         except ValueError as exc:  # the core's own refusal, as set_servo_targets raises it
-            raise MirrorRejection("servo_value", f"servo/target_states: {exc}") from exc
+            raise target_rejection(exc) from exc
         return True
+
+    def command_core(self) -> Any | None:
+        """The Rust master core while :meth:`target_states_values` takes its one-call path
+        (fast paths on, a Rust master, running), else None: for
+        ``rdm._rdm.spinal_apply_commands``, which then sets the goals as that path does."""
+        if self._frame_core is None or not self._fast:
+            return None
+        return self._frame_core if self.master.state is MasterState.RUNNING else None
 
     def target_current(self, msg: Any) -> None:
         """``servo/target_current``: the ``angles`` field carries the goal current."""

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -110,6 +111,10 @@ class ClientSession:
         self._publisher_cache: dict[str, ClientEndpoint] = {}  # name -> first plain slot
         self._cached_slots = 0  # len(publishers) when the cache was filled
         self._values = False  # a subscriber delivers field values (deliver_values)
+        #: ``f(items) -> n``: takes the leading run of good user frames it applies itself
+        #: (the Spinal mirror's steady commands, :meth:`SpinalMirror._apply_command_run`);
+        #: only while field values are delivered and before any other event of a spin.
+        self.command_run: Callable[[list], int] | None = None
 
     # -- slot set-up (advertise / subscribe / advertiseService) ---------------------------
     def _new_pub(self, name: str, type_: str, md5: str, codec: MessageCodec, ep: C.Endpoint):
@@ -384,7 +389,15 @@ class ClientSession:
         # good frames come as (topic_id, payload, offset): no Frame object for user topics
         values = self._values
         subscribers = self.subscribers
-        for item in self.parser._feed(data, now_ms, True):
+        items = self.parser._feed(data, now_ms, True)
+        run = self.command_run
+        if run is not None and values and items and not events:
+            # the leading frames it takes are done (in order, before any event); the rest
+            # below, as always
+            taken = run(items)
+            if taken:
+                items = items[taken:]
+        for item in items:
             if item.__class__ is tuple:
                 if item[0] >= C.FIRST_USER_TOPIC_ID:
                     if values:  # deliver_values: the field values when they decode

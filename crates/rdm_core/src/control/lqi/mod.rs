@@ -160,13 +160,19 @@ impl Default for LqiGains {
     }
 }
 
-/// Stateful gain synthesizer: keeps its workspace and the last solution (warm start).
+/// Solved results a synthesizer keeps (the last one included). A holding robot's joint
+/// reading flickers between two encoder counts, so its `B̄(q)` alternates between two values;
+/// each return to one was a whole CARE solve on the 40 Hz tick before these were kept.
+pub const KEPT_SOLUTIONS: usize = 4;
+
+/// Stateful gain synthesizer: keeps its workspace and the last solutions (warm start).
 ///
 /// The gains are a function of the problem: A, Q and R are fixed per synthesizer, so a call
-/// whose `B̄(q)` (eq. 25) is bitwise the last solved one returns that solution unchanged
-/// instead of solving again. A re-solve from its own warm start would move the last bits of
-/// the gains each time (Kleinman's fixed point is not exact in floating point) and costs a
-/// whole CARE solve on the 40 Hz tick, while the robot holds a configuration.
+/// whose `B̄(q)` (eq. 25) is bitwise one of the last [`KEPT_SOLUTIONS`] solved returns that
+/// solution unchanged instead of solving again. A re-solve from its own warm start would move
+/// the last bits of the gains each time (Kleinman's fixed point is not exact in floating
+/// point) and costs a whole CARE solve on the 40 Hz tick, while the robot holds a
+/// configuration.
 #[derive(Clone, Debug)]
 pub struct LqiSynthesizer {
     config: LqiConfig,
@@ -175,7 +181,12 @@ pub struct LqiSynthesizer {
     r: InputWeight,
     solver: CareSolver,
     last: LqiGains,
+    /// The last solved results, a ring (`kept_len` valid, `kept_next` the slot to write).
+    kept: [LqiGains; KEPT_SOLUTIONS],
+    kept_len: usize,
+    kept_next: usize,
     reused: u64,
+    changes: u64,
 }
 
 impl LqiSynthesizer {
@@ -189,7 +200,11 @@ impl LqiSynthesizer {
             r,
             solver: CareSolver::new(config.care),
             last: LqiGains::default(),
+            kept: [LqiGains::default(); KEPT_SOLUTIONS],
+            kept_len: 0,
+            kept_next: 0,
             reused: 0,
+            changes: 0,
         })
     }
 
@@ -203,18 +218,26 @@ impl LqiSynthesizer {
         self.solver.has_solution().then_some(&self.last)
     }
 
-    /// Drops the warm start: the next synthesis solves cold.
+    /// Drops the warm start and the kept solutions: the next synthesis solves cold.
     pub fn reset(&mut self) {
         self.solver.reset();
+        self.kept_len = 0;
+        self.kept_next = 0;
     }
 
-    /// Calls answered with the last solution because their `B̄` was bitwise the same.
+    /// Calls answered with a kept solution because their `B̄` was bitwise its own.
     pub fn reused(&self) -> u64 {
         self.reused
     }
 
-    /// Synthesizes the gains for one configuration (warm-started after the first call; the
-    /// last result itself when `B̄` is bitwise the last solved one, see [`Self::reused`]).
+    /// How often [`Self::last`] became another result (a solve, or a kept solution other
+    /// than the last one): unchanged, the last result is the same one.
+    pub fn changes(&self) -> u64 {
+        self.changes
+    }
+
+    /// Synthesizes the gains for one configuration (warm-started after the first call; a
+    /// kept result itself when `B̄` is bitwise one solved before, see [`Self::reused`]).
     /// On error the previous gains stay available through [`Self::last`].
     pub fn synthesize(
         &mut self,
@@ -223,9 +246,18 @@ impl LqiSynthesizer {
         allocation: &Allocation,
     ) -> Result<&LqiGains, LqiError> {
         let b = augmented_input_matrix(mass, inertia, allocation)?;
-        if self.solver.has_solution() && same_bits(&b, &self.last.b) {
-            self.reused += 1;
-            return Ok(&self.last);
+        if self.solver.has_solution() {
+            if same_bits(&b, &self.last.b) {
+                self.reused += 1;
+                return Ok(&self.last);
+            }
+            let kept = &self.kept[..self.kept_len];
+            if let Some(hit) = kept.iter().find(|g| same_bits(&b, &g.b)) {
+                self.last = *hit;
+                self.reused += 1;
+                self.changes += 1;
+                return Ok(&self.last);
+            }
         }
         let report = self.solver.solve(&self.a, &b, &self.q, &self.r)?;
         let k = *self.solver.k();
@@ -243,6 +275,10 @@ impl LqiSynthesizer {
             clamp_scales,
             report,
         };
+        self.kept[self.kept_next] = self.last;
+        self.kept_next = (self.kept_next + 1) % KEPT_SOLUTIONS;
+        self.kept_len = (self.kept_len + 1).min(KEPT_SOLUTIONS);
+        self.changes += 1;
         Ok(&self.last)
     }
 }
