@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import random
 import struct
+from typing import Any
 
 import numpy as np
 import pytest
@@ -240,6 +241,44 @@ def test_publish_payload_matches_publish():
         assert list(fast.counts.items()) == list(plain.counts.items())
     with pytest.raises(KeyError):
         fast.publish_payload("no/such_topic", b"")
+
+
+def test_try_publish_payload_queues_what_publish_payload_does():
+    fast, plain = ServerSession(REG), ServerSession(REG)
+    _handshake([fast, plain])
+    fast.take_output(), plain.take_output()
+    pinv = REG.msg("spinal/PMatrixPseudoInverseWithInertia")
+    unit = REG.msg("spinal/PMatrixPseudoInverseUnit")
+    topic = "p_matrix_pseudo_inverse_inertia"
+    taken = 0
+    for n in (4, 0, 300, 7):  # 300 units: larger than the device buffer
+        msg = pinv.new(pseudo_inverse=[unit.new(r=i, p=-i, y=3) for i in range(n)], inertia=[1] * 6)
+        payload = fast.outbound[topic].codec.encode(msg)
+        for form in (payload, bytearray(payload)):
+            results = []
+            if fast.try_publish_payload(topic, form):
+                taken += 1
+                results.append(True)
+            else:  # nothing queued or counted: the plain call decides
+                assert fast.take_output() == b"" and fast.counts == plain.counts
+                results.append(_outcome(fast.publish_payload, topic, form))
+            results.append(_outcome(plain.publish_payload, topic, form))
+            if results[0] is True:
+                assert isinstance(results[1], int)
+            else:
+                assert results[0] == results[1]
+            assert fast.take_output() == plain.take_output()
+            assert list(fast.counts.items()) == list(plain.counts.items())
+    assert taken == 3  # the bytes payloads that fit
+    assert not fast.try_publish_payload("no/such_topic", b"")
+    assert fast.take_output() == b""
+
+
+def _outcome(call: Any, *args: Any) -> Any:
+    try:
+        return call(*args)
+    except Exception as exc:  # compared by the caller
+        return (type(exc), str(exc))
 
 
 def test_direct_payloads_are_the_codec_bytes():

@@ -279,6 +279,20 @@ def test_encode_frame_matches_reference_and_errors():
         assert str(fast_err.value) == str(plain_err.value)
 
 
+def test_native_frame_equals_the_reference_and_declines_the_rest():
+    from rdm import _rdm
+
+    rng = random.Random(3)
+    for _ in range(3000):
+        topic = rng.choice([0, 7, 10, 100, 255, 256, 65535, rng.randrange(65536)])
+        payload = rng.randbytes(rng.choice([0, 1, 60, 300, 1022, 65535]))
+        assert _rdm.rosserial_frame(topic, payload) == encode_frame_plain(topic, payload)
+    # what encode_frame converts or refuses: no frame built here
+    for topic, payload in ((-1, b""), (65536, b""), (1, bytes(65536)), (150, bytearray(2)),
+                           (150.0, b"ab"), (150, [1, 2])):  # fmt: skip
+        assert _rdm.rosserial_frame(topic, payload) is None
+
+
 def _stream(rng: random.Random) -> bytes:
     parts = []
     for _ in range(rng.randint(1, 30)):

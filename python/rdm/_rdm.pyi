@@ -1105,6 +1105,11 @@ def rosserial_scan(
     ``(topic_id, payload, offset)``, other events as ``(kind, offset, data)`` with kind
     ``"skip"`` or the reject reason; used by ``rdm.protocol.rosserial.framing.FrameParser``."""
 
+def rosserial_frame(topic_id: int, payload: bytes) -> bytes | None:
+    """``framing.encode_frame(topic_id, payload)`` for a ``bytes`` payload; None when the
+    topic id or the length does not fit its uint16 field or ``payload`` is not exactly
+    ``bytes`` (``encode_frame`` then converts or raises)."""
+
 # --- spinalbusy ---
 def spinal_imu_frame(
     topic_id: int,

@@ -1,9 +1,10 @@
 //! The rosserial frame scanner (`rdm_core::firmware::rosserial_frame`) for
-//! `rdm.protocol.rosserial.framing.FrameParser`: one call scans the parser's whole buffer.
+//! `rdm.protocol.rosserial.framing.FrameParser`: one call scans the parser's whole buffer;
+//! and the frame builder of a payload for the PC side's publish path.
 
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyBytes, PyList};
-use rdm_core::firmware::rosserial_frame::{next_candidate, Step, FRAME_OVERHEAD};
+use rdm_core::firmware::rosserial_frame::{next_candidate, seal_frame, Step, FRAME_OVERHEAD};
 
 /// What one scan found; see `rosserial_scan`.
 type ScanResult<'py> = (Bound<'py, PyList>, usize, usize, bool, bool, bool);
@@ -67,7 +68,29 @@ fn rosserial_scan<'py>(
 }
 
 /// Add the scanner to the module.
+/// `framing.encode_frame(topic_id, payload)` for a `bytes` payload: the same frame, or None
+/// (nothing built) when the topic id or the length does not fit its `u16` field or
+/// `payload` is not exactly `bytes` (`encode_frame` then converts or raises).
+#[pyfunction]
+fn rosserial_frame<'py>(
+    py: Python<'py>,
+    topic_id: &Bound<'py, PyAny>,
+    payload: &Bound<'py, PyAny>,
+) -> Option<Bound<'py, PyBytes>> {
+    let topic: u16 = topic_id.extract().ok()?;
+    let payload = payload.cast_exact::<PyBytes>().ok()?.as_bytes();
+    let n = payload.len();
+    u16::try_from(n).ok()?;
+    PyBytes::new_with(py, n + FRAME_OVERHEAD, |frame| {
+        frame[7..7 + n].copy_from_slice(payload);
+        seal_frame(topic, frame);
+        Ok(())
+    })
+    .ok()
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rosserial_scan, m)?)?;
+    m.add_function(wrap_pyfunction!(rosserial_frame, m)?)?;
     Ok(())
 }

@@ -662,7 +662,11 @@ class OnboardNode:
 
     def _publish_payload(self, topic: str, payload: bytes) -> bool:
         """:meth:`_publish` of a message already serialized with the topic's codec."""
-        return self._send(self.session.publish_payload, topic, payload)
+        session = self.session
+        if self.direct_tx and session.try_publish_payload(topic, payload):
+            self.published[topic] += 1  # as _send counts a send
+            return True
+        return self._send(session.publish_payload, topic, payload)
 
     def _send(self, publish: Callable[[str, Any], int], topic: str, what: Any) -> bool:
         """One publish: refusals counted per topic, sends counted in ``published``."""
