@@ -220,23 +220,40 @@ def test_session_deferred_topics_match_decoding():
     assert fast.counts["rx_dropped"] > 0 and fast.counts["rx_messages"] > 100
 
 
-def test_publish_payload_matches_publish():
+PINV_TOPIC = "p_matrix_pseudo_inverse_inertia"
+
+
+def _two_sessions() -> tuple[ServerSession, ServerSession]:
+    """Two server sessions after the same handshake, their output taken."""
     fast, plain = ServerSession(REG), ServerSession(REG)
     _handshake([fast, plain])
     fast.take_output(), plain.take_output()
+    return fast, plain
+
+
+def _pinv_message(n: int) -> Any:
+    """A pinv + inertia message of ``n`` units (300: larger than the device buffer)."""
     pinv = REG.msg("spinal/PMatrixPseudoInverseWithInertia")
     unit = REG.msg("spinal/PMatrixPseudoInverseUnit")
-    for n in (4, 0, 300):  # 300 units: larger than the device buffer
-        msg = pinv.new(pseudo_inverse=[unit.new(r=i, p=-i, y=3) for i in range(n)], inertia=[1] * 6)
-        payload = fast.outbound["p_matrix_pseudo_inverse_inertia"].codec.encode(msg)
-        results = []
-        topic = "p_matrix_pseudo_inverse_inertia"
-        for send, arg in ((fast.publish_payload, payload), (plain.publish, msg)):
-            try:
-                results.append(send(topic, arg))
-            except Exception as exc:  # compared below
-                results.append((type(exc), str(exc)))
-        assert results[0] == results[1]
+    return pinv.new(pseudo_inverse=[unit.new(r=i, p=-i, y=3) for i in range(n)], inertia=[1] * 6)
+
+
+def _outcome(call: Any, *args: Any) -> Any:
+    """What ``call(*args)`` returned, or the type and text of what it raised."""
+    try:
+        return call(*args)
+    except Exception as exc:  # compared by the caller
+        return (type(exc), str(exc))
+
+
+def test_publish_payload_matches_publish():
+    fast, plain = _two_sessions()
+    for n in (4, 0, 300):
+        msg = _pinv_message(n)
+        payload = fast.outbound[PINV_TOPIC].codec.encode(msg)
+        assert _outcome(fast.publish_payload, PINV_TOPIC, payload) == _outcome(
+            plain.publish, PINV_TOPIC, msg
+        )
         assert fast.take_output() == plain.take_output()
         assert list(fast.counts.items()) == list(plain.counts.items())
     with pytest.raises(KeyError):
@@ -244,41 +261,26 @@ def test_publish_payload_matches_publish():
 
 
 def test_try_publish_payload_queues_what_publish_payload_does():
-    fast, plain = ServerSession(REG), ServerSession(REG)
-    _handshake([fast, plain])
-    fast.take_output(), plain.take_output()
-    pinv = REG.msg("spinal/PMatrixPseudoInverseWithInertia")
-    unit = REG.msg("spinal/PMatrixPseudoInverseUnit")
-    topic = "p_matrix_pseudo_inverse_inertia"
+    fast, plain = _two_sessions()
     taken = 0
-    for n in (4, 0, 300, 7):  # 300 units: larger than the device buffer
-        msg = pinv.new(pseudo_inverse=[unit.new(r=i, p=-i, y=3) for i in range(n)], inertia=[1] * 6)
-        payload = fast.outbound[topic].codec.encode(msg)
+    for n in (4, 0, 300, 7):
+        payload = fast.outbound[PINV_TOPIC].codec.encode(_pinv_message(n))
         for form in (payload, bytearray(payload)):
-            results = []
-            if fast.try_publish_payload(topic, form):
-                taken += 1
-                results.append(True)
-            else:  # nothing queued or counted: the plain call decides
+            took = fast.try_publish_payload(PINV_TOPIC, form)
+            if not took:  # nothing queued or counted: the plain call decides
                 assert fast.take_output() == b"" and fast.counts == plain.counts
-                results.append(_outcome(fast.publish_payload, topic, form))
-            results.append(_outcome(plain.publish_payload, topic, form))
-            if results[0] is True:
-                assert isinstance(results[1], int)
+                fast_result = _outcome(fast.publish_payload, PINV_TOPIC, form)
+            plain_result = _outcome(plain.publish_payload, PINV_TOPIC, form)
+            if took:
+                taken += 1
+                assert isinstance(plain_result, int)  # the plain call queued a frame too
             else:
-                assert results[0] == results[1]
+                assert fast_result == plain_result
             assert fast.take_output() == plain.take_output()
             assert list(fast.counts.items()) == list(plain.counts.items())
-    assert taken == 3  # the bytes payloads that fit
+    assert taken == 6  # the payloads that fit, bytes or bytearray
     assert not fast.try_publish_payload("no/such_topic", b"")
     assert fast.take_output() == b""
-
-
-def _outcome(call: Any, *args: Any) -> Any:
-    try:
-        return call(*args)
-    except Exception as exc:  # compared by the caller
-        return (type(exc), str(exc))
 
 
 def test_direct_payloads_are_the_codec_bytes():

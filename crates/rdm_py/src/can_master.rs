@@ -101,6 +101,15 @@ impl CanMaster {
         &self.core
     }
 
+    /// `(slave, position)` of every servo in `servo_table` order (`servo_keys`), without a
+    /// list (`crate::spinal_commands` looks one up per goal).
+    pub(crate) fn servo_key_iter(&self) -> impl Iterator<Item = (u8, usize)> + '_ {
+        self.core
+            .neurons()
+            .iter()
+            .flat_map(|n| (0..n.servos().len()).map(move |i| (n.slave, i)))
+    }
+
     /// `set_servo_target_list` without the Python list (`crate::spinal_commands`): the goals
     /// in order, stopping at the first the core refuses (as that method does).
     pub(crate) fn set_targets(&mut self, targets: &[(u8, u8, i32)]) -> PyResult<()> {
@@ -379,13 +388,7 @@ impl CanMaster {
     /// `(slave, position)` of every servo in `servo_table` order (the keys of
     /// `RustCanMaster.servo_states`).
     fn servo_keys(&self) -> Vec<(u8, usize)> {
-        let mut out = Vec::with_capacity(32);
-        for n in self.core.neurons() {
-            for i in 0..n.servos().len() {
-                out.push((n.slave, i));
-            }
-        }
-        out
+        self.servo_key_iter().collect()
     }
 
     /// IMU: `[(slave, [gyro, acc, mag] each (x, y, z) raw or None, stamp_ms), ...]` in order

@@ -10,6 +10,8 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList, PyTuple};
 
 use crate::attitude::{wire_term_rows, PySpinalStep};
+use rdm_core::firmware::can_master::{WORD_VALUE_MAX, WORD_VALUE_MIN};
+
 use crate::can_master::CanMaster;
 
 /// What a subscriber slot's frames are (the `kinds` table, one byte per subscriber index).
@@ -132,10 +134,6 @@ fn decode(kind: Kind, bytes: &[u8]) -> Option<Command> {
     p.done().then_some(command)
 }
 
-/// Bounds of a Neuron servo word (`rdm.protocol.neuron.servo.WORD_VALUE_MIN/MAX`).
-const WORD_MIN: i64 = -16384;
-const WORD_MAX: i64 = 16383;
-
 /// The `(slave, servo)` pairs of `index` in the master's servo order, when
 /// `SpinalServoBridge._targets_in_one_call` would take them all: as many indices as angles,
 /// at least one, every index a servo and every angle a servo word. None otherwise.
@@ -143,20 +141,16 @@ fn servo_targets(master: &CanMaster, index: &[u8], angles: &[i16]) -> Option<Vec
     if index.len() != angles.len() || index.is_empty() {
         return None;
     }
-    let mut keys: Vec<(u8, usize)> = Vec::with_capacity(32);
-    for n in master.core_ref().neurons() {
-        keys.extend((0..n.servos().len()).map(|i| (n.slave, i)));
-    }
     index
         .iter()
         .zip(angles)
         .map(|(&i, &value)| {
-            let (slave, servo) = *keys.get(usize::from(i))?;
-            let value = i64::from(value);
-            if !(WORD_MIN..=WORD_MAX).contains(&value) {
+            let (slave, servo) = master.servo_key_iter().nth(usize::from(i))?;
+            let value = i32::from(value);
+            if !(WORD_VALUE_MIN..=WORD_VALUE_MAX).contains(&value) {
                 return None;
             }
-            Some((slave, u8::try_from(servo).ok()?, value as i32))
+            Some((slave, u8::try_from(servo).ok()?, value))
         })
         .collect()
 }

@@ -47,11 +47,6 @@ from rdm.protocol.rosserial.framing import (
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 from rdm.protocol.rosserial.services import PendingCall, RemoteService, ServiceError
 
-try:
-    from rdm._rdm import rosserial_frame as _native_frame
-except ImportError:  # an extension built before it: encode_frame only
-    _native_frame = None
-
 _TIME_ID = int(C.TopicId.TIME)  # plain ints: compared for every received frame
 _LOG_ID = int(C.TopicId.LOG)
 
@@ -174,17 +169,14 @@ class ServerSession:
         return self._send_payload(topic, remote, payload)
 
     def try_publish_payload(self, topic: str, payload: bytes) -> bool:
-        """:meth:`publish_payload` where it succeeds: the same frame queued (built in one
-        Rust call, ``rdm._rdm.rosserial_frame``), True. False, with nothing queued or
-        counted, where it would raise or the payload is not ``bytes``: the caller then calls
-        :meth:`publish_payload`, which counts and raises as always."""
+        """:meth:`publish_payload` without its refusals: the same frame queued, True; False,
+        with nothing queued or counted, for a topic not negotiated or a payload over the
+        device's buffer (the caller then calls :meth:`publish_payload`, which counts and
+        raises as always)."""
         remote = self.outbound.get(topic)
-        if remote is None or _native_frame is None or len(payload) > remote.buffer_size:
+        if remote is None or len(payload) > remote.buffer_size:
             return False
-        frame = _native_frame(remote.topic_id, payload)
-        if frame is None:
-            return False
-        self._tx.append(frame)
+        self._tx.append(encode_frame(remote.topic_id, payload))
         return True
 
     def _send_payload(self, topic: str, remote: Any, payload: bytes) -> int:
