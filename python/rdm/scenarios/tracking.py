@@ -23,6 +23,12 @@ true foot pose, position averaged over the ``PRE_S`` before the motion, orientat
 Position error = true end-effector position (MuJoCo) - target (world axes); attitude error =
 the rotation vector of ``R_true R_ref^T`` (world axes; for small errors the roll, pitch, yaw
 errors, without the ZYX gimbal singularity). RMSE over the motion and ``AFTER_S`` after it.
+
+Resolution floor. The servo goals cross the wire as encoder counts (``servo/target_states``,
+1.53 mrad for a Dynamixel X), so even ideal servos, on their goals at once and without sag,
+put the end effector at the plan rounded to counts. ``StageErrors.att_floor_rmse`` /
+``pos_floor_rmse`` are the RMSE of that pose against the plan, over the same window and axes
+(docs/servolead.md): what no servo at this resolution can go below.
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from rdm.model import Robot
+from rdm.nodes.onboard_config import ServoMap
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels, plot_tracking_errors
 
@@ -205,6 +212,23 @@ class StageErrors:
     root_p: np.ndarray  # root position used for the target [m]
     root_r: np.ndarray  # root orientation used for the target
     joint_lag_s: np.ndarray  # q1..q6: how far the true joints trail the plan [s] (NaN: still)
+    #: RMSE of the plan rounded to encoder counts against the plan (ideal servos' floor)
+    pos_floor_rmse: np.ndarray
+    att_floor_rmse: np.ndarray
+
+
+def goal_resolution(q: np.ndarray, servo_map: ServoMap) -> np.ndarray:
+    """Joint paths ``q`` (n, n_q) as the servos are told them: each joint's goal rounded to an
+    encoder count as the onboard node writes ``servo/target_states`` (``round(zero + sign q /
+    scale)``, half to even), back in rad. Joints without a servo stay as they are."""
+    out = np.array(q, dtype=float)
+    n = min(out.shape[1], servo_map.n_joints)
+    zero = np.asarray(servo_map.zero_point[:n], dtype=float)
+    sign = np.asarray(servo_map.angle_sign[:n], dtype=float)
+    scale = np.asarray(servo_map.angle_scale[:n], dtype=float)
+    raw = np.rint(zero + sign * out[:, :n] / scale)
+    out[:, :n] = sign * (raw - zero) * scale
+    return out
 
 
 def ee_targets(
@@ -231,7 +255,8 @@ def _wxyz_to_rot(q: np.ndarray) -> Rotation:
 
 
 def stage_errors(stack: Stack, robot: Robot, plan: StagePlan | None) -> StageErrors | None:
-    """End-effector errors against the planned pose over [motion start, end + AFTER_S]."""
+    """End-effector errors against the planned pose over [motion start, end + AFTER_S], and
+    the floor the servos' goal resolution sets over the same window."""
     if plan is None:
         return None
     a = truth_arrays(stack)
@@ -242,14 +267,20 @@ def stage_errors(stack: Stack, robot: Robot, plan: StagePlan | None) -> StageErr
         return None
     root_p = a["foot"][pre].mean(axis=0)
     root_r = _wxyz_to_rot(a["quat"][pre][-1]).as_matrix()[0]
-    p_ref, r_ref = ee_targets(robot, root_p, root_r, plan_at(plan.points, t[win]))
+    q_plan = plan_at(plan.points, t[win])
+    p_ref, r_ref = ee_targets(robot, root_p, root_r, q_plan)
+    smap = stack.onboard.config.servo_map
+    assert smap is not None  # the node fills in the default map
+    p_fl, r_fl = ee_targets(robot, root_p, root_r, goal_resolution(q_plan, smap))
     times, qs = plan_arrays(plan.points)
     lags = joint_lags(t[win], a["q"][win, :6], times, qs[:, :6])
     ee_q = np.array([g.end_effector_quaternion for g, w in zip(stack.truth, win, strict=True) if w])
     pos_err = a["ee"][win] - p_ref
     from scipy.spatial.transform import Rotation
 
-    att_err = (_wxyz_to_rot(ee_q) * Rotation.from_matrix(r_ref).inv()).as_rotvec()
+    r_ref_inv = Rotation.from_matrix(r_ref).inv()
+    att_err = (_wxyz_to_rot(ee_q) * r_ref_inv).as_rotvec()
+    att_floor = (Rotation.from_matrix(r_fl) * r_ref_inv).as_rotvec()
     return StageErrors(
         t=t[win],
         pos_err=pos_err,
@@ -263,6 +294,8 @@ def stage_errors(stack: Stack, robot: Robot, plan: StagePlan | None) -> StageErr
         root_p=root_p,
         root_r=root_r,
         joint_lag_s=lags,
+        pos_floor_rmse=np.sqrt(np.mean((p_fl - p_ref) ** 2, axis=0)),
+        att_floor_rmse=np.sqrt(np.mean(att_floor**2, axis=0)),
     )
 
 
@@ -278,6 +311,11 @@ def metrics_of(stack: Stack, errs: dict[str, StageErrors | None]) -> list[Metric
         for k, ax in enumerate(ANGLES):
             v = float(e.att_rmse[k]) if e else nan
             ms.append(Metric(f"{stage}: EE attitude RMSE {ax}", v, paper[3 + k], "rad", "info"))
+        for k, ax in enumerate(ANGLES):
+            # ideal servos on their goals: the plan rounded to encoder counts (module doc)
+            v = float(e.att_floor_rmse[k]) if e else nan
+            name = f"{stage}: EE attitude RMSE {ax}, floor at one encoder count"
+            ms.append(Metric(name, v, paper[3 + k], "rad", "info"))
         ms.append(
             Metric(
                 f"{stage}: max |EE position error|",
@@ -431,6 +469,9 @@ def run(
                 "root_std": e.root_std.tolist(),
                 # what is left of the joints' lag behind the plan (q1..q6; NaN: not moved)
                 "joint_lag_s": e.joint_lag_s.tolist(),
+                # ideal servos at the wire's goal resolution (module doc)
+                "pos_floor_rmse": e.pos_floor_rmse.tolist(),
+                "att_floor_rmse": e.att_floor_rmse.tolist(),
             }
     result = ScenarioResult("tracking", stack, metrics_of(stack, errs), facts)
     result.errors = errs  # type: ignore[attr-defined]
