@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import pytest
 from fed_byte_link import FedByteLink
-from onboard_rig import REG, Rig, assert_same_servo_state, servo_readings
+from onboard_rig import REG, assert_same_servo_state, servo_readings, shadowed_rig
 
 from rdm.nodes.onboard import OnboardNode, _four_axis_payload, servo_states_decodes
 from rdm.nodes.onboard_config import OnboardConfig
@@ -311,42 +311,17 @@ def test_direct_payloads_are_the_codec_bytes():
             four.encode(four.new(angles=list(bad_angles), base_thrust=bad_thrust))
 
 
-class _Tee:
-    """The fast node's UART: what it reads is handed to the plain node too."""
-
-    def __init__(self, link) -> None:
-        self.link, self.read, self.out = link, [], []
-
-    def read_available(self) -> bytes:
-        data = self.link.read_available()
-        self.read.append(data)
-        return data
-
-    def write(self, data: bytes) -> int:
-        self.out.append(bytes(data))
-        return self.link.write(data)
-
-    @property
-    def port(self):
-        return self.link.port
-
-
 def test_node_fast_paths_match_plain_over_a_flight():
     """Fast node against Spinal (real ClientSession, scripted IMU/servos/acks); a node with
     every fast path of this round off ticks on the same bytes and inputs: the same UART
     bytes every tick, counters, commands and session counters."""
     cfg = OnboardConfig(lqi_every=1)
-    plain_link = FedByteLink()
-    plain = OnboardNode(plain_link, config=cfg)
-    plain.raw_rx, plain.direct_tx = False, False
-    plain.session.deferred.clear()
-    tee: list[_Tee] = []
 
-    def factory(uart, _foot):
-        tee.append(_Tee(uart))
-        return OnboardNode(tee[0], config=cfg)
+    def plain_paths(node: OnboardNode) -> None:
+        node.raw_rx, node.direct_tx = False, False
+        node.session.deferred.clear()
 
-    rig = Rig(factory)
+    rig, plain = shadowed_rig(cfg, plain_paths)
     try:
         fast = rig.node
         assert fast.raw_rx and fast.session.deferred
@@ -371,15 +346,6 @@ def test_node_fast_paths_match_plain_over_a_flight():
             if 1.2 < t < 1.6:  # servos moving: fresh readings
                 rig.servo_q = q + rng.normal(scale=0.01, size=q.size)
 
-        def after(t: float) -> None:
-            plain_link.pending = b"".join(tee[0].read)
-            tee[0].read.clear()
-            plain.tick(t)
-            assert b"".join(plain_link.written) == b"".join(tee[0].out)
-            plain_link.written.clear()
-            tee[0].out.clear()
-
-        rig.after_spin = after
         rig.run(0.0, 3.0, each=inputs)
         assert fast.arming.flying and fast.published["four_axes/command"] > 50
         assert fast.published["servo/target_states"] > 50 and fast.published["rpy/gain"] > 50

@@ -20,7 +20,7 @@ import struct
 import numpy as np
 import pytest
 from fed_byte_link import FedByteLink
-from onboard_rig import Rig
+from onboard_rig import shadowed_rig
 
 from rdm.control.attitude import gains_to_wire_terms
 from rdm.control.lqi import LqiResult, LqiSynthesizer
@@ -203,41 +203,16 @@ def test_pipeline_fast_lqi_failure_branches_match_plain():
         assert fast.counts[key] > 0
 
 
-class _Tee:
-    """The fast node's UART: what it reads is handed to the plain node too."""
-
-    def __init__(self, link) -> None:
-        self.link, self.read, self.out = link, [], []
-
-    def read_available(self) -> bytes:
-        data = self.link.read_available()
-        self.read.append(data)
-        return data
-
-    def write(self, data: bytes) -> int:
-        self.out.append(bytes(data))
-        return self.link.write(data)
-
-    @property
-    def port(self):
-        return self.link.port
-
-
 def test_node_fast_lqi_matches_plain_over_a_flight():
     """A node with ``fast_lqi`` against one with the plain LQI path ticking on the same
     Spinal bytes (arming, flight, perching on/off, moving servos): identical UART bytes
     every tick, counters and commands."""
     cfg = OnboardConfig(lqi_every=1)
-    plain_link = FedByteLink()
-    plain = OnboardNode(plain_link, config=cfg)
-    plain.control.fast_lqi = False
-    tee: list[_Tee] = []
 
-    def factory(uart, _foot):
-        tee.append(_Tee(uart))
-        return OnboardNode(tee[0], config=cfg)
+    def plain_lqi(node: OnboardNode) -> None:
+        node.control.fast_lqi = False
 
-    rig = Rig(factory)
+    rig, plain = shadowed_rig(cfg, plain_lqi)
     try:
         fast = rig.node
         assert fast.control.fast_lqi
@@ -259,15 +234,6 @@ def test_node_fast_lqi_matches_plain_over_a_flight():
             if 1.2 < t < 1.8:  # servos moving: the model and the gains change
                 rig.servo_q = q + rng.normal(scale=0.02, size=q.size)
 
-        def after(t: float) -> None:
-            plain_link.pending = b"".join(tee[0].read)
-            tee[0].read.clear()
-            plain.tick(t)
-            assert b"".join(plain_link.written) == b"".join(tee[0].out)
-            plain_link.written.clear()
-            tee[0].out.clear()
-
-        rig.after_spin = after
         rig.run(0.0, 3.0, each=inputs)
         assert fast.arming.flying and fast.published["rpy/gain"] > 50
         for a, b in (

@@ -16,12 +16,13 @@ from typing import Any
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from random_ros_messages import random_message
 
 from rdm.protocol.rosserial import codec as rc
 from rdm.protocol.rosserial import spinal_registry
 from rdm.protocol.rosserial.checksums import byte_sum
 from rdm.protocol.rosserial.client import ClientSession
-from rdm.protocol.rosserial.codec import RosDuration, RosTime
+from rdm.protocol.rosserial.codec import RosTime
 from rdm.protocol.rosserial.framing import (
     FrameError,
     FrameParser,
@@ -34,18 +35,6 @@ from rdm.protocol.rosserial.server import ServerSession
 
 FAST = spinal_registry()
 GOLDEN = json.loads((spinal_msgs_dir() / "golden_frames.json").read_text())
-INT_RANGE = {
-    "int8": (-128, 127),
-    "byte": (-128, 127),
-    "uint8": (0, 255),
-    "char": (0, 255),
-    "int16": (-32768, 32767),
-    "uint16": (0, 65535),
-    "int32": (-(2**31), 2**31 - 1),
-    "uint32": (0, 2**32 - 1),
-    "int64": (-(2**63), 2**63 - 1),
-    "uint64": (0, 2**64 - 1),
-}
 
 
 def _plain_registry() -> TypeRegistry:
@@ -67,34 +56,12 @@ def _plain_registry() -> TypeRegistry:
 PLAIN = _plain_registry()
 
 
-def _value(base: str, rng: random.Random) -> Any:
-    if base == "bool":
-        return rng.random() < 0.5
-    if base in INT_RANGE:
-        lo, hi = INT_RANGE[base]
-        return rng.choice([lo, hi, 0, rng.randint(lo, hi)])
-    if base == "float32":
-        return struct.unpack("<f", struct.pack("<f", rng.uniform(-1e6, 1e6)))[0]
-    if base == "float64":
-        return rng.choice([0.0, -0.0, 1e-300, rng.uniform(-1e9, 1e9), math.inf])
-    if base == "string":
-        return "".join(rng.choice("abc xyz") for _ in range(rng.randint(0, 5)))
-    if base == "time":
-        return RosTime(rng.randint(0, 2**32 - 1), rng.randint(0, 999_999_999))
-    if base == "duration":
-        return RosDuration(rng.randint(-(2**31), 2**31 - 1), rng.randint(0, 999_999_999))
-    return _message(FAST.msg(base), rng)
-
-
 def _message(codec: Any, rng: random.Random) -> Any:
-    values = {}
-    for f in codec.spec.fields:
-        if f.array_len is None:
-            values[f.name] = _value(f.base_type, rng)
-        else:
-            n = f.array_len if f.array_len >= 0 else rng.choice([0, 1, 4, rng.randint(0, 12)])
-            values[f.name] = [_value(f.base_type, rng) for _ in range(n)]
-    return codec.cls(**values)
+    return random_message(codec, rng, FAST, _array_len)
+
+
+def _array_len(rng: random.Random) -> int:
+    return rng.choice([0, 1, 4, rng.randint(0, 12)])
 
 
 def _outcome(call: Any) -> tuple[str, Any]:

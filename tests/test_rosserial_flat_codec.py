@@ -4,12 +4,11 @@ the bytes, values and errors of the per-field path (docs/lockstep.md, "The onboa
 
 from __future__ import annotations
 
-import math
 import random
-import struct
 from typing import Any
 
 import pytest
+from random_ros_messages import random_message
 
 from rdm.protocol.rosserial import codec as rc
 from rdm.protocol.rosserial import spinal_registry
@@ -17,18 +16,6 @@ from rdm.protocol.rosserial.codec import RosDuration, RosTime
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_msgs_dir
 
 FAST = spinal_registry()
-INT_RANGE = {
-    "int8": (-128, 127),
-    "byte": (-128, 127),
-    "uint8": (0, 255),
-    "char": (0, 255),
-    "int16": (-32768, 32767),
-    "uint16": (0, 65535),
-    "int32": (-(2**31), 2**31 - 1),
-    "uint32": (0, 2**32 - 1),
-    "int64": (-(2**63), 2**63 - 1),
-    "uint64": (0, 2**64 - 1),
-}
 
 
 @pytest.fixture(scope="module")
@@ -46,34 +33,8 @@ def plain():
     return reg
 
 
-def _value(base: str, rng: random.Random, reg) -> Any:
-    if base == "bool":
-        return rng.random() < 0.5
-    if base in INT_RANGE:
-        lo, hi = INT_RANGE[base]
-        return rng.choice([lo, hi, 0, rng.randint(lo, hi)])
-    if base == "float32":
-        return struct.unpack("<f", struct.pack("<f", rng.uniform(-1e6, 1e6)))[0]
-    if base == "float64":
-        return rng.choice([0.0, -0.0, 1e-300, rng.uniform(-1e9, 1e9), math.inf])
-    if base == "string":
-        return "".join(rng.choice("abc xyz") for _ in range(rng.randint(0, 5)))
-    if base == "time":
-        return RosTime(rng.randint(0, 2**32 - 1), rng.randint(0, 999_999_999))
-    if base == "duration":
-        return RosDuration(rng.randint(-(2**31), 2**31 - 1), rng.randint(0, 999_999_999))
-    return _message(reg.msg(base), rng, reg)
-
-
 def _message(codec, rng: random.Random, reg) -> Any:
-    values = {}
-    for f in codec.spec.fields:
-        if f.array_len is None:
-            values[f.name] = _value(f.base_type, rng, reg)
-        else:
-            n = f.array_len if f.array_len >= 0 else rng.randint(0, 3)
-            values[f.name] = [_value(f.base_type, rng, reg) for _ in range(n)]
-    return codec.cls(**values)
+    return random_message(codec, rng, reg, lambda r: r.randint(0, 3))
 
 
 def test_flat_layout_covers_the_hot_types():
