@@ -71,19 +71,39 @@ _NAN2 = np.full(2, np.nan)
 _NAN2.flags.writeable = False
 
 
+def _dot3(a: np.ndarray, b: np.ndarray) -> float:
+    """``a @ b`` of two float64 3-vectors summed left to right, ``(a0 b0 + a1 b1) + a2 b2``.
+    numpy's ``@`` may go through BLAS, whose kernels on some CPUs fuse a product into the
+    sum (one rounding less) or sum in another order; this order is the one every form of the
+    measurement and the Rust core share, on any machine."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return a0 * b0 + a1 * b1 + a2 * b2
+
+
+def _t_mul(m: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``m.T @ v`` for a 3x3 ``m`` and a 3-vector, each component summed over ``m``'s rows
+    in order (:func:`_dot3`'s order, not BLAS's)."""
+    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = m.tolist()
+    v0, v1, v2 = v.tolist()
+    return np.array(
+        (a0 * v0 + b0 * v1 + c0 * v2, a1 * v0 + b1 * v1 + c1 * v2, a2 * v0 + b2 * v1 + c2 * v2)
+    )
+
+
 def _yaw_about(normal: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> float:
     """Angle of the rotation r0 -> r1 about ``normal`` (x axes projected on the plane);
     :func:`_yaw_about_plain` with the cross product of :func:`_cross3`."""
-    x0 = r0[:, 0] - normal * (r0[:, 0] @ normal)
-    x1 = r1[:, 0] - normal * (r1[:, 0] @ normal)
-    return math.atan2(float(normal @ _cross3(x0, x1)), float(x0 @ x1))
+    x0 = r0[:, 0] - normal * _dot3(r0[:, 0], normal)
+    x1 = r1[:, 0] - normal * _dot3(r1[:, 0], normal)
+    return math.atan2(_dot3(normal, _cross3(x0, x1)), _dot3(x0, x1))
 
 
 def _yaw_about_plain(normal: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> float:
     """:func:`_yaw_about` with ``np.cross`` (the reference)."""
-    x0 = r0[:, 0] - normal * (r0[:, 0] @ normal)
-    x1 = r1[:, 0] - normal * (r1[:, 0] @ normal)
-    return math.atan2(float(normal @ np.cross(x0, x1)), float(x0 @ x1))
+    x0 = r0[:, 0] - normal * _dot3(r0[:, 0], normal)
+    x1 = r1[:, 0] - normal * _dot3(r1[:, 0], normal)
+    return math.atan2(_dot3(normal, np.cross(x0, x1)), _dot3(x0, x1))
 
 
 def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -249,7 +269,7 @@ class FootContactTracker:
         pb = self._plate_body
         rot = xmat[pb].reshape(3, 3)
         # The plain form's -(rot.T @ zeros) for the force and the torque: one product.
-        force = -(rot.T @ _ZEROS3)
+        force = -_t_mul(rot, _ZEROS3)
         torque = force.copy()
         if self._anchor_pos is not None or self._last_contact_time != -math.inf:
             self._track(data, False)
@@ -307,11 +327,11 @@ class FootContactTracker:
         self, data: mujoco.MjData
     ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """:meth:`measure_contacts_arrays` with the per-contact sums in Python floats: the
-        contact-frame products (``frame.T @ buf``) stay numpy's, everything after them is
-        the same IEEE operations in the same order on floats (the cross product as numpy
-        writes it: ``a1 * b2 - a2 * b1``, ...), so the same bits; sums holding a NaN (NaN
-        payloads could differ) take :meth:`measure_contacts_arrays` (tests/
-        test_truthlog_truth.py, tests/test_plant_fast_paths2.py)."""
+        contact-frame products (``frame.T @ buf``) and every later sum are the same IEEE
+        operations in the same order on floats (the products as :func:`_t_mul` orders them,
+        the cross product as numpy writes it: ``a1 * b2 - a2 * b1``, ...), so the same bits;
+        sums holding a NaN (NaN payloads could differ) take :meth:`measure_contacts_arrays`
+        (tests/test_truthlog_truth.py, tests/test_plant_fast_paths2.py)."""
         self._check_view(data)
         m = self._model
         pb = self._plate_body
@@ -337,9 +357,9 @@ class FootContactTracker:
             else:
                 continue
             mujoco.mj_contactForce(m, data, i, buf)
-            frame_t = frames[i].reshape(3, 3).T
-            f0, f1, f2 = (frame_t @ head).tolist()
-            t0, t1, t2 = (frame_t @ tail).tolist()
+            frame = frames[i].reshape(3, 3)
+            f0, f1, f2 = _t_mul(frame, head).tolist()
+            t0, t1, t2 = _t_mul(frame, tail).tolist()
             f0, f1, f2 = sign * f0, sign * f1, sign * f2
             if positions is None:
                 positions = contact.pos.tolist()
@@ -361,11 +381,11 @@ class FootContactTracker:
         if any(v != v for v in sums):
             return self.measure_contacts_arrays(data)
         rot = data.xmat[pb].reshape(3, 3)
-        force = -(rot.T @ np.array((fx, fy, fz)))
-        torque = -(rot.T @ np.array((tx, ty, tz)))
+        force = -_t_mul(rot, np.array((fx, fy, fz)))
+        torque = -_t_mul(rot, np.array((tx, ty, tz)))
         self._track(data, points > 0)
         zmp = (
-            (rot.T @ (np.array((cx, cy, cz)) / normal_sum))[:2]
+            _t_mul(rot, np.array((cx, cy, cz)) / normal_sum)[:2]
             if normal_sum > 0
             else np.full(2, np.nan)
         )
@@ -410,8 +430,8 @@ class FootContactTracker:
                 continue
             mujoco.mj_contactForce(m, data, i, buf)
             frame = frames[i].reshape(3, 3)
-            f = sign * (frame.T @ buf[:3])
-            t = sign * (frame.T @ buf[3:])
+            f = sign * _t_mul(frame, buf[:3])
+            t = sign * _t_mul(frame, buf[3:])
             pos = positions[i]
             force_w += f
             torque_w += t + np.cross(pos - origin, f)
@@ -419,10 +439,10 @@ class FootContactTracker:
             cop_num += n * (pos - origin)
             normal_sum += n
             points += 1
-        force = -(rot.T @ force_w)
-        torque = -(rot.T @ torque_w)
+        force = -_t_mul(rot, force_w)
+        torque = -_t_mul(rot, torque_w)
         self._track(data, points > 0)
-        zmp = (rot.T @ (cop_num / normal_sum))[:2] if normal_sum > 0 else np.full(2, np.nan)
+        zmp = _t_mul(rot, cop_num / normal_sum)[:2] if normal_sum > 0 else np.full(2, np.nan)
         if self._anchor_pos is None or self._anchor_rot is None:
             return points, force, torque, zmp, np.zeros(2), 0.0
         anchor_rot = self._anchor_rot
@@ -460,8 +480,8 @@ class FootContactTracker:
                 continue
             mujoco.mj_contactForce(m, data, i, self._buf)
             frame = c.frame.reshape(3, 3)  # rows: normal, tangent1, tangent2
-            f = sign * (frame.T @ self._buf[:3])
-            t = sign * (frame.T @ self._buf[3:])
+            f = sign * _t_mul(frame, self._buf[:3])
+            t = sign * _t_mul(frame, self._buf[3:])
             force_w += f
             torque_w += t + np.cross(c.pos - origin, f)
             n = abs(self._buf[0])
@@ -469,10 +489,10 @@ class FootContactTracker:
             normal_sum += n
             points += 1
         # Report what the robot applies to the environment, in the foot frame.
-        force = -(rot.T @ force_w)
-        torque = -(rot.T @ torque_w)
+        force = -_t_mul(rot, force_w)
+        torque = -_t_mul(rot, torque_w)
         self._track(data, points > 0)
-        zmp = (rot.T @ (cop_num / normal_sum))[:2] if normal_sum > 0 else np.full(2, np.nan)
+        zmp = _t_mul(rot, cop_num / normal_sum)[:2] if normal_sum > 0 else np.full(2, np.nan)
         if self._anchor_pos is None or self._anchor_rot is None:
             return points, force, torque, zmp, np.zeros(2), 0.0
         anchor_rot = self._anchor_rot
