@@ -176,7 +176,8 @@ def median_run(runs: list[Run]) -> Run:
     return sorted(runs, key=lambda r: r[1])[(len(runs) - 1) // 2]
 
 
-#: Iterations of :func:`reference_ms`'s loop (~0.1 s on this machine).
+#: Iterations of :func:`reference_ms`'s loop (~0.1 s on the machine of sessions 13-17,
+#: ~30 ms on session 18's).
 REFERENCE_ITERATIONS = 1_000_000
 
 
