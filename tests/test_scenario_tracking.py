@@ -189,3 +189,19 @@ def test_resolution_floor_matches_mujoco_and_exceeds_table_x_roll_pitch(run):
     paper = np.asarray(tracking.PAPER_RMSE_PERCHED[3:5])
     assert np.all(pe.att_floor_rmse[:2] > paper), (pe.att_floor_rmse, paper)
     assert np.all(pe.att_rmse[:2] > 0.5 * pe.att_floor_rmse[:2])
+
+
+def test_servo_option_builds_the_plant_with_those_servos(tmp_path):
+    """``tracking.run(..., servo=...)`` (the stiff-servo check of docs/servolead.md) puts
+    those gains on every joint servo of the MuJoCo model and records them."""
+    from rdm.plant.servo import ServoParams
+
+    res = tracking.run(
+        tmp_path, duration=0.2, log=False, plots=False, servo=ServoParams(kp=600.0, kv=20.0)
+    )
+    plant = res.stack.plant
+    act = np.asarray(plant._servo_act)
+    assert act.size == plant.model.njnt - 1  # every joint but the free root
+    assert np.all(plant.model.actuator_gainprm[act, 0] == 600.0)
+    assert np.all(plant.model.actuator_biasprm[act, 1:3] == [-600.0, -20.0])
+    assert res.facts["servo"] == {"kp": 600.0, "kv": 20.0}

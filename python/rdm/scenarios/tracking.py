@@ -33,7 +33,7 @@ put the end effector at the plan rounded to counts. ``StageErrors.att_floor_rmse
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -46,6 +46,8 @@ from rdm.sim.plots import plot_panels, plot_tracking_errors
 
 if TYPE_CHECKING:
     from scipy.spatial.transform import Rotation
+
+    from rdm.plant.servo import ServoParams
 
 from .common import (
     ScenarioResult,
@@ -425,17 +427,22 @@ def run(
     flight_posture: str = "straight",
     flight_gains: dict | str | None = "posture",
     servo_lead_s: float | None = None,
+    servo: ServoParams | None = None,
 ) -> ScenarioResult:
     """Run the scenario: it stops after the perched stage, or at ``duration``.
     ``flight_gains``: position gains of the flight stage ("posture": ``FLIGHT_STAGE_GAINS``
     of ``flight_posture``; None: the run's configuration; a dict: those).
     ``servo_lead_s``: feed-forward lead of the servo goals (None: the scenarios' identified
     lead, ``common.scenario_servo_lead()``; 0: the plan at its own time, as the paper's
-    planner sends it; docs/servolead.md)."""
+    planner sends it; docs/servolead.md).
+    ``servo``: the simulated joint servos (None: ``StackOptions.servo``, kp 150 N m/rad);
+    e.g. stiffer ones show how much of the perched error is their static sag."""
     if servo_lead_s is None:
         servo_lead_s = scenario_servo_lead()
     onboard = onboard_config(servo_lead_s=servo_lead_s)
     opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard)
+    if servo is not None:
+        opts = replace(opts, servo=servo)
     robot = Robot.default()
     if flight_gains == "posture":
         flight_gains = FLIGHT_STAGE_GAINS.get(flight_posture)
@@ -458,6 +465,8 @@ def run(
     }
     if flight_gains is not None:
         facts["flight_gains"] = dict(flight_gains)
+    if servo is not None:
+        facts["servo"] = {"kp": servo.kp, "kv": servo.kv}
     for stage, e in errs.items():
         if e is not None:
             facts[stage] = {
