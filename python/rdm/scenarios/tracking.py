@@ -28,7 +28,8 @@ Resolution floor. The servo goals cross the wire as encoder counts (``servo/targ
 1.53 mrad for a Dynamixel X), so even ideal servos, on their goals at once and without sag,
 put the end effector at the plan rounded to counts. ``StageErrors.att_floor_rmse`` /
 ``pos_floor_rmse`` are the RMSE of that pose against the plan, over the same window and axes
-(docs/servolead.md): what no servo at this resolution can go below.
+(docs/servolead.md). Real joints are not on their goals, so a run can land below this floor
+by chance (a sag that cancels part of a rounding), not by a margin the rounding leaves open.
 """
 
 from __future__ import annotations
