@@ -46,6 +46,13 @@ def _rotvec_between(q_a, q_b):
     return rv
 
 
+def _planned_q(plan):
+    """q(t) of a stage's plan: linear between the planned samples, as the node interpolates."""
+    times = np.array([p[0] for p in plan.points])
+    qs = np.array([p[1] for p in plan.points])
+    return lambda t: np.array([np.interp(t, times, qs[:, j]) for j in range(qs.shape[1])])
+
+
 def _mujoco_errors(res, a, plan):
     """Position and attitude errors of the true EE against MuJoCo FK of the planned q (linear
     between the planned samples, as the node interpolates), root as before the motion."""
@@ -54,12 +61,10 @@ def _mujoco_errors(res, a, plan):
     root_p = a["foot"][pre].mean(axis=0)
     root_q = np.asarray(a["quat"][pre][-1], dtype=float)
     root_r = _mat(root_q)
-    times = np.array([p[0] for p in plan.points])
-    qs = np.array([p[1] for p in plan.points])
+    planned = _planned_q(plan)
     pos, att = [], []
     for g in (g for g, w in zip(res.stack.truth, win, strict=True) if w):
-        q = np.array([np.interp(g.time, times, qs[:, j]) for j in range(qs.shape[1])])
-        fk.reset(q0=q)
+        fk.reset(q0=planned(g.time))
         ref = fk.ground_truth()  # the foot is welded at the world origin, level
         assert np.allclose(ref.base_position, 0.0)
         assert np.allclose(ref.base_quaternion, [1, 0, 0, 0])
@@ -168,22 +173,25 @@ def test_resolution_floor_matches_mujoco_and_exceeds_table_x_roll_pitch(run):
 
     for stage in ("flight", "perched"):
         plan = res.script.plans[stage]
-        _, win = _window(a, plan)
-        times = np.array([p[0] for p in plan.points])
-        qs = np.array([p[1] for p in plan.points])
-        att = []
+        pre, win = _window(a, plan)
+        planned = _planned_q(plan)
+        pos, att = [], []
         for t in a["t"][win]:
-            q = np.array([np.interp(t, times, qs[:, j]) for j in range(qs.shape[1])])
+            q = planned(t)
             fk.reset(q0=q)
-            ref = np.asarray(fk.ground_truth().end_effector_quaternion, dtype=float)
+            ref = fk.ground_truth()
             fk.reset(q0=counts(q))
-            att.append(_rotvec_between(fk.ground_truth().end_effector_quaternion, ref))
+            told = fk.ground_truth()
+            pos.append(
+                np.asarray(told.end_effector_position) - np.asarray(ref.end_effector_position)
+            )
+            att.append(_rotvec_between(told.end_effector_quaternion, ref.end_effector_quaternion))
         # the floor in the foot frame; world axes differ by the root's rotation
-        floor_foot = np.array(att)
-        root_q = np.asarray(a["quat"][_window(a, plan)[0]][-1], dtype=float)
-        floor_world = floor_foot @ _mat(root_q).T
+        root_r = _mat(np.asarray(a["quat"][pre][-1], dtype=float))
+        pos_world, att_world = np.array(pos) @ root_r.T, np.array(att) @ root_r.T
         ours = res.errors[stage]
-        assert np.allclose(ours.att_floor_rmse, _rmse(floor_world), rtol=1e-6, atol=1e-9), stage
+        assert np.allclose(ours.att_floor_rmse, _rmse(att_world), rtol=1e-6, atol=1e-9), stage
+        assert np.allclose(ours.pos_floor_rmse, _rmse(pos_world), rtol=1e-6, atol=1e-9), stage
         assert 2e-4 < np.linalg.norm(ours.att_floor_rmse) < 2e-3  # about one count (1.53 mrad)
     pe = res.errors["perched"]
     paper = np.asarray(tracking.PAPER_RMSE_PERCHED[3:5])
@@ -194,6 +202,8 @@ def test_resolution_floor_matches_mujoco_and_exceeds_table_x_roll_pitch(run):
 def test_servo_option_builds_the_plant_with_those_servos(tmp_path):
     """``tracking.run(..., servo=...)`` (the stiff-servo check of docs/servolead.md) puts
     those gains on every joint servo of the MuJoCo model and records them."""
+    from dataclasses import asdict
+
     from rdm.plant.servo import ServoParams
 
     res = tracking.run(
@@ -204,4 +214,4 @@ def test_servo_option_builds_the_plant_with_those_servos(tmp_path):
     assert act.size == plant.model.njnt - 1  # every joint but the free root
     assert np.all(plant.model.actuator_gainprm[act, 0] == 600.0)
     assert np.all(plant.model.actuator_biasprm[act, 1:3] == [-600.0, -20.0])
-    assert res.facts["servo"] == {"kp": 600.0, "kv": 20.0}
+    assert res.facts["servo"] == asdict(ServoParams(kp=600.0, kv=20.0))

@@ -34,7 +34,7 @@ by chance (a sag that cancels part of a rounding), not by a margin the rounding 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -221,16 +221,13 @@ class StageErrors:
 
 
 def goal_resolution(q: np.ndarray, servo_map: ServoMap) -> np.ndarray:
-    """Joint paths ``q`` (n, n_q) as the servos are told them: each joint's goal rounded to an
-    encoder count as the onboard node writes ``servo/target_states`` (``round(zero + sign q /
-    scale)``, half to even), back in rad. Joints without a servo stay as they are."""
+    """Joint paths ``q`` (n, n_q) as the servos are told them: each joint's goal in the ticks
+    the onboard node writes to ``servo/target_states`` (``ServoMap.to_raw``), back in rad
+    (``ServoMap.to_rad``). Joints without a servo stay as they are."""
     out = np.array(q, dtype=float)
     n = min(out.shape[1], servo_map.n_joints)
-    zero = np.asarray(servo_map.zero_point[:n], dtype=float)
-    sign = np.asarray(servo_map.angle_sign[:n], dtype=float)
-    scale = np.asarray(servo_map.angle_scale[:n], dtype=float)
-    raw = np.rint(zero + sign * out[:, :n] / scale)
-    out[:, :n] = sign * (raw - zero) * scale
+    to_raw, to_rad = servo_map.to_raw, servo_map.to_rad
+    out[:, :n] = [[to_rad(j, to_raw(j, v)) for j, v in enumerate(row[:n])] for row in out.tolist()]
     return out
 
 
@@ -467,7 +464,7 @@ def run(
     if flight_gains is not None:
         facts["flight_gains"] = dict(flight_gains)
     if servo is not None:
-        facts["servo"] = {"kp": servo.kp, "kv": servo.kv}
+        facts["servo"] = asdict(servo)
     for stage, e in errs.items():
         if e is not None:
             facts[stage] = {
