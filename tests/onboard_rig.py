@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from rdm.control.attitude import AttitudeController, CommandRejectedError
 from rdm.link.serial import open_pty_pair
 from rdm.protocol import leptrino as lp
 from rdm.protocol.rosserial import spinal_registry
@@ -18,6 +19,7 @@ from rdm.protocol.rosserial.events import MessageReceived
 
 REG = spinal_registry()
 TICK = 4096 / (2 * np.pi)
+G = 9.80665
 
 
 def raw_ticks(q: np.ndarray) -> list[int]:
@@ -44,6 +46,9 @@ class Rig:
         self._read = 0
         self.auto_ack = True
         self.imu_quaternion = [0.0, 0.0, 0.0, 1.0]
+        self.imu_acc = [0.0, 0.0, 9.8]
+        #: Spinal publishes nothing while True (a silent or unplugged flight controller)
+        self.silent = False
         self.servo_q: np.ndarray | None = None
         self.servo_extra: list[tuple[int, int]] = []
         self.foot_raw: tuple[int, ...] | None = None
@@ -86,8 +91,10 @@ class Rig:
                     self.publish("flight_config_ack", ack)
         if self.after_spin is not None:
             self.after_spin(t)
-        if self.spinal.configured:
-            imu = REG.msg("spinal/Imu").new(quaternion=list(self.imu_quaternion), acc=[0, 0, 9.8])
+        if self.spinal.configured and not self.silent:
+            imu = REG.msg("spinal/Imu").new(
+                quaternion=list(self.imu_quaternion), acc=list(self.imu_acc)
+            )
             self.publish("imu", imu)
             if self.servo_q is not None:
                 st = REG.msg("spinal/ServoState")
@@ -101,7 +108,7 @@ class Rig:
                 self.publish("servo/states", REG.msg("spinal/ServoStates").new(servos=servos))
             self.publish("battery_voltage_status", REG.msg("std_msgs/Float32").new(data=24.5))
         out = self.spinal.take_output()
-        if out:
+        if out and not self.silent:
             self.peer_link.write(out)
             wait_in(self.node_link.port, len(out))
         if self.foot_peer_link is not None:
@@ -134,6 +141,86 @@ class Rig:
 
     def count(self, topic: str, t0: float, t1: float) -> int:
         return sum(1 for t, _ in self.by_topic[topic] if t0 <= t < t1)
+
+
+class VerticalPlant:
+    """A point mass on a floor at z = 0 under the rotors' summed thrust (vertical only):
+    enough physics to see a climb, a descent and a touchdown."""
+
+    def __init__(self, mass: float, z: float = 0.0) -> None:
+        self.mass, self.z, self.vz = mass, z, 0.0
+        self.specific_force = G
+
+    def step(self, dt: float, thrust: float) -> None:
+        a = thrust / self.mass - G
+        self.vz += a * dt
+        self.z += self.vz * dt
+        if self.z <= 0.0:
+            self.z, self.vz = 0.0, max(self.vz, 0.0)
+            self.specific_force = G  # the floor carries the rest
+        else:
+            self.specific_force = thrust / self.mass
+
+
+class SpinalCore:
+    """Applies the node's messages to an AttitudeController and steps it at 200 Hz; with a
+    :class:`VerticalPlant`, the rotors' thrust moves it (level, no rotation) and the rig's
+    IMU reports its specific force."""
+
+    def __init__(self, rig: Rig, plant: VerticalPlant | None = None, voltage: float = 25.2):
+        self.rig = rig
+        self.core = AttitudeController(200.0)
+        self.plant = plant
+        self.voltage = voltage
+        self.rejected = 0
+        self.now = 0.0
+        self.last_output = None
+        rig.auto_ack = False
+        rig.on_message, rig.after_spin = self.on_message, self.after_spin
+
+    def on_message(self, t: float, topic: str, m) -> None:
+        c = self.core
+        try:
+            if topic == "uav_info":
+                c.set_uav_info(m.motor_num, m.uav_model)
+            elif topic == "motor_info":
+                rows = np.array([[u.voltage, u.max_thrust, *u.polynominal] for u in m.motor_info])
+                c.set_pwm_info(
+                    m.min_pwm,
+                    m.max_pwm,
+                    m.min_thrust,
+                    m.force_landing_thrust,
+                    m.pwm_conversion_mode,
+                    rows,
+                )
+            elif topic == "flight_config_cmd":
+                c.flight_config(m.cmd, t)
+            elif topic == "rpy/gain":
+                names = ("roll_p", "roll_i", "roll_d", "pitch_p", "pitch_i", "pitch_d", "yaw_d")
+                terms = np.array([[getattr(u, n) for n in names] for u in m.motors], np.int64)
+                c.set_gains_wire(terms)
+            elif topic == "p_matrix_pseudo_inverse_inertia":
+                pinv = np.array([[u.r, u.p, u.y] for u in m.pseudo_inverse], dtype=np.int16)
+                c.set_pinv_inertia_wire(pinv, list(m.inertia))
+            elif topic == "four_axes/command":
+                c.four_axis_command(list(m.angles), np.array(m.base_thrust, dtype=float), t)
+        except CommandRejectedError:
+            self.rejected += 1
+
+    def after_spin(self, t: float) -> None:
+        for k in range(5):  # 200 Hz inside the 25 ms tick
+            self.now = t + k * 0.005
+            out = self.core.step(self.now, np.eye(3), [0.0, 0.0, 0.0], self.voltage)
+            self.last_output = out
+            if self.plant is not None:
+                # a running rotor gives at least min_thrust (the min duty); stopped: none
+                thrust = np.maximum(np.asarray(out.thrust), 1.0) if self.core.armed else [0.0]
+                self.plant.step(0.005, float(np.sum(thrust)))
+                self.rig.imu_acc = [0.0, 0.0, self.plant.specific_force]
+            for name, value in out.events:
+                if name == "ack":
+                    ack = REG.msg("std_msgs/UInt8").new(data=int(value))
+                    self.rig.publish("flight_config_ack", ack)
 
 
 def servo_readings(rng, n: int, count: int) -> list[list[tuple[int, int]]]:

@@ -7,9 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from onboard_rig import REG, Rig
+from onboard_rig import Rig, SpinalCore
 
-from rdm.control.attitude import AttitudeController, CommandRejectedError
 from rdm.model import Robot
 from rdm.nodes.onboard import OnboardNode
 from rdm.nodes.onboard_config import OnboardConfig
@@ -23,56 +22,6 @@ def sqrt_duty(f: np.ndarray) -> np.ndarray:
     p0, p1, p2 = 12.3593793002, -6.627443098, 0.07983707
     x = (-p1 + np.sqrt(p1 * p1 - 40 * p2 * (p0 - f))) / (2 * p2)
     return np.clip(x / 100, 0.59, 0.9375)
-
-
-class SpinalCore:
-    """Applies the node's messages to an AttitudeController and steps it at 200 Hz."""
-
-    def __init__(self, rig: Rig) -> None:
-        self.rig = rig
-        self.core = AttitudeController(200.0)
-        self.rejected = 0
-        self.now = 0.0
-        self.last_output = None
-
-    def on_message(self, t: float, topic: str, m) -> None:
-        c = self.core
-        try:
-            if topic == "uav_info":
-                c.set_uav_info(m.motor_num, m.uav_model)
-            elif topic == "motor_info":
-                rows = np.array([[u.voltage, u.max_thrust, *u.polynominal] for u in m.motor_info])
-                c.set_pwm_info(
-                    m.min_pwm,
-                    m.max_pwm,
-                    m.min_thrust,
-                    m.force_landing_thrust,
-                    m.pwm_conversion_mode,
-                    rows,
-                )
-            elif topic == "flight_config_cmd":
-                c.flight_config(m.cmd, t)
-            elif topic == "rpy/gain":
-                names = ("roll_p", "roll_i", "roll_d", "pitch_p", "pitch_i", "pitch_d", "yaw_d")
-                terms = np.array([[getattr(u, n) for n in names] for u in m.motors], np.int64)
-                c.set_gains_wire(terms)
-            elif topic == "p_matrix_pseudo_inverse_inertia":
-                pinv = np.array([[u.r, u.p, u.y] for u in m.pseudo_inverse], dtype=np.int16)
-                c.set_pinv_inertia_wire(pinv, list(m.inertia))
-            elif topic == "four_axes/command":
-                c.four_axis_command(list(m.angles), np.array(m.base_thrust, dtype=float), t)
-        except CommandRejectedError:
-            self.rejected += 1
-
-    def after_spin(self, t: float) -> None:
-        for k in range(5):  # 200 Hz inside the 25 ms tick
-            self.now = t + k * 0.005
-            out = self.core.step(self.now, np.eye(3), [0.0, 0.0, 0.0], 25.2)
-            self.last_output = out
-            for name, value in out.events:
-                if name == "ack":
-                    ack = REG.msg("std_msgs/UInt8").new(data=int(value))
-                    self.rig.publish("flight_config_ack", ack)
 
 
 def test_arming_and_pwm_follow_base_thrust_through_spinal_core() -> None:

@@ -11,13 +11,22 @@ sec. 1.1, which is the default):
 
 Reads never block: :meth:`SerialLink.read_available` returns what has arrived (maybe ``b""``).
 A pty ignores the baud rate and delivers at memory speed; line timing must be modelled elsewhere.
+
+A device port (``serial:/dev/...``) survives an unplug: the first read or write that fails
+(EIO once the USB adapter is gone) closes it, counts it in :attr:`SerialLink.errors`, and the
+link then tries to open the same path again every :attr:`SerialLink.reopen_s` (0.5 s) on its
+reads, counting each success in :attr:`SerialLink.reopens`. Meanwhile reads give ``b""`` and
+writes hand over nothing. A udev name such as ``/dev/flight_controller`` follows the adapter to
+its new ``ttyUSB``/``ttyACM`` node. Other links raise the ``OSError`` to their caller.
 """
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import re
+import time
 from dataclasses import dataclass
 
 import serial
@@ -71,25 +80,79 @@ def parse_serial_spec(spec: str) -> SerialSpec:
 class SerialLink:
     """A non-blocking byte pipe over one pyserial port."""
 
-    def __init__(self, port: serial.SerialBase, spec: str, peer: SerialLink | None = None) -> None:
+    #: Seconds between attempts to open a lost device port again.
+    reopen_s = 0.5
+
+    def __init__(
+        self,
+        port: serial.SerialBase,
+        spec: str,
+        peer: SerialLink | None = None,
+        device: SerialSpec | None = None,
+    ) -> None:
         self.port = port
         self.spec = spec
         self.peer = peer  # the other end of a pty pair, else None
+        #: the device this link opens again after an unplug (None: errors are raised)
+        self.device = device
+        self.errors = 0
+        self.reopens = 0
+        self._lost_at: float | None = None
+        self._closed = False
+
+    @property
+    def connected(self) -> bool:
+        """False while a lost device port waits to be opened again."""
+        return self._lost_at is None
+
+    def _lose(self, exc: OSError) -> None:
+        """A failed read or write: raise it, or (a device) close the port and retry later."""
+        self.errors += 1
+        if self.device is None:
+            raise exc
+        self._lost_at = time.monotonic()
+        with contextlib.suppress(OSError):
+            self.port.close()
+
+    def _reopen(self) -> bool:
+        assert self.device is not None and self._lost_at is not None
+        now = time.monotonic()
+        if self._closed or now - self._lost_at < self.reopen_s:
+            return False
+        self._lost_at = now
+        try:
+            self.port = _open_port(self.device.target, self.device.baudrate, url=False)
+        except (OSError, ValueError):
+            return False
+        self._lost_at = None
+        self.reopens += 1
+        return True
 
     def read_available(self) -> bytes:
         """All bytes received so far (``b""`` if none); never blocks."""
-        waiting = self.port.in_waiting
-        return self.port.read(waiting) if waiting else b""
+        if self._lost_at is not None and not self._reopen():
+            return b""
+        try:
+            waiting = self.port.in_waiting
+            return self.port.read(waiting) if waiting else b""
+        except OSError as exc:  # serial.SerialException is an OSError
+            self._lose(exc)
+            return b""
 
     def write(self, data: bytes) -> int:
         """Write ``data``; returns the number of bytes handed to the port."""
-        if not data:
+        if not data or self._lost_at is not None:
             return 0
-        written = self.port.write(data)
+        try:
+            written = self.port.write(data)
+        except OSError as exc:
+            self._lose(exc)
+            return 0
         return len(data) if written is None else int(written)
 
     def close(self) -> None:
         """Close this end (and the peer of a pty pair)."""
+        self._closed = True
         self.port.close()
         if self.peer is not None:
             peer, self.peer = self.peer, None
@@ -160,4 +223,4 @@ def open_serial(spec: str) -> SerialLink:
         port = _open_port(parsed.target, parsed.baudrate, url=parsed.kind == "url")
     except ValueError as exc:  # pyserial rejects unknown URL schemes and bad settings this way
         raise SerialSpecError(f"serial spec {spec!r}: {exc}") from exc
-    return SerialLink(port, spec)
+    return SerialLink(port, spec, device=parsed if parsed.kind == "device" else None)

@@ -41,7 +41,9 @@ from rdm.nodes.onboard_arming import ArmingSequencer, FlightState
 from rdm.nodes.onboard_calibration import GET_CALIB_DATA, ImuCalibrationReader
 from rdm.nodes.onboard_config import OnboardConfig, ServoMap
 from rdm.nodes.onboard_control import ControlCommand, ControlPipeline, Setpoint, State
+from rdm.nodes.onboard_flight import FlightMode, FlightSupervisor
 from rdm.nodes.onboard_foot import ByteLink, FootSensorReader
+from rdm.nodes.onboard_monitors import Monitors, cells_from_reference
 from rdm.protocol.rosserial.codec import RosTime
 from rdm.protocol.rosserial.events import MessageReceived, ServiceResponse, SyncLost
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
@@ -54,6 +56,8 @@ INTEGRATION_CONTROL_ON = 160
 SERVO_CACHE_SIZE = 8
 #: ``spinal/Imu`` payload from byte 20: gyro (3 float32), mag skipped, quaternion (4 float32).
 _IMU_GYRO_QUAT = struct.Struct("<3f12x4f")
+#: ``spinal/Imu`` payload from byte 8: the accelerometer (3 float32, m/s^2).
+_IMU_ACC = struct.Struct("<3f")
 _U32 = struct.Struct("<I")
 #: ``spinal/ServoStates``: stamp (8 bytes), count (uint32), 7 bytes per ``spinal/ServoState``.
 _SERVO_STATES_HEAD, _SERVO_STATE_SIZE = 12, 7
@@ -256,6 +260,21 @@ class OnboardNode:
                 config.foot_restart_s,
             )
         )
+        #: the operator layer (take-off, go-to, landing, touchdown) and the health monitors
+        self.flight = FlightSupervisor(config.flight)
+        self.monitors = Monitors(
+            config.monitors,
+            config.monitors.battery_cells
+            or cells_from_reference([float(r[0]) for r in config.pwm_info.motor_info]),
+        )
+        self._flight_setpoint: Setpoint | None = None
+        self._imu_at: float | None = None
+        self._imu_acc: list[float] | None = None
+        self._servo_at: float | None = None
+        self._servo_rx = 0
+        self._link_up_at: float | None = None
+        self._command_at: float | None = None
+        self.ground_lost = False
         self.counts: Counter[str] = Counter()
         self.published: Counter[str] = Counter()
         self.bytes_written = 0
@@ -369,6 +388,7 @@ class OnboardNode:
             self.counts["target_invalid"] += 1
             return False
         self.setpoint = Setpoint(p, v, y)
+        self.flight.manual()
         return True
 
     def set_joint_targets(self, q: Sequence[float]) -> bool:
@@ -409,14 +429,74 @@ class OnboardNode:
         """Switch between flight mode and perching mode (eq. 20's λ_perch on/off)."""
         self._perch_request = bool(on)
 
-    def arm(self) -> None:
+    def arm(self) -> str | None:
+        """Start the arming sequence; the refusal reason (battery) or None."""
+        refusal = self.monitors.arm_refusal()
+        if refusal is not None:
+            self.monitors.trip("arm_refused", refusal, self._now)
+            return refusal
         self._requests.append("arm")
+        return None
 
     def disarm(self) -> None:
+        """ARM_OFF (the motors stop at once)."""
         self._requests.append("disarm")
 
     def force_landing(self) -> None:
+        """FORCE_LANDING to Spinal; the node then descends under position control while it
+        has position feedback, else stays silent so that Spinal's own ramp acts."""
         self._requests.append("force_landing")
+
+    # ------------------------------------------------------------------ operator layer
+    def takeoff(self, height: float | None = None) -> str | None:
+        """Arm if needed, then climb ``height`` m (default ``FlightLimits.takeoff_height``)
+        above the ground z at arming; the refusal reason or None."""
+        reason = self.flight.request_takeoff(height)
+        if reason is None and self.arming.state in (FlightState.IDLE, FlightState.DISARMING):
+            reason = self.arm()
+            if reason is not None:
+                self.flight.request_land()  # drops the pending take-off
+        return reason
+
+    def land(self) -> str | None:
+        """Descend at ``FlightLimits.land_descend_rate``, detect touchdown, disarm."""
+        if self.control.perching:
+            return "perched: unperch first"
+        return self.flight.request_land()
+
+    def halt(self) -> None:
+        """ARM_OFF from any state (JSK ``halt``): the motors stop where the robot is."""
+        self.counts["halt"] += 1
+        self._requests.append("disarm")
+
+    def goto(self, position: Sequence[float], yaw: float = 0.0) -> str | None:
+        """Fly to a world position [m] and yaw [rad] along a jerk-limited path (hover only)."""
+        p, y = _vector(position, 3), _scalar(yaw)
+        if p is None or y is None:
+            self.counts["goto_invalid"] += 1
+            return "position must be 3 finite numbers and yaw finite"
+        return self.flight.request_goto(p, y, self._now)
+
+    def set_gain_profile(self, name: str) -> str | None:
+        """Switch the position gains to a named profile of ``OnboardConfig.gain_profiles``
+        ("default": ``position_gains``), bumplessly."""
+        profiles = {"default": self.config.position_gains, **self.config.gain_profiles}
+        if name not in profiles:
+            return f"unknown gain profile {name!r}; known: {sorted(profiles)}"
+        self.control.set_position_gains(dict(profiles[name]), bumpless=True)
+        return None
+
+    def on_ground_lost(self) -> None:
+        """The ground station fell silent: land in flight; perched, hold (or land, as
+        ``MonitorLimits.ground_loss_perched`` says)."""
+        self.ground_lost = True
+        self.monitors.trip("ground_lost", "no ground heartbeat", self._now)
+        self._react("ground_lost", self._now)
+
+    def on_ground_restored(self) -> None:
+        """The ground station is back (a landing it caused goes on)."""
+        self.ground_lost = False
+        self.counts["ground_restored"] += 1
 
     # ---------------------------------------------------------------------------- tick
     def tick(self, now: float) -> None:
@@ -446,7 +526,11 @@ class OnboardNode:
                 self.control.reset_integrators()
                 self._arm_z, self.integration_on_sent = None, False
         self._requests.clear()
+        if self.counts["rx:servo/states"] != self._servo_rx:
+            self._servo_rx, self._servo_at = self.counts["rx:servo/states"], now
         if self.session.outbound:  # Spinal's subscribers are known: the handshake is done
+            if self._link_up_at is None:
+                self._link_up_at = now
             if not self._announced:
                 # uav_info/motor_info once per handshake, so Spinal (motor_number > 0) accepts
                 # the gains and the pinv message before arming (assumption, docs/onboard.md)
@@ -508,6 +592,7 @@ class OnboardNode:
     def _on_event(self, event: Any) -> None:
         if isinstance(event, SyncLost):
             self.counts["sync_lost"] += 1
+            self._link_up_at = None
             self.arming.link_lost()
             self._announced = False
             self.imu_calibration.reset()
@@ -527,6 +612,7 @@ class OnboardNode:
                 self.counts["imu_invalid"] += 1
                 return
             self._imu_quat, self._imu_euler = q, None
+            self._imu_at, self._imu_acc = self._now, [float(v) for v in msg.acc]
             g = msg.gyro
             if type(g) in (tuple, list) and len(g) == 3 and all(type(v) is float for v in g):
                 if all(map(math.isfinite, g)):  # what _vector accepts; converted when read
@@ -548,7 +634,7 @@ class OnboardNode:
                 self.control.reset_integrators()
         elif event.topic == "battery_voltage_status":
             v = float(msg.data)
-            if math.isfinite(v):
+            if self.monitors.battery(v, self._now):
                 self.battery_voltage = v
             else:
                 self.counts["battery_invalid"] += 1
@@ -563,6 +649,7 @@ class OnboardNode:
             self.counts["imu_invalid"] += 1
             return
         self._imu_quat, self._imu_euler = q, None
+        self._imu_at, self._imu_acc = self._now, list(_IMU_ACC.unpack_from(payload, 8))
         g = [gx, gy, gz]
         if all(map(math.isfinite, g)):
             self._gyro_src = g
@@ -752,8 +839,66 @@ class OnboardNode:
         return (
             self._mocap is not None
             and self._mocap_stamp is not None
-            and now - self._mocap_stamp <= self.config.mocap_timeout_s
+            and now - self._mocap_stamp <= self.config.mocap_timeout_s + 1e-9
         )
+
+    def _supervise(self, now: float, dt: float) -> None:
+        """Monitors, the operator layer's setpoint and touchdown (then ARM_OFF)."""
+        flying = self.arming.flying
+        p = v = None
+        yaw = 0.0
+        if self._mocap_usable(now):
+            assert self._mocap is not None
+            p, v, y = self._mocap
+            euler = self.imu_euler
+            yaw = y if y is not None else (euler[2] if euler is not None else 0.0)
+        self._monitor(now, flying, p)
+        landing = self.arming.state is FlightState.LANDING
+        sp = self.flight.update(now, flying, landing, p, v, yaw, self.setpoint.position, dt)
+        self._flight_setpoint = None if sp is None else Setpoint(*sp)
+        if flying and self.flight.mode is FlightMode.LAND and p is None:
+            self.flight.imu_touchdown(now, self.imu_gyro, self._imu_acc, self.control.perching)
+        if self.flight.take_touchdown():
+            self.monitors.trip("touchdown", "landed: ARM_OFF", now)
+            self.arming.disarm(now)
+
+    def _monitor(self, now: float, flying: bool, position: np.ndarray | None) -> None:
+        """Freshness of Spinal's imu and the servos, the foot sensor while perched, the
+        geofence and the battery; a trip in flight lands, perched it holds."""
+        m, lim = self.monitors, self.config.monitors
+        if self._link_up_at is not None:
+            last = self._imu_at if self._imu_at is not None else self._link_up_at
+            silent = now - last > lim.imu_timeout_s + 1e-9
+            if m.stale("spinal_silent", silent, now, f"no imu for {now - last:.3f} s"):
+                self._react("spinal_silent", now)
+        if flying:
+            last = self._servo_at if self._servo_at is not None else self._link_up_at
+            stale = last is not None and now - last > lim.servo_timeout_s + 1e-9
+            if m.stale("servo_stale", stale, now, "no servo/states"):
+                self._react("servo_stale", now)
+            if position is not None:
+                outside = not self.config.flight.inside_fence(position)
+                if m.stale("geofence", outside, now, f"position {position.tolist()} outside"):
+                    self._react("geofence", now)
+            if m.battery_low(now):
+                self._react("battery_low", now)
+        if self.foot is not None and self.control.perching:
+            missing = self.foot.latest(now, self.config.foot_timeout_s) is None
+            m.stale("foot_stale", missing, now, "no foot-sensor sample while perched")
+
+    def _react(self, monitor: str, now: float) -> None:
+        """A fault's reaction: in flight land; perched hold (or land when configured)."""
+        if not self.arming.flying:
+            return
+        if self.control.perching:
+            if monitor == "ground_lost" and self.config.monitors.ground_loss_perched == "land":
+                self._perch_request = False
+            else:
+                self.counts[f"{monitor}_hold"] += 1
+                return
+        if self.flight.mode is not FlightMode.LAND:
+            self.flight.request_land()
+            self.counts[f"{monitor}_land"] += 1
 
     def _control(self, now: float) -> None:
         ctl = self.control
@@ -796,14 +941,20 @@ class OnboardNode:
             else:
                 self.counts["dt_irregular"] += 1
         self._last_control = now
+        self._supervise(now, dt)
         command = None
         if self.arming.flying:
             command = self._flight_step(now, targets, dt)
         if command is not None:
             self.last_command = command
             self.last_alpha_beta = (command.alpha, command.beta)
+            self._command_at = now
         if self.arming.flying and self.last_command is not None:
-            self._send_command(self.last_command)
+            held = now - (self._command_at if self._command_at is not None else -math.inf)
+            if held <= self.config.flight.command_hold_s + 1e-9:
+                self._send_command(self.last_command)
+            else:  # no fresh command: silence, so that Spinal's timeout and ramp act
+                self.counts["command_withheld"] += 1
         if targets is not None:
             lead = self.config.servo_lead_s
             if lead > 0.0 and self._trajectory is not None:
@@ -814,6 +965,15 @@ class OnboardNode:
                 self._send_servo_targets(targets)
 
     def _send_command(self, c: ControlCommand) -> None:
+        limit = self.config.flight.max_tilt_cmd
+        roll, pitch, yaw_term = c.angles
+        limited = abs(roll) > limit or abs(pitch) > limit
+        reason = f"roll/pitch target beyond {limit} rad"
+        self.monitors.stale("tilt_limit", limited, self._now, reason)
+        if limited:  # saturate below Spinal's 1 rad tilt fail-safe
+            self.counts["tilt_limited"] += 1
+            roll, pitch = max(-limit, min(limit, roll)), max(-limit, min(limit, pitch))
+            c = replace(c, angles=(roll, pitch, yaw_term))
         if self._direct_remote("four_axes/command", "spinal/FourAxisCommand"):
             payload = _four_axis_payload(c.angles, c.base_thrust)
             if payload is not None:
@@ -851,8 +1011,9 @@ class OnboardNode:
             yaw = self.imu_euler[2]
         jt = targets if targets is not None else self.present_q
         foot = None if self.foot is None else self.foot.latest(now, self.config.foot_timeout_s)
+        setpoint = self._flight_setpoint or self.setpoint
         try:
-            return self.control.step(State(p, v, yaw), self.setpoint, jt, foot, dt)
+            return self.control.step(State(p, v, yaw), setpoint, jt, foot, dt)
         except ValueError:
             self.counts["control_error"] += 1
             return None
@@ -1013,6 +1174,13 @@ class OnboardNode:
             "imu_calibration": dict(self.imu_calibration.counts),
             "present_q": self.present_q.tolist(),
             "battery_voltage": self.battery_voltage,
+            "flight_mode": self.flight.mode.value,
+            "flight": dict(self.flight.counts),
+            "monitors": self.monitors.status(),
+            "uart_link": {
+                "errors": getattr(self.uart, "errors", 0),
+                "reopens": getattr(self.uart, "reopens", 0),
+            },
             "command": None
             if c is None
             else {

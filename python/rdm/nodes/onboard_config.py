@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rdm.nodes.onboard_flight import FlightLimits
+from rdm.nodes.onboard_monitors import MonitorLimits
 from rdm.pwm import HYDRUS_MOTOR_INFO, SQRT_MODE
 
 #: Dynamixel X: 4096 ticks per turn, centre 2048 (``JointProfile.angle_scale`` /
@@ -172,6 +174,14 @@ class OnboardConfig:
     #: as the paper's feed-forward planner and JSK send it. The control model keeps the plan
     #: at ``now``. Identify the value on the robot (docs/servolead.md).
     servo_lead_s: float = 0.0
+    #: The operator layer: take-off, go-to, landing, touchdown, command hold, tilt limit,
+    #: geofence (:class:`rdm.nodes.onboard_flight.FlightLimits`).
+    flight: FlightLimits = field(default_factory=FlightLimits)
+    #: Monitor thresholds (:class:`rdm.nodes.onboard_monitors.MonitorLimits`).
+    monitors: MonitorLimits = field(default_factory=MonitorLimits)
+    #: Named position-gain profiles (keyword overrides as ``position_gains``) the operator
+    #: switches between (``OnboardNode.set_gain_profile``); "default" is ``position_gains``.
+    gain_profiles: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
