@@ -375,6 +375,11 @@ class PlantBridge:
         if self._apply_battery(now) or changed:
             plant.set_rotor_duties(duties)
 
+    def set_battery(self, volts: float | Callable[[float], float]) -> None:
+        """The battery voltage from now on (volts, or a function of simulated time): the
+        plant's ESCs and the battery sinks take it at the next tick."""
+        self._battery = volts
+
     def _apply_battery(self, now: float) -> bool:
         """Apply the battery voltage of ``now`` if it changed (plant ESCs, then the sinks);
         True if it did: the duties must be re-commanded."""

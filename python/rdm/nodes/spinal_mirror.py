@@ -36,6 +36,7 @@ from rdm.link.can_wire import DRAIN_AT
 from rdm.link.inproc_can import SimClock
 from rdm.nodes.base import to_ms
 from rdm.nodes.can_master import BOOT_DELAY_MS, IDLE_DUTY, CanMaster, MasterState
+from rdm.nodes.onboard_monitors import MonitorLimits, cells_from_reference
 from rdm.nodes.spinal_servo_bridge import MirrorRejection, ServoBridge, target_rejection
 from rdm.nodes.spinal_uart import UartPump
 from rdm.protocol.rosserial import constants as C
@@ -358,6 +359,11 @@ class SpinalMirror:
         self.mag = LEVEL_MAG
         self.battery_input = DEFAULT_BATTERY_V
         self.adc_scale = 1.0
+        #: ``set_adc_scale`` as the firmware takes it (any positive scale); False: a scale
+        #: giving an implausible battery reading is rejected (see :meth:`_on_adc_scale`)
+        self.firmware_adc_scale = False
+        #: the highest reference voltage of the last accepted ``motor_info`` (the full battery)
+        self.reference_voltage = DEFAULT_BATTERY_V
         self.battery_voltage: float | None = None  # the low-passed value the firmware uses
         self.mag_declination = 0.0
         self.last_output: Any = None
@@ -680,6 +686,7 @@ class SpinalMirror:
             int(msg.pwm_conversion_mode),
             table,
         )
+        self.reference_voltage = float(table[:, 0].max())
 
     def _on_uav_info(self, msg: Any) -> None:
         before = self.core.motor_number
@@ -719,9 +726,25 @@ class SpinalMirror:
         self.pwm_test = duties
 
     def _on_adc_scale(self, msg: Any) -> None:
+        """``set_adc_scale``. The firmware takes any positive scale; unless
+        :attr:`firmware_adc_scale`, a scale that would put the present battery reading outside
+        the plausible range of the battery (``rdm.nodes.onboard_monitors``: 2.5..4.45 V per
+        cell, cells from ``motor_info``'s highest reference voltage) is rejected: one such
+        message made the battery reading 1.75 V and the voltage factor drove every rotor to
+        full duty."""
         scale = float(msg.data)
         if not (math.isfinite(scale) and scale > 0):
             raise ValueError(f"set_adc_scale: {scale!r} is not a positive finite scale")
+        if not self.firmware_adc_scale:
+            cells = cells_from_reference([self.reference_voltage])
+            lo, hi = (c * cells for c in MonitorLimits().cell_plausible)
+            volts = self.battery_input * scale
+            if not lo <= volts <= hi:
+                raise MirrorRejection(
+                    "adc_scale_implausible",
+                    f"set_adc_scale: {scale!r} makes the battery {volts:.2f} V, outside "
+                    f"{lo:.2f}..{hi:.2f} V ({cells} cells)",
+                )
         self.adc_scale = scale
 
     # ---------------------------------------------------------------- services

@@ -46,6 +46,12 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario("hover", "hover", "run", "take-off and hover at 0.4 m through every wire"),
         Scenario("flight", "flight", "run", "Fig. 9 configuration change in flight"),
         Scenario(
+            "mission",
+            "mission",
+            "run",
+            "operator flight: take off 1 m, go to a point, land; --fault injects one fault",
+        ),
+        Scenario(
             "perching",
             "perching",
             "run",

@@ -1,0 +1,71 @@
+"""The operator's mission through every wire (MuJoCo plant, Neuron mirrors on CAN, the Spinal
+mirror over rosserial, the onboard node): take off, go to a point, land, with each injected
+fault. Every run must end safe (disarmed on the floor, tilt in flight at most 30 deg, no duty
+above motor_info's maximum) and the node (or Spinal) must have noticed the fault."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rdm.scenarios.common import roll_pitch, truth_arrays
+from rdm.scenarios.mission import ARM_AT, FAULTS, MAX_TILT_DEG, run
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    base = tmp_path_factory.mktemp("mission")
+    out = {}
+    for fault in FAULTS:
+        result = run(base, duration=22.0, fault=fault)
+        out[fault] = (result.facts["mission"], truth_arrays(result.stack), result)
+    return out
+
+
+@pytest.mark.parametrize("fault", FAULTS)
+def test_every_fault_ends_safe_and_is_detected(runs, fault) -> None:
+    record, a, result = runs[fault]
+    assert record["outcome"] == "landed", record
+    assert record["safe"] is True
+    assert record["final_state"] == "idle"
+    if fault != "none":
+        assert record["fault_detected"] is True, record
+    # independent of the record: the truth log's own tilt and heights
+    floor = a["cog"][np.searchsorted(a["t"], ARM_AT) - 1, 2]
+    flying = a["cog"][:, 2] > floor + 0.05
+    tilt = np.degrees(np.abs(roll_pitch(a["quat"][flying]))).max()
+    assert tilt <= MAX_TILT_DEG
+    assert a["cog"][:, 2].max() > floor + 0.8  # it did take off (1 m)
+    assert abs(a["cog"][-1, 2] - floor) < 0.05
+    assert record["max_duty"] <= result.stack.onboard.config.pwm_info.max_pwm
+
+
+def test_the_mission_flies_where_it_is_told(runs) -> None:
+    record, a, _ = runs["none"]
+    start = a["cog"][np.searchsorted(a["t"], ARM_AT)]
+    top = a["cog"][np.argmax(a["cog"][:, 2])]
+    # take-off 1 m, then 0.5 m in x and 0.3 m up (the goto), within the hover tolerance
+    assert top[2] - start[2] == pytest.approx(1.3, abs=0.1)
+    assert top[0] - start[0] == pytest.approx(0.5, abs=0.15)
+    assert [text.split(" ->")[0] for _, text in record["operator"]] == ["takeoff", "goto", "land"]
+
+
+def test_mocap_loss_lands_by_spinals_own_force_landing(runs) -> None:
+    _, _, result = runs["mocap-loss"]
+    # the node went silent, so Spinal's 500 ms command timeout started its force landing
+    assert result.facts["spinal_failsafes"] == {"failsafe_timeout": 1}
+    assert result.stack.onboard.flight.counts["touchdown_imu"] == 1
+
+
+def test_uart_cut_of_300_ms_is_ridden_out(runs) -> None:
+    record, _, result = runs["uart-cut"]
+    assert record["monitors"]["spinal_silent"] == 1
+    assert not result.facts["spinal_failsafes"]  # shorter than Spinal's command timeout
+
+
+def test_bad_adc_scale_is_refused_by_spinal(runs) -> None:
+    _, _, result = runs["bad-adc-scale"]
+    assert result.facts["spinal_rejected"] == {"adc_scale_implausible": 1}
+    assert result.stack.spinal.adc_scale == 1.0
