@@ -1,5 +1,6 @@
 """``rdm onboard`` as a real-time process: pty paths printed, a rosserial Spinal peer and a
-Leptrino sensor peer on the other ends, UDP JSON control, SIGTERM exits cleanly."""
+Leptrino sensor peer on the other ends, signed commands over the ground link (rdm.ground),
+SIGTERM exits cleanly."""
 
 from __future__ import annotations
 
@@ -14,6 +15,8 @@ import time
 import pytest
 import serial
 
+from rdm.ground.auth import load_key, write_key
+from rdm.ground.client import GroundClient
 from rdm.protocol import leptrino as lp
 from rdm.protocol.rosserial import spinal_registry
 from rdm.protocol.rosserial.client import ClientSession
@@ -40,8 +43,10 @@ def read_line(proc, prefix: str, timeout: float = 30.0) -> str:
     raise AssertionError(f"no line starting with {prefix!r}")
 
 
-def test_rdm_onboard_process_arms_and_commands() -> None:
+def test_rdm_onboard_process_arms_and_commands(tmp_path) -> None:
     port = free_udp_port()
+    key_file = tmp_path / "robot.key"
+    write_key(key_file)
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     proc = subprocess.Popen(
         [
@@ -55,6 +60,8 @@ def test_rdm_onboard_process_arms_and_commands() -> None:
             "pty",
             "--control",
             f"udp:127.0.0.1:{port}",
+            "--key",
+            str(key_file),
             "--lqi-every",
             "4",
         ],
@@ -70,7 +77,7 @@ def test_rdm_onboard_process_arms_and_commands() -> None:
         uart = serial.Serial(uart_path, 921600, timeout=0)
         foot = serial.Serial(foot_path, 460800, timeout=0)
         spinal = ClientSession.from_layout()
-        ctl = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        ctl = GroundClient(f"udp:127.0.0.1:{port}", load_key(key_file))
         topics: dict[str, int] = {}
         foot_parser = lp.LeptrinoStreamParser()
         foot_cmds = []
@@ -93,11 +100,13 @@ def test_rdm_onboard_process_arms_and_commands() -> None:
             for ev in foot_parser.feed(foot.read(foot.in_waiting or 1)):
                 if ev.payload:
                     foot_cmds.append(lp.parse_command(ev.payload).command)
-            msg = {"mocap": {"position": [0, 0, 1], "velocity": [0, 0, 0], "yaw": 0.0}}
+            mocap = {"position": [0, 0, 1], "velocity": [0, 0, 0], "yaw": 0.0}
+            ctl.send(ctl.datagram("mocap", mocap)[1])
+            ctl.send(ctl.datagram("heartbeat")[1])  # the operator's station is alive
             if spinal.configured and not armed_sent:
-                msg.update(arm=True, target={"position": [0, 0, 1], "yaw": 0.0})
+                ctl.send(ctl.datagram("arm")[1])
+                ctl.send(ctl.datagram("goto", {"position": [0, 0, 1], "yaw": 0.0})[1])
                 armed_sent = True
-            ctl.sendto(json.dumps(msg).encode(), ("127.0.0.1", port))
             time.sleep(0.01)
         assert lp.Command.DATA_START in foot_cmds
         assert topics.get("flight_config_cmd", 0) >= 1
@@ -109,6 +118,8 @@ def test_rdm_onboard_process_arms_and_commands() -> None:
         final = json.loads(out.strip().splitlines()[-1])
         assert final["flight_state"] == "armed"
         assert final["ticks"] > 100
+        assert final["ground_link"]["commands"]["arm"] == 1
+        assert final["ground_link"]["commands"]["mocap"] > 100
         ctl.close()
         uart.close()
         foot.close()

@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "bench",
         "measure the real-time core against its 200 Hz and 40 Hz budgets and against peers",
     ),
+    "ctl": ("ctl", "send a signed command to rdm onboard over the ground link and print its ack"),
     "decode": ("decode", "decode a UART capture, candump log or Leptrino capture"),
     "design": ("design", "reachability/feasibility sweep reproducing Tables II-III"),
     "hil": (

@@ -4,15 +4,16 @@ position/perching control, LQI gain synthesis).
 Examples::
 
     rdm onboard --uart serial:/dev/flight_controller --foot-sensor serial:/dev/ttyACM0@460800
-    rdm onboard --uart pty --foot-sensor none --control udp:127.0.0.1:7301
+    rdm onboard --uart pty --foot-sensor none --control udp:127.0.0.1:7301 --key robot.key
 
 ``--uart pty`` / ``--foot-sensor pty`` create pseudo-terminals and print the path the other
-side (a Spinal mirror, a sensor mirror) must open. ``--control udp:HOST:PORT`` takes one JSON
-object per datagram with any of the keys ``mocap`` ({"position", "velocity", "yaw"}),
-``target`` ({"position", "yaw", "velocity"}), ``joint_targets`` (list), ``trajectory``
-([[t, q], ...], node time), ``perch`` (bool), ``arm`` / ``disarm`` / ``force_landing`` (true).
-Stops on Ctrl-C / SIGTERM or after ``--duration`` seconds; prints a JSON status line every
-``--status-interval`` seconds and at exit.
+side (a Spinal mirror, a sensor mirror) must open. ``--control udp:HOST:PORT --key FILE``
+opens the ground link (:mod:`rdm.ground`, docs/flying.md): signed commands from
+``rdm ctl``, acknowledged, with a heartbeat (``--ground-timeout``). Without ``--key`` the
+port is refused unless ``--insecure-control`` says so explicitly (unsigned datagrams are then
+accepted; a warning is printed). Stops on Ctrl-C / SIGTERM or after ``--duration`` seconds;
+prints a JSON status line every ``--status-interval`` seconds and at exit (the ground link's
+counts under ``ground_link``).
 """
 
 from __future__ import annotations
@@ -20,12 +21,12 @@ from __future__ import annotations
 import argparse
 import json
 import signal
-import socket
 import sys
 import threading
 from typing import Any
 
 from rdm.commands.arg_types import positive_finite
+from rdm.ground.heartbeat import GROUND_TIMEOUT_S
 from rdm.link.serial import SerialLink, SerialSpecError, open_pty_pair, open_serial
 from rdm.nodes.base import run_realtime
 
@@ -49,7 +50,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="send trajectory servo goals S s ahead (feed-forward for the servos' lag; "
         "0 = the paper's; identify it, docs/servolead.md)",
     )
-    parser.add_argument("--control", default=None, help="udp:HOST:PORT for JSON commands")
+    parser.add_argument(
+        "--control", default=None, help="udp:HOST:PORT of the ground link (rdm ctl --to)"
+    )
+    parser.add_argument("--key", default=None, help="the ground link's key file (rdm ctl keygen)")
+    parser.add_argument(
+        "--insecure-control",
+        action="store_true",
+        help="accept unsigned control datagrams (no --key; anyone on the network can command)",
+    )
+    parser.add_argument(
+        "--ground-timeout",
+        type=positive_finite,
+        default=GROUND_TIMEOUT_S,
+        help=f"s without the ground station before on_ground_lost (default {GROUND_TIMEOUT_S})",
+    )
     parser.add_argument("--arm", action="store_true", help="start the arming sequence at once")
     parser.add_argument(
         "--duration", type=positive_finite, default=None, help="stop after this many s"
@@ -70,53 +85,47 @@ def _open(spec: str, what: str) -> tuple[SerialLink, Any]:
     return open_serial(spec), None
 
 
-class ControlPort:
-    """UDP JSON commands applied to the node between its ticks (a Node of its own)."""
+def _control_key(args: argparse.Namespace) -> bytes | None:
+    """The ground link's key (None: no port, or ``--insecure-control``); ValueError (a key
+    file refused, an insecure port not asked for) names the argument and the rule."""
+    from rdm.ground.auth import load_key
 
-    name = "onboard_control"
+    if args.control is None:
+        if args.key or args.insecure_control:
+            raise ValueError("--key/--insecure-control: only with --control udp:HOST:PORT")
+        return None
+    if args.key and args.insecure_control:
+        raise ValueError("--key and --insecure-control exclude each other")
+    if not args.key and not args.insecure_control:
+        raise ValueError(
+            "--control needs --key FILE (rdm ctl keygen FILE); an unauthenticated port "
+            "needs --insecure-control"
+        )
+    return load_key(args.key) if args.key else None
 
-    def __init__(self, spec: str, node: Any) -> None:
-        host, _, port = spec.removeprefix("udp:").rpartition(":")
-        if not host or not port.isdigit():
-            raise ValueError(f"--control {spec!r}: expected udp:HOST:PORT")
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind((host, int(port)))
-        self.sock.setblocking(False)
-        self.node = node
-        self.period = node.period
-        self.errors = 0
 
-    def tick(self, now: float) -> None:
-        for _ in range(1000):
-            try:
-                data = self.sock.recv(65536)
-            except BlockingIOError:
-                return
-            try:
-                self.apply(json.loads(data))
-            except (ValueError, TypeError, KeyError, AttributeError):
-                self.errors += 1
+def _control_port(args: argparse.Namespace, node: Any, key: bytes | None) -> Any:
+    """The ground link's port for ``--control`` (None without it)."""
+    from rdm.ground.ee import EePlanner
+    from rdm.ground.port import GroundLinkConfig, GroundPort
 
-    def apply(self, cmd: dict[str, Any]) -> None:
-        n = self.node
-        if "mocap" in cmd:
-            m = cmd["mocap"]
-            n.set_mocap(m["position"], m["velocity"], m.get("yaw"))
-        if "target" in cmd:
-            g = cmd["target"]
-            n.set_target(g["position"], g.get("yaw", 0.0), g.get("velocity"))
-        if "joint_targets" in cmd:
-            n.set_joint_targets(cmd["joint_targets"])
-        if "trajectory" in cmd:
-            n.set_trajectory([(t, q) for t, q in cmd["trajectory"]])
-        if "perch" in cmd:
-            n.request_perch(bool(cmd["perch"]))
-        for key in ("arm", "disarm", "force_landing"):
-            if cmd.get(key):
-                getattr(n, key)()
-
-    def close(self) -> None:
-        self.sock.close()
+    if args.control is None:
+        return None
+    if key is None:
+        print(
+            f"rdm onboard: WARNING: --insecure-control: {args.control} accepts unsigned "
+            "commands from anyone who can reach it",
+            file=sys.stderr,
+            flush=True,
+        )
+    return GroundPort.bind(
+        args.control,
+        node,
+        key,
+        config=GroundLinkConfig(ground_timeout_s=args.ground_timeout),
+        planner=EePlanner(args.robot),
+        log=lambda line: print(f"rdm onboard: ground link: {line}", file=sys.stderr, flush=True),
+    )
 
 
 class _StatusPrinter:
@@ -137,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
     keep: list[Any] = []
     links: list[SerialLink] = []
     try:
+        key = _control_key(args)
         robot = Robot.shipped(args.robot)
         config = OnboardConfig(
             rate_hz=args.rate, lqi_every=args.lqi_every, servo_lead_s=args.servo_lead
@@ -151,9 +161,8 @@ def run(args: argparse.Namespace) -> int:
             keep.append(k)
         node = OnboardNode(uart, foot, robot, config=config)
         nodes: list[Any] = []
-        control = None
-        if args.control:
-            control = ControlPort(args.control, node)
+        control = _control_port(args, node, key)
+        if control is not None:
             nodes.append(control)
         nodes.append(node)
         if args.status_interval > 0:
@@ -184,5 +193,7 @@ def run(args: argparse.Namespace) -> int:
     status = node.status()
     status["ticks"] = stats.ticks.get(node.name, 0)
     status["overruns"] = stats.overruns.get(node.name, 0)
+    if control is not None:
+        status["ground_link"] = control.status()
     print(json.dumps(status), flush=True)
     return 0

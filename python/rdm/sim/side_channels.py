@@ -6,8 +6,7 @@ wires on the real robot.
   [rad/s], accelerometer xyz [m/s^2], magnetometer xyz [uT] (Spinal body frame), battery
   voltage [V] (the ADC reading; carried with every sample so a lost datagram cannot lose it).
 * **Mocap -> onboard PC** (on the robot: the motion-capture network link). One JSON object per
-  datagram, the ``rdm onboard --control`` format:
-  ``{"mocap": {"position": [x, y, z], "velocity": [vx, vy, vz], "yaw": psi}}``.
+  datagram: ``{"mocap": {"position": [x, y, z], "velocity": [vx, vy, vz], "yaw": psi}}``.
 
 Both are Unix datagram sockets in the abstract namespace (no file, no port; Linux only), named
 ``rdm-<run token>-<channel>``. Datagrams are whole messages; a receiver drains its socket every
@@ -179,37 +178,37 @@ class MocapSender:
 
 
 class MocapReceiver:
-    """Onboard-process end: a node (tick it before the onboard node) that applies every JSON
-    command datagram with :class:`rdm.commands.onboard.ControlPort`'s rules."""
+    """Onboard-process end: a node (tick it before the onboard node) that hands every mocap
+    datagram to ``onboard.set_mocap``. Datagrams are read with the ground link's bounds
+    (:func:`rdm.ground.message.decode`: size and nesting depth); anything else is counted."""
 
     name = "mocap_in"
 
     def __init__(self, token: str, onboard: Any, period: float) -> None:
-        from rdm.commands.onboard import ControlPort
-
         self.sock = bind_datagram(token, "mocap")
         self.period = period
         self.applied = 0
         self.errors = 0
-        self._apply = ControlPort.apply
         self.node = onboard
         #: The latest applied mocap position (world CoG), or None before the first.
         self.position: np.ndarray | None = None
 
     def tick(self, now: float) -> None:
+        from rdm.ground.message import Rejected, decode
+
         for _ in range(10_000):
             try:
                 data = self.sock.recv(65536)
             except BlockingIOError:
                 return
             try:
-                cmd = json.loads(data)
-                self._apply(self, cmd)  # type: ignore[arg-type]
-                p = np.asarray(cmd["mocap"]["position"], dtype=float) if "mocap" in cmd else None
-                if p is not None and p.shape == (3,) and np.all(np.isfinite(p)):
+                m = decode(data)["mocap"]
+                p = np.asarray(m["position"], dtype=float)
+                self.node.set_mocap(m["position"], m["velocity"], m.get("yaw"))
+                if p.shape == (3,) and np.all(np.isfinite(p)):
                     self.position = p
                 self.applied += 1
-            except (ValueError, TypeError, KeyError, AttributeError):
+            except (Rejected, ValueError, TypeError, KeyError, AttributeError):
                 self.errors += 1
 
     def close(self) -> None:
