@@ -81,6 +81,10 @@ def test_rdm_onboard_process_arms_and_commands(tmp_path) -> None:
         topics: dict[str, int] = {}
         foot_parser = lp.LeptrinoStreamParser()
         foot_cmds = []
+        state = REG.msg("spinal/ServoState")
+        servo_states = REG.msg("spinal/ServoStates").new(
+            servos=[state.new(index=i, angle=2048) for i in range(10)]
+        )
         t0 = time.monotonic()
         armed_sent = False
         while time.monotonic() - t0 < 4.0:
@@ -94,6 +98,7 @@ def test_rdm_onboard_process_arms_and_commands(tmp_path) -> None:
                         )
             if spinal.configured:
                 spinal.publish("imu", REG.msg("spinal/Imu").new(quaternion=[0, 0, 0, 1]))
+                spinal.publish("servo/states", servo_states)  # the joints at their zeros
             out = spinal.take_output()
             if out:
                 uart.write(out)
@@ -117,6 +122,7 @@ def test_rdm_onboard_process_arms_and_commands(tmp_path) -> None:
         assert proc.returncode == 0, err
         final = json.loads(out.strip().splitlines()[-1])
         assert final["flight_state"] == "armed"
+        assert final["monitors"]["counts"].get("servo_stale", 0) == 0
         assert final["ticks"] > 100
         assert final["ground_link"]["commands"]["arm"] == 1
         assert final["ground_link"]["commands"]["mocap"] > 100
