@@ -28,6 +28,7 @@ from rdm.sim import (
     write_summary,
 )
 from rdm.sim.plots import plot_panels, plot_tracking_errors, plot_zmp
+from rdm.sim.run_folder import RunFolderError
 
 TYPES = ["spinal/Imu", "spinal/FourAxisCommand", "spinal/ServoStates", "spinal/PwmInfo"]
 
@@ -183,8 +184,8 @@ def test_run_folder_layout(tmp_path):
     assert f.plot("fig9").name == "fig9.png"
     g = RunFolder.create("hover", base=tmp_path, stamp="20260101-000000")
     assert g.root.name == "hover-20260101-000000"
-    with pytest.raises(FileExistsError):
-        RunFolder.create("hover", base=tmp_path, seed=3, overwrite=False)
+    with pytest.raises(RunFolderError, match="not empty"):  # it holds its INCOMPLETE marker
+        RunFolder.create("hover", base=tmp_path, seed=3)
     with pytest.raises(ValueError):
         RunFolder.create("../evil", base=tmp_path, seed=1)
 

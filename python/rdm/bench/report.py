@@ -24,6 +24,7 @@ import json
 from typing import Any
 
 from rdm.bench.cases import Measurement, PeerResult, Target
+from rdm.output_files import open_output
 
 SCHEMA = "rdm.bench/1"
 
@@ -178,5 +179,5 @@ def write_json(doc: dict[str, Any], path: str) -> None:
     if path == "-":
         print(text)
     else:
-        with open(path, "w", encoding="utf-8") as f:
+        with open_output(path, "w", encoding="utf-8") as f:
             f.write(text + "\n")

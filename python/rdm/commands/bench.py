@@ -16,6 +16,8 @@ for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 
 from rdm.bench.runner import run_benchmarks  # noqa: E402  (after the thread pinning)
+from rdm.commands.arg_types import positive_int  # noqa: E402
+from rdm.commands.output import output_file_or_stdout  # noqa: E402
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -28,12 +30,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         nargs="?",
         const="-",
         default=None,
+        type=output_file_or_stdout,  # checked while parsing: before the benchmarks run
         metavar="FILE",
         help="also write the figures as JSON to FILE (stdout if FILE is omitted)",
     )
     parser.add_argument(
         "--iterations",
-        type=int,
+        type=positive_int,
         default=None,
         metavar="N",
         help="iterations of every measurement (peers: at most N); default per case",
@@ -75,5 +78,9 @@ def run(args: argparse.Namespace) -> int:
     text = format_text(doc)
     print(text, file=sys.stderr if args.json == "-" else sys.stdout)
     if args.json is not None:
-        write_json(doc, args.json)
+        try:
+            write_json(doc, args.json)
+        except (OSError, ValueError) as exc:  # a full disk, a link planted since the check
+            print(f"rdm bench: --json {args.json!r}: {exc}", file=sys.stderr)
+            return 2
     return 0

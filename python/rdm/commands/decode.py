@@ -17,12 +17,16 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import os
 import sys
 from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from rdm.commands.output import check_output_path, json_text
+from rdm.json_values import nulled
 
 Records = Iterator[dict[str, Any]]
 
@@ -41,10 +45,53 @@ class CaptureFormat:
     help: str
 
 
-def _decode_uart(path: Path, args: argparse.Namespace) -> Records:
-    from rdm.protocol.rosserial.capture import decode_uart, load_layout
+class LayoutError(ValueError):
+    """A ``--layout`` file that cannot be read or is not a slot layout."""
 
-    layout = None if args.no_layout else load_layout(args.layout)
+
+def load_checked_layout(path: Path | None) -> dict[str, Any]:
+    """The slot layout at ``path`` (default: the shipped one), checked: readable JSON, an
+    object whose ``subscribers`` and ``publishers`` are lists of rows with an integer
+    ``id``, string ``name`` and ``kind``, and a ``type`` the Spinal message registry knows.
+    :class:`LayoutError` names the file and what is wrong."""
+    from rdm.protocol.rosserial.capture import load_layout
+    from rdm.protocol.rosserial.registry import spinal_registry
+
+    where = f"--layout {str(path)!r}"
+    try:
+        layout = load_layout(path)
+    except OSError as exc:
+        raise LayoutError(f"{where}: {exc.strerror or exc}") from None
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise LayoutError(f"{where}: not JSON ({exc})") from None
+    if not isinstance(layout, dict):
+        raise LayoutError(f"{where}: not a JSON object")
+    registry = spinal_registry()
+    for key in ("subscribers", "publishers"):
+        rows = layout.get(key)
+        if not isinstance(rows, list):
+            raise LayoutError(f"{where}: {key!r} must be a list of slot rows")
+        for i, row in enumerate(rows):
+            ok = (
+                isinstance(row, dict)
+                and type(row.get("id")) is int
+                and isinstance(row.get("name"), str)
+                and isinstance(row.get("kind"), str)
+                and isinstance(row.get("type"), str)
+            )
+            if not ok:
+                raise LayoutError(
+                    f"{where}: {key}[{i}] must have an integer id and string name, type, kind"
+                )
+            if not (registry.has_msg(row["type"]) or registry.has_srv(row["type"])):
+                raise LayoutError(f"{where}: {key}[{i}]: unknown message type {row['type']!r}")
+    return layout
+
+
+def _decode_uart(path: Path, args: argparse.Namespace) -> Records:
+    from rdm.protocol.rosserial.capture import decode_uart
+
+    layout = None if args.no_layout else load_checked_layout(args.layout)
     return decode_uart(path.read_bytes(), layout=layout)
 
 
@@ -59,7 +106,9 @@ def _lazy(module: str, function: str) -> Callable[..., Records]:
 
 
 def _decode_candump(path: Path, args: argparse.Namespace) -> Records:
-    return _lazy("rdm.protocol.neuron", "decode_candump")(path)
+    # Vector ASCII by its suffix; candump -L lines for any other name (--format candump)
+    syntax = "asc" if path.suffix.lower() == ".asc" else "log"
+    return _lazy("rdm.protocol.neuron", "decode_candump")(path, syntax=syntax)
 
 
 def _decode_leptrino(path: Path, args: argparse.Namespace) -> Records:
@@ -72,7 +121,9 @@ FORMATS: dict[str, CaptureFormat] = {
         CaptureFormat(
             "uart", (".bin", ".raw", ".uart", ".cap"), _decode_uart, "rosserial UART bytes"
         ),
-        CaptureFormat("candump", (".log", ".candump"), _decode_candump, "candump -l log"),
+        CaptureFormat(
+            "candump", (".log", ".candump", ".asc"), _decode_candump, "candump -L or ASC log"
+        ),
         CaptureFormat("leptrino", (".lep", ".leptrino"), _decode_leptrino, "Leptrino bytes"),
     )
 }
@@ -115,6 +166,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def bad_reason(rec: dict[str, Any]) -> str:
+    """Why a record is bad, in one word for the summary: its kind (``skipped``), else the
+    head of its error text (``syntax`` of "syntax: bad data field"), else ``unknown``."""
+    kind = rec.get("kind")
+    if kind and kind != "bad_frame":
+        return str(kind)
+    error = rec.get("error")
+    if error:
+        return str(error).split(":", 1)[0].strip() or "unknown"
+    return "unknown"
+
+
+def _json_line(rec: dict[str, Any]) -> str:
+    """One record as valid JSON: a value that is not a finite number is null."""
+    try:
+        return json_text(rec, default=str)
+    except ValueError:
+        return json_text(nulled(rec), default=str)
+
+
 def _where(rec: dict[str, Any]) -> str:
     if "offset" in rec:
         return f"@{rec['offset']}"
@@ -138,10 +209,28 @@ def format_record(rec: dict[str, Any]) -> str:
     return f"{_where(rec)} {rec.get('kind')} {json.dumps(rest, separators=(',', ':'), default=str)}"
 
 
+def _one_of(out: Path, inputs: list[Path]) -> Path | None:
+    """The input that ``out`` is (the same file, by any name), or None."""
+    if not out.exists():
+        return None
+    for p in inputs:
+        try:
+            if p.exists() and os.path.samefile(out, p):
+                return p
+        except OSError:
+            continue
+    return None
+
+
 def _run_mcap(args: argparse.Namespace) -> int:
     from rdm.sim.capture_index import index_path
     from rdm.sim.wire_mcap import WireMcapError, run_captures, write_wire_mcap
 
+    try:
+        out = check_output_path(args.mcap, "--mcap")
+    except ValueError as exc:
+        print(f"rdm decode: {exc}", file=sys.stderr)
+        return 2
     path: Path = args.capture
     if path.is_dir():
         captures = run_captures(path)
@@ -167,8 +256,17 @@ def _run_mcap(args: argparse.Namespace) -> int:
     else:
         print(f"rdm decode: no such file or folder: {path}", file=sys.stderr)
         return 2
+    inputs = [*captures, *(index_path(c) for c in captures)]
+    same = _one_of(out, inputs)
+    if same is not None:
+        print(
+            f"rdm decode: --mcap {str(args.mcap)!r} is the input {str(same)!r}; "
+            "the output must be another file (e.g. RUN/wire.mcap)",
+            file=sys.stderr,
+        )
+        return 2
     try:
-        report = write_wire_mcap(captures, args.mcap)
+        report = write_wire_mcap(captures, out)
     except (WireMcapError, OSError) as exc:
         print(f"rdm decode: {exc}", file=sys.stderr)
         return 2
@@ -188,6 +286,9 @@ def run(args: argparse.Namespace) -> int:
     if path.is_dir():
         print(f"rdm decode: {path} is a folder; --mcap OUT converts a run folder", file=sys.stderr)
         return 2
+    if not path.exists():
+        print(f"rdm decode: no such file: {path}", file=sys.stderr)
+        return 2
     name = args.format or detect_format(path)
     if name is None:
         print(
@@ -196,21 +297,31 @@ def run(args: argparse.Namespace) -> int:
         )
         return 2
     if not path.is_file():
-        print(f"rdm decode: no such file: {path}", file=sys.stderr)
+        print(f"rdm decode: {path} is not a regular file", file=sys.stderr)
         return 2
+    if name == "uart" and not args.no_layout:
+        try:
+            load_checked_layout(args.layout)  # a bad --layout is refused before any output
+        except LayoutError as exc:
+            print(f"rdm decode: {exc}", file=sys.stderr)
+            return 2
     counts: Counter[str] = Counter()
     try:
         for rec in FORMATS[name].decode(path, args):
             counts["ok" if rec.get("ok") else "bad"] += 1
             if not rec.get("ok"):
-                key = rec.get("error") if rec.get("kind") == "bad_frame" else rec.get("kind")
-                counts[f"bad:{key}"] += 1
+                counts[f"bad:{bad_reason(rec)}"] += 1
             if args.json:
-                print(json.dumps(rec, default=str))
+                print(_json_line(rec))
             else:
                 print(format_record(rec))
     except DecoderUnavailable as exc:
         print(f"rdm decode: {name}: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        raise  # the reader went away: rdm.cli ends quietly
+    except OSError as exc:  # the capture could not be read
+        print(f"rdm decode: {path}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     bad = {k[4:]: v for k, v in counts.items() if k.startswith("bad:")}
     sys.stdout.flush()  # keep the summary after the records when both go to one terminal

@@ -3,17 +3,25 @@
 from __future__ import annotations
 
 import argparse
-import json
+import sys
 from pathlib import Path
+
+from rdm.commands.arg_types import positive_finite, positive_int
+from rdm.commands.output import check_output_path, json_text
+from rdm.json_values import nulled
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add ``design``'s options."""
     parser.add_argument("--table", type=int, choices=(2, 3), default=3)
-    parser.add_argument("--resolution", type=float, default=0.1, help="grid step [m]")
+    parser.add_argument(
+        "--resolution", type=positive_finite, default=0.1, help="grid step [m] (finite, > 0)"
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--plot-dir", help="write reachable-set PNGs (like Figs. 3-4) here")
-    parser.add_argument("--workers", type=int, default=None, help="processes (default: cores)")
+    parser.add_argument(
+        "--workers", type=positive_int, default=None, help="processes (default: cores)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -22,17 +30,31 @@ def run(args: argparse.Namespace) -> int:
 
     from rdm.planner.design import format_table, plot_results, run_table
 
-    if args.resolution <= 0:
-        print("rdm design: --resolution must be positive")
-        return 2
+    png = None
+    if args.plot_dir:  # the figure's folder and file checked before the sweep, not after it
+        try:
+            Path(args.plot_dir).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            print(f"rdm design: --plot-dir {args.plot_dir!r}: {exc.strerror}", file=sys.stderr)
+            return 2
+        try:
+            png = check_output_path(
+                Path(args.plot_dir) / f"table{args.table}_reachability.png", "--plot-dir"
+            )
+        except ValueError as exc:
+            print(f"rdm design: {exc}", file=sys.stderr)
+            return 2
     with ProcessPoolExecutor(max_workers=args.workers) as ex:
         results = run_table(args.table, args.resolution, ex)
     if args.json:
-        print(json.dumps({n: r.to_json() for n, r in results.items()}, indent=1))
+        # valid JSON: a figure that is not finite is null
+        print(json_text(nulled({n: r.to_json() for n, r in results.items()}), indent=1))
     else:
         print(format_table(args.table, results))
-    if args.plot_dir:
-        d = Path(args.plot_dir)
-        d.mkdir(parents=True, exist_ok=True)
-        plot_results(results, str(d / f"table{args.table}_reachability.png"))
+    if png is not None:
+        try:
+            plot_results(results, str(png))
+        except OSError as exc:  # a full disk, a link planted since the check
+            print(f"rdm design: --plot-dir: {png}: {exc}", file=sys.stderr)
+            return 2
     return 0

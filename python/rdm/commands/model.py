@@ -4,12 +4,15 @@ aerial-ZMP stability margin at a joint configuration."""
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from typing import Any
 
 import numpy as np
+
+from rdm.commands.arg_types import accept_negative_values, finite_list
+from rdm.commands.output import json_text
+from rdm.json_values import non_finite_paths
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,25 +27,39 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--toml", help="TOML file of a custom robot (needs --urdf)")
     parser.add_argument(
         "--q",
+        type=finite_list,
         default=None,
-        help="joint vector, comma-separated radians in the robot's joint order (default: zeros)",
+        help="joint vector, comma-separated radians in the robot's joint order (default: "
+        "zeros); finite numbers, a leading minus is fine (--q -0.5,0,...)",
     )
     parser.add_argument(
         "--degrees", action="store_true", help="read --q in degrees instead of radians"
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    accept_negative_values(parser)
 
 
-def _parse_q(text: str | None, n: int, degrees: bool) -> list[float]:
-    if text is None or not text.strip():
+def _parse_q(values: list[float] | None, n: int, degrees: bool) -> list[float]:
+    """The joint vector [rad] of ``--q`` (finite numbers, checked by its argparse type)."""
+    if values is None:
         return [0.0] * n
-    try:
-        q = [float(v) for v in text.split(",")]
-    except ValueError as exc:
-        raise ValueError(f"--q: not a comma-separated list of numbers: {text!r}") from exc
-    if len(q) != n:
-        raise ValueError(f"--q: expected {n} values, got {len(q)}")
-    return [math.radians(v) for v in q] if degrees else q
+    if len(values) != n:
+        raise ValueError(f"--q: expected {n} values, got {len(values)}")
+    return [math.radians(v) for v in values] if degrees else list(values)
+
+
+def limit_warnings(robot: Any, q: list[float]) -> list[str]:
+    """One line per joint of ``q`` outside the robot's joint limits (its URDF's)."""
+    lines = []
+    for i, (name, v, (lo, hi)) in enumerate(
+        zip(robot.joint_names, q, np.asarray(robot.joint_limits).tolist(), strict=True)
+    ):
+        if not lo <= v <= hi:
+            lines.append(
+                f"--q[{i}]: joint {name} = {v:.6g} rad is outside its limits "
+                f"[{lo:.6g}, {hi:.6g}] rad"
+            )
+    return lines
 
 
 def _table(header: list[str], rows: list[list[str]]) -> str:
@@ -160,9 +177,21 @@ def run(args: argparse.Namespace) -> int:
         else:
             robot = Robot.shipped(args.robot)
         q = _parse_q(args.q, robot.n_q, args.degrees)
+        warnings = limit_warnings(robot, q)
         report = collect(robot, q)
     except (DescriptionError, ModelError, ValueError) as exc:
         print(f"rdm model: {exc}", file=sys.stderr)
         return 2
-    print(json.dumps(report, indent=2) if args.json else _human(report))
+    for line in warnings:
+        print(f"rdm model: warning: {line}", file=sys.stderr)
+    bad = non_finite_paths(report)
+    if bad:
+        shown = ", ".join(bad[:6]) + (f" and {len(bad) - 6} more" if len(bad) > 6 else "")
+        print(
+            f"rdm model: the model is not finite at this --q ({shown}); "
+            "give joint angles within the limits",
+            file=sys.stderr,
+        )
+        return 1
+    print(json_text(report, indent=2) if args.json else _human(report))
     return 0

@@ -57,16 +57,15 @@ def run(args: argparse.Namespace) -> int:
     nodes: list[NeuronMirror] = []
     try:
         for slave in args.slave_id:
-            nodes.append(
-                NeuronMirror(
-                    open_can(args.can),
-                    slave,
-                    servos,
-                    imu=args.imu,
-                    esc=not args.no_esc,
-                    period=args.period,
+            bus = open_can(args.can)
+            try:
+                node = NeuronMirror(
+                    bus, slave, servos, imu=args.imu, esc=not args.no_esc, period=args.period
                 )
-            )
+            except BaseException:
+                bus.shutdown()  # a refused board leaves no bus open behind it
+                raise
+            nodes.append(node)
     except (CanSpecError, CanUnavailableError, ValueError) as exc:
         for node in nodes:
             node.close()

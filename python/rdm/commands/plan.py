@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
+
+from rdm.commands.arg_types import accept_negative_values
+from rdm.commands.output import json_text, output_file
+from rdm.json_values import non_finite_paths
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -15,8 +18,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--target", required=True, help="x,y,z[,roll,pitch,yaw] in the world/foot frame [m, rad]"
     )
     parser.add_argument("--mode", choices=("perched", "flight"), default="perched")
-    parser.add_argument("--out", help="write the trajectory (.csv or .json)")
-    parser.add_argument("--plot", help="write a PNG of the trajectory")
+    parser.add_argument("--out", type=output_file, help="write the trajectory (.csv or .json)")
+    parser.add_argument("--plot", type=output_file, help="write a PNG of the trajectory")
+    accept_negative_values(parser)  # --target -0.2,0,0.5
 
 
 def run(args: argparse.Namespace) -> int:
@@ -37,10 +41,6 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as e:  # a robot file or setup refused (RdmError: a ValueError)
         print(f"rdm plan: {e}", file=sys.stderr)
         return 2
-    if args.out:
-        traj.save(args.out)
-    if args.plot:
-        traj.plot(args.plot)
     summary = {
         "reached": traj.reached,
         "blocking": traj.blocking,
@@ -48,5 +48,21 @@ def run(args: argparse.Namespace) -> int:
         "final_error_m": traj.final_error,
         "final_q": [round(v, 4) for v in traj.zeta[-1][6:]],
     }
-    print(json.dumps(summary))
+    bad = non_finite_paths(summary)
+    if bad:
+        print(
+            f"rdm plan: the plan to --target {args.target} is not finite ({', '.join(bad)}); "
+            "is the target within reach of the robot?",
+            file=sys.stderr,
+        )
+        return 1
+    for option, path, write in (("--out", args.out, traj.save), ("--plot", args.plot, traj.plot)):
+        if path is None:
+            continue
+        try:
+            write(path)
+        except (OSError, ValueError) as e:  # a full disk, a link planted since the check
+            print(f"rdm plan: {option} {str(path)!r}: {e}", file=sys.stderr)
+            return 2
+    print(json_text(summary))
     return 0 if traj.reached else 1

@@ -3,18 +3,24 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+import sys
+
+from rdm.commands.arg_types import finite
+from rdm.commands.output import output_file
+from rdm.output_files import open_output
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``rdm plant``."""
     parser.add_argument("--robot", default="rdm", help="shipped robot (rdm, rcm) or a TOML path")
-    parser.add_argument("--export", type=Path, metavar="MODEL.xml", help="write the MJCF here")
     parser.add_argument(
-        "--ceiling-height", type=float, default=2.0, help="ceiling plane height [m]"
+        "--export", type=output_file, metavar="MODEL.xml", help="write the MJCF here"
+    )
+    parser.add_argument(
+        "--ceiling-height", type=finite, default=2.0, help="ceiling plane height [m]"
     )
     parser.add_argument("--no-ceiling", action="store_true", help="omit the ceiling")
-    parser.add_argument("--floor-height", type=float, default=None, help="add a floor plane [m]")
+    parser.add_argument("--floor-height", type=finite, default=None, help="add a floor plane [m]")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -25,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         desc = load_robot(args.robot)
     except DescriptionError as exc:
-        print(f"rdm plant: {exc}")
+        print(f"rdm plant: {exc}", file=sys.stderr)
         return 2
     options = BuildOptions(
         ceiling_height=None if args.no_ceiling else args.ceiling_height,
@@ -40,7 +46,12 @@ def run(args: argparse.Namespace) -> int:
         f"timestep {model.opt.timestep * 1e3:g} ms"
     )
     if args.export is not None:
-        args.export.parent.mkdir(parents=True, exist_ok=True)
-        args.export.write_text(spec.to_xml())
+        xml = spec.to_xml()
+        try:
+            with open_output(args.export, "w", encoding="utf-8") as f:
+                f.write(xml)
+        except OSError as exc:  # a full disk, a link planted since the check
+            print(f"rdm plant: --export {str(args.export)!r}: {exc}", file=sys.stderr)
+            return 2
         print(f"wrote {args.export}; view it with: python -m mujoco.viewer --mjcf {args.export}")
     return 0

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import signal
 import sys
-from contextlib import nullcontext
+from contextlib import nullcontext, suppress
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from rdm.commands.arg_types import positive_finite, seed
+from rdm.commands.output import json_text
 
 if TYPE_CHECKING:
     from rdm.sim.run_folder import RunFolder
@@ -23,9 +26,9 @@ def _speed(text: str) -> float | None:
     try:
         v = float(text)
     except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"--speed {text!r}: fast, realtime or a factor") from exc
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"--speed {text!r} must be > 0")
+        raise argparse.ArgumentTypeError(f"{text!r}: fast, realtime or a factor") from exc
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"{text!r} must be finite and > 0")
     return v
 
 
@@ -68,6 +71,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "on the simulated servos; 0 = the paper's feed-forward; docs/servolead.md)",
     )
     parser.add_argument("--out", default="runs", help="base folder of the run folder")
+    parser.add_argument(
+        "--replace",
+        action="store_true",
+        help="remove the content of an existing run folder first (else a non-empty run "
+        "folder is refused); symbolic links in it are removed, never followed",
+    )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.add_argument(
         "--wire-mcap",
@@ -92,7 +101,35 @@ def _write_wire_mcap(folder: RunFolder) -> bool:
     return True
 
 
+#: Exit code of a run stopped by Ctrl-C: what a shell reports for SIGINT (128 + 2).
+INTERRUPTED_EXIT = 130
+
+
 def run(args: argparse.Namespace) -> int:
+    """Run the scenario into its run folder; exit 0 when every metric passed, 1 when one
+    failed, 2 on bad input, :data:`INTERRUPTED_EXIT` on Ctrl-C (the folder then keeps its
+    INCOMPLETE marker with the reason)."""
+    from rdm.sim.run_folder import RunFolderError, run_folders
+
+    with run_folders(replace=args.replace) as created:
+        try:
+            return _run(args)
+        except RunFolderError as exc:
+            print(f"rdm sim: {exc}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            with suppress(ValueError):  # (only the main thread may set a handler)
+                signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C: no traceback
+            reason = "interrupted by Ctrl-C (SIGINT)"
+            for folder in created:
+                with suppress(OSError):
+                    folder.mark_incomplete(reason)
+            where = f"; {', '.join(str(f.root) for f in created)} marked INCOMPLETE"
+            print(f"\nrdm sim: {reason}{where if created else ''}", file=sys.stderr)
+            return INTERRUPTED_EXIT
+
+
+def _run(args: argparse.Namespace) -> int:
     from rdm.scenarios import SCENARIOS
     from rdm.scenarios.common import backend, progress_to, servo_lead
     from rdm.sim import format_metrics_table
@@ -119,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
                 args.out, duration=duration, seed=args.seed, uart=args.uart, speed=args.speed
             )
         if args.json:
-            print(json.dumps(json.loads(result.stack.folder.summary_json.read_text())))
+            print(json_text(json.loads(result.stack.folder.summary_json.read_text())))
         else:
             print(format_metrics_table(result.metrics), flush=True)
         # while the worker draws: the wire log on this core

@@ -97,14 +97,20 @@ def run(args: argparse.Namespace) -> int:
         uart.close()
         print(f"rdm spinal: {exc}", file=sys.stderr)
         return 2
-    mirror = SpinalMirror(
-        uart,
-        bus,
-        args.rate,
-        period=args.period,
-        boot_delay_ms=args.boot_delay_ms,
-        time_matched=args.time_matched,
-    )
+    try:
+        mirror = SpinalMirror(
+            uart,
+            bus,
+            args.rate,
+            period=args.period,
+            boot_delay_ms=args.boot_delay_ms,
+            time_matched=args.time_matched,
+        )
+    except ValueError as exc:  # refused: no bus or port left open behind it
+        bus.shutdown()
+        uart.close()
+        print(f"rdm spinal: {exc}", file=sys.stderr)
+        return 2
     mirror.set_battery_voltage(args.battery)
     stop = threading.Event()
     if threading.current_thread() is threading.main_thread():

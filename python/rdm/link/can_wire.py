@@ -20,6 +20,7 @@ import os
 
 from rdm import _rdm
 from rdm.link.inproc_can import InProcessBus
+from rdm.output_files import open_output
 
 #: Log frames kept in the core before they are formatted and written.
 DRAIN_AT = 8192
@@ -77,7 +78,7 @@ class WireCandump:
             raise ValueError(f"WireCandump: {path!r} must end in .log")
         self.path = path
         self._link = link
-        self._file = open(path, "w")  # noqa: SIM115 (closed in close())
+        self._file = open_output(path, "w")  # closed in close()
         self._written = 0
         link.capture = self
 

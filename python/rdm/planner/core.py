@@ -43,7 +43,17 @@ class PlannerSetup:
                 urdf, toml = u.read_text(), t.read_text()
         else:
             t = Path(robot)
-            urdf, toml = t.with_suffix(".urdf").read_text(), t.read_text()
+            if not t.is_file():
+                raise FileNotFoundError(
+                    f"unknown robot {str(robot)!r}: shipped robots are 'rdm' and 'rcm'; "
+                    "or give the path of a description's TOML file (its URDF beside it)"
+                )
+            urdf_path = t.with_suffix(".urdf")
+            if not urdf_path.is_file():
+                raise FileNotFoundError(
+                    f"robot {str(robot)!r}: no URDF {str(urdf_path)!r} beside the TOML file"
+                )
+            urdf, toml = urdf_path.read_text(), t.read_text()
         model = Robot.from_strs(urdf, toml)
         units = {}
         for unit in model.vectoring_units:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rdm.output_files import open_output
 from rdm.planner.core import PlannerSetup, feasible_starts, make_core
 from rdm.planner.plan import run_core
 
@@ -224,5 +225,8 @@ def plot_results(results: dict[str, DesignResult], path: str) -> None:
                ylabel="z [m]", aspect="equal")  # fmt: skip
         fig.colorbar(sc, ax=ax, label="F_ee,feasible [N]")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    try:
+        with open_output(path, "wb") as f:  # never through a symbolic link
+            fig.savefig(f, dpi=100, format="png")
+    finally:
+        plt.close(fig)

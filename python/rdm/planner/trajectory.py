@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rdm.output_files import open_output
+
 
 @dataclass
 class Trajectory:
@@ -64,10 +66,13 @@ class Trajectory:
         }
 
     def save(self, path: str | Path) -> None:
-        """Write ``.json`` (everything) or ``.csv`` (one row per step)."""
+        """Write ``.json`` (everything; ValueError for a non-finite value) or ``.csv`` (one row
+        per step), never through a symbolic link (:func:`rdm.output_files.open_output`)."""
         path = Path(path)
         if path.suffix == ".json":
-            path.write_text(json.dumps(self.to_json(), indent=1))
+            text = json.dumps(self.to_json(), indent=1, allow_nan=False)  # valid JSON or raise
+            with open_output(path, "w", encoding="utf-8") as f:
+                f.write(text)
             return
         n_z, n_t, n_l = self.zeta.shape[1], self.torques.shape[1], self.thrusts.shape[1]
         header = (
@@ -77,7 +82,7 @@ class Trajectory:
             + [f"tau{i + 1}" for i in range(n_t)]
             + ["rho", "clearance", "airflow", "ee_x", "ee_y", "ee_z", "error", "binding"]
         )
-        with path.open("w", newline="") as f:
+        with open_output(path, "w", newline="", encoding="utf-8") as f:
             w = csv.writer(f)
             w.writerow(header)
             for k in range(len(self.zeta)):
@@ -107,8 +112,14 @@ class Trajectory:
         status = "reached" if self.reached else f"unreachable ({self.blocking})"
         fig.suptitle(f"{self.mode} plan to {tuple(round(t, 3) for t in self.target)}: {status}")
         fig.tight_layout()
-        fig.savefig(path, dpi=100)
-        plt.close(fig)
+        fmt = Path(path).suffix[1:].lower() or "png"
+        try:
+            if fmt not in fig.canvas.get_supported_filetypes():
+                raise ValueError(f"matplotlib writes no {fmt!r} files (png, pdf, svg, ...)")
+            with open_output(path, "wb") as f:
+                fig.savefig(f, dpi=100, format=fmt)
+        finally:
+            plt.close(fig)
 
 
 @dataclass

@@ -15,6 +15,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from rdm.nodes.onboard_config import OnboardConfig, check_servo_lead
+from rdm.output_files import write_atomic
 from rdm.sim import Metric, format_metrics_table, write_summary
 
 from .stack import SIM_SERVO_LEAD_S, Stack, StackOptions
@@ -172,10 +173,11 @@ def run_stack(stack: Stack, seconds: float) -> float:
 
 def finish(result: ScenarioResult, seconds: float, wall_s: float) -> ScenarioResult:
     """Write metrics.txt and summary.json (with the simulated time the plant reached, at most
-    ``seconds``); returns the result."""
+    ``seconds``), both atomically, and take the run folder's INCOMPLETE marker away; returns
+    the result."""
     st = result.stack
     table = format_metrics_table(result.metrics)
-    st.folder.metrics_txt.write_text(table + "\n")
+    write_atomic(st.folder.metrics_txt, table + "\n")
     facts = dict(result.facts)
     # what the plant really simulated (a scenario may stop before its ``seconds`` bound)
     simulated = float(st.plant.time) if math.isfinite(st.plant.time) else seconds
@@ -197,6 +199,7 @@ def finish(result: ScenarioResult, seconds: float, wall_s: float) -> ScenarioRes
     )
     result.facts = facts
     write_summary(st.folder.summary_json, result.metrics, seed=st.plant.seed, **facts)
+    st.folder.mark_complete()
     return result
 
 

@@ -396,9 +396,29 @@ def build_stack(
     script: Callable[[Stack, float], None] | None = None,
     script_period: float = 0.01,
 ) -> Stack:
-    """Wire the full stack into a run folder ``<base>/<name>-seed<seed>``."""
-    opt = options
-    folder = RunFolder.create(name, base=base, seed=opt.seed)
+    """Wire the full stack into a run folder ``<base>/<name>-seed<seed>`` (made empty,
+    :class:`RunFolder`). A build that fails, Ctrl-C included, closes what it had opened (no
+    bus or port left behind) before the error goes on."""
+    folder = RunFolder.create(name, base=base, seed=options.seed)
+    opened: list[Callable[[], Any]] = []
+    try:
+        return _wire(folder, options, script, script_period, opened)
+    except BaseException:
+        for close in reversed(opened):
+            with contextlib.suppress(Exception):
+                close()
+        raise
+
+
+def _wire(
+    folder: RunFolder,
+    opt: StackOptions,
+    script: Callable[[Stack, float], None] | None,
+    script_period: float,
+    opened: list[Callable[[], Any]],
+) -> Stack:
+    """:func:`build_stack` into ``folder``; appends to ``opened`` the close of each part it
+    opens, as it opens it."""
     plant, q0 = make_plant(opt)
     channel = _free_channel()
     wire = (
@@ -406,6 +426,8 @@ def build_stack(
         if opt.can_wire and opt.neuron_backend == "rust" and opt.master_backend == "rust"
         else None
     )
+    if wire is not None:
+        opened.append(wire.shutdown)
     if opt.neuron_backend == "rust":
         layout, bank = make_neuron_bank(plant, q0, wire or open_can(f"inproc:{channel}"))
         neurons: list = list(bank.boards)
@@ -415,6 +437,7 @@ def build_stack(
         neuron_nodes = list(neurons)
     else:
         raise ValueError(f"neuron_backend={opt.neuron_backend!r}: 'rust' or 'python'")
+    opened.extend(n.close for n in neuron_nodes)
     barriers: list = []
     # The captures' time index (rdm.sim.capture_index): the plant's time is the loop's while
     # the nodes tick, and the lockstep kernel writes through the same file objects.
@@ -428,6 +451,7 @@ def build_stack(
         f_dev, f_host = open_inproc_uart(folder.uart_dir, "leptrino_foot", ".lep", clock)
     else:
         raise ValueError(f"uart={opt.uart!r}: 'inproc' or 'pty'")
+    opened.extend((s_dev.close, s_host.close, f_dev.close, f_host.close))
     spinal_link, onboard_link = DroppableLink(s_dev), DroppableLink(s_host)
     spinal = SpinalMirror(
         spinal_link,
@@ -439,14 +463,18 @@ def build_stack(
         master_backend=opt.master_backend,
         **spinal_flash_calibration(opt),
     )
+    opened.append(spinal.close)
     config = opt.onboard or OnboardConfig()
     from dataclasses import replace
 
     if config.initial_q is None:
         config = replace(config, initial_q=tuple(q0.tolist()))
     onboard = OnboardNode(onboard_link, f_host, config=config)
+    opened.append(onboard.close)
     sensor = LeptrinoSensorNode(f_dev, "CFS034CA301U", rate_hz=opt.leptrino_rate_hz)
     logger = McapLogger(folder.mcap) if opt.log else None
+    if logger is not None:
+        opened.append(logger.finish)
     candump: Any = None
     if opt.log:
         candump = (
@@ -454,6 +482,7 @@ def build_stack(
             if wire is not None
             else CandumpCapture(folder.candump, channel=channel)
         )
+        opened.append(candump.close)
     truth: list = []
 
     def truth_sink(gt: Any) -> None:

@@ -13,6 +13,7 @@ import os
 import can
 
 from rdm.link import inproc_can
+from rdm.output_files import open_output
 
 #: Frames buffered before one write to the file.
 BATCH_LINES = 512
@@ -27,7 +28,8 @@ class CandumpCapture:
         if not str(path).endswith(".log"):
             raise ValueError(f"CandumpCapture: {path!r} must end in .log")
         self.path = path
-        self._writer = can.CanutilsLogWriter(path, channel=channel or "can0")
+        # the writer takes an open file: ours, opened without following a symbolic link
+        self._writer = can.CanutilsLogWriter(open_output(path, "w"), channel=channel or "can0")
         self.frames = 0
         self._lines: list[str] = []
         self._stamp: float | None = None  # the float object _stamp_text was made from

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from rdm._rdm import capture_index_records
+from rdm.output_files import open_output
 
 MAGIC = b"RDMCIDX1"
 INDEX_SUFFIX = ".idx"
@@ -62,9 +63,9 @@ class TimedCaptureFile:
 
     def __init__(self, path: str | os.PathLike[str], clock: Clock) -> None:
         self._clock = clock
-        self._data: BinaryIO = open(path, "wb")  # noqa: SIM115
+        self._data: BinaryIO = open_output(path, "wb")
         try:
-            self._index: BinaryIO = open(index_path(path), "wb")  # noqa: SIM115
+            self._index: BinaryIO = open_output(index_path(path), "wb")
         except OSError:
             self._data.close()
             raise

@@ -30,6 +30,7 @@ from typing import Any, BinaryIO
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
+from rdm.output_files import open_output
 from rdm.protocol.rosserial.msgdef import MsgSpec
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 
@@ -139,7 +140,7 @@ class McapLogger:
         background_chunks: bool = True,
     ) -> None:
         self.path = path
-        self._file: BinaryIO = open(path, "wb")  # noqa: SIM115
+        self._file: BinaryIO = open_output(path, "wb")
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=compression)
         self._writer.start(profile="ros1", library="rdm")
         #: The writer's message path in fewer calls (same bytes), None: ``add_message``.

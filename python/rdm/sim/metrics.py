@@ -10,9 +10,12 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
+
+from rdm.json_values import nulled
+from rdm.output_files import write_atomic
 
 
 @dataclass(frozen=True)
@@ -72,29 +75,15 @@ def format_metrics_table(metrics: Sequence[Metric]) -> str:
     return "\n".join(out)
 
 
-def _clean(value: Any) -> Any:
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, Mapping):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if hasattr(value, "tolist"):
-        return _clean(value.tolist())
-    return value
-
-
 def summary_dict(metrics: Sequence[Metric], **facts: Any) -> dict[str, Any]:
     """The JSON summary: ``metrics`` (with ``passed``), ``all_passed`` and any run facts."""
     rows = [{**asdict(m), "passed": m.passed} for m in metrics]
     verdicts = [r["passed"] for r in rows if r["passed"] is not None]
-    return _clean({"metrics": rows, "all_passed": all(verdicts), **facts})
+    return nulled({"metrics": rows, "all_passed": all(verdicts), **facts})
 
 
 def write_summary(path: str | os.PathLike[str], metrics: Sequence[Metric], **facts: Any) -> dict:
     """Write :func:`summary_dict` as JSON (sorted keys, NaN as null); returns the dict."""
     doc = summary_dict(metrics, **facts)
-    with open(path, "w") as f:
-        json.dump(doc, f, indent=2, sort_keys=True, allow_nan=False)
-        f.write("\n")
+    write_atomic(path, json.dumps(doc, indent=2, sort_keys=True, allow_nan=False) + "\n")
     return doc

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import multiprocessing
 import pickle
+import signal
+import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -53,6 +55,19 @@ def _draw_snapshot(draw: Callable[..., None], out: Path, snapshot: bytes) -> Non
     draw(out, *pickle.loads(snapshot))
 
 
+@contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored inside the block (in the main thread; elsewhere no change)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler if old is None else old)
+
+
 class PlotWorker:
     """One spawned process that draws figures (``draw(out, *args)`` calls) in order."""
 
@@ -63,7 +78,12 @@ class PlotWorker:
             mp_context=multiprocessing.get_context("spawn"),
             initializer=_warm_up,
         )
-        self._pool.submit(_ready)  # start the process (and its matplotlib import) now
+        # start the process (and its matplotlib import) now, with Ctrl-C ignored: SIGINT to
+        # the terminal's process group is the parent's to handle (rdm sim stops the worker),
+        # and a process that starts with SIGINT ignored keeps it so (Python installs its
+        # KeyboardInterrupt handler only over the default), so no traceback of its own
+        with _sigint_ignored():
+            self._pool.submit(_ready)
         self._pending: list[tuple[Future | None, Callable[..., None], Path, bytes]] = []
         #: Every figure written so far (by :meth:`wait`), in order.
         self.drawn: list[Path] = []

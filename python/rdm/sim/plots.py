@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from rdm.output_files import open_output
 from rdm.sim.plot_worker import active_worker
 
 
@@ -85,7 +86,7 @@ def draw_panels(
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(out, dpi=dpi)
+    _save(fig, out, dpi)
     plt.close(fig)
 
 
@@ -131,7 +132,7 @@ def draw_tracking_errors(
     if title:
         ax.set_title(title)
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    _save(fig, out, 110)
     plt.close(fig)
 
 
@@ -164,8 +165,16 @@ def draw_zmp(out: Path, zmp: np.ndarray, plate_size: tuple[float, float], title:
     ax.set_title(title, fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    _save(fig, out, 110)
     plt.close(fig)
+
+
+def _save(fig: Any, out: str | os.PathLike[str], dpi: int) -> None:
+    """Write ``fig`` to ``out`` (format from the suffix, PNG without one), never through a
+    symbolic link (:func:`rdm.output_files.open_output`)."""
+    out = Path(out)
+    with open_output(out, "wb") as f:
+        fig.savefig(f, dpi=dpi, format=out.suffix[1:].lower() or "png")
 
 
 def _render(draw: Any, path: str | os.PathLike[str], *args: Any) -> Path:

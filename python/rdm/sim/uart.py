@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import BinaryIO
 
+from rdm.output_files import open_output
 from rdm.sim.capture_index import Clock, TimedCaptureFile
 
 
@@ -36,7 +37,7 @@ def _capture_file(
     if path is None:
         return None
     if clock is None:
-        return open(path, "wb")
+        return open_output(path, "wb")
     return TimedCaptureFile(path, clock)
 
 

@@ -108,13 +108,21 @@ def _decode_asc(path: Path, decoder: NeuronDecoder) -> Iterator[dict[str, Any]]:
         reader.stop()
 
 
+#: Log syntax by file suffix: ``candump -L`` lines or Vector ASCII.
+SYNTAX_OF_SUFFIX = {".log": "log", ".candump": "log", ".asc": "asc"}
+
+
 def decode_candump(
     path: str | os.PathLike[str],
     *,
     direction: Direction | None = None,
     decoder: NeuronDecoder | None = None,
+    syntax: str | None = None,
 ) -> Iterator[dict[str, Any]]:
-    """Yield one dict per frame line of a ``.log`` or ``.asc`` capture.
+    """Yield one dict per frame line of a ``.log``/``.candump`` or ``.asc`` capture.
+
+    ``syntax``: ``"log"`` (``candump -L`` lines) or ``"asc"`` (Vector ASCII); default from
+    the suffix (:data:`SYNTAX_OF_SUFFIX`), a ValueError for any other suffix.
 
     Keys: ``line``, ``kind`` (None on error), ``ok``, ``error`` (message or None), ``timestamp``,
     ``channel``, ``id``, ``dlc``, ``data`` (hex), ``direction``, ``ambiguous``,
@@ -125,10 +133,16 @@ def decode_candump(
     dec = decoder if decoder is not None else NeuronDecoder(direction=direction)
     if direction is not None:
         dec.direction = direction
-    suffix = p.suffix.lower()
-    if suffix == ".log":
+    if syntax is None:
+        syntax = SYNTAX_OF_SUFFIX.get(p.suffix.lower())
+        if syntax is None:
+            raise ValueError(
+                f"decode_candump: unsupported log suffix {p.suffix!r} "
+                f"(use {', '.join(SYNTAX_OF_SUFFIX)} or give the syntax)"
+            )
+    if syntax == "log":
         yield from _decode_log(p, dec)
-    elif suffix == ".asc":
+    elif syntax == "asc":
         yield from _decode_asc(p, dec)
     else:
-        raise ValueError(f"decode_candump: unsupported log suffix {p.suffix!r} (use .log or .asc)")
+        raise ValueError(f"decode_candump: syntax {syntax!r} must be 'log' or 'asc'")
