@@ -92,6 +92,7 @@ def test_every_registered_scenario_resolves_to_its_module():
         SCENARIOS,
         flight,
         hover,
+        mission,
         perching,
         push,
         tasks,
@@ -102,6 +103,7 @@ def test_every_registered_scenario_resolves_to_its_module():
     expect = {
         "hover": (hover.run, hover.DEFAULT_DURATION),
         "flight": (flight.run, flight.DEFAULT_DURATION),
+        "mission": (mission.run, mission.DEFAULT_DURATION),
         "perching": (perching.run, perching.DEFAULT_DURATION),
         "push": (push.run, push.DEFAULT_DURATION),
         "tracking": (tracking.run, tracking.DEFAULT_DURATION),
