@@ -135,20 +135,36 @@ def wrap_angle(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+#: Sampling step of a planned path, s: the node keeps the samples (no ruckig object outlives
+#: the planning call) and interpolates them linearly between.
+PATH_SAMPLE_S = 0.005
+
+
 class _Path:
-    """A ruckig trajectory of x, y, z, yaw from a start time."""
+    """A ruckig trajectory of x, y, z, yaw from a start time, sampled every
+    :data:`PATH_SAMPLE_S` (positions and velocities) and interpolated between samples."""
 
     def __init__(self, start: float, trajectory: Trajectory) -> None:
-        self.start, self.trajectory = start, trajectory
+        self.start = start
+        self.duration = float(trajectory.duration)
+        n = max(2, math.ceil(self.duration / PATH_SAMPLE_S) + 1)
+        self.times = np.linspace(0.0, self.duration, n)
+        samples = [trajectory.at_time(float(t)) for t in self.times]
+        self.pos = np.array([s[0] for s in samples])
+        self.vel = np.array([s[1] for s in samples])
 
     @property
     def end(self) -> float:
-        return self.start + self.trajectory.duration
+        return self.start + self.duration
 
     def at(self, now: float) -> tuple[np.ndarray, np.ndarray, float]:
-        t = min(max(now - self.start, 0.0), self.trajectory.duration)
-        pos, vel, _ = self.trajectory.at_time(t)
-        return np.array(pos[:3]), np.array(vel[:3]), wrap_angle(pos[3])
+        t = min(max(now - self.start, 0.0), self.duration)
+        i = min(int(np.searchsorted(self.times, t, side="right")), len(self.times) - 1)
+        t0, t1 = self.times[i - 1], self.times[i]
+        w = 0.0 if t1 <= t0 else (t - t0) / (t1 - t0)
+        pos = (1.0 - w) * self.pos[i - 1] + w * self.pos[i]
+        vel = (1.0 - w) * self.vel[i - 1] + w * self.vel[i]
+        return pos[:3], vel[:3], wrap_angle(float(pos[3]))
 
 
 def plan_path(
