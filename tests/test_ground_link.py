@@ -536,3 +536,24 @@ def test_the_simulated_mocap_channel_reads_with_the_same_bounds() -> None:
     assert node.calls == [("set_mocap", [1, 2, 3], [0, 0, 0], 0.5)]
     assert (rx.applied, rx.errors) == (1, 2)
     assert rx.position.tolist() == [1.0, 2.0, 3.0]
+
+
+def test_a_pose_datagram_reaches_set_mocap_pose_and_refreshes_no_heartbeat() -> None:
+    """``pose``: the marker body's pose as a motion-capture system gives it, checked (3 + 4
+    finite numbers) and handed to the node; like ``mocap`` it is no sign of the operator."""
+    from rdm.ground.commands import TABLE, Rejected
+
+    calls = []
+
+    class Node:
+        def set_mocap_pose(self, p, q):
+            calls.append((p, q))
+            return True
+
+    allowed, required, handler = TABLE["pose"]
+    assert set(allowed) == set(required) == {"position", "quaternion"}
+    handler(Node(), {"position": [1, 2, 3], "quaternion": [0, 0, 0, 1]})
+    assert calls == [([1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0])]
+    with pytest.raises(Rejected):
+        handler(Node(), {"position": [1, 2, 3], "quaternion": [0, 0, 1]})
+    assert len(calls) == 1

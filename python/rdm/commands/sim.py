@@ -77,6 +77,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="remove the content of an existing run folder first (else a non-empty run "
         "folder is refused); symbolic links in it are removed, never followed",
     )
+    parser.add_argument(
+        "--fault",
+        default=None,
+        help="mission only: inject one fault once the robot hovers (heartbeat-loss, "
+        "mocap-loss, uart-cut, low-battery, bad-adc-scale; docs/flying.md)",
+    )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.add_argument(
         "--wire-mcap",
@@ -145,6 +151,18 @@ def _run(args: argparse.Namespace) -> int:
     except OSError as exc:
         print(f"rdm sim: --out {args.out!r}: {exc.strerror or exc}", file=sys.stderr)
         return 2
+    extra = {}
+    if args.fault is not None:
+        from rdm.scenarios.mission import FAULTS
+
+        if sc.name != "mission" or args.fault not in FAULTS:
+            print(
+                f"rdm sim: --fault {args.fault!r}: the mission scenario's faults are "
+                f"{', '.join(FAULTS)}",
+                file=sys.stderr,
+            )
+            return 2
+        extra["fault"] = args.fault
     # no --servo-lead: each scenario's own default (docs/servolead.md)
     lead = nullcontext() if args.servo_lead is None else servo_lead(args.servo_lead)
     print(f"rdm sim {sc.name}: {sc.description}", file=sys.stderr)
@@ -153,7 +171,12 @@ def _run(args: argparse.Namespace) -> int:
     with plots_in_background() as worker:
         with lead, progress_to(sys.stderr, duration), backend(args.backend):
             result = sc.run(
-                args.out, duration=duration, seed=args.seed, uart=args.uart, speed=args.speed
+                args.out,
+                duration=duration,
+                seed=args.seed,
+                uart=args.uart,
+                speed=args.speed,
+                **extra,
             )
         if args.json:
             print(json_text(json.loads(result.stack.folder.summary_json.read_text())))

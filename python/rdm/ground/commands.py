@@ -10,6 +10,7 @@ method it calls.
 | ``perch`` / ``unperch`` | none | ``request_perch(True / False)`` |
 | ``gains`` | ``profile`` (name) | ``set_gain_profile(profile)`` |
 | ``mocap`` | ``position`` [3], optional ``velocity`` [3], ``yaw`` | ``set_mocap(p, v, yaw)`` |
+| ``pose`` | marker ``position`` [3] m, ``quaternion`` [x, y, z, w] | ``set_mocap_pose(p, q)`` |
 | ``status`` | none | the ack's ``result`` is ``status()`` |
 | ``heartbeat`` | none | nothing (refreshes the heartbeat) |
 | ``ee`` | ``position`` [x, y, z] m, foot frame | planned (``rdm.ground.ee``) |
@@ -127,6 +128,13 @@ def _mocap(node: Any, args: Args) -> None:
     call(node, "set_mocap", p, v, yaw)
 
 
+def _pose(node: Any, args: Args) -> None:
+    """A motion-capture system's sample: the marker body's pose, stamped on arrival (the
+    capture-to-arrival latency is not compensated; ASSUMPTION: a few ms)."""
+    p = vector("pose", args, "position", 3)
+    call(node, "set_mocap_pose", p, vector("pose", args, "quaternion", 4))
+
+
 def _status(node: Any, args: Args) -> dict[str, Any]:
     return {"node": json_safe(call(node, "status"))}
 
@@ -153,6 +161,7 @@ TABLE: dict[str, tuple[tuple[str, ...], tuple[str, ...], Callable[[Any, Args], A
     "unperch": ((), (), _plain("request_perch", False)),
     "gains": (("profile",), ("profile",), _gains),
     "mocap": (("position", "velocity", "yaw"), ("position",), _mocap),
+    "pose": (("position", "quaternion"), ("position", "quaternion"), _pose),
     "status": ((), (), _status),
     "heartbeat": ((), (), _nothing),
     "ee": (("position",), ("position",), _ee),

@@ -163,7 +163,7 @@ class GroundPort:
         assert msg is not None
         src, seq, cmd = msg["src"], msg["seq"], msg["cmd"]
         args = msg.get("args", {})
-        refreshes = cmd != "mocap" or self.config.mocap_refreshes_heartbeat
+        refreshes = cmd not in ("mocap", "pose") or self.config.mocap_refreshes_heartbeat
         if refreshes and self.heartbeat.refresh(now):
             self.log("ground station back")
             self._notify("on_ground_restored", None)

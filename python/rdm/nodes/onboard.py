@@ -43,6 +43,7 @@ from rdm.nodes.onboard_config import OnboardConfig, ServoMap
 from rdm.nodes.onboard_control import ControlCommand, ControlPipeline, Setpoint, State
 from rdm.nodes.onboard_flight import FlightMode, FlightSupervisor
 from rdm.nodes.onboard_foot import ByteLink, FootSensorReader
+from rdm.nodes.onboard_mocap import CogEstimator
 from rdm.nodes.onboard_monitors import Monitors, cells_from_reference
 from rdm.protocol.rosserial.codec import RosTime
 from rdm.protocol.rosserial.events import MessageReceived, ServiceResponse, SyncLost
@@ -268,6 +269,8 @@ class OnboardNode:
             or cells_from_reference([float(r[0]) for r in config.pwm_info.motor_info]),
         )
         self._flight_setpoint: Setpoint | None = None
+        #: the CoG state from marker poses (:meth:`set_mocap_pose`)
+        self.cog_estimator = CogEstimator(robot, config.mocap)
         self._imu_at: float | None = None
         self._imu_acc: list[float] | None = None
         self._servo_at: float | None = None
@@ -372,6 +375,31 @@ class OnboardNode:
             return False
         self._mocap = (p, v, y)
         self._mocap_stamp = self._now
+        return True
+
+    def set_mocap_pose(
+        self, position: Sequence[float], quaternion: Sequence[float], stamp: float | None = None
+    ) -> bool:
+        """A motion-capture sample as the system gives it: the world pose of the marker body
+        on the root link (position [m], quaternion x, y, z, w) taken at ``stamp`` (node time;
+        default: now). The CoG state comes from :class:`rdm.nodes.onboard_mocap.CogEstimator`
+        at the present joint angles. Invalid (non-finite, not a unit quaternion within 1 %,
+        a stamp more than 0.1 s ahead of the node) -> counted, ignored."""
+        p, quat = _vector(position, 3), _vector(quaternion, 4)
+        st = self._now if stamp is None else _scalar(stamp)
+        norm = 0.0 if quat is None else float(np.linalg.norm(quat))
+        if (
+            p is None
+            or quat is None
+            or st is None
+            or abs(norm - 1.0) > 0.01
+            or st > self._now + 0.1
+        ):
+            self.counts["mocap_invalid"] += 1
+            return False
+        cog, velocity, yaw = self.cog_estimator.update(st, p, quat / norm, self.present_q)
+        self._mocap = (cog, velocity, yaw)
+        self._mocap_stamp = st
         return True
 
     def set_target(

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rdm.nodes.onboard_flight import FlightLimits
+from rdm.nodes.onboard_mocap import MocapConfig
 from rdm.nodes.onboard_monitors import MonitorLimits
 from rdm.pwm import HYDRUS_MOTOR_INFO, SQRT_MODE
 
@@ -182,6 +183,9 @@ class OnboardConfig:
     #: Named position-gain profiles (keyword overrides as ``position_gains``) the operator
     #: switches between (``OnboardNode.set_gain_profile``); "default" is ``position_gains``.
     gain_profiles: dict = field(default_factory=dict)
+    #: The marker body of motion capture and the CoG estimate from its pose
+    #: (:class:`rdm.nodes.onboard_mocap.MocapConfig`, ``OnboardNode.set_mocap_pose``).
+    mocap: MocapConfig = field(default_factory=MocapConfig)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):

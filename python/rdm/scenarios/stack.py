@@ -42,6 +42,8 @@ from rdm.plant import EscParams, Plant, ServoParams
 from rdm.plant.sensors import imu_model_of_seed
 from rdm.sim import CandumpCapture, McapLogger, RunFolder, open_inproc_uart, open_tapped_pty
 
+from .mocap_node import MocapNode, MocapSensor
+
 _FLOAT64 = np.dtype(np.float64)
 
 
@@ -89,73 +91,6 @@ def quaternion_yaw(q_wxyz: np.ndarray) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-class MocapNode:
-    """Motion capture: the plant's CoG position (the controlled point), its velocity (finite
-    difference of the true CoG) and the foot-frame yaw, to the onboard node."""
-
-    name = "mocap"
-    #: What its tick changes of the lockstep kernel's parts: the plant (its lazy forward).
-    kernel_touches = ("plant",)
-
-    def __init__(self, plant: Plant, onboard: OnboardNode, period: float = 0.01) -> None:
-        self.plant = plant
-        self.onboard = onboard
-        self.period = period
-        self._last: list[float] | None = None
-        self.enabled = True
-        #: Float64 vectors read with one ``tolist`` and the 3-vector difference written out
-        #: (the same floats as :meth:`tick_plain`, tests/test_truthlog_nodes.py); False:
-        #: always :meth:`tick_plain`.
-        self.fast_paths = True
-
-    def tick(self, now: float) -> None:
-        if not self.fast_paths:
-            self.tick_plain(now)
-            return
-        gt = self.plant.ground_truth()
-        p = self._floats(gt.cog_position)
-        last = self._last
-        if last is None:
-            v = [0.0] * len(p)
-        elif len(p) == 3 and len(last) == 3:
-            period = self.period
-            v = [(p[0] - last[0]) / period, (p[1] - last[1]) / period, (p[2] - last[2]) / period]
-        else:
-            period = self.period
-            v = [(a - b) / period for a, b in zip(p, last, strict=True)]
-        self._last = p
-        if self.enabled:
-            w, x, y, z = self._floats(gt.base_quaternion)
-            yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-            self.onboard.set_mocap(p, v, yaw)
-
-    @staticmethod
-    def _floats(value: Any) -> list[float]:
-        """``np.asarray(value, dtype=float).reshape(-1).tolist()``; a float64 vector's
-        ``tolist`` directly (the same floats)."""
-        if type(value) is np.ndarray and value.dtype is _FLOAT64 and value.ndim == 1:
-            return value.tolist()
-        return np.asarray(value, dtype=float).reshape(-1).tolist()
-
-    def tick_plain(self, now: float) -> None:
-        """:meth:`tick` for any array-like truth fields (the reference form)."""
-        gt = self.plant.ground_truth()
-        # Plain floats: the same IEEE operations as the array form ``(p - last) / period``,
-        # and lists of floats take the onboard node's cheap validation path.
-        p = np.asarray(gt.cog_position, dtype=float).reshape(-1).tolist()
-        last = self._last
-        if last is None:
-            v = [0.0] * len(p)
-        else:
-            period = self.period
-            v = [(a - b) / period for a, b in zip(p, last, strict=True)]
-        self._last = p
-        if self.enabled:
-            w, x, y, z = np.asarray(gt.base_quaternion, dtype=float).reshape(-1).tolist()
-            yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-            self.onboard.set_mocap(p, v, yaw)
-
-
 class ScriptNode:
     """Runs a scenario's script ``f(now)`` (targets, perch requests, pushes) at its period.
     ``kernel_touches``: the lockstep kernel's parts the script reads or changes
@@ -198,6 +133,10 @@ class StackOptions:
     onboard: OnboardConfig | None = None
     leptrino_rate_hz: float = 500.0
     mocap_period: float = 0.01
+    #: What motion capture gives the onboard node (:class:`MocapSensor`): the true CoG state
+    #: (default), or ``MocapSensor()``: the marker body's pose with noise and latency, as a
+    #: real system gives it (docs/flying.md "Motion capture").
+    mocap: MocapSensor = field(default_factory=lambda: MocapSensor(source="truth"))
     truth_period: float = 0.01
     log: bool = True
     speed: float | None = None
@@ -501,7 +440,7 @@ def _wire(
         truth_sink=truth_sink,
     )
     bridge.kernel_truth_touches = ()  # truth_sink only keeps and logs the record
-    mocap = MocapNode(plant, onboard, opt.mocap_period)
+    mocap = MocapNode(plant, onboard, opt.mocap_period, opt.mocap, seed=opt.seed)
     status_log: list = []
     nodes: list = [bridge, *neuron_nodes, spinal, mocap, onboard, sensor]
     stack = Stack(

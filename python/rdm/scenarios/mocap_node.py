@@ -1,0 +1,138 @@
+"""Simulated motion capture for the onboard node (:class:`MocapNode`, :class:`MocapSensor`)."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from rdm.nodes.onboard import OnboardNode
+from rdm.plant import Plant
+
+_FLOAT64 = np.dtype(np.float64)
+#: The sub-stream of the run's seed for the mocap noise.
+_MOCAP_STREAM = 0x6D6F6361
+
+
+@dataclass(frozen=True)
+class MocapSensor:
+    """What the simulated motion-capture system measures. ASSUMPTIONS: a marker set tracked
+    to 0.3 mm and 1 mrad (1 sigma) with 10 ms from capture to the robot's computer, typical
+    of an optical system at 100-240 Hz."""
+
+    #: "marker": the marker body's pose (a real system); "truth": the true CoG state.
+    source: str = "marker"
+    position_noise_m: float = 0.0003
+    rotation_noise_rad: float = 0.001
+    latency_s: float = 0.01
+
+    def __post_init__(self) -> None:
+        if self.source not in ("marker", "truth"):
+            raise ValueError(f"MocapSensor.source={self.source!r}: 'marker' or 'truth'")
+        for name in ("position_noise_m", "rotation_noise_rad", "latency_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"MocapSensor.{name}={v!r} must be finite and >= 0")
+
+
+class MocapNode:
+    """Motion capture to the onboard node at ``period``. ``sensor.source`` "marker": the world
+    pose of the marker body on the root link (``OnboardConfig.mocap``'s offset) with Gaussian
+    position and rotation noise, delivered ``latency_s`` after it was taken with its capture
+    time as the stamp (``OnboardNode.set_mocap_pose``). "truth": the plant's CoG position
+    (the controlled point), its velocity (finite difference of the true CoG) and the
+    root-link yaw (``OnboardNode.set_mocap``)."""
+
+    name = "mocap"
+    #: What its tick changes of the lockstep kernel's parts: the plant (its lazy forward).
+    kernel_touches = ("plant",)
+
+    def __init__(
+        self,
+        plant: Plant,
+        onboard: OnboardNode,
+        period: float = 0.01,
+        sensor: MocapSensor | None = None,
+        seed: int = 0,
+    ) -> None:
+        self.plant = plant
+        self.onboard = onboard
+        self.period = period
+        self.sensor = sensor or MocapSensor(source="truth")
+        self._rng = np.random.default_rng([seed, _MOCAP_STREAM])
+        self._pending: deque[tuple[float, float, list[float], list[float]]] = deque()
+        self._last: list[float] | None = None
+        self.enabled = True
+        #: Float64 vectors read with one ``tolist`` and the 3-vector difference written out
+        #: (the same floats as :meth:`tick_plain`, tests/test_truthlog_nodes.py); False:
+        #: always :meth:`tick_plain`.
+        self.fast_paths = True
+
+    def tick(self, now: float) -> None:
+        if self.sensor.source == "marker":
+            self._tick_marker(now)
+            return
+        if not self.fast_paths:
+            self.tick_plain(now)
+            return
+        gt = self.plant.ground_truth()
+        p = self._floats(gt.cog_position)
+        last = self._last
+        if last is None:
+            v = [0.0] * len(p)
+        elif len(p) == 3 and len(last) == 3:
+            period = self.period
+            v = [(p[0] - last[0]) / period, (p[1] - last[1]) / period, (p[2] - last[2]) / period]
+        else:
+            period = self.period
+            v = [(a - b) / period for a, b in zip(p, last, strict=True)]
+        self._last = p
+        if self.enabled:
+            w, x, y, z = self._floats(gt.base_quaternion)
+            yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+            self.onboard.set_mocap(p, v, yaw)
+
+    @staticmethod
+    def _floats(value: Any) -> list[float]:
+        """``np.asarray(value, dtype=float).reshape(-1).tolist()``; a float64 vector's
+        ``tolist`` directly (the same floats)."""
+        if type(value) is np.ndarray and value.dtype is _FLOAT64 and value.ndim == 1:
+            return value.tolist()
+        return np.asarray(value, dtype=float).reshape(-1).tolist()
+
+    def tick_plain(self, now: float) -> None:
+        """:meth:`tick` for any array-like truth fields (the reference form)."""
+        gt = self.plant.ground_truth()
+        # Plain floats: the same IEEE operations as the array form ``(p - last) / period``,
+        # and lists of floats take the onboard node's cheap validation path.
+        p = np.asarray(gt.cog_position, dtype=float).reshape(-1).tolist()
+        last = self._last
+        if last is None:
+            v = [0.0] * len(p)
+        else:
+            period = self.period
+            v = [(a - b) / period for a, b in zip(p, last, strict=True)]
+        self._last = p
+        if self.enabled:
+            w, x, y, z = np.asarray(gt.base_quaternion, dtype=float).reshape(-1).tolist()
+            yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+            self.onboard.set_mocap(p, v, yaw)
+
+    def _tick_marker(self, now: float) -> None:
+        gt = self.plant.ground_truth()
+        s, cfg = self.sensor, self.onboard.config.mocap
+        w, x, y, z = (float(v) for v in gt.base_quaternion)
+        r_base = Rotation.from_quat([x, y, z, w])
+        r_marker = r_base * Rotation.from_quat(cfg.marker_quaternion)
+        p = np.asarray(gt.base_position, dtype=float) + r_base.apply(cfg.marker_position)
+        p = p + self._rng.normal(0.0, s.position_noise_m, 3)
+        r_marker = r_marker * Rotation.from_rotvec(self._rng.normal(0.0, s.rotation_noise_rad, 3))
+        self._pending.append((now + s.latency_s, now, p.tolist(), r_marker.as_quat().tolist()))
+        while self._pending and self._pending[0][0] <= now + 1e-9:
+            _, taken, position, quaternion = self._pending.popleft()
+            if self.enabled:
+                self.onboard.set_mocap_pose(position, quaternion, stamp=taken)

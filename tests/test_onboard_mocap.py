@@ -1,0 +1,86 @@
+"""The CoG state from a marker pose (rdm.nodes.onboard_mocap) against MuJoCo: the plant's own
+CoG (``data.subtree_com``) for random joint angles, base poses and marker offsets; the velocity
+filter against its first-order formula; the node's freshness check on the capture stamp."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from rdm.model import Robot
+from rdm.nodes.onboard import OnboardNode
+from rdm.nodes.onboard_config import OnboardConfig
+from rdm.nodes.onboard_mocap import CogEstimator, MocapConfig
+from rdm.plant import Plant
+
+ROBOT = Robot.default()
+
+
+def marker_pose(base_p, base_q_wxyz, offset_p, offset_q_xyzw):
+    w, x, y, z = base_q_wxyz
+    r_base = Rotation.from_quat([x, y, z, w])
+    r_marker = r_base * Rotation.from_quat(offset_q_xyzw)
+    return np.asarray(base_p) + r_base.apply(offset_p), r_marker.as_quat()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_cog_from_the_marker_pose_matches_mujoco(seed) -> None:
+    rng = np.random.default_rng(seed)
+    plant = Plant("rdm", seed=seed)
+    q = rng.uniform(-0.8, 0.8, ROBOT.n_q)
+    base_q = Rotation.from_rotvec(rng.normal(0, 0.4, 3)).as_quat()  # x, y, z, w
+    base_wxyz = [base_q[3], *base_q[:3]]
+    plant.reset(q, base_position=rng.uniform(-1, 1, 3), base_quaternion=base_wxyz)
+    gt = plant.ground_truth()
+    offset_p = tuple(rng.uniform(-0.1, 0.1, 3))
+    offset_q = tuple(Rotation.from_rotvec(rng.normal(0, 1.0, 3)).as_quat())
+    est = CogEstimator(ROBOT, MocapConfig(marker_position=offset_p, marker_quaternion=offset_q))
+    p, quat = marker_pose(gt.base_position, gt.base_quaternion, offset_p, offset_q)
+    cog, vel, yaw = est.update(0.0, p, quat, np.asarray(gt.joint_positions))
+    assert np.allclose(cog, gt.cog_position, atol=1e-9)
+    assert np.array_equal(vel, np.zeros(3))  # the first sample has no velocity
+    assert yaw == pytest.approx(Rotation.from_quat(base_q).as_euler("ZYX")[0], abs=1e-12)
+
+
+def test_the_velocity_filter_is_first_order_at_its_cutoff() -> None:
+    cfg = MocapConfig(velocity_cutoff_hz=10.0)
+    est = CogEstimator(ROBOT, cfg)
+    q = np.zeros(ROBOT.n_q)
+    ident = np.array([0.0, 0.0, 0.0, 1.0])
+    v_true = np.array([0.3, -0.2, 0.1])
+    dt = 1 / 120
+    a = 1 - math.exp(-2 * math.pi * 10.0 * dt)
+    expect = np.zeros(3)
+    for k in range(60):
+        _, vel, _ = est.update(k * dt, v_true * k * dt, ident, q)
+        if k > 0:
+            expect = expect + a * (v_true - expect)
+        assert np.allclose(vel, expect, atol=1e-9)
+    assert np.allclose(vel, v_true, atol=1e-6)
+    # a gap longer than max_gap_s restarts the filter at zero velocity
+    _, vel, _ = est.update(60 * dt + 0.5, v_true * 61 * dt, ident, q)
+    assert np.array_equal(vel, np.zeros(3)) and est.counts["velocity_restarted"] == 1
+
+
+def test_the_node_takes_stamped_poses_and_checks_their_age() -> None:
+    class Silent:
+        def read_available(self) -> bytes:
+            return b""
+
+        def write(self, data: bytes) -> int:
+            return len(data)
+
+    node = OnboardNode(Silent(), None, ROBOT, config=OnboardConfig())
+    node.tick(1.0)
+    ident = [0.0, 0.0, 0.0, 1.0]
+    assert node.set_mocap_pose([0, 0, 1], ident, stamp=0.95)
+    assert node._mocap_usable(1.0)
+    timeout = node.config.mocap_timeout_s
+    assert node._mocap_usable(0.95 + timeout) and not node._mocap_usable(0.95 + timeout + 0.001)
+    for bad in ([0, 0, 2], [float("nan"), 0, 0, 1], [0, 0, 0, 0]):
+        assert not node.set_mocap_pose([0, 0, 1], bad)
+    assert not node.set_mocap_pose([0, 0, 1], ident, stamp=1.2)  # from the future
+    assert node.counts["mocap_invalid"] == 4
