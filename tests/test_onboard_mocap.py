@@ -4,8 +4,6 @@ filter against its first-order formula; the node's freshness check on the captur
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -45,23 +43,36 @@ def test_cog_from_the_marker_pose_matches_mujoco(seed) -> None:
     assert yaw == pytest.approx(Rotation.from_quat(base_q).as_euler("ZYX")[0], abs=1e-12)
 
 
-def test_the_velocity_filter_is_first_order_at_its_cutoff() -> None:
-    cfg = MocapConfig(velocity_cutoff_hz=10.0)
+def test_the_velocity_filter_reaches_the_steady_state_kalman_gain() -> None:
+    """Constant-velocity Kalman filter per axis: after many samples at a fixed rate its gain is
+    the one of the discrete algebraic Riccati equation (scipy's solver), and a noise-free ramp
+    is tracked exactly."""
+    from scipy.linalg import solve_discrete_are
+
+    cfg = MocapConfig()
     est = CogEstimator(ROBOT, cfg)
     q = np.zeros(ROBOT.n_q)
     ident = np.array([0.0, 0.0, 0.0, 1.0])
     v_true = np.array([0.3, -0.2, 0.1])
-    dt = 1 / 120
-    a = 1 - math.exp(-2 * math.pi * 10.0 * dt)
-    expect = np.zeros(3)
-    for k in range(60):
-        _, vel, _ = est.update(k * dt, v_true * k * dt, ident, q)
-        if k > 0:
-            expect = expect + a * (v_true - expect)
-        assert np.allclose(vel, expect, atol=1e-9)
-    assert np.allclose(vel, v_true, atol=1e-6)
+    dt = 1 / 100
+    n = 400
+    for k in range(n):
+        pos, vel, _ = est.update(k * dt, v_true * k * dt, ident, q)
+    c = est.cog_in_root(q)  # the marker is the root link's origin here
+    assert np.allclose(vel, v_true, atol=1e-9) and np.allclose(pos, v_true * (n - 1) * dt + c)
+    # the gain: one sample off the ramp by delta moves the estimate by K delta
+    f = np.array([[1.0, dt], [0.0, 1.0]])
+    h = np.array([[1.0, 0.0]])
+    qn = cfg.acceleration_sigma**2 * np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]])
+    r = np.array([[cfg.position_noise_m**2]])
+    prior = solve_discrete_are(f.T, h.T, qn, r)
+    gain = (prior @ h.T / (h @ prior @ h.T + r)).ravel()
+    delta = 0.001
+    pos, vel, _ = est.update(n * dt, v_true * n * dt + delta, ident, q)
+    assert (pos - c - v_true * n * dt) / delta == pytest.approx([gain[0]] * 3, rel=1e-6)
+    assert (vel - v_true) / delta == pytest.approx([gain[1]] * 3, rel=1e-6)
     # a gap longer than max_gap_s restarts the filter at zero velocity
-    _, vel, _ = est.update(60 * dt + 0.5, v_true * 61 * dt, ident, q)
+    _, vel, _ = est.update(n * dt + 0.5, v_true * (n + 1) * dt, ident, q)
     assert np.array_equal(vel, np.zeros(3)) and est.counts["velocity_restarted"] == 1
 
 
