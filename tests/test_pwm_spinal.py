@@ -99,7 +99,8 @@ def test_rotor_divider_halves_thrust() -> None:
 def test_duty_encodings() -> None:
     duty = np.linspace(0.4, 1.1, 701)
     np.testing.assert_array_equal(duty_to_pwm_report(duty), np.trunc(duty * 2000).astype(np.uint16))
-    can = np.clip(np.trunc(duty * 2000 - 1000), 0, None).astype(np.uint16)
+    # Neuron CAN value pulse - 1000 us, clamped to the slot's valid 0..1000 (sec. 2.4).
+    can = np.clip(np.trunc(duty * 2000 - 1000), 0, 1000).astype(np.uint16)
     np.testing.assert_array_equal(duty_to_can(duty), can)
     dshot = np.clip(np.trunc(np.clip((duty - 0.5) / 0.5 * 1999 + 48, 0, None)), 48, 2047)
     np.testing.assert_array_equal(duty_to_dshot(duty), dshot.astype(np.uint16))

@@ -173,9 +173,18 @@ class AttitudeEstimator:
     """Spinal complementary-filter attitude estimator (docs/spinal.md)."""
 
     def __init__(
-        self, rate_hz: float = 200.0, time_matched: bool = False, **overrides: Any
-    ) -> None: ...
-    def step(self, gyro: Any, acc: Any, mag: Any) -> str: ...
+        self,
+        rate_hz: float = 200.0,
+        time_matched: bool = False,
+        *,
+        firmware_exact: bool = False,
+        **overrides: Any,
+    ) -> None:
+        """``overrides``: the EstimatorConfig fields and the guards' ``gyro_range``,
+        ``acc_range``, ``degraded_angle_rad``, ``reinit_angle_rad``, ``reinit_hold_s``;
+        ``firmware_exact=True`` has no guards."""
+    def step(self, gyro: Any, acc: Any, mag: Any) -> str:
+        """ "ok", "calibrating", "attitude_undefined", "degraded" or "invalid_input"."""
     def run(
         self,
         gyro: npt.NDArray[np.float64],
@@ -202,6 +211,8 @@ class AttitudeEstimator:
     def filter_vectors(self) -> npt.NDArray[np.float64]: ...
     @property
     def counters(self) -> dict[str, int]: ...
+    @property
+    def degraded(self) -> bool: ...
     @property
     def config(self) -> dict[str, Any]: ...
 
@@ -304,20 +315,30 @@ class _SpinalControllerMessages:
     @property
     def pwm_state(self) -> tuple[float, float, float, int] | None: ...
     @property
+    def voltage_window(self) -> tuple[float, float] | None: ...
+    @property
+    def last_good_voltage(self) -> float | None: ...
+    @property
     def counters(self) -> dict[str, int]: ...
 
 class AttitudeController(_SpinalControllerMessages):
-    """Spinal attitude controller and flight state machine."""
+    """Spinal attitude controller and flight state machine. ``firmware_exact=True`` selects
+    the firmware-exact option of every guard; ``None`` booleans follow it."""
 
     def __init__(
         self,
         rate_hz: float = 200.0,
         *,
-        anti_windup: bool = True,
+        firmware_exact: bool = False,
+        anti_windup: bool | None = None,
         integral_limit: float = 1.0,
         command_timeout_s: float = 0.5,
         max_tilt_rad: float = 1.0,
         force_landing_rate: float = 2.5,
+        voltage_guard: bool | None = None,
+        battery_cells: int = 0,
+        cell_voltage_range: tuple[float, float] = (3.0, 4.45),
+        saturate_commands: bool | None = None,
     ) -> None: ...
     def step(
         self, now_s: float, rotation: npt.NDArray[np.float64], gyro: Any, voltage: float
@@ -331,16 +352,23 @@ class SpinalStep(_SpinalControllerMessages):
         rate_hz: float = 200.0,
         *,
         time_matched: bool = False,
-        anti_windup: bool = True,
+        firmware_exact: bool = False,
+        anti_windup: bool | None = None,
         integral_limit: float = 1.0,
         command_timeout_s: float = 0.5,
         max_tilt_rad: float = 1.0,
         force_landing_rate: float = 2.5,
+        voltage_guard: bool | None = None,
+        battery_cells: int = 0,
+        cell_voltage_range: tuple[float, float] = (3.0, 4.45),
+        saturate_commands: bool | None = None,
         **estimator_overrides: Any,
     ) -> None: ...
     def step(
         self, now_s: float, gyro: Any, acc: Any, mag: Any, voltage: float
     ) -> SpinalStepOutput: ...
+    @property
+    def estimator_counters(self) -> dict[str, int]: ...
     def restart_gyro_calibration(self) -> None: ...
     def calibration_data(self) -> list[float]:
         """GET_CALIB_DATA's 12 floats: gyro bias, accelerometer bias, magnetometer bias and
@@ -358,11 +386,15 @@ class PwmConverter:
         force_landing_thrust: float,
         mode: int,
         motor_info: npt.NDArray[np.float64],
+        *,
+        voltage_guard: bool = True,
+        battery_cells: int = 0,
+        cell_voltage_range: tuple[float, float] = (3.0, 4.45),
     ) -> None: ...
     @staticmethod
     def hydrus_example() -> PwmConverter: ...
     def update_voltage(self, voltage: float, now_s: float) -> bool: ...
-    def force_voltage(self, voltage: float) -> None: ...
+    def force_voltage(self, voltage: float) -> bool: ...
     def set_rotor_divider(self, rotor_divider: float) -> None: ...
     def raw_duty(self, thrust: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
     def duty(self, thrust: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
@@ -378,6 +410,12 @@ class PwmConverter:
     def thrust_limit(self) -> float: ...
     @property
     def rejected_voltages(self) -> int: ...
+    @property
+    def voltage_window(self) -> tuple[float, float] | None: ...
+    @property
+    def last_good_voltage(self) -> float: ...
+    @property
+    def command_thrust_max(self) -> float: ...
 
 def duty_to_pwm_report(duty: npt.NDArray[np.float64]) -> npt.NDArray[np.uint16]: ...
 def duty_to_can(duty: npt.NDArray[np.float64]) -> npt.NDArray[np.uint16]: ...

@@ -2,8 +2,12 @@
 
 :class:`PwmConverter` selects the reference curve closest to the battery voltage (every
 500 ms), applies the voltage factor ((Vref/V)^2 SQRT, ^1.5 POLY), inverts the thrust curve and
-clamps to ``[min_duty, max_duty]`` (``min_duty`` from ``min_thrust``). The encoders give the
-``motor_pwms`` report (duty x 2000), the Neuron CAN value (duty x 2000 - 1000) and DShot.
+clamps to ``[min_duty, max_duty]`` (``min_duty`` from ``min_thrust``, never above
+``max_duty``; a non-finite duty gives ``min_duty``). A battery voltage outside the plausible
+window (cells from the reference curves x 3.0..4.45 V) is rejected, counted and replaced by
+the last good one (``voltage_guard=False``: firmware-exact). The encoders give the
+``motor_pwms`` report (duty x 2000), the Neuron CAN value (duty x 2000 - 1000, clamped to
+0..1000) and DShot.
 """
 
 from __future__ import annotations

@@ -72,8 +72,16 @@ fn estimator_step_allocates_nothing() {
         if k.is_multiple_of(100) {
             s.gyro[0] = f64::NAN; // the error path too
         }
+        if k.is_multiple_of(101) {
+            s.gyro[1] = 1e8; // out of range: the guard's rejection
+        }
+        if (2000..2400).contains(&k) {
+            s.gyro[0] = 34.9; // a full-scale spin: rescaling, degraded, re-initialisation
+        }
         std::hint::black_box(estimator.step(&s));
     });
+    let c = estimator.counters();
+    assert!(c.out_of_range > 0 && c.rescaled_vectors > 0 && c.degraded_steps > 0);
 }
 
 fn attitude_step_and_messages_allocate_nothing() {
@@ -87,9 +95,17 @@ fn attitude_step_and_messages_allocate_nothing() {
             let _ = controller.four_axis_command([0.0, 0.0, 0.0], &[5.0, 5.0], now); // rejected
             let _ = controller.set_gains(&example_gains());
         }
-        let gyro = nalgebra::Vector3::new(0.1, -0.1, 0.05);
-        std::hint::black_box(controller.step(now, &rotation, &gyro, 24.0));
+        if k.is_multiple_of(7) {
+            let _ = controller.four_axis_command([0.0, 0.0, -1e30], &[3.4e38, -1.0, 5.0, 5.0], now);
+        }
+        // The guards: a huge rate (non-finite thrust), implausible voltages.
+        let rate = if k.is_multiple_of(11) { 1e300 } else { 0.1 };
+        let gyro = nalgebra::Vector3::new(rate, rate, 0.05);
+        let voltage = if k.is_multiple_of(300) { 1.75 } else { 24.0 };
+        std::hint::black_box(controller.step(now, &rotation, &gyro, voltage));
     });
+    let c = controller.counters();
+    assert!(c.non_finite_outputs > 0 && c.saturated_commands > 0 && c.rejected_voltages > 0);
 }
 
 fn spinal_step_allocates_nothing() {

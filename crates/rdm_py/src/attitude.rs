@@ -2,8 +2,11 @@
 //! arming/fail-safe state machine, the combined `SpinalStep`, PWM conversion and the gain
 //! wire form.
 
+mod config;
 mod pwm;
 mod wire;
+
+use config::{control_config, events_list, ControlOptions};
 
 pub(crate) use wire::wire_term_rows;
 
@@ -14,13 +17,13 @@ use pyo3::create_exception;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use rdm_core::control::attitude::{
-    AntiWindup, AttitudeControlConfig, AttitudeController, AttitudeOutput, CommandError,
-    ControlStatus, SpinalConfig, SpinalEvent, SpinalOutput, SpinalStep,
+    AttitudeController, AttitudeOutput, CommandError, ControlStatus, SpinalConfig, SpinalOutput,
+    SpinalStep,
 };
 use rdm_core::estimate::ImuSample;
 
 use crate::errors::RdmError;
-use crate::estimate::{estimate_into_dict, estimator_config, status_name};
+use crate::estimate::{counters_dict, estimate_into_dict, estimator_config, status_name};
 
 create_exception!(
     _rdm,
@@ -40,54 +43,6 @@ fn control_status_name(s: ControlStatus) -> &'static str {
         ControlStatus::ForceLanding => "force_landing",
         ControlStatus::InvalidInput => "invalid_input",
     }
-}
-
-fn control_config(
-    rate_hz: f64,
-    anti_windup: bool,
-    integral_limit: f64,
-    command_timeout_s: f64,
-    max_tilt_rad: f64,
-    force_landing_rate: f64,
-) -> PyResult<AttitudeControlConfig> {
-    let config = AttitudeControlConfig {
-        rate_hz,
-        anti_windup: if anti_windup {
-            AntiWindup::ClampAndConditional {
-                limit: integral_limit,
-            }
-        } else {
-            AntiWindup::Off
-        },
-        command_timeout_s,
-        max_tilt_rad,
-        force_landing_rate,
-    };
-    config
-        .validate()
-        .map_err(|field| RdmError::new_err(format!("{field}: out of range")))?;
-    Ok(config)
-}
-
-fn events_list<'py>(py: Python<'py>, out: &AttitudeOutput) -> PyResult<Bound<'py, PyList>> {
-    let list = PyList::empty(py);
-    for event in out.events.iter() {
-        let item: (&str, Py<PyAny>) = match event {
-            SpinalEvent::Ack(cmd) => ("ack", cmd.to_wire().into_pyobject(py)?.into_any().unbind()),
-            SpinalEvent::FailsafeCommandTimeout => ("failsafe_timeout", py.None()),
-            SpinalEvent::FailsafeTilt => ("failsafe_tilt", py.None()),
-            SpinalEvent::FailsafeCommandTilt => ("failsafe_command_tilt", py.None()),
-            SpinalEvent::Rejected(e) => (
-                "rejected",
-                e.to_string().into_pyobject(py)?.into_any().unbind(),
-            ),
-        };
-        list.append(item)?;
-    }
-    if out.events.dropped() > 0 {
-        list.append(("events_dropped", out.events.dropped()))?;
-    }
-    Ok(list)
 }
 
 /// Output of one controller step. Arrays are built when read.
@@ -139,7 +94,8 @@ impl ControlOutput {
         PyArray1::from_slice(py, &self.inner.error_integral)
     }
     /// Events since the previous step: ("ack", cmd), ("failsafe_timeout", None),
-    /// ("failsafe_tilt", None), ("failsafe_command_tilt", None), ("rejected", message).
+    /// ("failsafe_tilt", None), ("failsafe_command_tilt", None), ("rejected", message),
+    /// ("voltage_rejected", None), ("command_saturated", None), ("non_finite_output", None).
     #[getter]
     fn events<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
         events_list(py, &self.inner)
@@ -369,7 +325,19 @@ macro_rules! controller_pymethods {
             fn pwm_state(&self) -> Option<(f64, f64, f64, usize)> {
                 self.ctrl_ref().pwm().map(|p| (p.min_duty(), p.max_duty(), p.voltage_factor(), p.reference_index()))
             }
-            /// Counters: wrong_length, non_finite, ignored, invalid_steps, failsafes.
+            /// The plausible battery voltage window (low, high), V; None before motor_info or
+            /// with the voltage guard off.
+            #[getter]
+            fn voltage_window(&self) -> Option<(f64, f64)> {
+                self.ctrl_ref().pwm().and_then(|p| p.voltage_window())
+            }
+            /// The battery voltage in use after the guard, V (None before motor_info).
+            #[getter]
+            fn last_good_voltage(&self) -> Option<f64> {
+                self.ctrl_ref().pwm().map(|p| p.last_good_voltage())
+            }
+            /// Counters: wrong_length, non_finite, ignored, invalid_steps, failsafes,
+            /// rejected_voltages, saturated_commands, non_finite_outputs.
             #[getter]
             fn counters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
                 let c = self.ctrl_ref().counters();
@@ -379,6 +347,9 @@ macro_rules! controller_pymethods {
                 d.set_item("ignored", c.ignored)?;
                 d.set_item("invalid_steps", c.invalid_steps)?;
                 d.set_item("failsafes", c.failsafes)?;
+                d.set_item("rejected_voltages", c.rejected_voltages)?;
+                d.set_item("saturated_commands", c.saturated_commands)?;
+                d.set_item("non_finite_outputs", c.non_finite_outputs)?;
                 Ok(d)
             }
         }
@@ -402,24 +373,38 @@ impl ControllerHost for PyAttitudeController {
 
 controller_pymethods!(PyAttitudeController, {
     #[new]
-    #[pyo3(signature = (rate_hz = 200.0, *, anti_windup = true, integral_limit = 1.0,
-                        command_timeout_s = 0.5, max_tilt_rad = 1.0, force_landing_rate = 2.5))]
+    #[pyo3(signature = (rate_hz = 200.0, *, firmware_exact = false, anti_windup = None,
+                        integral_limit = 1.0, command_timeout_s = 0.5, max_tilt_rad = 1.0,
+                        force_landing_rate = 2.5, voltage_guard = None, battery_cells = 0,
+                        cell_voltage_range = (rdm_core::pwm::CELL_MIN_V, rdm_core::pwm::CELL_MAX_V),
+                        saturate_commands = None))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         rate_hz: f64,
-        anti_windup: bool,
+        firmware_exact: bool,
+        anti_windup: Option<bool>,
         integral_limit: f64,
         command_timeout_s: f64,
         max_tilt_rad: f64,
         force_landing_rate: f64,
+        voltage_guard: Option<bool>,
+        battery_cells: u32,
+        cell_voltage_range: (f64, f64),
+        saturate_commands: Option<bool>,
     ) -> PyResult<Self> {
-        let config = control_config(
+        let config = control_config(&ControlOptions {
             rate_hz,
+            firmware_exact,
             anti_windup,
             integral_limit,
             command_timeout_s,
             max_tilt_rad,
             force_landing_rate,
-        )?;
+            voltage_guard,
+            battery_cells,
+            cell_voltage_range,
+            saturate_commands,
+        })?;
         let inner = AttitudeController::new(config)
             .map_err(|f| RdmError::new_err(format!("{f}: out of range")))?;
         Ok(Self { inner })
@@ -448,8 +433,10 @@ controller_pymethods!(PyAttitudeController, {
 
 /// The Spinal mirror's step: estimator + attitude controller + PWM conversion.
 ///
-/// `SpinalStep(rate_hz=200.0, *, time_matched=False, firmware_exact=False, anti_windup=True,
-/// integral_limit=1.0, **estimator_overrides)`.
+/// `SpinalStep(rate_hz=200.0, *, time_matched=False, firmware_exact=False, ...,
+/// **estimator_overrides)`: the controller's keywords as `AttitudeController`'s, the
+/// estimator's overrides as `AttitudeEstimator`'s; `firmware_exact=True` selects the
+/// firmware-exact option of every guard of both.
 #[pyclass(module = "rdm._rdm", name = "SpinalStep")]
 pub struct PySpinalStep {
     inner: SpinalStep,
@@ -492,34 +479,58 @@ impl ControllerHost for PySpinalStep {
 
 controller_pymethods!(PySpinalStep, {
     #[new]
-    #[pyo3(signature = (rate_hz = 200.0, *, time_matched = false, anti_windup = true,
-                        integral_limit = 1.0, command_timeout_s = 0.5, max_tilt_rad = 1.0,
-                        force_landing_rate = 2.5, **estimator_overrides))]
+    #[pyo3(signature = (rate_hz = 200.0, *, time_matched = false, firmware_exact = false,
+                        anti_windup = None, integral_limit = 1.0, command_timeout_s = 0.5,
+                        max_tilt_rad = 1.0, force_landing_rate = 2.5, voltage_guard = None,
+                        battery_cells = 0,
+                        cell_voltage_range = (rdm_core::pwm::CELL_MIN_V, rdm_core::pwm::CELL_MAX_V),
+                        saturate_commands = None, **estimator_overrides))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         rate_hz: f64,
         time_matched: bool,
-        anti_windup: bool,
+        firmware_exact: bool,
+        anti_windup: Option<bool>,
         integral_limit: f64,
         command_timeout_s: f64,
         max_tilt_rad: f64,
         force_landing_rate: f64,
+        voltage_guard: Option<bool>,
+        battery_cells: u32,
+        cell_voltage_range: (f64, f64),
+        saturate_commands: Option<bool>,
         estimator_overrides: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let config = SpinalConfig {
-            estimator: estimator_config(rate_hz, time_matched, estimator_overrides)?,
-            control: control_config(
+            estimator: estimator_config(
                 rate_hz,
+                time_matched,
+                firmware_exact,
+                estimator_overrides,
+            )?,
+            control: control_config(&ControlOptions {
+                rate_hz,
+                firmware_exact,
                 anti_windup,
                 integral_limit,
                 command_timeout_s,
                 max_tilt_rad,
                 force_landing_rate,
-            )?,
+                voltage_guard,
+                battery_cells,
+                cell_voltage_range,
+                saturate_commands,
+            })?,
         };
         let inner =
             SpinalStep::new(config).map_err(|f| RdmError::new_err(format!("{f}: out of range")))?;
         Ok(Self { inner })
+    }
+
+    /// The estimator's counters (see `AttitudeEstimator.counters`).
+    #[getter]
+    fn estimator_counters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        counters_dict(py, self.inner.estimator().counters())
     }
 
     /// One step: time (s), raw gyro (rad/s), acc (m/s^2), mag (uT), battery voltage (V).

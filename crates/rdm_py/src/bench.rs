@@ -87,7 +87,7 @@ fn armed_spinal(
     let config = SpinalConfig {
         estimator: EstimatorConfig {
             gyro_calib_duration_s,
-            ..EstimatorConfig::firmware(rate_hz)
+            ..EstimatorConfig::new(rate_hz)
         },
         control: AttitudeControlConfig {
             rate_hz,

@@ -5,7 +5,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rdm_core::estimate::{
     AttitudeEstimate, AttitudeEstimator as CoreEstimator, EstimateStatus, EstimatorConfig,
-    ImuSample,
+    EstimatorGuards, ImuSample,
 };
 
 use crate::errors::RdmError;
@@ -16,14 +16,26 @@ pub(crate) fn status_name(status: EstimateStatus) -> &'static str {
         EstimateStatus::Ok => "ok",
         EstimateStatus::Calibrating => "calibrating",
         EstimateStatus::AttitudeUndefined => "attitude_undefined",
+        EstimateStatus::Degraded => "degraded",
         EstimateStatus::InvalidInput => "invalid_input",
     }
 }
 
-/// Builds a checked estimator configuration from a rate, a base and keyword overrides.
+/// Keyword overrides of the estimator's guards (an error with `firmware_exact=True`).
+const GUARD_KEYS: [&str; 5] = [
+    "gyro_range",
+    "acc_range",
+    "degraded_angle_rad",
+    "reinit_angle_rad",
+    "reinit_hold_s",
+];
+
+/// Builds a checked estimator configuration from a rate, a base (time-matched or not,
+/// guarded or firmware-exact) and keyword overrides.
 pub(crate) fn estimator_config(
     rate_hz: f64,
     time_matched: bool,
+    firmware_exact: bool,
     kwargs: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<EstimatorConfig> {
     const KNOWN: [&str; 14] = [
@@ -45,47 +57,74 @@ pub(crate) fn estimator_config(
     let mut c = if time_matched {
         EstimatorConfig::time_matched(rate_hz)
     } else {
-        EstimatorConfig::firmware(rate_hz)
+        EstimatorConfig::new(rate_hz)
     };
+    if firmware_exact {
+        c.guards = None;
+    }
     if let Some(kwargs) = kwargs {
         for key in kwargs.keys() {
             let key: String = key.extract()?;
-            if !KNOWN.contains(&key.as_str()) {
+            let guard_key = GUARD_KEYS.contains(&key.as_str());
+            if guard_key && firmware_exact {
                 return Err(RdmError::new_err(format!(
-                    "{key}: unknown estimator parameter (known: {})",
-                    KNOWN.join(", ")
+                    "{key}: a guard parameter, but firmware_exact=True has no guards"
+                )));
+            }
+            if !KNOWN.contains(&key.as_str()) && !guard_key {
+                return Err(RdmError::new_err(format!(
+                    "{key}: unknown estimator parameter (known: {}, {})",
+                    KNOWN.join(", "),
+                    GUARD_KEYS.join(", ")
                 )));
             }
         }
         let get = |name: &str| -> PyResult<Option<Bound<'_, PyAny>>> { kwargs.get_item(name) };
         macro_rules! set {
-            ($field:ident, $ty:ty) => {
+            ($target:expr, $field:ident, $ty:ty) => {
                 if let Some(v) = get(stringify!($field))? {
                     if !v.is_none() {
-                        c.$field = v.extract::<$ty>().map_err(|e| {
+                        $target.$field = v.extract::<$ty>().map_err(|e| {
                             RdmError::new_err(format!("{}: {}", stringify!($field), e))
                         })?;
                     }
                 }
             };
         }
-        set!(gyro_calib_duration_s, f64);
-        set!(gyro_lpf_factor, f64);
-        set!(acc_lpf_factor, f64);
-        set!(acc_norm_sq_min, f64);
-        set!(acc_norm_sq_max, f64);
-        set!(acc_prescaler, u32);
-        set!(acc_cmpf_factor, f64);
-        set!(mag_cmpf_factor, f64);
-        set!(mag_outlier_threshold, f64);
-        set!(mag_outlier_max_count, u32);
-        set!(acc_bias, [f64; 3]);
-        set!(mag_bias, [f64; 3]);
-        set!(mag_scale, [f64; 3]);
-        set!(initial_heading, [f64; 3]);
+        set!(c, gyro_calib_duration_s, f64);
+        set!(c, gyro_lpf_factor, f64);
+        set!(c, acc_lpf_factor, f64);
+        set!(c, acc_norm_sq_min, f64);
+        set!(c, acc_norm_sq_max, f64);
+        set!(c, acc_prescaler, u32);
+        set!(c, acc_cmpf_factor, f64);
+        set!(c, mag_cmpf_factor, f64);
+        set!(c, mag_outlier_threshold, f64);
+        set!(c, mag_outlier_max_count, u32);
+        set!(c, acc_bias, [f64; 3]);
+        set!(c, mag_bias, [f64; 3]);
+        set!(c, mag_scale, [f64; 3]);
+        set!(c, initial_heading, [f64; 3]);
+        if let Some(g) = c.guards.as_mut() {
+            set!(g, gyro_range, f64);
+            set!(g, acc_range, f64);
+            set!(g, degraded_angle_rad, f64);
+            set!(g, reinit_angle_rad, f64);
+            set!(g, reinit_hold_s, f64);
+        }
     }
     c.validate().map_err(|e| RdmError::new_err(e.to_string()))?;
     Ok(c)
+}
+
+fn guards_into_dict(g: Option<&EstimatorGuards>, d: &Bound<'_, PyDict>) -> PyResult<()> {
+    d.set_item("firmware_exact", g.is_none())?;
+    d.set_item("gyro_range", g.map(|g| g.gyro_range))?;
+    d.set_item("acc_range", g.map(|g| g.acc_range))?;
+    d.set_item("degraded_angle_rad", g.map(|g| g.degraded_angle_rad))?;
+    d.set_item("reinit_angle_rad", g.map(|g| g.reinit_angle_rad))?;
+    d.set_item("reinit_hold_s", g.map(|g| g.reinit_hold_s))?;
+    Ok(())
 }
 
 /// The configuration as a dict.
@@ -109,6 +148,7 @@ pub(crate) fn config_dict<'py>(
     d.set_item("mag_bias", c.mag_bias.to_vec())?;
     d.set_item("mag_scale", c.mag_scale.to_vec())?;
     d.set_item("initial_heading", c.initial_heading.to_vec())?;
+    guards_into_dict(c.guards.as_ref(), &d)?;
     Ok(d)
 }
 
@@ -125,8 +165,11 @@ pub(crate) fn matrix_to_numpy<'py>(
 
 /// The Spinal complementary-filter attitude estimator (see docs/spinal.md).
 ///
-/// `AttitudeEstimator(rate_hz=200.0, time_matched=False, **overrides)`; overrides are the
-/// fields of the Rust `EstimatorConfig` (e.g. `gyro_calib_duration_s=3.0`).
+/// `AttitudeEstimator(rate_hz=200.0, time_matched=False, *, firmware_exact=False,
+/// **overrides)`; overrides are the fields of the Rust `EstimatorConfig` (e.g.
+/// `gyro_calib_duration_s=3.0`) and of its `EstimatorGuards` (`gyro_range`, `acc_range`,
+/// `degraded_angle_rad`, `reinit_angle_rad`, `reinit_hold_s`); `firmware_exact=True` has no
+/// guards.
 #[pyclass(module = "rdm._rdm", name = "AttitudeEstimator")]
 pub struct PyAttitudeEstimator {
     inner: CoreEstimator,
@@ -150,13 +193,14 @@ pub(crate) fn estimate_into_dict<'py>(
 #[pymethods]
 impl PyAttitudeEstimator {
     #[new]
-    #[pyo3(signature = (rate_hz = 200.0, time_matched = false, **overrides))]
+    #[pyo3(signature = (rate_hz = 200.0, time_matched = false, *, firmware_exact = false, **overrides))]
     fn new(
         rate_hz: f64,
         time_matched: bool,
+        firmware_exact: bool,
         overrides: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
-        let config = estimator_config(rate_hz, time_matched, overrides)?;
+        let config = estimator_config(rate_hz, time_matched, firmware_exact, overrides)?;
         let inner = CoreEstimator::new(config).map_err(|e| RdmError::new_err(e.to_string()))?;
         Ok(Self { inner })
     }
@@ -285,17 +329,17 @@ impl PyAttitudeEstimator {
         )?)
     }
 
-    /// Counters: steps, invalid_inputs, acc_corrections, mag_corrections, undefined_attitudes.
+    /// Counters: steps, invalid_inputs, out_of_range, acc_corrections, mag_corrections,
+    /// undefined_attitudes, rescaled_vectors, reinitialisations, degraded_steps.
     #[getter]
     fn counters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let c = self.inner.counters();
-        let d = PyDict::new(py);
-        d.set_item("steps", c.steps)?;
-        d.set_item("invalid_inputs", c.invalid_inputs)?;
-        d.set_item("acc_corrections", c.acc_corrections)?;
-        d.set_item("mag_corrections", c.mag_corrections)?;
-        d.set_item("undefined_attitudes", c.undefined_attitudes)?;
-        Ok(d)
+        counters_dict(py, self.inner.counters())
+    }
+
+    /// Whether the last step reported "degraded".
+    #[getter]
+    fn degraded(&self) -> bool {
+        self.inner.degraded()
     }
 
     /// The configuration in use.
@@ -310,6 +354,24 @@ impl PyAttitudeEstimator {
         estimate_into_dict(py, self.inner.estimate(), &d)?;
         Ok(d)
     }
+}
+
+/// The estimator counters as a dict.
+pub(crate) fn counters_dict<'py>(
+    py: Python<'py>,
+    c: &rdm_core::estimate::EstimatorCounters,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("steps", c.steps)?;
+    d.set_item("invalid_inputs", c.invalid_inputs)?;
+    d.set_item("out_of_range", c.out_of_range)?;
+    d.set_item("acc_corrections", c.acc_corrections)?;
+    d.set_item("mag_corrections", c.mag_corrections)?;
+    d.set_item("undefined_attitudes", c.undefined_attitudes)?;
+    d.set_item("rescaled_vectors", c.rescaled_vectors)?;
+    d.set_item("reinitialisations", c.reinitialisations)?;
+    d.set_item("degraded_steps", c.degraded_steps)?;
+    Ok(d)
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

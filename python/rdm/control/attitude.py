@@ -10,7 +10,11 @@
   term P/I/D); their ``rpy/gain`` wire form is int16 ``(N_ROTORS, 7)`` x 1000.
 
 Every method takes the caller's timestamp; nothing reads a clock. Rejected messages raise
-:class:`CommandRejectedError` (a :class:`rdm._rdm.RdmError`) and are counted.
+:class:`CommandRejectedError` (a :class:`rdm._rdm.RdmError`) and are counted. Guards the
+firmware lacks are on by default (battery-voltage window, command thrust saturation, the
+estimator's range checks and recovery); ``firmware_exact=True`` selects the firmware's
+behaviour for bit-exact comparison. No duty ever exceeds ``max_pwm`` and a non-finite thrust
+gives ``min_duty``, in every configuration.
 See ``docs/spinal.md``.
 """
 

@@ -107,6 +107,13 @@ _FAILSAFE_TEXT = {
     "failsafe_tilt": "failsafe: the roll pitch angles are too large",
     "failsafe_command_tilt": "failsafe: target angles are too large",
 }
+#: The controller's guards (docs/spinal.md "Guards on the actuator path"): the first of a run
+#: is logged as a warning; every trip is counted by the core (``core.counters``).
+_GUARD_TEXT = {
+    "voltage_rejected": "guard: implausible battery voltage, the last good one is used",
+    "command_saturated": "guard: four_axes/command thrust saturated",
+    "non_finite_output": "guard: non-finite thrust, every motor at min duty",
+}
 _LOG_LEVELS = {
     "debug": C.LogLevel.DEBUG,
     "info": C.LogLevel.INFO,
@@ -857,6 +864,8 @@ class SpinalMirror:
             elif kind in _FAILSAFE_TEXT:
                 self.counters.failsafes[kind] += 1
                 self._log(C.LogLevel.ERROR, _FAILSAFE_TEXT[kind])
+            elif kind in _GUARD_TEXT:
+                self._log(C.LogLevel.WARN, _GUARD_TEXT[kind])
             elif kind == "events_dropped":
                 self.counters.failsafes["events_dropped"] += int(value)
         n = self.master.motor_number

@@ -3,8 +3,82 @@
 /// Firmware loop rate, Hz (`DELTA_T = 0.001f`).
 pub const FIRMWARE_RATE_HZ: f64 = 1000.0;
 
+/// Two LSB of a 32767-count full scale: the int16 reading -32768 is one LSB beyond the
+/// scale, the second absorbs the rounding of the count -> unit conversion.
+const TWO_LSB_MARGIN: f64 = 32769.0 / 32767.0;
+/// Gyro range, rad/s: the ICM-20948 / MPU-9250 +-2000 dps setting (sec. 2.4, 3.2) plus two
+/// LSB.
+pub const GYRO_FULL_SCALE: f64 = 2000.0 * core::f64::consts::PI / 180.0 * TWO_LSB_MARGIN;
+/// Accelerometer range, m/s^2: the +-8 g setting (sec. 2.4, 3.2) plus two LSB.
+pub const ACC_FULL_SCALE: f64 = 8.0 * 9.80665 * TWO_LSB_MARGIN;
+/// Largest configurable sensor range (gyro rad/s, accelerometer m/s^2): with it every
+/// filter state stays finite whatever the accepted samples (IIR states below 1e9 x factor,
+/// bias sums below 1e9 x 3.6e7 samples, a rotation step below 1e9 x dt).
+pub const MAX_SENSOR_RANGE: f64 = 1.0e9;
+
+/// The estimator's guards against samples and states the firmware does not expect (not in
+/// the firmware; docs/spinal.md "Estimator guards"). `EstimatorConfig::guards = None` is
+/// firmware-exact.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EstimatorGuards {
+    /// A sample with any |gyro| axis above this is rejected (`InvalidInput`, counted as
+    /// `out_of_range`), rad/s. Default [`GYRO_FULL_SCALE`].
+    pub gyro_range: f64,
+    /// A sample with any |acc| axis above this is rejected, m/s^2. Default
+    /// [`ACC_FULL_SCALE`].
+    pub acc_range: f64,
+    /// Status `Degraded` while the gravity estimate and the last valid accelerometer sample
+    /// differ by more than this, rad. Default 20 deg.
+    pub degraded_angle_rad: f64,
+    /// The gravity estimate is re-initialised from the accelerometer once valid samples
+    /// differ from it by more than this for `reinit_hold_s`, rad. Default 60 deg.
+    pub reinit_angle_rad: f64,
+    /// How long (in valid accelerometer samples x dt) the `reinit_angle_rad` disagreement
+    /// must last, s. Default 0.5 s.
+    pub reinit_hold_s: f64,
+}
+
+impl Default for EstimatorGuards {
+    fn default() -> Self {
+        Self {
+            gyro_range: GYRO_FULL_SCALE,
+            acc_range: ACC_FULL_SCALE,
+            degraded_angle_rad: 20.0_f64.to_radians(),
+            reinit_angle_rad: 60.0_f64.to_radians(),
+            reinit_hold_s: 0.5,
+        }
+    }
+}
+
+impl EstimatorGuards {
+    fn validate(&self) -> Result<(), EstimatorConfigError> {
+        let fail = |field, reason| Err(EstimatorConfigError { field, reason });
+        for (value, field) in [
+            (self.gyro_range, "gyro_range"),
+            (self.acc_range, "acc_range"),
+        ] {
+            if !(value.is_finite() && value > 0.0 && value <= MAX_SENSOR_RANGE) {
+                return fail(field, "must be in (0, 1e9]");
+            }
+        }
+        let pi = core::f64::consts::PI;
+        if !(self.degraded_angle_rad > 0.0 && self.degraded_angle_rad <= pi) {
+            return fail("degraded_angle_rad", "must be in (0, pi]");
+        }
+        if !(self.reinit_angle_rad >= self.degraded_angle_rad && self.reinit_angle_rad <= pi) {
+            return fail("reinit_angle_rad", "must be in [degraded_angle_rad, pi]");
+        }
+        if !(self.reinit_hold_s.is_finite() && (0.0..=3600.0).contains(&self.reinit_hold_s)) {
+            return fail("reinit_hold_s", "must be in [0, 3600]");
+        }
+        Ok(())
+    }
+}
+
 /// Parameters of [`super::AttitudeEstimator`]. Defaults are the firmware's numbers at the
-/// 200 Hz rate of the mirror ([`EstimatorConfig::default`]).
+/// 200 Hz rate of the mirror with the default [`EstimatorGuards`]
+/// ([`EstimatorConfig::default`] = [`EstimatorConfig::new`]`(200.0)`);
+/// [`EstimatorConfig::firmware`] is firmware-exact (no guards).
 ///
 /// The filter factors are **per sample**, exactly as the firmware writes them. At a rate other
 /// than 1 kHz the same factors give proportionally longer time constants (x5 at 200 Hz: gyro
@@ -46,11 +120,13 @@ pub struct EstimatorConfig {
     /// example `[1, 0, 0]`) lets a mirror without magnetometer report roll and pitch, with
     /// the yaw then following the integrated gyro. Not firmware behaviour.
     pub initial_heading: [f64; 3],
+    /// Sample range checks and filter recovery; `None` is firmware-exact.
+    pub guards: Option<EstimatorGuards>,
 }
 
 impl Default for EstimatorConfig {
     fn default() -> Self {
-        Self::firmware(200.0)
+        Self::new(200.0)
     }
 }
 
@@ -72,7 +148,15 @@ impl core::fmt::Display for EstimatorConfigError {
 impl std::error::Error for EstimatorConfigError {}
 
 impl EstimatorConfig {
-    /// The firmware's per-sample factors, run at `rate_hz`.
+    /// The firmware's per-sample factors at `rate_hz` with the default guards.
+    pub fn new(rate_hz: f64) -> Self {
+        Self {
+            guards: Some(EstimatorGuards::default()),
+            ..Self::firmware(rate_hz)
+        }
+    }
+
+    /// Firmware-exact: the firmware's per-sample factors at `rate_hz`, no guards.
     pub fn firmware(rate_hz: f64) -> Self {
         Self {
             rate_hz,
@@ -90,6 +174,7 @@ impl EstimatorConfig {
             mag_bias: [0.0; 3],
             mag_scale: [1.0; 3],
             initial_heading: [0.0; 3],
+            guards: None,
         }
     }
 
@@ -97,9 +182,9 @@ impl EstimatorConfig {
     /// a per-sample pole `a = 1 - 1/N` becomes `a^(1000/rate)`, and the gravity correction
     /// weight `K/(K+1)` (applied every `acc_prescaler` valid samples) likewise. The magnetic
     /// factor is left alone: it acts per new magnetometer sample, whose rate does not depend
-    /// on the loop rate. Not firmware behaviour at rates other than 1 kHz.
+    /// on the loop rate. Not firmware behaviour at rates other than 1 kHz. Default guards.
     pub fn time_matched(rate_hz: f64) -> Self {
-        let base = Self::firmware(rate_hz);
+        let base = Self::new(rate_hz);
         let exponent = FIRMWARE_RATE_HZ / rate_hz;
         let iir = |n: f64| 1.0 / (1.0 - (1.0 - 1.0 / n).powf(exponent));
         let cmpf = |k: f64| {
@@ -174,6 +259,9 @@ impl EstimatorConfig {
                 return fail(field, "must be finite");
             }
         }
-        Ok(())
+        match &self.guards {
+            Some(guards) => guards.validate(),
+            None => Ok(()),
+        }
     }
 }

@@ -3,12 +3,23 @@
 //!
 //! The estimate feeds the Spinal-side attitude step ([`crate::control::attitude`]), which
 //! applies the roll/pitch part of the LQI law of eqs. (28)-(29).
+//!
+//! [`EstimatorGuards`] (the default; `guards: None` is firmware-exact) add what the firmware
+//! lacks: samples outside the sensor's range are rejected, the filter vectors are kept
+//! bounded and re-initialised when they degenerate or disagree grossly with a valid
+//! accelerometer, and the status says when the estimate is degraded (`guard.rs`).
 
 mod config;
+mod guard;
 mod imu_preprocess;
 
-pub use config::{EstimatorConfig, EstimatorConfigError, FIRMWARE_RATE_HZ};
+pub use config::{
+    EstimatorConfig, EstimatorConfigError, EstimatorGuards, ACC_FULL_SCALE, FIRMWARE_RATE_HZ,
+    GYRO_FULL_SCALE, MAX_SENSOR_RANGE,
+};
 pub use imu_preprocess::{FilteredImu, ImuPreprocessor};
+
+use guard::GuardState;
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -35,7 +46,14 @@ pub enum EstimateStatus {
     /// Estimate updated, but the gravity or heading vector is degenerate (for example no
     /// magnetometer sample yet): the rotation is the identity, as the firmware's NaN rule.
     AttitudeUndefined,
-    /// A NaN or infinite input; the sample was dropped and the state left untouched.
+    /// Estimate updated, but it may be wrong by more than `degraded_angle_rad` (guards
+    /// only): the gravity estimate differs from the last valid accelerometer sample by more
+    /// than that (while the filter re-converges), or the gyro path's error bound exceeds it
+    /// (the gyro filter's delay `(N - 1) dt |w|` plus the first-order rotation's error since
+    /// that sample: a fast spin).
+    Degraded,
+    /// A NaN or infinite input, or (guards on) a sample outside the sensor's range; the
+    /// sample was dropped and the state left untouched.
     InvalidInput,
 }
 
@@ -77,6 +95,14 @@ pub struct EstimatorCounters {
     pub steps: u64,
     /// Samples dropped for NaN/inf.
     pub invalid_inputs: u64,
+    /// Samples dropped for a gyro or accelerometer axis outside the guard's range.
+    pub out_of_range: u64,
+    /// Filter vectors scaled back to their bound (guards only).
+    pub rescaled_vectors: u64,
+    /// Gravity or heading vectors re-initialised from a sensor sample (guards only).
+    pub reinitialisations: u64,
+    /// Steps reported `Degraded`.
+    pub degraded_steps: u64,
     /// Accelerometer corrections applied.
     pub acc_corrections: u64,
     /// Magnetometer corrections applied.
@@ -95,6 +121,7 @@ pub struct AttitudeEstimator {
     est_m: Vector3<f64>,
     prev_mag: Vector3<f64>,
     acc_count: u32,
+    guard: GuardState,
     estimate: AttitudeEstimate,
     counters: EstimatorCounters,
 }
@@ -110,6 +137,7 @@ impl AttitudeEstimator {
             est_m: Vector3::from(config.initial_heading),
             prev_mag: Vector3::zeros(),
             acc_count: 0,
+            guard: GuardState::new(&config),
             estimate: AttitudeEstimate::default(),
             counters: EstimatorCounters::default(),
             config,
@@ -151,7 +179,13 @@ impl AttitudeEstimator {
         self.imu.restart_gyro_calibration();
     }
 
-    /// Processes one sample. Allocation-free; never panics; a non-finite input is dropped.
+    /// Whether the estimate is degraded (guards only; see [`EstimateStatus::Degraded`]).
+    pub fn degraded(&self) -> bool {
+        self.config.guards.is_some() && self.guard.degraded()
+    }
+
+    /// Processes one sample. Allocation-free; never panics; a non-finite input (or, guards
+    /// on, an out-of-range one) is dropped.
     pub fn step(&mut self, sample: &ImuSample) -> EstimateStatus {
         let all_finite = sample
             .gyro
@@ -162,6 +196,12 @@ impl AttitudeEstimator {
         if !all_finite {
             self.counters.invalid_inputs += 1;
             return EstimateStatus::InvalidInput;
+        }
+        if let Some(guards) = &self.config.guards {
+            if !guard::in_range(sample, guards) {
+                self.counters.out_of_range += 1;
+                return EstimateStatus::InvalidInput;
+            }
         }
         self.counters.steps += 1;
 
@@ -177,18 +217,31 @@ impl AttitudeEstimator {
         let m_before = self.est_m;
         self.est_m += m_before.cross(&rotation_step);
         self.est_g += g_before.cross(&rotation_step);
+        let guarded = self.config.guards.is_some();
+        if guarded {
+            self.guard
+                .add_rotation(rotation_step.norm(), self.config.gyro_lpf_factor);
+            self.bound_vectors(&imu);
+        }
 
         // 2. Gravity correction on every n-th valid accelerometer sample.
         let acc_norm_sq = imu.acc.norm_squared();
         let acc_valid =
             self.config.acc_norm_sq_min < acc_norm_sq && acc_norm_sq < self.config.acc_norm_sq_max;
-        if acc_valid && self.acc_count == 0 {
+        let reinitialised = guarded && acc_valid && self.check_gravity(&imu.acc);
+        if acc_valid && self.acc_count == 0 && !reinitialised {
             let k = self.config.acc_cmpf_factor;
             self.est_g = (self.est_g * k + imu.acc) * (1.0 / (k + 1.0));
             self.counters.acc_corrections += 1;
         }
 
         // 3. Magnetic correction when the magnetometer value changed.
+        if guarded && self.guard.heading_pending && imu.mag != Vector3::zeros() {
+            self.est_m = imu.mag;
+            self.prev_mag = imu.mag;
+            self.guard.heading_pending = false;
+            self.counters.reinitialisations += 1;
+        }
         if self.prev_mag != imu.mag {
             self.prev_mag = imu.mag;
             let k = self.config.mag_cmpf_factor;
@@ -223,6 +276,9 @@ impl AttitudeEstimator {
             EstimateStatus::Calibrating
         } else if !defined {
             EstimateStatus::AttitudeUndefined
+        } else if guarded && self.guard.degraded() {
+            self.counters.degraded_steps += 1;
+            EstimateStatus::Degraded
         } else {
             EstimateStatus::Ok
         }

@@ -309,11 +309,14 @@ pub fn initial_config_request(slave: u8) -> CanFrame {
 }
 
 /// MOTOR broadcast `frame_index` (0: slots of slaves 1..6, 1: 7..12): six 10-bit values
-/// packed LSB-first at bit `10*(k%3) + 32*(k/3)` (values masked to 10 bits).
+/// packed LSB-first at bit `10*(k%3) + 32*(k/3)`. A value above 1000 (pulse 2000 us, the
+/// largest Spinal sends) is clamped to 1000, never masked into the 10-bit field (masking
+/// turns 3360 into 288: a much shorter pulse than asked).
 pub fn pwm(frame_index: u8, values: &[u16; 6]) -> CanFrame {
     let mut word = 0u64;
     for (slot, v) in values.iter().enumerate() {
-        word |= ((*v as u64) & 0x3FF) << (10 * (slot % 3) + 32 * (slot / 3));
+        let value = u64::from(*v).min(PWM_VALUE_MAX);
+        word |= value << (10 * (slot % 3) + 32 * (slot / 3));
     }
     frame(
         (frame_index as u32 & 1) << 4 | BROADCAST_ID as u32,

@@ -4,7 +4,7 @@ use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods}
 use pyo3::prelude::*;
 use rdm_core::pwm::{
     duty_to_can_value, duty_to_dshot, duty_to_report, MotorInfo, PwmConverter, PwmInfo, PwmMode,
-    MAX_MOTOR_INFO,
+    VoltageGuard, CELL_MAX_V, CELL_MIN_V, MAX_MOTOR_INFO,
 };
 
 use crate::errors::RdmError;
@@ -53,8 +53,11 @@ pub(crate) fn pwm_info(
 
 /// Thrust -> duty conversion as Spinal's `pwmConversion` (see docs/spinal.md).
 ///
-/// `PwmConverter(min_pwm, max_pwm, min_thrust, force_landing_thrust, mode, motor_info)`,
-/// mode 0 = SQRT, 1 = POLY; `motor_info` rows (voltage, max_thrust, p0, p1, p2, p3, p4).
+/// `PwmConverter(min_pwm, max_pwm, min_thrust, force_landing_thrust, mode, motor_info, *,
+/// voltage_guard=True, battery_cells=0, cell_voltage_range=(3.0, 4.45))`, mode 0 = SQRT,
+/// 1 = POLY; `motor_info` rows (voltage, max_thrust, p0, p1, p2, p3, p4). The voltage guard
+/// rejects a voltage outside cells x cell_voltage_range (cells 0: from the reference curves)
+/// and uses the last good one; `voltage_guard=False` is firmware-exact.
 #[pyclass(module = "rdm._rdm", name = "PwmConverter")]
 pub struct PyPwmConverter {
     inner: PwmConverter,
@@ -63,7 +66,10 @@ pub struct PyPwmConverter {
 #[pymethods]
 impl PyPwmConverter {
     #[new]
-    #[pyo3(signature = (min_pwm, max_pwm, min_thrust, force_landing_thrust, mode, motor_info))]
+    #[pyo3(signature = (min_pwm, max_pwm, min_thrust, force_landing_thrust, mode, motor_info,
+                        *, voltage_guard = true, battery_cells = 0,
+                        cell_voltage_range = (CELL_MIN_V, CELL_MAX_V)))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         min_pwm: f64,
         max_pwm: f64,
@@ -71,6 +77,9 @@ impl PyPwmConverter {
         force_landing_thrust: f64,
         mode: u8,
         motor_info: PyReadonlyArray2<'_, f64>,
+        voltage_guard: bool,
+        battery_cells: u32,
+        cell_voltage_range: (f64, f64),
     ) -> PyResult<Self> {
         let info = pwm_info(
             min_pwm,
@@ -80,7 +89,17 @@ impl PyPwmConverter {
             mode,
             &motor_info,
         )?;
-        let inner = PwmConverter::new(info).map_err(|e| RdmError::new_err(e.to_string()))?;
+        let guard = if voltage_guard {
+            VoltageGuard::CellWindow {
+                cells: battery_cells,
+                min_cell_v: cell_voltage_range.0,
+                max_cell_v: cell_voltage_range.1,
+            }
+        } else {
+            VoltageGuard::Off
+        };
+        let inner =
+            PwmConverter::with_guard(info, guard).map_err(|e| RdmError::new_err(e.to_string()))?;
         Ok(Self { inner })
     }
 
@@ -97,9 +116,10 @@ impl PyPwmConverter {
         self.inner.update_voltage(voltage, now_s)
     }
 
-    /// Selects the reference for `voltage` now.
-    fn force_voltage(&mut self, voltage: f64) {
-        self.inner.force_voltage(voltage);
+    /// Selects the reference for `voltage` now; False when the voltage was rejected (the
+    /// last good one is then used, guard on).
+    fn force_voltage(&mut self, voltage: f64) -> bool {
+        self.inner.force_voltage(voltage)
     }
 
     /// Sets the rotor divider (2 for DRAGON dual rotors).
@@ -165,10 +185,29 @@ impl PyPwmConverter {
         self.inner.thrust_limit()
     }
 
-    /// Voltages ignored for being non-finite or non-positive.
+    /// Voltages rejected: non-finite or non-positive, or outside the guard's window.
     #[getter]
     fn rejected_voltages(&self) -> u64 {
         self.inner.rejected_voltages()
+    }
+
+    /// The plausible voltage window (low, high), V; None with the guard off.
+    #[getter]
+    fn voltage_window(&self) -> Option<(f64, f64)> {
+        self.inner.voltage_window()
+    }
+
+    /// The last voltage that passed the guard, V (at first the first reference's).
+    #[getter]
+    fn last_good_voltage(&self) -> f64 {
+        self.inner.last_good_voltage()
+    }
+
+    /// Largest base thrust a command may ask of one motor, N (largest reference max_thrust
+    /// times the rotor divider).
+    #[getter]
+    fn command_thrust_max(&self) -> f64 {
+        self.inner.command_thrust_max()
     }
 }
 
@@ -189,7 +228,7 @@ fn duty_to_pwm_report<'py>(
     map_u16(py, &duty, duty_to_report)
 }
 
-/// Neuron CAN motor values: `uint16(duty * 2000 - 1000)` (0 below duty 0.5).
+/// Neuron CAN motor values: `uint16(duty * 2000 - 1000)` clamped to 0..=1000.
 #[pyfunction]
 fn duty_to_can<'py>(
     py: Python<'py>,

@@ -5,94 +5,24 @@
 //! P-I-D thrust terms with the gyro-moment compensation of eq. (29), yaw spreading, the
 //! saturation factors alpha/beta, and the thrust -> duty conversion ([`crate::pwm`]).
 //! Everything is driven by the caller's timestamp; nothing reads a clock.
+//!
+//! Output guards in every configuration: a non-finite thrust on any rotor gives every rotor
+//! `min_duty` (idle while disarmed) and thrust 0, counted (`non_finite_outputs`) and reported
+//! (`SpinalEvent::NonFiniteOutput`); no duty exceeds `max_pwm`. The configurable guards
+//! (voltage window, command saturation) are in [`AttitudeControlConfig`].
+
+mod messages;
 
 use nalgebra::{Matrix3, Vector3};
 
+use super::config::{AntiWindup, AttitudeControlConfig};
 use super::events::{CommandError, EventList, FlightConfigCmd, SpinalEvent};
-use super::wire::{from_wire, inertia_from_wire, inertia_matrix, RollPitchYawTermWire};
-use crate::control::gains::GainSet;
-use crate::estimate::{euler_zyx, rotation_from_euler};
-use crate::pwm::{duty_to_report, PwmConverter, PwmInfo, IDLE_DUTY};
+use crate::estimate::euler_zyx;
+use crate::pwm::{duty_to_report, PwmConverter, IDLE_DUTY};
 use crate::N_ROTORS;
 
 /// `spinal/UavInfo.DRAGON`: dual rotors per link, so thrust is halved before conversion.
 pub const UAV_MODEL_DRAGON: u8 = 32;
-/// Firmware force-landing decrement per 1 ms step (`FORCE_LANDING_INTEGRAL`), N.
-pub const FIRMWARE_FORCE_LANDING_STEP: f64 = 0.0025;
-
-/// Integrator anti-windup (the firmware has none).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum AntiWindup {
-    /// Firmware-exact: `e_i += e dt` without any bound.
-    Off,
-    /// `|e_i| <= limit` per axis, and no integration that would grow `|e_i|` while the
-    /// previous step saturated (alpha < 0, or a rotor's duty clamped at min/max).
-    ClampAndConditional {
-        /// Bound of each roll/pitch error integral, rad s.
-        limit: f64,
-    },
-}
-
-/// Parameters of [`AttitudeController`].
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AttitudeControlConfig {
-    /// Step rate, Hz (integration `dt = 1/rate_hz`; firmware 1000).
-    pub rate_hz: f64,
-    /// Integrator anti-windup; default on with a 1.0 rad s bound.
-    pub anti_windup: AntiWindup,
-    /// FourAxisCommand timeout, s (firmware `FLIGHT_COMMAND_TIMEOUT` 500 ms).
-    pub command_timeout_s: f64,
-    /// Roll/pitch bound, rad (firmware `MAX_TILT_ANGLE` 1.0).
-    pub max_tilt_rad: f64,
-    /// Force-landing decrease of the average base thrust, N/s (firmware 0.0025 N per 1 ms
-    /// step = 2.5 N/s; applied per step as `rate * dt`).
-    pub force_landing_rate: f64,
-}
-
-impl Default for AttitudeControlConfig {
-    fn default() -> Self {
-        Self {
-            rate_hz: 200.0,
-            anti_windup: AntiWindup::ClampAndConditional { limit: 1.0 },
-            command_timeout_s: 0.5,
-            max_tilt_rad: 1.0,
-            force_landing_rate: FIRMWARE_FORCE_LANDING_STEP * 1000.0,
-        }
-    }
-}
-
-impl AttitudeControlConfig {
-    /// Firmware-exact behaviour at `rate_hz` (no anti-windup).
-    pub fn firmware(rate_hz: f64) -> Self {
-        Self {
-            rate_hz,
-            anti_windup: AntiWindup::Off,
-            ..Self::default()
-        }
-    }
-
-    /// Checks every field; names the field at fault.
-    pub fn validate(&self) -> Result<(), &'static str> {
-        if !(self.rate_hz.is_finite() && self.rate_hz > 0.0 && self.rate_hz <= 10_000.0) {
-            return Err("rate_hz");
-        }
-        if let AntiWindup::ClampAndConditional { limit } = self.anti_windup {
-            if !(limit.is_finite() && limit >= 0.0) {
-                return Err("anti_windup.limit");
-            }
-        }
-        for (value, name) in [
-            (self.command_timeout_s, "command_timeout_s"),
-            (self.max_tilt_rad, "max_tilt_rad"),
-            (self.force_landing_rate, "force_landing_rate"),
-        ] {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(name);
-            }
-        }
-        Ok(())
-    }
-}
 
 /// Flight state reported by a step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -147,6 +77,13 @@ pub struct ControlCounters {
     pub invalid_steps: u64,
     /// Fail-safe force landings started (timeout, tilt or commanded tilt).
     pub failsafes: u64,
+    /// Battery voltages rejected by the PWM converter (not finite and positive, or outside
+    /// the voltage guard's window), summed over every `motor_info`.
+    pub rejected_voltages: u64,
+    /// FourAxisCommands with a base thrust or yaw term saturated (`saturate_commands`).
+    pub saturated_commands: u64,
+    /// Steps whose computed thrust was not finite (every rotor then got `min_duty`).
+    pub non_finite_outputs: u64,
 }
 
 /// The Spinal attitude controller with its flight state machine.
@@ -189,6 +126,11 @@ pub struct AttitudeController {
     beta: f64,
     euler: [f64; 3],
     saturated: bool,
+    // Guard states: whether the last voltage update, command and step tripped the guard
+    // (an event is reported on the first of a run only).
+    voltage_rejecting: bool,
+    command_saturating: bool,
+    output_non_finite: bool,
     events: EventList,
     counters: ControlCounters,
 }
@@ -231,6 +173,9 @@ impl AttitudeController {
             beta: 0.0,
             euler: [0.0; 3],
             saturated: false,
+            voltage_rejecting: false,
+            command_saturating: false,
+            output_non_finite: false,
             events: EventList::default(),
             counters: ControlCounters::default(),
         })
@@ -329,296 +274,6 @@ impl AttitudeController {
             self.events.push(reason);
             self.events
                 .push(SpinalEvent::Ack(FlightConfigCmd::ForceLanding));
-        }
-    }
-
-    // ----- messages -----
-
-    /// `uav_info`: motor number and model. As the firmware: a motor number different from
-    /// an already known one sets it to 0 (blocks arming); DRAGON sets the rotor divider 2.
-    pub fn set_uav_info(&mut self, motor_num: u8, uav_model: u8) -> Result<(), CommandError> {
-        let motors = usize::from(motor_num);
-        if motors > N_ROTORS {
-            return Err(self.reject(CommandError::TooManyMotors(motors)));
-        }
-        if self.motor_number > 0 {
-            if self.motor_number != motors {
-                self.motor_number = 0;
-            }
-        } else {
-            self.motor_number = motors;
-        }
-        // The firmware stores the byte in an int8.
-        self.uav_model = i16::from(uav_model as i8);
-        if uav_model == UAV_MODEL_DRAGON {
-            self.rotor_divider = 2.0;
-        }
-        if let Some(pwm) = self.pwm.as_mut() {
-            pwm.set_rotor_divider(self.rotor_divider);
-        }
-        Ok(())
-    }
-
-    /// `motor_info` (`PwmInfo`): thrust curves and duty limits.
-    pub fn set_pwm_info(&mut self, info: PwmInfo) -> Result<(), CommandError> {
-        match PwmConverter::new(info) {
-            Ok(mut converter) => {
-                converter.set_rotor_divider(self.rotor_divider);
-                self.pwm = Some(converter);
-                Ok(())
-            }
-            Err(e) => Err(self.reject(CommandError::InvalidPwmInfo(e))),
-        }
-    }
-
-    /// `flight_config_cmd`.
-    pub fn flight_config(&mut self, cmd: u8, now_s: f64) -> Result<(), CommandError> {
-        let Some(command) = FlightConfigCmd::from_wire(cmd) else {
-            return Err(self.reject(CommandError::UnknownFlightConfig(cmd)));
-        };
-        match command {
-            FlightConfigCmd::ArmOn => {
-                if !self.activated() {
-                    return Err(self.reject(CommandError::NotActivated));
-                }
-                self.force_landing = false;
-                self.start_control = true;
-                self.events.push(SpinalEvent::Ack(command));
-            }
-            FlightConfigCmd::ArmOff => {
-                self.start_control = false;
-                self.reset(now_s);
-                self.events.push(SpinalEvent::Ack(command));
-            }
-            FlightConfigCmd::ForceLanding => {
-                self.force_landing = true;
-                self.events.push(SpinalEvent::Ack(command));
-            }
-            FlightConfigCmd::IntegrationControlOn => self.integrate = true,
-            FlightConfigCmd::IntegrationControlOff => self.integrate = false,
-        }
-        Ok(())
-    }
-
-    /// `set_attitude_control`: false skips the control computation (PWM output still runs).
-    pub fn set_attitude_control(&mut self, enabled: bool) {
-        self.att_control = enabled;
-    }
-
-    /// `desire_coordinate`: the control frame's roll, pitch, yaw.
-    pub fn set_desire_coordinate(
-        &mut self,
-        roll: f64,
-        pitch: f64,
-        yaw: f64,
-    ) -> Result<(), CommandError> {
-        if !(roll.is_finite() && pitch.is_finite() && yaw.is_finite()) {
-            return Err(self.reject(CommandError::NonFinite("desire_coordinate")));
-        }
-        self.offset_rot = rotation_from_euler(roll, pitch, yaw);
-        Ok(())
-    }
-
-    /// `four_axes/command`: roll/pitch targets, the yaw term for the max-yaw-gain rotor, and
-    /// the base thrust per rotor.
-    pub fn four_axis_command(
-        &mut self,
-        angles: [f64; 3],
-        base_thrust: &[f64],
-        now_s: f64,
-    ) -> Result<(), CommandError> {
-        if !self.start_control {
-            return Err(self.reject(CommandError::NotArmed));
-        }
-        if !(angles.iter().all(|a| a.is_finite())
-            && base_thrust.iter().all(|f| f.is_finite())
-            && now_s.is_finite())
-        {
-            return Err(self.reject(CommandError::NonFinite("four_axes/command")));
-        }
-        let tilt = self.config.max_tilt_rad;
-        if angles[0].abs() > tilt || angles[1].abs() > tilt {
-            self.enter_force_landing(SpinalEvent::FailsafeCommandTilt);
-        }
-        self.check_length("base_thrust", base_thrust.len())?;
-        let n = self.motor_number;
-        if self.force_landing {
-            let average = base_thrust.iter().sum::<f64>() / n as f64;
-            if average
-                < self
-                    .pwm
-                    .as_ref()
-                    .map_or(0.0, |p| p.info().force_landing_thrust)
-            {
-                return Err(self.reject(CommandError::BelowForceLandingThrust));
-            }
-        }
-        self.failsafe_armed = true;
-        self.last_command_s = now_s;
-        self.target_angle = [angles[0], angles[1]];
-        for (i, &thrust) in base_thrust.iter().enumerate().take(N_ROTORS) {
-            self.base_thrust[i] = thrust;
-            if let Some(imax) = self.max_yaw_index {
-                self.extra_yaw[i] = angles[2] * self.d_gain[i][2] / self.d_gain[imax][2];
-            }
-        }
-        Ok(())
-    }
-
-    /// `rpy/gain` from a [`GainSet`]: roll P/I/D, pitch P/I/D and yaw D of the first
-    /// `motor_number` rotors (yaw P/I and z are applied on the PC).
-    pub fn set_gains(&mut self, gains: &GainSet) -> Result<(), CommandError> {
-        if self.motor_number == 0 {
-            return Err(self.reject(CommandError::MotorNumberUnknown));
-        }
-        let finite = gains.iter().take(self.motor_number).all(|g| {
-            [
-                g.roll.p, g.roll.i, g.roll.d, g.pitch.p, g.pitch.i, g.pitch.d, g.yaw.d,
-            ]
-            .iter()
-            .all(|v| v.is_finite())
-        });
-        if !finite {
-            return Err(self.reject(CommandError::NonFinite("gains")));
-        }
-        for (i, g) in gains.iter().enumerate().take(self.motor_number) {
-            self.p_gain[i] = [g.roll.p, g.pitch.p, 0.0];
-            self.i_gain[i] = [g.roll.i, g.pitch.i, 0.0];
-            self.d_gain[i] = [g.roll.d, g.pitch.d, g.yaw.d];
-        }
-        self.update_max_yaw_index();
-        Ok(())
-    }
-
-    /// `rpy/gain` in wire form: `motor_number` per-rotor terms, or exactly one term of body
-    /// torque gains mapped through `torque_allocation_matrix_inv` (`thrustGainMapping`).
-    pub fn set_gains_wire(&mut self, terms: &[RollPitchYawTermWire]) -> Result<(), CommandError> {
-        if self.motor_number == 0 {
-            return Err(self.reject(CommandError::MotorNumberUnknown));
-        }
-        if terms.len() == 1 && self.motor_number != 1 {
-            let t = terms[0];
-            self.torque_gain = [
-                [from_wire(t.roll_p), from_wire(t.pitch_p), 0.0],
-                [from_wire(t.roll_i), from_wire(t.pitch_i), 0.0],
-                [
-                    from_wire(t.roll_d),
-                    from_wire(t.pitch_d),
-                    from_wire(t.yaw_d),
-                ],
-            ];
-            self.thrust_gain_mapping();
-        } else {
-            self.check_length("rpy/gain.motors", terms.len())?;
-            for (i, t) in terms.iter().enumerate().take(N_ROTORS) {
-                self.p_gain[i] = [from_wire(t.roll_p), from_wire(t.pitch_p), 0.0];
-                self.i_gain[i] = [from_wire(t.roll_i), from_wire(t.pitch_i), 0.0];
-                self.d_gain[i] = [
-                    from_wire(t.roll_d),
-                    from_wire(t.pitch_d),
-                    from_wire(t.yaw_d),
-                ];
-            }
-        }
-        self.update_max_yaw_index();
-        Ok(())
-    }
-
-    /// `torque_allocation_matrix_inv` in wire form (one row per rotor, x 1000).
-    pub fn set_torque_allocation_inv_wire(
-        &mut self,
-        rows: &[[i16; 3]],
-    ) -> Result<(), CommandError> {
-        self.check_length("torque_allocation_matrix_inv.rows", rows.len())?;
-        for (dst, row) in self.torque_allocation_inv.iter_mut().zip(rows.iter()) {
-            *dst = row.map(from_wire);
-        }
-        self.thrust_gain_mapping();
-        self.update_max_yaw_index();
-        Ok(())
-    }
-
-    /// `p_matrix_pseudo_inverse_inertia` in physical units: rows (r, p, y) of the allocation
-    /// pseudo-inverse per rotor and the inertia (xx, yy, zz, xy, yz, xz), kg m^2.
-    pub fn set_pinv_inertia(
-        &mut self,
-        pinv: &[[f64; 3]],
-        inertia: [f64; 6],
-    ) -> Result<(), CommandError> {
-        self.check_length("p_matrix_pseudo_inverse_inertia.pseudo_inverse", pinv.len())?;
-        if pinv
-            .iter()
-            .flatten()
-            .chain(inertia.iter())
-            .any(|v| !v.is_finite())
-        {
-            return Err(self.reject(CommandError::NonFinite("p_matrix_pseudo_inverse_inertia")));
-        }
-        for (dst, row) in self.pinv.iter_mut().zip(pinv.iter()) {
-            *dst = *row;
-        }
-        self.inertia = inertia_matrix(&inertia);
-        Ok(())
-    }
-
-    /// `p_matrix_pseudo_inverse_inertia` in wire form (x 1000).
-    pub fn set_pinv_inertia_wire(
-        &mut self,
-        pinv: &[[i16; 3]],
-        inertia: [i16; 6],
-    ) -> Result<(), CommandError> {
-        self.check_length("p_matrix_pseudo_inverse_inertia.pseudo_inverse", pinv.len())?;
-        for (dst, row) in self.pinv.iter_mut().zip(pinv.iter()) {
-            *dst = row.map(from_wire);
-        }
-        self.inertia = inertia_from_wire(&inertia);
-        Ok(())
-    }
-
-    fn thrust_gain_mapping(&mut self) {
-        for i in 0..self.motor_number.min(N_ROTORS) {
-            let t = self.torque_allocation_inv[i];
-            for (axis, &t_axis) in t.iter().enumerate() {
-                self.p_gain[i][axis] = t_axis * self.torque_gain[0][axis];
-                self.i_gain[i][axis] = t_axis * self.torque_gain[1][axis];
-                self.d_gain[i][axis] = t_axis * self.torque_gain[2][axis];
-            }
-        }
-    }
-
-    fn update_max_yaw_index(&mut self) {
-        let mut best = 0.0;
-        self.max_yaw_index = None;
-        for i in 0..self.motor_number.min(N_ROTORS) {
-            if self.d_gain[i][2] > best {
-                best = self.d_gain[i][2];
-                self.max_yaw_index = Some(i);
-            }
-        }
-    }
-
-    /// Firmware `reset()` (on ARM_OFF): gains, integrals, terms and the fail-safe timer
-    /// cleared, targets zero, every duty to idle. Vehicle description and PWM info stay.
-    fn reset(&mut self, now_s: f64) {
-        self.thrust = [0.0; N_ROTORS];
-        self.duty = [IDLE_DUTY; N_ROTORS];
-        self.base_thrust = [0.0; N_ROTORS];
-        self.rp_term = [0.0; N_ROTORS];
-        self.yaw_term = [0.0; N_ROTORS];
-        self.extra_yaw = [0.0; N_ROTORS];
-        self.p_gain = [[0.0; 3]; N_ROTORS];
-        self.i_gain = [[0.0; 3]; N_ROTORS];
-        self.d_gain = [[0.0; 3]; N_ROTORS];
-        self.torque_allocation_inv = [[0.0; 3]; N_ROTORS];
-        self.torque_gain = [[0.0; 3]; 3];
-        self.target_angle = [0.0; 2];
-        self.error_i = [0.0; 2];
-        self.max_yaw_index = None;
-        self.integrate = false;
-        self.failsafe_armed = false;
-        self.saturated = false;
-        if now_s.is_finite() {
-            self.last_command_s = now_s;
         }
     }
 
@@ -755,7 +410,17 @@ impl AttitudeController {
         let Some(pwm) = self.pwm.as_mut() else {
             return;
         };
-        pwm.update_voltage(voltage, now_s);
+        let rejected_before = pwm.rejected_voltages();
+        let used = pwm.update_voltage(voltage, now_s);
+        if pwm.rejected_voltages() > rejected_before {
+            self.counters.rejected_voltages += pwm.rejected_voltages() - rejected_before;
+            if !self.voltage_rejecting {
+                self.events.push(SpinalEvent::VoltageRejected);
+            }
+            self.voltage_rejecting = true;
+        } else if used {
+            self.voltage_rejecting = false;
+        }
         let pwm = &*pwm;
         let n = self.motor_number.min(N_ROTORS);
         let rd = self.rotor_divider;
@@ -810,15 +475,41 @@ impl AttitudeController {
                 beta = -1.0;
             }
         }
-        self.alpha = alpha;
-        self.beta = beta;
-
-        let mut saturated = alpha < 0.0;
+        let mut finite = true;
         for i in 0..n {
             self.thrust[i] = self.rp_term[i]
                 + (1.0 + alpha) * self.base_thrust[i]
                 + (1.0 + beta) * self.yaw_term[i];
-            if self.start_control {
+            finite &= self.thrust[i].is_finite();
+        }
+        if !finite {
+            // A non-finite thrust (for example a huge finite rate in the gyro-moment term)
+            // never reaches a motor: every rotor gets min_duty (idle while disarmed).
+            self.counters.non_finite_outputs += 1;
+            if !self.output_non_finite {
+                self.events.push(SpinalEvent::NonFiniteOutput);
+            }
+            self.output_non_finite = true;
+            self.alpha = -1.0;
+            self.beta = -1.0;
+            for i in 0..n {
+                self.thrust[i] = 0.0;
+                self.duty[i] = if self.start_control {
+                    pwm.min_duty()
+                } else {
+                    IDLE_DUTY
+                };
+            }
+            self.saturated = self.start_control;
+            return;
+        }
+        self.output_non_finite = false;
+        self.alpha = alpha;
+        self.beta = beta;
+
+        let mut saturated = alpha < 0.0;
+        if self.start_control {
+            for i in 0..n {
                 let raw = pwm.raw_duty(self.thrust[i]);
                 let clamped = pwm.clamp_duty(raw);
                 saturated |= raw != clamped;

@@ -119,6 +119,13 @@ pub enum SpinalEvent {
     FailsafeCommandTilt,
     /// A message was rejected with a firmware log error.
     Rejected(CommandError),
+    /// A battery voltage was rejected by the voltage guard (or was not finite and
+    /// positive); the last good voltage is in use. Reported on the first of a run.
+    VoltageRejected,
+    /// A FourAxisCommand value was saturated (`saturate_commands`). First of a run.
+    CommandSaturated,
+    /// A step computed a non-finite thrust; every rotor got `min_duty`. First of a run.
+    NonFiniteOutput,
 }
 
 /// Fixed-capacity list of events (no allocation). Events beyond the capacity are counted

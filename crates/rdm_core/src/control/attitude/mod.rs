@@ -4,14 +4,16 @@
 //! fail-safe state machine. [`SpinalStep`] chains the estimator and this controller into the
 //! Spinal mirror's 200 Hz step.
 
+mod config;
 mod controller;
 mod events;
 mod spinal_step;
 pub mod wire;
 
+pub use config::{AntiWindup, AttitudeControlConfig, FIRMWARE_FORCE_LANDING_STEP};
 pub use controller::{
-    AntiWindup, AttitudeControlConfig, AttitudeController, AttitudeOutput, ControlCounters,
-    ControlStatus, RotorAxisGains, FIRMWARE_FORCE_LANDING_STEP, UAV_MODEL_DRAGON,
+    AttitudeController, AttitudeOutput, ControlCounters, ControlStatus, RotorAxisGains,
+    UAV_MODEL_DRAGON,
 };
 pub use events::{CommandError, EventList, FlightConfigCmd, SpinalEvent};
 pub use spinal_step::{SpinalConfig, SpinalOutput, SpinalStep};

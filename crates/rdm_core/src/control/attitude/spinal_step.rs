@@ -1,6 +1,7 @@
 //! The Spinal mirror's step: attitude estimator, attitude controller and PWM conversion.
 
-use super::controller::{AttitudeControlConfig, AttitudeController, AttitudeOutput};
+use super::config::AttitudeControlConfig;
+use super::controller::{AttitudeController, AttitudeOutput};
 use crate::estimate::{
     AttitudeEstimate, AttitudeEstimator, EstimateStatus, EstimatorConfig, EstimatorConfigError,
     ImuSample,

@@ -5,6 +5,12 @@
 //! reference curve whose voltage is closest to the battery voltage (every 500 ms), scales the
 //! thrust by the voltage factor and inverts the thrust curve into a duty in `[min_duty,
 //! max_duty]`. Duty 0.5 is a 1000 us pulse (motor stopped).
+//!
+//! Guards that the firmware does not have (docs/spinal.md "Guards on the actuator path"):
+//! a battery voltage outside the plausible window of the battery's cell count is rejected,
+//! counted and replaced by the last good one ([`VoltageGuard`]; `VoltageGuard::Off` is the
+//! firmware's acceptance of any positive voltage); `min_duty` never exceeds `max_duty`, and a
+//! non-finite duty gives `min_duty`, in every mode.
 
 /// Duty that stops a motor (1000 us pulse at the 2 ms PWM period).
 pub const IDLE_DUTY: f64 = 0.5;
@@ -12,12 +18,17 @@ pub const IDLE_DUTY: f64 = 0.5;
 pub const MAX_MOTOR_INFO: usize = 8;
 /// Interval between reference-voltage selections, s (firmware: `> 500` ms).
 pub const VOLTAGE_UPDATE_INTERVAL_S: f64 = 0.5;
-/// Lowest DShot throttle value (firmware `DSHOT_MIN_THROTTLE`).
-pub const DSHOT_MIN_THROTTLE: u16 = 48;
-/// Highest DShot throttle value (firmware `DSHOT_MAX_THROTTLE`).
-pub const DSHOT_MAX_THROTTLE: u16 = 2047;
-/// DShot throttle span mapped onto duty 0.5..1.0 (firmware `DSHOT_RANGE`).
-pub const DSHOT_RANGE: f64 = 1999.0;
+
+mod encode;
+mod voltage_guard;
+
+pub use encode::{
+    duty_to_can_value, duty_to_dshot, duty_to_report, CAN_PWM_VALUE_MAX, DSHOT_MAX_THROTTLE,
+    DSHOT_MIN_THROTTLE, DSHOT_RANGE,
+};
+pub use voltage_guard::{
+    cells_from_reference, VoltageGuard, CELL_FULL_V, CELL_MAX_V, CELL_MIN_V, MAX_CELLS,
+};
 
 /// How a thrust is inverted into a PWM percentage (`MotorInfo.SQRT_MODE`/`POLYNOMINAL_MODE`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -80,6 +91,10 @@ pub enum PwmInfoError {
     NonPositiveVoltage,
     /// SQRT mode needs `p2 != 0`.
     ZeroQuadraticCoefficient,
+    /// `min_pwm` or `max_pwm` outside `[0, 1]` (a duty is a fraction of the PWM period).
+    DutyRange(&'static str),
+    /// A [`VoltageGuard`] field out of range; the field is named.
+    VoltageGuard(&'static str),
 }
 
 impl core::fmt::Display for PwmInfoError {
@@ -91,6 +106,8 @@ impl core::fmt::Display for PwmInfoError {
             Self::ZeroQuadraticCoefficient => {
                 write!(f, "motor_info.polynomial[2]: must be non-zero in SQRT mode")
             }
+            Self::DutyRange(field) => write!(f, "{field}: must be a duty in [0, 1]"),
+            Self::VoltageGuard(field) => write!(f, "{field}: out of range"),
         }
     }
 }
@@ -138,6 +155,11 @@ impl PwmInfo {
         ] {
             if !value.is_finite() {
                 return Err(PwmInfoError::NonFinite(name));
+            }
+        }
+        for (value, name) in [(self.min_pwm, "min_pwm"), (self.max_pwm, "max_pwm")] {
+            if !(0.0..=1.0).contains(&value) {
+                return Err(PwmInfoError::DutyRange(name));
             }
         }
         for curve in self.curves() {
@@ -229,21 +251,34 @@ pub struct PwmConverter {
     last_voltage_update_s: Option<f64>,
     rejected_voltages: u64,
     rotor_divider: f64,
+    voltage_window: Option<(f64, f64)>,
+    last_good_voltage: f64,
 }
 
 impl PwmConverter {
-    /// A converter for checked parameters. Until the first voltage update the factor is 1
-    /// and the reference is the first curve, as in the firmware.
+    /// A converter for checked parameters with the default [`VoltageGuard`]. Until the first
+    /// voltage update the factor is 1 and the reference is the first curve, as in the
+    /// firmware.
     pub fn new(info: PwmInfo) -> Result<Self, PwmInfoError> {
+        Self::with_guard(info, VoltageGuard::default())
+    }
+
+    /// A converter for checked parameters and a voltage guard (`VoltageGuard::Off`:
+    /// firmware-exact voltage handling). An invalid guard is refused as
+    /// `PwmInfoError::VoltageGuard`.
+    pub fn with_guard(info: PwmInfo, guard: VoltageGuard) -> Result<Self, PwmInfoError> {
         info.validate()?;
+        guard.validate().map_err(PwmInfoError::VoltageGuard)?;
         Ok(Self {
-            min_duty: info.min_pwm,
-            info,
+            min_duty: info.min_pwm.min(info.max_pwm),
             reference_index: 0,
             v_factor: 1.0,
             last_voltage_update_s: None,
             rejected_voltages: 0,
             rotor_divider: 1.0,
+            voltage_window: guard.window(&info),
+            last_good_voltage: info.motor_info[0].voltage,
+            info,
         })
     }
 
@@ -262,7 +297,8 @@ impl PwmConverter {
         self.v_factor
     }
 
-    /// Lowest duty in use (from `min_thrust` after the first voltage update if it is > 0).
+    /// Lowest duty in use (from `min_thrust` after the first voltage update if it is > 0),
+    /// never above `max_duty`.
     pub fn min_duty(&self) -> f64 {
         self.min_duty
     }
@@ -270,6 +306,16 @@ impl PwmConverter {
     /// Highest duty.
     pub fn max_duty(&self) -> f64 {
         self.info.max_pwm
+    }
+
+    /// The plausible battery voltage window `(low, high)`, V; `None`: guard off.
+    pub fn voltage_window(&self) -> Option<(f64, f64)> {
+        self.voltage_window
+    }
+
+    /// The last voltage that passed the guard (at first the first reference's voltage).
+    pub fn last_good_voltage(&self) -> f64 {
+        self.last_good_voltage
     }
 
     /// Sets how many rotors share one commanded thrust (firmware `rotor_devider_`: 2 for
@@ -285,9 +331,22 @@ impl PwmConverter {
         self.rotor_divider
     }
 
-    /// How many voltages were ignored because they were not finite and positive.
+    /// How many voltages were rejected: not finite and positive, or (guard on) outside the
+    /// plausible window.
     pub fn rejected_voltages(&self) -> u64 {
         self.rejected_voltages
+    }
+
+    /// Largest base thrust a command can ask of one motor: the largest `max_thrust` of the
+    /// reference curves times the rotor divider, N.
+    pub fn command_thrust_max(&self) -> f64 {
+        let top = self
+            .info
+            .curves()
+            .iter()
+            .map(|c| c.max_thrust)
+            .fold(0.0_f64, f64::max);
+        top * self.rotor_divider
     }
 
     fn reference(&self) -> &MotorInfo {
@@ -297,9 +356,19 @@ impl PwmConverter {
             .unwrap_or(&self.info.motor_info[0])
     }
 
+    /// Whether the guard lets `voltage` through (finite and positive in every case).
+    fn plausible(&self, voltage: f64) -> bool {
+        if !(voltage.is_finite() && voltage > 0.0) {
+            return false;
+        }
+        self.voltage_window
+            .is_none_or(|(low, high)| (low..=high).contains(&voltage))
+    }
+
     /// Selects the reference curve and voltage factor when more than 500 ms passed since the
-    /// last selection (or none was made yet). Returns whether an update happened. A voltage
-    /// that is not finite and positive is ignored and counted.
+    /// last selection (or none was made yet). Returns whether `voltage` was used. A rejected
+    /// voltage is counted; with the guard on, the last good voltage is selected instead and
+    /// the 500 ms schedule goes on; with it off, the voltage is ignored.
     pub fn update_voltage(&mut self, voltage: f64, now_s: f64) -> bool {
         if let Some(last) = self.last_voltage_update_s {
             // NaN time never triggers an update.
@@ -308,22 +377,36 @@ impl PwmConverter {
                 return false;
             }
         }
-        if !(voltage.is_finite() && voltage > 0.0 && now_s.is_finite()) {
+        if !now_s.is_finite() {
             self.rejected_voltages += 1;
             return false;
         }
-        self.force_voltage(voltage);
-        self.last_voltage_update_s = Some(now_s);
-        true
+        let used = self.force_voltage(voltage);
+        if used || self.voltage_window.is_some() {
+            self.last_voltage_update_s = Some(now_s);
+        }
+        used
     }
 
-    /// Selects the reference for `voltage` now, regardless of the 500 ms schedule.
-    /// The first curve with the smallest |V - Vref| wins, as in the firmware's strict `>`.
-    pub fn force_voltage(&mut self, voltage: f64) {
-        if !(voltage.is_finite() && voltage > 0.0) {
+    /// Selects the reference for `voltage` now, regardless of the 500 ms schedule; returns
+    /// whether `voltage` was used (a rejected one is counted and, guard on, replaced by the
+    /// last good voltage). The first curve with the smallest |V - Vref| wins, as in the
+    /// firmware's strict `>`.
+    pub fn force_voltage(&mut self, voltage: f64) -> bool {
+        if self.plausible(voltage) {
+            self.last_good_voltage = voltage;
+            self.select(voltage);
+            true
+        } else {
             self.rejected_voltages += 1;
-            return;
+            if self.voltage_window.is_some() {
+                self.select(self.last_good_voltage);
+            }
+            false
         }
+    }
+
+    fn select(&mut self, voltage: f64) {
         let mut best = f64::INFINITY;
         for (index, curve) in self.info.curves().iter().enumerate() {
             let diff = (voltage - curve.voltage).abs();
@@ -334,8 +417,15 @@ impl PwmConverter {
         }
         self.v_factor = voltage_factor(self.info.mode, self.reference().voltage, voltage);
         if self.info.min_thrust > 0.0 {
-            // As the firmware: convert() includes the rotor divider here too.
-            self.min_duty = self.raw_duty(self.info.min_thrust);
+            // As the firmware: convert() includes the rotor divider here too. Capped at
+            // max_pwm (the firmware's clamp would let min_duty > max_duty through); a
+            // non-finite value (an infinite voltage factor) falls back to min_pwm.
+            let raw = self.raw_duty(self.info.min_thrust);
+            self.min_duty = if raw.is_finite() {
+                raw.min(self.info.max_pwm)
+            } else {
+                self.info.min_pwm.min(self.info.max_pwm)
+            };
         }
     }
 
@@ -354,9 +444,10 @@ impl PwmConverter {
         )
     }
 
-    /// Clamps a duty into `[min_duty, max_duty]`; NaN becomes `min_duty`.
+    /// Clamps a duty into `[min_duty, max_duty]`; a non-finite duty becomes `min_duty`
+    /// (the firmware would pass NaN to the timer and clamp +inf to `max_duty`).
     pub fn clamp_duty(&self, duty: f64) -> f64 {
-        if duty.is_nan() || duty < self.min_duty {
+        if !duty.is_finite() || duty < self.min_duty {
             self.min_duty
         } else if duty > self.info.max_pwm {
             self.info.max_pwm
@@ -369,34 +460,6 @@ impl PwmConverter {
     pub fn duty(&self, thrust: f64) -> f64 {
         self.clamp_duty(self.raw_duty(thrust))
     }
-}
-
-/// Truncates a non-negative value into `u16` range (the firmware's implicit casts).
-fn saturating_trunc_u16(value: f64) -> u16 {
-    if value.is_nan() || value <= 0.0 {
-        0
-    } else if value >= f64::from(u16::MAX) {
-        u16::MAX
-    } else {
-        value as u16
-    }
-}
-
-/// The `motor_pwms` report value: `(uint16)(duty * 2000)`, i.e. the pulse in us.
-pub fn duty_to_report(duty: f64) -> u16 {
-    saturating_trunc_u16(duty * 2000.0)
-}
-
-/// The Neuron CAN motor value: `(uint16)(duty * 2000 - 1000)` (pulse - 1000 us), 0..=1000
-/// for duties in 0.5..=1.0. Duties below 0.5 give 0 instead of the firmware's wrap-around.
-pub fn duty_to_can_value(duty: f64) -> u16 {
-    saturating_trunc_u16(duty * 2000.0 - 1000.0)
-}
-
-/// The DShot throttle: `(duty - 0.5) / 0.5 * 1999 + 48`, truncated and clamped to 48..=2047.
-pub fn duty_to_dshot(duty: f64) -> u16 {
-    let value = (duty - 0.5) / 0.5 * DSHOT_RANGE + f64::from(DSHOT_MIN_THROTTLE);
-    saturating_trunc_u16(value).clamp(DSHOT_MIN_THROTTLE, DSHOT_MAX_THROTTLE)
 }
 
 #[cfg(test)]

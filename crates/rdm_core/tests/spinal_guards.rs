@@ -1,0 +1,76 @@
+//! The actuator-path guards of the Spinal core from the Rust API: the CAN PWM packer clamps,
+//! the firmware configuration selects every firmware-exact option, the voltage window.
+
+use nalgebra::{Matrix3, Vector3};
+use rdm_core::control::attitude::{
+    AntiWindup, AttitudeControlConfig, AttitudeController, SpinalConfig, SpinalEvent,
+};
+use rdm_core::estimate::EstimatorConfig;
+use rdm_core::firmware::spinal_frame::pwm;
+use rdm_core::pwm::{PwmInfo, VoltageGuard};
+
+/// Slot values above 1000 are clamped, not masked to 10 bits. The expected payload is
+/// cantools' encoding of `MotorPwmSlaves1To6` (firmware_protocol/neuron/
+/// neuron_spinal_to_neuron.dbc) with Pwm1..6 = 1000, 1000, 0, 1000, 999, 288. Masking would
+/// have packed 3360 as 288 (3360 & 0x3FF) and 1001 as 1001.
+#[test]
+fn pwm_frame_clamps_slot_values_to_1000() {
+    let frame = pwm(0, &[3360, 1000, 0, 1001, 999, 288]);
+    assert_eq!(frame.id, 15);
+    assert_eq!(frame.len, 8);
+    assert_eq!(frame.data, [232, 163, 15, 0, 232, 159, 15, 18]);
+    let saturated = pwm(1, &[u16::MAX; 6]);
+    let in_range = pwm(1, &[1000; 6]);
+    assert_eq!(saturated.data, in_range.data);
+}
+
+#[test]
+fn firmware_configs_select_every_firmware_exact_option() {
+    let control = AttitudeControlConfig::firmware(1000.0);
+    assert_eq!(control.anti_windup, AntiWindup::Off);
+    assert_eq!(control.voltage_guard, VoltageGuard::Off);
+    assert!(!control.saturate_commands);
+    assert!(EstimatorConfig::firmware(1000.0).guards.is_none());
+    let spinal = SpinalConfig::firmware(200.0);
+    assert!(spinal.estimator.guards.is_none());
+    assert_eq!(spinal.control.voltage_guard, VoltageGuard::Off);
+    // The defaults are the guarded ones.
+    let default = SpinalConfig::default();
+    assert!(default.estimator.guards.is_some());
+    assert!(default.control.saturate_commands);
+    assert_ne!(default.control.voltage_guard, VoltageGuard::Off);
+}
+
+fn armed(config: AttitudeControlConfig) -> AttitudeController {
+    let mut c = AttitudeController::new(config).unwrap();
+    c.set_uav_info(4, 16).unwrap();
+    c.set_pwm_info(PwmInfo::hydrus_example()).unwrap();
+    c.flight_config(0, 0.0).unwrap();
+    c
+}
+
+/// 25.2 V reference = 6 cells (round(25.2 / 4.2)); window 6 x [3.0, 4.45] = [18.0, 26.7] V.
+/// A voltage of 1e-300 is rejected and the reference's own voltage (factor 1) is used; with
+/// the guard off the factor is infinite, yet the duty stays within [min_pwm, max_pwm].
+#[test]
+fn voltage_guard_rejects_and_duty_never_exceeds_max() {
+    let mut c = armed(AttitudeControlConfig::default());
+    let out = c.step(0.0, &Matrix3::identity(), &Vector3::zeros(), 1e-300);
+    let pwm = c.pwm().unwrap();
+    assert_eq!(pwm.voltage_window(), Some((18.0, 6.0 * 4.45)));
+    assert_eq!(pwm.voltage_factor(), 1.0);
+    assert_eq!(c.counters().rejected_voltages, 1);
+    assert!(out
+        .events
+        .iter()
+        .any(|e| *e == SpinalEvent::VoltageRejected));
+    assert!(out.duty.iter().all(|d| (0.59 - 0.01..=0.9375).contains(d)));
+
+    let mut exact = armed(AttitudeControlConfig::firmware(200.0));
+    let out = exact.step(0.0, &Matrix3::identity(), &Vector3::zeros(), 1e-300);
+    assert!(exact.pwm().unwrap().voltage_factor().is_infinite());
+    assert_eq!(out.duty, [0.59; 4]); // min_duty = convert(min_thrust) = inf -> min_pwm
+    let out = exact.step(0.6, &Matrix3::identity(), &Vector3::zeros(), 1.75);
+    assert_eq!(out.duty, [0.9375; 4]); // min_duty capped at max_pwm
+    assert_eq!(out.pwm_report, [1875; 4]);
+}
