@@ -27,10 +27,10 @@ def test_cell_count_from_the_full_reference_voltage(volts, cells) -> None:
 
 @pytest.mark.parametrize(
     ("volts", "accepted"),
-    # 6 cells x (2.5 .. 4.45) V = 15.0 .. 26.7 V; 0.07 x 25 V (the bad adc scale) is out
+    # 6 cells x (3.0 .. 4.45) V = 18.0 .. 26.7 V; 0.07 x 25 V (the bad adc scale) is out
     [
-        (15.0, True),
-        (14.99, False),
+        (18.0, True),
+        (17.99, False),
         (26.7, True),
         (26.71, False),
         (1.75, False),

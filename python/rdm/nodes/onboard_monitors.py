@@ -38,8 +38,9 @@ class MonitorLimits:
     servo_timeout_s: float = 0.5
     #: Battery cells; None: from ``motor_info``'s highest reference voltage.
     battery_cells: int | None = None
-    #: Plausible cell voltage range, V.
-    cell_plausible: tuple[float, float] = (2.5, 4.45)
+    #: Plausible cell voltage range, V (the window of Spinal's voltage guard,
+    #: ``rdm_core::pwm``: a Li-Po's discharge cut-off to a high-voltage cell's full charge).
+    cell_plausible: tuple[float, float] = (3.0, 4.45)
     #: Land below this cell voltage (sustained ``low_battery_s``), V.
     cell_low: float = 3.5
     low_battery_s: float = 1.0

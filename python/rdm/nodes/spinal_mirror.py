@@ -735,7 +735,7 @@ class SpinalMirror:
     def _on_adc_scale(self, msg: Any) -> None:
         """``set_adc_scale``. The firmware takes any positive scale; unless
         :attr:`firmware_adc_scale`, a scale that would put the present battery reading outside
-        the plausible range of the battery (``rdm.nodes.onboard_monitors``: 2.5..4.45 V per
+        the plausible range of the battery (``rdm.nodes.onboard_monitors``: 3.0..4.45 V per
         cell, cells from ``motor_info``'s highest reference voltage) is rejected: one such
         message made the battery reading 1.75 V and the voltage factor drove every rotor to
         full duty."""
