@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import re
 from collections.abc import Iterator
@@ -58,7 +59,12 @@ def _decode_log(path: Path, decoder: NeuronDecoder) -> Iterator[dict[str, Any]]:
                 yield _error_dict(number, f"syntax: not a candump -L line: {text[:80]!r}")
                 continue
             id_text, payload = m["id"], m["data"]
-            extra = {"timestamp": float(m["ts"]), "channel": m["ch"]}
+            stamp = float(m["ts"])
+            if not math.isfinite(stamp):  # digits past the double's range
+                decoder.errors["syntax"] += 1
+                yield _error_dict(number, f"syntax: timestamp {m['ts'][:24]}... out of range")
+                continue
+            extra = {"timestamp": stamp, "channel": m["ch"]}
             remote = payload[:1] in ("R", "r")
             if payload.startswith("#"):  # CAN FD "##<flags><data>"
                 decoder.errors["fd"] += 1
@@ -85,6 +91,10 @@ def _decode_asc(path: Path, decoder: NeuronDecoder) -> Iterator[dict[str, Any]]:
     try:
         for msg in reader:
             number += 1
+            if not math.isfinite(msg.timestamp):  # digits past the double's range
+                decoder.errors["syntax"] += 1
+                yield _error_dict(number, "syntax: timestamp out of range")
+                continue
             extra = {"timestamp": msg.timestamp, "channel": msg.channel}
             if msg.is_error_frame:
                 decoder.errors["error_frame"] += 1
