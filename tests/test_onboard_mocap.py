@@ -95,3 +95,35 @@ def test_the_node_takes_stamped_poses_and_checks_their_age() -> None:
         assert not node.set_mocap_pose([0, 0, 1], bad)
     assert not node.set_mocap_pose([0, 0, 1], ident, stamp=1.2)  # from the future
     assert node.counts["mocap_invalid"] == 4
+
+
+def test_the_simulated_marker_pose_is_the_root_link_pose_times_the_offset() -> None:
+    """rdm.scenarios.mocap_node without noise or latency: the pose handed to the node is the
+    plant's root link pose composed with the marker offset (scipy's rotations as the oracle)."""
+    from rdm.scenarios.mocap_node import MocapNode, MocapSensor
+
+    rng = np.random.default_rng(7)
+    plant = Plant("rdm", seed=7)
+    base_q = Rotation.from_rotvec(rng.normal(0, 0.5, 3)).as_quat()
+    plant.reset(np.zeros(ROBOT.n_q), (0.2, -0.1, 1.0), [base_q[3], *base_q[:3]])
+    offset_p = (0.05, -0.02, 0.03)
+    offset_q = tuple(Rotation.from_rotvec([0.3, -0.2, 1.1]).as_quat())
+    cfg = OnboardConfig(mocap=MocapConfig(marker_position=offset_p, marker_quaternion=offset_q))
+
+    class Recorder:
+        config = cfg
+
+        def __init__(self) -> None:
+            self.poses: list = []
+
+        def set_mocap_pose(self, p, q, stamp):
+            self.poses.append((p, q, stamp))
+
+    rec = Recorder()
+    sensor = MocapSensor(position_noise_m=0.0, rotation_noise_rad=0.0, latency_s=0.0)
+    node = MocapNode(plant, rec, 0.01, sensor)
+    node.tick(0.0)
+    ((p, q, stamp),) = rec.poses
+    expect_p, expect_q = marker_pose((0.2, -0.1, 1.0), [base_q[3], *base_q[:3]], offset_p, offset_q)
+    assert np.allclose(p, expect_p, atol=1e-12) and stamp == 0.0
+    assert abs(abs(np.dot(q, expect_q)) - 1.0) < 1e-12

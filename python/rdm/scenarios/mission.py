@@ -1,6 +1,9 @@
 """``mission``: the operator's flight through every wire, with one injected fault.
 
-The onboard node's operator layer flies it (:mod:`rdm.nodes.onboard_flight`): take off 1 m,
+The node sees motion capture as a real system gives it: the marker body's pose with noise and
+latency (:class:`rdm.scenarios.mocap_node.MocapSensor`), the CoG state estimated on board
+(:mod:`rdm.nodes.onboard_mocap`). The onboard node's operator layer flies it
+(:mod:`rdm.nodes.onboard_flight`): take off 1 m,
 go to a point 0.5 m away and 0.3 m up, land (touchdown, then ARM_OFF). ``fault`` injects one
 fault once the robot hovers (:data:`FAULTS`); the robot must end safe: disarmed on the floor,
 never beyond 30 deg of tilt, never a duty above ``motor_info``'s maximum.
@@ -16,6 +19,7 @@ import numpy as np
 from rdm.sim import Metric
 
 from .common import ScenarioResult, finish, roll_pitch, run_stack, sim_stack_options, truth_arrays
+from .mocap_node import MocapSensor
 from .stack import Stack, build_stack
 
 ARM_AT = 1.5  # s: the CAN master runs from ~1.4 s (boot delay + enumeration)
@@ -156,7 +160,8 @@ def run(
 ) -> ScenarioResult:
     if fault not in FAULTS:
         raise ValueError(f"fault={fault!r}: one of {', '.join(FAULTS)}")
-    opts = sim_stack_options(seed, uart, speed=speed)
+    # motion capture as a real system gives it: the marker body's pose, noisy and late
+    opts = sim_stack_options(seed, uart, speed=speed, mocap=MocapSensor())
     script = MissionScript(fault)
     stack = build_stack(f"mission-{fault}", base, opts, script)
     wall = run_stack(stack, duration)

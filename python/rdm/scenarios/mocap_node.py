@@ -8,9 +8,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from rdm.nodes.onboard import OnboardNode
+from rdm.nodes.onboard_mocap import rotation_of
 from rdm.plant import Plant
 
 _FLOAT64 = np.dtype(np.float64)
@@ -126,13 +126,34 @@ class MocapNode:
         gt = self.plant.ground_truth()
         s, cfg = self.sensor, self.onboard.config.mocap
         w, x, y, z = (float(v) for v in gt.base_quaternion)
-        r_base = Rotation.from_quat([x, y, z, w])
-        r_marker = r_base * Rotation.from_quat(cfg.marker_quaternion)
-        p = np.asarray(gt.base_position, dtype=float) + r_base.apply(cfg.marker_position)
+        base = (x, y, z, w)
+        p = np.asarray(gt.base_position, dtype=float) + rotation_of(base) @ cfg.marker_position
         p = p + self._rng.normal(0.0, s.position_noise_m, 3)
-        r_marker = r_marker * Rotation.from_rotvec(self._rng.normal(0.0, s.rotation_noise_rad, 3))
-        self._pending.append((now + s.latency_s, now, p.tolist(), r_marker.as_quat().tolist()))
+        noise = _quaternion_of_rotvec(self._rng.normal(0.0, s.rotation_noise_rad, 3))
+        q = _quaternion_product(_quaternion_product(base, cfg.marker_quaternion), noise)
+        self._pending.append((now + s.latency_s, now, p.tolist(), list(q)))
         while self._pending and self._pending[0][0] <= now + 1e-9:
             _, taken, position, quaternion = self._pending.popleft()
             if self.enabled:
                 self.onboard.set_mocap_pose(position, quaternion, stamp=taken)
+
+
+def _quaternion_product(a: Any, b: Any) -> tuple[float, float, float, float]:
+    """``a b`` of quaternions (x, y, z, w)."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
+
+
+def _quaternion_of_rotvec(v: np.ndarray) -> tuple[float, float, float, float]:
+    """The unit quaternion (x, y, z, w) of a rotation vector."""
+    angle = float(np.linalg.norm(v))
+    if angle == 0.0:
+        return (0.0, 0.0, 0.0, 1.0)
+    x, y, z = (float(c) * math.sin(angle / 2) / angle for c in v)
+    return (x, y, z, math.cos(angle / 2))
