@@ -21,6 +21,8 @@ echo "== python: ruff"
 
 echo "== python: pytest"
 # Against the installed wheel: python/ is not on sys.path, tests/ is (shared test helpers).
+# tests/test_lean_install.py builds the wheel again (cargo reuses the build of the install
+# above: seconds) and installs it without extras into a fresh venv (its dependencies from PyPI).
 "$PY" -m pytest tests -q -p no:cacheprovider
 
 echo "== python: SocketCAN tests on vcan0 (VM harness)"

@@ -2,7 +2,10 @@
 
 Each sub-command lives in its own module under :mod:`rdm.commands` and is imported only
 when it runs, so ``rdm --help`` stays fast and a command's heavy dependencies (MuJoCo,
-scipy) load only for the commands that need them.
+scipy) load only for the commands that need them. The base install carries what the onboard
+node and the ground link import (``rdm onboard``, ``rdm ctl``, ``rdm config``); a command
+that needs an optional extra (``sim``: ``rdm sim``, ``rdm hil``, ``rdm spinal``, ...) and
+finds it missing prints one line with the install command and exits 2.
 """
 
 from __future__ import annotations
@@ -12,6 +15,21 @@ import importlib
 import os
 import sys
 from collections.abc import Sequence
+
+#: Modules of an optional extra (``pyproject.toml``) -> (extra, what it is). A command whose
+#: import or run fails on one of them says which extra to install (:func:`missing_extra`).
+OPTIONAL_MODULES: dict[str, tuple[str, str]] = {
+    "mujoco": ("sim", "the simulator extra"),
+    "matplotlib": ("sim", "the simulator extra"),
+    "scipy": ("sim", "the simulator extra"),
+    "mcap": ("sim", "the simulator extra"),
+    "msgpack": ("sim", "the simulator extra"),
+    "clarabel": ("bench", "the benchmark extra"),
+    "osqp": ("bench", "the benchmark extra"),
+}
+
+#: Exit code of a command that needs an optional extra that is not installed.
+MISSING_EXTRA_EXIT = 2
 
 #: Exit code when stdout's reader closed the pipe early: what a shell reports for a process
 #: killed by SIGPIPE (128 + 13), as `seq 1 1000000 | head -1` leaves in PIPESTATUS.
@@ -23,6 +41,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "bench",
         "measure the real-time core against its 200 Hz and 40 Hz budgets and against peers",
     ),
+    "config": ("config", "check an onboard configuration file and print it resolved"),
     "ctl": ("ctl", "send a signed command to rdm onboard over the ground link and print its ack"),
     "decode": ("decode", "decode a UART capture, candump log or Leptrino capture"),
     "design": ("design", "reachability/feasibility sweep reproducing Tables II-III"),
@@ -61,6 +80,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def missing_extra(command: str, exc: ModuleNotFoundError) -> str | None:
+    """The one line for ``command`` failing on a module of an optional extra (None: the
+    module is none of :data:`OPTIONAL_MODULES`, a real error)."""
+    top = (exc.name or "").split(".")[0]
+    if top not in OPTIONAL_MODULES:
+        return None
+    extra, what = OPTIONAL_MODULES[top]
+    return (
+        f"rdm {command}: needs {what} ({top} is not installed): "
+        f'pip install "rdm[{extra}]" (from a source tree: pip install ".[{extra}]")'
+    )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``rdm`` console script; returns the process exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -71,11 +103,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.print_help()
             return 2
     name = argv[0]
-    module = importlib.import_module(f"rdm.commands.{COMMANDS[name][0]}")
-    cmd_parser = argparse.ArgumentParser(prog=f"rdm {name}", description=COMMANDS[name][1])
-    module.add_arguments(cmd_parser)
     try:
+        module = importlib.import_module(f"rdm.commands.{COMMANDS[name][0]}")
+        cmd_parser = argparse.ArgumentParser(prog=f"rdm {name}", description=COMMANDS[name][1])
+        module.add_arguments(cmd_parser)
         return int(module.run(cmd_parser.parse_args(argv[1:])) or 0)
+    except ModuleNotFoundError as exc:
+        line = missing_extra(name, exc)
+        if line is None:
+            raise
+        print(line, file=sys.stderr)
+        return MISSING_EXTRA_EXIT
     except BrokenPipeError:
         # The reader of our output went away (`rdm decode x.log | head`): stop quietly, as
         # a Unix filter does, and keep Python from failing again on the exit-time flush.

@@ -5,6 +5,12 @@ Examples::
 
     rdm onboard --uart serial:/dev/flight_controller --foot-sensor serial:/dev/ttyACM0@460800
     rdm onboard --uart pty --foot-sensor none --control udp:127.0.0.1:7301 --key robot.key
+    rdm onboard --config robot.toml
+
+``--config FILE`` reads the node's whole configuration and its ports from a TOML file
+(:mod:`rdm.nodes.onboard_config_file`; ``rdm config example`` prints the shipped one,
+``rdm config check FILE`` the resolved result); the options given on the command line
+override it.
 
 ``--uart pty`` / ``--foot-sensor pty`` create pseudo-terminals and print the path the other
 side (a Spinal mirror, a sensor mirror) must open. ``--control udp:HOST:PORT --key FILE``
@@ -23,6 +29,7 @@ import json
 import signal
 import sys
 import threading
+from dataclasses import replace
 from typing import Any
 
 from rdm.commands.arg_types import positive_finite
@@ -32,23 +39,37 @@ from rdm.nodes.base import run_realtime
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--uart", required=True, help="Spinal UART: serial:/dev/...[@baud] | pty")
+    parser.add_argument(
+        "--config",
+        default=None,
+        help="TOML configuration file (rdm config example; every OnboardConfig field and "
+        "[ports]); the options below override it",
+    )
+    parser.add_argument(
+        "--uart", default=None, help="Spinal UART: serial:/dev/...[@baud] | pty (or ports.uart)"
+    )
     parser.add_argument(
         "--foot-sensor",
-        default="none",
-        help="Leptrino foot sensor: serial:/dev/ttyACM0@460800 | pty | none (default)",
+        default=None,
+        help="Leptrino foot sensor: serial:/dev/ttyACM0@460800 | pty | none "
+        "(default: ports.foot_sensor, else none)",
     )
     parser.add_argument("--robot", default="rdm", help="shipped robot: rdm (default) or rcm")
-    parser.add_argument("--rate", type=float, default=40.0, help="control rate, Hz (paper: 40)")
     parser.add_argument(
-        "--lqi-every", type=int, default=1, help="synthesize LQI gains every N ticks (default 1)"
+        "--rate", type=float, default=None, help="control rate, Hz (default: rate_hz, 40)"
+    )
+    parser.add_argument(
+        "--lqi-every",
+        type=int,
+        default=None,
+        help="synthesize LQI gains every N ticks (default: lqi_every, 1)",
     )
     parser.add_argument(
         "--servo-lead",
         type=float,
-        default=0.0,
+        default=None,
         help="send trajectory servo goals S s ahead (feed-forward for the servos' lag; "
-        "0 = the paper's; identify it, docs/servolead.md)",
+        "default: servo_lead_s, 0 = the paper's; identify it, docs/servolead.md)",
     )
     parser.add_argument(
         "--control", default=None, help="udp:HOST:PORT of the ground link (rdm ctl --to)"
@@ -72,6 +93,42 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--status-interval", type=float, default=0.0, help="print status every S s (0: at exit)"
     )
+
+
+def _configuration(args: argparse.Namespace) -> Any:
+    """The node's :class:`OnboardConfig`: ``--config FILE`` (or the defaults), then the
+    options given on the command line over it; the file's ports fill the port options left
+    out (``args`` is updated; ``args.loaded`` keeps the loaded file). ValueError names the
+    file and field, or the option."""
+    from rdm.nodes.onboard_config import OnboardConfig
+    from rdm.nodes.onboard_config_file import load_onboard_file
+
+    config = OnboardConfig()
+    if args.config is not None:
+        args.loaded = load_onboard_file(args.config)
+        config, ports = args.loaded.config, args.loaded.ports
+        if args.uart is None:
+            args.uart = ports.uart
+        if args.foot_sensor is None:
+            args.foot_sensor = ports.foot_sensor
+        if args.control is None:
+            args.control = ports.control
+        if args.key is None and not args.insecure_control:
+            args.key = ports.key
+    if args.uart is None:
+        raise ValueError("--uart is required (or ports.uart in the --config file)")
+    if args.foot_sensor is None:
+        args.foot_sensor = "none"
+    overrides = {
+        name: value
+        for name, value in (
+            ("rate_hz", args.rate),
+            ("lqi_every", args.lqi_every),
+            ("servo_lead_s", args.servo_lead),
+        )
+        if value is not None
+    }
+    return replace(config, **overrides) if overrides else config
 
 
 def _open(spec: str, what: str) -> tuple[SerialLink, Any]:
@@ -141,16 +198,16 @@ class _StatusPrinter:
 def run(args: argparse.Namespace) -> int:
     from rdm.model import Robot
     from rdm.nodes.onboard import OnboardNode
-    from rdm.nodes.onboard_config import OnboardConfig
+    from rdm.nodes.onboard_config_file import resolve_for_robot
 
     keep: list[Any] = []
     links: list[SerialLink] = []
     try:
+        config = _configuration(args)
         key = _control_key(args)
         robot = Robot.shipped(args.robot)
-        config = OnboardConfig(
-            rate_hz=args.rate, lqi_every=args.lqi_every, servo_lead_s=args.servo_lead
-        )
+        if args.config is not None:
+            config = resolve_for_robot(replace(args.loaded, config=config), robot)
         uart, k = _open(args.uart, "uart")
         links.append(uart)
         keep.append(k)
@@ -178,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: stop.set())
-    print(f"rdm onboard: ready robot={args.robot} rate={args.rate} Hz", flush=True)
+    print(f"rdm onboard: ready robot={args.robot} rate={config.rate_hz} Hz", flush=True)
     try:
         stats = run_realtime(nodes, duration=args.duration, stop=stop)
     finally:
