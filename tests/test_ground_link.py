@@ -546,14 +546,42 @@ def test_a_pose_datagram_reaches_set_mocap_pose_and_refreshes_no_heartbeat() -> 
     calls = []
 
     class Node:
-        def set_mocap_pose(self, p, q):
-            calls.append((p, q))
+        def set_mocap_pose(self, p, q, stamp):
+            calls.append((p, q, stamp))
             return True
 
     allowed, required, handler = TABLE["pose"]
     assert set(allowed) == set(required) == {"position", "quaternion"}
     handler(Node(), {"position": [1, 2, 3], "quaternion": [0, 0, 0, 1]})
-    assert calls == [([1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0])]
+    assert calls == [([1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0], None)]
     with pytest.raises(Rejected):
         handler(Node(), {"position": [1, 2, 3], "quaternion": [0, 0, 1]})
     assert len(calls) == 1
+
+
+def test_the_port_stamps_a_pose_with_its_signing_time() -> None:
+    """A ``pose`` is taken when it was signed: the port stamps it ``now - (wall - t)`` in node
+    time (its age by the Unix clock), at most POSE_AGE_MAX_S old."""
+    from rdm.ground.port import POSE_AGE_MAX_S
+
+    got = []
+
+    class Node:
+        def set_mocap_pose(self, p, q, stamp):
+            got.append(stamp)
+
+    wall = [1000.0]
+    port = GroundPort(Node(), KEY, wall=lambda: wall[0])
+    signed = [999.97]
+    client = GroundClient("udp:127.0.0.1:9", KEY, src="mocap", wall=lambda: signed[0])
+    pose = {"position": [0.0, 0.0, 1.0], "quaternion": [0.0, 0.0, 0.0, 1.0]}
+    # signed 30 ms, 0 s and 1.5 s before the port reads it (the last one: at the age limit)
+    for signed_at, now, expect in [
+        (999.97, 5.0, 4.97),
+        (1000.0, 5.0, 5.0),
+        (998.5, 6.0, 6.0 - min(1.5, POSE_AGE_MAX_S)),
+    ]:
+        signed[0] = signed_at
+        port.handle(client.datagram("pose", pose)[1], ("127.0.0.1", 9), now)
+        assert got[-1] == pytest.approx(expect, abs=1e-9)
+    assert port.outcomes["accepted"] == 3

@@ -128,11 +128,17 @@ def _mocap(node: Any, args: Args) -> None:
     call(node, "set_mocap", p, v, yaw)
 
 
-def _pose(node: Any, args: Args) -> None:
-    """A motion-capture system's sample: the marker body's pose, stamped on arrival (the
-    capture-to-arrival latency is not compensated; ASSUMPTION: a few ms)."""
+def _pose(node: Any, args: Args, stamp: float | None = None) -> None:
+    """A motion-capture system's sample: the marker body's pose, taken at ``stamp`` (node
+    time; None: now). The port stamps it from the datagram's own time (:func:`apply_pose`)."""
     p = vector("pose", args, "position", 3)
-    call(node, "set_mocap_pose", p, vector("pose", args, "quaternion", 4))
+    call(node, "set_mocap_pose", p, vector("pose", args, "quaternion", 4), stamp)
+
+
+def apply_pose(node: Any, args: Args, stamp: float) -> None:
+    """``pose`` taken at ``stamp`` (node time): the port's form of :func:`apply` for it."""
+    check_args("pose", args)
+    _pose(node, args, stamp)
 
 
 def _status(node: Any, args: Args) -> dict[str, Any]:

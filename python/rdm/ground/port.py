@@ -65,6 +65,10 @@ class _PendingPlan:
     addr: Any
 
 
+#: The oldest a ``pose`` sample is taken to be, s (older ones are stamped this old).
+POSE_AGE_MAX_S = 0.5
+
+
 class GroundPort:
     """The ground link's onboard node (module doc). ``sock`` is a bound UDP socket (made
     non-blocking here); ``key`` None accepts unsigned datagrams (insecure mode). ``wall``
@@ -170,6 +174,14 @@ class GroundPort:
         try:
             if cmd == "ee":
                 ack = self._start_plan(msg, args, addr)
+            elif cmd == "pose":
+                # taken when it was signed: its age by the Unix clocks of both ends (one host,
+                # or synchronised ones: ASSUMPTION), at most POSE_AGE_MAX_S
+                age = min(max(self.wall() - float(msg["t"]), 0.0), POSE_AGE_MAX_S)
+                commands.apply_pose(self.node, args, now - age)
+                ack = self._ack(src, seq, cmd, "accepted")
+                self.outcomes["accepted"] += 1
+                self.commands[cmd] += 1
             else:
                 result = commands.apply(self.node, cmd, args)
                 if cmd == "status":

@@ -12,8 +12,8 @@ velocity and yaw the position controller needs.
   (``jsk-flight-navigation.md`` sec. 9); with 0.3 mm / 1 mrad of marker noise and 10 ms of
   latency that let the simulated robot's lightly damped x/pitch loop (Table V's gains)
   diverge in ``rdm sim mission``, and the filter here holds it. A gap longer than
-  ``max_gap_s`` (or a stamp that does not advance) restarts the filter at the measured
-  position with zero velocity.
+  ``max_gap_s`` (or a stamp that goes back) restarts the filter at the measured position with
+  zero velocity; samples with the same stamp are fused without a prediction.
 * Yaw: the root link's ZYX yaw (the frame the controller's yaw refers to).
 """
 
@@ -100,7 +100,7 @@ class CogEstimator:
         cfg = self.config
         r = cfg.position_noise_m**2
         last = self._stamp
-        if last is None or not (0.0 < stamp - last <= cfg.max_gap_s):
+        if last is None or not (0.0 <= stamp - last <= cfg.max_gap_s):
             if last is not None:
                 self.counts["velocity_restarted"] += 1
             self.position, self.velocity = cog.copy(), np.zeros(3)

@@ -41,7 +41,9 @@ from rdm.nodes.spinal_mirror import SpinalMirror
 from rdm.plant import EscParams, Plant, ServoParams
 from rdm.plant.sensors import imu_model_of_seed
 from rdm.sim import CandumpCapture, McapLogger, RunFolder, open_inproc_uart, open_tapped_pty
+from rdm.sim.uart import open_device_pty
 
+from .external_onboard import ExternalOnboard
 from .mocap_node import MocapNode, MocapSensor
 
 _FLOAT64 = np.dtype(np.float64)
@@ -388,8 +390,11 @@ def _wire(
     elif opt.uart == "inproc":
         s_dev, s_host = open_inproc_uart(folder.uart_dir, "spinal", ".bin", clock)
         f_dev, f_host = open_inproc_uart(folder.uart_dir, "leptrino_foot", ".lep", clock)
+    elif opt.uart == "external":  # the onboard node is another process (rdm onboard)
+        s_dev, s_host = open_device_pty(folder.uart_dir, "spinal", ".bin", clock)
+        f_dev, f_host = open_device_pty(folder.uart_dir, "leptrino_foot", ".lep", clock)
     else:
-        raise ValueError(f"uart={opt.uart!r}: 'inproc' or 'pty'")
+        raise ValueError(f"uart={opt.uart!r}: 'inproc', 'pty' or 'external'")
     opened.extend((s_dev.close, s_host.close, f_dev.close, f_host.close))
     spinal_link, onboard_link = DroppableLink(s_dev), DroppableLink(s_host)
     spinal = SpinalMirror(
@@ -408,7 +413,12 @@ def _wire(
 
     if config.initial_q is None:
         config = replace(config, initial_q=tuple(q0.tolist()))
-    onboard = OnboardNode(onboard_link, f_host, config=config)
+    external = opt.uart == "external"
+    onboard: Any = (
+        ExternalOnboard(config, s_host.port.port, f_host.port.port)
+        if external
+        else OnboardNode(onboard_link, f_host, config=config)
+    )
     opened.append(onboard.close)
     sensor = LeptrinoSensorNode(f_dev, "CFS034CA301U", rate_hz=opt.leptrino_rate_hz)
     logger = McapLogger(folder.mcap) if opt.log else None
@@ -442,7 +452,7 @@ def _wire(
     bridge.kernel_truth_touches = ()  # truth_sink only keeps and logs the record
     mocap = MocapNode(plant, onboard, opt.mocap_period, opt.mocap, seed=opt.seed)
     status_log: list = []
-    nodes: list = [bridge, *neuron_nodes, spinal, mocap, onboard, sensor]
+    nodes: list = [bridge, *neuron_nodes, spinal, mocap, *([] if external else [onboard]), sensor]
     stack = Stack(
         plant,
         layout,
@@ -464,14 +474,15 @@ def _wire(
     if script is not None:
         touches = getattr(script, "kernel_touches", None)  # what the scenario declares
         nodes.append(ScriptNode(lambda t: script(stack, t), script_period, kernel_touches=touches))
-    nodes.append(StatusNode(stack))
+    if not external:  # it reads the in-process node
+        nodes.append(StatusNode(stack))
     if opt.progress is not None:
         report = opt.progress
         nodes.append(ScriptNode(lambda t: report(stack, t), 1.0, name="progress"))
     stack.loop = Lockstep(
         nodes, physics=plant, can_channels=[channel], barriers=barriers, speed=opt.speed
     )
-    if opt.lockstep_kernel and not barriers:
+    if opt.lockstep_kernel and not barriers and not external:
         attach_kernel(stack.loop, plant)
     stack.closers = [
         onboard.close,

@@ -25,7 +25,7 @@ import select
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 from rdm.output_files import open_output
 from rdm.sim.capture_index import Clock, TimedCaptureFile
@@ -172,6 +172,28 @@ def open_tapped_pty(
     hst = TappedLink(host)
     device.peer = None  # each TappedLink closes its own end
     return dev, hst, PtyPair(dev, hst)
+
+
+def open_device_pty(
+    capture_dir: str | os.PathLike[str] | None = None,
+    stem: str = "uart",
+    ext: str = ".bin",
+    clock: Clock | None = None,
+) -> tuple[TappedLink, Any]:
+    """A pty whose master is the device's end (tapped as :func:`open_tapped_pty` taps it) and
+    whose slave is for another process to open by its path: returns (device end, the slave
+    link). The slave stays open here without being read, so the pty never hangs up while the
+    other process reopens it."""
+    from rdm.link.serial import open_pty_pair
+
+    slave, master = open_pty_pair()
+    slave.peer = None  # each end closes itself
+    if capture_dir is None:
+        return TappedLink(master), slave
+    d = Path(capture_dir)
+    d.mkdir(parents=True, exist_ok=True)
+    dev = TappedLink(master, d / f"{stem}.device_tx{ext}", d / f"{stem}.host_tx{ext}", clock)
+    return dev, slave
 
 
 class InProcessUartEnd:
