@@ -1,4 +1,4 @@
-"""Process-level runner (rdm.sim.processes, docs/processes.md) on this host.
+"""Process-level runner (rdm.scenarios.processes, docs/processes.md) on this host.
 
 The host has no SocketCAN, so the three processes share python-can's ``udp_multicast`` bus
 (needs msgpack; skipped without it or without multicast loopback). The outcome of the process
@@ -202,12 +202,12 @@ def test_hover_as_processes_matches_lockstep(tmp_path):
     the same take-off and hover (ground truth from MuJoCo in both)."""
     from rdm.scenarios import hover
     from rdm.scenarios.common import truth_arrays
-    from rdm.sim.processes import ProcessRunOptions, hover_outcome, run_hover_processes
+    from rdm.scenarios.processes import ProcessRunOptions, hover_outcome, run_processes
     from rdm.sim.udp_can import random_udp_spec
 
     duration = 4.0
     opts = ProcessRunOptions(can=random_udp_spec(), duration=duration, scale=0.1)
-    run = run_hover_processes(tmp_path / "proc", opts)
+    run = run_processes(tmp_path / "proc", opts)
     lock = hover.run(tmp_path / "lock", duration=duration)
     a = truth_arrays(lock.stack)
     ref = hover_outcome(
@@ -270,7 +270,7 @@ def test_perching_as_processes_matches_lockstep(tmp_path):
     that function agrees with the scenario's own metrics on the lockstep run."""
     from rdm.scenarios import perching
     from rdm.scenarios.common import truth_arrays
-    from rdm.sim.processes import ProcessRunOptions, perching_outcome, run_processes
+    from rdm.scenarios.processes import ProcessRunOptions, perching_outcome, run_processes
     from rdm.sim.udp_can import random_udp_spec
 
     duration = 11.0
@@ -319,7 +319,7 @@ def test_perching_as_processes_matches_lockstep(tmp_path):
 
 def test_perching_outcome_without_a_perch_is_nan_and_fails():
     from rdm.commands.hil import perching_passed
-    from rdm.sim.processes import perching_outcome
+    from rdm.scenarios.processes import perching_outcome
 
     t = np.arange(0.0, 3.0, 0.01)
     truth = {

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from rdm.protocol.neuron import decode_candump
-from rdm.sim.processes import ProcessRunOptions, run_processes, stack_ceiling
+from rdm.scenarios.processes import ProcessRunOptions, run_processes, stack_ceiling
 
 DURATION = float(os.environ.get("RDM_PERCHING_DURATION", "11.0"))
 PWM_ID = 0x00F  # MOTOR device, message 0, broadcast slave field

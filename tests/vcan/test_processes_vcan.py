@@ -23,7 +23,7 @@ import os
 import numpy as np
 
 from rdm.protocol.neuron import decode_candump
-from rdm.sim.processes import ProcessRunOptions, run_hover_processes
+from rdm.scenarios.processes import ProcessRunOptions, run_processes
 
 SCALE = float(os.environ.get("RDM_PROCESSES_SCALE", "0.05"))
 DURATION = float(os.environ.get("RDM_PROCESSES_DURATION", "4.0"))
@@ -39,7 +39,7 @@ def pwm_slots(payload: bytes) -> list[int]:
 
 def test_hover_as_three_processes_on_vcan0(vcan_channel, tmp_path):
     opts = ProcessRunOptions(can=f"socketcan:{vcan_channel}", duration=DURATION, scale=SCALE)
-    run = run_hover_processes(tmp_path / "hil", opts)
+    run = run_processes(tmp_path / "hil", opts)
     print(
         json.dumps(
             {

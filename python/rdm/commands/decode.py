@@ -1,9 +1,10 @@
 """``rdm decode``: decode a capture file into one line per message.
 
-Formats (a registry: name -> file extensions and decoder):
+Formats (a registry: name -> decoder; the extensions of each name are
+:mod:`rdm.protocol.capture_formats`'):
 
 * ``uart``: raw bytes of the Spinal <-> PC rosserial link (:mod:`rdm.protocol.rosserial.capture`);
-* ``candump``: a ``candump -l`` log of the Spinal <-> Neuron CAN bus (``rdm.protocol.neuron``);
+* ``candump``: a ``candump -L`` log of the Spinal <-> Neuron CAN bus (``rdm.protocol.neuron``);
 * ``leptrino``: a raw Leptrino force/torque sensor capture (``rdm.protocol.leptrino``).
 
 With ``--mcap OUT`` the capture, or every capture of a run folder, is written as an MCAP log
@@ -27,6 +28,7 @@ from typing import Any
 
 from rdm.commands.output import check_output_path, json_text
 from rdm.json_values import nulled
+from rdm.protocol.capture_formats import EXTENSIONS, detect_format
 
 Records = Iterator[dict[str, Any]]
 
@@ -118,24 +120,13 @@ def _decode_leptrino(path: Path, args: argparse.Namespace) -> Records:
 FORMATS: dict[str, CaptureFormat] = {
     f.name: f
     for f in (
+        CaptureFormat("uart", EXTENSIONS["uart"], _decode_uart, "rosserial UART bytes"),
         CaptureFormat(
-            "uart", (".bin", ".raw", ".uart", ".cap"), _decode_uart, "rosserial UART bytes"
+            "candump", EXTENSIONS["candump"], _decode_candump, "candump -L or ASC log"
         ),
-        CaptureFormat(
-            "candump", (".log", ".candump", ".asc"), _decode_candump, "candump -L or ASC log"
-        ),
-        CaptureFormat("leptrino", (".lep", ".leptrino"), _decode_leptrino, "Leptrino bytes"),
+        CaptureFormat("leptrino", EXTENSIONS["leptrino"], _decode_leptrino, "Leptrino bytes"),
     )
 }
-
-
-def detect_format(path: Path) -> str | None:
-    """The format whose extensions include the file's suffix, or None."""
-    suffix = path.suffix.lower()
-    for fmt in FORMATS.values():
-        if suffix in fmt.extensions:
-            return fmt.name
-    return None
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

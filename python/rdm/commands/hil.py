@@ -103,7 +103,7 @@ def perching_passed(metrics: dict[str, float]) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rdm.sim.processes import ProcessRunError, ProcessRunOptions, run_processes
+    from rdm.scenarios.processes import ProcessRunError, ProcessRunOptions, run_processes
     from rdm.sim.udp_can import random_udp_spec
 
     if args.quick and args.scenario != "perching":

@@ -190,7 +190,7 @@ class PerchingScript:
     """The phase machine of the scenario, run by the stack's script node every 10 ms.
 
     ``stack`` only needs ``.onboard`` (the onboard node) and whatever ``cog(stack)`` reads:
-    the process runner (:mod:`rdm.sim.processes`) passes the onboard node's latest mocap."""
+    the process runner (:mod:`rdm.scenarios.processes`) passes the onboard node's latest mocap."""
 
     #: The lockstep kernel's parts it reads or changes (``rdm.nodes.lockstep_kernel``): the
     #: plant, through ``cog`` (the ground truth); the rest is the onboard node.

@@ -2,7 +2,7 @@
 
 matplotlib costs ~0.6 s to import and ~1 s to lay out and write one figure of
 :func:`rdm.sim.plots.plot_panels`: about as long as the 30 s perching simulation itself on
-this machine, and all of it after the simulation. ``rdm sim`` therefore starts one worker
+a 2-core x86_64 machine, and all of it after the simulation. ``rdm sim`` therefore starts one worker
 process at launch (:func:`plots_in_background`); it imports matplotlib on the second core
 while the single-threaded simulation runs, and draws the figures the scenario hands it
 while the main process evaluates metrics and writes the summary. The figures are the same
@@ -38,11 +38,19 @@ def active_worker() -> PlotWorker | None:
     return _ACTIVE.get()
 
 
+def pyplot() -> Any:
+    """``matplotlib.pyplot`` with the Agg backend (no display needed), imported on first use."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def _warm_up() -> None:
     """Worker initializer: import matplotlib (Agg) before the first figure is asked for."""
-    from rdm.sim.plots import _pyplot
-
-    _pyplot()
+    pyplot()
 
 
 def _ready() -> bool:

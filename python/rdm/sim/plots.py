@@ -22,17 +22,7 @@ from typing import Any
 import numpy as np
 
 from rdm.output_files import open_output
-from rdm.sim.plot_worker import active_worker
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    return plt
-
+from rdm.sim.plot_worker import active_worker, pyplot
 
 Panel = tuple[str, Mapping[str, Sequence[float]], str]  # (title, {label: values}, y label)
 
@@ -71,7 +61,7 @@ def draw_panels(
     dpi: int,
 ) -> None:
     """Draw :func:`plot_panels`' checked inputs into ``out``."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(7.0, 2.2 * len(panels)))
     axes = np.atleast_1d(axes)
     for ax, (ptitle, series, ylabel) in zip(axes, panels, strict=True):
@@ -118,7 +108,7 @@ def draw_tracking_errors(
     title: str,
 ) -> None:
     """Draw :func:`plot_tracking_errors`' checked inputs into ``out``."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.0, 2.8))
     for i, label in enumerate(labels):
         ax.plot(t, errors[:, i], label=label, linewidth=1.0)
@@ -153,7 +143,7 @@ def plot_zmp(
 
 def draw_zmp(out: Path, zmp: np.ndarray, plate_size: tuple[float, float], title: str) -> None:
     """Draw :func:`plot_zmp`'s checked inputs into ``out``."""
-    plt = _pyplot()
+    plt = pyplot()
     ok = np.all(np.isfinite(zmp), axis=1)
     hx, hy = plate_size[0] / 2, plate_size[1] / 2
     fig, ax = plt.subplots(figsize=(4.0, 4.0))

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from rdm.protocol.capture_formats import detect_format, known_extensions
 from rdm.sim.capture_index import CaptureIndex, CaptureIndexError, read_capture_index, time_ns
 from rdm.sim.mcap_log import McapLogger
 
@@ -111,12 +112,9 @@ def run_captures(run: str | os.PathLike[str]) -> list[Path]:
 
 def _kind_of(path: Path) -> str:
     """The capture's format by its extension, as ``rdm decode`` tells it."""
-    from rdm.commands.decode import FORMATS, detect_format
-
     kind = detect_format(path)
     if kind is None:
-        known = " ".join(ext for f in FORMATS.values() for ext in f.extensions)
-        raise WireMcapError(f"{path}: not a capture rdm decode knows ({known})")
+        raise WireMcapError(f"{path}: not a capture rdm decode knows ({known_extensions()})")
     return kind
 
 

@@ -2,6 +2,7 @@
 //!
 //! - [`params`]: Table VII parameters and the ones the paper leaves out.
 //! - [`filter`]: the 1 Hz first-order IIR low-pass on the measured foot wrench.
+//! - [`dims`]: the QP's size (variables, equality rows, rows).
 //! - [`qp`]: the QP of eq. (49): row builder, solver choice, safe command.
 //! - [`reduced`]: eq. (38) eliminated, the cost made `½‖y‖²` (4 thrust variables).
 //! - [`active_set`]: the dense dual active-set solver (default, allocation-free).
@@ -14,6 +15,7 @@
 
 pub mod active_set;
 pub mod controller;
+pub mod dims;
 pub mod filter;
 pub mod params;
 pub mod qp;
@@ -21,7 +23,8 @@ pub mod reduced;
 pub mod status;
 
 pub use controller::PerchController;
+pub use dims::{N_ROWS, N_VARS, N_ZERO_ROWS};
 pub use filter::WrenchFilter;
 pub use params::{ParamError, PerchParams, PerchSolver};
-pub use qp::{PerchInput, PerchQp, PerchSolution, N_ROWS, N_VARS, N_ZERO_ROWS};
+pub use qp::{PerchInput, PerchQp, PerchSolution};
 pub use status::{PerchCounters, PerchStatus};

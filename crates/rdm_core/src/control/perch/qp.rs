@@ -48,17 +48,11 @@ use clarabel::solver::{
 use nalgebra::{Matrix4, Vector4};
 
 use super::active_set::{ActiveSetOutcome, DualActiveSet};
+use super::dims::{N_ROWS, N_VARS, N_ZERO_ROWS};
 use super::params::{ParamError, PerchParams, PerchSolver};
 use super::reduced::{self, REDUCED_ROWS};
 use super::status::{PerchCounters, PerchStatus};
 use crate::N_ROTORS;
-
-/// Decision variables: 4 thrusts and the 4 components of `W_foot,t`.
-pub const N_VARS: usize = N_ROTORS + 4;
-/// Equality rows (zero cone), eq. (38).
-pub const N_ZERO_ROWS: usize = 4;
-/// All rows.
-pub const N_ROWS: usize = 29;
 
 const W: usize = N_ROTORS; // first column of w = [F_z, M_x, M_y, M_z]
 const FZ: usize = W;

@@ -15,7 +15,7 @@
 use nalgebra::Vector4;
 
 use super::active_set::DualActiveSet;
-use super::qp::{N_ROWS, N_VARS, N_ZERO_ROWS};
+use super::dims::{N_ROWS, N_VARS, N_ZERO_ROWS};
 use crate::N_ROTORS;
 
 /// Inequality rows of the reduced problem (rows 4-28 of the full one, same order).

@@ -1,6 +1,6 @@
-"""Throughput of the rosserial mirror (a measurement, not a test).
+"""Throughput of the rosserial mirror (a measurement, not a test; docs/rosserial.md).
 
-PYTHONPATH=python python firmware_protocol/spinal/tools/bench_rosserial.py
+usage: python scripts/bench_rosserial.py
 """
 
 import json
@@ -11,7 +11,11 @@ from rdm.protocol.rosserial import ClientSession, ServerSession
 from rdm.protocol.rosserial.framing import FrameParser
 from rdm.protocol.rosserial.registry import spinal_registry
 
-G = json.loads((Path(__file__).resolve().parents[1] / "golden_frames.json").read_text())
+G = json.loads(
+    (
+        Path(__file__).resolve().parents[1] / "firmware_protocol/spinal/golden_frames.json"
+    ).read_text()
+)
 stream = b"".join(bytes.fromhex(v["hex"]) for v in G["topics"]) * 200
 t = time.perf_counter()
 p = FrameParser(1022)
