@@ -47,6 +47,7 @@ class Rig:
         self.auto_ack = True
         self.imu_quaternion = [0.0, 0.0, 0.0, 1.0]
         self.imu_acc = [0.0, 0.0, 9.8]
+        self.battery_v = 24.5
         #: Spinal publishes nothing while True (a silent or unplugged flight controller)
         self.silent = False
         self.servo_q: np.ndarray | None = None
@@ -106,7 +107,8 @@ class Rig:
                 ]
                 servos += [st.new(index=i, angle=a) for i, a in self.servo_extra]
                 self.publish("servo/states", REG.msg("spinal/ServoStates").new(servos=servos))
-            self.publish("battery_voltage_status", REG.msg("std_msgs/Float32").new(data=24.5))
+            battery = REG.msg("std_msgs/Float32").new(data=self.battery_v)
+            self.publish("battery_voltage_status", battery)
         out = self.spinal.take_output()
         if out and not self.silent:
             self.peer_link.write(out)

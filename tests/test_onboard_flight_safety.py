@@ -236,3 +236,17 @@ def test_ground_loss_lands_in_flight(flight) -> None:
     flight.node.on_ground_lost()
     assert flight.node.flight.mode.value == "land"
     flight.run_until(lambda: not flight.spinal.core.armed, 10.0)
+
+
+def test_takeoff_is_refused_on_a_low_battery_and_nothing_arms(flight) -> None:
+    flight.rig.battery_v = 21.5  # 3.58 V per cell: below the 3.6 V/cell arming floor
+    flight.run(0.3)
+    reason = flight.node.takeoff(1.0)
+    assert reason is not None and "battery" in reason
+    flight.run(1.0)
+    assert not flight.spinal.core.armed and flight.node.flight.mode.value == "ground"
+    assert not any(m.cmd == 0 for _, m in flight.rig.by_topic["flight_config_cmd"])
+    flight.rig.battery_v = 21.7  # 3.62 V per cell: allowed
+    flight.run(0.3)
+    assert flight.node.takeoff(1.0) is None
+    flight.run_until(lambda: flight.spinal.core.armed, 2.0)

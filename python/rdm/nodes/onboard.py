@@ -483,7 +483,7 @@ class OnboardNode:
         if reason is None and self.arming.state in (FlightState.IDLE, FlightState.DISARMING):
             reason = self.arm()
             if reason is not None:
-                self.flight.request_land()  # drops the pending take-off
+                self.flight.cancel_takeoff()
         return reason
 
     def land(self) -> str | None:

@@ -226,6 +226,10 @@ class FlightSupervisor:
         self.counts["takeoff_requested"] += 1
         return None
 
+    def cancel_takeoff(self) -> None:
+        """Drop a take-off that waits for arming (arming was refused)."""
+        self._pending_takeoff = None
+
     def request_land(self) -> str | None:
         if self.mode is FlightMode.GROUND and self._pending_takeoff is None:
             return "not flying"

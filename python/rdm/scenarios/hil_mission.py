@@ -79,6 +79,7 @@ class Operator:
         self.fault_at: float | None = None
         self.heartbeat: subprocess.Popen | None = None
         self.done_at: float | None = None
+        self.was_armed = False
 
     def _ctl(self, now: float, *words: str) -> None:
         proc = subprocess.Popen(
@@ -126,8 +127,12 @@ class Operator:
                 self.phase = "land"  # the fault's reaction lands the robot
         if self.fault == "uart-cut" and self.fault_at is not None and now - self.fault_at > 0.3:
             stack.drop_uart(False)
-        if self.phase == "land" and not stack.spinal.core.armed and self.done_at is None:
-            self.done_at = now
+        armed = stack.spinal.core.armed
+        self.was_armed = self.was_armed or armed
+        if self.was_armed and not armed and self.done_at is None:
+            self.done_at = now  # disarmed after the take-off: landed, halted or crashed
+        if self.done_at is not None and now - self.done_at >= 1.0:
+            stack.loop.stop()  # a second on the floor is enough to judge the end
 
     def _inject(self, stack: Stack, now: float) -> None:
         if self.fault == "none":
