@@ -95,7 +95,7 @@ def call(node: Any, method: str, *a: Any) -> Any:
     return result
 
 
-def _plain(method: str, *a: Any) -> Callable[[Any, Args], None]:
+def _no_args(method: str, *a: Any) -> Callable[[Any, Args], None]:
     def handler(node: Any, args: Args) -> None:
         call(node, method, *a)
 
@@ -156,15 +156,15 @@ def _ee(node: Any, args: Args) -> None:
 # name -> (allowed args, required args, handler); ``ee`` is planned by the port.
 TABLE: dict[str, tuple[tuple[str, ...], tuple[str, ...], Callable[[Any, Args], Any]]] = {
     "takeoff": (("height",), ("height",), _takeoff),
-    "land": ((), (), _plain("land")),
-    "halt": ((), (), _plain("halt")),
-    "force_landing": ((), (), _plain("force_landing")),
-    "arm": ((), (), _plain("arm")),
-    "disarm": ((), (), _plain("disarm")),
+    "land": ((), (), _no_args("land")),
+    "halt": ((), (), _no_args("halt")),
+    "force_landing": ((), (), _no_args("force_landing")),
+    "arm": ((), (), _no_args("arm")),
+    "disarm": ((), (), _no_args("disarm")),
     "goto": (("position", "yaw"), ("position", "yaw"), _goto),
     "joints": (("q",), ("q",), _joints),
-    "perch": ((), (), _plain("request_perch", True)),
-    "unperch": ((), (), _plain("request_perch", False)),
+    "perch": ((), (), _no_args("request_perch", True)),
+    "unperch": ((), (), _no_args("request_perch", False)),
     "gains": (("profile",), ("profile",), _gains),
     "mocap": (("position", "velocity", "yaw"), ("position",), _mocap),
     "pose": (("position", "quaternion"), ("position", "quaternion"), _pose),
