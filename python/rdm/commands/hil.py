@@ -52,7 +52,18 @@ DEFAULT_DURATION = {"hover": 5.0, "perching": 17.0, "perching-quick": 11.0}
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "scenario", nargs="?", default="hover", choices=("hover", "perching"), help="default hover"
+        "scenario",
+        nargs="?",
+        default="hover",
+        choices=("hover", "perching", "mission"),
+        help="default hover; mission: rdm onboard as its own process, operated by rdm ctl "
+        "(docs/flying.md)",
+    )
+    parser.add_argument(
+        "--fault",
+        default="none",
+        help="mission: one fault once the robot hovers (none, heartbeat-loss, mocap-loss, "
+        "uart-cut, low-battery, replayed-command, garbage-datagram)",
     )
     parser.add_argument(
         "--quick",
@@ -102,9 +113,41 @@ def perching_passed(metrics: dict[str, float]) -> bool:
     )
 
 
+def run_mission(args: argparse.Namespace) -> int:
+    """``rdm hil mission``: one JSON record (``--json``) or a summary; exit 0 when safe and
+    the fault (if any) was detected."""
+    from rdm.scenarios import hil_mission
+
+    if args.fault not in hil_mission.FAULTS:
+        print(
+            f"rdm hil mission: --fault {args.fault!r}: one of {', '.join(hil_mission.FAULTS)}",
+            file=sys.stderr,
+        )
+        return 2
+    duration = 32.0 if args.duration is None else args.duration
+    out = Path(args.out or "runs")
+    try:
+        record = hil_mission.run(out, fault=args.fault, seed=args.seed, duration=duration)
+    except (OSError, RuntimeError, ValueError) as exc:
+        print(f"rdm hil mission: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json_text(nulled(record)))
+    else:
+        for key in ("outcome", "safe", "fault", "fault_detected", "final_state"):
+            print(f"{key}: {record[key]}")
+        print(f"max tilt {record['max_tilt_deg']:.1f} deg, max duty {record['max_duty']:.4f}")
+        print(f"run folder: {record['run_folder']}")
+    ok = record["safe"] and record["fault_detected"] is not False
+    return 0 if ok else 1
+
+
 def run(args: argparse.Namespace) -> int:
     from rdm.scenarios.processes import ProcessRunError, ProcessRunOptions, run_processes
     from rdm.sim.udp_can import random_udp_spec
+
+    if args.scenario == "mission":
+        return run_mission(args)
 
     if args.quick and args.scenario != "perching":
         print("rdm hil: --quick is for perching", file=sys.stderr)
