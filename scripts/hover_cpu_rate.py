@@ -1,5 +1,4 @@
-"""Simulated seconds per CPU second of the lockstep hover stack (the figure of
-docs/lockstep.md "Session 6 summary").
+"""Simulated seconds per CPU second of the lockstep hover stack (docs/sim.md "Speed").
 
 usage: python scripts/hover_cpu_rate.py [SECONDS=6] [START=1]
 Builds the ``rdm sim hover`` stack (seed 0, in-process wires, logs written to a temporary

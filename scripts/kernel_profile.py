@@ -1,4 +1,4 @@
-"""Where the time of the hover stack goes with the lockstep kernel (docs/kernel.md).
+"""Where the time of the hover stack goes with the lockstep kernel (docs/sim.md).
 
 usage: python scripts/kernel_profile.py [SECONDS=6] [perching FROM_S]
 Builds the ``rdm sim hover`` stack (seed 0, in-process wires, logs to a temporary folder),
@@ -6,7 +6,7 @@ runs 1 simulated s, then ``SECONDS`` more with the kernel's profile mode: wall u
 simulated ms of every node on its fast path ("fast") and in Python ("py", the flush and plan
 re-reads around it included), and of the physics steps, with the tick counts.
 With ``perching FROM_S``: the ``rdm sim perching`` stack instead, profiled from ``FROM_S``
-(e.g. ``6 perching 16``: the perched joint motion, docs/lockstep.md "Session 18").
+(e.g. ``6 perching 16``: the perched joint motion, docs/sim.md "Speed").
 """
 
 from __future__ import annotations

@@ -27,5 +27,5 @@ echo "== python: pytest"
 
 echo "== python: SocketCAN tests on vcan0 (VM harness)"
 # tests/vcan on a real kernel vcan0: here if the host has one, else in a small qemu VM
-# (scripts/vcanvm/; installs qemu on first use as root). See docs/vcan.md.
+# (scripts/vcanvm/; installs qemu on first use as root). See docs/processes.md.
 bash scripts/test-vcan.sh -q

@@ -1,4 +1,4 @@
-"""The flight envelope of the paper's controller (docs/envelope.md), checked against an
+"""The flight envelope of the paper's controller (docs/scenarios.md), checked against an
 independent computation from MuJoCo: the rotor wrenches from the actuators' gear vectors at
 the rotor sites, the CoG and composite inertia from the bodies, the levelling vectoring
 angles solved on MuJoCo's kinematics, and the LQI gains from scipy's Riccati solver with the

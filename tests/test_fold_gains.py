@@ -1,4 +1,4 @@
-"""The perching approach's horizontal loops in the hanging posture (docs/foldgains.md):
+"""The perching approach's horizontal loops in the hanging posture (docs/scenarios.md):
 ``perching.FOLD_GAINS`` from the end of the fold to the perch switch. The linear check uses
 the independent scipy/MuJoCo loop of ``test_flight_envelope``; the flight check reads
 MuJoCo's ground truth."""
@@ -52,7 +52,7 @@ def test_configured_y_loop_turns_unstable_during_the_fold(mj):
 def test_slowed_hanging_approach_stays_bounded(tmp_path):
     """A slow hanging approach (6 s hover after the fold, 0.02 m/s instead of 0.08): with the
     configured gains the CoG oscillates out in y and the robot flies off (tens of metres,
-    docs/foldgains.md); with the fold gains it perches, and the horizontal CoG error (MuJoCo
+    docs/scenarios.md); with the fold gains it perches, and the horizontal CoG error (MuJoCo
     truth against the held setpoint) stays bounded and does not grow over the approach."""
     timing = perching.PerchTiming(
         fold_gains=perching.FOLD_GAINS, reconfigure_wait_s=6.0, approach_speed=0.02

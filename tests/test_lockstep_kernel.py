@@ -28,7 +28,7 @@ Steps = Callable[[Stack], None]
 
 
 def _spinal_state(spinal) -> tuple:
-    """The Spinal mirror's busy-ms state the kernel writes back (docs/spinalkernel.md)."""
+    """The Spinal mirror's busy-ms state the kernel writes back (docs/spinal.md)."""
     out = spinal.last_output
     uart = spinal.uart
     chain = uart._chain
@@ -198,7 +198,7 @@ def test_hover_with_a_cut_uart_same_bytes_and_state(tmp_path: Path) -> None:
     assert fast["leptrino_foot"] > 1500
     assert stats["physics_fast"] == 4000
     assert fast["onboard"] == fast["mocap"] == fast["script"] == 0
-    # Spinal's routine busy ms ran in the kernel too (docs/spinalkernel.md): control steps
+    # Spinal's routine busy ms ran in the kernel too (docs/spinal.md): control steps
     # (most of the 500 after the CAN boot), battery samples, imu and servo/states frames;
     # the step with an event (the arming ack) went on in Python.
     busy = stats["spinal_busy"]
@@ -206,7 +206,7 @@ def test_hover_with_a_cut_uart_same_bytes_and_state(tmp_path: Path) -> None:
     assert busy["imu_frames"] > 400 and busy["servo_frames"] > 100
     assert busy["finish_step"] >= 1
     # The ms that read the onboard node's commands: received in Python, the rest of the ms
-    # (CAN, publishers, output) here (docs/spinalkernel.md "Receive, then the kernel").
+    # (CAN, publishers, output) here (docs/spinal.md "In the simulated stack").
     assert busy["receive_then_kernel"] > 100
 
 

@@ -1,4 +1,4 @@
-"""The lockstep fast paths give exactly what the plain forms give (docs/lockstep.md, "Speed").
+"""The lockstep fast paths give exactly what the plain forms give (docs/sim.md).
 
 Each test runs a fast path beside an independent plain form: a forward pass after every
 physics step, the element-wise numpy noise model, the unmemoised Neuron codec, byte-at-a-time

@@ -374,8 +374,9 @@ def test_vectoring_targets_match_eqs_33_36_and_point_thrust() -> None:
 
 def test_default_servo_map_is_the_can_table_order(tmp_path) -> None:
     """Spinal numbers servos by their place in its CAN table: Neurons by slave id, then the
-    servos on each (docs/neuron.md: 1 = foot unit alpha1, beta1; 2 = q1-q3; 3 = arm unit
-    alpha2, beta2; 4 = q4-q6). The node's default map must follow it, not joint order."""
+    servos on each (docs/sim.md "Plant bridge": 1 = foot unit alpha1, beta1; 2 = q1-q3;
+    3 = arm unit alpha2, beta2; 4 = q4-q6). The node's default map must follow it, not joint
+    order."""
     from rdm.nodes.onboard import OnboardNode
     from rdm.sim import open_inproc_uart
 

@@ -1,5 +1,5 @@
 """The onboard node's fast paths give exactly what the plain computations give
-(docs/lockstep.md, "The onboard node's 40 Hz tick").
+(docs/onboard.md).
 
 * ``foot_allocation`` (p x F written out) against ``np.cross``;
 * ``ControlPipeline.update_model`` / ``p_matrix_wire`` reused while q holds, against a

@@ -1,5 +1,5 @@
-"""Second round of the onboard node's fast paths (docs/lockstep.md, "Session 6: the onboard
-tick"): each against its plain form, on real and random input, including corrupt bytes.
+"""The onboard node's foot-sensor scan, caches and small helpers against their plain forms
+(docs/onboard.md), on real and random input, including corrupt bytes.
 
 * ``LeptrinoStreamParser.feed_ok_samples`` (the Rust scan of the leading run of OK-sample
   frames) against ``feed`` byte-at-a-time and chunked: same payloads, events, counters and

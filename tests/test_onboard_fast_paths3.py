@@ -1,5 +1,5 @@
-"""Third round of the onboard node's fast paths (docs/lockstep.md, "Session 6: the onboard PC
-side"), each against its plain form on real, random and corrupt input:
+"""The onboard node's deferred rosserial decode and direct payloads against their plain forms
+(docs/onboard.md), on real, random and corrupt input:
 
 * ``ServerSession.deferred``: ``imu`` / ``servo/states`` frames returned as ``(handler,
   payload)`` instead of decoded messages: same events (once decoded), counters and order;

@@ -1,4 +1,4 @@
-"""Fast paths of helper ``onboardfast`` against their plain forms (docs/onboardfast.md).
+"""The onboard node's LQI and model fast paths against their plain forms (docs/onboard.md).
 
 * ``LqiSynthesizer.synthesize_wire`` (one Rust call: gains, ``rpy/gain`` terms and payload,
   finite / fell-back / clamped flags) against ``synthesize`` + ``gains_to_wire_terms``;

@@ -1,6 +1,6 @@
-"""Round-2 plant-side fast paths against their reference forms (docs/lockstep.md, Session 6:
-plant side): the contact tracker's cached contact view, the array-wise contact measurement,
-the bridge's foot-sensor read and the Neuron bank's change-counter refresh."""
+"""Plant-side fast paths against their reference forms (docs/plant.md, "Ground truth, sensor
+noise and their Rust cores"): the contact tracker's cached contact view, the array-wise contact
+measurement, the bridge's foot-sensor read and the Neuron bank's change-counter refresh."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The rosserial codec's single-struct path for fixed-layout messages (``_FlatLayout``) gives
-the bytes, values and errors of the per-field path (docs/lockstep.md, "The onboard node's
-40 Hz tick"). The reference is a registry compiled with the flat path switched off."""
+the bytes, values and errors of the per-field path (docs/rosserial.md, "Native scan and
+generated layouts"). The reference is a registry compiled with the flat path switched off."""
 
 from __future__ import annotations
 

@@ -53,7 +53,7 @@ def test_drilling_touches_every_target_and_keeps_the_perch(drilling):
     assert all(math.isfinite(e) for e in errs), f"a target was never touched: {errs}"
     assert max(errs) < 0.01  # paper: about 0.01 m
     _perch_ok(drilling)
-    # the tasks send the planned joint goals ahead like every scenario (docs/servolead.md)
+    # the tasks send the planned joint goals ahead like every scenario (docs/scenarios.md)
     assert drilling.facts["servo_lead_s"] == SIM_SERVO_LEAD_S > 0.0
 
 

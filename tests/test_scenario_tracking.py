@@ -141,8 +141,8 @@ def test_perched_end_effector_is_steadier_than_in_flight(run):
 
 
 def test_servo_lead_cancels_the_joint_lag(run):
-    """With the scenarios' identified lead the moving joints no longer trail the plan (50 ms
-    without it, docs/servolead.md), and the perched end effector is within Table X's position
+    """With the scenarios' identified lead the moving joints do not trail the plan (50 ms
+    without it, docs/scenarios.md), and the perched end effector is within Table X's position
     RMSE on every axis."""
     res, _ = run
     assert res.facts["servo_lead_s"] == pytest.approx(0.05)
@@ -158,7 +158,7 @@ def test_servo_lead_cancels_the_joint_lag(run):
 def test_resolution_floor_matches_mujoco_and_exceeds_table_x_roll_pitch(run):
     """The floor ideal servos reach at the wire's goal resolution (the plan rounded to encoder
     counts), re-derived with Python's own ``round`` and MuJoCo's kinematics; perched it lies
-    above Table X's roll and pitch RMSE (docs/servolead.md), and the measured errors are not
+    above Table X's roll and pitch RMSE (docs/scenarios.md), and the measured errors are not
     below it by more than chance allows."""
     res, a = run
     smap = res.stack.onboard.config.servo_map
@@ -200,7 +200,7 @@ def test_resolution_floor_matches_mujoco_and_exceeds_table_x_roll_pitch(run):
 
 
 def test_servo_option_builds_the_plant_with_those_servos(tmp_path):
-    """``tracking.run(..., servo=...)`` (the stiff-servo check of docs/servolead.md) puts
+    """``tracking.run(..., servo=...)`` (the stiff-servo check of docs/scenarios.md) puts
     those gains on every joint servo of the MuJoCo model and records them."""
     from dataclasses import asdict
 

@@ -1,4 +1,4 @@
-"""The Spinal mirror's busy-ms fast paths (docs/spinalbusy.md) against their plain paths.
+"""The Spinal mirror's busy-ms fast paths (docs/spinal.md) against their plain paths.
 
 * ``rdm._rdm.spinal_imu_frame`` (stamp + ``spinal/Imu`` pack + frame in Rust) against
   ``ClientClock.now`` + the Python codec + ``encode_frame`` on random values, clocks, ticks

@@ -1,5 +1,5 @@
-"""The Spinal mirror's per-ms fast paths against its plain (reference) path (docs/lockstep.md,
-"Session 6: the Spinal mirror's per-tick cost").
+"""The Spinal mirror's per-ms fast paths against its plain (reference) path (docs/spinal.md,
+"In the simulated stack").
 
 * A whole lockstep hover stack run twice, once with every fast path off (mirror, servo bridge,
   Rust master duty hand-over): the UART, CAN and MCAP bytes and every counter are equal.

@@ -1,5 +1,5 @@
-"""The Spinal mirror's idle-ms fast path (docs/lockstep.md, "Session 6: the Spinal vertical")
-against its plain path.
+"""The Spinal mirror's idle-ms fast path (docs/spinal.md, "In the simulated stack") against its
+plain path.
 
 * ``ClientSession.idle_window``: a session that skips ``spin`` on byte-less ms inside the
   window gives the same events, output bytes, counters and clock as one that spins every ms,

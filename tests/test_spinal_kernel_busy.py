@@ -1,4 +1,4 @@
-"""Spinal's busy milliseconds inside the lockstep kernel (docs/spinalkernel.md).
+"""Spinal's busy milliseconds inside the lockstep kernel (docs/spinal.md).
 
 Oracle: the Python loop (``StackOptions.lockstep_kernel=False``), through
 ``test_lockstep_kernel._same``: the same bytes in every log file and the same state of every

@@ -1185,7 +1185,7 @@ def spinal_servo_states_frame(
 # --- lockstep kernel ---
 class LockstepKernel:
     """The unpaced lockstep loop in Rust with fast paths for the firmware side's steady
-    milliseconds (``rdm.nodes.lockstep_kernel``, docs/kernel.md)."""
+    milliseconds (``rdm.nodes.lockstep_kernel``, docs/sim.md)."""
 
     def __init__(
         self,

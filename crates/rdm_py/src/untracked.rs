@@ -3,7 +3,7 @@
 //! `PyReadonlyArray` / `PyReadwriteArray` register every borrow in a process-wide hash map
 //! and remove it again when the guard drops. The lockstep loop takes ~15 such borrows per
 //! simulated ms (the plant's MuJoCo views, the bridge's arrays); their bookkeeping was
-//! ~10k of ~186k instructions per simulated ms (cachegrind, docs/lockstep.md "Session 15").
+//! ~10k of ~186k instructions per simulated ms (cachegrind, docs/sim.md "Speed").
 //! The per-step paths read and write those arrays through these two functions instead.
 //!
 //! What the checker guarded, each caller keeps by hand (its `SAFETY` comment says how):

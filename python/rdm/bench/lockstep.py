@@ -176,8 +176,8 @@ def median_run(runs: list[Run]) -> Run:
     return sorted(runs, key=lambda r: r[1])[(len(runs) - 1) // 2]
 
 
-#: Iterations of :func:`reference_ms`'s loop (~0.1 s on the machine of sessions 13-17,
-#: ~30 ms on session 18's).
+#: Iterations of :func:`reference_ms`'s loop (30-100 ms on a 2-core x86_64 VM, depending on
+#: the machine and its load).
 REFERENCE_ITERATIONS = 1_000_000
 
 
@@ -236,7 +236,7 @@ def run_lockstep(ctx: Context) -> list[Measurement]:
         *_airborne_note(ns),
         *_kernel_note(stats),
         "full hover stack from power-on, every byte on its wire, MCAP + candump + UART "
-        "captures written (docs/lockstep.md)",
+        "captures written (docs/sim.md)",
     ]
     if not ctx.quick and ctx.iterations is None:
         ctx.progress("lockstep: profiled run for the per-node shares")

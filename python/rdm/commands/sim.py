@@ -68,7 +68,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=_servo_lead,
         default=None,
         help="send planned servo goals S s ahead (default: the scenario's, 0.05 s identified "
-        "on the simulated servos; 0 = the paper's feed-forward; docs/servolead.md)",
+        "on the simulated servos; 0 = the paper's feed-forward; docs/scenarios.md)",
     )
     parser.add_argument("--out", default="runs", help="base folder of the run folder")
     parser.add_argument(
@@ -163,7 +163,7 @@ def _run(args: argparse.Namespace) -> int:
             )
             return 2
         extra["fault"] = args.fault
-    # no --servo-lead: each scenario's own default (docs/servolead.md)
+    # no --servo-lead: each scenario's own default (docs/scenarios.md)
     lead = nullcontext() if args.servo_lead is None else servo_lead(args.servo_lead)
     print(f"rdm sim {sc.name}: {sc.description}", file=sys.stderr)
     # the PNG figures are drawn by a worker process on the other core (docs/sim.md

@@ -1,5 +1,5 @@
 """The Neuron CAN bus of the lockstep stack without python-can between the Rust CAN master and
-the Rust Neuron bank (``rdm._rdm.CanWire``, docs/canwire.md).
+the Rust Neuron bank (``rdm._rdm.CanWire``, docs/canbus.md).
 
 A :class:`CanWireLink` takes the place of both python-can buses on an in-process channel: the
 master (:class:`rdm.nodes.can_master_rust.RustCanMaster`) and the bank

@@ -1,5 +1,5 @@
 """Spinal's CAN master run by the Rust core (``rdm._rdm.CanMaster``): a drop-in for
-:class:`rdm.nodes.can_master.CanMaster`, which stays the reference (docs/canwire.md).
+:class:`rdm.nodes.can_master.CanMaster`, which stays the reference (docs/canbus.md).
 
 Same frames, same order, same state and counters as the Python master on the same bus; the
 schedule, decoding and tables live in ``rdm_core::firmware::can_master``. Frames go to and

@@ -208,7 +208,7 @@ class LeptrinoSensorNode:
         the cached frame of that wrench or None), or None when the tick has
         no Rust form now (bytes from the host, a UART other than an open in-process pipe
         whose writes are whole, a temperature or sensor number the Rust encoder does not
-        take) (docs/kernel.md)."""
+        take) (docs/sim.md)."""
         uart = self.uart
         if type(uart) is not TappedLink or type(uart.link) is not InProcessUartEnd:
             return None

@@ -8,7 +8,7 @@ ms, Leptrino streaming, the plant step) run in Rust on the cores the Python node
 use. Every other tick is the node's own Python ``tick``. Before Python code runs, the kernel
 writes back what its fast ticks changed of the parts that code may read or change; after,
 it re-reads those parts' ``kernel_plan``. So the logs are the same bytes as without the
-kernel (tests/test_lockstep_kernel.py, tests/test_spinal_kernel_busy.py; docs/kernel.md).
+kernel (tests/test_lockstep_kernel.py, tests/test_spinal_kernel_busy.py; docs/sim.md).
 """
 
 from __future__ import annotations

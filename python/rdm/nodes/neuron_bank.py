@@ -2,7 +2,7 @@
 
 Same behaviour, frame for frame and byte for byte, as one :class:`NeuronMirror` per board on a
 shared bus ticked in list order (the Python mirror stays the reference; see
-docs/fastneuron.md). The bank drains its bus once per tick, hands every frame to the core in
+docs/canbus.md). The bank drains its bus once per tick, hands every frame to the core in
 one call and sends the core's replies through the same python-can bus, so captures and the
 Spinal side see exactly what separate mirrors would send.
 
@@ -383,7 +383,7 @@ class NeuronBankNode:
 
     def tick(self, now: float) -> None:
         """Drain the bus, run every board at ``now``, send their frames in order."""
-        if self._wire is not None:  # the Rust wire to the Rust master (docs/canwire.md)
+        if self._wire is not None:  # the Rust wire to the Rust master (docs/canbus.md)
             wire = self._wire.wire
             self._push_positions_if_read(wire.neurons_pending_non_pwm())
             boards = self.boards
@@ -408,7 +408,7 @@ class NeuronBankNode:
     def kernel_plan(self) -> tuple | None:
         """What ``rdm._rdm.LockstepKernel`` needs to run :meth:`tick` in Rust: the wire
         path with the bridge attached and no Python servo feeds (then a position push is
-        the core's own), or None (docs/kernel.md). The kernel writes the boards'
+        the core's own), or None (docs/sim.md). The kernel writes the boards'
         ``tx_count`` and change counters back itself."""
         if self._wire is None or not self._bridged or self._fed is None or self._fed:
             return None

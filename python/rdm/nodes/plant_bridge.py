@@ -23,7 +23,7 @@ Commands flow mirror -> plant with one tick of delay (the mirrors tick after the
 real PWM/servo update lands on the next control period.
 
 The rotor <-> Neuron and joint <-> (Neuron, servo index) mapping is a :class:`BusLayout`;
-:func:`default_layout` gives the RDM's (see docs/lockstep.md).
+:func:`default_layout` gives the RDM's (see docs/sim.md).
 """
 
 from __future__ import annotations
@@ -479,7 +479,7 @@ class PlantBridge:
         """What ``rdm._rdm.LockstepKernel`` needs to run :meth:`tick` in Rust, or None when
         this tick has no Rust form now: the Python coupling, a battery voltage that is a
         function of time or not yet applied, ESCs outside the Rust duty map, or a wrench
-        sink other than the kernel's Leptrino node (docs/kernel.md). Its last item is the
+        sink other than the kernel's Leptrino node (docs/sim.md). Its last item is the
         IMU path (addresses, noise core, normal stream, the Spinal mirror) when the IMU's
         only sink is the kernel's Spinal mirror, else None (an IMU ms is then Python's);
         mocap samples are always Python's; a truth sample is :meth:`_kernel_truth`, called by

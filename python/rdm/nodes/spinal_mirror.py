@@ -13,7 +13,7 @@ It composes the existing parts and re-implements none of them:
 Node pattern (``rdm.nodes.base``): ``tick(now)`` with the time passed in, never a wall clock,
 never blocking. IMU samples and the battery voltage come from outside
 (:meth:`SpinalMirror.set_imu_sample`, :meth:`SpinalMirror.set_battery_voltage`); the default
-is a level, still IMU so that a stand-alone process works. See ``docs/mirror.md``.
+is a level, still IMU so that a stand-alone process works. See ``docs/spinal.md``.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 from rdm.protocol.rosserial.timesync import ClientClock
 from rdm.sim.capture_index import timed_capture_of
 
-try:  # the busy-ms helpers (crates/rdm_py/src/spinal_mirror.rs); older builds: Python only
+try:  # the busy-ms helpers (crates/rdm_py/src/spinal_mirror.rs); without them: Python only
     from rdm._rdm import spinal_duty_list as _duty_list
     from rdm._rdm import spinal_imu_frame as _imu_frame
 except ImportError:
@@ -261,7 +261,7 @@ class SpinalMirror:
         self.period = float(period)
         self.rate_hz = float(rate_hz)
         self.uart = UartPump(uart)
-        if master_backend == "rust":  # the Rust core (docs/canwire.md); "python" = reference
+        if master_backend == "rust":  # the Rust core (docs/canbus.md); "python" = reference
             from rdm.nodes.can_master_rust import RustCanMaster
 
             self.master = RustCanMaster(can_bus, boot_delay_ms=boot_delay_ms)
@@ -274,7 +274,7 @@ class SpinalMirror:
         self._fast = bool(fast_paths)
         #: The lockstep kernel may run the routine busy ms (control step, battery sample,
         #: ``imu`` / ``servo/states`` publications) itself (:meth:`kernel_plan`'s busy part);
-        #: False: only the idle ms (the plain kernel path, docs/spinalkernel.md).
+        #: False: only the idle ms (the plain kernel path, docs/spinal.md).
         self.kernel_busy = True
         #: A ms with bytes to read: this mirror receives them (:meth:`kernel_receive_tick`)
         #: and the kernel runs the rest of the ms from its plan; False: the whole tick here.
@@ -1097,7 +1097,7 @@ class SpinalMirror:
     # ---------------------------------------------------------------- lockstep kernel
     def kernel_plan(self) -> tuple | None:
         """The window in which :meth:`tick` is only the steady CAN ms, for
-        ``rdm._rdm.LockstepKernel`` (docs/kernel.md): (now_ms, _now_s, idle window lo, hi,
+        ``rdm._rdm.LockstepKernel`` (docs/sim.md): (now_ms, _now_s, idle window lo, hi,
         battery due ms, next control time, CAN ms, next publisher ms); the kernel runs a
         tick at ms m itself when m is inside the idle window, before the battery, control and
         publisher times, and one past the CAN ms. None when no tick can run so: the plain
@@ -1247,7 +1247,7 @@ class SpinalMirror:
         receive and ``kernel_receive`` is on, nothing more: returns that plan, and the kernel
         runs the rest (battery, control, CAN ms, publishers, output) as in any ms of its plan,
         or calls :meth:`kernel_receive_rest` when that ms is not one it runs. The same calls
-        in the same order as :meth:`tick` (docs/spinalkernel.md "Receive, then the kernel")."""
+        in the same order as :meth:`tick` (docs/spinal.md "In the simulated stack")."""
         if not self._fast:
             self._tick_plain(now)
             return None

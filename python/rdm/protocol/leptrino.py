@@ -36,7 +36,7 @@ HEADER_LEN = 4
 BROADCAST_SENSOR_NO = 0xFF
 BAUD_RATE = 460800
 RAW_AT_RATED = 10000
-# Fixed-width ASCII fields of the GET_INF response (Leptrino ``pCommon.h``; see docs/neuron.md).
+# Fixed-width ASCII fields of the GET_INF response (Leptrino ``pCommon.h``; see docs/canbus.md).
 PRODUCT_NAME_SIZE, SERIAL_SIZE, FIRMWARE_VERSION_SIZE, OUTPUT_RATE_SIZE = 16, 8, 4, 6
 
 

@@ -1,4 +1,4 @@
-"""The flight envelope of the paper's controller at one configuration (docs/envelope.md).
+"""The flight envelope of the paper's controller at one configuration (docs/scenarios.md).
 
 Two limits decide whether a joint motion flies:
 

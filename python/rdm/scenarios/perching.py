@@ -85,7 +85,7 @@ PERCH_PARAMS: dict = {"epsilon_z": 8.0}
 #: ``POSITION_GAINS``' y PID (3.0, 0.5, 4.0) through roll and Table V's x PID (4.6, 1.5, 7.0)
 #: through pitch are linearly unstable (pairs +0.41 +- 1.97j and +0.17 +- 3.68j rad/s,
 #: ``flight_envelope.horizontal_loop_poles``). These are the best-damped gains of a scan
-#: (damping 0.33 and 0.29; docs/envelope.md). For tracking's hanging flight stage and, as an
+#: (damping 0.33 and 0.29; docs/scenarios.md). For tracking's hanging flight stage and, as an
 #: option (``PerchTiming.fold_gains``), the hanging approach.
 HANGING_FLIGHT_GAINS: dict = {**POSITION_GAINS, "x_pid": (1.0, 0.1, 2.0), "y_pid": (0.3, 0.05, 0.8)}
 #: Where along the fold (fraction of its duration) ``PerchTiming.fold_gains`` take over. The
@@ -93,12 +93,12 @@ HANGING_FLIGHT_GAINS: dict = {**POSITION_GAINS, "x_pid": (1.0, 0.1, 2.0), "y_pid
 #: in the right half-plane from 0.53 of the fold on (x from 0.72), while the hanging gains
 #: stay stable all along; but their slow x loop (P 1.0) cannot follow the CoG's shift during
 #: the fold (switched at 0.4 or 0.55 the CoG drifted 0.7-0.9 m in x, seed 0), so they take over
-#: once the posture is reached. docs/foldgains.md.
+#: once the posture is reached. docs/scenarios.md.
 FOLD_GAINS_AT = 1.0
 #: The hanging gains for the approach, with a stiffer x integral: (1.5, 1.0, 2.0) is the
 #: best-damped x PID of a scan with I >= 1 (damping >= 0.26 from mid-fold on), and it holds
 #: the x offset the fold leaves (seed 0: the foot perched 35 mm from the planned point, 119 mm
-#: with the configured gains, 204 mm with (1.0, 0.1, 2.0)). docs/foldgains.md.
+#: with the configured gains, 204 mm with (1.0, 0.1, 2.0)). docs/scenarios.md.
 FOLD_GAINS: dict = {**HANGING_FLIGHT_GAINS, "x_pid": (1.5, 1.0, 2.0)}
 EDGE_MM = 1.0  # ZMP within this of the plate edge counts as "on the edge" (tipping)
 
@@ -158,13 +158,13 @@ class PerchTiming:
     #: position gains (``ControlPipeline.set_position_gains``) from ``fold_gains_at`` of the
     #: fold until the perch switch, when the configured gains are restored (default
     #: :data:`FOLD_GAINS`); None: the configured gains throughout (the behaviour before
-    #: docs/foldgains.md, whose configured loops are unstable in the hanging posture)
+    #: docs/scenarios.md, whose configured loops are unstable in the hanging posture)
     fold_gains: dict | None = field(default_factory=lambda: dict(FOLD_GAINS))
     #: fraction of the fold's duration at which ``fold_gains`` take over
     fold_gains_at: float = FOLD_GAINS_AT
 
 
-#: A shorter perching run for the process-level runs in the emulated VM (docs/hilperch.md):
+#: A shorter perching run for the process-level runs in the emulated VM (docs/processes.md):
 #: the fold in 4 s instead of 8, ending 0.1 m higher (foot 5 cm under the ceiling instead of
 #: 15 cm), approach after 0.5 s. Contact at 9.03 s instead of 14.83 s (seed 0). ASSUMPTION
 #: (ours; a 3 s fold with a 0.5 m/s climb perched at 7.4 s but tilted 10.8 deg and rocked the
@@ -172,11 +172,11 @@ class PerchTiming:
 #: The configured gains throughout (``fold_gains=None``): its approach lasts 0.9 s, too short
 #: for the hanging instability, and the gain switch's transient (the position integral
 #: restarts) just before the contact rocked the plate more (slip 0.060 vs 0.031 mm, min F_z
-#: 2.5 vs 6.3 N; docs/foldgains.md).
+#: 2.5 vs 6.3 N; docs/scenarios.md).
 QUICK_TIMING = PerchTiming(
     reconfigure_s=4.0, reconfigure_z=1.05, reconfigure_wait_s=0.5, fold_gains=None
 )
-#: The timing before docs/foldgains.md: the configured gains through the fold and approach.
+#: The timing before docs/scenarios.md: the configured gains through the fold and approach.
 CONFIGURED_GAINS_TIMING = PerchTiming(fold_gains=None)
 
 

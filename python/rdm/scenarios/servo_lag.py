@@ -2,7 +2,7 @@
 each joint's motion as the plan delayed (least squares over a grid of shifts).
 
 Used to identify the feed-forward lead of the joint servo goals
-(:attr:`rdm.nodes.onboard_config.OnboardConfig.servo_lead_s`; docs/servolead.md) and to
+(:attr:`rdm.nodes.onboard_config.OnboardConfig.servo_lead_s`; docs/scenarios.md) and to
 report, per run, what is left of the lag once the lead is applied.
 """
 

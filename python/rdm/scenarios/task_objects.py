@@ -293,7 +293,7 @@ def place_objects(model: mujoco.MjModel, compiled: TaskLayout, placed: TaskLayou
 
     ASSUMPTION (as :func:`enable_objects`: the objects are brought under the perched robot):
     they are placed relative to where the foot actually perched, not to a fixed world spot.
-    The foot lands within a few cm of its planned point (docs/foldgains.md), and the valve's
+    The foot lands within a few cm of its planned point (docs/scenarios.md), and the valve's
     workable window is only about -15..+10 mm of foot position, so a fixed placement makes the
     outcome depend on the landing. Call it while the objects' contacts are still off."""
     dx = placed.nominal_foot[0] - compiled.nominal_foot[0]

@@ -175,7 +175,7 @@ class TaskScript(perching.PerchingScript):
         layout: obj.TaskLayout,
         timing: perching.PerchTiming | None = None,
     ) -> None:
-        # perching's timing, fold gains included (docs/foldgains.md); the objects follow the
+        # perching's timing, fold gains included (docs/scenarios.md); the objects follow the
         # foot wherever it perched (task_objects.place_objects)
         super().__init__(motion=(), timing=timing or perching.PerchTiming())
         if task not in TASKS:

@@ -28,7 +28,7 @@ Resolution floor. The servo goals cross the wire as encoder counts (``servo/targ
 1.53 mrad for a Dynamixel X), so even ideal servos, on their goals at once and without sag,
 put the end effector at the plan rounded to counts. ``StageErrors.att_floor_rmse`` /
 ``pos_floor_rmse`` are the RMSE of that pose against the plan, over the same window and axes
-(docs/servolead.md). Real joints are not on their goals, so a run can land below this floor
+(docs/scenarios.md). Real joints are not on their goals, so a run can land below this floor
 by chance (a sag that cancels part of a rounding), not by a margin the rounding leaves open.
 """
 
@@ -75,7 +75,7 @@ FLIGHT_POSTURE = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 #: "hanging" (``PERCH_POSTURE``, after the fold; the flying hanging robot is lightly damped).
 FLIGHT_POSTURES = {"straight": FLIGHT_POSTURE, "hanging": PERCH_POSTURE}
 #: Position gains of the hanging posture's flight stage: ``perching.HANGING_FLIGHT_GAINS``
-#: (the configured y PID and Table V's x PID are linearly unstable there; docs/envelope.md).
+#: (the configured y PID and Table V's x PID are linearly unstable there; docs/scenarios.md).
 #: The straight posture keeps the run's configuration (None).
 FLIGHT_STAGE_GAINS: dict[str, dict | None] = {"straight": None, "hanging": HANGING_FLIGHT_GAINS}
 #: The joint path: (duration [s], q1..q6 offset from the stage's base posture) segments,
@@ -432,7 +432,7 @@ def run(
     of ``flight_posture``; None: the run's configuration; a dict: those).
     ``servo_lead_s``: feed-forward lead of the servo goals (None: the scenarios' identified
     lead, ``common.scenario_servo_lead()``; 0: the plan at its own time, as the paper's
-    planner sends it; docs/servolead.md).
+    planner sends it; docs/scenarios.md).
     ``servo``: the simulated joint servos (None: ``StackOptions.servo``, kp 150 N m/rad);
     e.g. stiffer ones show how much of the perched error is their static sag."""
     if servo_lead_s is None:

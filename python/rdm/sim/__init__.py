@@ -1,5 +1,5 @@
 """Simulation support for ``rdm sim``: run folder, MCAP signal log, candump and UART captures,
-metrics table and JSON summary, PNG plots. See docs/lockstep.md."""
+metrics table and JSON summary, PNG plots. See docs/sim.md."""
 
 from rdm.sim.candump import CandumpCapture
 from rdm.sim.mcap_log import McapLogger, ros1_definition

@@ -6,16 +6,16 @@
 the files directly (``.lep`` Leptrino, ``.bin`` rosserial).
 
 :class:`PtyPair` is the lockstep barrier of a pty pair. Linux delivers pty bytes through a
-kernel work queue, so bytes written in one tick may not be readable yet in the next (measured
-here: most writes are not visible immediately, some only after tens of ms on a loaded machine).
+kernel work queue, so bytes written in one tick may not be readable yet in the next (most
+writes are not visible immediately, some only after tens of ms on a loaded machine).
 That would make the tick at which a node sees a byte depend on the kernel scheduler. ``settle()``
 blocks until every byte written so far on either end is readable on the other, so the byte
 timeline is a function of simulated time only.
 
 :func:`open_inproc_uart` is the fast alternative when both ends live in the lockstep process: an
 in-process byte pipe with the same link API (bytes are readable as soon as written, no kernel,
-no barrier). Measured here a pty write costs 6 us on an idle machine but up to ~1 ms under load
-(the tty flush work queue), which dominated a lockstep chain; see docs/lockstep.md.
+no barrier). A pty write costs 6 us on an idle machine but up to ~1 ms under load (the tty
+flush work queue); see docs/sim.md.
 """
 
 from __future__ import annotations

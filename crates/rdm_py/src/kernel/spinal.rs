@@ -2,7 +2,7 @@
 //! inside the rosserial idle window, one steady CAN ms):
 //!
 //! * the idle ms: one Rust CAN master tick on the wire;
-//! * the busy ms (docs/spinalkernel.md): the battery sample, one control step
+//! * the busy ms (docs/spinal.md): the battery sample, one control step
 //!   (`SpinalStep.step` on the mirror's IMU sample, the duty list, the duty hand-over to the
 //!   Rust master), the `imu` and `servo/states` publications (frames from the Rust builders,
 //!   `ClientSession.send_frame`'s checks and counters), then the CAN ms; the frames go to a
