@@ -1,4 +1,4 @@
-"""Python fast paths of helper ``fastsensor`` against their plain forms.
+"""Python fast paths of the sensor nodes and the candump capture against their plain forms.
 
 The Leptrino node's in-range ``set_wrench`` shortcut (vs a numpy clip and saturation count),
 the candump line memo (vs python-can's ``CanutilsLogWriter`` on frames stamped by the

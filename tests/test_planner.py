@@ -57,8 +57,8 @@ def robot(rdm_setup):
 
 
 def test_start_is_feasible_with_a_regular_allocation(rdm_setup, robot):
-    """The blocker of the first version: at the start Q̄ must be regular (rho clearly > 0)
-    and the static thrusts inside [thrust_min, thrust_max]."""
+    """At the start Q̄ must be regular (rho clearly > 0; levelling on the wrong branch turns a
+    rotor pair and makes it singular) and the static thrusts inside [thrust_min, thrust_max]."""
     for mode in ("perched", "flight"):
         core = make_core(_with(rdm_setup, mode=mode))
         lay = core.layout

@@ -1,4 +1,4 @@
-"""The plant bridge's fast paths against their plain forms (helper ``fastbridge``).
+"""The plant bridge's, sensor models' and CAN master's fast paths against their plain forms.
 
 Each check compares bit for bit (signed zeros and NaN included) with an independent numpy
 computation: numpy's own generator called once per sample, the array forms of the noise

@@ -1,4 +1,4 @@
-"""The plant side's per-millisecond fast paths against their plain forms (helper ``samplers``).
+"""The plant side's per-millisecond fast paths against their plain forms.
 
 Every fast path keeps its plain form reachable; these compare them bit for bit (signed zeros
 and NaN included) on real plant states and random, bad input: the Rust JSON record writer

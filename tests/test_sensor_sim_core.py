@@ -1,4 +1,4 @@
-"""The Rust sensor paths (helper ``fastsensor``) against their plain forms.
+"""The Rust sensor paths (noise cores, Leptrino frame) against their plain forms.
 
 ``rdm._rdm.WrenchNoiseCore`` / ``ImuNoiseCore`` (behind ``WrenchSensorModel.sample_list`` and
 ``ImuModel.sample_lists``) against an independent numpy array form (``np.clip``, ``np.round``)

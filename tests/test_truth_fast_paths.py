@@ -1,4 +1,4 @@
-"""Fast paths of the 100 Hz ground-truth record (helper mstruth): the Ryu float writer
+"""Fast paths of the 100 Hz ground-truth record: the Ryu float writer
 against Python's own ``repr`` / ``json.dumps``; the one-call MjData copies against the
 plain numpy copies; the 1 kHz foot-sensor tuple path against the array path."""
 

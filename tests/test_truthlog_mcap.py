@@ -1,4 +1,4 @@
-"""The MCAP writer's native message path (helper truthlog): message records built in Rust
+"""The MCAP writer's native message path: message records built in Rust
 (``McapChunkBatch``) and handed to the ``mcap`` library's chunk builder in batches, JSON records
 encoded straight into the chunk, chunks closed here or on a worker thread. Whole files are
 compared with the library's own ``Writer.add_message`` path and the Python fast path."""

@@ -1,5 +1,5 @@
-"""The mocap and status nodes' fast paths (helper truthlog) against their plain forms, and a
-whole hover stack with every truthlog fast path on against the same stack with them off."""
+"""The mocap and status nodes' fast paths against their plain forms, and a whole hover stack
+with those fast paths and the native MCAP path on against the same stack with them off."""
 
 from __future__ import annotations
 

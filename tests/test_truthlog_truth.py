@@ -1,5 +1,5 @@
-"""The flying robot's ground-truth record in one Rust call (``RotorPlantCore.truth_free``,
-helper truthlog) against the record built from the tracker's measurement and the MjData copies
+"""The flying robot's ground-truth record in one Rust call (``RotorPlantCore.truth_free``)
+against the record built from the tracker's measurement and the MjData copies
 (``Plant._ground_truth_arrays``) and the reference form (``Plant._ground_truth_plain``); the
 contact measurement's float sums against its array and plain forms."""
 

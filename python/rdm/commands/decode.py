@@ -121,9 +121,7 @@ FORMATS: dict[str, CaptureFormat] = {
     f.name: f
     for f in (
         CaptureFormat("uart", EXTENSIONS["uart"], _decode_uart, "rosserial UART bytes"),
-        CaptureFormat(
-            "candump", EXTENSIONS["candump"], _decode_candump, "candump -L or ASC log"
-        ),
+        CaptureFormat("candump", EXTENSIONS["candump"], _decode_candump, "candump -L or ASC log"),
         CaptureFormat("leptrino", EXTENSIONS["leptrino"], _decode_leptrino, "Leptrino bytes"),
     )
 }

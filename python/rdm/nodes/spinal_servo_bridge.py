@@ -19,7 +19,7 @@ from rdm.protocol.neuron.servo import WORD_VALUE_MAX, WORD_VALUE_MIN
 from rdm.protocol.rosserial.codec import RosTime
 from rdm.protocol.rosserial.framing import encode_frame
 
-#: The whole ServoStates frame from the Rust master's table (None: an older extension).
+#: The whole ServoStates frame from the Rust master's table (None: an extension without it).
 _states_frame = getattr(_rdm, "spinal_servo_states_frame", None)
 
 

@@ -662,7 +662,7 @@ class Plant:
 
     # ---------------------------------------------------------------------- ground truth
     #: The flying robot's record through ``RotorPlantCore.truth_free`` (False: always
-    #: :meth:`_ground_truth_arrays`, the path before it).
+    #: :meth:`_ground_truth_arrays`, the measurement and copies in Python).
     truth_free_record = True
 
     def ground_truth(self) -> GroundTruth:

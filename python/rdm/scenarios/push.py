@@ -77,7 +77,7 @@ PAPER_FOOT_STD_PERCHED = (0.0009, 0.0011, 0.0004)
 #: 3.1 / 36 / 10 % of Table VIII's averages), y kept at 0.2 (0.3 and 0.4 lost contact on
 #: seed 1): the contact conditions the paper's controller enforces (eqs. 39-44) can hold
 #: them, and the plate does not rock (foot z std 0.02 mm). Beyond the ceiling,
-#: PERCHED_SCALE_BEYOND_CEILING (the previous default) is held too (slip 0.14 mm, contact
+#: PERCHED_SCALE_BEYOND_CEILING is held too (slip 0.14 mm, contact
 #: kept) but the x push rocks the plate on its edge by up to 80 mrad (foot z std 0.8 mm,
 #: twice Table IX's); docs/scenarios.md. (Hanging posture, 1 Hz: 0.05 held, 0.1 slipped
 #: 1.5 mm, 0.2 peeled, 1.0 fell.)

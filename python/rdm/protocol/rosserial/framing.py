@@ -82,11 +82,11 @@ def _new_frame(topic_id: int, payload: bytes, offset: int) -> Frame:
 
 try:
     from rdm._rdm import rosserial_scan as _native_scan
-except ImportError:  # an extension built before the scanner: the Python loop
+except ImportError:  # an extension without the scanner: the Python loop
     _native_scan = None
 try:
     from rdm._rdm import rosserial_frame as _native_frame
-except ImportError:  # an extension built before it: the frame built below
+except ImportError:  # an extension without it: the frame built below
     _native_frame = None
 
 _HEADER = struct.Struct("<BBHBH")  # FF FE len(u16) len_chk topic(u16)
