@@ -16,7 +16,7 @@ DT = 1.0 / RATE
 G = 9.80665
 MAG_WORLD = np.array([20.0, 3.0, -40.0])  # uT, a mid-latitude field
 FULL_SCALE = np.deg2rad(2000.0)  # +-2000 dps = 34.9 rad/s (jsk-wire-protocols.md sec. 3.2)
-SPIN = 34.9  # rad/s, the rate (inside the full scale)
+SPIN = 34.9  # rad/s, just inside the full scale
 
 
 def imu_of(truth: Rotation, omega_body: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -10,7 +10,7 @@ Measurement ``lockstep_hover``: the wall time per base tick (one simulated milli
 due node plus one physics step), each the mean over its chunk of 25 ticks (one onboard
 period, run through ``Lockstep.run_ticks`` as ``rdm sim`` runs them, so through the Rust
 lockstep kernel), is the sample; the budget is 50 us per simulated ms, i.e. 20x real time
-(the issue's target). The headline figure is the target
+(the target). The headline figure is the target
 ``speedup_vs:real_time`` = simulated seconds / wall seconds over the whole run (the mean, not
 the median: the 40 Hz onboard tick and the 100 Hz loggers make some ticks far longer), and
 ``speedup_vs:real_time_per_cpu_s`` = simulated seconds / CPU seconds of this process (the
@@ -33,7 +33,7 @@ import numpy as np
 from rdm.bench.cases import Case, Context, Measurement, Target, register
 from rdm.bench.statistics import summarize_ns
 
-#: The issue's target: the full stack at least 20x faster than real time.
+#: The target: the full stack at least 20x faster than real time.
 TARGET_REAL_TIME_FACTOR = 20.0
 #: Base tick of the lockstep loop (1 kHz physics).
 BASE_TICK_US = 1000.0

@@ -1,4 +1,4 @@
-"""``hover``: take-off and hover through every wire (priority (a) of the issue)."""
+"""``hover``: take-off and hover through every wire."""
 
 from __future__ import annotations
 

@@ -15,7 +15,7 @@ Phases (simulated time):
 Metrics (ground truth from MuJoCo, from the perch switch to the end): foot contact kept, slip
 of the foot plate, ZMP margin to the plate edge, friction-cone and yaw-friction usage, the
 perching QP status counts, and the root attitude. The paper reports these as plots (Fig. 10)
-and the statement that contact stability held; the limits here are the issue's: contact kept,
+and the statement that contact stability held; the limits here are ours: contact kept,
 slip < 1 mm, ZMP inside the plate.
 """
 
