@@ -4,7 +4,7 @@
     python fuzz/python/fuzz.py seed [TARGET ...]      # write golden-vector seeds to the corpus
     python fuzz/python/fuzz.py replay [TARGET ...]    # the committed corpus through the checks
     python fuzz/python/fuzz.py run TARGET --runs N [--engine auto|atheris|mutate]
-    python fuzz/python/fuzz.py minimize TARGET        # libFuzzer merge of corpus + new inputs
+    python fuzz/python/fuzz.py minimize TARGET        # seeds + the inputs a run kept, capped
 
 ``run`` prints one JSON object: inputs run, coverage (atheris: libFuzzer's ``cov``/``ft``),
 crashes, hangs, findings by kind (``bad_frame_accepted``, ``not_canonical``,
@@ -216,29 +216,23 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 1 if new else 0
 
 
-def cmd_minimize(name: str) -> int:
-    """libFuzzer's merge (atheris) of the committed corpus and the new inputs of the last
-    run into a set keeping every coverage feature; replaces the committed corpus."""
-    work = WORK / name
-    merged = work / "merged"
-    if merged.exists():
-        for p in merged.iterdir():
-            p.unlink()
-    merged.mkdir(parents=True, exist_ok=True)
-    stats = work / "merge-stats.json"
-    max_len = MAX_LEN.get(name, DEFAULT_MAX_LEN)
-    subprocess.run(
-        [sys.executable, str(HERE / "fuzz.py"), "_atheris", name, str(stats), "10", "--",
-         "-merge=1", f"-max_len={max_len}", str(merged), str(CORPUS / name),
-         str(work / "corpus")],
-        check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )  # fmt: skip
-    items = [p.read_bytes() for p in merged.iterdir()]
+def cmd_minimize(name: str, most: int = 300) -> int:
+    """Fold the inputs a campaign kept into the committed corpus: the golden-vector seeds,
+    plus the inputs libFuzzer wrote to ``fuzz/work/<name>/corpus`` (each added a coverage
+    feature when it was found), smallest first, up to ``most`` files in all."""
+    from fuzz_targets import TARGETS
+
+    seeds = list(TARGETS[name].seeds())
+    found = sorted(
+        (p.read_bytes() for p in (WORK / name / "corpus").glob("*")), key=lambda d: (len(d), d)
+    )
+    keep = seeds + found[: max(0, most - len(seeds))]
     folder = CORPUS / name
     for p in folder.iterdir():
         p.unlink()
-    write_corpus(name, items)
-    print(f"{name}: {len(items)} inputs, {sum(map(len, items))} bytes")
+    write_corpus(name, keep)
+    items = corpus_of(name)
+    print(f"{name}: {len(items)} inputs ({len(found)} found), {sum(map(len, items))} bytes")
     return 0
 
 

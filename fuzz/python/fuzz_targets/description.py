@@ -4,7 +4,7 @@ roxmltree) and the TOML reader, then a first evaluation.
 
 Input: the same format as the Rust target ``description`` (``fuzz/src/description.rs``):
 byte 0x00 + ``n_hi n_lo k`` repeats the last ``k`` bytes ``n`` more times (text capped at
-1 MiB), byte 0x01 separates URDF from TOML, invalid UTF-8 is replaced.
+256 KiB), byte 0x01 separates URDF from TOML, invalid UTF-8 is replaced.
 
 The reader is native code: a stack overflow kills the process, so the engines run this
 target in a child process per batch and report a child that dies as a crash with the input
@@ -28,7 +28,7 @@ from rdm import _rdm
 from rdm.descriptions import build_description
 from rdm.model import DescriptionError, ModelError
 
-MAX_TEXT = 1 << 20
+MAX_TEXT = 1 << 18
 SEPARATOR = 1
 #: Numbers the generator writes over one number of a description.
 EXTREMES = (b"1e308", b"-1e308", b"nan", b"inf", b"0", b"-0", b"1e-320", b"4.9e-324",

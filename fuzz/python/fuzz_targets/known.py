@@ -36,6 +36,7 @@ def nesting_depth(text: bytes) -> int:
     """Deepest element nesting of XML-ish ``text``: ``<name`` opens, ``</`` and ``/>``
     close (a plain count: comments and attribute values are not special-cased)."""
     depth = best = 0
+    end = -1  # the first '>' at or after the current '<' (one pass over the text)
     k = text.find(b"<")
     while k >= 0:
         nxt = text[k + 1 : k + 2]
@@ -44,8 +45,13 @@ def nesting_depth(text: bytes) -> int:
         elif nxt and nxt not in b"!?":
             depth += 1
             best = max(best, depth)
-        end = text.find(b">", k)
-        if end > 0 and text[end - 1 : end] == b"/":
+        if 0 <= end < k:
+            end = -1
+        if end < 0:
+            end = text.find(b">", k)
+            if end < 0:
+                end = len(text) + 1  # none left: no '/>' closes
+        if end <= len(text) and text[end - 1 : end] == b"/":
             depth -= 1
         k = text.find(b"<", k + 1)
     return best
