@@ -69,7 +69,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=None,
         help="send trajectory servo goals S s ahead (feed-forward for the servos' lag; "
-        "default: servo_lead_s, 0 = the paper's; identify it, docs/servolead.md)",
+        "default: servo_lead_s, 0 = the paper's; identify it: docs/scenarios.md, "
+        "'Servo goals ahead of the plan')",
     )
     parser.add_argument(
         "--control", default=None, help="udp:HOST:PORT of the ground link (rdm ctl --to)"

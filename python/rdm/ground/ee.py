@@ -29,7 +29,7 @@ from rdm.ground.message import Reason, Rejected
 
 #: Fastest joint motion of an ``ee`` path [rad/s]. ASSUMPTION: 0.2 rad/s, the scenarios'
 #: perched motions' order (a 0.8 rad fold in 4-8 s); slow enough for the perched robot's
-#: servos (docs/servolead.md) to follow without a lead.
+#: servos (docs/scenarios.md "Servo goals ahead of the plan") to follow without a lead.
 EE_JOINT_SPEED = 0.2
 #: Shortest segment of an ``ee`` path [s] (strictly increasing stamps for the node).
 EE_MIN_SEGMENT_S = 0.02

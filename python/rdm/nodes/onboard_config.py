@@ -173,7 +173,8 @@ class OnboardConfig:
     #: ``now`` [s]: feed-forward for the joint servos' lag (their time constant plus the
     #: 40 Hz goal hold and the CAN/RS485 hand-over). 0 = the planned angle at its own time,
     #: as the paper's feed-forward planner and JSK send it. The control model keeps the plan
-    #: at ``now``. Identify the value on the robot (docs/servolead.md).
+    #: at ``now``. Identify the value on the robot (docs/scenarios.md, "Servo goals ahead of
+    #: the plan").
     servo_lead_s: float = 0.0
     #: The operator layer: take-off, go-to, landing, touchdown, command hold, tilt limit,
     #: geofence (:class:`rdm.nodes.onboard_flight.FlightLimits`).

@@ -152,7 +152,7 @@ class StackOptions:
     master_backend: str = "rust"
     #: With both backends "rust": the Neuron CAN frames go from the Rust master to the Rust
     #: bank on a :class:`rdm.link.can_wire.CanWireLink` (no python-can bus; the candump is
-    #: the same bytes, docs/canwire.md). The channel then admits no other python-can endpoint
+    #: the same bytes, docs/canbus.md). The channel then admits no other python-can endpoint
     #: (CanWireError); False keeps the in-process python-can channel.
     can_wire: bool = True
     #: With neuron_backend "rust": the plant bridge's per-millisecond coupling (joint snapshot,
@@ -203,7 +203,8 @@ class StackOptions:
 #: (``OnboardConfig.servo_lead_s``) for the simulated servos above. Identified, not tuned to a
 #: metric: with no lead the joints trail the plan by 50-52 ms in both stages of ``tracking``
 #: (``rdm.scenarios.servo_lag.joint_lags``): the servo's kv/kp = 33 ms, the 40 Hz goal hold
-#: (12.5 ms on average) and the Spinal -> Neuron -> servo hand-over. docs/servolead.md.
+#: (12.5 ms on average) and the Spinal -> Neuron -> servo hand-over (docs/scenarios.md,
+#: "Servo goals ahead of the plan").
 SIM_SERVO_LEAD_S = 0.05
 
 
@@ -505,7 +506,7 @@ class StatusNode:
     name = "status"
     period = 0.025
     #: It reads the onboard node and the Spinal mirror (its duty list, which the lockstep
-    #: kernel's Spinal busy ms defer: docs/spinalkernel.md), and changes neither.
+    #: kernel's Spinal busy ms defer: docs/spinal.md), and changes neither.
     kernel_touches = ("spinal",)
 
     def __init__(self, stack: Stack) -> None:
