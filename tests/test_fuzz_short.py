@@ -218,14 +218,11 @@ def _isolated(name: str, data: bytes) -> tuple[str, str]:
 # -- known open findings: strict xfail with the committed reproducer --------------------------
 def test_every_known_finding_has_a_reproducer():
     names = {k.name for k in KNOWN}
-    assert names == {"ground-t-huge-int", "urdf-deep-nesting", "model-huge-origin-nan"}
+    assert names == {"model-huge-origin-nan"}
     for k in KNOWN:
         assert list((REGRESSIONS / k.target).iterdir()), k.name
 
 
-@pytest.mark.xfail(
-    strict=True, reason="open: rdm.ground owners (fuzz/python/fuzz_targets/known.py)"
-)
 def test_ground_verifier_refuses_a_huge_integer_t():
     """A signed datagram whose t is a 400-digit integer gets a verdict (stale), not an
     OverflowError out of Verifier.verify (which would end the onboard node's port)."""
@@ -238,10 +235,9 @@ def test_ground_verifier_refuses_a_huge_integer_t():
         assert Verifier(key).verify(data, T0).kind == "rejected"
 
 
-@pytest.mark.xfail(strict=True, reason="open: issue 28 item 1 (roxmltree recursion)")
 def test_urdf_nested_20000_deep_is_refused_with_a_message():
-    """rdm model --urdf deep.urdf: the loader names the file and the nesting, and the
-    process lives (today: SIGSEGV in roxmltree's recursive tokenizer)."""
+    """rdm model --urdf deep.urdf: the loader names the file and the nesting before the XML
+    parser (which recurses per level) sees it, and the process lives."""
     data = (REGRESSIONS / "description" / "urdf-nested-20000").read_bytes()
     code = (
         "import sys; sys.path.insert(0, sys.argv[1]); from fuzz_targets.description import split;"

@@ -585,3 +585,15 @@ def test_the_port_stamps_a_pose_with_its_signing_time() -> None:
         port.handle(client.datagram("pose", pose)[1], ("127.0.0.1", 9), now)
         assert got[-1] == pytest.approx(expect, abs=1e-9)
     assert port.outcomes["accepted"] == 3
+
+
+@pytest.mark.parametrize("value", [10**400, -(10**400), float("inf"), True, "1"])
+def test_numbers_a_float_cannot_hold_are_bad_arguments(value) -> None:
+    """JSON gives Python ints of any size: one beyond a float's range is refused as a bad
+    argument (not an OverflowError out of the handler)."""
+    from rdm.ground.commands import Rejected, number, vector
+
+    with pytest.raises(Rejected):
+        number("takeoff", {"height": value}, "height")
+    with pytest.raises(Rejected):
+        vector("goto", {"position": [0.0, value, 1.0]}, "position", 3)

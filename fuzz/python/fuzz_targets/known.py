@@ -73,32 +73,15 @@ def _model_nan(exc: BaseException | None, data: bytes, signal: int | None) -> bo
 
 MATCHERS: dict[str, Any] = {
     "model-huge-origin-nan": _model_nan,
-    "ground-t-huge-int": _ground_t,
-    "urdf-deep-nesting": _urdf_deep,
 }
 
 KNOWN = [
-    Known(
-        "ground-t-huge-int",
-        "ground_verify",
-        "rdm/ground/auth.py Verifier.verify: abs(msg['t'] - wall_now) on an integer t above "
-        "1.8e308 raises OverflowError (message.check_command accepts any int t); "
-        "commands.number: math.isfinite on such an int raises too",
-        "open: python/rdm/ground is owned by the ground-link work; reported",
-    ),
     Known(
         "model-huge-origin-nan",
         "description",
         "rdm_core model: a URDF origin or mass near the double's limit (xyz='0 -1e308 0') is "
         "accepted (finite), and evaluate(q = 0) returns NaN inertia / infinite CoG",
         "open: issue 28 item 9 (the description loader's checks)",
-    ),
-    Known(
-        "urdf-deep-nesting",
-        "description",
-        "roxmltree 0.20 tokenizer (parse_element <-> parse_content recursion, no depth "
-        "bound): a URDF nested ~11,000 deep overflows the main thread's 8 MiB stack (SIGSEGV)",
-        "open: crates/rdm_core/src/model/urdf.rs (issue 28 item 1); fix in docs/fuzzing.md",
     ),
 ]
 

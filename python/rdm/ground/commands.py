@@ -25,12 +25,11 @@ not allow.
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Callable
 from typing import Any
 
-from rdm.ground.message import Reason, Rejected, json_safe
+from rdm.ground.message import Reason, Rejected, as_finite, json_safe
 
 #: Most joint values in one ``joints`` command.
 MAX_JOINTS = 32
@@ -55,12 +54,12 @@ def _only(cmd: str, args: Args, allowed: tuple[str, ...], required: tuple[str, .
 
 def number(cmd: str, args: Args, name: str, positive: bool = False) -> float:
     """``args[name]`` as a finite float (> 0 if ``positive``), else ``bad_args``."""
-    x = args[name]
-    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+    x = as_finite(args[name])
+    if x is None:
         raise _bad(cmd, name, "must be a finite number")
     if positive and not x > 0:
         raise _bad(cmd, name, "must be > 0")
-    return float(x)
+    return x
 
 
 def vector(cmd: str, args: Args, name: str, n: int | None, most: int = MAX_JOINTS) -> list[float]:
@@ -71,9 +70,10 @@ def vector(cmd: str, args: Args, name: str, n: int | None, most: int = MAX_JOINT
         raise _bad(cmd, name, f"must be a list of {size} finite numbers")
     out = []
     for v in x:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        f = as_finite(v)
+        if f is None:
             raise _bad(cmd, name, f"must be a list of {size} finite numbers")
-        out.append(float(v))
+        out.append(f)
     return out
 
 

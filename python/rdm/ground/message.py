@@ -165,6 +165,18 @@ def _is_number(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
+def as_finite(x: Any) -> float | None:
+    """``x`` as a float if it is a number (not a bool) that a float holds finitely (a
+    400-digit integer is not), else None."""
+    if not _is_number(x):
+        return None
+    try:
+        v = float(x)
+    except OverflowError:
+        return None
+    return v if math.isfinite(v) else None
+
+
 def check_command(msg: Any) -> dict[str, Any]:
     """``msg`` if it is a well-formed command (module doc), else :class:`Rejected`
     (``malformed``) naming the field and its rule. ``hmac`` is checked by ``rdm.ground.auth``.
@@ -182,7 +194,7 @@ def check_command(msg: Any) -> dict[str, Any]:
     seq = msg.get("seq")
     if not (isinstance(seq, int) and not isinstance(seq, bool) and 0 <= seq < SEQ_LIMIT):
         raise Rejected(Reason.MALFORMED, "seq: must be an integer in [0, 2**63)")
-    if not _is_number(msg.get("t")):
+    if as_finite(msg.get("t")) is None:
         raise Rejected(Reason.MALFORMED, "t: must be a finite number (Unix time, s)")
     cmd = msg.get("cmd")
     if not (isinstance(cmd, str) and _CMD.fullmatch(cmd)):

@@ -248,8 +248,81 @@ fn parse_joint(file: &str, node: Node<'_, '_>) -> Result<UrdfJoint, DescriptionE
     })
 }
 
+/// Deepest element nesting a URDF may have. Real descriptions nest about 5 deep
+/// (robot/link/visual/geometry/mesh); the XML parser recurses per level, and a file nested
+/// tens of thousands deep would overflow the stack.
+pub const MAX_URDF_DEPTH: usize = 1000;
+
+/// The deepest element nesting of XML `text` (a byte scan: comments, processing
+/// instructions, CDATA and declarations skipped; quoted attribute values skipped). Stops
+/// counting past `limit + 1`.
+pub fn xml_element_depth(text: &str, limit: usize) -> usize {
+    let b = text.as_bytes();
+    let (mut i, mut depth, mut deepest) = (0usize, 0usize, 0usize);
+    let skip_to = |from: usize, end: &[u8]| -> usize {
+        b[from..]
+            .windows(end.len())
+            .position(|w| w == end)
+            .map_or(b.len(), |p| from + p + end.len())
+    };
+    while i < b.len() {
+        if b[i] != b'<' {
+            i += 1;
+            continue;
+        }
+        let rest = &b[i..];
+        if rest.starts_with(b"<!--") {
+            i = skip_to(i + 4, b"-->");
+        } else if rest.starts_with(b"<![CDATA[") {
+            i = skip_to(i + 9, b"]]>");
+        } else if rest.starts_with(b"<?") {
+            i = skip_to(i + 2, b"?>");
+        } else if rest.starts_with(b"<!") {
+            i = skip_to(i + 2, b">");
+        } else if rest.starts_with(b"</") {
+            depth = depth.saturating_sub(1);
+            i = skip_to(i + 2, b">");
+        } else {
+            // an opening tag: find its end outside quoted attribute values
+            let mut j = i + 1;
+            let mut quote = 0u8;
+            while j < b.len() {
+                let c = b[j];
+                if quote != 0 {
+                    if c == quote {
+                        quote = 0;
+                    }
+                } else if c == b'"' || c == b'\'' {
+                    quote = c;
+                } else if c == b'>' {
+                    break;
+                }
+                j += 1;
+            }
+            let self_closing = j > i + 1 && j < b.len() && b[j - 1] == b'/';
+            if !self_closing {
+                depth += 1;
+                deepest = deepest.max(depth);
+                if deepest > limit {
+                    return deepest;
+                }
+            }
+            i = j + 1;
+        }
+    }
+    deepest
+}
+
 /// Parse URDF text; `file` names the source in errors.
 pub(crate) fn parse_urdf(file: &str, text: &str) -> Result<Urdf, DescriptionError> {
+    if xml_element_depth(text, MAX_URDF_DEPTH) > MAX_URDF_DEPTH {
+        return Err(DescriptionError::new(
+            file,
+            "",
+            Kind::Syntax,
+            format!("elements nested deeper than {MAX_URDF_DEPTH}"),
+        ));
+    }
     let doc = Document::parse(text).map_err(|e| {
         DescriptionError::new(file, "", Kind::Syntax, format!("malformed XML: {e}"))
     })?;
@@ -272,4 +345,41 @@ pub(crate) fn parse_urdf(file: &str, text: &str) -> Result<Urdf, DescriptionErro
         }
     }
     Ok(Urdf { links, joints })
+}
+
+#[cfg(test)]
+mod depth_tests {
+    use super::*;
+
+    #[test]
+    fn depth_counts_elements_and_skips_the_rest() {
+        assert_eq!(xml_element_depth("<a><b/><c><d></d></c></a>", 100), 3);
+        let tricky =
+            "<?xml version='1.0'?><!-- <x><y><z> --><r a='<>' b=\"/>\"><![CDATA[<q><q>]]></r>";
+        assert_eq!(xml_element_depth(tricky, 100), 1);
+        let deep = "<a>".repeat(20_000) + &"</a>".repeat(20_000);
+        assert_eq!(xml_element_depth(&deep, MAX_URDF_DEPTH), MAX_URDF_DEPTH + 1);
+    }
+
+    #[test]
+    fn a_urdf_nested_20000_deep_is_refused_without_parsing() {
+        let deep = format!(
+            "<robot name='r'>{}{}</robot>",
+            "<a>".repeat(20_000),
+            "</a>".repeat(20_000)
+        );
+        let err = parse_urdf("deep.urdf", &deep).expect_err("refused");
+        assert_eq!(err.kind, Kind::Syntax);
+        assert!(
+            err.message.contains("nested deeper than 1000"),
+            "{}",
+            err.message
+        );
+        let ok = format!(
+            "<robot name='r'>{}{}</robot>",
+            "<a>".repeat(900),
+            "</a>".repeat(900)
+        );
+        assert!(xml_element_depth(&ok, MAX_URDF_DEPTH) == 901);
+    }
 }
