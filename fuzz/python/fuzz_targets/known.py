@@ -7,7 +7,6 @@ the day the owner's fix lands, so the entry is then removed here.
 
 from __future__ import annotations
 
-import traceback
 from dataclasses import dataclass
 from typing import Any
 
@@ -23,46 +22,6 @@ class Known:
 
     def matches(self, exc: BaseException | None, data: bytes, signal: int | None) -> bool:
         return MATCHERS[self.name](exc, data, signal)
-
-
-def _ground_t(exc: BaseException | None, data: bytes, signal: int | None) -> bool:
-    if not isinstance(exc, OverflowError) or "int too large to convert to float" not in str(exc):
-        return False
-    frames = traceback.extract_tb(exc.__traceback__)
-    return any(f.filename.endswith(("ground/auth.py", "ground/commands.py")) for f in frames)
-
-
-def nesting_depth(text: bytes) -> int:
-    """Deepest element nesting of XML-ish ``text``: ``<name`` opens, ``</`` and ``/>``
-    close (a plain count: comments and attribute values are not special-cased)."""
-    depth = best = 0
-    end = -1  # the first '>' at or after the current '<' (one pass over the text)
-    k = text.find(b"<")
-    while k >= 0:
-        nxt = text[k + 1 : k + 2]
-        if nxt == b"/":
-            depth -= 1
-        elif nxt and nxt not in b"!?":
-            depth += 1
-            best = max(best, depth)
-        if 0 <= end < k:
-            end = -1
-        if end < 0:
-            end = text.find(b">", k)
-            if end < 0:
-                end = len(text) + 1  # none left: no '/>' closes
-        if end <= len(text) and text[end - 1 : end] == b"/":
-            depth -= 1
-        k = text.find(b"<", k + 1)
-    return best
-
-
-def _urdf_deep(exc: BaseException | None, data: bytes, signal: int | None) -> bool:
-    if signal is None:
-        return False
-    from fuzz_targets.description import split
-
-    return nesting_depth(split(data)[0].encode()) >= 1000
 
 
 def _model_nan(exc: BaseException | None, data: bytes, signal: int | None) -> bool:
