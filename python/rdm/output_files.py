@@ -14,6 +14,7 @@ file are the caller's: only the file's own name is protected against a link.
 from __future__ import annotations
 
 import errno
+import contextlib
 import os
 import stat
 from typing import IO, Any
@@ -68,7 +69,10 @@ def open_output(
     try:
         return os.fdopen(fd, mode, **kwargs)
     except BaseException:
-        os.close(fd)
+        # the file object may already own (and have closed) fd when, say, Ctrl-C arrives
+        # inside fdopen: a second close must not replace the exception on its way out
+        with contextlib.suppress(OSError):
+            os.close(fd)
         raise
 
 
