@@ -13,8 +13,8 @@ file are the caller's: only the file's own name is protected against a link.
 
 from __future__ import annotations
 
-import errno
 import contextlib
+import errno
 import os
 import stat
 from typing import IO, Any
