@@ -236,14 +236,15 @@ def cmd_minimize(name: str, most: int = 300) -> int:
     return 0
 
 
-def cmd_table(path: str) -> int:
-    """A Markdown table of the JSON lines ``path`` (one per target run)."""
+def cmd_table(paths: list[str]) -> int:
+    """A Markdown table of the JSON lines in ``paths`` (one line per target run)."""
     print(
         "| target | engine | inputs run | coverage (cov / ft) | crashes | hangs | "
         "bad frames accepted | other findings | known open | peak RSS MB | wall s |"
     )
     print("|---|---|---:|---|---:|---:|---:|---|---|---:|---:|")
-    for line in Path(path).read_text().splitlines():
+    lines = [line for path in paths for line in Path(path).read_text().splitlines()]
+    for line in lines:
         r = json.loads(line)
         cov = f"{r['cov']} / {r['ft']}" if r.get("cov") is not None else "n/a"
         findings = dict(r["findings"])
@@ -288,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("minimize")
     p.add_argument("target")
     p = sub.add_parser("table", help="the results of a campaign (JSON lines) as a table")
-    p.add_argument("results")
+    p.add_argument("results", nargs="+")
     args = parser.parse_args(argv)
     if args.cmd == "rust":
         import rust_targets
