@@ -14,54 +14,13 @@
 //! joint origins and limits, rotors, plate, friction, sensor ranges) and a finite total
 //! mass.
 //!
-//! Known open finding (docs/fuzzing.md, finding 1): roxmltree's tokenizer recurses once per
-//! nesting level, and a URDF nested a few thousand deep (fewer under AddressSanitizer's
-//! larger frames) overflows the stack. Once found, every later input that deep would stop
-//! the campaign again, so an input whose URDF nests deeper than [`KNOWN_DEPTH`] is not
-//! loaded unless `RDM_FUZZ_DEEP_URDF` is set (its reproducer is
-//! `fuzz/regressions/description/urdf-nested-20000`).
-
-use std::sync::OnceLock;
+//! The depth of a URDF is bounded by the reader (`MAX_URDF_DEPTH`) before roxmltree, whose
+//! tokenizer recurses per level, sees it; the macro reaches that bound and past it.
 
 use rdm_core::model::RobotDescription;
 
 /// Largest expanded text [bytes].
 pub const MAX_TEXT: usize = 1 << 18;
-/// Deepest URDF nesting loaded while the known stack overflow is open.
-pub const KNOWN_DEPTH: usize = 1000;
-
-/// Deepest element nesting of XML-ish `text`: `<name` opens, `</` and `/>` close (a plain
-/// count, as `fuzz_targets.known.nesting_depth` makes it).
-pub fn nesting_depth(text: &[u8]) -> usize {
-    // the first '>' at or after `from` (usize::MAX: none); searched once per '>' overall
-    let find = |from: usize| {
-        text.get(from..)
-            .and_then(|rest| rest.iter().position(|&c| c == b'>'))
-            .map_or(usize::MAX, |e| from + e)
-    };
-    let (mut depth, mut best) = (0isize, 0isize);
-    let mut next_gt = find(0);
-    for (k, &b) in text.iter().enumerate() {
-        if b != b'<' {
-            continue;
-        }
-        match text.get(k + 1) {
-            Some(b'/') => depth -= 1,
-            Some(b'!') | Some(b'?') | None => {}
-            Some(_) => {
-                depth += 1;
-                best = best.max(depth);
-            }
-        }
-        if next_gt < k {
-            next_gt = find(k);
-        }
-        if next_gt != usize::MAX && next_gt > k && text[next_gt - 1] == b'/' {
-            depth -= 1;
-        }
-    }
-    best.max(0) as usize
-}
 
 /// The text an input stands for (see the module doc).
 pub fn expand(data: &[u8]) -> Vec<u8> {
@@ -117,12 +76,6 @@ fn finite(what: &str, values: &[f64]) {
 /// Load the description `data` stands for; panics on a broken rule.
 pub fn check(data: &[u8]) {
     let (urdf, toml) = split(data);
-    static DEEP: OnceLock<bool> = OnceLock::new();
-    if !*DEEP.get_or_init(|| std::env::var_os("RDM_FUZZ_DEEP_URDF").is_some())
-        && nesting_depth(urdf.as_bytes()) > KNOWN_DEPTH
-    {
-        return;
-    }
     let desc = match RobotDescription::from_strs(&urdf, &toml, "fuzz.urdf", "fuzz.toml") {
         Ok(desc) => desc,
         Err(e) => {

@@ -53,15 +53,3 @@ fn macro_expands_to_deep_nesting() {
     assert!(urdf.starts_with("<robot name=\"deep\"><a><a>"));
     assert!(toml.is_empty());
 }
-
-#[test]
-fn nesting_depth_counts_opens_and_closes() {
-    use rdm_fuzz::description::nesting_depth;
-    assert_eq!(nesting_depth(b"<robot><link><inertial/></link></robot>"), 3);
-    assert_eq!(
-        nesting_depth(b"<?xml version=\"1.0\"?><!-- c --><a><b></b><b/></a>"),
-        2
-    );
-    let (urdf, _) = rdm_fuzz::description::split(&deep_urdf(999));
-    assert_eq!(nesting_depth(urdf.as_bytes()), 1001);
-}
