@@ -15,8 +15,9 @@ import sys
 import time
 
 import pytest
+from spinal_peer import read_line
 from test_ground_link import FakeNode
-from test_onboard_cli import free_udp_port, read_line
+from test_onboard_cli import free_udp_port
 
 from rdm.ground.auth import load_key, write_key
 from rdm.ground.client import GroundClient

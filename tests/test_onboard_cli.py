@@ -14,6 +14,7 @@ import time
 
 import pytest
 import serial
+from spinal_peer import read_line
 
 from rdm.ground.auth import load_key, write_key
 from rdm.ground.client import GroundClient
@@ -30,17 +31,6 @@ def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def read_line(proc, prefix: str, timeout: float = 30.0) -> str:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline()
-        if line.startswith(prefix):
-            return line.strip()
-        if not line and proc.poll() is not None:
-            break
-    raise AssertionError(f"no line starting with {prefix!r}")
 
 
 def test_rdm_onboard_process_arms_and_commands(tmp_path) -> None:
