@@ -9,7 +9,7 @@
 # targets under atheris (libFuzzer, coverage-guided) or, for the isolated `description`
 # target, the mutation engine in a child process per batch (fuzz/python/engines.py).
 # Installs atheris and cargo-fuzz when missing. Runs at the lowest priority (nice 19).
-# Each target's result is a JSON line in fuzz/work/results.jsonl (or $FUZZ_RESULTS); the
+# Each target's result is a JSON line in fuzz/out/results.jsonl (or $FUZZ_RESULTS); the
 # table is printed at
 # the end. Exits non-zero when anything new (not a known open finding) was found.
 set -euo pipefail
@@ -36,8 +36,8 @@ wanted() {
 "$PY" -c "import atheris" 2>/dev/null || "$PY" -m pip install --quiet atheris
 cargo +nightly fuzz --version >/dev/null 2>&1 || cargo install --quiet cargo-fuzz
 
-mkdir -p fuzz/work
-RESULTS=${FUZZ_RESULTS:-fuzz/work/results.jsonl}
+mkdir -p fuzz/out
+RESULTS=${FUZZ_RESULTS:-fuzz/out/results.jsonl}
 : >"$RESULTS"
 status=0
 for t in "${RUST_TARGETS[@]}"; do

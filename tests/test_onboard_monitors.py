@@ -15,14 +15,14 @@ from rdm.model import Robot
 from rdm.nodes.onboard import OnboardNode
 from rdm.nodes.onboard_config import OnboardConfig
 from rdm.nodes.onboard_flight import FlightLimits
-from rdm.nodes.onboard_monitors import MonitorLimits, Monitors, cells_from_reference
+from rdm.nodes.onboard_monitors import MonitorLimits, Monitors, battery_cells
 
 ROBOT = Robot.default()
 
 
 @pytest.mark.parametrize(("volts", "cells"), [(25.2, 6), (16.8, 4), (12.6, 3), (22.2, 5)])
 def test_cell_count_from_the_full_reference_voltage(volts, cells) -> None:
-    assert cells_from_reference([volts - 3.0, volts]) == cells
+    assert battery_cells([volts - 3.0, volts]) == cells
 
 
 @pytest.mark.parametrize(

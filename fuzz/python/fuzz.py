@@ -10,7 +10,7 @@
 crashes, hangs, findings by kind (``bad_frame_accepted``, ``not_canonical``,
 ``non_finite``, ...), known open findings, peak RSS, wall time. Exit status 1 when
 anything new was found. The corpus lives in ``fuzz/corpus/<target>/`` (file name: sha1 of
-the content); new inputs and crash artifacts go to ``fuzz/work/<target>/`` (not kept).
+the content); new inputs and crash artifacts go to ``fuzz/out/<target>/`` (not kept).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 FUZZ = HERE.parent
 CORPUS = FUZZ / "corpus"
-WORK = FUZZ / "work"
+WORK = FUZZ / "out"
 
 import engines  # noqa: E402  (after the path set-up above)
 
@@ -218,7 +218,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_minimize(name: str, most: int = 300) -> int:
     """Fold the inputs a campaign kept into the committed corpus: the golden-vector seeds,
-    plus the inputs libFuzzer wrote to ``fuzz/work/<name>/corpus`` (each added a coverage
+    plus the inputs libFuzzer wrote to ``fuzz/out/<name>/corpus`` (each added a coverage
     feature when it was found), smallest first, up to ``most`` files in all."""
     from fuzz_targets import TARGETS
 

@@ -62,7 +62,7 @@ def _classify(target: str, text: str, artifact: Path | None) -> tuple[str, str]:
 
 def run(target: str, runs: int, timeout: float, seed: int, max_restarts: int = 50) -> dict:
     """``runs`` inputs of the Rust target, restarting after each crash."""
-    work = FUZZ / "work" / target
+    work = FUZZ / "out" / target
     (work / "corpus").mkdir(parents=True, exist_ok=True)
     artifacts = work / "artifacts"
     artifacts.mkdir(parents=True, exist_ok=True)

@@ -60,13 +60,13 @@ def split(data: bytes) -> tuple[str, str]:
     return urdf.decode("utf-8", "replace"), toml.decode("utf-8", "replace")
 
 
-def _plain(value: Any) -> Any:
+def _as_lists(value: Any) -> Any:
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {k: _as_lists(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
+        return [_as_lists(v) for v in value]
     return value
 
 
@@ -87,7 +87,7 @@ def check(data: bytes) -> None:
     if out.get("zmp_degenerate"):  # no aerial ZMP to give: its fields are not numbers
         out = {k: v for k, v in out.items() if k not in ("aerial_zmp", "zmp_margin")}
     try:
-        all_finite(_plain(out), "evaluate(0)")
+        all_finite(_as_lists(out), "evaluate(0)")
     except NonFinite as exc:
         raise NonFinite(f"accepted description: {exc}") from None
 

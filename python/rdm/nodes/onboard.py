@@ -44,7 +44,7 @@ from rdm.nodes.onboard_control import ControlCommand, ControlPipeline, Setpoint,
 from rdm.nodes.onboard_flight import FlightMode, FlightSupervisor
 from rdm.nodes.onboard_foot import ByteLink, FootSensorReader
 from rdm.nodes.onboard_mocap import CogEstimator
-from rdm.nodes.onboard_monitors import Monitors, cells_from_reference
+from rdm.nodes.onboard_monitors import Monitors, battery_cells
 from rdm.protocol.rosserial.codec import RosTime
 from rdm.protocol.rosserial.events import MessageReceived, ServiceResponse, SyncLost
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
@@ -266,7 +266,7 @@ class OnboardNode:
         self.monitors = Monitors(
             config.monitors,
             config.monitors.battery_cells
-            or cells_from_reference([float(r[0]) for r in config.pwm_info.motor_info]),
+            or battery_cells([float(r[0]) for r in config.pwm_info.motor_info]),
         )
         self._flight_setpoint: Setpoint | None = None
         #: the CoG state from marker poses (:meth:`set_mocap_pose`)

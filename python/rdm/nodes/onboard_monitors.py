@@ -68,7 +68,7 @@ class MonitorLimits:
             raise ValueError("MonitorLimits.ground_loss_perched: 'hold' or 'land'")
 
 
-def cells_from_reference(voltages: list[float]) -> int:
+def battery_cells(voltages: list[float]) -> int:
     """The cell count of a battery whose full voltage is the highest reference voltage."""
     top = max((v for v in voltages if math.isfinite(v) and v > 0), default=CELL_FULL_V)
     return max(1, round(top / CELL_FULL_V))

@@ -36,7 +36,7 @@ from rdm.link.can_wire import DRAIN_AT
 from rdm.link.inproc_can import SimClock
 from rdm.nodes.base import to_ms
 from rdm.nodes.can_master import BOOT_DELAY_MS, IDLE_DUTY, CanMaster, MasterState
-from rdm.nodes.onboard_monitors import MonitorLimits, cells_from_reference
+from rdm.nodes.onboard_monitors import MonitorLimits, battery_cells
 from rdm.nodes.spinal_servo_bridge import MirrorRejection, ServoBridge, target_rejection
 from rdm.nodes.spinal_uart import UartPump
 from rdm.protocol.rosserial import constants as C
@@ -743,7 +743,7 @@ class SpinalMirror:
         if not (math.isfinite(scale) and scale > 0):
             raise ValueError(f"set_adc_scale: {scale!r} is not a positive finite scale")
         if not self.firmware_adc_scale:
-            cells = cells_from_reference([self.reference_voltage])
+            cells = battery_cells([self.reference_voltage])
             lo, hi = (c * cells for c in MonitorLimits().cell_plausible)
             volts = self.battery_input * scale
             if not lo <= volts <= hi:
