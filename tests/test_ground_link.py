@@ -66,11 +66,14 @@ class FakeNode:
     def goto(self, position, yaw):
         self._rec("goto", position, yaw)
 
-    def set_joint_targets(self, q):
-        self._rec("set_joint_targets", q)
+    def move_joints(self, q):
+        self._rec("move_joints", q)
 
-    def request_perch(self, on):
-        self._rec("request_perch", on)
+    def perch(self, speed=None):
+        self._rec("perch", speed)
+
+    def unperch(self):
+        self._rec("unperch")
 
     def set_gain_profile(self, name):
         self._rec("set_gain_profile", name)
@@ -321,9 +324,10 @@ CALLS = [
     ("arm", {}, ("arm",)),
     ("disarm", {}, ("disarm",)),
     ("goto", {"position": [0.5, -1, 1.2], "yaw": -0.3}, ("goto", [0.5, -1.0, 1.2], -0.3)),
-    ("joints", {"q": [0.1, 0.2, 0, 0, 0, -0.5]}, ("set_joint_targets", [0.1, 0.2, 0, 0, 0, -0.5])),
-    ("perch", {}, ("request_perch", True)),
-    ("unperch", {}, ("request_perch", False)),
+    ("joints", {"q": [0.1, 0.2, 0, 0, 0, -0.5]}, ("move_joints", [0.1, 0.2, 0, 0, 0, -0.5])),
+    ("perch", {}, ("perch", None)),
+    ("perch", {"speed": 0.05}, ("perch", 0.05)),
+    ("unperch", {}, ("unperch",)),
     ("gains", {"profile": "perch-soft_1"}, ("set_gain_profile", "perch-soft_1")),
     ("mocap", {"position": [1, 2, 3], "velocity": [0, 0, 0.5], "yaw": 0.25},
      ("set_mocap", [1.0, 2.0, 3.0], [0.0, 0.0, 0.5], 0.25)),
@@ -353,6 +357,8 @@ BAD_ARGS = [
     ("joints", {"q": []}, "joints.q"),
     ("joints", {"q": [0.0] * 33}, "joints.q"),
     ("joints", {"q": 0.5}, "joints.q"),
+    ("perch", {"speed": -0.1}, "perch.speed"),
+    ("perch", {"speed": "fast"}, "perch.speed"),
     ("gains", {"profile": "two words"}, "gains.profile"),
     ("gains", {"profile": 3}, "gains.profile"),
     ("mocap", {"position": [1, 2, 3], "velocity": [1, 2]}, "mocap.velocity"),

@@ -6,8 +6,9 @@ method it calls.
 | ``takeoff`` | ``height`` (m, > 0) | ``takeoff(height)`` |
 | ``land`` / ``halt`` / ``force_landing`` / ``arm`` / ``disarm`` | none | same name |
 | ``goto`` | ``position`` [x, y, z] m, ``yaw`` rad | ``goto(position, yaw)`` |
-| ``joints`` | ``q`` (1-32 numbers, rad) | ``set_joint_targets(q)`` |
-| ``perch`` / ``unperch`` | none | ``request_perch(True / False)`` |
+| ``joints`` | ``q`` (6 or all joints, rad) | ``move_joints(q)`` (jerk-limited path) |
+| ``perch`` | optional ``speed`` (m/s, > 0) | ``perch(speed)`` (approach, contact, perched) |
+| ``unperch`` | none | ``unperch()`` |
 | ``gains`` | ``profile`` (name) | ``set_gain_profile(profile)`` |
 | ``mocap`` | ``position`` [3], optional ``velocity`` [3], ``yaw`` | ``set_mocap(p, v, yaw)`` |
 | ``pose`` | marker ``position`` [3] m, ``quaternion`` [x, y, z, w] | ``set_mocap_pose(p, q)`` |
@@ -111,7 +112,14 @@ def _goto(node: Any, args: Args) -> None:
 
 
 def _joints(node: Any, args: Args) -> None:
-    call(node, "set_joint_targets", vector("joints", args, "q", None))
+    call(node, "move_joints", vector("joints", args, "q", None))
+
+
+def _perch(node: Any, args: Args) -> None:
+    if "speed" in args:
+        call(node, "perch", number("perch", args, "speed", positive=True))
+    else:
+        call(node, "perch")
 
 
 def _gains(node: Any, args: Args) -> None:
@@ -163,8 +171,8 @@ TABLE: dict[str, tuple[tuple[str, ...], tuple[str, ...], Callable[[Any, Args], A
     "disarm": ((), (), _no_args("disarm")),
     "goto": (("position", "yaw"), ("position", "yaw"), _goto),
     "joints": (("q",), ("q",), _joints),
-    "perch": ((), (), _no_args("request_perch", True)),
-    "unperch": ((), (), _no_args("request_perch", False)),
+    "perch": (("speed",), (), _perch),
+    "unperch": ((), (), _no_args("unperch")),
     "gains": (("profile",), ("profile",), _gains),
     "mocap": (("position", "velocity", "yaw"), ("position",), _mocap),
     "pose": (("position", "quaternion"), ("position", "quaternion"), _pose),

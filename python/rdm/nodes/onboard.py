@@ -37,6 +37,7 @@ import numpy as np
 
 from rdm import _rdm
 from rdm.nodes.bus_layout import can_table, default_neuron_joints
+from rdm.nodes.joint_motion import plan_joint_motion
 from rdm.nodes.onboard_arming import ArmingSequencer, FlightState
 from rdm.nodes.onboard_calibration import GET_CALIB_DATA, ImuCalibrationReader
 from rdm.nodes.onboard_config import OnboardConfig, ServoMap
@@ -304,6 +305,8 @@ class OnboardNode:
         self.last_alpha_beta: tuple[tuple[float, ...], tuple[float, ...]] | None = None
         self._requests: list[str] = []
         self._perch_request = False
+        #: the name of the position-gain profile in effect ("default": ``position_gains``)
+        self.gain_profile = "default"
         self._started = False
         self._now = 0.0
         self._last_control: float | None = None
@@ -453,9 +456,59 @@ class OnboardNode:
         self._trajectory = (times, qs)
         return True
 
+    def move_joints(self, q: Sequence[float]) -> str | None:
+        """Move the joints to ``q`` (q1..q6, vectoring targets kept, or the full joint_order
+        vector) along a jerk-limited path (:mod:`rdm.nodes.joint_motion`, limits
+        ``FlightLimits.joint_max_*``) from the present targets; the refusal reason or None."""
+        n_q = self.robot.n_q
+        arr = _vector(q, 6 if np.size(q) == 6 else n_q)
+        if arr is None:
+            self.counts["joint_targets_invalid"] += 1
+            return f"q must be 6 or {n_q} finite numbers"
+        start = self._current_joint_targets(self._now)
+        start = (self.present_q if start is None else start).copy()
+        goal = start.copy()
+        goal[: arr.size] = arr
+        lim = self.config.flight
+        points = plan_joint_motion(
+            self._now,
+            start,
+            goal,
+            lim.joint_max_velocity,
+            lim.joint_max_acceleration,
+            lim.joint_max_jerk,
+        )
+        if points is None or not self.set_trajectory(points):
+            return "no joint trajectory to the goal"
+        self.counts["joint_motion"] += 1
+        return None
+
     def request_perch(self, on: bool = True) -> None:
-        """Switch between flight mode and perching mode (eq. 20's λ_perch on/off)."""
+        """Switch between flight mode and perching mode (eq. 20's λ_perch on/off) at once,
+        without the perch sequence (:meth:`perch`, :meth:`unperch`)."""
         self._perch_request = bool(on)
+
+    def perch(self, speed: float | None = None) -> str | None:
+        """The perch sequence: approach (the z setpoint rising at ``speed``, default
+        ``FlightLimits.approach_speed``) until the foot sensor reads more than
+        ``FlightLimits.contact_fz``, then the perching control (eq. 20) and the
+        ``perched_gains`` profile at the contact height. The refusal reason or None."""
+        if self.foot is None:
+            return "no foot sensor"
+        if not self.arming.flying:
+            return "not flying"
+        profile = self.config.flight.perched_gains
+        if profile != "default" and profile not in self.config.gain_profiles:
+            return f"FlightLimits.perched_gains names no gain profile ({profile!r})"
+        sp = self.setpoint
+        return self.flight.request_approach(self._now, sp.position, sp.yaw, speed)
+
+    def unperch(self) -> str | None:
+        """Leave the perch: perching control off, a jerk-limited path down, then hover."""
+        reason = self.flight.request_unperch(self._now)
+        if reason is None:
+            self._perch_request = False
+        return reason
 
     def arm(self) -> str | None:
         """Start the arming sequence; the refusal reason (battery) or None."""
@@ -505,14 +558,21 @@ class OnboardNode:
             return "position must be 3 finite numbers and yaw finite"
         return self.flight.request_goto(p, y, self._now)
 
-    def set_gain_profile(self, name: str) -> str | None:
+    def set_gain_profile(self, name: str, bumpless: bool = True) -> str | None:
         """Switch the position gains to a named profile of ``OnboardConfig.gain_profiles``
-        ("default": ``position_gains``), bumplessly."""
+        ("default": ``position_gains``), bumplessly unless told otherwise."""
         profiles = {"default": self.config.position_gains, **self.config.gain_profiles}
         if name not in profiles:
             return f"unknown gain profile {name!r}; known: {sorted(profiles)}"
-        self.control.set_position_gains(dict(profiles[name]), bumpless=True)
+        self.use_position_gains(profiles[name], name, bumpless)
         return None
+
+    def use_position_gains(self, gains: dict, name: str, bumpless: bool = False) -> None:
+        """Position gains (``OnboardConfig.position_gains`` keys) under a profile ``name``: a
+        script's gain schedule outside the configured profiles. The perch contact switches
+        back to ``FlightLimits.perched_gains`` when ``name`` differs from it."""
+        self.control.set_position_gains(dict(gains), bumpless=bumpless)
+        self.gain_profile = name
 
     def on_ground_lost(self) -> None:
         """The ground station fell silent: land in flight; perched, hold (or land, as
@@ -881,14 +941,36 @@ class OnboardNode:
             euler = self.imu_euler
             yaw = y if y is not None else (euler[2] if euler is not None else 0.0)
         self._monitor(now, flying, p)
+        if self.flight.mode is FlightMode.APPROACH and p is not None:
+            self._contact_check(now, float(p[2]))
         landing = self.arming.state is FlightState.LANDING
         sp = self.flight.update(now, flying, landing, p, v, yaw, self.setpoint.position, dt)
         self._flight_setpoint = None if sp is None else Setpoint(*sp)
+        if self.flight.mode is FlightMode.LAND and self._perch_request:
+            # a landing (force landing, a fault) from the perch: perching control off first
+            self._perch_request = False
+            self.control.set_perching(False)
+            self.counts["perch_released_to_land"] += 1
         if flying and self.flight.mode is FlightMode.LAND and p is None:
             self.flight.imu_touchdown(now, self.imu_gyro, self._imu_acc, self.control.perching)
         if self.flight.take_touchdown():
             self.monitors.trip("touchdown", "landed: ARM_OFF", now)
             self.arming.disarm(now)
+
+    def _contact_check(self, now: float, z: float) -> None:
+        """The approach's contact: the foot sensor's fresh normal force above
+        ``FlightLimits.contact_fz`` -> perched at the measured height ``z``, the
+        ``perched_gains`` profile now and the perching control from the next tick (whose
+        synthesis then sees it first, as for :meth:`request_perch`)."""
+        lim = self.config.flight
+        wrench = None if self.foot is None else self.foot.latest(now, self.config.foot_timeout_s)
+        if wrench is None or not float(wrench[2]) > lim.contact_fz:
+            return
+        self.flight.contact(now, z)
+        self._perch_request = True  # the next tick's model update and synthesis perch
+        if self.gain_profile != lim.perched_gains:
+            self.set_gain_profile(lim.perched_gains, bumpless=False)
+        self.monitors.note("contact", f"foot F_z {float(wrench[2]):.2f} N: perched", now)
 
     def _monitor(self, now: float, flying: bool, position: np.ndarray | None) -> None:
         """Freshness of Spinal's imu and the servos, the foot sensor while perched, the

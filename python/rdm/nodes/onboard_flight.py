@@ -1,5 +1,6 @@
-"""The operator layer of the onboard node: take-off, go-to, land, halt and the descent of a
-force landing, as setpoints for the 40 Hz position controller (sans-IO, time passed in).
+"""The operator layer of the onboard node: take-off, go-to, approach and perch, unperch,
+land, halt and the descent of a force landing, as setpoints for the 40 Hz position controller
+(sans-IO, time passed in).
 
 What it decides each tick (:meth:`FlightSupervisor.update`):
 
@@ -19,6 +20,13 @@ Modes (:class:`FlightMode`):
                target for ``hover_convergent_s`` (JSK's convergence check, sec. 3 of
                ``jsk-flight-navigation.md``)
 ``hover``      holding, or flying a go-to trajectory
+``approach``   the z setpoint rising at ``approach_speed`` (the paper's perching approach,
+               Sec. VII-B) until the node reports contact (:meth:`FlightSupervisor.contact`:
+               the foot sensor's normal force above ``contact_fz``); back to ``hover`` at the
+               start point when it rose ``approach_rise_max`` without contact
+``perched``    the setpoint frozen at the contact height (+ ``press_offset``); the node runs
+               the perching control (eq. 20's λ_perch) and its gains
+``unperch``    perching control off, a jerk-limited path ``unperch_drop`` down; then ``hover``
 ``land``       z setpoint descending at ``land_descend_rate`` (JSK ``land_descend_vel``,
                0.3 m/s) to ``land_undershoot`` below the ground z; touchdown then disarm
 =============  =============================================================================
@@ -48,7 +56,14 @@ class FlightMode(enum.Enum):
     MANUAL = "manual"
     TAKEOFF = "takeoff"
     HOVER = "hover"
+    APPROACH = "approach"
+    PERCHED = "perched"
+    UNPERCH = "unperch"
     LAND = "land"
+
+
+#: The modes in which the robot is on or near its perch (the perch sequence).
+PERCH_MODES = (FlightMode.APPROACH, FlightMode.PERCHED, FlightMode.UNPERCH)
 
 
 @dataclass(frozen=True)
@@ -87,6 +102,25 @@ class FlightLimits:
     #: position outside lands the robot. ASSUMPTION: a 20 m x 20 m x 4 m room.
     fence_min: tuple[float, float, float] = (-10.0, -10.0, -0.5)
     fence_max: tuple[float, float, float] = (10.0, 10.0, 3.5)
+    #: Perching approach: rise rate of the z setpoint, m/s (the paper's slow approach;
+    #: ASSUMPTION: 0.08 m/s, the perching scenario's), and how far it may rise without
+    #: contact before it gives up, m. ASSUMPTION.
+    approach_speed: float = 0.08
+    approach_rise_max: float = 1.0
+    #: Foot-sensor normal force that means contact, N. ASSUMPTION.
+    contact_fz: float = 3.0
+    #: Altitude setpoint above the contact height once perched, m (>= 0). ASSUMPTION.
+    press_offset: float = 0.0
+    #: Position-gain profile switched in at contact (``OnboardConfig.gain_profiles``,
+    #: "default": ``position_gains``).
+    perched_gains: str = "default"
+    #: Unperch: the path goes this far down from the perched setpoint, m. ASSUMPTION.
+    unperch_drop: float = 0.15
+    #: Joint motions (``rdm ctl joints``): per-joint limits of the jerk-limited path, rad/s,
+    #: rad/s^2, rad/s^3. ASSUMPTION: well inside the servos' 5.8 rad/s no-load speed.
+    joint_max_velocity: float = 0.5
+    joint_max_acceleration: float = 1.0
+    joint_max_jerk: float = 5.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -104,12 +138,23 @@ class FlightLimits:
             "still_s",
             "command_hold_s",
             "max_tilt_cmd",
+            "approach_speed",
+            "approach_rise_max",
+            "contact_fz",
+            "unperch_drop",
+            "joint_max_velocity",
+            "joint_max_acceleration",
+            "joint_max_jerk",
         ):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"FlightLimits.{name}={v!r} must be finite and > 0")
         if not (math.isfinite(self.land_undershoot) and self.land_undershoot >= 0):
             raise ValueError(f"FlightLimits.land_undershoot={self.land_undershoot!r} must be >= 0")
+        if not (math.isfinite(self.press_offset) and self.press_offset >= 0):
+            raise ValueError(f"FlightLimits.press_offset={self.press_offset!r} must be >= 0")
+        if self.approach_speed > self.max_velocity[2]:
+            raise ValueError("FlightLimits.approach_speed must not exceed max_velocity's z")
         if self.max_tilt_cmd >= 1.0:
             raise ValueError("FlightLimits.max_tilt_cmd must be below Spinal's 1.0 rad fail-safe")
         for name in ("max_velocity", "max_acceleration", "max_jerk"):
@@ -213,6 +258,9 @@ class FlightSupervisor:
         self._check_z: float | None = None
         self._still_since: float | None = None
         self.touchdown_at: float | None = None
+        self._approach: tuple[float, float] | None = None  # (start z, rise rate)
+        #: the node time of the last contact (``approach`` -> ``perched``)
+        self.perched_at: float | None = None
 
     # -- operator requests ---------------------------------------------------------------
     def request_takeoff(self, height: float | None) -> str | None:
@@ -220,7 +268,7 @@ class FlightSupervisor:
         h = self.limits.takeoff_height if height is None else float(height)
         if not (math.isfinite(h) and h > 0.0):
             return "takeoff height must be finite and > 0"
-        if self.mode in (FlightMode.TAKEOFF, FlightMode.HOVER, FlightMode.LAND):
+        if self.mode not in (FlightMode.GROUND, FlightMode.MANUAL):
             return f"already in {self.mode.value}"
         self._pending_takeoff = h
         self.counts["takeoff_requested"] += 1
@@ -252,6 +300,57 @@ class FlightSupervisor:
         self.counts["goto"] += 1
         return None
 
+    def request_approach(
+        self, now: float, setpoint: np.ndarray, yaw: float, speed: float | None = None
+    ) -> str | None:
+        """Start the perching approach from hover (its hold) or from a script's setpoint
+        (``setpoint``, ``yaw``): the z setpoint rises at ``speed`` (default
+        ``approach_speed``) until :meth:`contact`."""
+        rate = self.limits.approach_speed if speed is None else float(speed)
+        if not (math.isfinite(rate) and 0.0 < rate <= self.limits.max_velocity[2]):
+            return f"approach speed must be in (0, {self.limits.max_velocity[2]}] m/s"
+        if self.mode is FlightMode.HOVER:
+            if self.path is not None:
+                return "a go-to is under way"
+            assert self._hold is not None
+            start, y = self._hold
+        elif self.mode is FlightMode.MANUAL:
+            start, y = setpoint, yaw
+        else:
+            return f"perch needs hover (mode {self.mode.value})"
+        self._hold = (np.array(start, dtype=float), float(y))
+        self._approach = (float(start[2]), rate)
+        self.mode = FlightMode.APPROACH
+        self.counts["approach"] += 1
+        return None
+
+    def contact(self, now: float, z: float) -> None:
+        """The node saw the foot touch (``approach`` only): hold the contact height ``z``
+        (measured) plus ``press_offset``; ``perched``."""
+        if self.mode is not FlightMode.APPROACH:
+            return
+        assert self._hold is not None
+        p, y = self._hold
+        self._hold = (np.array([p[0], p[1], z + self.limits.press_offset]), y)
+        self.mode, self._approach, self.perched_at = FlightMode.PERCHED, None, now
+        self.counts["contact"] += 1
+
+    def request_unperch(self, now: float) -> str | None:
+        """Leave the perch: a jerk-limited path ``unperch_drop`` down from the perched
+        setpoint, then ``hover`` (the node switches the perching control off)."""
+        if self.mode is not FlightMode.PERCHED:
+            return f"not perched (mode {self.mode.value})"
+        assert self._hold is not None
+        p, y = self._hold
+        target = p - np.array([0.0, 0.0, self.limits.unperch_drop])
+        path = plan_path(self.limits, now, p, np.zeros(3), y, target, y)
+        if path is None:
+            return "no trajectory down from the perch"
+        self.path, self._hold = path, (target, y)
+        self.mode = FlightMode.UNPERCH
+        self.counts["unperch"] += 1
+        return None
+
     def manual(self) -> None:
         """A script took the setpoint (``set_target``): this layer stops planning."""
         if self.mode in (FlightMode.TAKEOFF, FlightMode.HOVER):
@@ -261,9 +360,15 @@ class FlightSupervisor:
         if self.mode is not FlightMode.LAND:
             self.counts["land"] += 1
         self.mode = FlightMode.LAND
-        self.path = None
+        self.path, self._approach = None, None
         self._check_at = self._check_z = None
         self._still_since = None
+
+    @property
+    def hold_position(self) -> np.ndarray | None:
+        """The position this layer holds (hover, perched) or its path ends at; None when it
+        commands nothing (ground, manual, before a landing's first tick)."""
+        return None if self._hold is None else self._hold[0].copy()
 
     # -- per tick ------------------------------------------------------------------------
     def _setpoint_now(self, now: float) -> tuple[np.ndarray, float]:
@@ -291,6 +396,7 @@ class FlightSupervisor:
         if not armed:
             if self.mode is not FlightMode.GROUND:
                 self.mode, self.path, self._hold = FlightMode.GROUND, None, None
+                self._approach = None
             self.ground_z = None
             return None
         if self.ground_z is None and position is not None:
@@ -306,15 +412,40 @@ class FlightSupervisor:
         if self.mode is FlightMode.LAND:
             return self._land(now, position, velocity, setpoint_position, yaw, dt)
         assert self._hold is not None
+        if self.mode is FlightMode.APPROACH:
+            return self._rise(now, dt)
+        if self.mode is FlightMode.PERCHED:
+            return self._hold[0], np.zeros(3), self._hold[1]
         if self.path is not None:
             p, v, y = self.path.at(now)
             if now >= self.path.end:
                 self._hold, self.path = (p, y), None
+                if self.mode is FlightMode.UNPERCH:
+                    self.mode = FlightMode.HOVER
         else:
             (p, y), v = self._hold, np.zeros(3)
         if self.mode is FlightMode.TAKEOFF and position is not None:
             self._takeoff_convergence(now, position)
         return p, v, y
+
+    def _rise(self, now: float, dt: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """The approach's rising setpoint; past ``approach_rise_max`` without contact, a
+        path back down to where the approach started, in ``hover``."""
+        assert self._hold is not None and self._approach is not None
+        p, y = self._hold
+        z0, rate = self._approach
+        z = float(p[2]) + rate * dt
+        if z - z0 > self.limits.approach_rise_max:
+            self.counts["approach_no_contact"] += 1
+            start = np.array([p[0], p[1], z0])
+            self.path = plan_path(self.limits, now, p, np.zeros(3), y, start, y)
+            self._hold, self._approach = (start, y), None
+            self.mode = FlightMode.HOVER
+            if self.path is None:  # cannot happen for a straight drop; hold the start
+                return start, np.zeros(3), y
+            return self.path.at(now)
+        self._hold = (np.array([p[0], p[1], z]), y)
+        return self._hold[0], np.array([0.0, 0.0, rate]), y
 
     def _start_takeoff(self, now: float, position: np.ndarray, yaw: float) -> None:
         assert self._pending_takeoff is not None and self.ground_z is not None

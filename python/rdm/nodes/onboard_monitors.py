@@ -92,6 +92,12 @@ class Monitors:
         self.events.append({"t": round(now, 4), "monitor": name, "reason": reason})
         LOG.warning("t=%.3f %s: %s", now, name, reason)
 
+    def note(self, name: str, what: str, now: float) -> None:
+        """Count, log (info) and remember one event of the flight that is not a fault."""
+        self.counts[name] += 1
+        self.events.append({"t": round(now, 4), "monitor": name, "reason": what})
+        LOG.info("t=%.3f %s: %s", now, name, what)
+
     # -- battery -------------------------------------------------------------------------
     def battery(self, volts: float, now: float) -> bool:
         """A ``battery_voltage_status`` reading; False if rejected (the last good one kept)."""

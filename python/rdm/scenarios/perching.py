@@ -5,10 +5,11 @@ Phases (simulated time):
 
 1. boot (Neurons enumerate, Spinal calibrates its gyro), arm at ``ARM_AT``;
 2. climb to ``APPROACH_Z`` under the perching spot (setpoint ramped at ``CLIMB_SPEED``);
-3. approach: the CoG setpoint rises at ``APPROACH_SPEED`` until the PC's foot sensor reads a
-   normal force above ``CONTACT_FZ`` (what the onboard PC can see; no ground truth);
-4. perch: ``request_perch`` (λ_perch of eqs. 37-49 is added, eq. 20) and the altitude setpoint
-   is frozen at the contact height;
+3. approach and perch: the onboard node's perch sequence (``OnboardNode.perch``,
+   :mod:`rdm.nodes.onboard_flight`): the CoG setpoint rises at ``APPROACH_SPEED`` until the
+   PC's foot sensor reads a normal force above ``FlightLimits.contact_fz`` (what the onboard
+   PC can see; no ground truth); then λ_perch of eqs. 37-49 is added (eq. 20) and the altitude
+   setpoint is frozen at the contact height;
 5. joint motion while perched: q follows ``PERCHED_MOTION`` (smooth joint-space segments);
 6. hold.
 
@@ -29,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from rdm.nodes.onboard_config import OnboardConfig
+from rdm.nodes.onboard_flight import FlightMode
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels
 
@@ -56,8 +58,6 @@ PERCH_POSTURE = (1.5708, -0.5, 0.0, 0.0, 0.0, 0.0)
 RECONFIGURE_S = 8.0  # s for q: 0 -> PERCH_POSTURE in flight
 RECONFIGURE_Z = 0.95  # m: CoG height after the reconfiguration (the foot is 0.5 m above)
 APPROACH_SPEED = 0.08  # m/s
-CONTACT_FZ = 3.0  # N: foot-sensor normal force that means "touching" (ASSUMPTION)
-PRESS_OFFSET = 0.0  # m: altitude setpoint above the contact height once perched (ASSUMPTION)
 #: Joint motion while perched (Fig. 10 moves the arm while the foot holds): (duration [s],
 #: q1..q6 goal). ASSUMPTION: arm pitch and yaw sweeps of the size shown in Fig. 10.
 PERCHED_MOTION: tuple[tuple[float, tuple[float, ...]], ...] = (
@@ -246,21 +246,18 @@ class PerchingScript:
             goal[2] = tm.reconfigure_z
             self.ramp.set_goal(goal, (tm.reconfigure_z - tm.climb_z) / tm.reconfigure_s)
         elif self.phase == "reconfigure" and now > self.t_phase_end + tm.reconfigure_wait_s:
-            self.phase = "approach"
-            self.ramp.set_goal(self.ramp.position + np.array([0.0, 0.0, 1.0]), tm.approach_speed)
-        elif self.phase == "approach":
-            fz = _foot_normal_force(stack)
-            if fz is not None and fz > CONTACT_FZ:
-                self.t_contact = now
-                z = float(self.cog(stack)[2])  # mocap, as the PC has
-                self.ramp.position[2] = z + PRESS_OFFSET
-                self.ramp.set_goal(self.ramp.position.copy())
-                ob.request_perch(True)
-                self.t_perch = now
-                if self.fold_gains_window is not None:  # perching mode takes over: restore
-                    self.fold_gains_window = (self.fold_gains_window[0], now)
-                    ob.control.set_position_gains(ob.config.position_gains)
-                self.phase = "settle"
+            # the node's perch sequence from the script's setpoint (approach, contact, perched)
+            refusal = ob.perch(tm.approach_speed)
+            self.phase = "approach" if refusal is None else f"perch refused: {refusal}"
+        elif self.phase == "approach" and ob.flight.mode is FlightMode.PERCHED:
+            self.t_contact = self.t_perch = ob.flight.perched_at
+            hold = ob.flight.hold_position
+            assert hold is not None
+            self.ramp.position = hold
+            self.ramp.set_goal(hold.copy())
+            if self.fold_gains_window is not None:  # the node switched to its perched gains
+                self.fold_gains_window = (self.fold_gains_window[0], self.t_perch)
+            self.phase = "settle"
         elif self.phase == "settle" and self.t_perch is not None and now - self.t_perch > SETTLE_S:
             self.phase = "motion"
             points, self.t_motion_end = joint_path(now, np.array(PERCH_POSTURE), self.motion, n_q)
@@ -280,7 +277,7 @@ class PerchingScript:
             and self.t_perch is None
             and now >= self.t_fold + tm.fold_gains_at * tm.reconfigure_s
         ):
-            stack.onboard.control.set_position_gains(tm.fold_gains)
+            stack.onboard.use_position_gains(tm.fold_gains, "fold")
             self.fold_gains_window = (now, None)
 
     def phase_gains(self, stack: Any) -> dict:
@@ -291,14 +288,6 @@ class PerchingScript:
         if w is not None and w[1] is None and self.timing.fold_gains is not None:
             return self.timing.fold_gains
         return stack.onboard.config.position_gains
-
-
-def _foot_normal_force(stack: Any) -> float | None:
-    """Normal force the PC's foot sensor reads (F_z, foot frame, > 0 pressing)."""
-    foot = stack.onboard.foot
-    if foot is None or foot.wrench is None:
-        return None
-    return float(foot.wrench[2])
 
 
 def run(
