@@ -87,8 +87,13 @@ def test_ctl_negative_numbers_and_json_args(port, key_file) -> None:
     code, _, err = run_ctl(port, "--to", to(port), "--key", str(key_file), "mocap",
                              "--json", '{"position": [1, 2, 3], "yaw": 0.5}')  # fmt: skip
     assert code == 0, err
+    code, _, err = run_ctl(port, "--to", to(port), "--key", str(key_file), "perch", "0.05")
+    assert code == 0, err
+    code, _, err = run_ctl(port, "--to", to(port), "--key", str(key_file), "perch")
+    assert code == 0, err
     assert port.node.calls == [("goto", [-0.5, 0.0, 1.2], -1.0),
-                               ("set_mocap", [1.0, 2.0, 3.0], None, 0.5)]  # fmt: skip
+                               ("set_mocap", [1.0, 2.0, 3.0], None, 0.5),
+                               ("perch", 0.05), ("perch", None)]  # fmt: skip
 
 
 def test_ctl_rejection_exits_1(key_file) -> None:
@@ -128,6 +133,7 @@ def test_ctl_with_another_key_is_refused_as_bad_signature(port, tmp_path) -> Non
         (["takeoff", "nan"], "'nan' is not finite"),
         (["fly"], "unknown_command"),
         (["land", "now"], "land: takes no values"),
+        (["perch", "0.1", "0.2"], "perch: expected 1 numbers"),
         (["mocap", "--json", "[1]"], "--json: must be a JSON object"),
         (["takeoff", "--json", '{"heigth": 1}'], "takeoff.heigth: unknown argument"),
         ([], "a command is required"),

@@ -1,15 +1,27 @@
 """The operator's mission through every wire (MuJoCo plant, Neuron mirrors on CAN, the Spinal
-mirror over rosserial, the onboard node): take off, go to a point, land, with each injected
-fault. Every run must end safe (disarmed on the floor, tilt in flight at most 30 deg, no duty
-above motor_info's maximum) and the node (or Spinal) must have noticed the fault."""
+mirror over rosserial, the onboard node): take off, go to a point, land (the quick form) with
+each injected flight fault; the whole mission (fold, perch, arm motion, unperch, unfold, land);
+a foot-sensor loss while perched. Every run must end safe (disarmed on the floor or held
+perched, tilt in flight at most 30 deg, no duty above motor_info's maximum) and the node (or
+Spinal) must have noticed the fault."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from rdm.scenarios import perching
 from rdm.scenarios.common import roll_pitch, truth_arrays
-from rdm.scenarios.mission import ARM_AT, FAULTS, MAX_TILT_DEG, run
+from rdm.scenarios.mission import (
+    ARM_AT,
+    DEFAULT_DURATION,
+    FAULTS,
+    MAX_TILT_DEG,
+    PERCHED_ARM,
+    PERCHED_FAULTS,
+    QUICK_DURATION,
+    run,
+)
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 
@@ -19,17 +31,27 @@ def runs(tmp_path_factory):
     base = tmp_path_factory.mktemp("mission")
     out = {}
     for fault in FAULTS:
-        result = run(base, duration=22.0, fault=fault)
+        if fault in PERCHED_FAULTS:  # the whole mission up to the perch; it ends held there
+            result = run(base, duration=DEFAULT_DURATION, fault=fault)
+        else:
+            result = run(base, duration=QUICK_DURATION, fault=fault, quick=True)
         out[fault] = (result.facts["mission"], truth_arrays(result.stack), result)
     return out
+
+
+@pytest.fixture(scope="module")
+def whole(tmp_path_factory):
+    result = run(tmp_path_factory.mktemp("whole"), duration=DEFAULT_DURATION)
+    return result.facts["mission"], truth_arrays(result.stack), result
 
 
 @pytest.mark.parametrize("fault", FAULTS)
 def test_every_fault_ends_safe_and_is_detected(runs, fault) -> None:
     record, a, result = runs[fault]
-    assert record["outcome"] == "landed", record
+    perched = fault in PERCHED_FAULTS
+    assert record["outcome"] == ("perched" if perched else "landed"), record
     assert record["safe"] is True
-    assert record["final_state"] == "idle"
+    assert record["final_state"] == ("armed" if perched else "idle")
     if fault != "none":
         assert record["fault_detected"] is True, record
     # independent of the record: the truth log's own tilt and heights
@@ -38,8 +60,41 @@ def test_every_fault_ends_safe_and_is_detected(runs, fault) -> None:
     tilt = np.degrees(np.abs(roll_pitch(a["quat"][flying]))).max()
     assert tilt <= MAX_TILT_DEG
     assert a["cog"][:, 2].max() > floor + 0.8  # it did take off (1 m)
-    assert abs(a["cog"][-1, 2] - floor) < 0.05
+    if perched:  # held on the ceiling: the foot in contact to the end
+        assert a["contact"][-200:].all()
+    else:
+        assert abs(a["cog"][-1, 2] - floor) < 0.05
     assert record["max_duty"] <= result.stack.onboard.config.pwm_info.max_pwm
+
+
+def test_the_whole_mission_perches_moves_the_arm_and_lands(whole) -> None:
+    record, a, result = whole
+    assert (record["outcome"], record["safe"], record["final_state"]) == ("landed", True, "idle")
+    said = [text.split(" ->") for _, text in record["operator"]]
+    assert [c for c, _ in said] == [
+        "takeoff", "goto", "goto", "joints fold", "perch", "joints arm", "joints arm back",
+        "unperch", "joints unfold", "land",
+    ]  # fmt: skip
+    assert all(r == " None" for _, r in said), said  # every command accepted
+    times = {c: t for t, text in record["operator"] for c in [text.split(" ->")[0]]}
+    t = a["t"]
+    # the ground truth: in contact from shortly after the perch until the unperch
+    perch = result.stack.onboard.flight.counts["contact"]
+    assert perch == 1
+    contact_at = t[np.argmax(a["contact"] & (t > times["perch"]))]
+    held = (t > contact_at + 0.5) & (t < times["unperch"])
+    assert held.sum() > 500 and a["contact"][held].all()
+    assert not a["contact"][(t > times["unperch"] + 2.0) & (t < times["land"])].any()
+    # the arm reached its goal while perched (the truth's joint angles)
+    at_goal = np.searchsorted(t, times["joints arm back"]) - 1
+    np.testing.assert_allclose(a["q"][at_goal, :6], PERCHED_ARM, atol=0.05)
+    # and the posture it perched in
+    at_perch = np.searchsorted(t, times["joints arm"]) - 1
+    np.testing.assert_allclose(a["q"][at_perch, :6], perching.PERCH_POSTURE, atol=0.05)
+    floor = a["cog"][np.searchsorted(t, ARM_AT) - 1, 2]
+    flying = a["cog"][:, 2] > floor + 0.05
+    assert np.degrees(np.abs(roll_pitch(a["quat"][flying]))).max() <= MAX_TILT_DEG
+    assert abs(a["cog"][-1, 2] - floor) < 0.05
 
 
 def test_the_mission_flies_where_it_is_told(runs) -> None:

@@ -29,7 +29,8 @@ from rdm.commands.arg_types import positive_finite
 USAGE = {
     "takeoff": "HEIGHT",
     "goto": "X Y Z YAW",
-    "joints": "Q1 [Q2 ...]",
+    "joints": "Q1 ... Q6 (or every joint)",
+    "perch": "[SPEED]",
     "gains": "PROFILE",
     "ee": "X Y Z",
     "mocap": "X Y Z (or --json with velocity, yaw)",
@@ -109,6 +110,8 @@ def command_args(cmd: str, params: list[str], args_json: str | None) -> dict[str
         args = {"position": v[:3], "yaw": v[3]}
     elif cmd == "joints":
         args = {"q": _numbers(cmd, params, None)}
+    elif cmd == "perch" and params:
+        args = {"speed": _numbers(cmd, params, 1)[0]}
     elif cmd in ("ee", "mocap"):
         args = {"position": _numbers(cmd, params, 3)}
     elif cmd == "gains":

@@ -81,7 +81,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--fault",
         default=None,
         help="mission only: inject one fault once the robot hovers (heartbeat-loss, "
-        "mocap-loss, uart-cut, low-battery, bad-adc-scale; docs/flying.md)",
+        "mocap-loss, uart-cut, low-battery, bad-adc-scale) or once perched "
+        "(foot-sensor-loss); docs/flying.md",
+    )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="mission only: take off, go to a point and land (no perch); 22 s by default",
     )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.add_argument(
@@ -143,6 +149,9 @@ def _run(args: argparse.Namespace) -> int:
 
     sc = SCENARIOS[args.scenario]
     duration = sc.default_duration if args.duration is None else args.duration
+    if args.quick and sc.name != "mission":
+        print("rdm sim: --quick is for the mission scenario", file=sys.stderr)
+        return 2
     if not duration > 0:
         print("rdm sim: --duration must be > 0", file=sys.stderr)
         return 2
@@ -163,6 +172,11 @@ def _run(args: argparse.Namespace) -> int:
             )
             return 2
         extra["fault"] = args.fault
+    if args.quick:
+        from rdm.scenarios.mission import QUICK_DURATION
+
+        extra["quick"] = True
+        duration = QUICK_DURATION if args.duration is None else args.duration
     # no --servo-lead: each scenario's own default (docs/scenarios.md)
     lead = nullcontext() if args.servo_lead is None else servo_lead(args.servo_lead)
     print(f"rdm sim {sc.name}: {sc.description}", file=sys.stderr)

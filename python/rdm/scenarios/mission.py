@@ -3,10 +3,19 @@
 The node sees motion capture as a real system gives it: the marker body's pose with noise and
 latency (:class:`rdm.scenarios.mocap_node.MocapSensor`), the CoG state estimated on board
 (:mod:`rdm.nodes.onboard_mocap`). The onboard node's operator layer flies it
-(:mod:`rdm.nodes.onboard_flight`): take off 1 m,
-go to a point 0.5 m away and 0.3 m up, land (touchdown, then ARM_OFF). ``fault`` injects one
-fault once the robot hovers (:data:`FAULTS`); the robot must end safe: disarmed on the floor,
-never beyond 30 deg of tilt, never a duty above ``motor_info``'s maximum.
+(:mod:`rdm.nodes.onboard_flight`), every step an operator command (the ``rdm ctl`` ones):
+
+1. take off 1 m; go to a point 0.5 m away and 0.3 m up (``quick`` ends here: land);
+2. go down to the fold height, fold into the hanging posture (``joints``, a jerk-limited
+   path);
+3. ``perch``: approach until the foot sensor reads contact, perched with perching control;
+4. move the arm and back (``joints``) while perched;
+5. ``unperch``, unfold (``joints``), ``land`` (touchdown, ARM_OFF).
+
+``fault`` injects one fault (:data:`FAULTS`): the flight faults once the robot hovers after
+take-off, ``foot-sensor-loss`` once perched and settled. The robot must end safe: disarmed on
+the floor or held perched, never beyond 30 deg of tilt in flight, never a duty above
+``motor_info``'s maximum.
 """
 
 from __future__ import annotations
@@ -16,17 +25,34 @@ from typing import Any
 
 import numpy as np
 
+from rdm.nodes.onboard_flight import FlightMode
 from rdm.sim import Metric
 
+from . import perching
 from .common import ScenarioResult, finish, roll_pitch, run_stack, sim_stack_options, truth_arrays
 from .mocap_node import MocapSensor
-from .stack import Stack, build_stack
+from .stack import DroppableLink, Stack, build_stack
 
 ARM_AT = 1.5  # s: the CAN master runs from ~1.4 s (boot delay + enumeration)
 TAKEOFF_HEIGHT = 1.0
 GOTO_OFFSET = np.array([0.5, 0.0, 0.3])
 HOLD_AT_GOAL_S = 2.0
-DEFAULT_DURATION = 30.0
+#: The fold's CoG height above the take-off point: the foot then ends about 0.1 m under the
+#: ceiling (0.5 m above the CoG), so the approach in the hanging posture is short, as in
+#: ``perching.QUICK_TIMING`` (the configured gains throughout).
+FOLD_HEIGHT = 0.95
+#: Hover after the unperch path before the unfold, s: short, as the configured gains are
+#: unstable in the hanging posture (``perching.HANGING_FLIGHT_GAINS``; docs/scenarios.md).
+UNPERCH_WAIT_S = 0.2
+#: The arm motion while perched (q1..q6 goal and back), as the perching scenario's first.
+PERCHED_ARM = perching.PERCHED_MOTION[0][1]
+#: Waits after a joint motion ends, and perched before the arm moves, s.
+JOINT_WAIT_S = 1.0
+SETTLE_S = perching.SETTLE_S
+#: How long a held perch (``foot-sensor-loss``) is watched before the run ends, s.
+HOLD_PERCHED_S = 3.0
+DEFAULT_DURATION = 75.0
+QUICK_DURATION = 22.0
 #: The faults ``--fault`` injects, once the robot hovers after take-off.
 FAULTS = (
     "none",
@@ -35,7 +61,10 @@ FAULTS = (
     "uart-cut",  # the Spinal UART is cut for 0.3 s (Spinal's 500 ms timeout does not fire)
     "low-battery",  # the battery sags to 3.4 V per cell (the node lands)
     "bad-adc-scale",  # set_adc_scale 0.07 reaches Spinal (1.75 V: rejected by its guard)
+    "foot-sensor-loss",  # the foot sensor's cable is cut once perched (the node holds)
 )
+#: Faults injected once perched (the others: once hovering after take-off).
+PERCHED_FAULTS = ("foot-sensor-loss",)
 #: The safety bounds of a run.
 MAX_TILT_DEG = 30.0
 
@@ -45,11 +74,13 @@ class MissionScript:
 
     kernel_touches = None  # reads the Spinal mirror's duties and can change its inputs
 
-    def __init__(self, fault: str) -> None:
+    def __init__(self, fault: str, quick: bool = False) -> None:
         self.fault = fault
+        self.quick = quick and fault not in PERCHED_FAULTS
         self.phase = "wait"
         self.fault_at: float | None = None
         self.goal_at: float | None = None
+        self._until: float | None = None
         self.max_duty = 0.0
         self.events: list[tuple[float, str]] = []
 
@@ -57,31 +88,84 @@ class MissionScript:
         node = stack.onboard
         duties = getattr(stack.spinal, "duties", None) or []
         self.max_duty = max([self.max_duty, *duties])
-        mode = node.flight.mode.value
+        mode = node.flight.mode
         if self.phase == "wait" and now >= ARM_AT:
-            self._say(now, f"takeoff -> {node.takeoff(TAKEOFF_HEIGHT)}")
+            self._say(now, "takeoff", node.takeoff(TAKEOFF_HEIGHT))
             self.phase = "takeoff"
-        elif self.phase == "takeoff" and mode == "hover":
-            self._inject(stack, now)
-            p = np.asarray(node.mocap[0]) if node.mocap is not None else np.zeros(3)
-            self._say(now, f"goto -> {node.goto(p + GOTO_OFFSET, 0.0)}")
+        elif self.phase == "takeoff" and mode is FlightMode.HOVER:
+            if self.fault not in PERCHED_FAULTS:
+                self._inject(stack, now)
+            self.start = np.asarray(node.flight.hold_position)
+            self._say(now, "goto", node.goto(self.start + GOTO_OFFSET, 0.0))
             self.phase = "goto"
-        elif self.phase == "goto" and mode == "hover" and node.flight.path is None:
-            self.goal_at = self.goal_at or now
-            if now - self.goal_at >= HOLD_AT_GOAL_S:
-                self._say(now, f"land -> {node.land()}")
+        elif self.phase == "goto" and self._arrived(node, now, HOLD_AT_GOAL_S):
+            if self.quick or self.fault_at is not None:
+                self._say(now, "land", node.land())
                 self.phase = "land"
+            else:
+                fold_at = self.start + np.array([GOTO_OFFSET[0], 0.0, FOLD_HEIGHT - 1.0])
+                self._say(now, "goto", node.goto(fold_at, 0.0))
+                self.phase = "down"
+        elif self.phase == "down" and self._arrived(node, now, JOINT_WAIT_S):
+            self._joints(node, now, perching.PERCH_POSTURE, "fold")
+        elif self.phase == "fold" and self._joints_done(node, now):
+            self._say(now, "perch", node.perch())
+            self.phase = "approach"
+        elif self.phase == "approach" and mode is FlightMode.PERCHED:
+            self.phase, self._until = "perched", now + SETTLE_S
+        elif self.phase == "perched" and self._until is not None and now >= self._until:
+            if self.fault in PERCHED_FAULTS:  # once settled on the perch
+                self._inject(stack, now)
+                self.phase, self._until = "hold", now + HOLD_PERCHED_S
+            else:
+                self._joints(node, now, PERCHED_ARM, "arm")
+        elif self.phase == "arm" and self._joints_done(node, now):
+            self._joints(node, now, perching.PERCH_POSTURE, "arm back")
+        elif self.phase == "arm back" and self._joints_done(node, now):
+            self._say(now, "unperch", node.unperch())
+            self.phase = "unperch"
+        elif self.phase == "unperch" and self._arrived(node, now, UNPERCH_WAIT_S):
+            self._joints(node, now, (0.0,) * 6, "unfold")
+        elif self.phase == "unfold" and self._joints_done(node, now):
+            self._say(now, "land", node.land())
+            self.phase = "land"
+        elif self.phase == "hold" and self._until is not None and now >= self._until:
+            stack.loop.stop()  # held perched after the fault: the run's end
+            self.phase = "held"
         if self.fault == "uart-cut" and self.fault_at is not None and now - self.fault_at > 0.3:
             stack.drop_uart(False)
 
-    def _say(self, now: float, text: str) -> None:
-        self.events.append((round(now, 3), text))
+    def _arrived(self, node: Any, now: float, wait: float) -> bool:
+        """In hover with no path left for ``wait`` s."""
+        if node.flight.mode is not FlightMode.HOVER or node.flight.path is not None:
+            self.goal_at = None
+            return False
+        self.goal_at = self.goal_at or now
+        if now - self.goal_at >= wait:
+            self.goal_at = None
+            return True
+        return False
+
+    def _joints(self, node: Any, now: float, q: tuple[float, ...], phase: str) -> None:
+        """``joints`` with the whole joint vector: q1..q6 and the vectoring apparatus
+        levelled (:func:`rdm.scenarios.perching.leveled`)."""
+        goal = perching.leveled(np.asarray(q, dtype=float), node.robot.n_q)
+        self._say(now, f"joints {phase}", node.move_joints(goal.tolist()))
+        trajectory = node._trajectory
+        self._until = None if trajectory is None else float(trajectory[0][-1]) + JOINT_WAIT_S
+        self.phase = phase
+
+    def _joints_done(self, node: Any, now: float) -> bool:
+        return self._until is not None and now >= self._until
+
+    def _say(self, now: float, command: str, refusal: str | None = None) -> None:
+        self.events.append((round(now, 3), f"{command} -> {refusal}"))
 
     def _inject(self, stack: Stack, now: float) -> None:
         if self.fault == "none":
             return
         self.fault_at = now
-        self._say(now, f"fault {self.fault}")
+        self.events.append((round(now, 3), f"fault {self.fault}"))
         if self.fault == "heartbeat-loss":
             stack.onboard.on_ground_lost()
         elif self.fault == "mocap-loss":
@@ -93,6 +177,10 @@ class MissionScript:
         elif self.fault == "bad-adc-scale":  # a set_adc_scale frame on the wire to Spinal
             scale = stack.onboard.session.registry.msg("std_msgs/Float32").new(data=0.07)
             stack.onboard.session.publish("set_adc_scale", scale)
+        elif self.fault == "foot-sensor-loss":  # the sensor's cable cut at the PC
+            foot = stack.onboard.foot
+            foot.link = DroppableLink(foot.link)
+            foot.link.dropped = True
 
 
 #: Which monitor or counter shows that the node noticed each fault.
@@ -102,6 +190,7 @@ _DETECTED_BY = {
     "uart-cut": ("monitors", "spinal_silent"),
     "low-battery": ("monitors", "battery_low"),
     "bad-adc-scale": ("spinal", "adc_scale_implausible"),
+    "foot-sensor-loss": ("monitors", "foot_stale"),
 }
 
 
@@ -119,10 +208,18 @@ def outcome(stack: Stack, script: MissionScript, a: dict[str, np.ndarray]) -> di
     disarmed = node.state.value == "idle" and not stack.spinal.core.armed
     on_floor = abs(float(a["cog"][-1, 2]) - floor_z) < 0.05
     max_duty_allowed = node.config.pwm_info.max_pwm
+    perched = (
+        not disarmed
+        and node.flight.mode is FlightMode.PERCHED
+        and bool(a["contact"][-1])
+        and node.status()["perching"]
+    )
     if disarmed and on_floor:
         result = "landed"
     elif disarmed:
         result = "halted"
+    elif perched:
+        result = "perched"
     else:
         result = "airborne"
     if max_tilt > MAX_TILT_DEG:
@@ -136,7 +233,7 @@ def outcome(stack: Stack, script: MissionScript, a: dict[str, np.ndarray]) -> di
     touchdowns = [e["t"] for e in node.monitors.events if e["monitor"] == "touchdown"]
     return {
         "outcome": result,
-        "safe": result == "landed"
+        "safe": result in ("landed", "perched")
         and max_tilt <= MAX_TILT_DEG
         and script.max_duty <= max_duty_allowed + 1e-9,
         "fault": script.fault,
@@ -157,12 +254,16 @@ def run(
     uart: str = "inproc",
     speed: float | None = None,
     fault: str = "none",
+    quick: bool = False,
 ) -> ScenarioResult:
+    """The mission (``quick``: take-off, go-to and land only; a perched fault perches)."""
     if fault not in FAULTS:
         raise ValueError(f"fault={fault!r}: one of {', '.join(FAULTS)}")
-    # motion capture as a real system gives it: the marker body's pose, noisy and late
-    opts = sim_stack_options(seed, uart, speed=speed, mocap=MocapSensor())
-    script = MissionScript(fault)
+    # motion capture as a real system gives it: the marker body's pose, noisy and late;
+    # the configuration of the hanging-posture experiments (perching)
+    config = perching.onboard_config()
+    opts = sim_stack_options(seed, uart, speed=speed, mocap=MocapSensor(), onboard=config)
+    script = MissionScript(fault, quick)
     stack = build_stack(f"mission-{fault}", base, opts, script)
     wall = run_stack(stack, duration)
     a = truth_arrays(stack)

@@ -49,7 +49,8 @@ SCENARIOS: dict[str, Scenario] = {
             "mission",
             "mission",
             "run",
-            "operator flight: take off 1 m, go to a point, land; --fault injects one fault",
+            "operator flight: take off, go to a point, fold, perch, move the arm, unperch, "
+            "land (--quick: take off, go to, land); --fault injects one fault",
         ),
         Scenario(
             "perching",
