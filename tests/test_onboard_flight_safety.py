@@ -250,3 +250,24 @@ def test_takeoff_is_refused_on_a_low_battery_and_nothing_arms(flight) -> None:
     flight.run(0.3)
     assert flight.node.takeoff(1.0) is None
     flight.run_until(lambda: flight.spinal.core.armed, 2.0)
+
+
+def test_land_during_a_goto_descends_from_where_the_path_is(flight) -> None:
+    """The descent starts at the path's present setpoint: neither the goal nor the hover
+    point before the go-to (a step of the setpoint at the land)."""
+    lim = FlightLimits()
+    flight.run(0.3)
+    assert flight.node.takeoff(1.0) is None
+    flight.run_until(lambda: flight.node.flight.mode.value == "hover", 15.0)
+    assert flight.node.goto([0.0, 0.0, 1.8]) is None
+    flight.run(1.5)  # mid-path
+    before = flight.log[-1][2]
+    assert 1.1 < before < 1.7
+    assert flight.node.land() is None
+    flight.run(DT * 2)
+    after = [sp for _, _, sp in flight.log[-2:]]
+    # at most one tick of the descent rate below the path's last setpoint
+    for sp in after:
+        assert before - 2 * DT * lim.land_descend_rate - 0.06 <= sp <= before + 0.06
+    flight.run_until(lambda: not flight.spinal.core.armed, 20.0)
+    assert flight.plant.z < 0.01

@@ -97,6 +97,37 @@ def test_the_node_takes_stamped_poses_and_checks_their_age() -> None:
     assert node.counts["mocap_invalid"] == 4
 
 
+def test_a_late_pose_is_predicted_to_the_control_time() -> None:
+    """A marker moving at a constant 1 m/s, each pose arriving 50 ms after it was taken: the
+    CoG state the control uses at the node's time is where the CoG is then (the filter's
+    velocity over the age), not where it was 50 ms ago (a 5 cm lag)."""
+
+    class Silent:
+        def read_available(self) -> bytes:
+            return b""
+
+        def write(self, data: bytes) -> int:
+            return len(data)
+
+    node = OnboardNode(Silent(), None, ROBOT, config=OnboardConfig())
+    cog0 = np.asarray(ROBOT.evaluate(node.present_q)["cog"], dtype=float)
+    ident = [0.0, 0.0, 0.0, 1.0]
+    latency, speed = 0.05, np.array([1.0, 0.0, 0.0])
+    for k in range(200):  # 100 Hz for 2 s
+        now = 1.0 + 0.01 * k
+        node.tick(now)
+        taken = now - latency
+        assert node.set_mocap_pose(speed * taken + [0.0, 0.0, 1.0], ident, stamp=taken)
+    p, v, _ = node._mocap_at(now)
+    truth = speed * now + [0.0, 0.0, 1.0] + cog0
+    np.testing.assert_allclose(v, speed, atol=1e-3)
+    np.testing.assert_allclose(p, truth, atol=2e-3)
+    # a state given as of now (set_mocap) is taken as it is
+    node.set_mocap([1.0, 2.0, 3.0], [1.0, 0.0, 0.0], 0.0)
+    node.tick(now + 0.02)
+    np.testing.assert_allclose(node._mocap_at(now + 0.02)[0], [1.0, 2.0, 3.0])
+
+
 def test_the_simulated_marker_pose_is_the_root_link_pose_times_the_offset() -> None:
     """rdm.scenarios.mocap_node without noise or latency: the pose handed to the node is the
     plant's root link pose composed with the marker offset (scipy's rotations as the oracle)."""

@@ -290,6 +290,9 @@ class OnboardNode:
         self.setpoint = Setpoint(np.zeros(3), np.zeros(3), 0.0)
         self._mocap: tuple[np.ndarray, np.ndarray, float | None] | None = None
         self._mocap_stamp: float | None = None
+        #: the sample is a marker pose taken at its stamp (its CoG state is then predicted
+        #: to the tick's time, :meth:`_mocap_at`); False: a state given as of now
+        self._mocap_latent = False
         self._mocap_lost_since: float | None = None
         # IMU: the newest valid quaternion / gyro of each tick's messages, converted only when
         # read (imu_euler, imu_gyro): several arrive per tick and all but the last are unused
@@ -378,6 +381,7 @@ class OnboardNode:
             return False
         self._mocap = (p, v, y)
         self._mocap_stamp = self._now
+        self._mocap_latent = False
         return True
 
     def set_mocap_pose(
@@ -403,6 +407,7 @@ class OnboardNode:
         cog, velocity, yaw = self.cog_estimator.update(st, p, quat / norm, self.present_q)
         self._mocap = (cog, velocity, yaw)
         self._mocap_stamp = st
+        self._mocap_latent = True
         return True
 
     def set_target(
@@ -543,7 +548,7 @@ class OnboardNode:
         """Descend at ``FlightLimits.land_descend_rate``, detect touchdown, disarm."""
         if self.control.perching:
             return "perched: unperch first"
-        return self.flight.request_land()
+        return self.flight.request_land(self._now)
 
     def halt(self) -> None:
         """ARM_OFF from any state (JSK ``halt``): the motors stop where the robot is."""
@@ -930,14 +935,24 @@ class OnboardNode:
             and now - self._mocap_stamp <= self.config.mocap_timeout_s + 1e-9
         )
 
+    def _mocap_at(self, now: float) -> tuple[np.ndarray, np.ndarray, float | None]:
+        """The usable mocap state at ``now``: a marker pose's CoG position predicted over the
+        sample's age with its estimated velocity (constant velocity, the filter's model:
+        motion capture's latency compensated), else the sample as given."""
+        assert self._mocap is not None and self._mocap_stamp is not None
+        p, v, y = self._mocap
+        age = now - self._mocap_stamp
+        if self._mocap_latent and age > 0.0:
+            p = p + v * age
+        return p, v, y
+
     def _supervise(self, now: float, dt: float) -> None:
         """Monitors, the operator layer's setpoint and touchdown (then ARM_OFF)."""
         flying = self.arming.flying
         p = v = None
         yaw = 0.0
         if self._mocap_usable(now):
-            assert self._mocap is not None
-            p, v, y = self._mocap
+            p, v, y = self._mocap_at(now)
             euler = self.imu_euler
             yaw = y if y is not None else (euler[2] if euler is not None else 0.0)
         self._monitor(now, flying, p)
@@ -1007,7 +1022,7 @@ class OnboardNode:
                 self.counts[f"{monitor}_hold"] += 1
                 return
         if self.flight.mode is not FlightMode.LAND:
-            self.flight.request_land()
+            self.flight.request_land(now)
             self.counts[f"{monitor}_land"] += 1
 
     def _control(self, now: float) -> None:
@@ -1111,8 +1126,7 @@ class OnboardNode:
                 self.arming.force_landing(now)
             return None
         self._mocap_lost_since = None
-        assert self._mocap is not None
-        p, v, yaw = self._mocap
+        p, v, yaw = self._mocap_at(now)
         self._rp_integration(float(p[2]))
         if yaw is None:
             if self.imu_euler is None:

@@ -278,11 +278,12 @@ class FlightSupervisor:
         """Drop a take-off that waits for arming (arming was refused)."""
         self._pending_takeoff = None
 
-    def request_land(self) -> str | None:
+    def request_land(self, now: float) -> str | None:
+        """Descend from where the setpoint is at ``now`` (a path under way stops there)."""
         if self.mode is FlightMode.GROUND and self._pending_takeoff is None:
             return "not flying"
         self._pending_takeoff = None
-        self._enter_land()
+        self._enter_land(now)
         return None
 
     def request_goto(self, target: np.ndarray, yaw: float, now: float) -> str | None:
@@ -356,9 +357,12 @@ class FlightSupervisor:
         if self.mode in (FlightMode.TAKEOFF, FlightMode.HOVER):
             self.mode, self.path = FlightMode.MANUAL, None
 
-    def _enter_land(self) -> None:
+    def _enter_land(self, now: float) -> None:
         if self.mode is not FlightMode.LAND:
             self.counts["land"] += 1
+        if self.path is not None:  # the descent starts where the path is now, not its end
+            p, _, y = self.path.at(now)
+            self._hold = (p, y)
         self.mode = FlightMode.LAND
         self.path, self._approach = None, None
         self._check_at = self._check_z = None
@@ -402,7 +406,7 @@ class FlightSupervisor:
         if self.ground_z is None and position is not None:
             self.ground_z = float(position[2])
         if force_landing and self.mode is not FlightMode.LAND:
-            self._enter_land()
+            self._enter_land(now)
         if self.mode is FlightMode.GROUND:
             self.mode = FlightMode.MANUAL
         if self._pending_takeoff is not None and position is not None:
@@ -492,11 +496,11 @@ class FlightSupervisor:
         lim = self.limits
         if position is None or velocity is None or self.ground_z is None:
             return None
-        if self._hold is None or self.path is not None:
-            # the descent starts from the lower of the setpoint and the measured z
+        if self._hold is None:
+            # from a script's setpoint: the measured xy, the lower of the setpoint and the
+            # measured z
             z0 = min(float(setpoint_position[2]), float(position[2]))
             self._hold = (np.array([position[0], position[1], z0]), yaw)
-            self.path = None
         hold, y = self._hold
         floor = self.ground_z - lim.land_undershoot
         z = max(float(hold[2]) - lim.land_descend_rate * dt, floor)
