@@ -63,12 +63,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--fault",
         default="none",
         help="mission: one fault once the robot hovers (none, heartbeat-loss, mocap-loss, "
-        "uart-cut, low-battery, replayed-command, garbage-datagram)",
+        "uart-cut, low-battery, replayed-command, garbage-datagram) or once perched "
+        "(foot-sensor-loss)",
     )
     parser.add_argument(
         "--quick",
         action="store_true",
-        help="perching: fold in 4 s and approach from 5 cm (contact ~9 s instead of ~14.8 s)",
+        help="perching: fold in 4 s and approach from 5 cm (contact ~9 s instead of ~14.8 s); "
+        "mission: take off, go to, land (no perch)",
     )
     parser.add_argument(
         "--can",
@@ -79,7 +81,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--duration",
         type=positive_finite,
         default=None,
-        help="simulated s (default hover 5, perching 17, perching --quick 11)",
+        help="simulated s (default hover 5, perching 17, perching --quick 11, mission 60, "
+        "mission --quick 24)",
     )
     parser.add_argument(
         "--scale", type=positive_finite, default=0.05, help="simulated s per wall s (default 0.05)"
@@ -124,10 +127,14 @@ def run_mission(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
-    duration = 32.0 if args.duration is None else args.duration
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        print("rdm hil mission: --duration must be > 0", file=sys.stderr)
+        return 2
     out = Path(args.out or "runs")
     try:
-        record = hil_mission.run(out, fault=args.fault, seed=args.seed, duration=duration)
+        record = hil_mission.run(
+            out, fault=args.fault, seed=args.seed, duration=args.duration, quick=args.quick
+        )
     except (OSError, RuntimeError, ValueError) as exc:
         print(f"rdm hil mission: {exc}", file=sys.stderr)
         return 2

@@ -12,8 +12,13 @@
 
 The phases follow the ground truth as an operator watching the robot would: take off at
 1.5 s; once the robot has held its height 1.5 s, the fault (if any) and the go-to; 2 s at the
-goal, land. ``fault`` is one of :data:`FAULTS`; the run's record has the fields of
-:func:`rdm.scenarios.mission.outcome` plus the onboard process's final status.
+goal; then (not ``quick``, no flight fault) ``joints`` to the hanging posture, ``perch``, once
+in contact 1.5 s ``joints`` to move the arm and back, ``unperch``, ``joints`` to unfold; land.
+Each joint motion counts as done when the joints are within 0.05 rad of their goal for 1 s.
+``fault`` is one of :data:`FAULTS` (``foot-sensor-loss`` once perched; the run then ends held
+perched); the run's record has the fields of :func:`rdm.scenarios.mission.outcome` plus the
+onboard process's final status. The onboard process runs the configuration of the
+hanging-posture experiments (``perching.onboard_config``, as a TOML file).
 """
 
 from __future__ import annotations
@@ -31,11 +36,21 @@ import numpy as np
 
 from rdm.ground.auth import load_key, write_key
 from rdm.ground.client import GroundClient
+from rdm.json_values import nulled
 
+from . import perching
 from .common import sim_stack_options, truth_arrays
-from .mission import GOTO_OFFSET, MAX_TILT_DEG, TAKEOFF_HEIGHT
+from .mission import (
+    GOTO_OFFSET,
+    HOLD_PERCHED_S,
+    MAX_TILT_DEG,
+    PERCHED_ARM,
+    PERCHED_FAULTS,
+    SETTLE_S,
+    TAKEOFF_HEIGHT,
+)
 from .mocap_node import MocapSensor
-from .stack import Stack, build_stack
+from .stack import DroppableLink, Stack, build_stack
 
 ARM_AT = 1.5
 HOLD_BEFORE_GOTO_S = 1.5
@@ -52,7 +67,24 @@ FAULTS = (
     "low-battery",  # the battery sags to 3.4 V per cell
     "replayed-command",  # the take-off datagram is sent again (must change nothing)
     "garbage-datagram",  # 1000 '[' and random bytes to the control port
+    "foot-sensor-loss",  # the foot sensor's line cut once perched (the node holds)
 )
+#: A joint motion is done once the joints are this close to the goal for ``JOINT_WAIT_S``.
+JOINT_TOL = 0.05
+JOINT_WAIT_S = 1.0
+#: After ``unperch``: the path down (0.15 m) and a short hover before the unfold, s.
+UNPERCH_S = 1.6
+#: Longest wait for the contact after ``perch``, s (then the operator lands).
+APPROACH_LIMIT_S = 15.0
+#: The onboard process's configuration file: the hanging-posture experiments' gains and
+#: perching parameters (``perching.POSITION_GAINS``, ``perching.PERCH_PARAMS``).
+ONBOARD_TOML = """[position_gains]
+k_roll = 1.0
+y_pid = [3.0, 0.5, 4.0]
+
+[perch_params]
+epsilon_z = 8.0
+"""
 
 
 def _free_udp_port() -> int:
@@ -66,9 +98,13 @@ class Operator:
 
     kernel_touches = None
 
-    def __init__(self, fault: str) -> None:
+    def __init__(self, fault: str, quick: bool = False) -> None:
         #: the ``rdm ctl`` command line and the ground client; the phases wait for them
         self.ctl: list[str] = []
+        self.quick = quick and fault not in PERCHED_FAULTS
+        self.q_goal: np.ndarray | None = None
+        self._phase_at = 0.0
+        self._until: float | None = None
         self.client: Any = None
         self.fault = fault
         self.phase = "wait"
@@ -113,7 +149,8 @@ class Operator:
             at_height = abs(float(cog[2]) - self.start_z - TAKEOFF_HEIGHT) < 0.1
             self._since = (self._since or now) if at_height else None
             if self._since is not None and now - self._since >= HOLD_BEFORE_GOTO_S:
-                self._inject(stack, now)
+                if self.fault not in PERCHED_FAULTS:
+                    self._inject(stack, now)
                 self.goal = np.asarray(cog) + GOTO_OFFSET
                 self.phase = "goto"
         elif self.phase == "goto":
@@ -124,10 +161,33 @@ class Operator:
             near = np.linalg.norm(np.asarray(cog) - self.goal) < GOAL_TOL
             self._since = (self._since or now) if near else None
             if self._since is not None and now - self._since >= HOLD_AT_GOAL_S:
-                self._ctl(now, "land")
-                self.phase = "land"
+                self._since = None
+                if self.quick or self.fault_at is not None:
+                    self._ctl(now, "land")
+                    self.phase = "land"
+                else:
+                    self._joints(stack, now, perching.PERCH_POSTURE, "fold")
             elif self.fault_at is not None and now - self.fault_at > 8.0:
                 self.phase = "land"  # the fault's reaction lands the robot
+        elif self.phase in ("fold", "arm", "arm back", "unfold"):
+            self._joint_phase(stack, now)
+        elif self.phase == "approach":
+            contact = stack.plant.ground_truth().foot_in_contact
+            self._since = (self._since or now) if contact else None
+            if self._since is not None and now - self._since >= SETTLE_S:
+                self._since = None
+                if self.fault in PERCHED_FAULTS:
+                    self._inject(stack, now)
+                    self.phase, self._until = "hold", now + HOLD_PERCHED_S
+                else:
+                    self._joints(stack, now, PERCHED_ARM, "arm")
+            elif now - self._phase_at > APPROACH_LIMIT_S:
+                self._ctl(now, "land")  # refused while perched: then unperch first
+                self.phase = "land"
+        elif self.phase == "unperch" and now - self._phase_at >= UNPERCH_S:
+            self._joints(stack, now, (0.0,) * 6, "unfold")
+        elif self.phase == "hold" and self._until is not None and now >= self._until:
+            stack.loop.stop()  # held perched after the fault: the run's end
         if self.fault == "uart-cut" and self.fault_at is not None and now - self.fault_at > 0.3:
             stack.drop_uart(False)
         armed = stack.spinal.core.armed
@@ -136,6 +196,38 @@ class Operator:
             self.done_at = now  # disarmed after the take-off: landed, halted or crashed
         if self.done_at is not None and now - self.done_at >= 1.0:
             stack.loop.stop()  # a second on the floor is enough to judge the end
+
+    def _joints(self, stack: Stack, now: float, q6: tuple[float, ...], phase: str) -> None:
+        """``rdm ctl joints`` with the whole joint vector (q1..q6, the vectoring levelled)."""
+        n_q = len(stack.plant.ground_truth().joint_positions)
+        self.q_goal = perching.leveled(np.asarray(q6, dtype=float), n_q)
+        self._ctl(now, "joints", *(f"{v:.5f}" for v in self.q_goal))
+        self.phase, self._phase_at, self._since = phase, now, None
+
+    def _joint_phase(self, stack: Stack, now: float) -> None:
+        """Wait for the joints to reach their goal, then the next command."""
+        assert self.q_goal is not None
+        if self._status("joints") == "refused":
+            self._ctl(now, "land")
+            self.phase = "land"
+            return
+        q = np.asarray(stack.plant.ground_truth().joint_positions, dtype=float)
+        reached = float(np.max(np.abs(q[:6] - self.q_goal[:6]))) < JOINT_TOL
+        self._since = (self._since or now) if reached else None
+        if self._since is None or now - self._since < JOINT_WAIT_S:
+            return
+        self._since = None
+        if self.phase == "fold":
+            self._ctl(now, "perch")
+            self.phase, self._phase_at = "approach", now
+        elif self.phase == "arm":
+            self._joints(stack, now, perching.PERCH_POSTURE, "arm back")
+        elif self.phase == "arm back":
+            self._ctl(now, "unperch")
+            self.phase, self._phase_at = "unperch", now
+        else:  # unfold
+            self._ctl(now, "land")
+            self.phase = "land"
 
     def _inject(self, stack: Stack, now: float) -> None:
         if self.fault == "none":
@@ -155,6 +247,9 @@ class Operator:
         elif self.fault == "garbage-datagram":
             self.client.send(b"[" * 1000)
             self.client.send(bytes(np.random.default_rng(0).integers(0, 256, 700, np.uint8)))
+        elif self.fault == "foot-sensor-loss":  # the sensor's line cut: nothing reaches the PC
+            stack.sensor.uart = DroppableLink(stack.sensor.uart)
+            stack.sensor.uart.dropped = True
 
     def close(self) -> None:
         for _, _, proc in self.procs:
@@ -178,18 +273,33 @@ def _read_until(proc: subprocess.Popen, prefix: str, timeout: float) -> str:
     raise RuntimeError(f"rdm onboard did not print {prefix!r}")
 
 
-def run(base: str | Path, fault: str = "none", seed: int = 0, duration: float = 24.0) -> dict:
+#: Simulated seconds of the whole mission and of ``quick`` (take-off, go-to, land).
+DURATION = 60.0
+QUICK_DURATION = 24.0
+
+
+def run(
+    base: str | Path,
+    fault: str = "none",
+    seed: int = 0,
+    duration: float | None = None,
+    quick: bool = False,
+) -> dict:
     """One process-level mission; returns its record (see the module doc)."""
     if fault not in FAULTS:
         raise ValueError(f"fault={fault!r}: one of {', '.join(FAULTS)}")
+    if duration is None:
+        duration = QUICK_DURATION if quick and fault not in PERCHED_FAULTS else DURATION
     opts = sim_stack_options(
         seed, "external", speed=1.0, mocap=MocapSensor(), lockstep_kernel=False
     )
     python = [sys.executable, "-m", "rdm.cli"]
-    operator = Operator(fault)
+    operator = Operator(fault, quick)
     stack = build_stack(f"hil-mission-{fault}", base, opts, operator)
     key_path = stack.folder.root / "ground.key"
     write_key(key_path)
+    config_path = stack.folder.root / "onboard.toml"
+    config_path.write_text(ONBOARD_TOML)
     port = _free_udp_port()
     to = f"udp:127.0.0.1:{port}"
     ctl = [*python, "ctl", "--to", to, "--key", str(key_path)]
@@ -199,6 +309,8 @@ def run(base: str | Path, fault: str = "none", seed: int = 0, duration: float = 
         [
             *python,
             "onboard",
+            "--config",
+            str(config_path),
             "--uart",
             f"serial:{ext.uart_path}",
             "--foot-sensor",
@@ -237,7 +349,12 @@ def run(base: str | Path, fault: str = "none", seed: int = 0, duration: float = 
         client.close()
         stack.close()
     final = _last_json(out)
-    return _record(stack, operator, final, wall, err)
+    record = _record(stack, operator, final, wall, err)
+    # the run folder's summary is the record; then the folder is complete
+    summary = json.dumps(nulled(record), indent=1, allow_nan=False)
+    stack.folder.summary_json.write_text(summary + "\n", encoding="utf-8")
+    stack.folder.mark_complete()
+    return record
 
 
 def _last_json(out: str) -> dict[str, Any]:
@@ -262,12 +379,20 @@ def _record(stack: Stack, op: Operator, final: dict, wall: float, err: str) -> d
     disarmed = final.get("flight_state") == "idle" and not stack.spinal.core.armed
     on_floor = abs(float(a["cog"][-1, 2]) - floor_z) < 0.05
     took_off = bool(airborne.any())
+    perched = (
+        not disarmed
+        and final.get("flight_mode") == "perched"
+        and final.get("perching") is True
+        and bool(a["contact"][-1])
+    )
     if max_tilt > MAX_TILT_DEG:
         outcome = "crashed"
     elif disarmed and on_floor and took_off:
         outcome = "landed"
     elif disarmed:
         outcome = "halted"
+    elif perched:
+        outcome = "perched"
     else:
         outcome = "airborne"
     monitors = final.get("monitors", {}).get("counts", {})
@@ -280,10 +405,11 @@ def _record(stack: Stack, op: Operator, final: dict, wall: float, err: str) -> d
         "low-battery": bool(monitors.get("battery_low")),
         "replayed-command": "replayed" in json.dumps(link) or "stale" in json.dumps(link),
         "garbage-datagram": "too_deep" in json.dumps(link) or "malformed" in json.dumps(link),
+        "foot-sensor-loss": bool(monitors.get("foot_stale")),
     }[op.fault]
     return {
         "outcome": outcome,
-        "safe": outcome == "landed" and op.max_duty <= 0.9375 + 1e-9,
+        "safe": outcome in ("landed", "perched") and op.max_duty <= 0.9375 + 1e-9,
         "fault": op.fault,
         "fault_detected": detected,
         "final_state": final.get("flight_state"),
