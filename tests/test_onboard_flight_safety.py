@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 from onboard_rig import Rig, SpinalCore, VerticalPlant
 
+from rdm.control.attitude import AttitudeController
 from rdm.model import Robot
 from rdm.nodes.onboard import OnboardNode
 from rdm.nodes.onboard_config import OnboardConfig
 from rdm.nodes.onboard_flight import FlightLimits
+from rdm.protocol.rosserial.client import ClientSession
 
 pytestmark = pytest.mark.timeout(300)
 ROBOT = Robot.default()
@@ -271,3 +273,29 @@ def test_land_during_a_goto_descends_from_where_the_path_is(flight) -> None:
         assert before - 2 * DT * lim.land_descend_rate - 0.06 <= sp <= before + 0.06
     flight.run_until(lambda: not flight.spinal.core.armed, 20.0)
     assert flight.plant.z < 0.01
+
+
+def test_a_spinal_reset_in_flight_is_noticed_and_never_rearms_by_itself(flight) -> None:
+    """Spinal reboots in hover (silent 1.5 s while it boots, then a fresh rosserial client and
+    a disarmed attitude core): the node notices within 100 ms, lands (the motors stopped: the
+    robot falls), ends idle on the ground and sends no ARM_ON of its own; after the new
+    handshake an operator's take-off flies again."""
+    flight.hover_at(1.0)
+    t_reset = flight.t
+    flight.rig.silent = True
+    flight.spinal.core = AttitudeController(200.0)
+    flight.rig.spinal = ClientSession.from_layout()
+    flight.run(0.15)
+    assert flight.node.monitors.counts["spinal_silent"] == 1
+    assert flight.node.flight.mode.value == "land"
+    flight.run(1.35)
+    flight.rig.silent = False
+    flight.run_until(lambda: flight.rig.spinal.configured, 10.0)
+    flight.run(2.0)
+    assert flight.plant.z == 0.0 and not flight.spinal.core.armed
+    assert (flight.node.state.value, flight.node.flight.mode.value) == ("idle", "ground")
+    arm_on = [t for t, m in flight.rig.by_topic["flight_config_cmd"] if m.cmd == 0 and t > t_reset]
+    assert arm_on == []
+    assert flight.node.takeoff(1.0) is None
+    flight.run_until(lambda: flight.node.flight.mode.value == "hover", 20.0)
+    assert abs(flight.plant.z - 1.0) < 0.05
