@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rdm.control import attitude
 from rdm.link.can import open_can
 from rdm.nodes.can_master import CanMaster, MasterState
 from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
@@ -43,8 +44,6 @@ from rdm.sim import (
     open_inproc_uart,
     open_tapped_pty,
 )
-
-attitude = pytest.importorskip("rdm.control.attitude")
 
 CHANNEL = "hil_chain"
 RUNNING_AT = 1.401  # boot_delay 0, 4 Neurons: running at 1400 ms (docs/canbus.md)

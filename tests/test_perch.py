@@ -5,16 +5,15 @@ the paper's QP; constraint checks; failure handling."""
 from __future__ import annotations
 
 import dataclasses
+import sys
 
+import clarabel
 import numpy as np
+import osqp
 import pytest
+from scipy import sparse
 
-pytest.importorskip("rdm._rdm")
-clarabel = pytest.importorskip("clarabel")
-osqp = pytest.importorskip("osqp")
-from scipy import sparse  # noqa: E402
-
-from rdm.control.perch import PerchController, PerchError, PerchQp  # noqa: E402
+from rdm.control.perch import PerchController, PerchError, PerchQp
 
 G = 9.80665
 EPS_Z, MU_X, MU_Y, MU_Z, H_X, H_Y, DELTA, LMAX = 1.0, 0.9, 0.9, 0.5, 0.04, 0.07, 5.0, 30.0
@@ -227,6 +226,29 @@ def test_rust_qp_matches_clarabel_osqp_and_paper_qp_on_random_instances(solver: 
     assert osqp_stalled <= len(instances) // 100, f"OSQP stalled on {osqp_stalled} instances"
     assert qp.counters()["solved"] == len(instances)
     assert qp.counters()["fallback"] == 0
+
+
+@pytest.mark.parametrize(("mu_x", "mu_y"), [(0.9, 0.3), (0.3, 0.9)])
+def test_friction_coefficients_per_axis_match_the_paper_qp(monkeypatch, mu_x, mu_y) -> None:
+    """Eq. (40) with mu_x != mu_y: each axis's force against its own coefficient (a mu_x in
+    the y rows passes every test with equal coefficients), against the paper-form QP."""
+    module = sys.modules[__name__]
+    monkeypatch.setattr(module, "MU_X", mu_x)
+    monkeypatch.setattr(module, "MU_Y", mu_y)
+    qp = PerchQp(mu_x=mu_x, mu_y=mu_y)
+    worst = 0.0
+    binding = 0
+    for inst in feasible_instances(300, seed=4):
+        res = solve_rust(qp, inst)
+        assert res.status == "solved"
+        check_constraints(inst, res, tol=1e-8)
+        worst = max(worst, float(np.max(np.abs(paper_qp_osqp(inst) - res.thrust))))
+        fx, fy = inst["foot_wrench"][:2]
+        # the smaller coefficient's axis sets the normal force: the case the swap breaks
+        small = abs(fy) / mu_y if mu_y < mu_x else abs(fx) / mu_x
+        binding += bool(abs(res.foot_wrench[0] - small) < 1e-6)
+    assert worst < THRUST_ATOL
+    assert binding >= 30, binding  # enough instances where eq. (40) on that axis binds
 
 
 def test_solver_choice_is_a_parameter_and_bad_names_are_refused() -> None:

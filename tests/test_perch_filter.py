@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-pytest.importorskip("rdm._rdm")
 from scipy import signal
 
 from rdm.control.perch import PerchError, WrenchFilter

@@ -58,17 +58,21 @@ def test_wires_enumerate_arm_and_lift_off(takeoff):
 
 def test_pwm_on_can_equals_rotor_duty(takeoff):
     """The ESC duty that drives the plant is what crossed the CAN bus (independent decode of
-    the candump): the last PWM frame's value per Neuron, (value + 1000) / 2000."""
+    the candump): the last MOTOR frame (index 0 carries slaves 1-6, jsk-wire-protocols.md),
+    per Neuron the value of its slave id, duty = (value + 1000) / 2000."""
     st, _ = takeoff
-    last: dict[int, float] = {}
+    last: dict = {}
     for r in decode_candump(st.folder.candump):
         assert r["ok"], r
-        if r["kind"] == "pwm":
+        if r["kind"] == "pwm" and r["frame_index"] == 0:
             last = r
     assert last, "no PWM frame on the bus"
-    duties = np.array([n.esc.duty for n in st.neurons])
-    assert np.all(duties > 0.55)  # flying
-    assert np.all(np.isfinite(duties))
+    by_slave = {n.slave_id: n.esc.duty for n in st.neurons}
+    assert sorted(by_slave) == [1, 2, 3, 4]
+    for slave, duty in by_slave.items():
+        assert duty == pytest.approx((last["values"][slave - 1] + 1000) / 2000, abs=1e-12)
+    assert min(by_slave.values()) > 0.55  # flying
+    assert len(set(last["values"][:4])) > 1  # the rotors differ: the slot order matters
 
 
 def test_same_seed_same_bytes(takeoff):
