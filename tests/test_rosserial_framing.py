@@ -59,6 +59,19 @@ def test_checksums_match_the_independent_formula(topic_id, payload):
     assert total % 256 == 255
 
 
+def test_a_topic_id_above_255_is_in_the_checksum_byte_for_byte():
+    """Topic 0x0123, payload 01, written out by hand: length 01 00, its checksum
+    255 - 1 = fe, the message checksum 255 - (0x23 + 0x01 + 0x01) = da. The same frame with
+    the topic's high byte changed (0x02) fails the checksum."""
+    frame = bytes.fromhex("fffe 0100 fe 2301 01 da")
+    assert encode_frame(0x0123, b"\x01") == frame
+    parser = FrameParser(512, rescan=False)
+    assert [(f.topic_id, f.payload) for f in frames(parser.feed(frame))] == [(0x0123, b"\x01")]
+    wrong_high = bytes.fromhex("fffe 0100 fe 2302 01 da")
+    events = FrameParser(512, rescan=False).feed(wrong_high)
+    assert not frames(events) and bad(events)[0].reason == "message_checksum"
+
+
 def test_encode_frame_limits():
     with pytest.raises(FrameError, match="topic_id"):
         encode_frame(70000, b"")
