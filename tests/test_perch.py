@@ -401,6 +401,22 @@ def test_non_finite_inputs_give_safe_command_and_are_counted(field: str, solver:
     assert qp.counters()["non_finite_input"] == 1
 
 
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("mass", [0.0, -1.0, -1e300])
+def test_a_mass_not_above_zero_gives_the_safe_command(mass: float, solver: str) -> None:
+    """Eq. (47) with m <= 0 would raise the thrust ceiling above the rotors' limit: the
+    input is refused (status invalid_input, counted), never reported as solved."""
+    inst = feasible_instances(1, seed=6)[0]
+    qp = PerchQp(solver=solver)
+    qp.solve(**inst)
+    res = qp.solve(**{**inst, "mass": mass})
+    assert res.status == "invalid_input"
+    assert not res.ok
+    assert np.all(res.thrust >= 0) and np.all(res.thrust <= LMAX)
+    assert np.all(np.isfinite(res.thrust_max))
+    assert qp.counters()["invalid_input"] == 1
+
+
 def test_singular_allocation_is_reported() -> None:
     inst = feasible_instances(1, seed=7)[0]
     inst["allocation"] = np.zeros((4, 4))

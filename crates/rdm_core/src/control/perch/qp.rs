@@ -296,6 +296,16 @@ impl PerchQp {
             };
             return self.failure(PerchStatus::NonFiniteInput, &previous, None, input, 0);
         }
+        if input.mass <= 0.0 {
+            // eq. (47) with m <= 0 would lift the thrust ceiling: no physical robot
+            return self.failure(
+                PerchStatus::InvalidInput,
+                &input.previous_thrust,
+                None,
+                input,
+                0,
+            );
+        }
         let thrust_max = match self.thrust_max(input) {
             Some(m) => m,
             None => {

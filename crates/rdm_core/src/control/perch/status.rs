@@ -25,6 +25,8 @@ pub enum PerchStatus {
     NonFiniteInput,
     /// `Q̄(q)` of eq. (47) is singular, or every controlled row of `Q̄_perch` is zero.
     SingularAllocation,
+    /// An input outside its physical range (a mass not above 0): the safe command.
+    InvalidInput,
     /// Eq. (49) was infeasible only because of the rate limit of eq. (48) (our improvement,
     /// `PerchParams::relax_rate_limit`): the problem without it was solved and the thrust
     /// moves toward that solution by at most `δλ_perch` (e.g. a press `ε_z` larger than one
@@ -34,7 +36,7 @@ pub enum PerchStatus {
 
 impl PerchStatus {
     /// All statuses in counter order.
-    pub const ALL: [PerchStatus; 8] = [
+    pub const ALL: [PerchStatus; 9] = [
         PerchStatus::Solved,
         PerchStatus::AlmostSolved,
         PerchStatus::Infeasible,
@@ -43,6 +45,7 @@ impl PerchStatus {
         PerchStatus::NonFiniteInput,
         PerchStatus::SingularAllocation,
         PerchStatus::RateLimited,
+        PerchStatus::InvalidInput,
     ];
 
     /// True when the thrust comes from the QP solution rather than the safe command.
@@ -64,6 +67,7 @@ impl PerchStatus {
             PerchStatus::NonFiniteInput => "non_finite_input",
             PerchStatus::SingularAllocation => "singular_allocation",
             PerchStatus::RateLimited => "rate_limited",
+            PerchStatus::InvalidInput => "invalid_input",
         }
     }
 
@@ -77,6 +81,7 @@ impl PerchStatus {
             PerchStatus::NonFiniteInput => 5,
             PerchStatus::SingularAllocation => 6,
             PerchStatus::RateLimited => 7,
+            PerchStatus::InvalidInput => 8,
         }
     }
 }
@@ -84,7 +89,7 @@ impl PerchStatus {
 /// How many ticks ended in each [`PerchStatus`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PerchCounters {
-    counts: [u64; 8],
+    counts: [u64; 9],
     fallbacks: u64,
 }
 
