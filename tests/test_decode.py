@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from rdm.cli import main
@@ -164,6 +165,25 @@ def test_missing_other_decoders_give_a_clear_error(tmp_path, capsys, monkeypatch
     lep.write_bytes(b"\x10\x02")
     assert main(["decode", "--format", "leptrino", str(lep)]) == 2
     assert "rdm.protocol.leptrino.decode_leptrino" in capsys.readouterr().err
+
+
+def test_leptrino_garbage_between_frames_is_counted(tmp_path, capsys):
+    """Bytes outside any frame are reported (one bad record with their number), not dropped
+    silently: 300 random bytes without a DLE (0x10), a frame, 200 more."""
+    from rdm.protocol import leptrino as lp
+
+    rng = np.random.default_rng(3)
+    junk = [bytes(b for b in rng.integers(0, 256, n, np.uint8).tobytes() if b != 0x10)
+            for n in (300, 200)]  # fmt: skip
+    frame = lp.encode_response(lp.ForceData((1, 2, 3, 4, 5, 6), 25, 0))
+    lep = tmp_path / "ft.lep"
+    lep.write_bytes(junk[0] + frame + junk[1])
+    assert main(["decode", "--json", str(lep)]) == 0
+    out, err = capsys.readouterr()
+    records = [json.loads(line) for line in out.splitlines()]
+    assert [r["ok"] for r in records] == [True, False]
+    assert records[1]["discarded_bytes"] == len(junk[0]) + len(junk[1])
+    assert "1 records decoded, 1 bad {'discarded': 1}" in err
 
 
 def test_cli_module_entry_point(tmp_path):

@@ -114,7 +114,20 @@ def _decode_candump(path: Path, args: argparse.Namespace) -> Records:
 
 
 def _decode_leptrino(path: Path, args: argparse.Namespace) -> Records:
-    return _lazy("rdm.protocol.leptrino", "decode_leptrino")(path.read_bytes())
+    """The frames, then one bad record ``discarded: N bytes outside any frame`` when the
+    parser skipped bytes that belong to no frame (garbage between frames is counted)."""
+    decode = _lazy("rdm.protocol.leptrino", "decode_leptrino")
+    parser = _lazy("rdm.protocol.leptrino", "LeptrinoStreamParser")()
+    yield from decode(path.read_bytes(), parser=parser)
+    if parser.discarded_bytes:
+        n = parser.discarded_bytes
+        yield {
+            "offset": None,
+            "kind": None,
+            "ok": False,
+            "error": f"discarded: {n} bytes outside any frame",
+            "discarded_bytes": n,
+        }
 
 
 FORMATS: dict[str, CaptureFormat] = {
