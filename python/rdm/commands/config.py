@@ -6,6 +6,7 @@ Examples::
     rdm config example > robot.toml      # the shipped example: every field at its default
     rdm config check robot.toml          # the resolved configuration as JSON, exit 0
     rdm config check robot.toml --robot rcm
+    rdm config deploy deploy/            # the systemd unit and udev rules to edit and install
 
 ``check`` reads the file as ``rdm onboard --config FILE`` does, resolves it for the robot
 (the servo map from the robot's CAN wiring when the file gives none) and prints one JSON
@@ -20,6 +21,7 @@ import argparse
 import dataclasses
 import json
 import sys
+from pathlib import Path
 
 from rdm.json_values import non_finite_paths
 
@@ -33,6 +35,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     check.add_argument("file", help="the TOML file (rdm onboard --config FILE)")
     check.add_argument("--robot", default="rdm", help="shipped robot: rdm (default) or rcm")
     sub.add_parser("example", help="print the shipped example file (every default)")
+    deploy = sub.add_parser(
+        "deploy",
+        help="write the shipped systemd unit and udev rules into DIR (docs/onboard.md "
+        '"Deploying on the robot"); existing files are never overwritten',
+    )
+    deploy.add_argument("dir", help="the folder to write them into (made if missing)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -42,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "example":
         sys.stdout.write(EXAMPLE_FILE.read_text(encoding="utf-8"))
         return 0
+    if args.action == "deploy":
+        return _deploy(Path(args.dir))
     from rdm.model import Robot
     from rdm.nodes.onboard_config_file import (
         config_json,
@@ -67,4 +77,30 @@ def run(args: argparse.Namespace) -> int:
         print(f"rdm config: non-finite values at {', '.join(bad)}", file=sys.stderr)
         return 2
     print(json.dumps(out, indent=2, allow_nan=False))
+    return 0
+
+
+#: The shipped deployment files (``python/rdm/data/deploy``).
+DEPLOY_FILES = ("rdm-onboard.service", "60-rdm-serial.rules")
+
+
+def _deploy(folder: Path) -> int:
+    """Copy the deployment files into ``folder``; exit 2 naming the file when one exists or
+    cannot be written (nothing is overwritten)."""
+    source = Path(__file__).resolve().parent.parent / "data" / "deploy"
+    targets = [folder / name for name in DEPLOY_FILES]
+    for target in targets:
+        if target.exists() or target.is_symlink():
+            print(f"rdm config deploy: {target} exists; not overwritten", file=sys.stderr)
+            return 2
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for name, target in zip(DEPLOY_FILES, targets, strict=True):
+            with open(target, "x", encoding="utf-8") as out:
+                out.write((source / name).read_text(encoding="utf-8"))
+    except OSError as exc:
+        print(f"rdm config deploy: {exc.filename or folder}: {exc.strerror}", file=sys.stderr)
+        return 2
+    for target in targets:
+        print(target)
     return 0
