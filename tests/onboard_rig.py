@@ -225,6 +225,44 @@ class SpinalCore:
                     self.rig.publish("flight_config_ack", ack)
 
 
+class FlightRig:
+    """:class:`Rig` + :class:`SpinalCore` + a vertical ``plant`` in simulated time (25 ms
+    ticks): the node gets the plant's z as mocap unless ``mocap`` is False; ``log`` keeps
+    (t, z, setpoint z) per tick. Subclasses extend :meth:`feed`."""
+
+    DT = 0.025
+
+    def __init__(self, node_factory, plant: VerticalPlant, foot: bool = False) -> None:
+        self.rig = Rig(node_factory, foot=foot)
+        self.plant = plant
+        self.spinal = SpinalCore(self.rig, plant)
+        self.node = self.rig.node
+        self.rig.servo_q = np.zeros(self.node.robot.n_q)
+        self.mocap = True
+        self.t = 0.0
+        self.log: list[tuple[float, float, float]] = []
+
+    def feed(self, t: float) -> None:
+        if self.mocap:
+            self.node.set_mocap([0.0, 0.0, self.plant.z], [0.0, 0.0, self.plant.vz], 0.0)
+        sp = self.node._flight_setpoint or self.node.setpoint
+        self.log.append((t, self.plant.z, float(sp.position[2])))
+
+    def run(self, seconds: float) -> None:
+        self.t = self.rig.run(self.t, self.t + seconds, each=self.feed)
+
+    def run_until(self, condition, limit: float) -> float:
+        """Ticks until ``condition()``; the time it took (fails past ``limit``)."""
+        start = self.t
+        while not condition():
+            assert self.t - start < limit, f"not within {limit} s"
+            self.run(self.DT)
+        return self.t - start
+
+    def close(self) -> None:
+        self.rig.close()
+
+
 def servo_readings(rng, n: int, count: int) -> list[list[tuple[int, int]]]:
     """``count`` random ``servo/states`` readings for ``n`` servos as (index, angle) lists:
     full, partial, with an unknown index (99) or with a joint twice."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from onboard_rig import Rig, SpinalCore, VerticalPlant
+from onboard_rig import FlightRig, VerticalPlant
 
 from rdm.control.attitude import AttitudeController
 from rdm.model import Robot
@@ -24,37 +24,13 @@ DT = 0.025
 FORCE_LANDING_THRUST = 6.5
 
 
-class Flight:
-    """Rig + Spinal core + plant; the node gets the plant's z as mocap unless ``mocap`` is
-    False."""
+class Flight(FlightRig):
+    """The rig with the default onboard configuration and a point mass on the floor."""
 
     def __init__(self, config: OnboardConfig | None = None, z0: float = 0.0) -> None:
-        self.rig = Rig(lambda u, f: OnboardNode(u, f, ROBOT, config=config or OnboardConfig()))
-        self.plant = VerticalPlant(float(ROBOT.mass), z0)
-        self.spinal = SpinalCore(self.rig, self.plant)
-        self.rig.servo_q = np.zeros(ROBOT.n_q)
-        self.node = self.rig.node
-        self.mocap = True
-        self.t = 0.0
-        self.log: list[tuple[float, float, float]] = []  # t, z, setpoint z
-
-    def feed(self, t: float) -> None:
-        if self.mocap:
-            p = [0.0, 0.0, self.plant.z]
-            self.node.set_mocap(p, [0.0, 0.0, self.plant.vz], 0.0)
-        sp = self.node._flight_setpoint or self.node.setpoint
-        self.log.append((t, self.plant.z, float(sp.position[2])))
-
-    def run(self, seconds: float) -> None:
-        self.t = self.rig.run(self.t, self.t + seconds, each=self.feed)
-
-    def run_until(self, condition, limit: float) -> float:
-        """Ticks until ``condition()``; the time it took (fails past ``limit``)."""
-        start = self.t
-        while not condition():
-            assert self.t - start < limit, f"not within {limit} s"
-            self.run(DT)
-        return self.t - start
+        cfg = config or OnboardConfig()
+        node = lambda u, f: OnboardNode(u, f, ROBOT, config=cfg)  # noqa: E731
+        super().__init__(node, VerticalPlant(float(ROBOT.mass), z0))
 
     def commands_between(self, t0: float, t1: float) -> list[float]:
         return [t for t, _ in self.rig.by_topic["four_axes/command"] if t0 <= t < t1]
@@ -67,9 +43,6 @@ class Flight:
         self.run_until(lambda: self.spinal.core.armed, 2.0)
         self.run_until(lambda: abs(self.plant.z - z) < 0.05 and abs(self.plant.vz) < 0.05, 15)
         self.run(1.0)
-
-    def close(self) -> None:
-        self.rig.close()
 
 
 @pytest.fixture

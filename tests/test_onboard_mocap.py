@@ -76,14 +76,17 @@ def test_the_velocity_filter_reaches_the_steady_state_kalman_gain() -> None:
     assert np.array_equal(vel, np.zeros(3)) and est.counts["velocity_restarted"] == 1
 
 
+class Silent:
+    """A UART end that reads nothing and takes every write."""
+
+    def read_available(self) -> bytes:
+        return b""
+
+    def write(self, data: bytes) -> int:
+        return len(data)
+
+
 def test_the_node_takes_stamped_poses_and_checks_their_age() -> None:
-    class Silent:
-        def read_available(self) -> bytes:
-            return b""
-
-        def write(self, data: bytes) -> int:
-            return len(data)
-
     node = OnboardNode(Silent(), None, ROBOT, config=OnboardConfig())
     node.tick(1.0)
     ident = [0.0, 0.0, 0.0, 1.0]
@@ -101,13 +104,6 @@ def test_a_late_pose_is_predicted_to_the_control_time() -> None:
     """A marker moving at a constant 1 m/s, each pose arriving 50 ms after it was taken: the
     CoG state the control uses at the node's time is where the CoG is then (the filter's
     velocity over the age), not where it was 50 ms ago (a 5 cm lag)."""
-
-    class Silent:
-        def read_available(self) -> bytes:
-            return b""
-
-        def write(self, data: bytes) -> int:
-            return len(data)
 
     node = OnboardNode(Silent(), None, ROBOT, config=OnboardConfig())
     cog0 = np.asarray(ROBOT.evaluate(node.present_q)["cog"], dtype=float)

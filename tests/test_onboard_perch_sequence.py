@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from onboard_rig import G, Rig, SpinalCore, VerticalPlant
+from onboard_rig import FlightRig, G, VerticalPlant
 
 from rdm.model import Robot
 from rdm.nodes.onboard import OnboardNode
@@ -40,37 +40,22 @@ class CeilingPlant(VerticalPlant):
             self.push = max(thrust - self.mass * G, 0.0)
 
 
-class Perch:
+class Perch(FlightRig):
+    """The rig with a ceiling and a foot sensor that reads the push on it."""
+
     def __init__(self, ceiling: float | None = CEILING, foot: bool = True, **flight) -> None:
         config = OnboardConfig(flight=FlightLimits(**flight))
-        self.rig = Rig(lambda u, f: OnboardNode(u, f, ROBOT, config=config), foot=foot)
-        self.plant = CeilingPlant(float(ROBOT.mass), ceiling)
-        self.spinal = SpinalCore(self.rig, self.plant)
-        self.rig.servo_q = np.zeros(ROBOT.n_q)
-        self.node = self.rig.node
-        self.t = 0.0
-        self.log: list[tuple[float, float, float]] = []  # t, z, setpoint z
+        node = lambda u, f: OnboardNode(u, f, ROBOT, config=config)  # noqa: E731
+        super().__init__(node, CeilingPlant(float(ROBOT.mass), ceiling), foot=foot)
         self.foot_alive = True
 
     def feed(self, t: float) -> None:
-        self.node.set_mocap([0.0, 0.0, self.plant.z], [0.0, 0.0, self.plant.vz], 0.0)
         if self.foot_alive:
             w = np.array([0.0, 0.0, self.plant.push, 0.0, 0.0, 0.0])
             self.rig.foot_raw = tuple(int(v) for v in np.round(w * 10000 / RATED))
         else:
             self.rig.foot_raw = None
-        sp = self.node._flight_setpoint or self.node.setpoint
-        self.log.append((t, self.plant.z, float(sp.position[2])))
-
-    def run(self, seconds: float) -> None:
-        self.t = self.rig.run(self.t, self.t + seconds, each=self.feed)
-
-    def run_until(self, condition, limit: float) -> float:
-        start = self.t
-        while not condition():
-            assert self.t - start < limit, f"not within {limit} s"
-            self.run(DT)
-        return self.t - start
+        super().feed(t)
 
     @property
     def mode(self) -> str:
