@@ -81,5 +81,6 @@ def test_ground_link_faults_end_safe_and_are_detected(tmp_path, fault) -> None:
         assert link["rejected"].get("stale", 0) + link["rejected"].get("replayed", 0) == 1
     elif fault == "garbage-datagram":
         assert link["rejected"].get("too_deep") == 1 and link["rejected"].get("malformed") == 1
-    else:
-        assert record["monitors"]["ground_lost"] == 1
+    else:  # lost at least once (a go-to datagram after the loss restores it for a while)
+        assert record["monitors"]["ground_lost"] >= 1
+        assert record["ground_link"]["heartbeat"]["trips"] == record["monitors"]["ground_lost"]
