@@ -227,23 +227,29 @@ def test_takeoff_is_refused_on_a_low_battery_and_nothing_arms(flight) -> None:
     flight.run_until(lambda: flight.spinal.core.armed, 2.0)
 
 
-def test_land_during_a_goto_descends_from_where_the_path_is(flight) -> None:
-    """The descent starts at the path's present setpoint: neither the goal nor the hover
-    point before the go-to (a step of the setpoint at the land)."""
+def test_land_during_a_goto_brakes_from_where_the_path_is_then_descends(flight) -> None:
+    """A land asked mid-path: the setpoint neither jumps (to the goal, or back to the hover
+    point before the go-to) nor stops dead (a step of deceleration): it brakes within the
+    path's acceleration limit (finite differences of the setpoint), then descends."""
     lim = FlightLimits()
     flight.run(0.3)
     assert flight.node.takeoff(1.0) is None
     flight.run_until(lambda: flight.node.flight.mode.value == "hover", 15.0)
     assert flight.node.goto([0.0, 0.0, 1.8]) is None
-    flight.run(1.5)  # mid-path
-    before = flight.log[-1][2]
-    assert 1.1 < before < 1.7
+    flight.run(1.5)  # mid-path, climbing at the velocity limit
+    t_land = flight.log[-1][0]
     assert flight.node.land() is None
-    flight.run(DT * 2)
-    after = [sp for _, _, sp in flight.log[-2:]]
-    # at most one tick of the descent rate below the path's last setpoint
-    for sp in after:
-        assert before - 2 * DT * lim.land_descend_rate - 0.06 <= sp <= before + 0.06
+    flight.run(3.0)
+    ts, zs = np.array([(t, sp) for t, _, sp in flight.log if t >= t_land - 3 * DT]).T
+    v = np.diff(zs) / np.diff(ts)
+    a = np.diff(v) / np.diff(ts[1:])
+    assert v[0] > 0.9 * lim.max_velocity[2]  # it was moving
+    assert 1.1 < zs[0] < 1.7
+    stopped = int(np.argmax(v <= 1e-9))  # the first step with no more climb
+    assert stopped > 0 and ts[stopped] - t_land < 1.0  # the stop is short at these limits
+    assert np.max(np.abs(a[: stopped - 1])) <= lim.max_acceleration[2] + 0.05
+    assert np.max(np.abs(v)) <= lim.max_velocity[2] + 1e-6  # no jump: to the goal or back
+    assert v[-1] == pytest.approx(-lim.land_descend_rate)  # then the descent
     flight.run_until(lambda: not flight.spinal.core.armed, 20.0)
     assert flight.plant.z < 0.01
 

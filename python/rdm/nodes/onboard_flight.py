@@ -48,7 +48,7 @@ from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
-from ruckig import InputParameter, Result, Ruckig, Trajectory
+from ruckig import ControlInterface, InputParameter, Result, Ruckig, Trajectory
 
 
 class FlightMode(enum.Enum):
@@ -197,10 +197,21 @@ class _Path:
         samples = [trajectory.at_time(float(t)) for t in self.times]
         self.pos = np.array([s[0] for s in samples])
         self.vel = np.array([s[1] for s in samples])
+        self.acc = np.array([s[2] for s in samples])
 
     @property
     def end(self) -> float:
         return self.start + self.duration
+
+    def state(self, now: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position, velocity and acceleration (x, y, z, yaw) at ``now``, interpolated."""
+        t = min(max(now - self.start, 0.0), self.duration)
+        i = min(int(np.searchsorted(self.times, t, side="right")), len(self.times) - 1)
+        t0, t1 = self.times[i - 1], self.times[i]
+        w = 0.0 if t1 <= t0 else (t - t0) / (t1 - t0)
+        return tuple(  # type: ignore[return-value]
+            (1.0 - w) * a[i - 1] + w * a[i] for a in (self.pos, self.vel, self.acc)
+        )
 
     def at(self, now: float) -> tuple[np.ndarray, np.ndarray, float]:
         t = min(max(now - self.start, 0.0), self.duration)
@@ -241,6 +252,28 @@ def plan_path(
     return _Path(start, trajectory)
 
 
+def plan_stop(limits: FlightLimits, now: float, path: _Path) -> _Path | None:
+    """A jerk-limited stop (ruckig's velocity interface: to zero velocity and acceleration)
+    from where ``path`` is at ``now``, within the same limits. None if ruckig refuses."""
+    pos, vel, acc = path.state(now)
+    inp = InputParameter(4)
+    inp.control_interface = ControlInterface.Velocity
+    inp.current_position = pos.tolist()
+    inp.current_velocity = vel.tolist()
+    inp.current_acceleration = acc.tolist()
+    inp.target_velocity = [0.0] * 4
+    inp.target_acceleration = [0.0] * 4
+    inp.max_velocity = list(limits.max_velocity)
+    inp.max_acceleration = [
+        max(m, abs(float(a))) for m, a in zip(limits.max_acceleration, acc, strict=True)
+    ]
+    inp.max_jerk = list(limits.max_jerk)
+    trajectory = Trajectory(4)
+    if Ruckig(4).calculate(inp, trajectory) not in (Result.Working, Result.Finished):
+        return None
+    return _Path(now, trajectory)
+
+
 class FlightSupervisor:
     """Operator modes, their setpoints and touchdown (see the module doc). The node calls
     :meth:`update` every control tick with what it knows and applies the result."""
@@ -259,6 +292,7 @@ class FlightSupervisor:
         self._still_since: float | None = None
         self.touchdown_at: float | None = None
         self._approach: tuple[float, float] | None = None  # (start z, rise rate)
+        self._stop: _Path | None = None  # a landing's stop from a path under way
         #: the node time of the last contact (``approach`` -> ``perched``)
         self.perched_at: float | None = None
 
@@ -360,9 +394,14 @@ class FlightSupervisor:
     def _enter_land(self, now: float) -> None:
         if self.mode is not FlightMode.LAND:
             self.counts["land"] += 1
-        if self.path is not None:  # the descent starts where the path is now, not its end
-            p, _, y = self.path.at(now)
-            self._hold = (p, y)
+        self._stop = None
+        if self.path is not None:
+            # a path under way first comes to a jerk-limited stop; the descent starts there
+            # (a setpoint that stood still at once would ask for a step of deceleration)
+            self._stop = plan_stop(self.limits, now, self.path)
+            if self._stop is None:
+                p, _, y = self.path.at(now)
+                self._hold = (p, y)
         self.mode = FlightMode.LAND
         self.path, self._approach = None, None
         self._check_at = self._check_z = None
@@ -400,7 +439,7 @@ class FlightSupervisor:
         if not armed:
             if self.mode is not FlightMode.GROUND:
                 self.mode, self.path, self._hold = FlightMode.GROUND, None, None
-                self._approach = None
+                self._approach = self._stop = None
             self.ground_z = None
             return None
         if self.ground_z is None and position is not None:
@@ -496,6 +535,11 @@ class FlightSupervisor:
         lim = self.limits
         if position is None or velocity is None or self.ground_z is None:
             return None
+        if self._stop is not None:  # braking first; the descent starts at the stop
+            p, v, y = self._stop.at(now)
+            if now < self._stop.end:
+                return p, v, y
+            self._hold, self._stop = (p, y), None
         if self._hold is None:
             # from a script's setpoint: the measured xy, the lower of the setpoint and the
             # measured z
