@@ -218,7 +218,7 @@ def _isolated(name: str, data: bytes) -> tuple[str, str]:
 # -- known open findings: strict xfail with the committed reproducer --------------------------
 def test_every_known_finding_has_a_reproducer():
     names = {k.name for k in KNOWN}
-    assert names == {"model-huge-origin-nan"}
+    assert names == set()  # every finding is closed (docs/fuzzing.md)
     for k in KNOWN:
         assert list((REGRESSIONS / k.target).iterdir()), k.name
 
@@ -253,13 +253,16 @@ def test_urdf_nested_20000_deep_is_refused_with_a_message():
     assert proc.returncode == 0 and proc.stdout.startswith("deep.urdf"), proc.returncode
 
 
-@pytest.mark.xfail(strict=True, reason="open: issue 28 item 9 (description checks)")
 def test_origin_near_the_double_limit_is_refused():
+    """A joint origin of -1e308 m is finite, but the model's products of it overflow (NaN
+    inertia at q = 0): the loader refuses it, naming the joint, the attribute and the rule."""
     from fuzz_targets.description import split
 
     from rdm.model import DescriptionError
 
     urdf, toml = split((REGRESSIONS / "description" / "origin-1e308").read_bytes())
-    with pytest.raises(DescriptionError):
-        robot = _rdm.Robot.from_strs(urdf, toml, "x.urdf", "x.toml")
-        robot.evaluate([0.0] * robot.n_q)  # the NaN inertia it gives today
+    with pytest.raises(DescriptionError) as err:
+        _rdm.Robot.from_strs(urdf, toml, "x.urdf", "x.toml")
+    assert str(err.value) == (
+        "x.urdf: joint 'alpha1'/<origin xyz>: -1e308 is outside the length bound |x| <= 1000 m"
+    )

@@ -12,6 +12,7 @@ from test_plant_urdf_oracle import joint_limits, mass_and_cog, robot_files, roto
 
 from rdm.cli import main as cli_main
 from rdm.plant import DescriptionError, Plant, ServoParams, load_robot
+from rdm.plant.description import robot_toml
 from rdm.plant.mjcf import rotor_site, servo_actuator
 
 JOINTS = ("q1", "q2", "q3", "q4", "q5", "q6", "alpha1", "beta1", "alpha2", "beta2")
@@ -140,3 +141,21 @@ def test_description_with_modified_joints_builds() -> None:
     )
     plant = Plant(stiff)
     assert np.allclose(plant.model.actuator("q1_servo").forcerange, [-9.0, 9.0])
+
+
+def test_a_toml_number_past_its_physical_bound_is_refused(tmp_path) -> None:
+    """The plant's reader bounds the TOML's numbers as the core loader does: a rotor offset
+    of 1e308 m is finite but its products overflow; the message names the field and rule."""
+    src = robot_toml("rdm")
+    text = src.read_text()
+    (tmp_path / "rdm.urdf").write_bytes((src.parent / "rdm.urdf").read_bytes())
+    bad = tmp_path / "rdm.toml"
+    bad.write_text(text.replace("offset = [0.0, 0.07, 0.03]", "offset = [0.0, 1e308, 0.03]", 1))
+    with pytest.raises(DescriptionError) as err:
+        load_robot(bad)
+    assert str(err.value) == "rotors[0].offset: 1e+308 is outside the length bound |x| <= 1000 m"
+    bad.write_text(text.replace("friction_z = 0.5", "friction_z = nan", 1))
+    with pytest.raises(DescriptionError, match=r"foot\.friction_z: NaN or infinite"):
+        load_robot(bad)
+    bad.write_text(text)
+    assert load_robot(bad).rotors[0].offset == (0.0, 0.07, 0.03)

@@ -11,12 +11,14 @@
 //!
 //! Checks: a rejection names the file it is about (`fuzz.urdf` or `fuzz.toml`); an
 //! accepted description holds finite numbers only (masses, centres of mass, inertias,
-//! joint origins and limits, rotors, plate, friction, sensor ranges) and a finite total
-//! mass.
+//! joint origins and limits, rotors, plate, friction, sensor ranges), its masses, lengths
+//! and inertias are within the reader's physical bounds (`rdm_core::model::bounds`), and
+//! its total mass is finite.
 //!
 //! The depth of a URDF is bounded by the reader (`MAX_URDF_DEPTH`) before roxmltree, whose
 //! tokenizer recurses per level, sees it; the macro reaches that bound and past it.
 
+use rdm_core::model::bounds::{MAX_INERTIA, MAX_LENGTH, MAX_MASS};
 use rdm_core::model::RobotDescription;
 
 /// Largest expanded text [bytes].
@@ -73,6 +75,14 @@ fn finite(what: &str, values: &[f64]) {
     );
 }
 
+fn within(what: &str, values: &[f64], bound: f64) {
+    finite(what, values);
+    assert!(
+        values.iter().all(|v| v.abs() <= bound),
+        "past the bound {bound}: {what} = {values:?} in an accepted description"
+    );
+}
+
 /// Load the description `data` stands for; panics on a broken rule.
 pub fn check(data: &[u8]) {
     let (urdf, toml) = split(data);
@@ -88,12 +98,17 @@ pub fn check(data: &[u8]) {
         }
     };
     for l in &desc.links {
-        finite("link mass", &[l.mass]);
-        finite("link com", l.com.as_slice());
-        finite("link inertia", l.inertia.as_slice());
+        within("link mass", &[l.mass], MAX_MASS);
+        within("link com", l.com.as_slice(), MAX_LENGTH);
+        // the inertia about the com, turned into the link frame: entries up to 3x the bound
+        within("link inertia", l.inertia.as_slice(), 3.0 * MAX_INERTIA);
     }
     for j in &desc.joints {
-        finite("joint origin", j.origin.translation.vector.as_slice());
+        within(
+            "joint origin",
+            j.origin.translation.vector.as_slice(),
+            MAX_LENGTH,
+        );
         finite("joint rotation", j.origin.rotation.coords.as_slice());
         finite("joint limits", &[j.lower, j.upper]);
         if let Some(axis) = j.axis {

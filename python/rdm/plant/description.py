@@ -7,6 +7,7 @@ Rust model (``rdm._rdm.Robot``): it needs only :mod:`tomllib` and the URDF path.
 
 from __future__ import annotations
 
+import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,10 +89,37 @@ class RobotDescription:
         raise DescriptionError(f"joints: no joint named {name!r}")
 
 
-def _vec3(value: object, field: str) -> tuple[float, float, float]:
+#: Physical bounds on the TOML's numbers, the same as the core loader's
+#: (``rdm_core::model::bounds``): rule name -> (largest magnitude, unit). A finite number
+#: past them (an offset of 1e308 m) overflows the products built from it. ASSUMPTION
+#: (docs/model.md).
+BOUNDS: dict[str, tuple[float, str]] = {
+    "length": (1e3, " m"),
+    "axis component": (1e3, ""),
+    "force": (1e5, " N"),
+    "torque": (1e5, " N m"),
+    "friction coefficient": (1e2, ""),
+}
+
+
+def _num(value: object, field: str, rule: str) -> float:
+    """``value`` as a finite float within the bound ``rule`` of :data:`BOUNDS`."""
+    try:
+        x = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise DescriptionError(f"{field}: expected a number, got {value!r}") from None
+    if not math.isfinite(x):
+        raise DescriptionError(f"{field}: NaN or infinite value")
+    limit, unit = BOUNDS[rule]
+    if abs(x) > limit:
+        raise DescriptionError(f"{field}: {x:g} is outside the {rule} bound |x| <= {limit:g}{unit}")
+    return x
+
+
+def _vec3(value: object, field: str, rule: str) -> tuple[float, float, float]:
     if not isinstance(value, list) or len(value) != 3:
         raise DescriptionError(f"{field}: expected a list of 3 numbers, got {value!r}")
-    return (float(value[0]), float(value[1]), float(value[2]))
+    return (_num(value[0], field, rule), _num(value[1], field, rule), _num(value[2], field, rule))
 
 
 def _get(table: dict, key: str, field: str) -> object:
@@ -113,32 +141,37 @@ def load_description(toml_path: str | Path) -> RobotDescription:
     frames = _get(doc, "frames", "toml")
     foot = _get(doc, "foot", "toml")
     size = _get(foot, "plate_size", "foot")
+    if not isinstance(size, list) or len(size) != 2:
+        raise DescriptionError(f"foot.plate_size: expected a list of 2 numbers, got {size!r}")
     rotors = []
     for i, r in enumerate(_get(doc, "rotors", "toml")):  # type: ignore[union-attr]
         field = f"rotors[{i}]"
         spin = int(_get(r, "spin", field))
         if spin not in (-1, 1):
             raise DescriptionError(f"{field}.spin: must be +1 or -1, got {spin}")
-        tmin, tmax = float(_get(r, "thrust_min", field)), float(_get(r, "thrust_max", field))
+        tmin = _num(_get(r, "thrust_min", field), f"{field}.thrust_min", "force")
+        tmax = _num(_get(r, "thrust_max", field), f"{field}.thrust_max", "force")
         if not 0.0 <= tmin < tmax:
             raise DescriptionError(f"{field}.thrust_min/max: need 0 <= min < max")
         rotors.append(
             RotorSpec(
                 name=str(_get(r, "name", field)),
                 parent=str(_get(r, "parent", field)),
-                offset=_vec3(_get(r, "offset", field), f"{field}.offset"),
-                axis=_vec3(_get(r, "axis", field), f"{field}.axis"),
+                offset=_vec3(_get(r, "offset", field), f"{field}.offset", "length"),
+                axis=_vec3(_get(r, "axis", field), f"{field}.axis", "axis component"),
                 spin=spin,
-                drag_to_thrust=float(_get(r, "drag_to_thrust", field)),
+                drag_to_thrust=_num(
+                    _get(r, "drag_to_thrust", field), f"{field}.drag_to_thrust", "length"
+                ),
                 thrust_min=tmin,
                 thrust_max=tmax,
-                diameter=float(_get(r, "diameter", field)),
+                diameter=_num(_get(r, "diameter", field), f"{field}.diameter", "length"),
             )
         )
     joints = []
     for i, j in enumerate(_get(doc, "joints", "toml")):  # type: ignore[union-attr]
         field = f"joints[{i}]"
-        stall = float(_get(j, "stall_torque", field))
+        stall = _num(_get(j, "stall_torque", field), f"{field}.stall_torque", "torque")
         if stall <= 0.0:
             raise DescriptionError(f"{field}.stall_torque: must be > 0")
         joints.append(JointSpec(str(_get(j, "name", field)), str(j.get("servo", "")), stall))
@@ -148,8 +181,12 @@ def load_description(toml_path: str | Path) -> RobotDescription:
             name=key,
             frame=str(_get(s, "frame", f"sensors.{key}")),
             model=str(s.get("model", "")),
-            force_range=_vec3(_get(s, "force_range", f"sensors.{key}"), f"{key}.force_range"),
-            torque_range=_vec3(_get(s, "torque_range", f"sensors.{key}"), f"{key}.torque_range"),
+            force_range=_vec3(
+                _get(s, "force_range", f"sensors.{key}"), f"sensors.{key}.force_range", "force"
+            ),
+            torque_range=_vec3(
+                _get(s, "torque_range", f"sensors.{key}"), f"sensors.{key}.torque_range", "torque"
+            ),
         )
     return RobotDescription(
         name=str(_get(doc, "name", "toml")),
@@ -158,9 +195,16 @@ def load_description(toml_path: str | Path) -> RobotDescription:
         joint_order=tuple(str(n) for n in _get(doc, "joint_order", "toml")),  # type: ignore[union-attr]
         foot_frame=str(_get(frames, "foot", "frames")),
         end_effector_frame=str(_get(frames, "end_effector", "frames")),
-        foot_plate_size=(float(size[0]), float(size[1])),  # type: ignore[index]
-        friction_xy=float(_get(foot, "friction_xy", "foot")),
-        friction_z=float(_get(foot, "friction_z", "foot")),
+        foot_plate_size=(
+            _num(size[0], "foot.plate_size", "length"),
+            _num(size[1], "foot.plate_size", "length"),
+        ),
+        friction_xy=_num(
+            _get(foot, "friction_xy", "foot"), "foot.friction_xy", "friction coefficient"
+        ),
+        friction_z=_num(
+            _get(foot, "friction_z", "foot"), "foot.friction_z", "friction coefficient"
+        ),
         rotors=tuple(rotors),
         joints=tuple(joints),
         wrench_sensors=sensors,

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use nalgebra::{Isometry3, Matrix3, Vector3};
 
+use super::bounds::check_toml_numbers;
 use super::config::TomlDescription;
 use super::error::{DescriptionError, DescriptionErrorKind as Kind};
 use super::urdf::parse_urdf;
@@ -110,19 +111,6 @@ pub struct RobotDescription {
     pub ancestors: Vec<Vec<usize>>,
 }
 
-fn finite(file: &str, field: &str, values: &[f64]) -> Result<(), DescriptionError> {
-    if values.iter().all(|v| v.is_finite()) {
-        Ok(())
-    } else {
-        Err(DescriptionError::new(
-            file,
-            field,
-            Kind::NonFinite,
-            "NaN or infinite value",
-        ))
-    }
-}
-
 impl RobotDescription {
     /// Load from a URDF file and a TOML file; errors name the file and field.
     pub fn from_files(urdf: &Path, toml: &Path) -> Result<Self, DescriptionError> {
@@ -153,6 +141,7 @@ impl RobotDescription {
             DescriptionError::new(toml_name, "", Kind::Syntax, e.to_string().trim().to_owned())
         })?;
         let (uf, tf) = (urdf_name, toml_name);
+        check_toml_numbers(tf, &cfg)?;
 
         // Links and the tree structure.
         let mut links: Vec<Link> = Vec::with_capacity(urdf.links.len());
@@ -333,7 +322,6 @@ impl RobotDescription {
                         "joint not in joint_order",
                     )
                 })?;
-            finite(tf, &format!("{field}.stall_torque"), &[j.stall_torque])?;
             if j.stall_torque <= 0.0 {
                 return Err(DescriptionError::new(
                     tf,
@@ -369,10 +357,6 @@ impl RobotDescription {
                     format!("unknown link '{}' (not in {uf})", r.parent),
                 )
             })?;
-            finite(tf, &format!("{field}.offset"), &r.offset)?;
-            finite(tf, &format!("{field}.axis"), &r.axis)?;
-            let scalars = [r.drag_to_thrust, r.thrust_min, r.thrust_max, r.diameter];
-            finite(tf, &field, &scalars)?;
             let axis = Vector3::from(r.axis);
             if axis.norm() < 1e-9 {
                 return Err(DescriptionError::new(
@@ -500,8 +484,6 @@ impl RobotDescription {
         let foot_link = named("foot")?;
         let end_effector_link = named("end_effector")?;
         let foot = &cfg.foot;
-        finite(tf, "foot.plate_size", &foot.plate_size)?;
-        finite(tf, "foot", &[foot.friction_xy, foot.friction_z])?;
         if foot.plate_size.iter().any(|&s| s < 0.0)
             || foot.friction_xy < 0.0
             || foot.friction_z < 0.0
@@ -527,8 +509,6 @@ impl RobotDescription {
                     )
                 })?,
             };
-            finite(tf, &field, &s.force_range)?;
-            finite(tf, &field, &s.torque_range)?;
             sensors.push(WrenchSensor {
                 name: name.clone(),
                 link,

@@ -8,6 +8,7 @@
 
 mod aerial_zmp;
 mod allocation;
+pub mod bounds;
 mod config;
 mod description;
 mod error;

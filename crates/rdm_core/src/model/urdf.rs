@@ -4,6 +4,7 @@
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use roxmltree::{Document, Node};
 
+use super::bounds::{bounded, Bound, ANGLE, AXIS, INERTIA, LENGTH, MASS};
 use super::error::{DescriptionError, DescriptionErrorKind as Kind};
 
 /// A URDF link: mass, centre of mass and inertia about it, both in the link frame.
@@ -54,7 +55,24 @@ fn number(file: &str, field: &str, text: &str) -> Result<f64, DescriptionError> 
     Ok(value)
 }
 
-fn triple(file: &str, field: &str, text: &str) -> Result<Vector3<f64>, DescriptionError> {
+/// A number within `bound` (see `model::bounds`).
+fn bounded_number(
+    file: &str,
+    field: &str,
+    text: &str,
+    bound: Bound,
+) -> Result<f64, DescriptionError> {
+    let value = number(file, field, text)?;
+    bounded(file, field, &[value], bound)?;
+    Ok(value)
+}
+
+fn triple(
+    file: &str,
+    field: &str,
+    text: &str,
+    bound: Bound,
+) -> Result<Vector3<f64>, DescriptionError> {
     let parts: Vec<&str> = text.split_whitespace().collect();
     if parts.len() != 3 {
         return Err(DescriptionError::new(
@@ -65,9 +83,9 @@ fn triple(file: &str, field: &str, text: &str) -> Result<Vector3<f64>, Descripti
         ));
     }
     Ok(Vector3::new(
-        number(file, field, parts[0])?,
-        number(file, field, parts[1])?,
-        number(file, field, parts[2])?,
+        bounded_number(file, field, parts[0], bound)?,
+        bounded_number(file, field, parts[1], bound)?,
+        bounded_number(file, field, parts[2], bound)?,
     ))
 }
 
@@ -97,11 +115,11 @@ fn origin(file: &str, field: &str, node: Node<'_, '_>) -> Result<Isometry3<f64>,
         return Ok(Isometry3::identity());
     };
     let xyz = match o.attribute("xyz") {
-        Some(t) => triple(file, &format!("{field}/<origin xyz>"), t)?,
+        Some(t) => triple(file, &format!("{field}/<origin xyz>"), t, LENGTH)?,
         None => Vector3::zeros(),
     };
     let rpy = match o.attribute("rpy") {
-        Some(t) => triple(file, &format!("{field}/<origin rpy>"), t)?,
+        Some(t) => triple(file, &format!("{field}/<origin rpy>"), t, ANGLE)?,
         None => Vector3::zeros(),
     };
     let rotation = Rotation3::from_euler_angles(rpy.x, rpy.y, rpy.z);
@@ -135,6 +153,7 @@ fn parse_link(file: &str, node: Node<'_, '_>) -> Result<UrdfLink, DescriptionErr
             format!("negative mass {mass}"),
         ));
     }
+    bounded(file, &mfield, &[mass], MASS)?;
     let frame = origin(file, &ifield, inertial)?;
     let inertia = match child(inertial, "inertia") {
         Some(i) => {
@@ -144,7 +163,7 @@ fn parse_link(file: &str, node: Node<'_, '_>) -> Result<UrdfLink, DescriptionErr
                 .enumerate()
             {
                 let f = format!("{ifield}/<inertia {key}>");
-                v[k] = number(file, &f, attr(file, &f, i, key)?)?;
+                v[k] = bounded_number(file, &f, attr(file, &f, i, key)?, INERTIA)?;
             }
             Matrix3::new(v[0], v[1], v[2], v[1], v[3], v[4], v[2], v[4], v[5])
         }
@@ -189,7 +208,7 @@ fn parse_joint(file: &str, node: Node<'_, '_>) -> Result<UrdfJoint, DescriptionE
         "fixed" => (None, 0.0, 0.0),
         "revolute" | "continuous" => {
             let axis = match child(node, "axis").and_then(|a| a.attribute("xyz")) {
-                Some(t) => triple(file, &format!("{field}/<axis xyz>"), t)?,
+                Some(t) => triple(file, &format!("{field}/<axis xyz>"), t, AXIS)?,
                 None => Vector3::x(), // URDF default axis
             };
             let norm = axis.norm();
@@ -209,11 +228,11 @@ fn parse_joint(file: &str, node: Node<'_, '_>) -> Result<UrdfJoint, DescriptionE
                     DescriptionError::new(file, &f, Kind::Missing, "revolute joint needs <limit>")
                 })?;
                 let lower = match l.attribute("lower") {
-                    Some(t) => number(file, &format!("{f} lower"), t)?,
+                    Some(t) => bounded_number(file, &format!("{f} lower"), t, ANGLE)?,
                     None => 0.0,
                 };
                 let upper = match l.attribute("upper") {
-                    Some(t) => number(file, &format!("{f} upper"), t)?,
+                    Some(t) => bounded_number(file, &format!("{f} upper"), t, ANGLE)?,
                     None => 0.0,
                 };
                 if lower > upper {
