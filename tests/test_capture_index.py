@@ -1,4 +1,4 @@
-"""The time index beside a byte capture (rdm.sim.capture_index): what each write records, the
+"""The time index beside a byte capture (rdm.link.capture_index): what each write records, the
 batches the lockstep kernel writes at once, and indexes that do not describe their capture."""
 
 from __future__ import annotations
@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from rdm._rdm import capture_index_records
-from rdm.sim import TappedLink, open_inproc_uart
-from rdm.sim.capture_index import (
+from rdm.link.capture_index import (
     MAGIC,
     CaptureIndexError,
     TimedCaptureFile,
@@ -19,6 +18,8 @@ from rdm.sim.capture_index import (
     read_capture_index,
     time_ns,
 )
+from rdm.link.tapped_link import TappedLink
+from rdm.link.uart_pipe import open_inproc_uart
 
 
 class _Clock:

@@ -144,11 +144,11 @@ def test_output_files_never_write_through_a_link_or_into_a_fifo(tmp_path):
 
 def _writers():
     """(name, file it writes in a run folder, open-and-write) of every run-folder writer."""
+    from rdm.link.capture_index import TimedCaptureFile
+    from rdm.link.tapped_link import TappedLink
     from rdm.sim.candump import CandumpCapture
-    from rdm.sim.capture_index import TimedCaptureFile
     from rdm.sim.mcap_log import McapLogger
     from rdm.sim.plots import plot_panels
-    from rdm.sim.uart import TappedLink
 
     return [
         ("candump", "can.log", lambda p: CandumpCapture(p).close()),

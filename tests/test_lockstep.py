@@ -272,8 +272,9 @@ def test_bridge_refuses_a_layout_that_does_not_match_the_mirrors():
 
 
 def test_leptrino_node_answers_commands_and_streams():
+    from rdm.link.tapped_link import TappedLink
     from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
-    from rdm.sim.uart import PtyPair, TappedLink
+    from rdm.sim.pty_pair import PtyPair
 
     dev, host = open_pty_pair()
     dev.peer = None

@@ -26,6 +26,7 @@ import pytest
 
 from rdm.control import attitude
 from rdm.link.can import open_can
+from rdm.link.uart_pipe import open_inproc_uart
 from rdm.nodes.can_master import CanMaster, MasterState
 from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
 from rdm.nodes.lockstep import Lockstep
@@ -41,7 +42,6 @@ from rdm.sim import (
     McapLogger,
     ProbeNode,
     RunFolder,
-    open_inproc_uart,
     open_tapped_pty,
 )
 

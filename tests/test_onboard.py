@@ -377,8 +377,8 @@ def test_default_servo_map_is_the_can_table_order(tmp_path) -> None:
     servos on each (docs/sim.md "Plant bridge": 1 = foot unit alpha1, beta1; 2 = q1-q3;
     3 = arm unit alpha2, beta2; 4 = q4-q6). The node's default map must follow it, not joint
     order."""
+    from rdm.link.uart_pipe import open_inproc_uart
     from rdm.nodes.onboard import OnboardNode
-    from rdm.sim import open_inproc_uart
 
     table = ["alpha1", "beta1", "q1", "q2", "q3", "alpha2", "beta2", "q4", "q5", "q6"]
     dev, host = open_inproc_uart(tmp_path, "spinal", ".bin")

@@ -98,8 +98,8 @@ def test_imu_datagram_layout():
 
 def test_imu_receiver_feeds_a_real_spinal_mirror():
     from rdm.link.can import open_can
+    from rdm.link.uart_pipe import open_inproc_uart
     from rdm.nodes.spinal_mirror import SpinalMirror
-    from rdm.sim.uart import open_inproc_uart
 
     dev, _host = open_inproc_uart()
     spinal = SpinalMirror(dev, open_can(f"inproc:procs-{random.getrandbits(32)}"))

@@ -16,13 +16,13 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from rdm.link.inproc_can import InProcessBus, SimClock, set_channel_clock
 from rdm.link.serial import open_pty_pair
+from rdm.link.tapped_link import TappedLink
 from rdm.protocol.rosserial.registry import spinal_registry
 from rdm.sim import (
     CandumpCapture,
     McapLogger,
     Metric,
     RunFolder,
-    TappedLink,
     format_metrics_table,
     ros1_definition,
     write_summary,
@@ -153,7 +153,7 @@ def test_tapped_link_captures_exact_bytes(tmp_path):
     dev.peer = None
     tap = TappedLink(dev, tmp_path / "tx.bin", tmp_path / "rx.bin")
     hl = TappedLink(host)
-    from rdm.sim.uart import PtyPair
+    from rdm.sim.pty_pair import PtyPair
 
     pair = PtyPair(tap, hl)
     rng = np.random.default_rng(3)

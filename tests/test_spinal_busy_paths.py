@@ -510,7 +510,7 @@ _BUSES = itertools.count()
 def _mirror(fast: bool) -> tuple[sm.SpinalMirror, Any]:
     """A mirror on an in-process UART (and the PC's end of it) and a bus of its own."""
     from rdm.link.can import open_can
-    from rdm.sim.uart import open_inproc_uart
+    from rdm.link.uart_pipe import open_inproc_uart
 
     dev, host = open_inproc_uart()
     bus = open_can(f"virtual:spinal_busy_{next(_BUSES)}")
@@ -664,8 +664,9 @@ def test_stack_bytes_and_counters_equal_with_busy_fast_paths_on_and_off(
 
 # ----------------------------------------------------------------------------- UART chain
 def _chain(base: Path, name: str, cut: bool, tapped: bool) -> tuple[Any, ...]:
+    from rdm.link.tapped_link import TappedLink
+    from rdm.link.uart_pipe import InProcessUartEnd
     from rdm.scenarios.stack import DroppableLink
-    from rdm.sim.uart import InProcessUartEnd, TappedLink
 
     dev, host = InProcessUartEnd("device"), InProcessUartEnd("host")
     dev.peer, host.peer = host, dev

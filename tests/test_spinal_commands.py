@@ -45,7 +45,7 @@ _BUSES = itertools.count()
 def _mirror(fast: bool, runs: bool) -> tuple[sm.SpinalMirror, Any]:
     """A mirror on an in-process UART (and the PC's end of it) and a bus of its own."""
     from rdm.link.can import open_can
-    from rdm.sim.uart import open_inproc_uart
+    from rdm.link.uart_pipe import open_inproc_uart
 
     dev, host = open_inproc_uart()
     bus = open_can(f"virtual:spinal_commands_{next(_BUSES)}")

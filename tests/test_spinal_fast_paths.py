@@ -235,8 +235,8 @@ def _pump_counters(pump) -> tuple[int, ...]:
 
 
 def test_uart_pump_fast_send_equals_queue_path() -> None:
+    from rdm.link.uart_pipe import open_inproc_uart
     from rdm.nodes.spinal_uart import UartPump
-    from rdm.sim.uart import open_inproc_uart
 
     rng = np.random.default_rng(11)
     sends = [rng.bytes(int(rng.integers(0, 3000))) for _ in range(200)]

@@ -23,11 +23,12 @@ import numpy as np
 import pytest
 
 from rdm import _rdm
+from rdm.link.tapped_link import TappedLink
+from rdm.link.uart_pipe import InProcessUartEnd, open_inproc_uart
 from rdm.nodes.spinal_uart import UartPump, source_inbox
 from rdm.protocol.rosserial import constants as C
 from rdm.protocol.rosserial.client import ClientSession
 from rdm.protocol.rosserial.framing import encode_frame
-from rdm.sim.uart import InProcessUartEnd, TappedLink, open_inproc_uart
 
 
 def _time_answer(session: ClientSession, secs: int, nsecs: int) -> bytes:

@@ -16,13 +16,13 @@ import pytest
 from mcap.reader import make_reader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from rdm.link.capture_index import index_path
 from rdm.protocol.leptrino import decode_leptrino
 from rdm.protocol.neuron import decode_candump
 from rdm.protocol.rosserial.capture import decode_uart, load_layout
 from rdm.scenarios.common import run_stack, sim_stack_options
 from rdm.scenarios.hover import HOVER_Z, make_script
 from rdm.scenarios.stack import build_stack
-from rdm.sim.capture_index import index_path
 from rdm.sim.wire_mcap import WireMcapError, run_captures, write_wire_mcap
 
 SECONDS = 3.0

@@ -1,4 +1,4 @@
-//! The time-index records of one capture write (`rdm.sim.capture_index.TimedCaptureFile.write`):
+//! The time-index records of one capture write (`rdm.link.capture_index.TimedCaptureFile.write`):
 //! the loop over a batch's marks, which in Python was ~1.9 µs per simulated ms of the
 //! lockstep loop (the kernel's Spinal batches carry 5-13 marks each).
 
@@ -6,7 +6,7 @@ use pyo3::exceptions::{PyOverflowError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 
-/// `rdm.sim.capture_index.time_ns`: `round(t * 1e6) * 1000` (ties to even, as Python's
+/// `rdm.link.capture_index.time_ns`: `round(t * 1e6) * 1000` (ties to even, as Python's
 /// `round`), refused where Python's `round` or the index's int64 would refuse it.
 fn time_ns(t: f64) -> PyResult<i64> {
     let us = t * 1e6;

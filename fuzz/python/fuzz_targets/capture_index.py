@@ -1,4 +1,4 @@
-"""Capture time index (``rdm.sim.capture_index.read_capture_index``): the ``.idx`` file
+"""Capture time index (``rdm.link.capture_index.read_capture_index``): the ``.idx`` file
 beside a UART or Leptrino capture, read by ``rdm decode RUN --mcap``.
 
 Input: the capture's size (little-endian u32, masked to 24 bits: up to 16 MiB, written as a
@@ -18,7 +18,7 @@ from collections.abc import Iterable
 
 from fuzz_targets.base import BadFrameAccepted, Target, WrongCount
 from fuzz_targets.neuron import _scratch
-from rdm.sim.capture_index import MAGIC, CaptureIndex, CaptureIndexError, read_capture_index
+from rdm.link.capture_index import MAGIC, CaptureIndex, CaptureIndexError, read_capture_index
 
 
 def _records(body: bytes) -> list[tuple[int, int]] | None:
@@ -99,5 +99,5 @@ def seeds() -> Iterable[bytes]:
 
 TARGETS = [
     Target("capture_index", check, seeds,
-           about="rdm.sim.capture_index.read_capture_index, CaptureIndex.time_ns_of"),
+           about="rdm.link.capture_index.read_capture_index, CaptureIndex.time_ns_of"),
 ]  # fmt: skip

@@ -225,7 +225,7 @@ def _one_of(out: Path, inputs: list[Path]) -> Path | None:
 
 
 def _run_mcap(args: argparse.Namespace) -> int:
-    from rdm.sim.capture_index import index_path
+    from rdm.link.capture_index import index_path
     from rdm.sim.wire_mcap import WireMcapError, run_captures, write_wire_mcap
 
     try:

@@ -23,8 +23,9 @@ from collections import Counter
 from collections.abc import Sequence
 
 from rdm._rdm import leptrino_force_frame
+from rdm.link.tapped_link import TappedLink
+from rdm.link.uart_pipe import InProcessUartEnd
 from rdm.protocol import leptrino as lp
-from rdm.sim.uart import InProcessUartEnd, TappedLink
 
 
 class LeptrinoSensorNode:

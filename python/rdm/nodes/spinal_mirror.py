@@ -33,6 +33,7 @@ from rdm import _rdm
 from rdm._rdm import RdmError
 from rdm.control.attitude import ARM_OFF, N_ROTORS, CommandRejectedError, SpinalStep
 from rdm.link.can_wire import DRAIN_AT
+from rdm.link.capture_index import timed_capture_of
 from rdm.link.inproc_can import SimClock
 from rdm.nodes.base import to_ms
 from rdm.nodes.can_master import BOOT_DELAY_MS, IDLE_DUTY, CanMaster, MasterState
@@ -51,7 +52,6 @@ from rdm.protocol.rosserial.events import (
 )
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 from rdm.protocol.rosserial.timesync import ClientClock
-from rdm.sim.capture_index import timed_capture_of
 
 try:  # the busy-ms helpers (crates/rdm_py/src/spinal_mirror.rs); without them: Python only
     from rdm._rdm import spinal_duty_list as _duty_list

@@ -14,13 +14,13 @@ import os
 import select
 from typing import Any
 
-from rdm.sim.uart import InProcessUartEnd
+from rdm.link.uart_pipe import InProcessUartEnd
 
 #: Bytes kept for a slow peer before the backlog is discarded (8 KiB = Spinal's TX ring).
 DEFAULT_MAX_PENDING = 128 * 64
 #: Wrappers whose ``read_available`` with nothing underneath returns ``b""`` and changes
 #: nothing (module, class name): the capture tap and the stack's cuttable link.
-_TAPPED = ("rdm.sim.uart", "TappedLink")
+_TAPPED = ("rdm.link.tapped_link", "TappedLink")
 _DROPPABLE = ("rdm.scenarios.stack", "DroppableLink")
 _PURE_READ_WRAPPERS = {_TAPPED, _DROPPABLE}
 _MAX_WRAPPERS = 8
@@ -34,7 +34,7 @@ def _kind(link: Any) -> tuple[str, str]:
 def source_inbox(link: Any) -> bytearray | None:
     """The in-process receive buffer under ``link`` when reading ``link`` with that buffer
     empty is a no-op returning ``b""`` (a chain of known wrappers over an
-    :class:`rdm.sim.uart.InProcessUartEnd`); None for anything else (ptys, serial ports)."""
+    :class:`rdm.link.uart_pipe.InProcessUartEnd`); None for anything else (ptys, serial ports)."""
     for _ in range(_MAX_WRAPPERS):
         cls = type(link)
         if cls is InProcessUartEnd:

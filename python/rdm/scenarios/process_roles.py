@@ -56,7 +56,7 @@ def neuron_filters(slave: int) -> list[dict[str, Any]]:
 def _tapped_pty(folder: Path, stem: str, ext: str, clock: Callable[[], float]):
     """(device end with time-indexed captures, slave link kept open, slave path)."""
     from rdm.link.serial import open_pty_pair
-    from rdm.sim.uart import TappedLink
+    from rdm.link.tapped_link import TappedLink
 
     slave, master = open_pty_pair()
     slave.peer = None  # each end is closed on its own

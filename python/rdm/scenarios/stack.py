@@ -27,6 +27,7 @@ import numpy as np
 
 from rdm.link.can import open_can
 from rdm.link.can_wire import CanWireLink, WireCandump
+from rdm.link.uart_pipe import open_inproc_uart
 from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
 from rdm.nodes.lockstep import Lockstep
 from rdm.nodes.lockstep_kernel import attach_kernel
@@ -40,8 +41,8 @@ from rdm.nodes.servo_model import ServoConfig
 from rdm.nodes.spinal_mirror import SpinalMirror
 from rdm.plant import EscParams, Plant, ServoParams
 from rdm.plant.sensors import imu_model_of_seed
-from rdm.sim import CandumpCapture, McapLogger, RunFolder, open_inproc_uart, open_tapped_pty
-from rdm.sim.uart import open_device_pty
+from rdm.sim import CandumpCapture, McapLogger, RunFolder, open_tapped_pty
+from rdm.sim.pty_pair import open_device_pty
 
 from .external_onboard import ExternalOnboard
 from .mocap_node import MocapNode, MocapSensor
@@ -381,7 +382,7 @@ def _wire(
         raise ValueError(f"neuron_backend={opt.neuron_backend!r}: 'rust' or 'python'")
     opened.extend(n.close for n in neuron_nodes)
     barriers: list = []
-    # The captures' time index (rdm.sim.capture_index): the plant's time is the loop's while
+    # The captures' time index (rdm.link.capture_index): the plant's time is the loop's while
     # the nodes tick, and the lockstep kernel writes through the same file objects.
     clock = lambda: plant.time  # noqa: E731
     if opt.uart == "pty":

@@ -5,8 +5,8 @@ from rdm.sim.candump import CandumpCapture
 from rdm.sim.mcap_log import McapLogger, ros1_definition
 from rdm.sim.metrics import Metric, format_metrics_table, summary_dict, write_summary
 from rdm.sim.probe import ProbeNode
+from rdm.sim.pty_pair import PtyPair, open_tapped_pty
 from rdm.sim.run_folder import RunFolder
-from rdm.sim.uart import PtyPair, TappedLink, open_inproc_uart, open_tapped_pty
 
 __all__ = [
     "CandumpCapture",
@@ -15,9 +15,7 @@ __all__ = [
     "ProbeNode",
     "PtyPair",
     "RunFolder",
-    "TappedLink",
     "format_metrics_table",
-    "open_inproc_uart",
     "open_tapped_pty",
     "ros1_definition",
     "summary_dict",

@@ -8,7 +8,7 @@ Layout (names are fixed so tools and docs can rely on them)::
         wire.mcap           with --wire-mcap: every wire message at its time (rdm.sim.wire_mcap)
         can.log             candump -L capture of the Neuron bus (rdm decode can.log)
         uart/               raw UART byte captures (*.bin rosserial, *.lep Leptrino), each with
-                            its time index *.idx (rdm.sim.capture_index)
+                            its time index *.idx (rdm.link.capture_index)
         plots/              PNG figures
         metrics.txt         the metrics table
         summary.json        metrics + run facts (seed, duration, speed, counters)

@@ -18,7 +18,7 @@ a channel per message kind, each message at the simulated time it crossed its wi
 * ``.../errors`` (JSON): every bad frame, skipped run of bytes or undecodable payload, with its
   offset or line and bytes, so nothing on a wire is left out.
 
-UART and Leptrino captures are timed by the index beside each (:mod:`rdm.sim.capture_index`);
+UART and Leptrino captures are timed by the index beside each (:mod:`rdm.link.capture_index`);
 a capture without one is skipped and named in the report. A capture and index of a run killed
 before it closed them may disagree in length (each file loses its own unwritten buffer): the
 messages are all kept, those past the index at its last time, and the report names the
@@ -34,8 +34,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from rdm.link.capture_index import CaptureIndex, CaptureIndexError, read_capture_index, time_ns
 from rdm.protocol.capture_formats import detect_format, known_extensions
-from rdm.sim.capture_index import CaptureIndex, CaptureIndexError, read_capture_index, time_ns
 from rdm.sim.mcap_log import McapLogger
 
 #: Record keys that say where a record came from or whether it decoded, not what it holds.

@@ -57,7 +57,7 @@ def time_ns(t: float) -> int:
 class TimedCaptureFile:
     """A capture file that indexes every write with the clock's time (see the module text).
 
-    It stands in for the plain file a :class:`rdm.sim.uart.TappedLink` writes (``write``,
+    It stands in for the plain file a :class:`rdm.link.tapped_link.TappedLink` writes (``write``,
     ``flush``, ``close``, ``closed``), so the lockstep kernel's direct writes are timed too.
     """
 
