@@ -37,6 +37,8 @@ import pytest
 from rdm import _rdm
 from rdm.control.attitude import ARM_ON, INTEGRATION_CONTROL_ON, UAV_HYDRUS, SpinalStep
 from rdm.nodes import spinal_mirror as sm
+from rdm.nodes import spinal_mirror_control as sm_control
+from rdm.nodes import spinal_mirror_publishers as sm_publishers
 from rdm.nodes.can_master import IDLE_DUTY
 from rdm.nodes.spinal_servo_bridge import ServoBridge
 from rdm.protocol.rosserial import constants as C
@@ -605,8 +607,8 @@ def _run(base: str, fast: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[dict, 
 
         return call
 
-    monkeypatch.setattr(sm, "_imu_frame", counting("imu", sm._imu_frame))
-    monkeypatch.setattr(sm, "_duty_list", counting("duties", sm._duty_list))
+    monkeypatch.setattr(sm_publishers, "_imu_frame", counting("imu", sm_publishers._imu_frame))
+    monkeypatch.setattr(sm_control, "_duty_list", counting("duties", sm_control._duty_list))
     stack = _stack(base)
     spinal = stack.spinal
     spinal._fast = fast

@@ -26,6 +26,7 @@ import pytest
 from rdm import _rdm
 from rdm.control.attitude import ARM_ON, UAV_HYDRUS
 from rdm.nodes import spinal_mirror as sm
+from rdm.nodes import spinal_mirror_commands as sm_commands
 from rdm.nodes.spinal_servo_bridge import MirrorRejection
 from rdm.protocol.rosserial import constants as C
 from rdm.protocol.rosserial.framing import encode_frame
@@ -123,7 +124,7 @@ def test_command_runs_equal_value_routes_and_messages(
 ) -> None:
     rng = random.Random(seed)
     taken = [0, 0]  # frames the runs applied, runs that stopped early
-    inner = sm._apply_commands
+    inner = sm_commands._apply_commands
 
     def counting(items: list, *args: Any) -> tuple[int, Any]:
         n, exc = inner(items, *args)
@@ -131,7 +132,7 @@ def test_command_runs_equal_value_routes_and_messages(
         taken[1] += n < len(items)
         return n, exc
 
-    monkeypatch.setattr(sm, "_apply_commands", counting)
+    monkeypatch.setattr(sm_commands, "_apply_commands", counting)
     mirrors = [_mirror(True, True), _mirror(True, False), _mirror(False, False)]
     try:
         for m, pc in mirrors:

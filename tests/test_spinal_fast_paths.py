@@ -161,7 +161,7 @@ def _pinv_array(step, pinv, inertia) -> None:
 
 def test_gain_and_pinv_rows_equal_array_setters() -> None:
     from rdm.control.attitude import SpinalStep
-    from rdm.nodes.spinal_mirror import _applied
+    from rdm.nodes.spinal_mirror_commands import _applied
 
     rng = np.random.default_rng(3)
     cases = [rng.integers(-33000, 33000, (4, 7)).tolist() for _ in range(40)]

@@ -1,0 +1,115 @@
+"""The Spinal mirror's battery sampling and control steps: the low-passed battery reading,
+the :class:`rdm._rdm.SpinalStep` steps at ``rate_hz`` with their events (acks, fail-safes,
+guards) and the duty list for the CAN master.
+
+:class:`SpinalControl` is a part of :class:`rdm.nodes.spinal_mirror.SpinalMirror`: its methods
+read the mirror's state (``core``, ``master``, ``counters``, ``pwm_test`` ...).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from rdm.control.attitude import N_ROTORS
+from rdm.nodes.can_master import IDLE_DUTY
+from rdm.protocol.rosserial import constants as C
+
+try:  # the busy-ms helper (crates/rdm_py/src/spinal_mirror.rs); without it: Python only
+    from rdm._rdm import spinal_duty_list as _duty_list
+except ImportError:
+    _duty_list = None
+
+BATTERY_SAMPLE_MS = 20  # HAL ms: the battery task runs every 20 ms
+#: Battery low-pass ``v = 0.99 v + 0.01 new`` per 20 ms sample.
+BATTERY_FILTER = 0.99
+#: Control steps replayed at most per tick when the loop runs late; then re-phased.
+MAX_CONTROL_CATCH_UP = 5
+
+_FAILSAFE_TEXT = {
+    "failsafe_timeout": "failsafe: cannot connect with ROS",
+    "failsafe_tilt": "failsafe: the roll pitch angles are too large",
+    "failsafe_command_tilt": "failsafe: target angles are too large",
+}
+#: The controller's guards (docs/spinal.md "Guards on the actuator path"): the first of a run
+#: is logged as a warning; every trip is counted by the core (``core.counters``).
+_GUARD_TEXT = {
+    "voltage_rejected": "guard: implausible battery voltage, the last good one is used",
+    "command_saturated": "guard: four_axes/command thrust saturated",
+    "non_finite_output": "guard: non-finite thrust, every motor at min duty",
+}
+
+
+class SpinalControl:
+    """The battery and control steps of :class:`rdm.nodes.spinal_mirror.SpinalMirror` (a
+    part of it)."""
+
+    def _battery(self, now_ms: int) -> None:
+        last = self._last_pub.get("_battery_sample")
+        if last is not None and now_ms - last < BATTERY_SAMPLE_MS:
+            return
+        self._last_pub["_battery_sample"] = now_ms
+        self._battery_due_ms = now_ms + BATTERY_SAMPLE_MS
+        sample = self.battery_input * self.adc_scale
+        if not math.isfinite(sample):
+            self.counters.rejected["battery_non_finite"] += 1
+            return
+        v = self.battery_voltage
+        self.battery_voltage = (
+            sample if v is None else BATTERY_FILTER * v + (1 - BATTERY_FILTER) * sample
+        )
+
+    def _control(self, now: float) -> None:
+        period = 1.0 / self.rate_hz
+        if self._next_control is None:
+            self._next_control = now
+        steps = 0
+        while now >= self._next_control - 1e-9:
+            if steps == MAX_CONTROL_CATCH_UP:
+                self.counters.control_overruns += 1
+                self._next_control = now + period
+                break
+            self._step(now)
+            steps += 1
+            self._next_control += period
+
+    def _step(self, now: float) -> None:
+        voltage = self.battery_voltage if self.battery_voltage is not None else self.battery_input
+        out = self.core.step(now, self.gyro, self.acc, self.mag, voltage)
+        self.last_output = out
+        self.counters.control_steps += 1
+        if self._fast and _duty_list is not None and self.pwm_test is None:
+            # No event and the controller's own duties: the list _step_tail builds, from
+            # the core's output in one call (None: an event or another case, below).
+            n = self.master.motor_number
+            if n == self.core.motor_number:
+                duties = _duty_list(out, n, IDLE_DUTY)
+                if duties is not None:
+                    self.duties = duties
+                    return
+        self._step_tail(out)
+
+    def _step_tail(self, out: Any) -> None:
+        """The events of a control step, then the duty list for the CAN master."""
+        for kind, value in out.events:
+            if kind == "ack":
+                self.counters.acks[int(value)] += 1
+                self._publish_topic("flight_config_ack", self._msg.uint8.new(data=int(value)))
+            elif kind == "rejected":
+                self._log(C.LogLevel.ERROR, str(value))
+            elif kind in _FAILSAFE_TEXT:
+                self.counters.failsafes[kind] += 1
+                self._log(C.LogLevel.ERROR, _FAILSAFE_TEXT[kind])
+            elif kind in _GUARD_TEXT:
+                self._log(C.LogLevel.WARN, _GUARD_TEXT[kind])
+            elif kind == "events_dropped":
+                self.counters.failsafes["events_dropped"] += int(value)
+        n = self.master.motor_number
+        if self.pwm_test is not None:
+            duties = (self.pwm_test + [IDLE_DUTY] * n)[:n]
+        elif n and n == self.core.motor_number and n <= N_ROTORS:
+            # tolist: the same Python floats as float() of each element, in one call
+            duties = [min(1.0, max(IDLE_DUTY, d)) for d in out.duty.tolist()[:n]]
+        else:
+            duties = [IDLE_DUTY] * n
+        self.duties = duties
