@@ -10,6 +10,9 @@ integrates. Every reading refers to the current time: the ``mj_forward`` that ma
 derived quantities (sensors, body poses, actuator forces) current runs lazily, once, before
 the first reading or command after a step (a step that nobody reads costs no forward pass;
 the trajectory is bit-identical to forwarding after every step, see docs/plant.md).
+
+The readings (:mod:`rdm.plant.readings`) and the ground truth (:mod:`rdm.plant.truth_readout`)
+are parts of :class:`Plant` in modules of their own.
 """
 
 from __future__ import annotations
@@ -38,18 +41,18 @@ from rdm.plant.mjcf import (
     servo_actuator,
 )
 from rdm.plant.option_flags import disableflags_address
+from rdm.plant.readings import PlantReadings
 from rdm.plant.sensors import (
     ImuModel,
     ImuNoise,
-    ImuReading,
     WrenchNoise,
-    WrenchReading,
     WrenchSensorModel,
     sensor_seed_sequences,
 )
 from rdm.plant.servo import ServoParams, torque_constant
 from rdm.plant.sleep import SLEEP_AVAILABLE, SLEEP_ENABLE_BIT, RestingSleep
 from rdm.plant.truth import TRUTH_FIELDS, FootContactTracker, GroundTruth
+from rdm.plant.truth_readout import PlantTruthReadout
 
 
 def _vector(values: Sequence[float] | np.ndarray, n: int, name: str) -> np.ndarray:
@@ -59,7 +62,7 @@ def _vector(values: Sequence[float] | np.ndarray, n: int, name: str) -> np.ndarr
     return arr
 
 
-class Plant:
+class Plant(PlantReadings, PlantTruthReadout):
     """MuJoCo plant of one robot; deterministic for a given seed.
 
     Args:
@@ -550,225 +553,6 @@ class Plant:
     def time(self) -> float:
         """Simulated time [s]."""
         return self._data.time
-
-    # -------------------------------------------------------------------------- sensors
-    def _sensor(self, name: str, size: int = 3) -> np.ndarray:
-        adr = self._sensor_adr[name]
-        return self._fresh().sensordata[adr : adr + size].copy()
-
-    def joint_positions_list(self) -> list[float]:
-        """Present joint positions (joint_order) as floats (no forward pass needed)."""
-        q = self._v_qpos.tolist()
-        return [q[i] for i in self._qadr_list]
-
-    def imu(self) -> ImuReading:
-        """One noisy IMU sample in the IMU frame (root link, at the processor)."""
-        if self._stale:
-            self.sync()
-        g, a, m = self._imu_adr
-        # One Rust call reads the three ideal values from the sensordata view (the same
-        # numbers as :meth:`imu_plain`, tests/test_sampler_fast_paths.py).
-        return self.imu_model.sample_at(self._v_sensordata, g, a, m)
-
-    def imu_plain(self) -> ImuReading:
-        """:meth:`imu` through the Python list path (the reference of the Rust read)."""
-        if self._stale:
-            self.sync()
-        sd = self._v_sensordata
-        g, a, m = self._imu_adr
-        return self.imu_model.sample_lists(
-            sd[g : g + 3].tolist(), sd[a : a + 3].tolist(), sd[m : m + 3].tolist()
-        )
-
-    def imu_ideal(self) -> ImuReading:
-        """The noise-free IMU values (gyro, accelerometer, magnetometer)."""
-        return ImuReading(
-            self._sensor("gyro"), self._sensor("accelerometer"), self._sensor("magnetometer"), False
-        )
-
-    def wrench_ideal(self, sensor: str) -> tuple[np.ndarray, np.ndarray]:
-        """Noise-free (force, torque) of a wrench sensor: what the robot applies through it,
-        in the sensor frame, torque about the sensor origin."""
-        if sensor not in self.wrench_models:
-            raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
-        return self._sensor(f"{sensor}_force"), self._sensor(f"{sensor}_torque")
-
-    def _wrench_address(self, sensor: str) -> tuple[int, int]:
-        """(force, torque) addresses of a wrench sensor in ``sensordata``, the state synced."""
-        adr = self._wrench_adr.get(sensor)
-        if adr is None:
-            raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
-        if self._stale:
-            self.sync()
-        return adr
-
-    def wrench(self, sensor: str) -> WrenchReading:
-        """One noisy sample of a wrench sensor (``foot_wrench``, ``end_effector_wrench``)."""
-        adr = self._wrench_address(sensor)
-        f, t = adr
-        return self.wrench_models[sensor].sample_at(self._v_sensordata, f, t)
-
-    def wrench_force_torque(self, sensor: str) -> tuple[np.ndarray, np.ndarray]:
-        """(force, torque) of :meth:`wrench` without the :class:`WrenchReading` (the bridge's
-        1 kHz foot-sensor read): the same normals and numbers."""
-        adr = self._wrench_address(sensor)
-        model = self.wrench_models[sensor]
-        force, torque, _ = model._core.sample_at(
-            self._v_sensordata, adr[0], adr[1], model._normals.take(6)
-        )
-        return force, torque
-
-    def wrench_values(self, sensor: str) -> tuple[float, float, float, float, float, float]:
-        """(Fx, Fy, Fz, Mx, My, Mz) of :meth:`wrench` as one tuple of floats (the bridge's
-        1 kHz foot-sensor read into the Leptrino mirror): the same normals and numbers."""
-        adr = self._wrench_address(sensor)
-        model = self.wrench_models[sensor]
-        return model._core.sample_values_at(
-            self._v_sensordata, adr[0], adr[1], model._normals.take(6)
-        )
-
-    def wrench_plain(self, sensor: str) -> WrenchReading:
-        """:meth:`wrench` through the Python list path (the reference of the Rust read)."""
-        adr = self._wrench_address(sensor)
-        sd = self._v_sensordata
-        f, t = adr
-        return self.wrench_models[sensor].sample_list(
-            sd[f : f + 3].tolist() + sd[t : t + 3].tolist()
-        )
-
-    def servo_positions(self) -> np.ndarray:
-        """Present joint positions (joint_order) [rad]."""
-        return self._data.qpos[self._qadr]  # fancy indexing copies; qpos is current
-
-    def servo_velocities(self) -> np.ndarray:
-        """Present joint velocities (joint_order) [rad/s]."""
-        return self._data.qvel[self._vadr]
-
-    def servo_torques(self) -> np.ndarray:
-        """Servo output torques (joint_order) [N m], limited to the stall torques."""
-        return self._fresh().actuator_force[self._servo_act].copy()
-
-    def servo_currents(self) -> np.ndarray:
-        """Servo currents (joint_order) [A] from a linear torque constant (ASSUMPTION)."""
-        return self.servo_torques() / self._kt
-
-    def rotor_thrusts(self) -> np.ndarray:
-        """Thrusts applied in the last step, ceiling effect included [N]."""
-        return self._thrusts
-
-    def rotor_distances_to_ceiling(self) -> np.ndarray:
-        """Distance of each rotor to the ceiling along its axis [m] (inf: none ahead)."""
-        return self._rotor_distances()
-
-    # ---------------------------------------------------------------------- ground truth
-    #: The flying robot's record through ``RotorPlantCore.truth_free`` (False: always
-    #: :meth:`_ground_truth_arrays`, the measurement and copies in Python).
-    truth_free_record = True
-
-    def ground_truth(self) -> GroundTruth:
-        """The true state now (see :class:`GroundTruth`). Asked twice for the same state
-        (e.g. a logger and a mocap node in one tick), it returns the same object: treat
-        its arrays as read-only."""
-        cached = self._truth_cache
-        if cached is not None and cached[0] == self._state_version:
-            return cached[1]
-        truth = self._ground_truth()
-        self._truth_cache = (self._state_version, truth)
-        return truth
-
-    def _ground_truth(self) -> GroundTruth:
-        d = self._fresh()
-        tracker = self._tracker
-        if (
-            self.truth_free_record
-            and tracker.idle()
-            and (d.ncon == 0 or not tracker.plate_contact(d))
-        ):
-            # No plate contact and no contact anchor (the flying robot, or one resting on
-            # other links): the whole record in one Rust call, the numbers
-            # :meth:`_ground_truth_arrays` gives (contacts without the plate are not summed;
-            # tests/test_truthlog_truth.py); None when the plate frame is not finite.
-            truth = self._rotors.truth_free(
-                float(d.time),
-                self._v_xpos,
-                self._v_xquat,
-                self._v_xmat,
-                self._v_qpos,
-                self._v_qvel,
-                self._v_subtree_com,
-            )
-            if truth is not None:
-                mujoco.mju_mat2Quat(truth.end_effector_quaternion, self._v_ee_xmat)
-                return truth
-        return self._ground_truth_arrays()
-
-    def _ground_truth_arrays(self) -> GroundTruth:
-        """:meth:`_ground_truth` for any contact state: the tracker's measurement, the
-        MjData copies in one Rust call, the record built without the frozen ``__init__``."""
-        d = self._fresh()
-        points, force, torque, zmp, slip, yaw = self._tracker.measure(d)
-        # Every MjData copy (and the applied thrusts) in one Rust call over the cached views
-        # (stable for the data's lifetime): the same values as the plain form's numpy copies.
-        pos, quat, lin, ang, qj, vj, cog, ee_pos, thrusts = self._rotors.truth_arrays(
-            self._v_xpos, self._v_xquat, self._v_qpos, self._v_qvel, self._v_subtree_com
-        )
-        ee_quat = np.zeros(4)
-        mujoco.mju_mat2Quat(ee_quat, self._v_xmat[self._ee_body])  # MuJoCo's own bits
-        return GroundTruth.from_values(
-            float(d.time),
-            pos,
-            quat,
-            lin,
-            ang,
-            qj,
-            vj,
-            cog,
-            ee_pos,
-            ee_quat,
-            thrusts,
-            points > 0,
-            points,
-            force,
-            torque,
-            zmp,
-            slip,
-            yaw,
-        )
-
-    def _ground_truth_plain(self) -> GroundTruth:
-        """The reference form of :meth:`_ground_truth` (fresh MjData views, keyword
-        construction), for tests/test_sampler_fast_paths.py."""
-        d = self._fresh()
-        points, force, torque, zmp, slip, yaw = self._tracker.measure_plain(d)
-        fb = self._foot_body
-        if self.options.fixed_base:
-            lin = np.zeros(3)
-            ang = np.zeros(3)
-        else:
-            lin = d.qvel[0:3].copy()
-            ang = d.qvel[3:6].copy()
-        ee_quat = np.zeros(4)
-        mujoco.mju_mat2Quat(ee_quat, d.xmat[self._ee_body])
-        return GroundTruth(
-            time=float(d.time),
-            base_position=d.xpos[fb].copy(),
-            base_quaternion=d.xquat[fb].copy(),
-            base_linear_velocity=lin,
-            base_angular_velocity=ang,
-            joint_positions=self.servo_positions(),
-            joint_velocities=self.servo_velocities(),
-            cog_position=d.subtree_com[fb].copy(),
-            end_effector_position=d.xpos[self._ee_body].copy(),
-            end_effector_quaternion=ee_quat,
-            rotor_thrusts=self.rotor_thrusts(),
-            foot_in_contact=points > 0,
-            foot_contact_points=points,
-            foot_contact_force=force,
-            foot_contact_torque=torque,
-            foot_zmp=zmp,
-            foot_slip=slip,
-            foot_slip_yaw=yaw,
-        )
 
     def to_xml(self) -> str:
         """The generated MJCF (opens in ``python -m mujoco.viewer --mjcf``)."""
