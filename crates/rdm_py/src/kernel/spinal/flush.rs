@@ -1,0 +1,204 @@
+//! What the busy ms changed since the last flush, and the flush that writes it back to the
+//! mirror (clock, CAN ms, counters, battery, control step, duties, publications, the UART
+//! bytes).
+
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict, PyList};
+use rdm_core::control::attitude::SpinalOutput;
+use rdm_core::N_ROTORS;
+
+use super::names::Names;
+use super::plan::Chain;
+use super::SpinalFast;
+use crate::attitude::SpinalStepOutput;
+use crate::kernel::attr::Name;
+
+/// A duty list: values and length.
+#[derive(Clone, Copy)]
+pub(super) struct Duties {
+    pub(super) values: [f64; N_ROTORS],
+    pub(super) n: usize,
+}
+
+impl Duties {
+    fn list<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        PyList::new(py, self.values.iter().take(self.n).copied())
+    }
+}
+
+/// What the busy ms changed since the last flush.
+#[derive(Default)]
+pub(super) struct Deferred {
+    pub(super) steps: i64,
+    pub(super) next_control: bool,
+    /// The output of the last control step here (its `SpinalStepOutput` is made at flush).
+    pub(super) output: Option<SpinalOutput>,
+    /// The last duty list (`duties`), whether it is also the one handed over, and the last
+    /// one handed over (`_duties_to_master`).
+    pub(super) duties: Option<Duties>,
+    pub(super) duties_handed: bool,
+    pub(super) handed: Option<Duties>,
+    pub(super) battery: Option<(i64, f64)>,
+    pub(super) imu_last: bool,
+    pub(super) servo_last: bool,
+    pub(super) next_pub: bool,
+    pub(super) frames: i64,
+    pub(super) imu_frames: i64,
+    pub(super) servo_frames: i64,
+}
+
+impl SpinalFast {
+    /// Write the mirror's state back: clock and CAN ms (`now_ms`, `_now_s`, `_can_ms`), the
+    /// master's counters of the steady CAN ms (`tx_count`, `_pending_events` = 0) and what
+    /// the busy ms changed (battery, control step, duties, publications, the UART bytes).
+    pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
+        if !self.dirty {
+            return Ok(());
+        }
+        if let Some(p) = &self.plan {
+            let node = self.node.bind(py);
+            let n = &self.names;
+            n.now_ms.set(node, p.now_ms)?;
+            n.now_s.set(node, p.now_s)?;
+            n.can_ms.set(node, p.can_ms)?;
+            if self.steady {
+                let master = n.master.get(node)?;
+                let tx = n.tx_count.i64(&master)?;
+                n.tx_count.set(&master, tx + self.tx_delta)?;
+                n.pending_events.set(&master, 0)?;
+            }
+            let d = std::mem::take(&mut self.deferred);
+            let last_pub = if d.battery.is_some() || d.imu_last || d.servo_last {
+                Some(n.last_pub.get(node)?.cast_into::<PyDict>()?)
+            } else {
+                None
+            };
+            if let (Some((ms, v)), Some(last)) = (d.battery, &last_pub) {
+                last.set_item(n.battery_sample.key(py), ms)?;
+                n.battery_due_ms.set(node, p.battery_due_ms)?;
+                n.battery_voltage.set(node, v)?;
+            }
+            if d.steps > 0 {
+                let counters = n.counters.get(node)?;
+                let steps = n.control_steps.i64(&counters)?;
+                n.control_steps.set(&counters, steps + d.steps)?;
+            }
+            if d.next_control {
+                n.next_control.set(node, p.next_control)?;
+            }
+            if let Some(out) = d.output {
+                n.last_output
+                    .set(node, Py::new(py, SpinalStepOutput { inner: out })?)?;
+            }
+            if let Some(duties) = &d.duties {
+                let list = duties.list(py)?;
+                n.duties.set(node, &list)?;
+                if d.duties_handed {
+                    n.duties_to_master.set(node, &list)?;
+                } else if let Some(handed) = &d.handed {
+                    n.duties_to_master.set(node, handed.list(py)?)?;
+                }
+            }
+            if let (Some(b), Some(last)) = (&p.busy, &last_pub) {
+                if d.imu_last {
+                    last.set_item(n.imu.key(py), b.imu_last)?;
+                }
+                if d.servo_last {
+                    last.set_item(n.servo_states.key(py), b.servo_last)?;
+                }
+            }
+            if d.next_pub {
+                n.next_pub_ms.set(node, p.next_pub_ms)?;
+            }
+            if d.frames > 0 {
+                let data = PyBytes::new(py, &self.tx);
+                self.tx.clear();
+                match p.busy.as_ref().and_then(|b| b.chain.as_ref()) {
+                    Some(chain) => Self::commit_tx(n, node, chain, &data, &d, &self.tx_marks)?,
+                    None => {
+                        node.call_method1(
+                            n.commit_tx.key(py),
+                            (
+                                data,
+                                d.frames,
+                                d.imu_frames,
+                                d.servo_frames,
+                                PyList::new(py, &self.tx_marks)?,
+                            ),
+                        )?;
+                    }
+                }
+            }
+        }
+        self.tx.clear();
+        self.tx_marks.clear();
+        self.deferred = Deferred::default();
+        self.tx_delta = 0;
+        self.steady = false;
+        self.dirty = false;
+        Ok(())
+    }
+
+    /// mirror's counters, then `UartPump.send(data)` of a whole write through the chain
+    /// (`_write_chain`: the cut line counts the bytes lost; else the peer's inbox and the
+    /// capture tap take them) and `bytes_out` (the plan's `writes_whole` held since).
+    fn commit_tx(
+        n: &Names,
+        node: &Bound<'_, PyAny>,
+        chain: &Chain,
+        data: &Bound<'_, PyBytes>,
+        d: &Deferred,
+        marks: &[(f64, usize)],
+    ) -> PyResult<()> {
+        let py = node.py();
+        let add = |obj: &Bound<'_, PyAny>, key: &Name, k: i64| -> PyResult<()> {
+            let key = key.key(py);
+            let v: i64 = obj.get_item(key)?.extract()?;
+            obj.set_item(key, v + k)
+        };
+        add(
+            &n.counts.get(&n.session.get(node)?)?,
+            &n.tx_frames,
+            d.frames,
+        )?;
+        let published = n.published.get(&n.counters.get(node)?)?;
+        if d.imu_frames > 0 {
+            add(&published, &n.imu, d.imu_frames)?;
+        }
+        if d.servo_frames > 0 {
+            add(&published, &n.servo_states, d.servo_frames)?;
+        }
+        let len = i64::try_from(data.as_bytes().len()).unwrap_or(i64::MAX);
+        let cut = match &chain.droppable {
+            Some(link) => n.dropped.truthy(link.bind(py))?,
+            None => false,
+        };
+        if let (true, Some(link)) = (cut, &chain.droppable) {
+            let link = link.bind(py);
+            n.bytes_lost.set(link, n.bytes_lost.i64(link)? + len)?;
+        } else {
+            let peer = n.peer.get(chain.end.bind(py))?;
+            n.inbox
+                .get(&peer)?
+                .call_method1(n.extend.key(py), (data,))?;
+            if let Some(tap) = &chain.tapped {
+                let tap = tap.bind(py);
+                n.tx_bytes.set(tap, n.tx_bytes.i64(tap)? + len)?;
+                let file = n.tx_file.get(tap)?;
+                if !file.is_none() {
+                    // A time-indexed capture takes each tick's bytes at that tick's time.
+                    match file.getattr(n.write_marked.key(py)) {
+                        Ok(write_marked) => {
+                            write_marked.call1((data, PyList::new(py, marks)?))?;
+                        }
+                        Err(_) => {
+                            file.call_method1(n.write.key(py), (data,))?;
+                        }
+                    }
+                }
+            }
+        }
+        let uart = n.uart.get(node)?;
+        n.bytes_out.set(&uart, n.bytes_out.i64(&uart)? + len)
+    }
+}
