@@ -199,7 +199,6 @@ def test_onboard_ctl_and_config_need_no_extra(tmp_path) -> None:
         (["sim", "--duration", "1"], None),
         (["hil", "--can", "udp", "--duration", "1"], None),
         (["plant"], "mujoco"),
-        (["spinal", "--uart", "pty", "--can", "virtual:x", "--duration", "1"], "mcap"),
         (["plan", "--target", "0.3,0,0.2,0,0,0.1"], "scipy"),
     ],
 )
@@ -213,6 +212,21 @@ def test_simulator_commands_name_the_extra(tmp_path, argv, module) -> None:
     assert lines[0].find('pip install "rdm[sim]"') > 0
     if module is not None:
         assert f"({module} is not installed)" in lines[0]
+
+
+def test_spinal_mirror_needs_no_extra(tmp_path) -> None:
+    """``rdm spinal`` (the firmware mirror on a UART and a CAN bus, a layer below the
+    simulator) runs for its duration and stops with its diagnostics, never asking for a
+    module of an extra."""
+    out = _run_blocked(
+        'sys.exit(main(["spinal", "--uart", "pty", "--can", "virtual:x", "--duration", "1"]))',
+        tmp_path,
+    )
+    assert out.returncode == 0 and "Traceback" not in out.stderr, out.stderr
+    (line,) = [x for x in out.stdout.splitlines() if x.startswith("rdm spinal: stopped ")]
+    summary = json.loads(line[len("rdm spinal: stopped ") :])
+    assert summary["realtime"]["ticks"] > 0
+    assert _asked(out.stderr) == []
 
 
 #: Modules only the ``test`` and ``bench`` extras install.
