@@ -10,6 +10,7 @@ import pytest
 
 from rdm import descriptions
 from rdm.model import DescriptionError, Robot, shipped_robot_files
+from rdm.protocol import leptrino as lp
 
 
 @pytest.mark.parametrize("name", ["rdm", "rcm"])
@@ -118,3 +119,46 @@ def test_malformed_xml_and_toml_and_missing_files() -> None:
         _load(urdf, no_frames)
     with pytest.raises(DescriptionError, match=r"nowhere\.urdf"):
         Robot.from_files(Path("nowhere.urdf"), Path("nowhere.toml"))
+
+
+def test_a_robot_without_mass_is_refused() -> None:
+    urdf, toml = _texts()
+    massless = re.sub(r'<mass value="[^"]*"/>', '<mass value="0"/>', urdf)
+    assert massless.count('<mass value="0"/>') == urdf.count("<mass value=")
+    with pytest.raises(
+        DescriptionError,
+        match=r"bad\.urdf: <robot> .*<mass value>: total mass 0 kg: .*must sum to more than 0",
+    ):
+        _load(massless, toml)
+
+
+def test_a_vectoring_unit_with_one_joint_for_roll_and_pitch_is_refused() -> None:
+    urdf, toml = _texts()
+    same = toml.replace('pitch_joint = "beta2"', 'pitch_joint = "alpha2"', 1)
+    assert same != toml
+    with pytest.raises(
+        DescriptionError,
+        match=r"bad\.toml: vectoring_units\[1\] \('arm_unit'\)\.pitch_joint: joint 'alpha2' is "
+        r"also the roll_joint: the two must differ",
+    ):
+        _load(urdf, same)
+
+
+def test_an_unknown_sensor_model_is_refused() -> None:
+    urdf, toml = _texts()
+    unknown = toml.replace('model = "CFS018CA201"', 'model = "CFS999"', 1)
+    assert unknown != toml
+    with pytest.raises(
+        DescriptionError,
+        match=r"bad\.toml: sensors\.end_effector_wrench\.model: unknown sensor model 'CFS999' "
+        r"\(known: CFS034CA301U, ",
+    ):
+        _load(urdf, unknown)
+
+
+def test_the_known_sensor_models_include_every_leptrino_model() -> None:
+    """Every model the Leptrino decoder knows loads (a description naming it is accepted)."""
+    urdf, toml = _texts()
+    for model in lp.MODELS:
+        Robot.from_strs(urdf, toml.replace('model = "CFS034CA301U"', f'model = "{model}"', 1),
+                        "ok.urdf", "ok.toml")  # fmt: skip

@@ -145,6 +145,39 @@ def test_allocation_matrix_matches_rotor_wrench_about_mujoco_com() -> None:
         assert out["rho"] == pytest.approx(np.sqrt(max(np.linalg.det(qb @ qb.T), 0.0)), rel=1e-9)
 
 
+def test_allocation_on_a_tilted_base_is_the_world_wrench_in_cog_axes() -> None:
+    """Q(q) is in the CoG frame (the foot's axes): with the base tilted, Q lambda equals the
+    world-frame rotor wrench (MuJoCo's frames moved by the base pose) rotated by R_C^T. Using
+    R_C in place of R_C^T moves it by the tilt (0.6 and more at these tilts)."""
+    robot = Robot.default()
+    model, data = _mujoco("rdm")
+    foot = model.body("foot").id
+    rng = np.random.default_rng(4)
+    for _ in range(N_CONFIGS):
+        q = _random_q(robot, rng)
+        lam = rng.uniform(1, 20, robot.n_rotors)
+        rpy = rng.uniform(0.3, 1.2, 3) * rng.choice([-1.0, 1.0], 3)
+        base = np.eye(4)
+        base[:3, :3] = _euler_zyx(*rpy)
+        base[:3, 3] = rng.uniform(-2, 2, 3)
+        _set_q(model, data, robot.joint_names, q)
+        com = base[:3, :3] @ data.subtree_com[foot] + base[:3, 3]
+        force = np.zeros(3)
+        moment = np.zeros(3)
+        for i, r in enumerate(robot.rotors):
+            parent = base @ _pose(data, model.body(r["parent"]).id)
+            u = parent[:3, :3] @ r["axis"]
+            p = parent[:3, :3] @ r["offset"] + parent[:3, 3]
+            force += lam[i] * u
+            moment += np.cross(p - com, lam[i] * u) - r["drag_to_thrust"] * r["spin"] * lam[i] * u
+        r_cog = (base @ _pose(data, foot))[:3, :3]
+        out = robot.evaluate(q, base)
+        wrench = out["allocation"] @ lam
+        np.testing.assert_allclose(wrench[:3], r_cog.T @ force, atol=1e-9)
+        np.testing.assert_allclose(wrench[3:], r_cog.T @ moment, atol=1e-9)
+        np.testing.assert_allclose(out["allocation_bar"], out["allocation"][2:], atol=0)
+
+
 @pytest.mark.parametrize("frame", ["end_effector", "foot", "middle_link", "arm_unit_pitch"])
 def test_joint_jacobian_columns_match_mujoco_jacbody(frame: str) -> None:
     robot = Robot.default()

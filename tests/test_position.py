@@ -21,7 +21,11 @@ TABLE_V = dict(
 
 
 class NumpyPosition:
-    """Eqs. (30)-(36) re-derived, with the documented integral clamp |k_I int e| <= limit."""
+    """Eqs. (30)-(36) re-derived, with the documented integral clamp |k_I int e| <= limit and
+    the tilt bound (1.0 rad): |acc| <= g tan(bound), |roll|, |pitch| <= bound, each
+    apparatus's lean (its local x, y) <= g tan(bound)."""
+
+    MAX_TILT = 1.0
 
     def __init__(self, kp, ki, kd, k_roll, k_pitch, k_theta, k_phi, limit=(1.0, 1.0)):
         self.kp, self.ki, self.kd = kp, ki, kd
@@ -35,20 +39,25 @@ class NumpyPosition:
         bound = self.limit / np.abs(self.ki)
         self.integral = np.clip(self.integral, -bound, bound)
         acc = self.kp * e + self.ki * self.integral + self.kd * (vd - v)
+        a_max = G * np.tan(self.MAX_TILT)
+        if np.linalg.norm(acc) > a_max:
+            acc = acc * a_max / np.linalg.norm(acc)
         s, c = np.sin(yaw), np.cos(yaw)
-        roll = self.k_roll * (acc[0] * s - acc[1] * c) / G
-        pitch = self.k_pitch * (acc[0] * c + acc[1] * s) / G
+        roll = np.clip(self.k_roll * (acc[0] * s - acc[1] * c) / G, -self.MAX_TILT, self.MAX_TILT)
+        pitch = np.clip(self.k_pitch * (acc[0] * c + acc[1] * s) / G, -self.MAX_TILT, self.MAX_TILT)
         alphas, betas, ns = [], [], []
         for i, rot in enumerate(rots):
-            n_va = rot @ np.array(
+            lean = np.array(
                 [
                     self.k_theta[i] * (acc[0] * c + acc[1] * s),
                     # heading-frame lateral acceleration (the thrust leans toward it; the
                     # printed eq. 36 has the opposite sign here, see docs/lqi.md)
                     self.k_phi[i] * (-acc[0] * s + acc[1] * c),
-                    G,
                 ]
             )
+            if np.linalg.norm(lean) > a_max:
+                lean = lean * a_max / np.linalg.norm(lean)
+            n_va = rot @ np.array([lean[0], lean[1], G])
             n = n_va / np.linalg.norm(n_va)
             alpha = np.arctan(-n[1] / n[2])
             beta = np.arctan(n[0] / (-n[1] * np.sin(alpha) + n[2] * np.cos(alpha)))
@@ -91,7 +100,7 @@ def test_position_steps_match_numpy(gains):
             k_roll_vectoring=list(g["k_phi"]),
         )
     ref = NumpyPosition(**g)
-    clamped = 0
+    clamped = saturated = 0
     for _ in range(400):
         p, v, pd, vd = (rng.normal(scale=s, size=2) for s in (1.0, 0.5, 1.0, 0.2))
         yaw = rng.uniform(-np.pi, np.pi)
@@ -115,7 +124,9 @@ def test_position_steps_match_numpy(gains):
         np.testing.assert_allclose(out.direction, ns, atol=1e-12)
         np.testing.assert_allclose(ctrl.integral, ref.integral, atol=1e-12)
         clamped += out.integral_clamped
+        saturated += out.saturated
     assert clamped > 0, "anti-windup clamp never exercised"
+    assert 0 < saturated < 400, "tilt bound never (or always) exercised"
 
 
 def test_angles_turn_apparatus_z_onto_direction():
@@ -235,3 +246,68 @@ def test_bumpless_switch_carries_the_integral_action(new_x, new_y, new_limit):
     np.testing.assert_allclose(action, carried_then_stepped, rtol=1e-12, atol=1e-15)
     # the old controller is untouched
     np.testing.assert_allclose(np.array([1.5, 0.005]) * old.integral, old_action)
+
+
+def _tilt_from_link_z(n: np.ndarray, rot: np.ndarray) -> float:
+    """Angle between a unit direction and its link's z axis (rot's third column)."""
+    return float(np.arccos(np.clip(np.dot(n, rot[:, 2]), -1.0, 1.0)))
+
+
+@pytest.mark.parametrize(
+    ("position", "velocity"),
+    [
+        ([1e300, 0.0], [0.0, 0.0]),
+        ([-1e300, 2e299], [1e300, -1e300]),
+        ([1e308, -1e308], [-1e308, 1e308]),  # the PID sum overflows to inf - inf
+    ],
+)
+def test_absurd_errors_command_at_most_the_tilt_bound(position, velocity):
+    """1e300 m of error asks for the bound (1.0 rad), not 4.7e299 rad, and says so."""
+    ctrl = pc.PositionController()
+    rots = np.stack([rx(0.3) @ ry(-0.2), ry(0.4)])
+    out = ctrl.step(np.array(position), np.array(velocity), np.zeros(2), np.zeros(2), 0.4, rots,
+                    0.025)  # fmt: skip
+    limit = pc.MAX_TILT_RAD
+    assert limit == 1.0
+    assert abs(out.roll) <= limit and abs(out.pitch) <= limit
+    assert np.all(np.isfinite(out.acceleration))
+    assert np.hypot(*out.acceleration) <= G * np.tan(limit) * (1 + 1e-12)
+    for i in range(2):
+        assert np.all(np.isfinite(out.direction[i]))
+        assert _tilt_from_link_z(out.direction[i], rots[i]) <= limit + 1e-12
+    assert np.all(np.isfinite(out.alpha)) and np.all(np.isfinite(out.beta))
+    assert out.saturated and "acceleration" in out.saturation
+    # A later, ordinary step is not cut (the integral stayed within its clamp).
+    ctrl.reset()
+    calm = ctrl.step(np.array([0.1, 0.0]), np.zeros(2), np.zeros(2), np.zeros(2), 0.0, rots, 0.025)
+    assert not calm.saturated and calm.saturation == ()
+
+
+def test_the_tilt_bound_cuts_pitch_at_the_bound_it_is_given():
+    """With k_theta_d = 1 the pitch target is a/g (eq. 32): a 5 m/s^2 demand is 0.51 rad, cut
+    to a 0.3 rad bound; the acceleration itself is cut to g tan(0.3)."""
+    ctrl = pc.PositionController(x_pid=(5.0, 0.0, 0.0), max_tilt=0.3)
+    out = ctrl.step(np.array([-1.0, 0.0]), np.zeros(2), np.zeros(2), np.zeros(2), 0.0,
+                    np.stack([np.eye(3)] * 2), 0.025)  # fmt: skip
+    assert out.pitch == pytest.approx(0.3, abs=1e-12)
+    np.testing.assert_allclose(out.acceleration, [G * np.tan(0.3), 0.0], atol=1e-12)
+    # a/g = tan(0.3) > 0.3: eq. (32)'s linear pitch target is cut too
+    assert out.saturation == ("acceleration", "attitude")
+    free = pc.PositionController(x_pid=(5.0, 0.0, 0.0)).step(
+        np.array([-1.0, 0.0]), np.zeros(2), np.zeros(2), np.zeros(2), 0.0,
+        np.stack([np.eye(3)] * 2), 0.025,
+    )  # fmt: skip
+    assert free.pitch == pytest.approx(5.0 / G, abs=1e-12) and not free.saturated
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.2, np.pi / 2, float("nan"), float("inf")])
+def test_a_tilt_bound_outside_the_open_quarter_turn_is_refused(bad):
+    with pytest.raises(pc.PositionControlError, match="gains"):
+        pc.PositionController(max_tilt=bad)
+
+
+def test_nan_errors_are_refused_not_saturated():
+    ctrl = pc.PositionController()
+    with pytest.raises(pc.PositionControlError, match="position"):
+        ctrl.step(np.array([np.nan, 1e300]), np.zeros(2), np.zeros(2), np.zeros(2), 0.0,
+                  np.stack([np.eye(3)] * 2), 0.025)  # fmt: skip

@@ -433,6 +433,7 @@ JSK_TO_PAPER: list[int]
 MAX_WIRE_GAIN: float
 N_VECTORING: int
 GRAVITY: float
+MAX_TILT_RAD: float
 
 class CareSolveError(RdmError):
     """The Riccati solver failed (not stabilisable, not converged, or invalid input)."""
@@ -525,7 +526,10 @@ class PcAxisController:
     def integrals(self) -> tuple[float, float]: ...
 
 class PositionController:
-    """Eqs. (30)-(36); defaults Table V, integral limit 1 m/s^2 per axis (assumption)."""
+    """Eqs. (30)-(36); defaults Table V, integral limit 1 m/s^2 per axis and tilt bound
+    ``max_tilt`` = MAX_TILT_RAD (assumptions). ``step`` returns a dict: acceleration, roll,
+    pitch, alpha, beta, direction, integral_clamped, saturated (bool) and saturation (the
+    names of the outputs cut to the tilt bound: "acceleration", "attitude", "vectoring")."""
 
     def __init__(
         self,
@@ -537,6 +541,7 @@ class PositionController:
         k_pitch_vectoring: list[float] | None = None,
         k_roll_vectoring: list[float] | None = None,
         gravity: float | None = None,
+        max_tilt: float | None = None,
     ) -> None: ...
     def step(
         self,

@@ -7,7 +7,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use rdm_core::control::position::{
-    self as core_position, AxisPid, PositionError, PositionGains, PositionInput, N_VECTORING,
+    self as core_position, AxisPid, PositionError, PositionGains, PositionInput, Saturation,
+    N_VECTORING,
 };
 
 use crate::errors::RdmError;
@@ -36,11 +37,13 @@ pub(crate) struct PositionController {
 
 #[pymethods]
 impl PositionController {
-    /// Defaults are Table V (integral limits 1 m/s² are an assumption).
+    /// Defaults are Table V (integral limits 1 m/s² and the tilt bound `max_tilt` 1.0 rad
+    /// are assumptions).
     #[new]
     #[allow(clippy::too_many_arguments)]
     #[pyo3(signature = (x_pid=None, y_pid=None, integral_limit=None, k_roll=None, k_pitch=None,
-                        k_pitch_vectoring=None, k_roll_vectoring=None, gravity=None))]
+                        k_pitch_vectoring=None, k_roll_vectoring=None, gravity=None,
+                        max_tilt=None))]
     fn new(
         x_pid: Option<(f64, f64, f64)>,
         y_pid: Option<(f64, f64, f64)>,
@@ -50,6 +53,7 @@ impl PositionController {
         k_pitch_vectoring: Option<[f64; N_VECTORING]>,
         k_roll_vectoring: Option<[f64; N_VECTORING]>,
         gravity: Option<f64>,
+        max_tilt: Option<f64>,
     ) -> PyResult<Self> {
         let mut g = PositionGains::table_v();
         let pid = |t: (f64, f64, f64), limit: f64| AxisPid {
@@ -66,12 +70,15 @@ impl PositionController {
         g.k_pitch_vectoring = k_pitch_vectoring.unwrap_or(g.k_pitch_vectoring);
         g.k_roll_vectoring = k_roll_vectoring.unwrap_or(g.k_roll_vectoring);
         g.gravity = gravity.unwrap_or(g.gravity);
+        g.max_tilt = max_tilt.unwrap_or(g.max_tilt);
         let inner = core_position::PositionController::new(g).map_err(position_error)?;
         Ok(Self { inner })
     }
 
     /// One step. `link_rotations` has shape (N_VECTORING, 3, 3). Returns a dict with
-    /// acceleration, roll, pitch, alpha, beta, direction, integral_clamped.
+    /// acceleration, roll, pitch, alpha, beta, direction, integral_clamped, saturated (any
+    /// output cut to the tilt bound) and saturation (the cut outputs' names: acceleration,
+    /// attitude, vectoring).
     #[allow(clippy::too_many_arguments)]
     fn step<'py>(
         &mut self,
@@ -118,6 +125,8 @@ impl PositionController {
             .collect();
         d.set_item("direction", directions)?;
         d.set_item("integral_clamped", out.integral_clamped)?;
+        d.set_item("saturated", out.saturation.any())?;
+        d.set_item("saturation", saturation_names(&out.saturation))?;
         Ok(d)
     }
 
@@ -141,6 +150,18 @@ impl PositionController {
     }
 }
 
+/// Names of the outputs a step cut to the tilt bound, in a fixed order.
+fn saturation_names(s: &Saturation) -> Vec<&'static str> {
+    [
+        (s.acceleration, "acceleration"),
+        (s.attitude, "attitude"),
+        (s.vectoring, "vectoring"),
+    ]
+    .into_iter()
+    .filter_map(|(cut, name)| cut.then_some(name))
+    .collect()
+}
+
 /// Eqs. (33)-(34) for a unit direction n: returns (alpha, beta).
 #[pyfunction]
 fn vectoring_angles(n: PyReadonlyArray1<'_, f64>) -> PyResult<(f64, f64)> {
@@ -161,6 +182,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     )?;
     m.add("N_VECTORING", N_VECTORING)?;
     m.add("GRAVITY", core_position::GRAVITY)?;
+    m.add("MAX_TILT_RAD", core_position::MAX_TILT_RAD)?;
     m.add_class::<PositionController>()?;
     m.add_function(wrap_pyfunction!(vectoring_angles, m)?)?;
     Ok(())

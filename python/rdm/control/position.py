@@ -1,6 +1,9 @@
 """Horizontal position control and vectoring angles (paper Sec. IV-A-2, eqs. 30-36).
 
-Defaults are the paper's Table V; the integral clamp (1 m/s^2 per axis) is an assumption.
+Defaults are the paper's Table V; the integral clamp (1 m/s^2 per axis) is an assumption, and
+so is the tilt bound ``max_tilt`` (:data:`MAX_TILT_RAD`, the attitude controller's 1.0 rad):
+roll/pitch targets, the vectoring directions' lean and the desired acceleration
+(``g tan(max_tilt)``) are cut to it, and the step says so (``saturated``, ``saturation``).
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from rdm import _rdm
 PositionControlError = _rdm.PositionControlError
 N_VECTORING: int = _rdm.N_VECTORING
 GRAVITY: float = _rdm.GRAVITY
+MAX_TILT_RAD: float = _rdm.MAX_TILT_RAD
 vectoring_angles = _rdm.vectoring_angles
 
 
@@ -28,6 +32,10 @@ class PositionCommand:
     beta: tuple[float, ...]
     direction: np.ndarray
     integral_clamped: bool
+    #: True when an output was cut to the tilt bound this step.
+    saturated: bool = False
+    #: The cut outputs' names ("acceleration", "attitude", "vectoring").
+    saturation: tuple[str, ...] = ()
 
 
 class PositionController:
@@ -35,7 +43,8 @@ class PositionController:
 
     def __init__(self, **gains: object) -> None:
         """Keyword gains: x_pid, y_pid (P, I, D), integral_limit (x, y) [m/s^2], k_roll,
-        k_pitch, k_pitch_vectoring, k_roll_vectoring (per apparatus), gravity."""
+        k_pitch, k_pitch_vectoring, k_roll_vectoring (per apparatus), gravity, max_tilt [rad]
+        in (0, pi/2)."""
         self._core = _rdm.PositionController(**gains)
 
     def step(
@@ -60,6 +69,8 @@ class PositionController:
             beta=tuple(out["beta"]),
             direction=np.asarray(out["direction"]),
             integral_clamped=out["integral_clamped"],
+            saturated=out["saturated"],
+            saturation=tuple(out["saturation"]),
         )
 
     def step_outputs(
@@ -74,7 +85,8 @@ class PositionController:
     ) -> dict:
         """:meth:`step` as the core returns it: a dict with ``acceleration`` (array), ``roll``,
         ``pitch`` (floats), ``alpha``, ``beta`` (lists of floats), ``direction`` (list of
-        [x, y, z] lists), ``integral_clamped``; no :class:`PositionCommand` is built."""
+        [x, y, z] lists), ``integral_clamped``, ``saturated``, ``saturation`` (list of names);
+        no :class:`PositionCommand` is built."""
         vec = np.ascontiguousarray
         return self._core.step(
             vec(position, dtype=float),

@@ -47,7 +47,15 @@ pub struct PositionGains {
     pub k_roll_vectoring: [f64; N_VECTORING],
     /// g of eqs. (31), (32), (36).
     pub gravity: f64,
+    /// Bound on the commanded tilt [rad], in (0, π/2): `|φ_d|`, `|θ_d|` and the tilt of each
+    /// apparatus direction `n_i` from its link's z axis, and through it `|p̈_d|` <=
+    /// `g tan(max_tilt)`. ASSUMPTION (not in the paper): the attitude controller's roll/pitch
+    /// bound, 1.0 rad (firmware `MAX_TILT_ANGLE`, `AttitudeConfig::max_tilt_rad`).
+    pub max_tilt: f64,
 }
+
+/// Default [`PositionGains::max_tilt`]: the firmware's `MAX_TILT_ANGLE` (rad).
+pub const MAX_TILT_RAD: f64 = 1.0;
 
 impl PositionGains {
     /// Table V: x (4.6, 1.5, 7.0), y (7.0, 0.005, 10.5), `k_φd = 0`, `k_θd = 1`,
@@ -71,6 +79,7 @@ impl PositionGains {
             k_pitch_vectoring: [0.0, 0.0],
             k_roll_vectoring: [1.0, 0.0],
             gravity: GRAVITY,
+            max_tilt: MAX_TILT_RAD,
         }
     }
 
@@ -90,7 +99,9 @@ impl PositionGains {
                 .chain(self.k_roll_vectoring.iter())
                 .all(|k| k.is_finite())
             && self.gravity.is_finite()
-            && self.gravity > 0.0;
+            && self.gravity > 0.0
+            && self.max_tilt > 0.0
+            && self.max_tilt < core::f64::consts::FRAC_PI_2;
         if axes_ok && rest_ok {
             Ok(())
         } else {
@@ -141,6 +152,27 @@ pub struct PositionOutput {
     pub direction: [Vector3<f64>; N_VECTORING],
     /// True when an integral term hit its limit this step.
     pub integral_clamped: bool,
+    /// Which outputs were cut to [`PositionGains::max_tilt`] this step.
+    pub saturation: Saturation,
+}
+
+/// Outputs of a position step cut to the tilt bound (all false: none).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Saturation {
+    /// `|p̈_d|` was above `g tan(max_tilt)` and was scaled down to it (direction kept).
+    pub acceleration: bool,
+    /// `φ_d` or `θ_d` was past `±max_tilt` and was clamped.
+    pub attitude: bool,
+    /// An apparatus direction leaned more than `max_tilt` from its link's z axis and was
+    /// brought back to it (horizontal part scaled, direction kept).
+    pub vectoring: bool,
+}
+
+impl Saturation {
+    /// Whether any output was cut.
+    pub fn any(&self) -> bool {
+        self.acceleration || self.attitude || self.vectoring
+    }
 }
 
 /// Why a position step failed; the controller state is left unchanged.
@@ -259,16 +291,21 @@ impl PositionController {
             }
         }
         self.integral = integral;
-        let acceleration = Vector2::new(
+        let mut saturation = Saturation::default();
+        let pid_acceleration = Vector2::new(
             g.x.p * error.x + g.x.i * integral.x + g.x.d * error_rate.x,
             g.y.p * error.y + g.y.i * integral.y + g.y.d * error_rate.y,
         );
+        // The horizontal acceleration a level thrust of g can give at the tilt bound. A huge
+        // (or overflowed, infinite) PID sum keeps its direction.
+        let horizontal_limit = g.gravity * g.max_tilt.tan();
+        let acceleration = bounded_norm(pid_acceleration, horizontal_limit, &mut saturation);
         let (sin_yaw, cos_yaw) = input.target_yaw.sin_cos();
         // Desired acceleration in the yaw-aligned frame, as eqs. (31), (32), (36) use it.
         let forward = acceleration.x * cos_yaw + acceleration.y * sin_yaw;
         let lateral = acceleration.x * sin_yaw - acceleration.y * cos_yaw;
-        let roll = g.k_roll * lateral / g.gravity;
-        let pitch = g.k_pitch * forward / g.gravity;
+        let roll = clamp_tilt(g.k_roll * lateral / g.gravity, g.max_tilt, &mut saturation);
+        let pitch = clamp_tilt(g.k_pitch * forward / g.gravity, g.max_tilt, &mut saturation);
         let mut alpha = [0.0; N_VECTORING];
         let mut beta = [0.0; N_VECTORING];
         let mut direction = [Vector3::zeros(); N_VECTORING];
@@ -278,11 +315,14 @@ impl PositionController {
             // −lateral. The printed eq. (36) puts eq. (31)'s roll-target sign (+lateral) in that
             // slot, which leans the thrust away from the demand: positive feedback in y (seen
             // in MuJoCo). We use the direction sign; k_roll_vectoring = −1 gives the print.
-            let local = Vector3::new(
+            let lean = Vector2::new(
                 g.k_pitch_vectoring[i] * forward,
                 -g.k_roll_vectoring[i] * lateral,
-                g.gravity,
             );
+            let mut lean_cut = Saturation::default();
+            let lean = bounded_norm(lean, horizontal_limit, &mut lean_cut);
+            saturation.vectoring |= lean_cut.acceleration;
+            let local = Vector3::new(lean.x, lean.y, g.gravity);
             let n_va = input.link_rotations[i] * local;
             // |n_va| >= g * smallest singular value of the rotation, so > 0 for a valid input.
             let n = n_va / n_va.norm();
@@ -299,7 +339,41 @@ impl PositionController {
             beta,
             direction,
             integral_clamped,
+            saturation,
         })
+    }
+}
+
+/// `v` scaled down to norm `limit` when longer (`saturation.acceleration` set); an infinite
+/// component gives the unit vector of the infinite components' signs. A NaN component (an
+/// overflowed sum of opposite infinities) has no direction: zero, saturated.
+fn bounded_norm(v: Vector2<f64>, limit: f64, saturation: &mut Saturation) -> Vector2<f64> {
+    let norm = v.norm();
+    if norm <= limit {
+        return v;
+    }
+    saturation.acceleration = true;
+    if v.iter().any(|c| c.is_nan()) {
+        return Vector2::zeros();
+    }
+    let unit = if v.iter().any(|c| c.is_infinite()) {
+        let signs = v.map(|c| if c.is_infinite() { c.signum() } else { 0.0 });
+        signs / signs.norm()
+    } else {
+        // scaled by the largest entry first: |v| itself may overflow (1e300 squared)
+        let w = v / v.amax();
+        w / w.norm()
+    };
+    unit * limit
+}
+
+/// `angle` clamped to `±max_tilt` (`saturation.attitude` set when cut).
+fn clamp_tilt(angle: f64, max_tilt: f64, saturation: &mut Saturation) -> f64 {
+    if angle.abs() > max_tilt {
+        saturation.attitude = true;
+        max_tilt.copysign(angle)
+    } else {
+        angle
     }
 }
 
@@ -326,4 +400,90 @@ fn validate_input(input: &PositionInput) -> Result<(), PositionError> {
         check(orthonormal, "link_rotations")?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn input(position: [f64; 2], velocity: [f64; 2]) -> PositionInput {
+        PositionInput {
+            position: Vector2::from(position),
+            velocity: Vector2::from(velocity),
+            target_position: Vector2::zeros(),
+            target_velocity: Vector2::zeros(),
+            target_yaw: 0.3,
+            link_rotations: [Matrix3::identity(); N_VECTORING],
+            dt: 0.025,
+        }
+    }
+
+    /// Tilt of a unit direction from the link z axis (identity link rotations).
+    fn tilt(n: &Vector3<f64>) -> f64 {
+        n.z.clamp(-1.0, 1.0).acos()
+    }
+
+    #[test]
+    fn huge_errors_command_at_most_the_tilt_bound() {
+        let cases = [
+            ([1e300, 0.0], [0.0, 0.0]),
+            ([-1e300, 3e299], [1e300, -1e300]),
+            ([f64::MAX, -f64::MAX], [-f64::MAX, f64::MAX]),
+            ([1e308, 0.0], [-1e308, 0.0]),
+        ];
+        for (position, velocity) in cases {
+            let mut c = PositionController::new(PositionGains::table_v()).unwrap();
+            let out = c.step(&input(position, velocity)).unwrap();
+            let limit = MAX_TILT_RAD;
+            assert!(
+                out.roll.abs() <= limit && out.pitch.abs() <= limit,
+                "{out:?}"
+            );
+            assert!(out.acceleration.iter().all(|a| a.is_finite()), "{out:?}");
+            assert!(out.acceleration.norm() <= GRAVITY * limit.tan() * (1.0 + 1e-12));
+            for n in &out.direction {
+                assert!(n.iter().all(|v| v.is_finite()), "{out:?}");
+                assert!(tilt(n) <= limit + 1e-12, "{out:?}");
+            }
+            assert!(out.alpha.iter().chain(&out.beta).all(|a| a.is_finite()));
+            assert!(
+                out.saturation.any() && out.saturation.acceleration,
+                "{out:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_saturated_step_keeps_the_direction_of_the_demand() {
+        let mut c = PositionController::new(PositionGains::table_v()).unwrap();
+        // error along -x only: the acceleration points along -x (target 0, position +1e300)
+        let out = c.step(&input([1e300, 0.0], [0.0, 0.0])).unwrap();
+        let expected = -GRAVITY * MAX_TILT_RAD.tan();
+        assert!((out.acceleration.x - expected).abs() < 1e-12, "{out:?}");
+        assert_eq!(out.acceleration.y, 0.0);
+    }
+
+    #[test]
+    fn small_errors_are_not_cut() {
+        let mut c = PositionController::new(PositionGains::table_v()).unwrap();
+        let out = c.step(&input([0.2, -0.1], [0.05, 0.0])).unwrap();
+        assert_eq!(out.saturation, Saturation::default());
+        // eq. (30) by hand: x: 4.6 e + 1.5 e dt + 7 e_rate
+        let ax = 4.6 * -0.2 + 1.5 * (-0.2 * 0.025) + 7.0 * -0.05;
+        assert!((out.acceleration.x - ax).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_tilt_bound_outside_the_open_quarter_turn_is_refused() {
+        for bad in [0.0, -0.1, core::f64::consts::FRAC_PI_2, f64::NAN] {
+            let gains = PositionGains {
+                max_tilt: bad,
+                ..PositionGains::table_v()
+            };
+            assert_eq!(
+                PositionController::new(gains),
+                Err(PositionError::InvalidInput { argument: "gains" })
+            );
+        }
+    }
 }

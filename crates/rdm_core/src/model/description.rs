@@ -8,6 +8,7 @@ use nalgebra::{Isometry3, Matrix3, Vector3};
 use super::bounds::check_toml_numbers;
 use super::config::TomlDescription;
 use super::error::{DescriptionError, DescriptionErrorKind as Kind};
+use super::rules;
 use super::urdf::parse_urdf;
 
 /// A rigid link: mass, centre of mass and inertia about it (link frame).
@@ -215,6 +216,8 @@ impl RobotDescription {
             ));
         }
         let root_link = roots[0];
+        let masses: Vec<f64> = links.iter().map(|l| l.mass).collect();
+        rules::check_total_mass(uf, &masses)?;
 
         // Topological order of joints (breadth first from the root).
         let mut order: Vec<usize> = Vec::with_capacity(raw.len());
@@ -431,6 +434,7 @@ impl RobotDescription {
         let mut units = Vec::with_capacity(cfg.vectoring_units.len());
         for (k, u) in cfg.vectoring_units.iter().enumerate() {
             let field = format!("vectoring_units[{k}] ('{}')", u.name);
+            rules::check_unit_joints(tf, &field, &u.roll_joint, &u.pitch_joint)?;
             let roll_q = q_of(&format!("{field}.roll_joint"), &u.roll_joint)?;
             let pitch_q = q_of(&format!("{field}.pitch_joint"), &u.pitch_joint)?;
             let mut unit_rotors = Vec::with_capacity(u.rotors.len());
@@ -498,6 +502,7 @@ impl RobotDescription {
         let mut sensors = Vec::with_capacity(cfg.sensors.len());
         for (name, s) in &cfg.sensors {
             let field = format!("sensors.{name}");
+            rules::check_sensor_model(tf, &field, &s.model)?;
             let link = match named_frames.iter().find(|(n, _)| n == &s.frame) {
                 Some(&(_, l)) => l,
                 None => link_index(&s.frame).ok_or_else(|| {

@@ -154,3 +154,34 @@ pub fn inertia_from_wire(wire: &[i16; 6]) -> nalgebra::Matrix3<f64> {
 pub fn inertia_matrix(c: &[f64; 6]) -> nalgebra::Matrix3<f64> {
     nalgebra::Matrix3::new(c[0], c[3], c[5], c[3], c[1], c[4], c[5], c[4], c[2])
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Golden values written out by hand: `static_cast<int16_t>(value * 1000)` of the PC's
+    /// C++ truncates toward zero, so 1.9999 goes out as 1999 (rounding would give 2000).
+    #[test]
+    fn to_wire_truncates_toward_zero() {
+        let golden: [(f64, i16); 10] = [
+            (0.0019, 1),
+            (-0.0019, -1),
+            (1.9999, 1999),
+            (-1.9999, -1999),
+            (1.2348, 1234),
+            (-7.9996, -7999),
+            (0.0009, 0),
+            (-0.0009, 0),
+            (32.7679, 32767),
+            (-40.0, -32768),
+        ];
+        for (value, wire) in golden {
+            assert_eq!(to_wire(value, "v"), Ok(wire), "{value}");
+        }
+        assert_eq!(
+            to_wire(f64::NAN, "roll.p"),
+            Err(WireValueError { field: "roll.p" })
+        );
+        assert_eq!(from_wire(-1999), -1.999);
+    }
+}
