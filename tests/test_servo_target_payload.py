@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from rdm import _rdm
-from rdm.nodes import onboard as onboard_module
+from rdm.nodes import onboard_send as onboard_module
 from rdm.nodes.onboard_config import DYNAMIXEL_RAD_PER_TICK, DYNAMIXEL_ZERO, ServoMap
 
 N = 10

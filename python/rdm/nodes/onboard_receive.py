@@ -1,0 +1,258 @@
+"""The onboard node's receive side: the rosserial events from Spinal (``imu``, ``servo/states``,
+``servo/torque_states``, ``flight_config_ack``, ``battery_voltage_status``, the ``imu_calib``
+answer, a lost sync), the ``imu`` and ``servo/states`` payloads read without the codec, and the
+cache of servo readings seen before.
+
+:class:`OnboardReceive` is a part of :class:`rdm.nodes.onboard.OnboardNode`: its methods read
+and write the node's state (``present_q``, ``counts``, ``arming``, ``config`` ...).
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from rdm.nodes.onboard_arming import FlightState
+from rdm.nodes.onboard_calibration import GET_CALIB_DATA
+from rdm.nodes.onboard_operator import _vector
+from rdm.protocol.rosserial.events import MessageReceived, ServiceResponse, SyncLost
+from rdm.protocol.rosserial.services import ServiceError
+
+#: How many distinct ``servo/states`` readings the node keeps the joint writes of.
+SERVO_CACHE_SIZE = 8
+#: ``spinal/Imu`` payload from byte 20: gyro (3 float32), mag skipped, quaternion (4 float32).
+_IMU_GYRO_QUAT = struct.Struct("<3f12x4f")
+#: ``spinal/Imu`` payload from byte 8: the accelerometer (3 float32, m/s^2).
+_IMU_ACC = struct.Struct("<3f")
+_U32 = struct.Struct("<I")
+#: ``spinal/ServoStates``: stamp (8 bytes), count (uint32), 7 bytes per ``spinal/ServoState``.
+_SERVO_STATES_HEAD, _SERVO_STATE_SIZE = 12, 7
+#: ``spinal/ServoState``'s index (uint8) and angle (int16); temp, load, error skipped.
+_SERVO_INDEX_ANGLE = struct.Struct("<Bh4x")
+_SERVO_STATE_FIELDS = [
+    ("index", "uint8", None),
+    ("angle", "int16", None),
+    ("temp", "uint8", None),
+    ("load", "int16", None),
+    ("error", "uint8", None),
+]
+
+
+class _ServoReading(NamedTuple):
+    """The two fields of a ``spinal/ServoState`` the node reads."""
+
+    index: int
+    angle: int
+
+
+class _ServoReadings:
+    """What :meth:`OnboardNode._on_servo_states` reads of a decoded ``spinal/ServoStates``."""
+
+    __slots__ = ("servos",)
+
+    def __init__(self, servos: list[_ServoReading]) -> None:
+        self.servos = servos
+
+
+def quaternion_to_euler(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (ZYX) of a unit quaternion."""
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def servo_states_decodes(payload: bytes) -> bool:
+    """Whether ``spinal/ServoStates`` decodes ``payload`` (a stamp, a count and exactly that
+    many 7-byte entries; anything shorter or longer is a decode error)."""
+    n = len(payload)
+    if n < _SERVO_STATES_HEAD:
+        return False
+    return n - _SERVO_STATES_HEAD == _SERVO_STATE_SIZE * _U32.unpack_from(payload, 8)[0]
+
+
+class OnboardReceive:
+    """What the node takes in from Spinal (a part of :class:`rdm.nodes.onboard.OnboardNode`)."""
+
+    @property
+    def imu_euler(self) -> tuple[float, float, float] | None:
+        """Roll, pitch, yaw of the newest valid ``imu`` quaternion (None before one)."""
+        if self._imu_euler is None and self._imu_quat is not None:
+            x, y, z, w = self._imu_quat
+            self._imu_euler = quaternion_to_euler(x, y, z, w)
+        return self._imu_euler
+
+    @property
+    def imu_gyro(self) -> np.ndarray | None:
+        """The newest valid ``imu`` gyro vector [rad/s] (None before one)."""
+        if self._gyro_src is not None:
+            self._imu_gyro, self._gyro_src = np.array(self._gyro_src), None
+        return self._imu_gyro
+
+    def _read_imu_calibration(self, now: float) -> None:
+        """Ask Spinal for its IMU calibration (once per handshake, retried until answered)."""
+        if not self.config.read_imu_calibration or not self.imu_calibration.request(now):
+            return
+        try:
+            self.session.call_service(
+                "imu_calib", self._imu_calib_request.new(command=GET_CALIB_DATA, data=[]), now
+            )
+        except ServiceError:  # not offered (yet) or a call still pending: the retry asks again
+            self.imu_calibration.counts["call_refused"] += 1
+
+    def _on_event(self, event: Any) -> None:
+        if isinstance(event, SyncLost):
+            self.counts["sync_lost"] += 1
+            self._link_up_at = None
+            self.arming.link_lost()
+            self._announced = False
+            self.imu_calibration.reset()
+            return
+        if isinstance(event, ServiceResponse):
+            if event.service == "imu_calib":
+                r = event.response
+                self.imu_calibration.on_response(bool(r.success), r.data)
+            return
+        if not isinstance(event, MessageReceived):
+            return
+        msg = event.message
+        self.counts[f"rx:{event.topic}"] += 1
+        if event.topic == "imu":
+            q = [float(v) for v in msg.quaternion]
+            if not all(map(math.isfinite, q)) or abs(math.fsum([v * v for v in q]) - 1) > 0.1:
+                self.counts["imu_invalid"] += 1
+                return
+            self._imu_quat, self._imu_euler = q, None
+            self._imu_at, self._imu_acc = self._now, [float(v) for v in msg.acc]
+            g = msg.gyro
+            if type(g) in (tuple, list) and len(g) == 3 and all(type(v) is float for v in g):
+                if all(map(math.isfinite, g)):  # what _vector accepts; converted when read
+                    self._gyro_src = g
+            else:
+                arr = _vector(g, 3)
+                if arr is not None:
+                    self._gyro_src, self._imu_gyro = None, arr
+        elif event.topic == "servo/states":
+            self._on_servo_states(msg)
+        elif event.topic == "servo/torque_states":
+            flags = [bool(v) for v in msg.torque_enable]
+            indices = self.config.servo_map.servo_index
+            self.servos_torque_on = all(i < len(flags) and flags[i] for i in indices)
+        elif event.topic == "flight_config_ack":
+            before = self.arming.state
+            self.arming.on_ack(int(msg.data))
+            if before is not FlightState.ARMED and self.arming.state is FlightState.ARMED:
+                self.control.reset_integrators()
+        elif event.topic == "battery_voltage_status":
+            v = float(msg.data)
+            if self.monitors.battery(v, self._now):
+                self.battery_voltage = v
+            else:
+                self.counts["battery_invalid"] += 1
+
+    def _on_imu_payload(self, payload: bytes) -> None:
+        """An ``imu`` message from its payload (one the codec decodes): what ``_on_event`` does
+        with the decoded message, reading only the gyro and the quaternion."""
+        self.counts["rx:imu"] += 1
+        gx, gy, gz, x, y, z, w = _IMU_GYRO_QUAT.unpack_from(payload, 20)
+        q = [x, y, z, w]
+        if not all(map(math.isfinite, q)) or abs(math.fsum((x * x, y * y, z * z, w * w)) - 1) > 0.1:
+            self.counts["imu_invalid"] += 1
+            return
+        self._imu_quat, self._imu_euler = q, None
+        self._imu_at, self._imu_acc = self._now, list(_IMU_ACC.unpack_from(payload, 8))
+        g = [gx, gy, gz]
+        if all(map(math.isfinite, g)):
+            self._gyro_src = g
+
+    def _on_servo_payload(self, payload: bytes) -> None:
+        """A ``servo/states`` message from its payload (one the codec decodes): a reading seen
+        before (same bytes after the stamp) applied from its cached entry, else decoded."""
+        self.counts["rx:servo/states"] += 1
+        body = None
+        if self.reuse_servo_states:
+            self._servo_cache_valid()
+            body = payload[8:]
+            hit = self._servo_raw.get(body)
+            if hit is not None:
+                self._apply_servo_entry(hit)
+                return
+        if self.fast_servo_decode and servo_states_decodes(payload):
+            # the index and angle of each entry, as the codec decodes them (uint8, int16)
+            readings = _SERVO_INDEX_ANGLE.iter_unpack(memoryview(payload)[_SERVO_STATES_HEAD:])
+            msg = _ServoReadings(list(map(_ServoReading._make, readings)))
+        else:
+            msg = self._servo_codec.decode(payload)
+        entry = self._on_servo_states(msg)
+        if body is not None and entry is not None:
+            raw = self._servo_raw
+            raw[body] = entry
+            if len(raw) > SERVO_CACHE_SIZE:
+                del raw[next(iter(raw))]  # the oldest
+
+    def _servo_cache_valid(self) -> None:
+        """Forget the cached servo entries when the servo map object changed."""
+        smap = self.config.servo_map
+        if smap is not self._servo_cache_map:
+            self._servo_cache.clear()
+            self._servo_raw.clear()
+            self._servo_cache_map = smap
+
+    def _apply_servo_entry(self, entry: tuple[np.ndarray, np.ndarray, int, bool]) -> None:
+        # a reading seen before: the same joint writes and counts as the loop
+        joints, values, n_unknown, partial = entry
+        self.present_q[joints] = values
+        self._seen[joints] = True
+        if n_unknown:
+            self.counts["servo_unknown_index"] += n_unknown
+        if partial:
+            self.counts["servo_states_partial"] += 1
+        self._hold_present_q()
+
+    def _on_servo_states(self, msg: Any) -> tuple[np.ndarray, np.ndarray, int, bool] | None:
+        """Apply one decoded reading; returns its cache entry (None when not cacheable)."""
+        smap = self.config.servo_map
+        key = None
+        if self.reuse_servo_states:
+            self._servo_cache_valid()
+            try:
+                key = tuple([(s.index, s.angle) for s in msg.servos])
+                hit = self._servo_cache.get(key)
+            except (TypeError, AttributeError):  # not hashable / not servo entries: plain path
+                key = hit = None
+            if hit is not None:
+                self._apply_servo_entry(hit)
+                return hit
+        covered = set()
+        joints, values, n_unknown = [], [], 0
+        for s in msg.servos:
+            joint = smap.joint_of(int(s.index))
+            if joint is None or joint >= self.robot.n_q:
+                self.counts["servo_unknown_index"] += 1
+                n_unknown += 1
+                continue
+            value = smap.to_rad(joint, int(s.angle))
+            self.present_q[joint] = value
+            self._seen[joint] = True
+            covered.add(joint)
+            joints.append(joint)
+            values.append(value)
+        partial = len(covered) != self.robot.n_q
+        if partial:
+            self.counts["servo_states_partial"] += 1
+        entry = None
+        if key is not None and len(covered) == len(joints):  # no joint written twice
+            cache = self._servo_cache
+            entry = (np.array(joints, dtype=np.intp), np.array(values), n_unknown, partial)
+            cache[key] = entry
+            if len(cache) > SERVO_CACHE_SIZE:
+                del cache[next(iter(cache))]  # the oldest
+        self._hold_present_q()
+        return entry
+
+    def _hold_present_q(self) -> None:
+        if self.joint_targets is None and self._trajectory is None and self._seen.all():
+            self.joint_targets = self.present_q.copy()  # hold where the arm is

@@ -1,0 +1,234 @@
+"""The onboard node's control tick: the model update and gain synthesis, the pseudo-inverse
+and desired-coordinate messages, the joint targets (held or interpolated on a trajectory), the
+mocap state at the tick, the supervision (monitors and their reactions, the operator layer's
+setpoint, the approach's contact, touchdown), the flight step and the commands it sends.
+
+:class:`OnboardStep` is a part of :class:`rdm.nodes.onboard.OnboardNode`: its methods read and
+write the node's state (``control``, ``flight``, ``monitors``, ``arming`` ...).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rdm.nodes.onboard_arming import FlightState
+from rdm.nodes.onboard_control import ControlCommand, Setpoint, State
+from rdm.nodes.onboard_flight import FlightMode
+
+try:  # the C function np.interp ends in for float data (without its Python layers)
+    from numpy._core.multiarray import interp as _compiled_interp
+except ImportError:  # another numpy layout: np.interp throughout
+    _compiled_interp = None
+
+
+class OnboardStep:
+    """The control tick of :class:`rdm.nodes.onboard.OnboardNode` (a part of it)."""
+
+    def _control(self, now: float) -> None:
+        ctl = self.control
+        ctl.update_model(self.present_q)
+        ctl.set_perching(self._perch_request)
+        if ctl.synthesize_due():
+            ok = ctl.synthesize()
+            if ctl.gains_wire is not None:  # on failure the last good gains go out again
+                self._send_gains()
+            if not ok:
+                self.counts["gains_kept"] += 1
+        pm = ctl.p_matrix_wire()
+        if pm is not None:
+            cached = self._p_matrix_msg
+            if cached is None or cached[0] is not pm:  # the pipeline reuses pm while q holds
+                rows, inertia = pm
+                unit = self._msg["pinv_unit"]
+                msg = self._msg["p_matrix_pseudo_inverse_inertia"].new(
+                    pseudo_inverse=[unit.new(r=r, p=p, y=y) for r, p, y in rows],
+                    inertia=inertia,
+                )
+                cached = self._p_matrix_msg = (pm, msg)
+            self._publish_same("p_matrix_pseudo_inverse_inertia", cached[1])
+        if self.config.send_desire_coordinate and ctl.terms is not None:
+            cached_desire = self._desire_msg
+            if cached_desire is None or cached_desire[0] is not ctl.terms:
+                # a function of the model terms alone: rebuilt when they change
+                desire = ctl.desire_coordinate()
+                assert desire is not None
+                roll, pitch, yaw = desire
+                msg = self._msg["desire_coordinate"].new(roll=roll, pitch=pitch, yaw=yaw)
+                cached_desire = self._desire_msg = (ctl.terms, msg)
+            self._publish_same("desire_coordinate", cached_desire[1])
+        targets = self._current_joint_targets(now)
+        dt = self.period
+        if self._last_control is not None:
+            measured = now - self._last_control
+            if 0 < measured <= 3 * self.period:
+                dt = measured
+            else:
+                self.counts["dt_irregular"] += 1
+        self._last_control = now
+        self._supervise(now, dt)
+        command = None
+        if self.arming.flying:
+            command = self._flight_step(now, targets, dt)
+        if command is not None:
+            self.last_command = command
+            self.last_alpha_beta = (command.alpha, command.beta)
+            self._command_at = now
+        if self.arming.flying and self.last_command is not None:
+            held = now - (self._command_at if self._command_at is not None else -math.inf)
+            if held <= self.config.flight.command_hold_s + 1e-9:
+                self._send_command(self.last_command)
+            else:  # no fresh command: silence, so that Spinal's timeout and ramp act
+                self.counts["command_withheld"] += 1
+        if targets is not None:
+            lead = self.config.servo_lead_s
+            if lead > 0.0 and self._trajectory is not None:
+                goals = self._current_joint_targets(now + lead)
+                assert goals is not None
+                self._send_servo_targets(goals)
+            else:
+                self._send_servo_targets(targets)
+
+    def _flight_step(
+        self, now: float, targets: np.ndarray | None, dt: float
+    ) -> ControlCommand | None:
+        if not self._mocap_usable(now):
+            self.counts["command_held"] += 1
+            if self._mocap_lost_since is None:
+                self._mocap_lost_since = now
+            elif (
+                now - self._mocap_lost_since >= self.config.mocap_loss_force_landing_s
+                and self.arming.state is FlightState.ARMED
+            ):
+                self.counts["mocap_lost_force_landing"] += 1
+                self.arming.force_landing(now)
+            return None
+        self._mocap_lost_since = None
+        p, v, yaw = self._mocap_at(now)
+        self._rp_integration(float(p[2]))
+        if yaw is None:
+            if self.imu_euler is None:
+                self.counts["no_yaw"] += 1
+                return None
+            yaw = self.imu_euler[2]
+        jt = targets if targets is not None else self.present_q
+        foot = None if self.foot is None else self.foot.latest(now, self.config.foot_timeout_s)
+        setpoint = self._flight_setpoint or self.setpoint
+        try:
+            return self.control.step(State(p, v, yaw), setpoint, jt, foot, dt)
+        except ValueError:
+            self.counts["control_error"] += 1
+            return None
+
+    def _current_joint_targets(self, now: float) -> np.ndarray | None:
+        trajectory = self._trajectory
+        if trajectory is not None:
+            times, qs = trajectory
+            if self.fast_interp and qs.dtype == np.float64 and qs.ndim == 2:
+                # np.interp(x, xp, fp) of a real fp is compiled_interp(x, xp, fp, None, None)
+                cached = self._trajectory_columns
+                if cached is None or cached[0] is not trajectory:
+                    columns = tuple(np.ascontiguousarray(qs[:, j]) for j in range(qs.shape[1]))
+                    cached = self._trajectory_columns = (trajectory, columns)
+                interp = _compiled_interp
+                return np.array([interp(now, times, column, None, None) for column in cached[1]])
+            return np.array([np.interp(now, times, qs[:, j]) for j in range(qs.shape[1])])
+        return self.joint_targets
+
+    def _mocap_usable(self, now: float) -> bool:
+        return (
+            self._mocap is not None
+            and self._mocap_stamp is not None
+            and now - self._mocap_stamp <= self.config.mocap_timeout_s + 1e-9
+        )
+
+    def _mocap_at(self, now: float) -> tuple[np.ndarray, np.ndarray, float | None]:
+        """The usable mocap state at ``now``: a marker pose's CoG position predicted over the
+        sample's age with its estimated velocity (constant velocity, the filter's model:
+        motion capture's latency compensated), else the sample as given."""
+        assert self._mocap is not None and self._mocap_stamp is not None
+        p, v, y = self._mocap
+        age = now - self._mocap_stamp
+        if self._mocap_latent and age > 0.0:
+            p = p + v * age
+        return p, v, y
+
+    def _supervise(self, now: float, dt: float) -> None:
+        """Monitors, the operator layer's setpoint and touchdown (then ARM_OFF)."""
+        flying = self.arming.flying
+        p = v = None
+        yaw = 0.0
+        if self._mocap_usable(now):
+            p, v, y = self._mocap_at(now)
+            euler = self.imu_euler
+            yaw = y if y is not None else (euler[2] if euler is not None else 0.0)
+        self._monitor(now, flying, p)
+        if self.flight.mode is FlightMode.APPROACH and p is not None:
+            self._contact_check(now, float(p[2]))
+        landing = self.arming.state is FlightState.LANDING
+        sp = self.flight.update(now, flying, landing, p, v, yaw, self.setpoint.position, dt)
+        self._flight_setpoint = None if sp is None else Setpoint(*sp)
+        if self.flight.mode is FlightMode.LAND and self._perch_request:
+            # a landing (force landing, a fault) from the perch: perching control off first
+            self._perch_request = False
+            self.control.set_perching(False)
+            self.counts["perch_released_to_land"] += 1
+        if flying and self.flight.mode is FlightMode.LAND and p is None:
+            self.flight.imu_touchdown(now, self.imu_gyro, self._imu_acc, self.control.perching)
+        if self.flight.take_touchdown():
+            self.monitors.trip("touchdown", "landed: ARM_OFF", now)
+            self.arming.disarm(now)
+
+    def _contact_check(self, now: float, z: float) -> None:
+        """The approach's contact: the foot sensor's fresh normal force above
+        ``FlightLimits.contact_fz`` -> perched at the measured height ``z``, the
+        ``perched_gains`` profile now and the perching control from the next tick (whose
+        synthesis then sees it first, as for :meth:`request_perch`)."""
+        lim = self.config.flight
+        wrench = None if self.foot is None else self.foot.latest(now, self.config.foot_timeout_s)
+        if wrench is None or not float(wrench[2]) > lim.contact_fz:
+            return
+        self.flight.contact(now, z)
+        self._perch_request = True  # the next tick's model update and synthesis perch
+        if self.gain_profile != lim.perched_gains:
+            self.set_gain_profile(lim.perched_gains, bumpless=False)
+        self.monitors.note("contact", f"foot F_z {float(wrench[2]):.2f} N: perched", now)
+
+    def _monitor(self, now: float, flying: bool, position: np.ndarray | None) -> None:
+        """Freshness of Spinal's imu and the servos, the foot sensor while perched, the
+        geofence and the battery; a trip in flight lands, perched it holds."""
+        m, lim = self.monitors, self.config.monitors
+        if self._link_up_at is not None:
+            last = self._imu_at if self._imu_at is not None else self._link_up_at
+            silent = now - last > lim.imu_timeout_s + 1e-9
+            if m.stale("spinal_silent", silent, now, f"no imu for {now - last:.3f} s"):
+                self._react("spinal_silent", now)
+        if flying:
+            last = self._servo_at if self._servo_at is not None else self._link_up_at
+            stale = last is not None and now - last > lim.servo_timeout_s + 1e-9
+            if m.stale("servo_stale", stale, now, "no servo/states"):
+                self._react("servo_stale", now)
+            if position is not None:
+                outside = not self.config.flight.inside_fence(position)
+                if m.stale("geofence", outside, now, f"position {position.tolist()} outside"):
+                    self._react("geofence", now)
+            if m.battery_low(now):
+                self._react("battery_low", now)
+        if self.foot is not None and self.control.perching:
+            missing = self.foot.latest(now, self.config.foot_timeout_s) is None
+            m.stale("foot_stale", missing, now, "no foot-sensor sample while perched")
+
+    def _react(self, monitor: str, now: float) -> None:
+        """A fault's reaction: in flight land; perched hold (or land when configured)."""
+        if not self.arming.flying:
+            return
+        if self.control.perching:
+            if monitor == "ground_lost" and self.config.monitors.ground_loss_perched == "land":
+                self._perch_request = False
+            else:
+                self.counts[f"{monitor}_hold"] += 1
+                return
+        if self.flight.mode is not FlightMode.LAND:
+            self.flight.request_land(now)
+            self.counts[f"{monitor}_land"] += 1
