@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.signal import lfilter
 from scipy.spatial.transform import Rotation
 
 from rdm.estimate import AttitudeEstimator
@@ -269,3 +270,47 @@ def test_bad_configuration_names_the_field() -> None:
         AttitudeEstimator(200.0, acc_prescaler=0)
     with pytest.raises(RdmError, match="unknown"):
         AttitudeEstimator(200.0, no_such_field=1.0)
+
+
+def test_filter_vectors_are_exponential_running_means_of_the_sensor_values() -> None:
+    """With no rotation (zero gyro), the gravity vector is g <- (k g + a)/(k + 1) on each
+    correction: a first-order low-pass of unit DC gain, scipy's lfilter([1/(k+1)],
+    [1, -k/(k+1)]) over the accelerometer values it was given; the magnetic vector likewise
+    with k = 250. Dividing by k instead of k + 1 grows the vectors without bound (the
+    attitude, from their directions, hides it)."""
+    est = AttitudeEstimator(200.0, firmware_exact=True, gyro_calib_duration_s=0.05)
+    k_acc, k_mag = est.config["acc_cmpf_factor"], est.config["mag_cmpf_factor"]
+    rng = np.random.default_rng(11)
+    n = 4000
+    t = np.arange(n) / 200.0
+    acc = np.column_stack([0.8 * np.sin(0.7 * t), 0.5 * np.cos(0.4 * t), np.full(n, 9.6)])
+    acc += rng.normal(scale=0.05, size=(n, 3))
+    mag = np.repeat(rng.normal([0.3, 0.05, -0.4], 0.02, size=(n // 8 + 1, 3)), 8, axis=0)[:n]
+    acc_in, mag_in, g_at, m_at = [], [], [], []
+    counts = dict(est.counters)
+    for i in range(n):
+        est.step([0.0, 0.0, 0.0], acc[i], mag[i])
+        c = est.counters
+        if c["acc_corrections"] > counts["acc_corrections"]:
+            acc_in.append(est.acc.copy())  # the filtered value the correction used
+            g_at.append(est.filter_vectors[0].copy())
+        if c["mag_corrections"] > counts["mag_corrections"]:
+            mag_in.append(est.mag.copy())
+            m_at.append(est.filter_vectors[1].copy())
+        counts = dict(c)
+    assert len(acc_in) > 1000 and len(mag_in) > 400
+    for k, x, got in ((k_acc, acc_in, g_at), (k_mag, mag_in, m_at)):
+        want = lfilter([1.0 / (k + 1.0)], [1.0, -k / (k + 1.0)], np.array(x), axis=0)
+        np.testing.assert_allclose(np.array(got), want, rtol=1e-9, atol=1e-12)
+    # unit DC gain: after many time constants the gravity vector is the accelerometer's mean
+    tail = np.array(acc_in)[-200:].mean(axis=0)
+    assert np.linalg.norm(g_at[-1]) == pytest.approx(np.linalg.norm(tail), rel=0.2)
+
+
+def test_gyro_bias_is_the_mean_of_the_calibration_window() -> None:
+    est = AttitudeEstimator(200.0, firmware_exact=True, gyro_calib_duration_s=0.5)
+    rng = np.random.default_rng(12)
+    gyro = rng.normal([0.01, -0.02, 0.005], 0.003, size=(150, 3))
+    for g in gyro:
+        est.step(g, [0.0, 0.0, 9.8], [0.3, 0.0, -0.4])
+    np.testing.assert_allclose(est.gyro_bias, gyro[:100].mean(axis=0), rtol=1e-12)

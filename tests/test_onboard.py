@@ -20,6 +20,7 @@ from onboard_rig import REG, Rig, raw_ticks
 from rdm.model import Robot
 from rdm.nodes.onboard import OnboardNode
 from rdm.nodes.onboard_config import OnboardConfig
+from rdm.nodes.onboard_control import to_wire
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -271,12 +272,35 @@ def test_p_matrix_equals_numpy_pinv(rig: Rig) -> None:
     msg = rig.by_topic["p_matrix_pseudo_inverse_inertia"][-1][1]
     o = model_at(quantized(Q_BENT))
     pinv = np.linalg.pinv(o["allocation_bar"])
-    want = np.clip(np.trunc(pinv[:, 1:4] * 1000), -32768, 32767)
     got = np.array([[u.r, u.p, u.y] for u in msg.pseudo_inverse])
-    assert np.abs(got - want).max() <= 1
     i = o["inertia"]
-    want_i = np.trunc(np.array([i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[1, 2], i[0, 2]]) * 1000)
-    assert np.abs(np.array(msg.inertia) - want_i).max() <= 1
+    inertia = np.array([i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[1, 2], i[0, 2]])
+    for value, wire in ((pinv[:, 1:4] * 1000, got), (inertia * 1000, np.array(msg.inertia))):
+        # x1000 truncated toward zero (the C++ int16 cast), exactly: only a value within
+        # 1e-6 count of an integer may differ by the pseudo-inverse's last bits
+        want = np.clip(np.trunc(value), -32768, 32767)
+        clear = np.abs(value - np.round(value)) > 1e-6
+        np.testing.assert_array_equal(wire[clear], want[clear])
+        assert np.abs(wire - want).max() <= 1
+    # the payload tells truncation from rounding: some terms have a fraction above one half
+    frac = np.abs(pinv[:, 1:4] * 1000) % 1.0
+    assert np.count_nonzero((frac > 0.5) & (frac < 1 - 1e-6)) >= 2
+
+
+def test_to_wire_golden_values() -> None:
+    """x1000, truncated toward zero and saturated to int16, written out by hand."""
+    golden = [
+        (0.0019, (1, False)),
+        (-0.0019, (-1, False)),
+        (1.9999, (1999, False)),
+        (-7.9996, (-7999, False)),
+        (0.0009, (0, False)),
+        (32.7679, (32767, False)),
+        (40.0, (32767, True)),
+        (-40.0, (-32768, True)),
+    ]
+    for value, wire in golden:
+        assert to_wire(value) == wire, value
 
 
 def test_command_matches_eqs_30_32_and_z_pid() -> None:
