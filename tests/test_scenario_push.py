@@ -18,9 +18,25 @@ from rdm.scenarios.common import truth_arrays
 PLAN = push.DEFAULT_PLAN
 
 
+#: the perching controller's own ZMP of each perched tick of the shared run (the scenario's
+#: observer): t, zmp x, y (foot frame), margin x, y (eq. 42) [m]
+PROBE: list[tuple[float, float, float, float, float]] = []
+
+
+def _probe_perch_zmp(stack, now: float) -> None:
+    c = stack.onboard.last_command
+    p = getattr(c, "perch", None) if c is not None else None
+    if p is not None:
+        PROBE.append((now, *p.zmp, *p.zmp_margin))
+
+
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
-    res = push.run(tmp_path_factory.mktemp("push"), plan=PLAN, log=False, plots=False)
+    PROBE.clear()
+    res = push.run(
+        tmp_path_factory.mktemp("push"), plan=PLAN, log=False, plots=False,
+        observer=_probe_perch_zmp,
+    )  # fmt: skip
     return res, truth_arrays(res.stack)
 
 
@@ -60,9 +76,6 @@ def test_perched_robot_holds_the_push(run):
     assert a["contact"][pushed].all(), "the foot left the ceiling under the push"
     slip = a["slip"][pushed]
     assert np.max(np.linalg.norm(slip - slip[0], axis=1)) < 1e-3
-    zmp = a["zmp"][pushed]
-    assert np.all(np.abs(zmp[:, 0]) <= push.PLATE_HALF[0] + 1e-6)
-    assert np.all(np.abs(zmp[:, 1]) <= push.PLATE_HALF[1] + 1e-6)
     # the perched root barely moves, far less than the flying one
     fl = push.stage_windows(PLAN, res.script.t_flight_stage + PLAN.move_s)
     std_perched = np.linalg.norm(np.std(a["foot"][pushed], axis=0))
@@ -71,6 +84,55 @@ def test_perched_robot_holds_the_push(run):
     # Table IX: the perched foot scatters less than the paper's on every axis (the plate
     # does not rock under pushes its QP can hold)
     assert np.all(np.std(a["foot"][pushed], axis=0) < np.asarray(push.PAPER_FOOT_STD_PERCHED))
+
+
+def test_perched_controller_zmp_agrees_with_the_contact_centre_of_pressure(run):
+    """Under the perched pushes the perching controller's own ZMP (eqs. 42-44) keeps its
+    eq. (42) margin and agrees with MuJoCo's contact-force centre of pressure: over the
+    pushes to 3 mm, over every 0.5 s to 2 cm; the contact CoP averaged over 0.5 s stays 2 mm
+    off every plate edge (a plate rocking on an edge holds it there)."""
+    res, a = run
+    lo, hi = push.stage_windows(PLAN, res.script.t_perched_stage)["pushes"]
+    probe = np.array(PROBE)
+    probe = probe[(probe[:, 0] >= lo) & (probe[:, 0] <= hi)]
+    pushed = _window(a, (lo, hi))
+    t, cop = a["t"][pushed], a["zmp"][pushed]
+    assert len(probe) > 500 and pushed.sum() > 500
+    assert np.all(probe[:, 3:5] >= -1e-9), probe[:, 3:5].min(axis=0)  # eq. (42)
+    np.testing.assert_allclose(probe[:, 1:3].mean(axis=0), cop.mean(axis=0), atol=3e-3)
+    half = np.asarray(push.PLATE_HALF)
+    for start in np.arange(t[0], t[-1] - 0.5, 0.5):
+        ours = probe[(probe[:, 0] >= start) & (probe[:, 0] < start + 0.5), 1:3]
+        truth = cop[(t >= start) & (t < start + 0.5)]
+        np.testing.assert_allclose(ours.mean(axis=0), truth.mean(axis=0), atol=0.02)
+        assert np.all(half - np.abs(truth.mean(axis=0)) > 2e-3), (start, truth.mean(axis=0))
+
+
+#: Table VIII against the end-effector sensor, as fractions of the paper's average / peak:
+#: (stage, axis, band of mean |F| / paper average, band of peak |F| / paper peak). Flight x
+#: is the paper's push and meets Table VIII within 10 %; the other axes are the fractions of
+#: it the simulated robot holds (FLIGHT_SCALE, PERCHED_SCALE; docs/scenarios.md), below the
+#: paper: their bands are the present values' (seed 0) +-15 %.
+TABLE_VIII_BANDS = (
+    ("flight", 0, (0.9, 1.1), (0.9, 1.1)),
+    ("flight", 1, (0.255, 0.345), (0.35, 0.48)),
+    ("flight", 2, (0.34, 0.46), (0.39, 0.53)),
+    ("perched", 0, (0.021, 0.029), (0.026, 0.036)),
+    ("perched", 1, (0.17, 0.23), (0.18, 0.25)),
+    ("perched", 2, (0.068, 0.092), (0.072, 0.098)),
+)
+
+
+def test_end_effector_forces_against_table_viii(run):
+    res, _ = run
+    avg = {"flight": push.PAPER_FLIGHT_FORCE_AVG, "perched": push.PAPER_PERCHED_FORCE_AVG}
+    peak = {"flight": push.PAPER_FLIGHT_FORCE_PEAK, "perched": push.PAPER_PERCHED_FORCE_PEAK}
+    for stage, k, (m_lo, m_hi), (p_lo, p_hi) in TABLE_VIII_BANDS:
+        r = res.analysis[stage]
+        mean_ratio = r["force_mean_abs"][k] / avg[stage][k]
+        peak_ratio = r["force_peak"][k] / peak[stage][k]
+        assert m_lo <= mean_ratio <= m_hi, (stage, k, mean_ratio)
+        assert p_lo <= peak_ratio <= p_hi, (stage, k, peak_ratio)
 
 
 def test_perched_pushes_stay_within_the_perching_qps_static_ceiling():

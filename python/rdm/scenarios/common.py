@@ -133,6 +133,28 @@ class ScenarioResult:
         return all(m.passed is not False for m in self.metrics)
 
 
+class _Observed:
+    """A scenario script followed by an observer, declaring the script's kernel parts."""
+
+    def __init__(
+        self, script: Callable[[Stack, float], None], observer: Callable[[Stack, float], None]
+    ) -> None:
+        self.script, self.observer = script, observer
+        self.kernel_touches = getattr(script, "kernel_touches", None)
+
+    def __call__(self, stack: Stack, now: float) -> None:
+        self.script(stack, now)
+        self.observer(stack, now)
+
+
+def observed(
+    script: Callable[[Stack, float], None], observer: Callable[[Stack, float], None] | None
+) -> Callable[[Stack, float], None]:
+    """``script``, or ``script`` then ``observer(stack, now)`` on each of its ticks (the
+    observer reads what the script may read: the onboard node and the plant)."""
+    return script if observer is None else _Observed(script, observer)
+
+
 def truth_arrays(stack: Stack) -> dict[str, np.ndarray]:
     """Ground truth of the run as arrays (rows = truth samples)."""
     tr = stack.truth

@@ -38,6 +38,7 @@ from .common import (
     ScenarioResult,
     SetpointRamp,
     finish,
+    observed,
     roll_pitch,
     run_stack,
     scenario_servo_lead,
@@ -299,13 +300,16 @@ def run(
     motion=PERCHED_MOTION,
     log: bool = True,
     timing: PerchTiming | None = None,
+    observer: Callable[[Stack, float], None] | None = None,
     **stack_overrides: Any,
 ) -> ScenarioResult:
+    """Run the scenario; ``observer(stack, now)``, if given, is called after the script on
+    each of its ticks (a test's probe of the controller's own quantities)."""
     if "onboard" not in stack_overrides:
         stack_overrides["onboard"] = onboard_config()
     opts = sim_stack_options(seed, uart, speed=speed, log=log, **stack_overrides)
     script = PerchingScript(motion, timing)
-    stack = build_stack("perching", base, opts, script)
+    stack = build_stack("perching", base, opts, observed(script, observer))
     wall = run_stack(stack, duration)
     return finish(_evaluate(stack, script), duration, wall)
 

@@ -29,6 +29,7 @@ Table VIII; perched: contact kept, slip, ZMP inside the plate, friction usage.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,6 +42,7 @@ from rdm.sim.plots import plot_panels, plot_zmp
 from .common import (
     ScenarioResult,
     finish,
+    observed,
     run_stack,
     sim_stack_options,
     truth_arrays,
@@ -651,8 +653,10 @@ def run(
     plan: PushPlan | None = None,
     log: bool = True,
     plots: bool = True,
+    observer: Callable[[Stack, float], None] | None = None,
 ) -> ScenarioResult:
-    """Run the scenario: it stops 0.5 s after the perched stage, or at ``duration``."""
+    """Run the scenario: it stops 0.5 s after the perched stage, or at ``duration``;
+    ``observer(stack, now)``, if given, is called after the script on each of its ticks."""
     plan = plan or DEFAULT_PLAN
     onboard = onboard_config(
         perch_params={**PERCH_PARAMS, **plan.perch_params},
@@ -660,7 +664,7 @@ def run(
     )
     opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard)
     script = PushScript(plan)
-    stack = build_stack("push", base, opts, script)
+    stack = build_stack("push", base, opts, observed(script, observer))
     wall = run_stack(stack, DEFAULT_DURATION if duration is None else duration)
     seconds = stack.plant.time
     res = analyse(stack, script)
