@@ -20,10 +20,9 @@ from typing import Any
 import numpy as np
 import pytest
 from fed_byte_link import FedByteLink
-from onboard_rig import REG, assert_same_servo_state, servo_readings, shadowed_rig
+from onboard_rig import REG, assert_same_servo_state, servo_readings
 
 from rdm.nodes.onboard import OnboardNode, _four_axis_payload, servo_states_decodes
-from rdm.nodes.onboard_config import OnboardConfig
 from rdm.protocol.rosserial.client import ClientSession
 from rdm.protocol.rosserial.codec import DecodeError, EncodeError
 from rdm.protocol.rosserial.events import MessageReceived
@@ -118,7 +117,6 @@ def test_imu_payload_handler_matches_the_decoded_message():
 
 def test_servo_payload_handler_matches_the_decoded_message():
     fast, plain = OnboardNode(FedByteLink()), OnboardNode(FedByteLink())
-    plain.reuse_servo_states = False
     n = len(fast.config.servo_map.servo_index)
     rng = random.Random(11)
     readings = servo_readings(rng, n, 14)
@@ -309,57 +307,6 @@ def test_direct_payloads_are_the_codec_bytes():
         assert _four_axis_payload(bad_angles, np.array(bad_thrust)) is None
         with pytest.raises((EncodeError, OverflowError)):  # the codec's own error
             four.encode(four.new(angles=list(bad_angles), base_thrust=bad_thrust))
-
-
-def test_node_fast_paths_match_plain_over_a_flight():
-    """Fast node against Spinal (real ClientSession, scripted IMU/servos/acks); a node with
-    every fast path of this round off ticks on the same bytes and inputs: the same UART
-    bytes every tick, counters, commands and session counters."""
-    cfg = OnboardConfig(lqi_every=1)
-
-    def plain_paths(node: OnboardNode) -> None:
-        node.raw_rx, node.direct_tx = False, False
-        node.session.deferred.clear()
-
-    rig, plain = shadowed_rig(cfg, plain_paths)
-    try:
-        fast = rig.node
-        assert fast.raw_rx and fast.session.deferred
-        q = fast.present_q.copy()
-        q[:6] = [0.1, -0.2, 0.3, 0.05, -0.1, 0.2]
-        rig.servo_q = q
-        rng = np.random.default_rng(3)
-
-        def inputs(t: float) -> None:
-            for node in (fast, plain):
-                if abs(t - 0.5) < 1e-9:
-                    node.set_target([0.0, 0.0, 1.0], 0.1)
-                    node.arm()
-                p = [0.05 * np.sin(t), 0.02, 0.9 + 0.05 * t]
-                node.set_mocap(p, [0.0, 0.01, 0.02], None if t > 1.5 else 0.05)
-                if abs(t - 2.0) < 1e-9:
-                    node.request_perch(True)
-                if abs(t - 2.5) < 1e-9:
-                    node.request_perch(False)
-            if t > 1.0:
-                rig.imu_quaternion = [0.0, 0.0, float(np.sin(t / 4)), float(np.cos(t / 4))]
-            if 1.2 < t < 1.6:  # servos moving: fresh readings
-                rig.servo_q = q + rng.normal(scale=0.01, size=q.size)
-
-        rig.run(0.0, 3.0, each=inputs)
-        assert fast.arming.flying and fast.published["four_axes/command"] > 50
-        assert fast.published["servo/target_states"] > 50 and fast.published["rpy/gain"] > 50
-        for a, b in (
-            (fast.counts, plain.counts),
-            (fast.published, plain.published),
-            (fast.session.counts, plain.session.counts),
-            (fast.control.counts, plain.control.counts),
-        ):
-            assert list(a.items()) == list(b.items())
-        assert fast.counts["rx:imu"] > 50 and fast.counts["rx:servo/states"] > 20
-        assert fast.last_command.base_thrust.tobytes() == plain.last_command.base_thrust.tobytes()
-    finally:
-        rig.close()
 
 
 def test_perch_zero_hold_and_command_match_the_plain_step():

@@ -333,25 +333,22 @@ def test_model_fast_matches_plain():
     assert list(fast.counts.items()) == list(plain.counts.items())
 
 
-def test_trajectory_targets_fast_interp_match_np_interp():
+def test_trajectory_targets_are_np_interp():
     node = OnboardNode(FedByteLink())
-    assert node.fast_interp
     rng = np.random.default_rng(6)
     n_q = node.robot.n_q
     for trial in range(5):
         times = np.cumsum(rng.uniform(0.01, 0.5, size=2 + trial))
         points = [(float(t), rng.normal(size=n_q)) for t in times]
         assert node.set_trajectory(points)
+        qs = np.array([q for _, q in points])
         probes = [times[0] - 1.0, float(times[-1]) + 1.0, *times.tolist()]
         probes += rng.uniform(times[0] - 0.1, times[-1] + 0.1, size=50).tolist()
         for now in probes:
-            node.fast_interp = True
-            fast = node._current_joint_targets(now)
-            node.fast_interp = False
-            plain = node._current_joint_targets(now)
-            assert fast.dtype == plain.dtype and fast.shape == plain.shape
-            assert fast.tobytes() == plain.tobytes()
-    node.fast_interp = True
+            got = node._current_joint_targets(now)
+            want = np.array([np.interp(now, times, qs[:, j]) for j in range(n_q)])
+            assert got.dtype == want.dtype and got.shape == want.shape
+            assert got.tobytes() == want.tobytes()
     assert node.set_joint_targets(np.zeros(6))  # the trajectory is dropped
     assert node._current_joint_targets(0.0) is node.joint_targets
 
@@ -405,7 +402,7 @@ def test_p_matrix_wire_fast_model_matches_plain():
     assert list(fast.counts.items()) == list(plain.counts.items())
 
 
-def test_servo_payload_fast_decode_matches_the_codec():
+def test_servo_payload_struct_decode_matches_the_codec():
     """New ``servo/states`` payloads unpacked with one struct (index, angle) against the
     codec's decode, both through ``_on_servo_states``: counters, joint state, caches."""
     import random
@@ -413,85 +410,35 @@ def test_servo_payload_fast_decode_matches_the_codec():
     from onboard_rig import REG, assert_same_servo_state, servo_readings
 
     servos, unit = REG.msg("spinal/ServoStates"), REG.msg("spinal/ServoState")
-    for reuse in (True, False):
-        fast, plain = OnboardNode(FedByteLink()), OnboardNode(FedByteLink())
-        assert fast.fast_servo_decode
-        plain.fast_servo_decode = False
-        for node in (fast, plain):
-            node.reuse_servo_states = reuse
-        n = len(fast.config.servo_map.servo_index)
-        rng = random.Random(13)
-        readings = servo_readings(rng, n, 40)
-        for k in range(600):
-            reading = readings[rng.randrange(len(readings))]
-            if k % 7 == 0:  # fresh angles, extremes of the wire types
-                reading = [
-                    (i, rng.choice([-32768, 32767, rng.randrange(4096)])) for i, _ in reading
-                ]
-            if k % 11 == 0:
-                reading = reading[: rng.randrange(len(reading) + 1)]  # partial / empty
-            entries = [
-                unit.new(index=i, angle=a, temp=rng.randrange(256), load=rng.randrange(-99, 99))
-                for i, a in reading
-            ]
-            payload = servos.encode(servos.new(stamp=(k, 0), servos=entries))
-            fast._on_servo_payload(payload)
-            plain._on_servo_payload(payload)
-            assert_same_servo_state(fast, plain)
-            assert list(fast._servo_cache) == list(plain._servo_cache)
-            assert list(fast._servo_raw) == list(plain._servo_raw)
-        assert fast.counts["servo_unknown_index"] > 0 and fast.counts["servo_states_partial"] > 0
+    fast, plain = OnboardNode(FedByteLink()), OnboardNode(FedByteLink())
+    assert fast._servo_struct
+    plain._servo_struct = False  # what a message tree of another layout takes: the codec
+    n = len(fast.config.servo_map.servo_index)
+    rng = random.Random(13)
+    readings = servo_readings(rng, n, 40)
+    for k in range(600):
+        reading = readings[rng.randrange(len(readings))]
+        if k % 7 == 0:  # fresh angles, extremes of the wire types
+            reading = [(i, rng.choice([-32768, 32767, rng.randrange(4096)])) for i, _ in reading]
+        if k % 11 == 0:
+            reading = reading[: rng.randrange(len(reading) + 1)]  # partial / empty
+        entries = [
+            unit.new(index=i, angle=a, temp=rng.randrange(256), load=rng.randrange(-99, 99))
+            for i, a in reading
+        ]
+        payload = servos.encode(servos.new(stamp=(k, 0), servos=entries))
+        fast._on_servo_payload(payload)
+        plain._on_servo_payload(payload)
+        assert_same_servo_state(fast, plain)
+        assert list(fast._servo_cache) == list(plain._servo_cache)
+        assert list(fast._servo_raw) == list(plain._servo_raw)
+    assert fast.counts["servo_unknown_index"] > 0 and fast.counts["servo_states_partial"] > 0
     # a payload whose count does not match its length: the codec's error on both
     bad = servos.encode(servos.new(stamp=(0, 0), servos=[unit.new(index=1, angle=5)]))[:-1]
     for node in (fast, plain):
         with pytest.raises(Exception) as e:
             node._on_servo_payload(bad)
         assert type(e.value).__name__ == "DecodeError"
-
-
-def test_servo_target_ticks_written_out_match_to_raw():
-    """``servo/target_states`` with the vectoring joints' ticks computed inline against a
-    node whose servo map is a subclass (the ``ServoMap.to_raw`` calls): the same payloads,
-    counters and errors, for random targets and angles incl. out-of-range and NaN."""
-    from dataclasses import replace as dc_replace
-
-    from rdm.nodes.onboard_arming import FlightState
-    from rdm.nodes.onboard_config import ServoMap
-    from rdm.protocol.rosserial.server import RemoteTopic
-
-    class _Map(ServoMap):
-        pass
-
-    fast = OnboardNode(FedByteLink())
-    smap = fast.config.servo_map
-    plain = OnboardNode(
-        FedByteLink(), config=dc_replace(fast.config, servo_map=_Map(**smap.__dict__))
-    )
-    codec = fast.session.registry.msg("spinal/ServoControlCmd")
-    rng = np.random.default_rng(14)
-    n_vec = len(fast.control.vectoring_joints)
-    for node in (fast, plain):
-        node.session.outbound["servo/target_states"] = RemoteTopic(
-            120, "servo/target_states", "spinal/ServoControlCmd", codec, 512
-        )
-        node.arming.state = FlightState.ARMED
-    for k in range(300):
-        targets = rng.normal(scale=1.0, size=fast.robot.n_q)
-        alpha = tuple(float(v) for v in rng.normal(scale=[0.5, 30.0][k % 7 == 0], size=n_vec))
-        beta = tuple(float(v) for v in rng.normal(scale=0.5, size=n_vec))
-        if k % 29 == 3:
-            alpha = (float("nan"), *alpha[1:])
-        out = []
-        for node in (fast, plain):
-            node.last_alpha_beta = (alpha, beta)
-            try:
-                node._send_servo_targets(targets)
-                out.append(node.session.take_output())
-            except (ValueError, OverflowError) as exc:
-                out.append((type(exc), str(exc)))
-        assert out[0] == out[1]
-    assert list(fast.counts.items()) == list(plain.counts.items())
-    assert fast.published == plain.published and fast.published["servo/target_states"] > 200
 
 
 def test_evaluate_control_is_what_evaluate_gives():

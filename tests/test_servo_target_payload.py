@@ -1,19 +1,22 @@
-"""The onboard node's servo goals in one call (``rdm._rdm.servo_target_payload``, used by
-``OnboardNode._send_servo_targets``) against the Python form it replaces
-(``_send_servo_targets_plain``).
+"""The onboard node's ``servo/target_states`` (``OnboardNode._send_servo_targets``, its payload
+in one Rust call ``rdm._rdm.servo_target_payload``) against the message definition written out:
+``spinal/ServoControlCmd`` is ``uint8[] index, int16[] angles`` (uint32 count, then the values,
+little-endian), each angle ``round(zero + sign * q / scale)`` saturated to int16, framed as
+rosserial frames a message (sync 0xff 0xfe, length, its checksum, topic id, payload, checksum).
 
 On a node of a hover stack whose Spinal subscribes to ``servo/target_states``: random joint
 targets (ties between two ticks, saturating values, NaN, inf, other lengths), vectoring
 angles written over the joints or not (tuples, arrays, ints, too short), servo maps with
-other signs, zero points, scales and indices (one past uint8): both forms give the same
-frames on the wire, the same ``last_servo_goals`` (values and types), the same counters, or
-the same exception. The call answers every case it can and declines the rest.
+other signs, zero points, scales and indices (one past uint8): the frame on the wire and
+``last_servo_goals`` are the written-out ones, or the node raises where no frame can carry
+the goals. The call answers every case it can and declines the rest.
 """
 
 from __future__ import annotations
 
 import math
 import random
+import struct
 import tempfile
 from dataclasses import replace
 from types import SimpleNamespace
@@ -23,7 +26,7 @@ import numpy as np
 import pytest
 
 from rdm import _rdm
-from rdm.nodes import onboard_send as onboard_module
+from rdm.nodes import onboard_send
 from rdm.nodes.onboard_config import DYNAMIXEL_RAD_PER_TICK, DYNAMIXEL_ZERO, ServoMap
 
 N = 10
@@ -80,28 +83,48 @@ def _vectoring(rng: random.Random) -> Any:
     return tuple(alpha), tuple(beta)
 
 
-def _outcome(node: Any, targets: Any) -> tuple:
-    published, counts = dict(node.published), dict(node.counts)
-    try:
-        node._send_servo_targets(targets)
-    except Exception as exc:  # the same exception is what is compared
-        node.session.take_output()
-        return ("raised", type(exc).__name__, str(exc))
-    goals = node.last_servo_goals
+def _frame(topic_id: int, payload: bytes) -> bytes:
+    """A rosserial (protocol 2) frame, from the protocol's description."""
+    length = struct.pack("<H", len(payload))
+    topic = struct.pack("<H", topic_id)
     return (
-        "sent",
-        node.session.take_output(),
-        repr(goals),
-        [type(g).__name__ for g in goals],
-        {k: v - published.get(k, 0) for k, v in node.published.items()},
-        {k: v - counts.get(k, 0) for k, v in node.counts.items()},
+        b"\xff\xfe"
+        + length
+        + bytes([255 - sum(length) % 256])
+        + topic
+        + payload
+        + bytes([255 - (sum(topic) + sum(payload)) % 256])
     )
 
 
-def test_one_call_equals_the_python_form(monkeypatch: pytest.MonkeyPatch) -> None:
+def _expected(targets: Any, vectoring: Any, pairs: Any, smap: ServoMap) -> tuple | None:
+    """``(goals, payload)`` as the message definition gives them; None: no frame carries
+    them (an index past uint8, a tick of NaN or inf, fewer vectoring angles than units, a
+    vectoring joint past the targets)."""
+    q = [float(v) for v in targets]
+    if vectoring is not None:
+        alpha, beta = vectoring
+        if len(alpha) < len(pairs) or len(beta) < len(pairs):
+            return None
+        if any(j >= len(q) for pair in pairs for j in pair):
+            return None  # a vectoring joint past the targets
+        for i, (ja, jb) in enumerate(pairs):
+            q[ja], q[jb] = float(alpha[i]), float(beta[i])
+    n = min(len(smap.servo_index), len(q))
+    index = smap.servo_index[:n]
+    ticks = []
+    for j in range(n):
+        x = smap.zero_point[j] + smap.angle_sign[j] * q[j] / smap.angle_scale[j]
+        if not math.isfinite(x) or not all(0 <= i <= 255 for i in index):
+            return None
+        ticks.append(max(-32768, min(32767, round(x))))
+    return q[:n], struct.pack(f"<I{n}BI{n}h", n, *index, n, *ticks)
+
+
+def test_frames_are_the_message_definitions(monkeypatch: pytest.MonkeyPatch) -> None:
     rng = random.Random(4)
     calls = [0, 0]  # answered, declined
-    inner = onboard_module._servo_target_payload
+    inner = onboard_send._servo_target_payload
     assert inner is _rdm.servo_target_payload
 
     def counting(*args: Any) -> Any:
@@ -109,13 +132,15 @@ def test_one_call_equals_the_python_form(monkeypatch: pytest.MonkeyPatch) -> Non
         calls[got is None] += 1
         return got
 
-    monkeypatch.setattr(onboard_module, "_servo_target_payload", counting)
+    monkeypatch.setattr(onboard_send, "_servo_target_payload", counting)
+    sent = raised = 0
     with tempfile.TemporaryDirectory() as base:
         stack = _stack(base)
         try:
             stack.loop.run(3.0)  # negotiated and flying
             node = stack.onboard
-            assert node._direct_remote("servo/target_states", "spinal/ServoControlCmd")
+            topic_id = node.session.outbound["servo/target_states"].topic_id
+            pairs = node.control.vectoring_joints
             node.session.take_output()
             config, arming = node.config, node.arming
             for _ in range(1500):
@@ -127,15 +152,27 @@ def test_one_call_equals_the_python_form(monkeypatch: pytest.MonkeyPatch) -> Non
                     targets = np.array(targets)
                 node.last_alpha_beta = _vectoring(rng)
                 node.arming = SimpleNamespace(flying=rng.random() < 0.8)
-                outcomes = []
-                for fast in (True, False):
-                    node.fast_servo_targets = fast
-                    outcomes.append(_outcome(node, targets))
-                assert outcomes[0] == outcomes[1], (targets, smap, node.last_alpha_beta)
+                vectoring = node.last_alpha_beta if node.arming.flying else None
+                want = _expected(targets, vectoring, pairs, smap)
+                case = (list(targets), smap, vectoring)
+                if want is None:
+                    with pytest.raises((ValueError, OverflowError, IndexError, struct.error)):
+                        node._send_servo_targets(targets)
+                    node.session.take_output()
+                    raised += 1
+                    continue
+                node._send_servo_targets(targets)
+                goals, payload = want
+                assert node.session.take_output() == _frame(topic_id, payload), case
+                got = node.last_servo_goals
+                assert [type(g) for g in got] == [float] * len(goals), case
+                assert repr(got) == repr(goals), case
+                sent += 1
             node.config, node.arming = config, arming
         finally:
             stack.close()
     assert calls[0] > 600 and calls[1] > 300, calls
+    assert sent > 600 and raised > 300, (sent, raised)
 
 
 def test_declines_what_it_does_not_take() -> None:

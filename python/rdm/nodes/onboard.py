@@ -50,16 +50,15 @@ from rdm.nodes.onboard_mocap import CogEstimator
 from rdm.nodes.onboard_monitors import Monitors, battery_cells
 from rdm.nodes.onboard_operator import OnboardOperator
 from rdm.nodes.onboard_operator import _vector as _vector
-from rdm.nodes.onboard_operator import _vector_plain as _vector_plain
 from rdm.nodes.onboard_receive import _SERVO_STATE_FIELDS, OnboardReceive, servo_states_decodes
 from rdm.nodes.onboard_receive import SERVO_CACHE_SIZE as SERVO_CACHE_SIZE
 from rdm.nodes.onboard_receive import quaternion_to_euler as quaternion_to_euler
 from rdm.nodes.onboard_send import INTEGRATION_CONTROL_ON as INTEGRATION_CONTROL_ON
 from rdm.nodes.onboard_send import PUBLISHED_TOPICS as PUBLISHED_TOPICS
-from rdm.nodes.onboard_send import OnboardSend, _servo_target_payload
+from rdm.nodes.onboard_send import OnboardSend
 from rdm.nodes.onboard_send import _floats as _floats
 from rdm.nodes.onboard_send import _four_axis_payload as _four_axis_payload
-from rdm.nodes.onboard_step import OnboardStep, _compiled_interp
+from rdm.nodes.onboard_step import OnboardStep
 from rdm.protocol.rosserial.codec import RosTime
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 from rdm.protocol.rosserial.server import ServerSession
@@ -205,25 +204,23 @@ class OnboardNode(OnboardOperator, OnboardReceive, OnboardStep, OnboardSend):
         self._p_matrix_msg: tuple[Any, Any] | None = None
         self._desire_msg: tuple[Any, Any] | None = None
         #: ``servo/states`` readings seen before (the servos hold still for many messages) are
-        #: applied from their cached joint writes; False: every message through the loop
-        self.reuse_servo_states = True
+        #: applied from their cached joint writes
         self._servo_cache: dict[tuple, tuple[np.ndarray, np.ndarray, int, bool]] = {}
         self._servo_cache_map: ServoMap | None = None
-        #: the same entries by the readings' payload bytes after the stamp (deferred path)
+        #: the same entries by the readings' payload bytes after the stamp
         self._servo_raw: dict[bytes, tuple[np.ndarray, np.ndarray, int, bool]] = {}
         self._servo_codec = reg.msg("spinal/ServoStates")
-        #: a new ``servo/states`` payload's servo indices and angles unpacked with one
-        #: ``struct`` (what :meth:`_on_servo_states` reads), when the layout is the one
-        #: ``_SERVO_INDEX_ANGLE`` reads; False: decoded by the codec (the plain form)
         servo_fields = [
             (f.name, f.base_type, f.array_len) for f in reg.msg("spinal/ServoState").spec.fields
         ]
-        self.fast_servo_decode = servo_fields == _SERVO_STATE_FIELDS
-        imu_size = reg.msg("spinal/Imu").fixed_size
-        #: ``imu`` and ``servo/states`` are taken in from their payloads (the session defers
-        #: their decoding; only what the node reads is unpacked); False: decoded messages
-        self.raw_rx = imu_size == 60  # the layout _IMU_GYRO_QUAT reads
-        if self.raw_rx:
+        #: whether ``spinal/ServoState`` has the layout ``_SERVO_INDEX_ANGLE`` reads (a new
+        #: ``servo/states`` payload's indices and angles then unpacked with one ``struct``;
+        #: another message tree's layout: decoded by the codec)
+        self._servo_struct = servo_fields == _SERVO_STATE_FIELDS
+        # ``imu`` and ``servo/states`` are taken in from their payloads (the session defers
+        # their decoding; only what the node reads is unpacked) when ``spinal/Imu`` has the
+        # layout _IMU_GYRO_QUAT reads; another message tree's: decoded messages (_on_event)
+        if reg.msg("spinal/Imu").fixed_size == 60:
             self.session.deferred.update(
                 {
                     "imu": ("spinal/Imu", lambda p: len(p) == 60, self._on_imu_payload),
@@ -234,20 +231,10 @@ class OnboardNode(OnboardOperator, OnboardReceive, OnboardStep, OnboardSend):
                     ),
                 }
             )
-        #: commands serialized by the node where the wire form is a plain struct (rpy/gain,
-        #: four_axes/command, servo/target_states) and unchanged messages (pinv, desire) sent
-        #: as the payload encoded once; False: every message through the codec
-        self.direct_tx = True
+        #: unchanged messages (pinv, desire) sent as the payload encoded once per codec
         self._payloads: dict[str, tuple[Any, Any, bytes]] = {}
-        #: trajectory targets through the C interpolation ``np.interp`` calls for float data,
-        #: on contiguous copies of the joint columns (made once per trajectory); False:
-        #: ``np.interp`` per joint (the plain form)
-        self.fast_interp = _compiled_interp is not None
+        #: the trajectory's joint columns as contiguous arrays (made once per trajectory)
         self._trajectory_columns: tuple[Any, tuple[np.ndarray, ...]] | None = None
-        self._target_ticks: tuple[ServoMap, bytes, list[int]] | None = None
-        #: ``servo/target_states`` goals and payload of a :class:`ServoMap` in one Rust call
-        #: (``rdm._rdm.servo_target_payload``); False: :meth:`_send_servo_targets_plain`
-        self.fast_servo_targets = _servo_target_payload is not None
 
     # ---------------------------------------------------------------------------- tick
     def tick(self, now: float) -> None:

@@ -15,36 +15,18 @@ from typing import Any
 
 import numpy as np
 
-from rdm import _rdm
+from rdm._rdm import finite_float_vector as _finite_float_vector
 from rdm.nodes.joint_motion import plan_joint_motion
 from rdm.nodes.onboard_arming import FlightState
 from rdm.nodes.onboard_control import Setpoint
 
-_F64 = np.dtype(np.float64)
-
-
-_finite_float_vector = getattr(_rdm, "finite_float_vector", None)
-
 
 def _vector(value: Any, n: int) -> np.ndarray | None:
-    """``value`` as a finite float vector of length n, else None."""
-    if _finite_float_vector is not None:
-        # a list/tuple of n exact floats in one Rust call: the array below, False: not finite
-        got = _finite_float_vector(value, n)
-        if got is not None:
-            return None if got is False else got
-    return _vector_plain(value, n)
-
-
-def _vector_plain(value: Any, n: int) -> np.ndarray | None:
-    """:func:`_vector` without the Rust call (the reference form)."""
-    if type(value) in (tuple, list) and len(value) == n and all(type(v) is float for v in value):
-        # the common case (a decoded message field): the same array without numpy's checks
-        return np.array(value) if all(map(math.isfinite, value)) else None
-    if type(value) is np.ndarray and value.dtype == _F64 and value.shape == (n,):
-        # a float vector already (a script's setpoint): the same view as below, its values
-        # checked as Python floats (np.isfinite's dispatch costs more than the check)
-        return value.reshape(-1) if all(map(math.isfinite, value.tolist())) else None
+    """``value`` as a finite float vector of length n, else None: a list or tuple of n exact
+    floats (a decoded message field) in one Rust call, anything else through numpy."""
+    got = _finite_float_vector(value, n)  # None: not that form; False: a value not finite
+    if got is not None:
+        return None if got is False else got
     try:
         v = np.asarray(value, dtype=float).reshape(-1)
     except (TypeError, ValueError):

@@ -172,22 +172,20 @@ class OnboardReceive:
         """A ``servo/states`` message from its payload (one the codec decodes): a reading seen
         before (same bytes after the stamp) applied from its cached entry, else decoded."""
         self.counts["rx:servo/states"] += 1
-        body = None
-        if self.reuse_servo_states:
-            self._servo_cache_valid()
-            body = payload[8:]
-            hit = self._servo_raw.get(body)
-            if hit is not None:
-                self._apply_servo_entry(hit)
-                return
-        if self.fast_servo_decode and servo_states_decodes(payload):
+        self._servo_cache_valid()
+        body = payload[8:]
+        hit = self._servo_raw.get(body)
+        if hit is not None:
+            self._apply_servo_entry(hit)
+            return
+        if self._servo_struct and servo_states_decodes(payload):
             # the index and angle of each entry, as the codec decodes them (uint8, int16)
             readings = _SERVO_INDEX_ANGLE.iter_unpack(memoryview(payload)[_SERVO_STATES_HEAD:])
             msg = _ServoReadings(list(map(_ServoReading._make, readings)))
         else:
             msg = self._servo_codec.decode(payload)
         entry = self._on_servo_states(msg)
-        if body is not None and entry is not None:
+        if entry is not None:
             raw = self._servo_raw
             raw[body] = entry
             if len(raw) > SERVO_CACHE_SIZE:
@@ -215,17 +213,15 @@ class OnboardReceive:
     def _on_servo_states(self, msg: Any) -> tuple[np.ndarray, np.ndarray, int, bool] | None:
         """Apply one decoded reading; returns its cache entry (None when not cacheable)."""
         smap = self.config.servo_map
-        key = None
-        if self.reuse_servo_states:
-            self._servo_cache_valid()
-            try:
-                key = tuple([(s.index, s.angle) for s in msg.servos])
-                hit = self._servo_cache.get(key)
-            except (TypeError, AttributeError):  # not hashable / not servo entries: plain path
-                key = hit = None
-            if hit is not None:
-                self._apply_servo_entry(hit)
-                return hit
+        self._servo_cache_valid()
+        try:
+            key = tuple([(s.index, s.angle) for s in msg.servos])
+            hit = self._servo_cache.get(key)
+        except (TypeError, AttributeError):  # not hashable / not servo entries: the loop
+            key = hit = None
+        if hit is not None:
+            self._apply_servo_entry(hit)
+            return hit
         covered = set()
         joints, values, n_unknown = [], [], 0
         for s in msg.servos:

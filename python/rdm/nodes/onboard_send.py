@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from rdm import _rdm
+from rdm._rdm import servo_target_payload as _servo_target_payload
 from rdm.nodes.onboard_arming import FlightState
 from rdm.nodes.onboard_config import ServoMap
 from rdm.nodes.onboard_control import ControlCommand
@@ -39,9 +39,6 @@ PUBLISHED_TOPICS = (
     "p_matrix_pseudo_inverse_inertia",
     "servo/target_states",
 )
-
-
-_servo_target_payload = getattr(_rdm, "servo_target_payload", None)
 
 
 def _floats(values: Any) -> list[float]:
@@ -70,7 +67,7 @@ class OnboardSend:
     def _publish_payload(self, topic: str, payload: bytes) -> bool:
         """:meth:`_publish` of a message already serialized with the topic's codec."""
         session = self.session
-        if self.direct_tx and session.try_publish_payload(topic, payload):
+        if session.try_publish_payload(topic, payload):
             self.published[topic] += 1  # as _send counts a send
             return True
         return self._send(session.publish_payload, topic, payload)
@@ -92,7 +89,7 @@ class OnboardSend:
         """:meth:`_publish` of a message object the node never mutates: serialized once per
         codec (the topic's codec gives the same bytes for the same unchanged message)."""
         remote = self.session.outbound.get(topic)
-        if remote is None or not self.direct_tx:
+        if remote is None:
             return self._publish(topic, msg)
         cached = self._payloads.get(topic)
         if cached is None or cached[0] is not msg or cached[1] is not remote.codec:
@@ -100,11 +97,8 @@ class OnboardSend:
         return self._publish_payload(topic, cached[2])
 
     def _direct_remote(self, topic: str, type_name: str) -> bool:
-        """Whether ``topic`` may be sent as a payload the node packs itself: fast path on and
-        the device subscribes to it with ``type_name`` (else the codec path, which raises or
-        counts exactly as before)."""
-        if not self.direct_tx:
-            return False
+        """Whether ``topic`` may be sent as a payload the node packs itself: the device
+        subscribes to it with ``type_name`` (else the codec path, which raises or counts)."""
         remote = self.session.outbound.get(topic)
         return remote is not None and remote.type == type_name
 
@@ -221,15 +215,19 @@ class OnboardSend:
         self._publish("rpy/gain", self._gains_msg[1])
 
     def _send_servo_targets(self, targets: np.ndarray) -> None:
+        """``servo/target_states``: the joint targets, in flight the vectoring joints written
+        over with the last command's angles, each to raw ticks (:meth:`ServoMap.to_raw`); the
+        goals kept in ``last_servo_goals``. One Rust call (``rdm._rdm.servo_target_payload``)
+        packs the payload for a :class:`ServoMap` when Spinal subscribes with
+        ``spinal/ServoControlCmd``; what it declines (another map type or message type, a
+        target or index the wire cannot carry) goes through the codec, which raises or
+        counts."""
         arr = np.array(targets, dtype=float)
         smap = self.config.servo_map
-        if (
-            self.fast_servo_targets
-            and smap.__class__ is ServoMap
-            and self._direct_remote("servo/target_states", "spinal/ServoControlCmd")
+        vectoring = self.last_alpha_beta if self.arming.flying else None
+        if smap.__class__ is ServoMap and self._direct_remote(
+            "servo/target_states", "spinal/ServoControlCmd"
         ):
-            assert _servo_target_payload is not None
-            vectoring = self.last_alpha_beta if self.arming.flying else None
             done = _servo_target_payload(
                 arr,
                 vectoring,
@@ -239,59 +237,21 @@ class OnboardSend:
                 smap.angle_scale,
                 smap.servo_index,
             )
-            if done is not None:  # else the plain form decides (and raises as before)
+            if done is not None:
                 self.last_servo_goals, payload = done
                 self._publish_payload("servo/target_states", payload)
                 return
-        self._send_servo_targets_plain(arr)
-
-    def _send_servo_targets_plain(self, arr: np.ndarray) -> None:
-        """:meth:`_send_servo_targets` of the float64 array of the targets in Python."""
-        # a list of the same Python floats float(q[j]) gives (element writes: same values)
         q = arr.tolist()
-        written: list[int] = []
-        if self.arming.flying and self.last_alpha_beta is not None:
-            alpha, beta = self.last_alpha_beta
+        if vectoring is not None:
+            alpha, beta = vectoring
             for i, (ja, jb) in enumerate(self.control.vectoring_joints):
                 q[ja], q[jb] = float(alpha[i]), float(beta[i])
-                written += (ja, jb)
-        smap = self.config.servo_map
         n = min(smap.n_joints, len(q))
         self.last_servo_goals = q if n == len(q) else q[:n]
-        to_raw = smap.to_raw
-        if self._direct_remote("servo/target_states", "spinal/ServoControlCmd"):
-            index = smap.servo_index[:n]
-            # to_raw is per joint: the targets' ticks (they hold for many ticks) are kept, the
-            # vectoring joints' ticks are redone from the angles written over them
-            key = arr.tobytes()
-            cached = self._target_ticks
-            if cached is None or cached[0] is not smap or cached[1] != key:
-                base = arr.tolist()
-                cached = self._target_ticks = (smap, key, [to_raw(j, base[j]) for j in range(n)])
-            angles = cached[2].copy()
-            if written and smap.__class__ is ServoMap:
-                # ServoMap.to_raw written out (the same expression, rounding and clamp)
-                zero, sign, scale = smap.zero_point, smap.angle_sign, smap.angle_scale
-                for j in written:
-                    if j < n:
-                        angles[j] = max(
-                            -32768, min(32767, round(zero[j] + sign[j] * q[j] / scale[j]))
-                        )
-            else:
-                for j in written:
-                    if j < n:
-                        angles[j] = to_raw(j, q[j])
-            try:  # uint8[] index, int16[] angles; out of range: the codec's error below
-                payload = struct.pack(f"<I{len(index)}BI{n}h", len(index), *index, n, *angles)
-            except (struct.error, TypeError):
-                payload = None
-            if payload is not None:
-                self._publish_payload("servo/target_states", payload)
-                return
         self._publish(
             "servo/target_states",
             self._msg["servo/target_states"].new(
                 index=list(smap.servo_index[:n]),
-                angles=[to_raw(j, q[j]) for j in range(n)],
+                angles=[smap.to_raw(j, q[j]) for j in range(n)],
             ),
         )

@@ -18,9 +18,11 @@ from rdm.nodes.onboard_control import ControlCommand, Setpoint, State
 from rdm.nodes.onboard_flight import FlightMode
 
 try:  # the C function np.interp ends in for float data (without its Python layers)
-    from numpy._core.multiarray import interp as _compiled_interp
-except ImportError:  # another numpy layout: np.interp throughout
-    _compiled_interp = None
+    from numpy._core.multiarray import interp as _interp
+except ImportError:  # another numpy layout: np.interp, the same values
+
+    def _interp(x: float, xp: np.ndarray, fp: np.ndarray, left: None, right: None) -> float:
+        return float(np.interp(x, xp, fp, left, right))
 
 
 class OnboardStep:
@@ -122,19 +124,17 @@ class OnboardStep:
             return None
 
     def _current_joint_targets(self, now: float) -> np.ndarray | None:
+        """The joint targets at ``now``: the trajectory's (linear between its points, held
+        after the last) or the held ``joint_targets``."""
         trajectory = self._trajectory
-        if trajectory is not None:
-            times, qs = trajectory
-            if self.fast_interp and qs.dtype == np.float64 and qs.ndim == 2:
-                # np.interp(x, xp, fp) of a real fp is compiled_interp(x, xp, fp, None, None)
-                cached = self._trajectory_columns
-                if cached is None or cached[0] is not trajectory:
-                    columns = tuple(np.ascontiguousarray(qs[:, j]) for j in range(qs.shape[1]))
-                    cached = self._trajectory_columns = (trajectory, columns)
-                interp = _compiled_interp
-                return np.array([interp(now, times, column, None, None) for column in cached[1]])
-            return np.array([np.interp(now, times, qs[:, j]) for j in range(qs.shape[1])])
-        return self.joint_targets
+        if trajectory is None:
+            return self.joint_targets
+        times, qs = trajectory  # float64, one row per time (set_trajectory)
+        cached = self._trajectory_columns
+        if cached is None or cached[0] is not trajectory:
+            columns = tuple(np.ascontiguousarray(qs[:, j]) for j in range(qs.shape[1]))
+            cached = self._trajectory_columns = (trajectory, columns)
+        return np.array([_interp(now, times, column, None, None) for column in cached[1]])
 
     def _mocap_usable(self, now: float) -> bool:
         return (
