@@ -1,5 +1,5 @@
-"""Spinal CAN master + Neuron mirrors in lockstep on python-can ``virtual:`` buses, driven by
-explicit simulated milliseconds (fact sheet sec. 2.5-2.7).
+"""Spinal's CAN master + Neuron boards (the Rust firmware cores) in lockstep on python-can
+``virtual:`` buses, driven by explicit simulated milliseconds (fact sheet sec. 2.5-2.7).
 
 Every frame on the bus is captured by a separate listening bus, tagged with the simulated ms,
 and checked with cantools (DBC files) or the codec's ``NeuronDecoder`` — never with the
@@ -279,7 +279,7 @@ def test_servo_state_and_imu_table_scaling(sim_factory):
     n1.set_imu_raw(gyro=(100, -200, 300), acc=(-4096, 2048, 1), mag=(50, -60, 70))
     n1.servos[0].temperature = 61
     n1.servos[0].hardware_error = 0x80
-    n1.servos[1].external_current = -321
+    n1.servos[1].set_external_current(-321)
     sim.run_until(sim.t + 20)
     reading = sim.master.imu[1]
     kg, ka, km = 2000 / 32767 * math.pi / 180, 9.80665 / 4096, 4912 / 32760
@@ -518,3 +518,22 @@ def test_run_realtime_ticks_nodes_at_their_periods_and_rephases_late_ones(sim_fa
     with pytest.raises(ValueError, match="period"):
         Slow.period = 0.0
         run_realtime([Slow()], duration=0.1)
+
+
+def test_core_errors_are_typed():
+    from rdm import _rdm
+    from rdm.link.inproc_can import InProcessBus
+
+    core = _rdm.CanMaster(0, 0)
+    with pytest.raises(_rdm.CanMasterError, match=r"duties: 1 values"):
+        core.set_motor_duties([0.5])
+    with pytest.raises(_rdm.CanMasterError, match="no servo 0 on Neuron 1"):
+        core.set_servo_target(1, 0, 5)
+    with pytest.raises(_rdm.CanMasterError, match="payload > 8"):
+        core.configure_board(0x712, bytes(9))
+    with pytest.raises(_rdm.CanMasterError, match="out of range"):
+        core.servo(0, 0)
+    master = CanMaster(InProcessBus("canwire_errors"))
+    with pytest.raises(KeyError, match="no servo 1 on Neuron 3"):
+        master.servo(3, 1)
+    master.close()

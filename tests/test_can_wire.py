@@ -1,7 +1,7 @@
 """The Rust CanWire (master <-> Neuron bank without python-can) against the in-process
-python-can channel with ``CandumpCapture`` and the Python ``CanMaster`` (the reference): the
-same candump bytes, the same master and board state, at every tick; the full hover stack
-writes the same logs; another python-can endpoint on a wired channel is refused."""
+python-can channel with ``CandumpCapture``: the same candump bytes, the same master and board
+state, at every tick, whichever link carries the frames; the full hover stack writes the same
+logs on either; another python-can endpoint on a wired channel is refused."""
 
 from __future__ import annotations
 
@@ -15,8 +15,7 @@ from hover_run_files import hover_run_files
 from rdm.link.can import open_can
 from rdm.link.can_wire import CanWireError, CanWireLink, WireCandump
 from rdm.link.inproc_can import SimClock, add_tap, remove_tap, set_channel_clock
-from rdm.nodes.can_master import CanMaster, MasterState
-from rdm.nodes.can_master_rust import SERVO_FIELDS, RustCanMaster
+from rdm.nodes.can_master import SERVO_FIELDS, CanMaster, MasterState
 from rdm.nodes.neuron_bank import NeuronBankNode, NeuronSpec
 from rdm.nodes.servo_model import ServoConfig
 from rdm.protocol import neuron as nr
@@ -46,7 +45,7 @@ class Rig:
             link = CanWireLink(self.channel)
             set_channel_clock(self.channel, self.clock)
             self.bank = NeuronBankNode(link, _specs())
-            self.master = RustCanMaster(link, boot_delay_ms=3)
+            self.master = CanMaster(link, boot_delay_ms=3)
             self.capture = WireCandump(self.path, link)
         else:
             self.bank = NeuronBankNode(open_can(f"inproc:{self.channel}"), _specs())
@@ -122,7 +121,7 @@ def test_other_endpoint_on_a_wired_channel_is_refused(tmp_path):
     """A python-can bus or a tap joining the channel: CanWireError at the next master tick
     (the wire would not deliver to it)."""
     link = CanWireLink(f"canwire_alone_{next(_channels)}")
-    master = RustCanMaster(link, boot_delay_ms=0)
+    master = CanMaster(link, boot_delay_ms=0)
     master.tick_ms(0)
     intruder = open_can(f"inproc:{link.channel}")
     with pytest.raises(CanWireError, match="1 other bus"):
@@ -144,9 +143,9 @@ _run_hover = hover_run_files
 
 
 def test_hover_stack_on_the_wire_is_byte_identical(tmp_path):
-    """4 simulated s from power-on: the wired stack (default) and the python-can stack with
-    the Python master (the reference) write the same can.log, signals.mcap and UART bytes."""
-    ref = _run_hover(tmp_path / "ref", "ref", 4.0, master_backend="python", can_wire=False)
+    """4 simulated s from power-on: the wired stack (default) and the stack on an in-process
+    python-can channel write the same can.log, signals.mcap and UART bytes."""
+    ref = _run_hover(tmp_path / "ref", "ref", 4.0, can_wire=False)
     wired = _run_hover(tmp_path / "wire", "wire", 4.0)
     assert {"can.log", "signals.mcap"} <= set(ref)
     assert sorted(ref) == sorted(wired)

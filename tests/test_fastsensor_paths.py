@@ -134,23 +134,33 @@ def test_send_standard_into_full_queues_drops_as_send_does():
 
 
 def test_can_master_sends_through_the_bus_it_holds_and_counts_refusals():
-    master = CanMaster(InProcessBus("fastsensor_master_a"))
+    enum_request = (0x70F, b"")  # the first frame after boot (fact sheet sec. 2.5)
+    master = CanMaster(InProcessBus("fastsensor_master_a"), boot_delay_ms=0)
     listener = InProcessBus("fastsensor_master_b")
-    master.bus = InProcessBus("fastsensor_master_b")  # the fast path follows the bus
-    master._send_raw(0x123, b"\x01\x02")
+    master.bus = InProcessBus("fastsensor_master_b")  # the send path follows the bus
+    master.tick_ms(0)
     got = listener.recv(timeout=0)
-    assert (got.arbitration_id, bytes(got.data)) == (0x123, b"\x01\x02")
+    assert (got.arbitration_id, bytes(got.data)) == enum_request
     assert master.tx_count == 1 and master.tx_errors == 0
     master.bus.shutdown()
-    master._send_raw(0x123, b"\x01")  # closed bus: CanOperationError, counted
-    assert master.tx_count == 1 and master.tx_errors == 1
+
+    class RefusingBus(InProcessBus):
+        """A bus whose controller refuses every frame (python-can's CanOperationError)."""
+
+        def send_standard(self, can_id: int, data: bytes) -> None:
+            raise can.CanOperationError("TX refused")
+
+    refused = CanMaster(RefusingBus("fastsensor_master_c"), boot_delay_ms=0)
+    refused.tick_ms(0)  # refused: counted, the node goes on
+    assert refused.tx_count == 0 and refused.tx_errors == 1
+    refused.close()
     # A python-can bus without send_standard takes the generic path.
     virt_tx = can.Bus(interface="virtual", channel="fastsensor_virt")
     virt_rx = can.Bus(interface="virtual", channel="fastsensor_virt")
-    master.bus = virt_tx
-    master._send_raw(0x0F, b"\x05")
+    generic = CanMaster(virt_tx, boot_delay_ms=0)
+    generic.tick_ms(0)
     got = virt_rx.recv(timeout=1.0)
-    assert (got.arbitration_id, bytes(got.data), got.is_extended_id) == (0x0F, b"\x05", False)
-    assert master.tx_count == 2
+    assert (got.arbitration_id, bytes(got.data), got.is_extended_id) == (*enum_request, False)
+    assert generic.tx_count == 1
     for b in (virt_tx, virt_rx, listener):
         b.shutdown()

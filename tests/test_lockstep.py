@@ -193,7 +193,7 @@ def test_bridge_couples_duties_goals_positions_and_sinks():
     import dataclasses
 
     from rdm.link.inproc_can import InProcessBus
-    from rdm.nodes.neuron_mirror import NeuronMirror
+    from rdm.nodes.neuron_bank import NeuronBankNode, NeuronSpec
     from rdm.nodes.plant_bridge import PlantBridge, default_layout
     from rdm.plant import Plant
     from rdm.plant.description import load_robot
@@ -207,11 +207,14 @@ def test_bridge_couples_duties_goals_positions_and_sinks():
         desc, seed=1, fixed_base=True, ceiling_height=None, servo=ServoParams(1000.0, 50.0)
     )
     layout = default_layout(plant.description)
-    buses = [InProcessBus("bridge_alone") for _ in layout.neurons]
-    neurons = [
-        NeuronMirror(b, nl.slave, layout.servo_configs(nl.slave), plant_driven=True)
-        for b, nl in zip(buses, layout.neurons, strict=True)
+    specs = [
+        NeuronSpec(nl.slave, tuple(layout.servo_configs(nl.slave)), plant_driven=True)
+        for nl in layout.neurons
     ]
+    bank = NeuronBankNode(InProcessBus("bridge_alone"), specs)
+    neurons = bank.boards
+    goal = round(layout.to_ticks("q1", 0.2))
+    feeder = _SpinalFrames(InProcessBus("bridge_alone"), goal)
     imu, wrench, mocap, volts = [], [], [], []
     bridge = PlantBridge(
         plant,
@@ -224,15 +227,13 @@ def test_bridge_couples_duties_goals_positions_and_sinks():
         mocap_period=0.005,
     )
     try:
-        # drive the mirrors directly (no CAN master): ESC values and one servo goal
-        for n in neurons:
-            n.esc.stopped = False
-            n.esc.held_value = 500  # duty 0.75
-        servo = neurons[1].servos[0]  # q1 on Neuron 2
-        servo.set_torque(True)
-        servo.goal = round(layout.to_ticks("q1", 0.2))
-        loop = Lockstep([bridge], physics=plant)
+        # Spinal's frames on the bus (no CAN master): PWM 500 (duty 0.75) in every slot each
+        # ms; torque on, then the goal with its ack bit, for q1 (Neuron 2's first servo)
+        loop = Lockstep([bridge, bank, feeder], physics=plant)
         loop.run(0.5)
+        assert [n.esc.value for n in neurons] == [500] * 4
+        servo = neurons[1].servos[0]  # q1 on Neuron 2
+        assert servo.torque_enable and servo.goal == goal
         # independent: the plant's own duty -> steady thrust map at the bridge's voltage
         want = plant.escs[0].params.steady_thrust(0.75, volts[-1])
         assert np.allclose(plant.rotor_thrusts(), plant.rotor_thrusts()[0])
@@ -249,8 +250,37 @@ def test_bridge_couples_duties_goals_positions_and_sinks():
         assert len(volts) == 500 and volts[0] == 24.0
         assert bridge.time_mismatches == 0
     finally:
-        for b in buses:
-            b.shutdown()
+        bank.close()
+        feeder.bus.shutdown()
+
+
+class _SpinalFrames:
+    """Spinal's side of the bus, written out: PWM 500 in every slot each ms; at 1 ms torque
+    on for Neuron 2's first servo, from 2 ms its goal with the ack bit (fact sheet sec. 2.4)."""
+
+    name = "spinal_frames"
+    period = 0.001
+
+    def __init__(self, bus, goal: int) -> None:
+        self.bus = bus
+        self.goal = goal
+        self.ticks = 0
+
+    def tick(self, now: float) -> None:
+        import can
+
+        from rdm.protocol.neuron.memo import encode_pwm_cached, encode_servo_words_cached
+
+        frames = list(encode_pwm_cached([500] * 4))
+        if self.ticks == 1:
+            frames.append(encode_servo_words_cached(True, 2, (0, 0, 0), (True, False, False)))
+        elif self.ticks > 1:
+            frames.append(
+                encode_servo_words_cached(False, 2, (self.goal, 0, 0), (True, False, False))
+            )
+        for can_id, payload in frames:
+            self.bus.send(can.Message(arbitration_id=can_id, data=payload, is_extended_id=False))
+        self.ticks += 1
 
 
 def test_bridge_refuses_a_layout_that_does_not_match_the_mirrors():

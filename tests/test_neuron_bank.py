@@ -1,8 +1,8 @@
-"""The Rust Neuron bank (``rdm.nodes.neuron_bank``) against the Python reference
-(``NeuronMirror``, one per board on a shared bus): same frames out, same board state, same
-counters, on random frame streams full of bad frames, on the fact-sheet scenarios (watchdog,
-BOARD_CONFIG, reboot, slave-id change), and byte-identical logs of a whole hover stack run.
-Replies are also decoded with cantools and the Neuron->Spinal DBC (an independent reading).
+"""The Neuron bank (``rdm.nodes.neuron_bank``, the Rust firmware core) against the fact sheet:
+bad frames counted by reason, enumeration and config replies decoded with cantools and the
+Neuron->Spinal DBC (an independent reading) and with ``struct``, the watchdog, BOARD_CONFIG,
+reboot, a slave-id change, colliding boards; random frame streams full of bad frames against
+golden digests.
 """
 
 from __future__ import annotations
@@ -11,17 +11,16 @@ import hashlib
 import itertools
 import random
 import struct
+from collections import Counter
 from pathlib import Path
 
 import can
 import cantools
 import pytest
-from hover_run_files import hover_run_files
 
 from rdm.link.inproc_can import InProcessBus
 from rdm.nodes.base import drain
 from rdm.nodes.neuron_bank import NeuronBankNode, NeuronSpec
-from rdm.nodes.neuron_mirror import NeuronMirror
 from rdm.nodes.servo_model import ServoConfig
 
 DBC_DIR = Path(__file__).resolve().parents[1] / "firmware_protocol" / "neuron"
@@ -45,91 +44,25 @@ SPECS = [
 ]
 
 
-def _mirror(bus: can.BusABC, spec: NeuronSpec) -> NeuronMirror:
-    return NeuronMirror(
-        bus,
-        spec.slave_id,
-        spec.servos,
-        spec.imu,
-        spec.esc,
-        plant_driven=spec.plant_driven,
-        ttl_rs485_mixed=spec.ttl_rs485_mixed,
-        pulley_skip_thresh=spec.pulley_skip_thresh,
-        reboot_ms=spec.reboot_ms,
-    )
-
-
-class Twin:
-    """The same boards twice: Python mirrors on one channel, the Rust bank on another; a
-    Spinal bus on each sends the same frames and collects the replies."""
+class Bank:
+    """The boards as one bank on an in-process channel; a Spinal bus on it sends frames and
+    collects the replies."""
 
     def __init__(self, specs: list[NeuronSpec]) -> None:
         n = next(_channels)
-        self.py_spinal = InProcessBus(f"bank_py_{n}")
-        self.rs_spinal = InProcessBus(f"bank_rs_{n}")
-        self.mirrors = [_mirror(InProcessBus(f"bank_py_{n}"), s) for s in specs]
-        self.bank = NeuronBankNode(InProcessBus(f"bank_rs_{n}"), specs)
+        self.spinal = InProcessBus(f"bank_{n}")
+        self.bank = NeuronBankNode(InProcessBus(f"bank_{n}"), specs)
 
     def send(self, msg: can.Message) -> None:
-        self.py_spinal.send(msg)
-        self.rs_spinal.send(msg)
+        self.spinal.send(msg)
 
-    def tick(self, now: float) -> tuple[list, list]:
-        for m in self.mirrors:
-            m.tick(now)
+    def tick(self, now: float) -> list[tuple[int, bytes]]:
         self.bank.tick(now)
-        py = [(m.arbitration_id, bytes(m.data)) for m in drain(self.py_spinal)]
-        rs = [(m.arbitration_id, bytes(m.data)) for m in drain(self.rs_spinal)]
-        return py, rs
-
-    def assert_same_state(self, where: str) -> None:
-        for m, v in zip(self.mirrors, self.bank.boards, strict=True):
-            assert _mirror_state(m) == _view_state(v), f"{where}: board {m.slave_id}"
+        return [(m.arbitration_id, bytes(m.data)) for m in drain(self.spinal)]
 
     def close(self) -> None:
-        for m in self.mirrors:
-            m.close()
         self.bank.close()
-        self.py_spinal.shutdown()
-        self.rs_spinal.shutdown()
-
-
-def _mirror_state(m: NeuronMirror) -> dict:
-    return {
-        "slave_id": m.slave_id,
-        "flash_slave_id": m.flash_slave_id,
-        "imu_send_flag": m.imu_send_flag,
-        "esc": (m.esc.held_value, m.esc.stopped, m.esc.value),
-        "changes": m.changes[0],
-        "connected": m.connected,
-        "rx": (m.rx_count, m.rx_filtered, dict(m.rx_errors), dict(m.rx_kinds), m.reboots),
-        "tx": (m.tx_count, m.tx_errors),
-        "servos": [
-            (
-                s.position,
-                s.velocity,
-                s.goal,
-                s.goal_current,
-                s.torque_enable,
-                s.send_goal_position,
-                s.homing_offset,
-                s.round_offset,
-                s.present_position,
-                s.current,
-                s.moving,
-                s.config.p_gain,
-                s.config.i_gain,
-                s.config.d_gain,
-                s.config.profile_velocity,
-                s.config.current_limit,
-                s.config.send_data_flag,
-                s.config.external_encoder_flag,
-                s.config.joint_resolution,
-                s.config.servo_resolution,
-            )
-            for s in m.servos
-        ],
-    }
+        self.spinal.shutdown()
 
 
 def _view_state(v) -> dict:
@@ -177,8 +110,8 @@ def _view_state(v) -> dict:
 
 
 @pytest.fixture
-def twin():
-    t = Twin(SPECS)
+def rig():
+    t = Bank(SPECS)
     yield t
     t.close()
 
@@ -272,36 +205,49 @@ def random_frame(rng: random.Random) -> can.Message:
     return std(0x1000 | slave, b"")  # an 11-bit frame whose id does not fit 11 bits
 
 
+#: SHA-256 of every reply frame and every board's state after each step of the random
+#: streams below (golden: the Python per-board mirror and the Rust bank gave these same bytes
+#: when both existed; any change of the firmware's behaviour on these streams changes them).
+RANDOM_STREAM_DIGESTS = {
+    0: "065f82fbcba9c065c1264e68e7eed305ae45b4ac123bc19fda55234376a7be93",
+    1: "70f6d0e71fccdd9f3b6e585806796700dd96bc1ff486a3b39dc24d44a424e20d",
+    2: "5806b29a903c8e4a9dad8268621d063b03f55e7b89e4ffd3c989989526b13577",
+    3: "d53d568b6c54b7bcef3b63feb8978fdf5a3a0f1a536887683a45c05ad5b3f9a5",
+    4: "47a683059fde246ce3abc6f0a0cbb9f1061c31a98a6bc7f6cfc0647d12813c0b",
+    5: "c55aa225cb33bc7304b9c649761ee1f5e58534e8e731d01aed09ddce49723488",
+}
+
+
 @pytest.mark.parametrize("seed", range(6))
-def test_random_streams_match_the_python_mirrors(twin, seed):
+def test_random_streams_keep_their_golden_replies(rig, seed):
     rng = random.Random(seed)
     now = 0.0
     sent = 0
-    for step in range(700):
+    digest = hashlib.sha256()
+    for _step in range(700):
         for _ in range(rng.choice([0, 1, 1, 2, 3, 6])):
-            twin.send(random_frame(rng))
+            rig.send(random_frame(rng))
         if rng.random() < 0.05:
             # Plant feedback on the plant-driven board (slave 3, bank index 2).
             q = [rng.uniform(-40000, 40000) for _ in range(4)]
-            twin.mirrors[2].set_present_positions(q)
-            twin.bank.boards[2].set_present_positions(q)
+            rig.bank.boards[2].set_present_positions(q)
         if rng.random() < 0.03:
             g = [rng.uniform(-40, 40) for _ in range(3)]
-            twin.mirrors[0].set_imu(gyro=g, acc=g[::-1], mag=[v * 10 for v in g])
-            twin.bank.boards[0].set_imu(gyro=g, acc=g[::-1], mag=[v * 10 for v in g])
+            rig.bank.boards[0].set_imu(gyro=g, acc=g[::-1], mag=[v * 10 for v in g])
         now += 0.001 if rng.random() < 0.97 else rng.choice([0.0, 0.05, 0.15, 0.3])
-        py, rs = twin.tick(now)
-        assert rs == py, f"seed {seed} step {step}: frames differ"
-        sent += len(py)
-        twin.assert_same_state(f"seed {seed} step {step}")
-    errors = sum((m.rx_errors for m in twin.mirrors), start=__import__("collections").Counter())
+        rs = rig.tick(now)
+        sent += len(rs)
+        digest.update(repr(rs).encode())
+        digest.update(repr([_view_state(v) for v in rig.bank.boards]).encode())
+    errors = sum((v.rx_errors for v in rig.bank.boards), start=Counter())
     # The stream must have exercised the paths it claims to.
     assert sent > 100
     for reason in ("dlc", "range", "unknown_id", "not_standard_id", "direction"):
         assert errors[reason] > 0, reason
+    assert digest.hexdigest() == RANDOM_STREAM_DIGESTS[seed]
 
 
-def test_bad_frames_are_counted_by_reason(twin):
+def test_bad_frames_are_counted_by_reason(rig):
     frames = [
         std(0x201, words([5], [True]) + b"\x00"),  # DLC 3: dlc
         std(0x00F, pwm([0] * 6)[:7]),  # PWM DLC 7: dlc
@@ -319,11 +265,9 @@ def test_bad_frames_are_counted_by_reason(twin):
         std(0x501, b""),  # device 5: unknown_id
     ]
     for f in frames:
-        twin.send(f)
-    py, rs = twin.tick(0.001)
-    assert rs == py
-    twin.assert_same_state("bad frames")
-    b1, b2, b3, b7 = (v.rx_errors for v in twin.bank.boards)
+        rig.send(f)
+    rs = rig.tick(0.001)
+    b1, b2, b3, b7 = (v.rx_errors for v in rig.bank.boards)
     # Independent expectation (fact sheet + the mirror's documented reasons).
     assert b1 == {
         "dlc": 2,
@@ -339,16 +283,15 @@ def test_bad_frames_are_counted_by_reason(twin):
     }
     assert b3["servo_count"] == 1 and b3["dlc"] == 1 and b7.get("servo_index") is None
     assert b2["fd"] == 1 and b2["not_standard_id"] == 1  # counted before the id filter
-    assert twin.bank.boards[0].rx_filtered == 2  # 0x727 and 0x203 are not for slave 1
+    assert rig.bank.boards[0].rx_filtered == 2  # 0x727 and 0x203 are not for slave 1
     # Reply of the accepted board config (0x727): INITIAL_CONFIG_0 + 2 x (1, 2, 3).
     assert [i for i, _ in rs] == [0x717, 0x727, 0x737, 0x747, 0x727, 0x737, 0x747]
 
 
-def test_enumeration_and_config_replies_decode_with_the_dbc(twin):
-    twin.send(std(0x70F))
-    twin.send(std(0x713))
-    py, rs = twin.tick(0.001)
-    assert rs == py
+def test_enumeration_and_config_replies_decode_with_the_dbc(rig):
+    rig.send(std(0x70F))
+    rig.send(std(0x713))
+    rs = rig.tick(0.001)
     ids = [i for i, _ in rs]
     # Every board answers in bank order; board 3 handles both of its frames before board 7.
     assert ids == [0x701, 0x702, 0x703, 0x713, *[0x723, 0x733, 0x743] * 4, 0x707]
@@ -362,34 +305,31 @@ def test_enumeration_and_config_replies_decode_with_the_dbc(twin):
     assert struct.unpack("<BBhhh", ic3) == (3, 0, -20, 4096, 4096)
 
 
-def test_watchdog_board_config_and_reboot(twin):
+def test_watchdog_board_config_and_reboot(rig):
     t = 0.0
 
     def step(*frames: can.Message, dt: float = 0.001) -> list:
         nonlocal t
         for f in frames:
-            twin.send(f)
+            rig.send(f)
         t += dt
-        py, rs = twin.tick(t)
-        assert rs == py
-        twin.assert_same_state(f"t={t:.3f}")
-        return rs
+        return rig.tick(t)
 
     step(std(0x00F, pwm([100, 200, 300, 0, 0, 0])))
-    assert [v.esc.value for v in twin.bank.boards] == [100, 200, 300, 0]
+    assert [v.esc.value for v in rig.bank.boards] == [100, 200, 300, 0]
     step(dt=0.100)  # exactly 100 ms since the last frame: still running
-    assert twin.bank.boards[0].esc.value == 100
+    assert rig.bank.boards[0].esc.value == 100
     step(dt=0.001)  # 101 ms: watchdog
-    assert [v.esc.value for v in twin.bank.boards] == [0, 0, 0, 0]
-    assert not twin.bank.boards[0].connected
+    assert [v.esc.value for v in rig.bank.boards] == [0, 0, 0, 0]
+    assert not rig.bank.boards[0].connected
     step(std(0x00F, pwm([100, 200, 300, 0, 0, 0])))
-    assert twin.bank.boards[1].esc.value == 200
+    assert rig.bank.boards[1].esc.value == 200
     # Torque on for board 7's servos, then goals with the handshake ack.
     step(std(0x217, words([0, 0], [True, True])))
     rs = step(std(0x207, words([1000, 1500], [False, True])))
     states = [d for i, d in rs if i in (0x207, 0x217)]
     assert [struct.unpack("<hBBhBx", d)[2] & 4 for d in states] == [4, 0]  # servo 0 pending
-    assert twin.bank.boards[3].servo_goals() == [2048, 1500]
+    assert rig.bank.boards[3].servo_goals() == [2048, 1500]
     # BOARD_CONFIG: PID gains of servo 1 on board 7, answered with the full config set.
     rs = step(std(0x727, bytes([3, 1, 0x10, 0x27, 5, 0, 6, 0])))
     ic1 = [struct.unpack("<BBHHH", d) for i, d in rs if i == 0x727]
@@ -397,34 +337,31 @@ def test_watchdog_board_config_and_reboot(twin):
     # SET_SLAVE_ID 7 -> 8, then REBOOT: deaf for 30 ms, then answers as slave 8.
     step(std(0x727, bytes([0, 8])))
     step(std(0x727, bytes([7])))
-    assert twin.bank.boards[3].state()["rebooting"]
-    assert twin.bank.boards[3].servos[1].torque_enable is False
+    assert rig.bank.boards[3].state()["rebooting"]
+    assert rig.bank.boards[3].servos[1].torque_enable is False
     for _ in range(29):
         step(std(0x70F))
-    assert twin.bank.boards[3].slave_id == 7
+    assert rig.bank.boards[3].slave_id == 7
     step()
-    assert twin.bank.boards[3].slave_id == 8 and twin.bank.boards[3].reboots == 1
+    assert rig.bank.boards[3].slave_id == 8 and rig.bank.boards[3].reboots == 1
     rs = step(std(0x70F))
     assert 0x708 in [i for i, _ in rs]
 
 
-def test_slave_id_collision_boards_hear_each_other(twin):
+def test_slave_id_collision_boards_hear_each_other(rig):
     """Board 2 renamed to 1 after a reboot: both answer slave-1 frames and each hears the
     other's replies as the shared bus delivers them."""
     t = 0.0
     for frames in ([std(0x722, bytes([0, 1]))], [std(0x722, bytes([7]))]):
         for f in frames:
-            twin.send(f)
+            rig.send(f)
         t += 0.001
-        py, rs = twin.tick(t)
-        assert rs == py
+        rig.tick(t)
     for k in range(150):
-        twin.send(std(0x201, words([k], [True])) if k % 2 else std(0x711))
+        rig.send(std(0x201, words([k], [True])) if k % 2 else std(0x711))
         t += 0.001
-        py, rs = twin.tick(t)
-        assert rs == py
-        twin.assert_same_state(f"collision step {k}")
-    renamed = twin.bank.boards[1]
+        rig.tick(t)
+    renamed = rig.bank.boards[1]
     assert renamed.slave_id == 1
     # Deaf for its 100 ms reboot, then 25 angle frames from Spinal, plus board 1's 8-byte
     # servo states (same id 0x201) read as angle frames, and its IMU samples rejected for
@@ -446,20 +383,3 @@ def test_bank_rejects_bad_setup_with_named_errors():
     with pytest.raises(_rdm.NeuronBankError, match="now must be finite"):
         bank.tick(float("inf"))
     bank.close()
-
-
-def _run_hover(tmp_path: Path, backend: str, seconds: float) -> dict[str, bytes]:
-    return hover_run_files(tmp_path, backend, seconds, neuron_backend=backend)
-
-
-def test_hover_stack_logs_are_byte_identical(tmp_path):
-    """4 simulated s from power-on (boot, enumeration, arming, take-off): can.log,
-    signals.mcap and every UART capture are the same bytes with either backend."""
-    py = _run_hover(tmp_path / "py", "python", 4.0)
-    rs = _run_hover(tmp_path / "rs", "rust", 4.0)
-    assert {"can.log", "signals.mcap"} <= set(py)
-    assert any(k.startswith("uart/") for k in py)
-    assert sorted(py) == sorted(rs)
-    for name in py:
-        assert hashlib.sha256(rs[name]).hexdigest() == hashlib.sha256(py[name]).hexdigest(), name
-    assert py["can.log"].count(b"\n") > 4000  # the Neurons did talk

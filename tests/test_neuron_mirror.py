@@ -274,7 +274,9 @@ def test_servo_angle_frame_triggers_states_then_imu(bus_pair):
 
 def test_goal_handshake_and_first_order_motion(bus_pair):
     spinal, b = bus_pair(2)
-    cfg = ServoConfig(initial_position=1000, time_constant=0.05, max_position=4000)
+    cfg = ServoConfig(
+        initial_position=1000, time_constant=0.05, min_position=-100, max_position=4000
+    )
     node = NeuronMirror(b, 1, [cfg])
     # Torque off: goals are ignored.
     _states(spinal, node, 0.000, words((3000, True)))
@@ -302,8 +304,7 @@ def test_goal_handshake_and_first_order_motion(bus_pair):
     # Joint limit: a goal above max_position is clamped to it.
     _states(spinal, node, t0 + 0.102, words((9000, True)))
     assert node.servo_goals() == [4000]
-    # Negative 15-bit goals are sign-extended (bit 14 is the sign): -5 is not 32763.
-    node.servos[0].reconfigure(min_position=-100)
+    # Negative 15-bit goals are sign-extended (bit 14 is the sign): -5, not 32763 (-> 4000).
     _states(spinal, node, t0 + 0.103, words((-5, True)))
     assert node.servo_goals() == [-5]
 

@@ -228,7 +228,6 @@ def test_hover_as_processes_matches_lockstep(tmp_path):
     assert abs(m["final_z"] - ref["final_z"]) < 0.02
     assert abs(m["max_roll_pitch_deg_after_arm"] - ref["max_roll_pitch_deg_after_arm"]) < 1.0
     assert not run.reports["spinal"]["diagnostics"]["failsafes"]
-    assert run.reports["spinal"]["can_master"] == "RustCanMaster"  # the lockstep's master
     assert run.reports["onboard"]["states"][-1][1] == "armed"
     pwm = [line for line in run.candump.read_text().splitlines() if " 00F#" in line]
     assert len(pwm) > 250 * (duration - opts.arm_at)

@@ -11,9 +11,10 @@
 * ``ClientSession.deliver_values`` against a session without it on a random stream: the
   same events (values vs messages), output bytes and counters; ``send_frame`` /
   ``send_payload`` against ``_send`` (too large, ring full, not configured).
-* ``ServoBridge.states_frame`` (the Rust master's table framed in one call) and
-  ``states_payload`` against encoding ``states()``, on a running Rust master and a table
-  stand-in; declines for stamps, topic ids and codecs they do not take.
+* ``ServoBridge.states_frame`` (the master's table framed in one call) against encoding
+  ``states()`` with the Python codec; declines for stamps, topic ids and codecs it does not
+  take. ``servo/target_states`` against its rules written out (lengths, indices, 15-bit
+  values, the last of a repeated index).
 * The command handlers from field values against the message handlers on random good and
   bad commands (rejections, logs, counters, core state).
 * The whole hover stack with the fast paths on and off: same bytes in every log and the
@@ -375,23 +376,7 @@ def _stack(base: str):
     return build_stack("busy", base, opts, make_script(np.array([0.483, 0.0, HOVER_Z])))
 
 
-class _Reports:
-    """A master stand-in with a fixed servo table."""
-
-    def __init__(self, reports: list[tuple]) -> None:
-        from rdm.nodes.can_master import MasterState
-
-        self.state = MasterState.RUNNING
-        self.reports = reports
-
-    def servo_keys(self) -> list[tuple[int, int]]:
-        return [(1, i) for i in range(len(self.reports))]
-
-    def servo_reports(self) -> list[tuple]:
-        return self.reports
-
-
-def test_servo_states_payload_equals_encoded_message() -> None:
+def test_servo_states_frame_equals_the_encoded_message() -> None:
     codec = REG.msg("spinal/ServoStates")
     msgs = SimpleNamespace(servo_state=REG.msg("spinal/ServoState"), servo_states=codec)
     stamp = RosTime(12, 345)
@@ -400,60 +385,41 @@ def test_servo_states_payload_equals_encoded_message() -> None:
         try:
             stack.loop.run_ticks(2600)
             bridge = ServoBridge(stack.spinal.master)
-            assert bridge._frame_core is stack.spinal.master.core  # the Rust frame path
             for _ in range(3):
-                payload = bridge.states_payload(codec, stamp)
-                message = ServoBridge(stack.spinal.master).states(msgs, stamp)
-                assert isinstance(payload, bytes) and payload == codec.encode(message)
                 for topic, when in ((160, stamp), (0xFFFF, RosTime(2**32 - 1, 999_999_999))):
                     frame = bridge.states_frame(codec, when, topic)
                     message = ServoBridge(stack.spinal.master).states(msgs, when)
+                    assert message is not None and len(message.servos) > 0
                     assert frame == encode_frame(topic, codec.encode(message))
                 stack.loop.run_ticks(40)
             for topic, when in ((70000, stamp), (160, RosTime(2**32, 0)), (160, RosTime(-1, 0))):
                 assert bridge.states_frame(codec, when, topic) is False
             assert bridge.states_frame(codec, (12, 345), 160) is False
             assert bridge.states_frame(REG.msg("spinal/Pwms"), stamp, 160) is False
-            assert (
-                ServoBridge(stack.spinal.master, fast=False).states_payload(codec, stamp) is False
-            )
         finally:
             stack.close()
-    rng = random.Random(8)
-    for _ in range(200):
-        reports = [
-            (
-                rng.random() < 0.6,
-                rng.randint(-32768, 32767),
-                rng.randint(0, 255),
-                rng.randint(-32768, 32767),
-                rng.randint(0, 255),
-                rng.random() < 0.5,
-            )
-            for _ in range(rng.randrange(8))
-        ]
-        bridge = ServoBridge(_Reports(reports))
-        assert bridge._frame_core is None  # no Rust master: the payload path, framed
-        payload = bridge.states_payload(codec, stamp)
-        frame = bridge.states_frame(codec, stamp, 160)
-        msg = ServoBridge(_Reports(reports)).states(msgs, stamp)
-        assert (payload is None) == (msg is None) == (frame is None)
-        if msg is not None:
-            assert payload == codec.encode(msg)
-            assert frame == encode_frame(160, payload)
-    bridge = ServoBridge(_Reports([(True, 40000, 0, 0, 0, True)]))  # past int16
-    assert bridge.states_payload(codec, stamp) is False
-    with pytest.raises(EncodeError):
-        codec.encode(bridge.states(msgs, stamp))
-    assert bridge.states_payload(codec, (12, 345)) is False  # not a RosTime
-    assert bridge.states_payload(REG.msg("spinal/Pwms"), stamp) is False
 
 
 def _goals(master: Any) -> list[int]:
     return [view.goal_position for view in master.servo_states.values()]
 
 
-def test_servo_targets_in_one_call_equal_the_plain_bridge() -> None:
+def _expected_targets(keys, start, index, angles):
+    """``servo/target_states`` by its rules, written out: (reason or "ok", goals after)."""
+    n = len(keys)
+    if len(index) != len(angles):
+        return "wrong_length", start
+    if any(not 0 <= i < n for i in index):
+        return "servo_index", start
+    if any(not -(1 << 14) <= int(v) < (1 << 14) for v in angles):
+        return "servo_value", start
+    goals = dict(zip(keys, start, strict=True))
+    for i, v in zip(index, angles, strict=True):
+        goals[keys[i]] = int(v)  # a repeated index: the last value
+    return "ok", [goals[k] for k in keys]
+
+
+def test_servo_targets_follow_the_topic_rules() -> None:
     from rdm.nodes.spinal_servo_bridge import MirrorRejection
 
     rng = random.Random(12)
@@ -462,19 +428,10 @@ def test_servo_targets_in_one_call_equal_the_plain_bridge() -> None:
         try:
             stack.loop.run_ticks(2600)
             master = stack.spinal.master
-            fast, plain = ServoBridge(master), ServoBridge(master, fast=False)
-            assert fast._frame_core is master.core and plain._frame_core is None
-            n = len(master.servo_keys())
-            taken = 0
-            calls = [0]
-            one_call = fast._targets_in_one_call
-
-            def counting(*args: Any) -> bool:
-                done = one_call(*args)
-                calls[0] += done
-                return done
-
-            fast._targets_in_one_call = counting
+            bridge = ServoBridge(master)
+            keys = master.servo_keys()
+            n = len(keys)
+            seen = set()
             for case in range(600):
                 k = rng.choice([0, 1, 3, n, n + 2])
                 index = [rng.choice([0, 1, n - 1, rng.randrange(n)]) for _ in range(k)]
@@ -485,22 +442,21 @@ def test_servo_targets_in_one_call_equal_the_plain_bridge() -> None:
                     angles[rng.randrange(k)] = rng.choice([1 << 14, -(1 << 14) - 1, 32767])
                 if case % 13 == 0:
                     angles = angles[:-1] if angles else [5]
-                if case % 17 == 0 and k:
-                    angles[0] = True  # an int, not exactly: the plain path takes it
-                start = _goals(master)
-                outcomes = []
-                for bridge in (fast, plain):
-                    master.core.set_servo_target_list(
-                        [(s, i, g) for (s, i), g in zip(master.servo_keys(), start, strict=True)]
-                    )
-                    try:
-                        bridge.target_states_values(index, angles)
-                        outcomes.append(("ok", _goals(master)))
-                    except MirrorRejection as exc:
-                        outcomes.append((exc.reason, str(exc), _goals(master)))
-                assert outcomes[0] == outcomes[1], (index, angles)
-                taken += outcomes[0][0] == "ok"
-            assert calls[0] > 150 and taken > calls[0]  # some only the plain path takes
+                if case % 17 == 0 and angles:
+                    angles[0] = True  # a bool is an int: goal 1
+                start = [rng.randint(-2000, 2000) for _ in range(n)]
+                master.core.set_servo_target_list(
+                    [(s, i, g) for (s, i), g in zip(keys, start, strict=True)]
+                )
+                try:
+                    bridge.target_states_values(index, angles)
+                    outcome = "ok"
+                except MirrorRejection as exc:
+                    outcome = exc.reason
+                want = _expected_targets(keys, start, index, angles)
+                assert (outcome, _goals(master)) == want, (index, angles)
+                seen.add(outcome)
+            assert seen == {"ok", "wrong_length", "servo_index", "servo_value"}
         finally:
             stack.close()
 

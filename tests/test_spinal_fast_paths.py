@@ -18,8 +18,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rdm.nodes.spinal_servo_bridge import MirrorRejection, ServoBridge
-
 TICKS = 2600  # past the 2 s CAN boot: the master runs, servos report, duties flow
 
 
@@ -68,33 +66,6 @@ def running_stack():
         stack.loop.run_ticks(TICKS)
         yield stack
         stack.close()
-
-
-def test_servo_bridge_fast_equals_view_path(running_stack) -> None:
-    spinal = running_stack.spinal
-    master = spinal.master
-    fast, plain = ServoBridge(master, fast=True), ServoBridge(master, fast=False)
-    assert fast._fast and not plain._fast
-    # Independent: the keys and fields read one view at a time.
-    views = list(master.servo_states.items())
-    assert fast._keys() == [k for k, _ in views] == plain._keys()
-    assert [r[1] for r in fast._reports()] == [v.angle for _, v in views]
-    codec, stamp = spinal._msg, spinal.session.now(spinal.now_ms)
-    for _ in range(3):  # the second and third reuse the cached per-servo messages
-        assert fast.states(codec, stamp) == plain.states(codec, stamp) is not None
-        running_stack.loop.run_ticks(40)  # servo values move on
-    assert fast.torque_states(codec) == plain.torque_states(codec) is not None
-    n = len(views)
-    msg_type = spinal.session.registry.msg("spinal/ServoControlCmd")
-    for index, angles in (([0], [2048]), ([n], [1]), ([-1], [1]), ([0, 1], [5])):
-        msg = msg_type.new(index=index, angles=angles)
-        outcomes = []
-        for bridge in (fast, plain):
-            try:
-                outcomes.append(bridge._resolve("servo/target_states", msg.index, msg.angles))
-            except MirrorRejection as exc:
-                outcomes.append((exc.reason, str(exc)))
-        assert outcomes[0] == outcomes[1]
 
 
 def _reference_check(duties, n: int) -> str | None:

@@ -1017,7 +1017,7 @@ class CanMasterError(RdmError): ...
 
 class CanMaster:
     """Spinal's CAN master (reference: ``rdm.nodes.can_master.CanMaster``); wrapped by
-    ``rdm.nodes.can_master_rust.RustCanMaster``."""
+    ``rdm.nodes.can_master.CanMaster``."""
 
     def __init__(self, boot_delay_ms: int = 5000, start_ms: int = 0) -> None: ...
     def tick_ms(

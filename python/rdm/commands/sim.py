@@ -43,7 +43,6 @@ def _servo_lead(text: str) -> float:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from rdm.scenarios import DEFAULT_SCENARIO, SCENARIOS
-    from rdm.scenarios.common import BACKENDS
 
     parser.add_argument(
         "scenario",
@@ -56,13 +55,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=seed, default=0)
     parser.add_argument("--speed", type=_speed, default=None, help="fast | realtime | FACTOR")
     parser.add_argument("--uart", choices=("inproc", "pty"), default="inproc")
-    parser.add_argument(
-        "--backend",
-        choices=sorted(BACKENDS),
-        default="fast",
-        help="node implementations: fast (Rust Neuron bank and CAN master, the default) or "
-        "reference (Python Neuron mirrors and CAN master on a python-can bus; same bytes)",
-    )
     parser.add_argument(
         "--servo-lead",
         type=_servo_lead,
@@ -143,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from rdm.scenarios import SCENARIOS
-    from rdm.scenarios.common import backend, progress_to, servo_lead
+    from rdm.scenarios.common import progress_to, servo_lead
     from rdm.sim import format_metrics_table
     from rdm.sim.plot_worker import plots_in_background
 
@@ -183,7 +175,7 @@ def _run(args: argparse.Namespace) -> int:
     # the PNG figures are drawn by a worker process on the other core (docs/sim.md
     # "Start-up and figures"), waited for before the run folder is named
     with plots_in_background() as worker:
-        with lead, progress_to(sys.stderr, duration), backend(args.backend):
+        with lead, progress_to(sys.stderr, duration):
             result = sc.run(
                 args.out,
                 duration=duration,

@@ -2,7 +2,7 @@
 the Rust Neuron bank (``rdm._rdm.CanWire``, docs/canbus.md).
 
 A :class:`CanWireLink` takes the place of both python-can buses on an in-process channel: the
-master (:class:`rdm.nodes.can_master_rust.RustCanMaster`) and the bank
+master (:class:`rdm.nodes.can_master.CanMaster`) and the bank
 (:class:`rdm.nodes.neuron_bank.NeuronBankNode`) are given the link instead of a bus, and
 frames go from one Rust core to the other at the same ticks, in the same order and with the
 same channel-clock stamps as on the in-process channel. :class:`WireCandump` writes the same

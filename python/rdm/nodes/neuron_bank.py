@@ -1,10 +1,20 @@
-"""All Neuron boards of one CAN bus in one node, run by the Rust core (``rdm._rdm.NeuronBank``).
+"""All Neuron boards of one CAN bus in one node, run by the Rust core (``rdm._rdm.NeuronBank``,
+``rdm_core::firmware::neuron``; fact sheet sec. 2).
 
-Same behaviour, frame for frame and byte for byte, as one :class:`NeuronMirror` per board on a
-shared bus ticked in list order (the Python mirror stays the reference; see
-docs/canbus.md). The bank drains its bus once per tick, hands every frame to the core in
-one call and sends the core's replies through the same python-can bus, so captures and the
-Spinal side see exactly what separate mirrors would send.
+What the firmware does each millisecond, per board: drop frames whose slave field is neither
+15 nor its own id (the hardware filter, counted in ``rx_filtered``); answer ENUM_REQUEST and
+INITIAL_CONFIG_REQUEST (CONFIG_0, then CONFIG_1/2/3 per servo); apply BOARD_CONFIG
+sub-commands (answered with the full config set; REBOOT takes ``reboot_ms``); read its PWM slot;
+apply servo goal / current / torque words; after a servo-angle frame send the state of every
+servo with ``send_data_flag``, then gyro, acc, mag if its IMU flag is set; move the servos
+(unless a plant drives them); stop the ESC after 100 ms without an accepted frame (the
+watchdog). Bad frames (DLC, reserved bits, direction, extended/remote/FD) are counted in
+``rx_errors`` by reason and ignored.
+
+The bank drains its bus once per tick, hands every frame to the core in one call and sends
+the core's replies through the same python-can bus (or, given a
+:class:`rdm.link.can_wire.CanWireLink`, straight onto the Rust wire). Boards of one bank hear
+each other's frames as boards on one bus do (colliding slave ids).
 
 :attr:`NeuronBankNode.boards` holds one :class:`NeuronBoardView` per board with the part of
 the mirror interface the plant bridge, the stack and the tools use (``slave_id``,
@@ -14,6 +24,7 @@ the mirror interface the plant bridge, the stack and the tools use (``slave_id``
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections import Counter
 from collections.abc import Sequence
 from typing import Any
@@ -27,15 +38,38 @@ from rdm.protocol import neuron as nr
 
 from .base import drain
 from .esc_model import EscOutputs
-from .neuron_mirror import _IMU_SCALE, DEFAULT_REBOOT_MS, NeuronMirror, _int16
 from .servo_model import ServoConfig
 
 _SENSORS = (nr.ImuMessage.GYRO, nr.ImuMessage.ACC, nr.ImuMessage.MAG)
+#: Simulated reboot time after BOARD_CONFIG REBOOT (ASSUMPTION: the real one is a reset + init).
+DEFAULT_REBOOT_MS = 100
+
+_IMU_SCALE = {
+    nr.ImuMessage.GYRO: nr.GYRO_SCALE,
+    nr.ImuMessage.ACC: nr.ACC_SCALE,
+    nr.ImuMessage.MAG: nr.MAG_SCALE,
+}
+
+
+def _int16(value: float) -> int:
+    return int(min(max(round(value), -0x8000), 0x7FFF))
+
+
+def _finite_xyz(sensor: nr.ImuMessage, xyz: Sequence[float]) -> tuple[float, float, float]:
+    if len(xyz) != 3 or not all(math.isfinite(v) for v in xyz):
+        raise ValueError(f"{sensor.name.lower()}: need 3 finite values, got {xyz!r}")
+    return float(xyz[0]), float(xyz[1]), float(xyz[2])
+
+
+def _int16_xyz(sensor: nr.ImuMessage, xyz: Sequence[int]) -> tuple[int, int, int]:
+    if len(xyz) != 3 or not all(isinstance(v, int) and -0x8000 <= v <= 0x7FFF for v in xyz):
+        raise ValueError(f"{sensor.name.lower()}: need 3 int16 values, got {xyz!r}")
+    return int(xyz[0]), int(xyz[1]), int(xyz[2])
 
 
 @dataclasses.dataclass(frozen=True)
 class NeuronSpec:
-    """One board of a bank: the :class:`NeuronMirror` constructor arguments."""
+    """One board of a bank: its slave id, servos, IMU and ESC flags, options."""
 
     slave_id: int
     servos: tuple[ServoConfig, ...] = ()
@@ -61,7 +95,7 @@ class NeuronSpec:
 
 
 class EscView(EscOutputs):
-    """A board's ESC as :class:`rdm.nodes.esc_model.EscModel` shows it (read from the core)."""
+    """A board's ESC: the slot value it holds and the watchdog's verdict (read from the core)."""
 
     __slots__ = ("_board",)
 
@@ -150,6 +184,15 @@ class ServoView:
     def hardware_error(self, value: int) -> None:
         self._board._bank._core.set_servo_field(self._board._k, self._i, "hardware_error", value)
 
+    @property
+    def temperature(self) -> int:
+        """The temperature the servo reports [deg C]."""
+        return self._state()["temperature"]
+
+    @temperature.setter
+    def temperature(self, value: int) -> None:
+        self._board._bank._core.set_servo_field(self._board._k, self._i, "temperature", value)
+
     def set_external_current(self, value: int | None) -> None:
         """When set, the reported current (else the position-error model)."""
         self._board._bank._core.set_servo_field(self._board._k, self._i, "external_current", value)
@@ -160,7 +203,9 @@ class ServoView:
 
 
 class NeuronBoardView:
-    """One board of a :class:`NeuronBankNode`, with :class:`NeuronMirror`'s read interface."""
+    """One board of a :class:`NeuronBankNode`: what a plant, the stack and the tools read and
+    set (``slave_id``, ``servos[i].goal / torque_enable / feed``, ``changes``, ``esc.duty``,
+    ``set_imu`` ...)."""
 
     def __init__(self, bank: NeuronBankNode, k: int, spec: NeuronSpec) -> None:
         self._bank = bank
@@ -250,7 +295,7 @@ class NeuronBoardView:
         """Raw MPU9250/AK8963 int16 samples in the sensor frame (what goes on CAN)."""
         for sensor, xyz in zip(_SENSORS, (gyro, acc, mag), strict=True):
             if xyz is not None:
-                raw = NeuronMirror._check_xyz(sensor, xyz)
+                raw = _int16_xyz(sensor, xyz)
                 self._bank._core.set_imu_raw(self._k, int(sensor), list(raw))
 
     def set_imu(
@@ -259,18 +304,21 @@ class NeuronBoardView:
         acc: Sequence[float] | None = None,
         mag: Sequence[float] | None = None,
     ) -> None:
-        """Physical values in Spinal's frame, as :meth:`NeuronMirror.set_imu` converts them."""
+        """Physical values in Spinal's frame (rad/s, m/s^2, uT), converted to raw samples by
+        inverting Spinal's scaling and axis remap (rounded, saturated to int16)."""
         core = self._bank._core
         for sensor, xyz in ((nr.ImuMessage.GYRO, gyro), (nr.ImuMessage.ACC, acc)):
             if xyz is not None:
-                sx, sy, sz = NeuronMirror._finite(sensor, xyz)
+                sx, sy, sz = _finite_xyz(sensor, xyz)
                 k = _IMU_SCALE[sensor]
+                # Spinal: (x, y, z) = (-raw_y, raw_x, raw_z) * k
                 core.set_imu_raw(
                     self._k, int(sensor), [_int16(sy / k), _int16(-sx / k), _int16(sz / k)]
                 )
         if mag is not None:
-            sx, sy, sz = NeuronMirror._finite(nr.ImuMessage.MAG, mag)
+            sx, sy, sz = _finite_xyz(nr.ImuMessage.MAG, mag)
             k = nr.MAG_SCALE
+            # Spinal: (x, y, z) = (-raw_x, raw_y, -raw_z) * k
             core.set_imu_raw(self._k, 2, [_int16(-sx / k), _int16(sy / k), _int16(-sz / k)])
 
     def close(self) -> None:
@@ -342,9 +390,9 @@ class NeuronBankNode:
         return list(groups.values())
 
     def _push_positions(self) -> None:
-        # The reference servo reads its plant feed when it first needs the position in a new
-        # feed epoch; the feed's values are fixed within an epoch, so pushing them before the
-        # frames are handled gives the same positions.
+        # A servo reads its plant feed when it first needs the position in a new feed epoch;
+        # the feed's values are fixed within an epoch, so pushing them before the frames are
+        # handled gives the same positions.
         if self._bridged:
             self._core.bridge_push_positions()
         fed = self._fed
@@ -360,17 +408,12 @@ class NeuronBankNode:
 
     def _refresh_changes(self) -> None:
         # Most milliseconds no board's counter moves: one list comparison instead of a
-        # write per board (the same counters as :meth:`_refresh_changes_plain`).
+        # write per board.
         changes = self._core.changes()
         if changes != self._last_changes:
             self._last_changes = changes
             for board, c in zip(self.boards, changes, strict=True):
                 board.changes[0] = c
-
-    def _refresh_changes_plain(self) -> None:
-        """:meth:`_refresh_changes` writing every board's counter (the reference)."""
-        for board, c in zip(self.boards, self._core.changes(), strict=True):
-            board.changes[0] = c
 
     def _push_positions_if_read(self, non_pwm_pending: bool) -> None:
         """Positions are only read while handling a frame other than a PWM broadcast (MOTOR

@@ -1,5 +1,6 @@
-"""A Dynamixel servo as a Neuron sees it: configuration, goal handshake and a first-order motion
-model (fact sheet sec. 2.4 "Servo target angle", "Servo state", goal-sync handshake).
+"""A Dynamixel servo as a Neuron sees it: its configuration (fact sheet sec. 2.4 "Servo target
+angle", "Servo state"). The goal handshake and the first-order motion model run in the Neuron
+core (``rdm_core::firmware::neuron``).
 
 Positions and currents are raw Dynamixel units (position ticks, current units), exactly the
 integers carried on CAN; no unit conversion happens on the Neuron.
@@ -8,7 +9,7 @@ integers carried on CAN; no unit conversion happens on the Neuron.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Protocol
 
 #: Dynamixel X "Profile Velocity" unit: 0.229 rpm; 4096 ticks per revolution.
@@ -68,155 +69,3 @@ class PositionFeed(Protocol):
     epoch: int
 
     def ticks(self) -> list[float]: ...
-
-
-def _clip(value: float, low: int, high: int) -> int:
-    return int(min(max(round(value), low), high))
-
-
-class ServoModel:
-    """Run-time state of one servo on a Neuron.
-
-    Goal handshake (Neuron side, ``neuronlib/Servo/servo.cpp`` as the fact sheet describes it):
-    when torque goes on, the goal is set to the present position and ``send_goal_position``
-    is raised; while raised, state reports carry the goal (status bit 2) and goals from CAN are
-    ignored unless their ack bit (bit 15) is set, which clears the flag. Goals are also ignored
-    while torque is off.
-    """
-
-    def __init__(self, config: ServoConfig) -> None:
-        #: Bumped by every goal / torque change (a Neuron shares one counter with its servos
-        #: and ESC so a plant bridge can skip boards whose outputs did not change).
-        self.changes = [0]
-        #: Optional plant feedback: ``(feed, joint_index)``; the position is then read from
-        #: ``feed.ticks()`` (the plant's angle at the feed's present epoch) when first needed.
-        self.feed: tuple[PositionFeed, int] | None = None
-        self._feed_epoch = -1
-        self._position = float(config.initial_position)
-        self.config = config
-        self.velocity = 0.0
-        self._goal = config.initial_position
-        self.goal_current = config.goal_current
-        self._torque_enable = False
-        self.send_goal_position = False
-        self.temperature = config.temperature
-        self.hardware_error = 0
-        self.homing_offset = 0
-        self.round_offset = 0
-        #: When set, the plant drives ``current`` (else it follows the position-error model).
-        self.external_current: int | None = None
-
-    # ------------------------------------------------------------------ tracked state
-    @property
-    def position(self) -> float:
-        """Present position (raw ticks, float); from the plant feed when one is attached."""
-        feed = self.feed
-        if feed is not None and feed[0].epoch != self._feed_epoch:
-            self._feed_epoch = feed[0].epoch
-            position = feed[0].ticks()[feed[1]]
-            if not math.isfinite(position):
-                raise ValueError(f"present position {position!r} is not finite")
-            self._position = position
-        return self._position
-
-    @position.setter
-    def position(self, value: float) -> None:
-        self._position = value
-        if self.feed is not None:
-            self._feed_epoch = self.feed[0].epoch  # an explicit value holds until the next
-
-    @property
-    def goal(self) -> int:
-        return self._goal
-
-    @goal.setter
-    def goal(self, value: int) -> None:
-        if value != self._goal:
-            self._goal = value
-            self.changes[0] += 1
-
-    @property
-    def torque_enable(self) -> bool:
-        return self._torque_enable
-
-    @torque_enable.setter
-    def torque_enable(self, value: bool) -> None:
-        if value != self._torque_enable:
-            self._torque_enable = value
-            self.changes[0] += 1
-
-    # ------------------------------------------------------------------ commands from CAN
-    def set_torque(self, enable: bool) -> None:
-        """``setTorque``: a hardware error keeps torque off (Dynamixel shutdown)."""
-        enable = enable and self.hardware_error == 0
-        if enable and not self.torque_enable:
-            self.goal = self.present_position
-            self.send_goal_position = True
-        self.torque_enable = enable
-
-    def command_goal(self, value: int, ack: bool) -> bool:
-        """One goal word from a servo-angle frame; returns True when the goal was applied."""
-        if not self.torque_enable:
-            return False
-        if self.send_goal_position:
-            if not ack:
-                return False
-            self.send_goal_position = False
-        self.goal = _clip(value, self.config.min_position, self.config.max_position)
-        return True
-
-    def set_homing_offset(self, offset: int) -> None:
-        """The reading frame shifts by the offset change (position and goal move together)."""
-        delta = offset - self.homing_offset
-        self.homing_offset = offset
-        self.position += delta
-        self.goal += delta
-
-    # ------------------------------------------------------------------ model
-    def advance(self, dt: float) -> None:
-        """First-order approach to the goal, rate-limited by ``profile_velocity`` if set."""
-        if dt <= 0:
-            return
-        before = self.position
-        if self.torque_enable:
-            step = (self.goal - self.position) * (1.0 - math.exp(-dt / self.config.time_constant))
-            if self.config.profile_velocity > 0:
-                vmax = self.config.profile_velocity * TICKS_PER_S_PER_PROFILE_UNIT * dt
-                step = max(-vmax, min(vmax, step))
-            self.position += step
-            if abs(self.goal - self.position) < 0.5:
-                self.position = float(self.goal)
-        self.velocity = (self.position - before) / dt
-
-    def set_present_position(self, position: float) -> None:
-        """Plant feedback: the joint is where the plant says (velocity left to the plant)."""
-        if not math.isfinite(position):
-            raise ValueError(f"present position {position!r} is not finite")
-        self.position = float(position)
-
-    # ------------------------------------------------------------------ readings
-    @property
-    def present_position(self) -> int:
-        return _clip(self.position, *INT16)
-
-    @property
-    def moving(self) -> bool:
-        return abs(self.velocity) > MOVING_THRESHOLD_TICKS_PER_S
-
-    @property
-    def current(self) -> int:
-        if self.external_current is not None:
-            return self.external_current
-        if not self.torque_enable:
-            return 0
-        limit = self.config.current_limit
-        return _clip((self.goal - self.position) * self.config.current_per_tick, -limit, limit)
-
-    @property
-    def reported_angle(self) -> int:
-        """Angle field of the state frame: the goal while the handshake is pending."""
-        return _clip(self.goal, *INT16) if self.send_goal_position else self.present_position
-
-    def reconfigure(self, **changes: object) -> None:
-        """Replace configuration fields (board-config sub-commands)."""
-        self.config = replace(self.config, **changes)

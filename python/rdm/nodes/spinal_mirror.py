@@ -123,7 +123,6 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         boot_delay_ms: int = BOOT_DELAY_MS,
         registry: TypeRegistry | None = None,
         layout: Any = None,
-        master_backend: str = "python",
         fast_paths: bool = True,
         **spinal_options: Any,
     ) -> None:
@@ -137,14 +136,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         self.period = float(period)
         self.rate_hz = float(rate_hz)
         self.uart = UartPump(uart)
-        if master_backend == "rust":  # the Rust core (docs/canbus.md); "python" = reference
-            from rdm.nodes.can_master_rust import RustCanMaster
-
-            self.master = RustCanMaster(can_bus, boot_delay_ms=boot_delay_ms)
-        elif master_backend == "python":
-            self.master = CanMaster(can_bus, boot_delay_ms=boot_delay_ms)
-        else:
-            raise ValueError(f"SpinalMirror: master_backend {master_backend!r}: 'python' or 'rust'")
+        self.master = CanMaster(can_bus, boot_delay_ms=boot_delay_ms)
         self.core = SpinalStep(self.rate_hz, **spinal_options)
         # fast_paths=False keeps the plain per-ms path (the reference of the fast one).
         self._fast = bool(fast_paths)
@@ -158,7 +150,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         #: The kernel writes its deferred output and the TX counters itself, through the
         #: UART chain (as :meth:`kernel_commit_tx` does); False: it calls that method.
         self.kernel_tx_direct = True
-        self.servos = ServoBridge(self.master, fast=self._fast)
+        self.servos = ServoBridge(self.master)
         #: The Rust master's one-call duty hand-over (None: the Python master).
         self._try_duties = getattr(self.master, "try_set_motor_duties", None)
         reg = registry or spinal_registry()
@@ -263,7 +255,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         self._battery_due_ms = -(2**62)  # first ms _battery samples again
         self._idle_lo = self._idle_hi = 0  # ClientSession.idle_window after the last spin
         # The Rust master on a CanWireLink: tick's steady-state CAN ms in one core call.
-        wire = getattr(self.master, "wire", None) if master_backend == "rust" else None
+        wire = self.master.wire
         self._wire_link = wire if self._fast else None
         self._wire_channel = None if wire is None else wire._ch
         self._tick_wire_steady = None if wire is None else self.master.core.tick_wire_steady
@@ -333,12 +325,9 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
             and self._master_was_running
             and master.state is MasterState.RUNNING
             and master._wire is link
-            and (
-                self.duties is self._duties_to_master
-                or (master.fast and self._try_wire_duties(self.duties))
-            )
+            and (self.duties is self._duties_to_master or self._try_wire_duties(self.duties))
         ):
-            # _can's steady state with no new duties, and RustCanMaster.tick_ms's wire path,
+            # _can's steady state with no new duties, and CanMaster.tick_ms's wire path,
             # in one core call: the same checks, stamp, frames, counters and log drain.
             ch = self._wire_channel
             if len(ch.buses) != 1 or ch.taps:
@@ -365,7 +354,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
 
     def _try_wire_duties(self, duties: list[float]) -> bool:
         """_can's steady-state hand-over of a new duty list when the core takes it in one
-        call (``RustCanMaster.try_set_motor_duties``); False: nothing applied, _can decides."""
+        call (``CanMaster.try_set_motor_duties``); False: nothing applied, _can decides."""
         if duties.__class__ is list and self._core_try_duties(duties):
             self._duties_to_master = duties
             return True

@@ -104,13 +104,9 @@ class SpinalKernelInterface:
         The kernel reads the IMU sample, battery input, ADC scale and battery voltage from
         the mirror itself when it uses them (another node may set them without a re-read)."""
         core = self.core
-        master = self.master
         step_core = (
             core
-            if core.__class__ is SpinalStep
-            and self.pwm_test is None
-            and _duty_list is not None
-            and getattr(master, "fast", False) is True
+            if core.__class__ is SpinalStep and self.pwm_test is None and _duty_list is not None
             else None
         )
         session = self.session

@@ -9,18 +9,16 @@ carries the servos with send_data_flag; ``servo/torque_states`` carries every se
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Sequence
 from typing import Any
 
 from rdm import _rdm
-from rdm.nodes.can_master import CanMaster, MasterState, ServoEntry
+from rdm.nodes.can_master import CanMaster, MasterState, ServoEntryView
 from rdm.protocol.neuron.servo import WORD_VALUE_MAX, WORD_VALUE_MIN
 from rdm.protocol.rosserial.codec import RosTime
-from rdm.protocol.rosserial.framing import encode_frame
 
-#: The whole ServoStates frame from the Rust master's table (None: an extension without it).
-_states_frame = getattr(_rdm, "spinal_servo_states_frame", None)
+#: The whole ServoStates frame from the master's table in one core call.
+_states_frame = _rdm.spinal_servo_states_frame
 
 
 class MirrorRejection(ValueError):
@@ -32,17 +30,13 @@ class MirrorRejection(ValueError):
         self.reason = reason
 
 
-def _int16(value: int) -> int:
-    return max(-32768, min(32767, int(value)))
-
-
 #: One ``spinal/ServoState`` (index, angle, temp, load, error) as the codec packs it.
 _SERVO_STATE_FORMAT = "BhBhB"
 _SERVO_STATE_FIELDS = ["index", "angle", "temp", "load", "error"]
 
 
 def _is_servo_states_layout(codec: Any) -> bool:
-    """Whether ``codec`` packs ``spinal/ServoStates`` as :meth:`ServoBridge.states_payload`
+    """Whether ``codec`` packs ``spinal/ServoStates`` as ``rdm._rdm.spinal_servo_states_frame``
     does: ``time stamp`` then ``ServoState[] servos`` of the five fields above, through the
     codec's whole-message layout (``codec._VarLayout``)."""
     var = getattr(codec, "_var", None)
@@ -68,29 +62,22 @@ def target_rejection(exc: ValueError) -> MirrorRejection:
 class ServoBridge:
     """Applies servo commands from the UART to a :class:`CanMaster`; builds servo reports.
 
-    With a master that offers ``servo_keys()`` and ``servo_reports()`` (the Rust master,
-    :class:`rdm.nodes.can_master_rust.RustCanMaster`) and ``fast=True``, the table is read
-    in one call instead of one entry view per servo field; ``fast=False`` keeps the plain
-    path (the reference the fast one is tested against: same messages, same rejections).
+    The master's table is read in one core call (``servo_keys()``, ``servo_reports()``);
+    the ``servo/states`` frame is built from it in one call
+    (``rdm._rdm.spinal_servo_states_frame``) when the codec has the standard layout.
     """
 
-    def __init__(self, master: CanMaster, *, fast: bool = True) -> None:
+    def __init__(self, master: CanMaster) -> None:
         self.master = master
-        keys = getattr(master, "servo_keys", None)
-        reports = getattr(master, "servo_reports", None)
-        self._fast = fast and keys is not None and reports is not None
-        #: Fast path: the last ``spinal/ServoState`` built per servo with its field values;
-        #: reused while the values repeat (a message is only encoded, never changed).
+        #: The last ``spinal/ServoState`` built per servo with its field values; reused while
+        #: the values repeat (a message is only encoded, never changed).
         self._state_msgs: list[tuple[tuple, Any]] = []
         self._state_codec: Any = None  # the codec those messages come from
-        #: states_payload: the ServoStates codec whose layout was checked, structs per count
+        #: states_frame: the ServoStates codec whose layout was checked
         self._payload_codec: Any = None
-        self._payload_structs: dict[int, struct.Struct] = {}
-        #: states_frame: the Rust master's core (its table read in the frame call), or None
-        core = getattr(master, "core", None) if self._fast else None
-        self._frame_core = core if type(core) is getattr(_rdm, "CanMaster", None) else None
+        self._frame_core = master.core
 
-    def table(self) -> list[tuple[tuple[int, int], ServoEntry]]:
+    def table(self) -> list[tuple[tuple[int, int], ServoEntryView]]:
         """Every servo in index order (empty until the master runs)."""
         if self.master.state is not MasterState.RUNNING:
             return []
@@ -117,29 +104,15 @@ class ServoBridge:
         """``(slave, index)`` of every servo in index order (empty until the master runs)."""
         if self.master.state is not MasterState.RUNNING:
             return []
-        if self._fast:
-            return self.master.servo_keys()
-        return [key for key, _entry in self.table()]
+        return self.master.servo_keys()
 
     def _reports(self) -> list[tuple[bool, int, int, int, int, bool]]:
         """``(send_data_flag, angle, temperature, current, error, torque_enable)`` of every
-        servo in index order, each clamped to its message field (empty until running)."""
+        servo in index order (the core's table holds i16 / u8 values: each fits its message
+        field; empty until running)."""
         if self.master.state is not MasterState.RUNNING:
             return []
-        if self._fast:
-            # The Rust table holds i16 / u8 values: the clamps below are the identity there.
-            return self.master.servo_reports()
-        return [
-            (
-                bool(e.send_data_flag),
-                _int16(e.angle),
-                max(0, min(255, e.temperature)),
-                _int16(e.current),
-                max(0, min(255, e.error)),
-                bool(e.torque_enable),
-            )
-            for _key, e in self.table()
-        ]
+        return self.master.servo_reports()
 
     def target_states(self, msg: Any) -> None:
         """``servo/target_states`` (``spinal/ServoControlCmd``): goal positions, raw ticks."""
@@ -147,21 +120,26 @@ class ServoBridge:
 
     def target_states_values(self, index: Sequence[int], angles: Sequence[int]) -> None:
         """:meth:`target_states` of a message's ``index`` and ``angles`` fields."""
-        if self._frame_core is not None and self._fast and self._targets_in_one_call(index, angles):
+        if self._targets_in_one_call(index, angles):
             return
         pairs = self._resolve("servo/target_states", index, angles)
+        for (slave, idx), value in pairs:  # every value, also one a repeated index overrides
+            if not WORD_VALUE_MIN <= value <= WORD_VALUE_MAX:
+                raise MirrorRejection(
+                    "servo_value",
+                    f"servo/target_states: servo ({slave}, {idx}) target {value} not a 15-bit int",
+                )
         try:
             self.master.set_servo_targets(dict(pairs))
         except ValueError as exc:
             raise target_rejection(exc) from exc
 
     def _targets_in_one_call(self, index: Sequence[int], angles: Sequence[int]) -> bool:
-        """The Rust master's goal positions from ``index``/``angles`` in one core call when
-        every pair is valid: what ``_resolve`` then ``RustCanMaster.set_servo_targets`` do
-        for them (the same core setter per servo; a repeated index sets the same goal again,
-        leaving the last value as the dict of the plain path does). False, nothing
-        applied, for anything else (not running, lengths, an index or value out of range,
-        not an int): the plain path then raises its precise rejection."""
+        """The goal positions from ``index``/``angles`` in one core call when every pair is
+        valid (a repeated index sets the same goal again, leaving the last value). False,
+        nothing applied, for anything else (not running, lengths, an index or value out of
+        range, not an int): :meth:`_resolve` and ``CanMaster.set_servo_targets`` then raise
+        the precise rejection."""
         if self.master.state is not MasterState.RUNNING or len(index) != len(angles):
             return False
         core = self._frame_core
@@ -179,19 +157,16 @@ class ServoBridge:
             slave, idx = keys[i]
             targets.append((slave, idx, value))
         if not targets:
-            return False  # the plain path: nothing to set (or servo_not_ready)
+            return False  # nothing to set (or servo_not_ready): _resolve decides
         try:
             core.set_servo_target_list(targets)
-        except ValueError as exc:  # the core's own refusal, as set_servo_targets raises it
+        except ValueError as exc:  # the core's own refusal
             raise target_rejection(exc) from exc
         return True
 
     def command_core(self) -> Any | None:
-        """The Rust master core while :meth:`target_states_values` takes its one-call path
-        (fast paths on, a Rust master, running), else None: for
-        ``rdm._rdm.spinal_apply_commands``, which then sets the goals as that path does."""
-        if self._frame_core is None or not self._fast:
-            return None
+        """The master's core while it runs, else None: for ``rdm._rdm.spinal_apply_commands``,
+        which then sets the goals as :meth:`target_states_values` does."""
         return self._frame_core if self.master.state is MasterState.RUNNING else None
 
     def target_current(self, msg: Any) -> None:
@@ -211,81 +186,36 @@ class ServoBridge:
 
     def states(self, codec: Any, stamp: Any) -> Any | None:
         """A ``spinal/ServoStates`` of the servos with send_data_flag, or None if there are none."""
-        new = codec.servo_state.new
-        if self._fast:
-            if codec.servo_state is not self._state_codec:
-                self._state_codec, self._state_msgs = codec.servo_state, []
-            servos = self._states_reused(new)
-        else:
-            servos = [
-                new(index=i, angle=angle, temp=temp, load=load, error=error)
-                for i, (send, angle, temp, load, error, _torque) in enumerate(self._reports())
-                if send
-            ]
+        if codec.servo_state is not self._state_codec:
+            self._state_codec, self._state_msgs = codec.servo_state, []
+        servos = self._states_reused(codec.servo_state.new)
         if not servos:
             return None
         return codec.servo_states.new(stamp=stamp, servos=servos)
 
-    def states_payload(self, codec: Any, stamp: Any) -> bytes | bool | None:
-        """``codec.encode(self.states(..., stamp))`` without message objects, for the
-        ``spinal/ServoStates`` ``codec``: the payload, None when no servo has send_data_flag
-        (no message), False when this path does not apply (``fast`` off, another layout, a
-        stamp that is not a :class:`RosTime`, a value its field does not take: then build
-        the message with :meth:`states`)."""
-        if not self._fast or stamp.__class__ is not RosTime:
-            return False
-        if codec is not self._payload_codec:
-            if not _is_servo_states_layout(codec):
-                return False
-            self._payload_codec, self._payload_structs = codec, {}
-        flat: list[int] = []
-        for i, (send, angle, temp, load, error, _torque) in enumerate(self._reports()):
-            if send:
-                flat += (i, angle, temp, load, error)
-        n = len(flat) // 5
-        if not n:
-            return None
-        st = self._payload_structs.get(n)
-        if st is None:
-            if len(self._payload_structs) >= 64:
-                self._payload_structs.clear()
-            st = self._payload_structs[n] = struct.Struct("<III" + _SERVO_STATE_FORMAT * n)
-        try:
-            return st.pack(stamp[0], stamp[1], n, *flat)
-        except struct.error:
-            return False  # the message path raises its precise error
-
     def states_frame(self, codec: Any, stamp: Any, topic_id: int) -> bytes | bool | None:
-        """``encode_frame(topic_id, codec.encode(self.states(..., stamp)))``: with the Rust
-        master, the whole frame from its servo table in one call
-        (``rdm._rdm.spinal_servo_states_frame``); else :meth:`states_payload` framed. None
-        when no servo has send_data_flag, False when this path does not apply (as
-        :meth:`states_payload`)."""
+        """``encode_frame(topic_id, codec.encode(self.states(..., stamp)))``: the whole frame
+        from the master's servo table in one call (``rdm._rdm.spinal_servo_states_frame``).
+        None when no servo has send_data_flag, False when this path does not apply (another
+        layout, a stamp that is not a :class:`RosTime`: then build the message with
+        :meth:`states`)."""
         core = self._frame_core
-        if core is None or _states_frame is None or not self._fast:
-            payload = self.states_payload(codec, stamp)
-            if payload is None or payload is False:
-                return payload
-            return encode_frame(topic_id, payload)
         if stamp.__class__ is not RosTime:
             return False
         if codec is not self._payload_codec:
             if not _is_servo_states_layout(codec):
                 return False
-            self._payload_codec, self._payload_structs = codec, {}
+            self._payload_codec = codec
         if self.master.state is not MasterState.RUNNING:
             return None  # no servo reported: no message
         return _states_frame(topic_id, stamp[0], stamp[1], core)
 
     def kernel_frame_core(self, codec: Any) -> Any:
-        """The Rust master's core when :meth:`states_frame` of ``codec`` with a ``RosTime``
+        """The master's core when :meth:`states_frame` of ``codec`` with a ``RosTime``
         stamp is exactly ``rdm._rdm.spinal_servo_states_frame(topic_id, sec, nsec, core)``
         while the master runs (the lockstep kernel then builds that frame itself); None
         otherwise (also before the codec's first frame, whose layout check this skips)."""
-        core = self._frame_core
-        if core is None or _states_frame is None or not self._fast:
-            return None
-        return core if codec is self._payload_codec else None
+        return self._frame_core if codec is self._payload_codec else None
 
     def _states_reused(self, new: Any) -> list[Any]:
         """The ``servos`` list of :meth:`states`, reusing each servo's last message while its

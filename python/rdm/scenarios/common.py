@@ -50,20 +50,6 @@ def progress_to(stream: TextIO, duration: float) -> Iterator[None]:
         stream.flush()
 
 
-#: :class:`StackOptions` fields of the node implementations: "fast" = the Rust Neuron bank,
-#: Rust CAN master, Rust plant coupling and the in-process CAN wire (the defaults);
-#: "reference" = one Python Neuron mirror per board and the Python CAN master on a python-can
-#: bus. The two give the same bytes on every wire (docs/sim.md; ``rdm sim --backend``).
-BACKENDS: dict[str, dict[str, Any]] = {
-    "fast": {},
-    "reference": {
-        "neuron_backend": "python",
-        "master_backend": "python",
-        "can_wire": False,
-        "rust_bridge": False,
-    },
-}
-_BACKEND: ContextVar[str] = ContextVar("rdm_sim_backend", default="fast")
 _SERVO_LEAD: ContextVar[float | None] = ContextVar("rdm_sim_servo_lead", default=None)
 
 
@@ -86,25 +72,10 @@ def servo_lead(seconds: float) -> Iterator[None]:
         _SERVO_LEAD.reset(token)
 
 
-@contextmanager
-def backend(name: str) -> Iterator[None]:
-    """Every stack a scenario builds inside the block uses the node implementations of
-    :data:`BACKENDS` ``[name]``."""
-    if name not in BACKENDS:
-        raise ValueError(f"backend {name!r}: one of {sorted(BACKENDS)}")
-    token = _BACKEND.set(name)
-    try:
-        yield
-    finally:
-        _BACKEND.reset(token)
-
-
 def sim_stack_options(seed: int, uart: str, **overrides: Any) -> StackOptions:
     """Stack options of the scenarios (assumptions in docs/sim.md and :class:`StackOptions`).
-    Inside :func:`progress_to` the stack reports its progress; inside :func:`backend` it
-    uses that backend's nodes."""
+    Inside :func:`progress_to` the stack reports its progress."""
     kw: dict[str, Any] = {"seed": seed, "uart": uart, "progress": _PROGRESS.get()}
-    kw.update(BACKENDS[_BACKEND.get()])
     kw.update(overrides)
     if "onboard" not in kw:
         # the paper's Table V gains (the core defaults); joint goals lead the plan by the
@@ -211,13 +182,7 @@ def finish(result: ScenarioResult, seconds: float, wall_s: float) -> ScenarioRes
         spinal_failsafes=dict(st.spinal.counters.failsafes),
         spinal_rejected=dict(st.spinal.counters.rejected),
         onboard_state=st.onboard.state.value,
-        backend=_BACKEND.get(),
         servo_lead_s=st.onboard.config.servo_lead_s,
-        # the node classes that ran (what the backend selected)
-        nodes={
-            "neuron": type(st.neurons[0]).__name__ if st.neurons else None,
-            "can_master": type(st.spinal.master).__name__,
-        },
     )
     result.facts = facts
     write_summary(st.folder.summary_json, result.metrics, seed=st.plant.seed, **facts)

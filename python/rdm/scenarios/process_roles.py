@@ -287,8 +287,7 @@ def spinal_main(cfg: dict[str, Any]) -> None:
         boot_delay_ms=opt.boot_delay_ms,
         gyro_calib_duration_s=opt.gyro_calib_duration_s,
         time_matched=opt.spinal_time_matched,
-        # the lockstep's CAN master (Rust by default) on this process's python-can bus
-        master_backend=opt.master_backend,
+        # Spinal's CAN master on this process's python-can bus
         **opt.spinal_flash,  # the estimator's flash calibration, as in lockstep
     )
     imu_in = ImuReceiver(cfg["token"], spinal)
@@ -305,7 +304,6 @@ def spinal_main(cfg: dict[str, Any]) -> None:
             "imu_samples": imu_in.samples,
             "imu_malformed": imu_in.malformed,
             "diagnostics": spinal.diagnostics(),
-            "can_master": type(spinal.master).__name__,
         }
         _write_report(folder, "spinal", report)
         imu_in.close()

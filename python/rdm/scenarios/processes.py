@@ -113,7 +113,6 @@ def stack_config(seed: int) -> dict[str, Any]:
         "truth_period",
         "esc_tau",
         "battery_voltage",
-        "master_backend",
         "plant_sleep",
         "plant_contact_gate",
         "plant_lazy_sensors",

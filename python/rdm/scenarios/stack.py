@@ -2,7 +2,7 @@
 
 ::
 
-    MuJoCo plant --PlantBridge (1 kHz)--> 4 NeuronMirror --CAN inproc:--> SpinalMirror (200 Hz)
+    MuJoCo plant --PlantBridge (1 kHz)--> Neuron bank (4 boards) --CAN wire--> SpinalMirror (200 Hz)
          ^   IMU -> SpinalMirror.set_imu_sample              rosserial on a UART (inproc or pty)
          |   foot F/T -> LeptrinoSensorNode --Leptrino UART--> OnboardNode (40 Hz)
          |   ground-truth CoG (mocap, 100 Hz) ------------------------^
@@ -143,20 +143,12 @@ class StackOptions:
     truth_period: float = 0.01
     log: bool = True
     speed: float | None = None
-    #: Neuron boards: "rust" = one :class:`rdm.nodes.neuron_bank.NeuronBankNode` (Rust core,
-    #: byte-identical logs, tests/test_neuron_bank.py) or "python" = one
-    #: :class:`NeuronMirror` node per board (the reference).
-    neuron_backend: str = "rust"
-    #: Spinal's CAN master: "rust" = :class:`rdm.nodes.can_master_rust.RustCanMaster`
-    #: (byte-identical logs, tests/test_can_master_rust.py) or "python" = the reference
-    #: :class:`rdm.nodes.can_master.CanMaster`.
-    master_backend: str = "rust"
-    #: With both backends "rust": the Neuron CAN frames go from the Rust master to the Rust
-    #: bank on a :class:`rdm.link.can_wire.CanWireLink` (no python-can bus; the candump is
-    #: the same bytes, docs/canbus.md). The channel then admits no other python-can endpoint
-    #: (CanWireError); False keeps the in-process python-can channel.
+    #: The Neuron CAN frames go from Spinal's CAN master to the Neuron bank on a
+    #: :class:`rdm.link.can_wire.CanWireLink` (no python-can bus; the candump is the same
+    #: bytes, docs/canbus.md). The channel then admits no other python-can endpoint
+    #: (CanWireError); False puts them on an in-process python-can channel.
     can_wire: bool = True
-    #: With neuron_backend "rust": the plant bridge's per-millisecond coupling (joint snapshot,
+    #: The plant bridge's per-millisecond coupling (joint snapshot,
     #: goals -> servo targets, ESC outputs -> rotor duties) runs in the Rust bank in one call
     #: (byte-identical files, tests/test_bridge_rust.py); False keeps the Python path.
     rust_bridge: bool = True
@@ -215,7 +207,7 @@ class Stack:
 
     plant: Plant
     layout: BusLayout
-    #: One :class:`NeuronMirror` per board, or the board views of the Rust bank.
+    #: The board views of the Neuron bank.
     neurons: list
     spinal: SpinalMirror
     onboard: OnboardNode
@@ -364,23 +356,13 @@ def _wire(
     opens, as it opens it."""
     plant, q0 = make_plant(opt)
     channel = _free_channel()
-    wire = (
-        CanWireLink(channel, logging=opt.log)
-        if opt.can_wire and opt.neuron_backend == "rust" and opt.master_backend == "rust"
-        else None
-    )
+    wire = CanWireLink(channel, logging=opt.log) if opt.can_wire else None
     if wire is not None:
         opened.append(wire.shutdown)
-    if opt.neuron_backend == "rust":
-        layout, bank = make_neuron_bank(plant, q0, wire or open_can(f"inproc:{channel}"))
-        neurons: list = list(bank.boards)
-        neuron_nodes: list = [bank]
-    elif opt.neuron_backend == "python":
-        layout, neurons = make_neurons(plant, q0, lambda _slave: open_can(f"inproc:{channel}"))
-        neuron_nodes = list(neurons)
-    else:
-        raise ValueError(f"neuron_backend={opt.neuron_backend!r}: 'rust' or 'python'")
-    opened.extend(n.close for n in neuron_nodes)
+    layout, bank = make_neuron_bank(plant, q0, wire or open_can(f"inproc:{channel}"))
+    neurons: list = list(bank.boards)
+    neuron_nodes: list = [bank]
+    opened.append(bank.close)
     barriers: list = []
     # The captures' time index (rdm.link.capture_index): the plant's time is the loop's while
     # the nodes tick, and the lockstep kernel writes through the same file objects.
@@ -406,7 +388,6 @@ def _wire(
         boot_delay_ms=opt.boot_delay_ms,
         gyro_calib_duration_s=opt.gyro_calib_duration_s,
         time_matched=opt.spinal_time_matched,
-        master_backend=opt.master_backend,
         **spinal_flash_calibration(opt),
     )
     opened.append(spinal.close)
