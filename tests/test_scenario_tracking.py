@@ -155,6 +155,39 @@ def test_servo_lead_cancels_the_joint_lag(run):
     assert np.all(perched < np.asarray(tracking.PAPER_RMSE_PERCHED[:3]))
 
 
+#: "Meets the paper": our RMSE at most 10 % above Table X's.
+PAPER_TOLERANCE = 1.1
+#: Table X entries ours does not meet, held to the present value's band (seed 0, +-20 %):
+#: (stage, index into Table X's row x y z roll pitch yaw, band). Flight attitude: the paper's
+#: 0.3-1.9 mrad are below what the simulated flying robot holds; perched roll and pitch: the
+#: servos' goal resolution alone gives more (test below, docs/scenarios.md).
+TABLE_X_PRESENT_BANDS = (
+    ("flight", 3, (0.0020, 0.0030)),
+    ("flight", 4, (0.0150, 0.0225)),
+    ("flight", 5, (0.0132, 0.0199)),
+    ("perched", 3, (0.00051, 0.00076)),
+    ("perched", 4, (0.00151, 0.00226)),
+)
+
+
+def test_end_effector_rmse_against_table_x(run):
+    """End-effector position and attitude RMSE (re-derived from MuJoCo above) against
+    Table X: every entry within 10 % of the paper or below it, except the ones listed in
+    TABLE_X_PRESENT_BANDS, which are held to their present band."""
+    res, a = run
+    paper = {"flight": tracking.PAPER_RMSE_FLIGHT, "perched": tracking.PAPER_RMSE_PERCHED}
+    bands = {(stage, k): band for stage, k, band in TABLE_X_PRESENT_BANDS}
+    for stage in ("flight", "perched"):
+        pos, att = _mujoco_errors(res, a, res.script.plans[stage])
+        ours = np.concatenate([_rmse(pos), _rmse(att)])
+        for k, value in enumerate(ours):
+            if (stage, k) in bands:
+                lo, hi = bands[stage, k]
+                assert lo <= value <= hi, (stage, k, value)
+            else:
+                assert value <= PAPER_TOLERANCE * paper[stage][k], (stage, k, value)
+
+
 def test_resolution_floor_matches_mujoco_and_exceeds_table_x_roll_pitch(run):
     """The floor ideal servos reach at the wire's goal resolution (the plan rounded to encoder
     counts), re-derived with Python's own ``round`` and MuJoCo's kinematics; perched it lies
