@@ -11,7 +11,7 @@ from contextlib import nullcontext, suppress
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rdm.commands.arg_types import positive_finite, seed
+from rdm.commands.arg_types import positive_finite, positive_int, seed
 from rdm.commands.output import json_text
 
 if TYPE_CHECKING:
@@ -48,8 +48,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "scenario",
         nargs="?",
         default=DEFAULT_SCENARIO,
-        choices=sorted(SCENARIOS),
-        help=f"default {DEFAULT_SCENARIO}",
+        choices=[*sorted(SCENARIOS), "all"],
+        help=f"default {DEFAULT_SCENARIO}; all: every scenario (with --seeds)",
     )
     parser.add_argument("--duration", type=positive_finite, default=None, help="simulated seconds")
     parser.add_argument("--seed", type=seed, default=0)
@@ -80,6 +80,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--quick",
         action="store_true",
         help="mission only: take off, go to a point and land (no perch); 22 s by default",
+    )
+    parser.add_argument(
+        "--seeds",
+        type=positive_int,
+        default=None,
+        help="run seeds SEED..SEED+N-1 and report every metric as a distribution (median, "
+        "p10..p90, passed runs); writes OUT/sweep-SCENARIO.json (docs/scenarios.md)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=positive_int,
+        default=None,
+        help="with --seeds: processes running seeds at once (default: cores)",
     )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.add_argument(
@@ -139,6 +152,14 @@ def _run(args: argparse.Namespace) -> int:
     from rdm.sim import format_metrics_table
     from rdm.sim.plot_worker import plots_in_background
 
+    if args.scenario == "all" and args.seeds is None:
+        print("rdm sim: scenario 'all' needs --seeds N", file=sys.stderr)
+        return 2
+    if args.workers is not None and args.seeds is None:
+        print("rdm sim: --workers is for --seeds", file=sys.stderr)
+        return 2
+    if args.seeds is not None:
+        return _sweep(args)
     sc = SCENARIOS[args.scenario]
     duration = sc.default_duration if args.duration is None else args.duration
     if args.quick and sc.name != "mission":
@@ -205,3 +226,56 @@ def _run(args: argparse.Namespace) -> int:
             f"({f['sim_s_per_wall_s']:.2f} simulated s per wall s)"
         )
     return 0 if result.all_passed else 1
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    """``--seeds N``: each scenario over seeds SEED..SEED+N-1 on a process pool; the
+    distribution table (or JSON) and ``OUT/sweep-SCENARIO.json``. Exit 0 when every run
+    completed with every metric passing, 1 otherwise, 2 on bad input."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from rdm.output_files import write_atomic
+    from rdm.scenarios import SCENARIOS
+    from rdm.scenarios.seed_sweep import format_report, report, sweep
+
+    if args.fault is not None or args.quick or args.wire_mcap or args.servo_lead is not None:
+        print(
+            "rdm sim: --seeds takes --duration, --seed, --out, --replace, --workers, --json",
+            file=sys.stderr,
+        )
+        return 2
+    names = sorted(SCENARIOS) if args.scenario == "all" else [args.scenario]
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    try:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"rdm sim: --out {args.out!r}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    docs = []
+    with ProcessPoolExecutor(max_workers=args.workers) as ex:
+        for name in names:
+
+            def progress(o, name=name) -> None:
+                state = "done" if o.summary is not None else f"FAILED ({o.error})"
+                print(f"rdm sim {name}: seed {o.seed} {state}", file=sys.stderr, flush=True)
+
+            outcomes = sweep(
+                name,
+                args.out,
+                seeds,
+                args.duration,
+                executor=ex,
+                progress=progress,
+                replace=args.replace,
+            )
+            doc = report(name, outcomes)
+            target = Path(args.out) / f"sweep-{name}.json"
+            write_atomic(target, json.dumps(doc, indent=1, allow_nan=False) + "\n")
+            docs.append(doc)
+            if not args.json:
+                print(format_report(doc), flush=True)
+                print(f"sweep: {target}", flush=True)
+    if args.json:
+        print(json_text(docs[0] if len(docs) == 1 else {"sweeps": docs}))
+    ok = all(d["runs_all_passed"] == len(d["seeds"]) for d in docs)
+    return 0 if ok else 1
