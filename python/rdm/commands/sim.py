@@ -73,8 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--fault",
         default=None,
         help="mission only: inject one fault once the robot hovers (heartbeat-loss, "
-        "mocap-loss, uart-cut, low-battery, bad-adc-scale) or once perched "
-        "(foot-sensor-loss); docs/flying.md",
+        "mocap-loss, uart-cut, low-battery, bad-adc-scale, uart-noise-1e-4, uart-noise-1e-3, "
+        "battery-sag) or once perched (foot-sensor-loss); with --seeds also all: the fault "
+        "campaign; docs/flying.md",
     )
     parser.add_argument(
         "--quick",
@@ -230,20 +231,31 @@ def _run(args: argparse.Namespace) -> int:
 
 def _sweep(args: argparse.Namespace) -> int:
     """``--seeds N``: each scenario over seeds SEED..SEED+N-1 on a process pool; the
-    distribution table (or JSON) and ``OUT/sweep-SCENARIO.json``. Exit 0 when every run
-    completed with every metric passing, 1 otherwise, 2 on bad input."""
+    distribution table (or JSON) and ``OUT/sweep-SCENARIO.json``; with ``--fault KIND|all``
+    (mission) the fault campaign and ``OUT/faults-mission.json``. Exit 0 when every run
+    completed with every metric passing (campaign: every run safe), 1 otherwise, 2 on bad
+    input."""
     from concurrent.futures import ProcessPoolExecutor
 
-    from rdm.output_files import write_atomic
     from rdm.scenarios import SCENARIOS
-    from rdm.scenarios.seed_sweep import format_report, report, sweep
 
-    if args.fault is not None or args.quick or args.wire_mcap or args.servo_lead is not None:
-        print(
-            "rdm sim: --seeds takes --duration, --seed, --out, --replace, --workers, --json",
-            file=sys.stderr,
-        )
+    if args.wire_mcap or args.servo_lead is not None:
+        print("rdm sim: --seeds takes no --wire-mcap or --servo-lead", file=sys.stderr)
         return 2
+    if (args.fault is not None or args.quick) and args.scenario != "mission":
+        print("rdm sim: --fault and --quick are for the mission scenario", file=sys.stderr)
+        return 2
+    faults = None
+    if args.fault is not None:
+        from rdm.scenarios.mission import FAULTS
+
+        if args.fault != "all" and args.fault not in FAULTS:
+            print(
+                f"rdm sim: --fault {args.fault!r}: all or one of {', '.join(FAULTS)}",
+                file=sys.stderr,
+            )
+            return 2
+        faults = list(FAULTS) if args.fault == "all" else [args.fault]
     names = sorted(SCENARIOS) if args.scenario == "all" else [args.scenario]
     seeds = list(range(args.seed, args.seed + args.seeds))
     try:
@@ -251,31 +263,59 @@ def _sweep(args: argparse.Namespace) -> int:
     except OSError as exc:
         print(f"rdm sim: --out {args.out!r}: {exc.strerror or exc}", file=sys.stderr)
         return 2
-    docs = []
     with ProcessPoolExecutor(max_workers=args.workers) as ex:
-        for name in names:
+        if faults is not None:
+            return _campaign(args, faults, seeds, ex)
+        return _distributions(args, names, seeds, ex)
 
-            def progress(o, name=name) -> None:
-                state = "done" if o.summary is not None else f"FAILED ({o.error})"
-                print(f"rdm sim {name}: seed {o.seed} {state}", file=sys.stderr, flush=True)
 
-            outcomes = sweep(
-                name,
-                args.out,
-                seeds,
-                args.duration,
-                executor=ex,
-                progress=progress,
-                replace=args.replace,
-            )
-            doc = report(name, outcomes)
-            target = Path(args.out) / f"sweep-{name}.json"
-            write_atomic(target, json.dumps(doc, indent=1, allow_nan=False) + "\n")
-            docs.append(doc)
-            if not args.json:
-                print(format_report(doc), flush=True)
-                print(f"sweep: {target}", flush=True)
+def _progress(label: str):
+    def report(o) -> None:
+        state = "done" if o.summary is not None else f"FAILED ({o.error})"
+        print(f"rdm sim {label}: seed {o.seed} {state}", file=sys.stderr, flush=True)
+
+    return report
+
+
+def _distributions(args: argparse.Namespace, names: list[str], seeds: list[int], ex) -> int:
+    from rdm.output_files import write_atomic
+    from rdm.scenarios.seed_sweep import format_report, report, sweep
+
+    extra = {"quick": True} if args.quick else {}
+    docs = []
+    for name in names:
+        outcomes = sweep(
+            name, args.out, seeds, args.duration, extra, ex, _progress(name), args.replace
+        )
+        doc = report(name, outcomes)
+        target = Path(args.out) / f"sweep-{name}.json"
+        write_atomic(target, json.dumps(doc, indent=1, allow_nan=False) + "\n")
+        docs.append(doc)
+        if not args.json:
+            print(format_report(doc), flush=True)
+            print(f"sweep: {target}", flush=True)
     if args.json:
         print(json_text(docs[0] if len(docs) == 1 else {"sweeps": docs}))
     ok = all(d["runs_all_passed"] == len(d["seeds"]) for d in docs)
     return 0 if ok else 1
+
+
+def _campaign(args: argparse.Namespace, faults: list[str], seeds: list[int], ex) -> int:
+    from rdm.output_files import write_atomic
+    from rdm.scenarios.fault_campaign import fault_row, fault_runs, format_campaign
+
+    rows = []
+    for fault in faults:
+        outcomes = fault_runs(
+            fault, args.out, seeds, ex, _progress(f"mission {fault}"), args.replace
+        )
+        rows.append(fault_row(fault, outcomes))
+    doc = {"scenario": "mission", "seeds": seeds, "faults": rows}
+    target = Path(args.out) / "faults-mission.json"
+    write_atomic(target, json.dumps(doc, indent=1, allow_nan=False) + "\n")
+    if args.json:
+        print(json_text(doc))
+    else:
+        print(format_campaign(rows), flush=True)
+        print(f"campaign: {target}", flush=True)
+    return 0 if all(r["safe"] == r["runs"] for r in rows) else 1

@@ -26,6 +26,7 @@ import numpy as np
 
 from rdm.nodes.onboard_flight import FlightMode
 from rdm.sim import Metric
+from rdm.sim.byte_faults import CorruptingLink
 
 from . import perching
 from .common import ScenarioResult, finish, roll_pitch, run_stack, sim_stack_options, truth_arrays
@@ -61,8 +62,16 @@ FAULTS = (
     "uart-cut",  # the Spinal UART is cut for 0.3 s (Spinal's 500 ms timeout does not fire)
     "low-battery",  # the battery sags to 3.4 V per cell (the node lands)
     "bad-adc-scale",  # set_adc_scale 0.07 reaches Spinal (1.75 V: rejected by its guard)
+    "uart-noise-1e-4",  # each byte on the Spinal UART flipped / lost / repeated at p = 1e-4
+    "uart-noise-1e-3",  # ... at p = 1e-3 (about one damaged frame in 30)
+    "battery-sag",  # the battery sags 1 V/s from where it is (the node lands by itself)
     "foot-sensor-loss",  # the foot sensor's cable is cut once perched (the node holds)
 )
+#: Byte-fault probability of the ``uart-noise-*`` faults (sim.byte_faults.CorruptingLink).
+UART_NOISE = {"uart-noise-1e-4": 1e-4, "uart-noise-1e-3": 1e-3}
+#: The sag of ``battery-sag``, V/s (ASSUMPTION: a failing cell under hover load), down to
+#: 3.0 V per cell. The operator then holds at the goal: the node must land by itself.
+SAG_V_PER_S = 1.0
 #: Faults injected once perched (the others: once hovering after take-off).
 PERCHED_FAULTS = ("foot-sensor-loss",)
 #: The safety bounds of a run.
@@ -98,6 +107,8 @@ class MissionScript:
             self.start = np.asarray(node.flight.hold_position)
             self._say(now, "goto", node.goto(self.start + GOTO_OFFSET, 0.0))
             self.phase = "goto"
+        elif self.phase == "goto" and self.fault == "battery-sag":
+            pass  # hold at the goal: the node's battery monitor must land the robot
         elif self.phase == "goto" and self._arrived(node, now, HOLD_AT_GOAL_S):
             if self.quick or self.fault_at is not None:
                 self._say(now, "land", node.land())
@@ -173,6 +184,13 @@ class MissionScript:
         elif self.fault == "bad-adc-scale":  # a set_adc_scale frame on the wire to Spinal
             scale = stack.onboard.session.registry.msg("std_msgs/Float32").new(data=0.07)
             stack.onboard.session.publish("set_adc_scale", scale)
+        elif self.fault in UART_NOISE:  # both directions, each its own seeded stream
+            seed = int(stack.plant.seed)
+            for k, end in enumerate((stack.spinal_link, stack.onboard_link)):
+                end.link = CorruptingLink(end.link, UART_NOISE[self.fault], 1000 * seed + k)
+        elif self.fault == "battery-sag":
+            v0, floor = stack.spinal.battery_input, 3.0 * stack.onboard.monitors.cells
+            stack.bridge.set_battery(lambda t: max(floor, v0 - SAG_V_PER_S * (t - now)))
         elif self.fault == "foot-sensor-loss":  # the sensor's cable cut at the PC
             foot = stack.onboard.foot
             foot.link = DroppableLink(foot.link)
@@ -186,6 +204,9 @@ _DETECTED_BY = {
     "uart-cut": ("monitors", "spinal_silent"),
     "low-battery": ("monitors", "battery_low"),
     "bad-adc-scale": ("spinal", "adc_scale_implausible"),
+    "uart-noise-1e-4": ("parser", "bad_frames"),
+    "uart-noise-1e-3": ("parser", "bad_frames"),
+    "battery-sag": ("monitors", "battery_low"),
     "foot-sensor-loss": ("monitors", "foot_stale"),
 }
 
@@ -225,6 +246,7 @@ def outcome(stack: Stack, script: MissionScript, a: dict[str, np.ndarray]) -> di
         "monitors": node.monitors.counts,
         "node": node.counts,
         "spinal": stack.spinal.counters.rejected,
+        "parser": {"bad_frames": node.session.parser.bad_frames},
     }.get(where, {})
     touchdowns = [e["t"] for e in node.monitors.events if e["monitor"] == "touchdown"]
     return {
@@ -234,6 +256,7 @@ def outcome(stack: Stack, script: MissionScript, a: dict[str, np.ndarray]) -> di
         and script.max_duty <= max_duty_allowed + 1e-9,
         "fault": script.fault,
         "fault_detected": bool(counts[key]) if key else None,
+        "fault_at_s": script.fault_at,
         "final_state": node.state.value,
         "max_tilt_deg": max_tilt,
         "max_duty": script.max_duty,
