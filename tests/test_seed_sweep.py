@@ -13,6 +13,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 import rdm
 from rdm.scenarios.seed_sweep import report, run_seed
 
@@ -60,11 +62,22 @@ def test_sweep_refuses_bad_options():
         (["hover", "--seeds", "0"], "--seeds"),
         (["all"], "--seeds"),
         (["hover", "--workers", "2"], "--workers"),
-        (["mission", "--seeds", "2", "--fault", "uart-cut"], "--seeds"),
+        (["hover", "--seeds", "2", "--wire-mcap"], "--seeds"),
     ):
         out = _sim(args, timeout=120)
         assert out.returncode == 2 and word in out.stderr, (args, out.stderr)
         assert "Traceback" not in out.stderr
+
+
+def test_the_default_duration_is_the_scenarios(tmp_path):
+    from rdm.scenarios import SCENARIOS
+    from rdm.scenarios.mission import QUICK_DURATION
+
+    done = run_seed("hover", str(tmp_path), 0, None, {})
+    assert done.error is None
+    assert done.summary["simulated_s"] == pytest.approx(SCENARIOS["hover"].default_duration)
+    quick = run_seed("mission", str(tmp_path), 0, None, {"quick": True})
+    assert quick.error is None and quick.summary["simulated_s"] <= QUICK_DURATION
 
 
 def test_a_failed_seed_is_reported_not_fatal(tmp_path):

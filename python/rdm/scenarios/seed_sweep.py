@@ -95,6 +95,13 @@ def run_seed(
 
     sc = SCENARIOS[scenario]
     try:
+        if duration is None:  # the scenario's default run (the mission's quick form: its own)
+            if scenario == "mission" and extra.get("quick"):
+                from rdm.scenarios.mission import QUICK_DURATION
+
+                duration = QUICK_DURATION
+            else:
+                duration = sc.default_duration
         with run_folders(replace=replace):
             result = sc.run(base, duration=duration, seed=seed, uart="inproc", speed=None, **extra)
         summary = json.loads(Path(result.stack.folder.summary_json).read_text())
