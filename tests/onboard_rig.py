@@ -291,53 +291,20 @@ def assert_same_servo_state(fast, plain) -> None:
     assert list(fast.counts.items()) == list(plain.counts.items())
 
 
-class TeeLink:
-    """A node's UART that keeps what the node read (for a shadow node) and what it wrote."""
-
-    def __init__(self, link) -> None:
-        self.link, self.read, self.out = link, [], []
-
-    def read_available(self) -> bytes:
-        data = self.link.read_available()
-        self.read.append(data)
-        return data
-
-    def write(self, data: bytes) -> int:
-        self.out.append(bytes(data))
-        return self.link.write(data)
-
-    @property
-    def port(self):
-        return self.link.port
-
-
-def shadowed_rig(config, set_up_shadow) -> tuple[Rig, Any]:
-    """A :class:`Rig` whose node (``config``) has a shadow: a second ``OnboardNode`` (same
-    config, then ``set_up_shadow(shadow)``, e.g. its fast paths off) that ticks right after
-    each spin on the bytes the rig's node read, and must write the same bytes every tick
-    (asserted in the rig's ``after_spin``). Returns (rig, shadow)."""
-    from fed_byte_link import FedByteLink
-
-    from rdm.nodes.onboard import OnboardNode
-
-    shadow_link = FedByteLink()
-    shadow = OnboardNode(shadow_link, config=config)
-    set_up_shadow(shadow)
-    tee: list[TeeLink] = []
-
-    def factory(uart, _foot):
-        tee.append(TeeLink(uart))
-        return OnboardNode(tee[0], config=config)
-
-    rig = Rig(factory)
-
-    def after(t: float) -> None:
-        shadow_link.pending = b"".join(tee[0].read)
-        tee[0].read.clear()
-        shadow.tick(t)
-        assert b"".join(shadow_link.written) == b"".join(tee[0].out)
-        shadow_link.written.clear()
-        tee[0].out.clear()
-
-    rig.after_spin = after
-    return rig, shadow
+def handshake(servers: list[Any]) -> ClientSession:
+    """Server sessions through one handshake with a Spinal-layout client (the same bytes
+    from each server; the client answers the last)."""
+    client = ClientSession.from_layout()
+    for s in servers:
+        s.start(0.0)
+    for ms in range(0, 400, 5):
+        out = b""
+        for s in servers:
+            out = s.take_output()  # the same bytes from each
+        data = b"".join(e for e in [out])
+        client.spin(data, ms)
+        wire = client.take_output()
+        for s in servers:
+            s.feed(wire, ms / 1000)
+    assert client.configured
+    return client

@@ -98,3 +98,37 @@ def test_finite_float_vector_states_its_three_answers(value, n, expected):
         assert got.tolist() == list(value)
     else:
         assert got is expected
+
+
+@pytest.mark.parametrize(
+    "value",
+    [
+        (0.1, -2.5, 3e-9),
+        [0.0, -0.0, 1e300],
+        (0.1, float("nan"), 0.0),
+        (float("inf"), 0.0, 0.0),
+        (1, 2, 3),  # ints
+        (0.1, 0.2),
+        (0.1, 0.2, 0.3, 0.4),
+        [[0.1], [0.2], [0.3]],
+        ("0.5", 1.0, 2.0),
+        ("x", 1.0, 2.0),
+        None,
+        np.array([0.1, -2.5, 3e-9]),
+        np.array([0.0, -0.0, np.nan]),
+        np.array([0.0, -np.inf, 1.0]),
+        np.array([1.0, 2.0, 3.0, 4.0])[::2][:3],  # a strided view, length 2
+        np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0])[::2],  # a strided view, length 3
+        np.array([[0.1, 0.2, 0.3]]),
+        np.array([1, 2, 3]),
+        np.array([0.1, 0.2, 0.3], dtype=np.float32),
+    ],
+)
+def test_vector_of_fixed_values_is_numpys_reading(value):
+    got, want = _vector(value, 3), _numpy(value, 3)
+    assert (got is None) == (want is None), (got, want)
+    if want is not None:
+        assert _same(got, want)
+        # a float64 vector stays a view of the caller's memory, as numpy reads it (a script
+        # that later writes its setpoint in place moves the target too)
+        assert np.shares_memory(got, value) == np.shares_memory(want, value)

@@ -1,8 +1,9 @@
-"""``ControlPipeline.step``'s flight part in one Rust call (``_rdm.flight_axes``) against its
-plain form (``ControlPipeline._flight_axes_plain``): two pipelines, one per form, fed the same
-random sequence of states, setpoints, joint targets and mode switches, give the same commands
-bit for bit, the same controller integrals and the same counters; inputs the Rust call does
-not read fall back to the plain form and leave every controller state as the plain form does.
+"""``ControlPipeline.step``'s flight part in one Rust call (``_rdm.flight_axes``, for the core
+robot's shape) against the general form that takes every other robot shape and input
+(``ControlPipeline._flight_axes_general``): two pipelines, one per form, fed the same random
+sequence of states, setpoints, joint targets and mode switches, give the same commands bit for
+bit, the same controller integrals and the same counters; inputs the Rust call does not read
+fall back to the general form and leave every controller state as the general form does.
 """
 
 from __future__ import annotations
@@ -33,9 +34,10 @@ def rust_results(monkeypatch) -> list:
     return results
 
 
-def _pipeline(fast: bool, **config: object) -> ControlPipeline:
+def _pipeline(rust: bool, **config: object) -> ControlPipeline:
     ctl = ControlPipeline(Robot.default(), OnboardConfig(**config))
-    ctl.fast_step = fast
+    if not rust:  # every step through the general form, as for a robot of another shape
+        ctl._flight_axes_rust = lambda *args: None
     return ctl
 
 
@@ -107,65 +109,65 @@ def _random_inputs(rng: np.random.Generator, n_q: int) -> tuple:
         {"feed_forward": "none"},
     ],
 )
-def test_flight_axes_equal_the_plain_form_over_a_random_sequence(config, rust_results):
+def test_flight_axes_equal_the_general_form_over_a_random_sequence(config, rust_results):
     rng = np.random.default_rng(16)
-    fast, plain = _pipeline(True, **config), _pipeline(False, **config)
-    n_q = fast.robot.n_q
+    rust, general = _pipeline(True, **config), _pipeline(False, **config)
+    n_q = rust.robot.n_q
     qs = [rng.uniform(-0.8, 0.8, n_q) for _ in range(4)]
     for k in range(400):
         if k % 50 == 0:
             q = qs[(k // 50) % len(qs)]
-            _ready(fast, q)
-            _ready(plain, q)
+            _ready(rust, q)
+            _ready(general, q)
         if k % 70 == 35:  # perched stretches: the xy and z loops held
-            on = not fast.perching
-            fast.set_perching(on)
-            plain.set_perching(on)
+            on = not rust.perching
+            rust.set_perching(on)
+            general.set_perching(on)
         state, setpoint, targets = _random_inputs(rng, n_q)
         dt = float(rng.choice([0.025, 0.02, 0.031]))
         foot = rng.normal(0.0, 5.0, 6) if rng.random() < 0.8 else None
-        a = fast.step(state, setpoint, targets, foot, dt)
-        b = plain.step(state, setpoint, targets, foot, dt)
+        a = rust.step(state, setpoint, targets, foot, dt)
+        b = general.step(state, setpoint, targets, foot, dt)
         assert _command_bits(a) == _command_bits(b), k
-        assert _state_bits(fast) == _state_bits(plain), k
+        assert _state_bits(rust) == _state_bits(general), k
     # every tick through the Rust call: every input of this sequence is one it reads
     assert len(rust_results) == 400
     assert all(r is not None for r in rust_results)
     if config.get("vectoring_min_nz"):
-        assert fast.counts["vectoring_singular"] > 0
-    assert fast.counts["perch_entered"] > 0
+        assert rust.counts["vectoring_singular"] > 0
+    assert rust.counts["perch_entered"] > 0
 
 
-def test_wrap_of_the_yaw_error_is_the_plain_forms():
+def test_wrap_of_the_yaw_error_is_the_general_forms():
     """Yaw errors across many turns: the Rust sin/cos/atan2 wrap gives Python's floats."""
-    fast, plain = _pipeline(True), _pipeline(False)
-    q = np.zeros(fast.robot.n_q)
-    _ready(fast, q)
-    _ready(plain, q)
+    rust, general = _pipeline(True), _pipeline(False)
+    q = np.zeros(rust.robot.n_q)
+    _ready(rust, q)
+    _ready(general, q)
     for yaw in [*np.linspace(-40.0, 40.0, 801).tolist(), math.pi, -math.pi, 1e-300, 3e8]:
         state = State(np.zeros(3), np.zeros(3), 0.0)
         setpoint = Setpoint(np.zeros(3), np.zeros(3), yaw)
-        a = fast.step(state, setpoint, q, None, 0.025)
-        b = plain.step(state, setpoint, q, None, 0.025)
+        a = rust.step(state, setpoint, q, None, 0.025)
+        b = general.step(state, setpoint, q, None, 0.025)
         assert _command_bits(a) == _command_bits(b), yaw
-    assert fast.pc_axes.integrals == plain.pc_axes.integrals
+    assert rust.pc_axes.integrals == general.pc_axes.integrals
 
 
 @pytest.mark.parametrize(
     "bad",
     [
-        "int_position",  # an int vector: the plain form converts it
+        "int_position",  # an int vector: the general form converts it
         "short_targets",  # a joint vector the units' indices do not fit
         "nan_setpoint_z",  # the PC axes refuse it (after the position step, as before)
-        "list_velocity",  # a list, not an array: converted by the plain form
+        "list_velocity",  # a list, not an array: converted by the general form
         "zero_dt",  # the PC axes refuse it (the position loop raises first, as before)
     ],
 )
-def test_inputs_the_rust_call_does_not_read_take_the_plain_form(bad):
-    fast, plain = _pipeline(True), _pipeline(False)
-    q = np.full(fast.robot.n_q, 0.1)
-    _ready(fast, q)
-    _ready(plain, q)
+def test_inputs_the_rust_call_does_not_read_take_the_general_form(bad):
+    rust, general = _pipeline(True), _pipeline(False)
+    q = np.full(rust.robot.n_q, 0.1)
+    _ready(rust, q)
+    _ready(general, q)
     state = State(np.array([0.1, -0.2, 1.0]), np.array([0.01, 0.0, -0.1]), 0.2)
     setpoint = Setpoint(np.array([0.0, 0.0, 1.2]), np.zeros(3), 0.0)
     targets, dt = q.copy(), 0.025
@@ -179,17 +181,17 @@ def test_inputs_the_rust_call_does_not_read_take_the_plain_form(bad):
         state = State(state.position, [0.01, 0.0, -0.1], state.yaw)
     elif bad == "zero_dt":
         dt = 0.0
-    before = _state_bits(fast)
-    assert fast._flight_axes_rust(state, setpoint, targets, fast.terms.hover_thrust, dt) is None
-    assert _state_bits(fast) == before  # nothing stepped
+    before = _state_bits(rust)
+    assert rust._flight_axes_rust(state, setpoint, targets, rust.terms.hover_thrust, dt) is None
+    assert _state_bits(rust) == before  # nothing stepped
     outcomes = []
-    for ctl in (fast, plain):
+    for ctl in (rust, general):
         try:
             outcomes.append(("ok", _command_bits(ctl.step(state, setpoint, targets, None, dt))))
         except Exception as e:  # the same exception type from both forms
             outcomes.append(("raised", type(e)))
     assert outcomes[0] == outcomes[1]
-    assert _state_bits(fast) == _state_bits(plain)
+    assert _state_bits(rust) == _state_bits(general)
 
 
 def test_truth_values_are_taken_as_python_takes_them(rust_results):
@@ -197,18 +199,18 @@ def test_truth_values_are_taken_as_python_takes_them(rust_results):
     read by its truth value in both forms, and the Rust call takes it."""
     rng = np.random.default_rng(7)
     for perching, vectoring in ((1, np.True_), (0, np.False_), (np.True_, 1)):
-        fast, plain = _pipeline(True), _pipeline(False)
-        q = np.full(fast.robot.n_q, 0.2)
-        _ready(fast, q)
-        _ready(plain, q)
-        for ctl in (fast, plain):
+        rust, general = _pipeline(True), _pipeline(False)
+        q = np.full(rust.robot.n_q, 0.2)
+        _ready(rust, q)
+        _ready(general, q)
+        for ctl in (rust, general):
             ctl.perching = perching
             ctl.config = dataclasses.replace(ctl.config, vectoring=vectoring)
-        state, setpoint, targets = _random_inputs(rng, fast.robot.n_q)
+        state, setpoint, targets = _random_inputs(rng, rust.robot.n_q)
         rust_results.clear()
-        a = fast.step(state, setpoint, targets, None, 0.025)
-        b = plain.step(state, setpoint, targets, None, 0.025)
-        # taken by the Rust call (the fast pipeline's one call; the plain one makes none)
+        a = rust.step(state, setpoint, targets, None, 0.025)
+        b = general.step(state, setpoint, targets, None, 0.025)
+        # taken by the Rust call (the rust pipeline's one call; the general one makes none)
         assert len(rust_results) == 1 and rust_results[0] is not None
         assert _command_bits(a) == _command_bits(b)
-        assert _state_bits(fast) == _state_bits(plain)
+        assert _state_bits(rust) == _state_bits(general)

@@ -158,3 +158,28 @@ def test_seed_1_plate_lies_flat_with_the_calibrated_imu(tmp_path, calibrated):
         assert tilt < 0.1 and edge < 0.02, (tilt, edge)
     else:
         assert tilt > 0.3 and edge > 0.2, (tilt, edge)
+
+
+def test_setpoint_ramp_distance_is_numpys_norm() -> None:
+    """``SetpointRamp.step``'s distance (``sqrt(d.dot(d))``) against ``np.linalg.norm`` on
+    random vectors, and ``arrived`` against ``np.all(position == goal)``."""
+    from rdm.scenarios.common import SetpointRamp
+
+    rng = np.random.default_rng(3)
+    for _ in range(500):
+        start, goal = rng.normal(size=3) * rng.choice([1e-6, 1.0, 1e3]), rng.normal(size=3)
+        speed, dt = float(rng.uniform(0.01, 2.0)), 0.01
+        ramp = SetpointRamp(start, speed)
+        ramp.set_goal(goal)
+        delta = goal - start
+        dist = float(np.linalg.norm(delta))
+        ramp.step(dt)
+        reach = speed * dt
+        want = goal if dist <= reach else start + delta / dist * reach
+        assert ramp.position.tobytes() == np.asarray(want, dtype=float).tobytes()
+        assert ramp.arrived == bool(np.all(ramp.position == ramp.goal))
+    ramp = SetpointRamp(np.array([0.0, -0.0, 1.0]), 1.0)
+    ramp.set_goal(np.array([-0.0, 0.0, 1.0]))
+    assert ramp.arrived  # -0.0 == 0.0, as numpy compares
+    ramp.set_goal(np.array([np.nan, 0.0, 1.0]))
+    assert not ramp.arrived

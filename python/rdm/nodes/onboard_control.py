@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from rdm import _rdm
-from rdm.control.attitude import gains_to_wire_terms
 from rdm.control.lqi import LqiSynthesizer, PcAxisController, gyro_compensation
 from rdm.control.perch import PerchController, PerchResult
 from rdm.control.position import PositionController
@@ -108,14 +107,6 @@ def foot_allocation(allocation: np.ndarray, foot_in_cog: np.ndarray) -> np.ndarr
     return out
 
 
-def foot_allocation_reference(allocation: np.ndarray, foot_in_cog: np.ndarray) -> np.ndarray:
-    """:func:`foot_allocation` with ``np.cross`` (the plain form the tests compare with)."""
-    full = np.asarray(allocation, dtype=float)
-    p_foot = np.asarray(foot_in_cog, dtype=float)[:3, 3]
-    moments = full[3:6] - np.cross(p_foot, full[0:3].T).T
-    return np.vstack([full[2], moments])
-
-
 @dataclass(frozen=True)
 class ModelTerms:
     """Model quantities at one q."""
@@ -162,41 +153,19 @@ class ControlCommand:
     yaw_rotor: int | None
 
 
-def _p_matrix_terms_plain(g: dict) -> tuple[list[tuple[int, int, int]], list[int], bool]:
-    """The pinv rows, the inertia terms (x1000 int16) and whether any saturated, of a
-    ``gyro_compensation`` dict (the plain form of :func:`_p_matrix_terms`)."""
-    sat = False
-    rows = []
-    for r, p, y in zip(g["pinv_roll"], g["pinv_pitch"], g["pinv_yaw"], strict=True):
-        w = [to_wire(float(v)) for v in (r, p, y)]
-        sat |= any(s for _, s in w)
-        rows.append(tuple(v for v, _ in w))
-    i = np.asarray(g["inertia"], dtype=float)
-    comps = [i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[1, 2], i[0, 2]]
-    inertia = []
-    for v in comps:
-        w, s = to_wire(float(v))
-        sat |= s
-        inertia.append(w)
-    return rows, inertia, sat
-
-
 def _p_matrix_terms(g: dict) -> tuple[list[tuple[int, int, int]], list[int], bool]:
-    """:func:`_p_matrix_terms_plain` on the Python floats ``tolist`` gives (the values
-    ``float`` gives of each element): the same ``to_wire`` calls in the same order."""
-    columns = (g["pinv_roll"], g["pinv_pitch"], g["pinv_yaw"], g["inertia"])
-    if not all(
-        c.__class__ is np.ndarray and c.dtype == np.float64 and c.ndim == n
-        for c, n in zip(columns, (1, 1, 1, 2), strict=True)
-    ):
-        return _p_matrix_terms_plain(g)
+    """The pinv rows, the inertia terms (x1000 int16, :func:`to_wire`) and whether any
+    saturated, of a ``gyro_compensation`` dict: rows r, p, y per rotor, then the inertia
+    xx, yy, zz, xy, yz, xz."""
+    columns = [np.asarray(g[k], dtype=float).tolist() for k in ("pinv_roll", "pinv_pitch")]
+    columns.append(np.asarray(g["pinv_yaw"], dtype=float).tolist())
     sat = False
     rows = []
-    for r, p, y in zip(*(c.tolist() for c in columns[:3]), strict=True):
+    for r, p, y in zip(*columns, strict=True):
         (a, sa), (b, sb), (c, sc) = to_wire(r), to_wire(p), to_wire(y)
         sat = sat or sa or sb or sc
         rows.append((a, b, c))
-    i = columns[3].tolist()
+    i = np.asarray(g["inertia"], dtype=float).tolist()
     inertia = []
     for v in (i[0][0], i[1][1], i[2][2], i[0][1], i[1][2], i[0][2]):
         w, s = to_wire(v)
@@ -273,12 +242,8 @@ class ControlPipeline:
         self.terms: ModelTerms | None = None
         self.gains: np.ndarray | None = None  # (N, 4, 3)
         self.gains_wire: np.ndarray | None = None  # (N, 7) int16
-        #: (gains_wire, its ``rpy/gain`` payload bytes) when the fast LQI path built both
+        #: (gains_wire, its ``rpy/gain`` payload bytes), both from the synthesis
         self.gains_payload: tuple[np.ndarray, bytes] | None = None
-        #: LQI through :meth:`LqiSynthesizer.synthesize_wire` (gains, wire terms and the
-        #: ``rpy/gain`` payload from one Rust call; :attr:`lqi_result` built when read);
-        #: False: ``synthesize`` + ``gains_to_wire_terms`` (the plain form)
-        self.fast_lqi = True
         self._lqi_result = None
         #: the synthesizer whose kept result lqi_result is, while not built yet (else None)
         self._lqi_result_kept = None
@@ -286,20 +251,15 @@ class ControlPipeline:
         self.perch_thrust = np.zeros(robot.n_rotors)
         self._ticks = 0
         #: the model terms and the pinv wire message depend on q alone: both are reused while
-        #: the present q is bit-for-bit the one they were computed at (False: always compute)
-        self.reuse_model = True
+        #: the present q is bit-for-bit the one they were computed at
         self._model_key: bytes | None = None
         #: the last few q's model terms and pinv wire message: the present q flickers between
         #: a handful of servo readings, each seen again within a few ticks
         self._model_cache: dict[bytes, tuple[ModelTerms, tuple | None, bool]] = {}
         self._p_matrix: tuple[list[tuple[int, int, int]], list[int]] | None = None
-        #: a model evaluation through ``Robot.evaluate_control``, its hover thrust through
-        #: the lstsq gufunc directly, its ModelTerms without the frozen __init__ and its pinv
-        #: terms from Python floats; False: ``evaluate``, np.linalg.lstsq, ModelTerms(...)
-        #: and numpy scalars (the plain forms)
-        self.fast_model = True
         #: ``Robot.evaluate_control`` (the evaluation's arrays the pipeline reads, without
-        #: every frame's pose) when the robot offers it and its ``evaluate`` is the core's
+        #: every frame's pose) when the robot offers it and its ``evaluate`` is the core's;
+        #: else (a robot model of another kind) its ``evaluate``
         core = _rdm.Robot
         plain_evaluate = getattr(type(robot), "evaluate", None) is core.evaluate
         self._evaluate_control = (
@@ -308,26 +268,21 @@ class ControlPipeline:
             else None
         )
         self._p_matrix_saturated = False
-        #: the flight part of :meth:`step` (position loop, vectoring choice, PC-side axes)
-        #: through ``_rdm.flight_axes``, one Rust call with the same arithmetic; False:
-        #: :meth:`_flight_axes_plain` (the reference form)
-        self.fast_step = True
 
     # -- 1. model ------------------------------------------------------------------------
     def update_model(self, q: np.ndarray) -> bool:
         """Evaluate the model at q; on failure keep the last terms (counted)."""
-        if self.reuse_model:
-            key = np.asarray(q, dtype=float).tobytes()
-            if key == self._model_key:
-                return True
-            hit = self._model_cache.get(key)
-            if hit is not None:  # the terms an evaluation at this q gives (deterministic)
-                self.terms, self._p_matrix, self._p_matrix_saturated = hit
-                self._model_key = key
-                return True
+        key = np.asarray(q, dtype=float).tobytes()
+        if key == self._model_key:
+            return True
+        hit = self._model_cache.get(key)
+        if hit is not None:  # the terms an evaluation at this q gives (deterministic)
+            self.terms, self._p_matrix, self._p_matrix_saturated = hit
+            self._model_key = key
+            return True
         self._model_key = None
         self._p_matrix = None
-        lean = self.fast_model and self._evaluate_control is not None
+        lean = self._evaluate_control is not None
         try:
             if lean:  # the same arrays of the same evaluation, without the rest of the dict
                 o = dict(
@@ -351,10 +306,7 @@ class ControlPipeline:
         imu = cog_rot.T @ np.asarray(imu_pose, dtype=float)[:3, :3]
         g = self.config.gravity
         rhs = [o["mass"] * g, 0.0, 0.0, 0.0]
-        if self.fast_model:
-            hover = _lstsq_solution(qbar, rhs)
-        else:
-            hover = np.linalg.lstsq(qbar, rhs, rcond=None)[0]
+        hover = _lstsq_solution(qbar, rhs)
         if not (_all_finite(qbar) and _all_finite(hover)):
             self.counts["model_non_finite"] += 1
             return False
@@ -369,7 +321,7 @@ class ControlPipeline:
             hover,
             imu,
         )
-        self.terms = _model_terms(*values) if self.fast_model else ModelTerms(*values)
+        self.terms = _model_terms(*values)
         self._model_key = self.terms.q.tobytes()
         self._remember_model()
         return True
@@ -414,43 +366,20 @@ class ControlPipeline:
         self._lqi_result, self._lqi_result_kept = value, None
 
     def synthesize(self) -> bool:
-        """LQI gains at the current model; on failure keep the last good ones (counted)."""
+        """LQI gains at the current model; on failure keep the last good ones (counted). The
+        gains, their ``rpy/gain`` wire terms and payload and the finite / fell-back / clamped
+        flags come from :meth:`LqiSynthesizer.synthesize_wire`; :attr:`lqi_result` is built
+        when read."""
         t = self.terms
         if t is None:
             return False
-        if self.fast_lqi:
-            return self._synthesize_fast(t)
-        try:
-            res = self.lqi.synthesize(t.mass, t.inertia, t.allocation_bar)
-            wire = np.asarray(gains_to_wire_terms(res.gains), dtype=np.int16)
-        except ValueError:
-            self.counts["lqi_failed"] += 1
-            self.lqi.reset()  # next attempt is cold
-            return False
-        if not _all_finite(res.gains):
-            self.counts["lqi_failed"] += 1
-            return False
-        self.counts["lqi_ok"] += 1
-        if res.fell_back:
-            self.counts["lqi_fell_back"] += 1
-        if any(s != 1.0 for s in res.clamp_scales):
-            self.counts["gain_clamped"] += 1
-        self.lqi_result = res
-        self.gains = np.asarray(res.gains, dtype=float)
-        self.gains_wire = wire
-        return True
-
-    def _synthesize_fast(self, t: ModelTerms) -> bool:
-        """:meth:`synthesize` through ``synthesize_wire``: the same solve, checks, counters
-        (in the same order) and attributes; the wire terms and the finite check come from
-        the core, the :class:`LqiResult` is built only when :attr:`lqi_result` is read."""
         try:
             gains, wire, payload, finite, fell_back, clamped = self.lqi.synthesize_wire(
                 t.mass, t.inertia, t.allocation_bar
             )
         except ValueError:
             wire = None
-        if wire is None:  # the solve or gains_to_wire_terms raised
+        if wire is None:  # the solve or the wire terms failed
             self.counts["lqi_failed"] += 1
             self.lqi.reset()  # next attempt is cold
             return False
@@ -474,7 +403,7 @@ class ControlPipeline:
         t = self.terms
         if t is None:
             return None
-        if self.reuse_model and self._p_matrix is not None:
+        if self._p_matrix is not None:
             if self._p_matrix_saturated:
                 self.counts["pinv_saturated"] += 1
             return self._p_matrix
@@ -483,10 +412,7 @@ class ControlPipeline:
         except ValueError:
             self.counts["pinv_failed"] += 1
             return None
-        if self.fast_model:
-            rows, inertia, sat = _p_matrix_terms(g)
-        else:
-            rows, inertia, sat = _p_matrix_terms_plain(g)
+        rows, inertia, sat = _p_matrix_terms(g)
         if sat:
             self.counts["pinv_saturated"] += 1
         if self._model_key is not None:  # the terms are the ones at the keyed q
@@ -538,7 +464,7 @@ class ControlPipeline:
         if axes is not None and axes[6]:
             self.counts["vectoring_singular"] += axes[6]
         if axes is None:
-            axes = self._flight_axes_plain(state, setpoint, joint_targets, ff, dt)
+            axes = self._flight_axes_general(state, setpoint, joint_targets, ff, dt)
         roll, pitch, yaw_term, alpha, beta, applied, _, flight, yaw_rotor = axes
         result = None
         if self.perching:
@@ -580,13 +506,13 @@ class ControlPipeline:
         feed_forward: np.ndarray,
         dt: float,
     ) -> tuple | None:
-        """:meth:`_flight_axes_plain` in one Rust call (``_rdm.flight_axes``, the same tuple;
-        the singular units are not counted here). None, with nothing stepped, when
-        :attr:`fast_step` is off, a controller is not the core's, or an input is one the call
-        does not read: then the plain form runs."""
+        """The flight axes in one Rust call (``_rdm.flight_axes``, the tuple of
+        :meth:`_flight_axes_general`; the singular units are not counted here). None, with
+        nothing stepped, when a controller is not the core's or an input is not of the core
+        robot's shape (its rotor and vectoring-unit counts, float64 vectors): then
+        :meth:`_flight_axes_general` runs."""
         if not (
-            self.fast_step
-            and self.position.__class__ is PositionController
+            self.position.__class__ is PositionController
             and self.pc_axes.__class__ is PcAxisController
         ):
             return None
@@ -612,7 +538,7 @@ class ControlPipeline:
             dt,
         )
 
-    def _flight_axes_plain(
+    def _flight_axes_general(
         self,
         state: State,
         setpoint: Setpoint,
@@ -620,9 +546,10 @@ class ControlPipeline:
         feed_forward: np.ndarray,
         dt: float,
     ) -> tuple:
-        """Position loop, vectoring choice and PC-side axes of :meth:`step` (the reference
-        form of ``_rdm.flight_axes``): roll, pitch, yaw term, alpha, beta, applied, the
-        number of singular units (counted here), the base thrust, the yaw rotor."""
+        """Position loop, vectoring choice and PC-side axes of :meth:`step` for what
+        ``_rdm.flight_axes`` does not take (another robot shape, a controller of another
+        class): roll, pitch, yaw term, alpha, beta, applied, the number of singular units
+        (counted here), the base thrust, the yaw rotor."""
         t, gains = self.terms, self.gains
         assert t is not None and gains is not None
         # Perched, the foot cannot translate: a horizontal error would only wind up the PID

@@ -52,14 +52,10 @@ class FootSensorReader:
         self._last_start: float | None = None
         # Every sample of a batch but the newest is only counted (see poll). Exact when offset
         # and rated values are moderate: raw counts are int16, so every wrench is then finite
-        # and the plain path's non-finite check can never drop a sample.
+        # and the per-payload non-finite check can never drop a sample.
         self._skip_older = len(self.offset) == len(self.model.rated) == 6 and all(
             abs(v) < _MODERATE for v in (*self.offset, *self.model.rated)
         )
-        #: the leading run of OK-sample frames of each read is de-framed in one Rust call
-        #: (:meth:`rdm.protocol.leptrino.LeptrinoStreamParser.feed_ok_samples`); False: every
-        #: frame through ``feed`` (the plain form the tests compare with)
-        self.fast_scan = True
 
     def poll(self, now: float) -> None:
         """Read what arrived, keep the newest sample, (re-)send DATA_START when due."""
@@ -71,9 +67,10 @@ class FootSensorReader:
         if data:
             self.counts["bytes"] += len(data)
         newest: bytes | None = None  # a well-formed OK sample not converted yet
-        if self._skip_older and self.fast_scan:
-            # the leading run of OK samples, scanned in Rust: what the loop below does for
-            # each of them (one sample each, newest wins), summed
+        if self._skip_older:
+            # the leading run of OK-sample frames de-framed in one Rust call
+            # (LeptrinoStreamParser.feed_ok_samples): what the loop below does for each of
+            # them (one sample each, newest wins), summed
             count, newest, events = self.parser.feed_ok_samples(data)
             if count:
                 self.stamp = now
@@ -86,7 +83,7 @@ class FootSensorReader:
                 continue
             payload = event.payload or b""
             if self._skip_older and _is_ok_sample(payload):
-                # what the plain path below does for it: one sample, finite, newest wins
+                # what _handle below does for it: one sample, finite, newest wins
                 newest = payload
                 self.stamp = now
                 self.counts["samples"] += 1
@@ -104,7 +101,7 @@ class FootSensorReader:
             self._start(now)
 
     def _handle(self, payload: bytes, now: float) -> None:
-        """The plain path for one de-framed payload: parse, check, convert, keep."""
+        """One de-framed payload: parse, check, convert, keep."""
         try:
             resp = lp.parse_response(payload)
         except lp.LeptrinoError as exc:
@@ -132,11 +129,6 @@ class FootSensorReader:
         scale = lp.RAW_AT_RATED
         pairs = zip(raw, self.offset, self.model.rated, strict=True)
         self.wrench = np.array([(r - o) * k / scale for r, o, k in pairs], dtype=float)
-
-    def _take_reference(self, payload: bytes) -> np.ndarray:
-        """:meth:`_take`'s value through ``parse_response`` + ``to_wrench`` (tests compare)."""
-        resp = lp.parse_response(payload)
-        return np.array(lp.to_wrench(resp.raw, self.model, self.offset), dtype=float)
 
     def _start(self, now: float) -> None:
         try:
