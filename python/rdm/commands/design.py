@@ -1,4 +1,5 @@
-"""``rdm design``: reproduce Tables II/III (AMR, AMF) with the planner."""
+"""``rdm design``: reproduce Tables II/III (AMR [m^3], AMF) on a 3-D grid beside the
+paper's values."""
 
 from __future__ import annotations
 
@@ -15,7 +16,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add ``design``'s options."""
     parser.add_argument("--table", type=int, choices=(2, 3), default=3)
     parser.add_argument(
-        "--resolution", type=positive_finite, default=0.1, help="grid step [m] (finite, > 0)"
+        "--resolution", type=positive_finite, default=0.1, help="voxel side [m] (finite, > 0)"
+    )
+    parser.add_argument(
+        "--joint-step",
+        type=positive_finite,
+        default=0.12,
+        help="joint grid step [rad] (finite, > 0)",
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--plot-dir", help="write reachable-set PNGs (like Figs. 3-4) here")
@@ -28,8 +35,15 @@ def run(args: argparse.Namespace) -> int:
     """Run the sweep and print ours beside the paper's values."""
     from concurrent.futures import ProcessPoolExecutor
 
-    from rdm.planner.design import format_table, plot_results, run_table
+    from rdm.planner.design import format_table, plot_results, run_table, table_json
 
+    if args.joint_step < 0.03 or args.resolution < 0.02:
+        print(
+            "rdm design: --joint-step must be >= 0.03 rad and --resolution >= 0.02 m "
+            "(finer grids do not fit in memory)",
+            file=sys.stderr,
+        )
+        return 2
     png = None
     if args.plot_dir:  # the figure's folder and file checked before the sweep, not after it
         try:
@@ -45,10 +59,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"rdm design: {exc}", file=sys.stderr)
             return 2
     with ProcessPoolExecutor(max_workers=args.workers) as ex:
-        results = run_table(args.table, args.resolution, ex)
+        results = run_table(args.table, args.resolution, ex, joint_step=args.joint_step)
     if args.json:
         # valid JSON: a figure that is not finite is null
-        print(json_text(nulled({n: r.to_json() for n, r in results.items()}), indent=1))
+        print(json_text(nulled(table_json(args.table, results)), indent=1))
     else:
         print(format_table(args.table, results))
     if png is not None:
