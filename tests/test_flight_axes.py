@@ -1,15 +1,19 @@
-"""``ControlPipeline.step``'s flight part in one Rust call (``_rdm.flight_axes``, for the core
-robot's shape) against the general form that takes every other robot shape and input
-(``ControlPipeline._flight_axes_general``): two pipelines, one per form, fed the same random
-sequence of states, setpoints, joint targets and mode switches, give the same commands bit for
-bit, the same controller integrals and the same counters; inputs the Rust call does not read
-fall back to the general form and leave every controller state as the general form does.
+"""``ControlPipeline.step``'s flight part in one Rust call (``_rdm.flight_axes``) against the
+composition of the controllers' own entry points, written out here: the position loop
+(``PositionController.step_outputs``, held at zero error while perched), the choice per
+vectoring unit between its angles and the joint targets, the PC-side axes
+(``PcAxisController.step``, the yaw error wrapped by atan2(sin, cos), the z loop held while
+perched). Two pipelines, one stepping each way, fed the same random sequence of states,
+setpoints, joint targets and mode switches, give the same commands bit for bit, the same
+controller integrals and the same counters; integer and list inputs are read as floats;
+inputs the call cannot take raise a ValueError with nothing stepped.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import types
 
 import numpy as np
 import pytest
@@ -34,10 +38,66 @@ def rust_results(monkeypatch) -> list:
     return results
 
 
+def _composed_axes(
+    ctl: ControlPipeline,
+    state: State,
+    setpoint: Setpoint,
+    joint_targets: np.ndarray,
+    feed_forward: np.ndarray,
+    dt: float,
+) -> tuple:
+    """The flight axes from the controllers' entry points (the tuple ``_rdm.flight_axes``
+    returns)."""
+    t, gains = ctl.terms, ctl.gains
+    held = ctl.perching
+    position = np.asarray(state.position, dtype=float)[:2]
+    velocity = np.zeros(2) if held else np.asarray(state.velocity, dtype=float)[:2]
+    pos = ctl.position.step_outputs(
+        position,
+        velocity,
+        position if held else np.asarray(setpoint.position, dtype=float)[:2],
+        velocity if held else np.asarray(setpoint.velocity, dtype=float)[:2],
+        setpoint.yaw,
+        t.link_rotations,
+        dt,
+    )
+    alpha, beta, applied = [], [], []
+    singular = 0
+    vectoring, min_nz = ctl.config.vectoring, ctl.config.vectoring_min_nz
+    for i, (ja, jb) in enumerate(ctl.vectoring_joints):
+        ok = vectoring and abs(float(pos["direction"][i][2])) >= min_nz
+        singular += bool(not ok and vectoring)
+        alpha.append(float(pos["alpha"][i]) if ok else float(joint_targets[ja]))
+        beta.append(float(pos["beta"][i]) if ok else float(joint_targets[jb]))
+        applied.append(ok)
+    z_err = 0.0 if held else float(setpoint.position[2] - state.position[2])
+    vz_err = 0.0 if held else float(setpoint.velocity[2] - state.velocity[2])
+    yaw_err = setpoint.yaw - state.yaw
+    base, yaw_term, yaw_rotor = ctl.pc_axes.step(
+        gains,
+        z_err,
+        vz_err,
+        math.atan2(math.sin(yaw_err), math.cos(yaw_err)),
+        np.ascontiguousarray(feed_forward, dtype=float),
+        dt,
+    )
+    return (
+        float(pos["roll"]),
+        float(pos["pitch"]),
+        float(yaw_term),
+        tuple(alpha),
+        tuple(beta),
+        tuple(applied),
+        singular,
+        np.asarray(base, dtype=float),
+        yaw_rotor,
+    )
+
+
 def _pipeline(rust: bool, **config: object) -> ControlPipeline:
     ctl = ControlPipeline(Robot.default(), OnboardConfig(**config))
-    if not rust:  # every step through the general form, as for a robot of another shape
-        ctl._flight_axes_rust = lambda *args: None
+    if not rust:  # every step through the controllers' entry points
+        ctl._flight_axes = types.MethodType(_composed_axes, ctl)
     return ctl
 
 
@@ -109,27 +169,27 @@ def _random_inputs(rng: np.random.Generator, n_q: int) -> tuple:
         {"feed_forward": "none"},
     ],
 )
-def test_flight_axes_equal_the_general_form_over_a_random_sequence(config, rust_results):
+def test_flight_axes_equal_the_composed_controllers_over_a_random_sequence(config, rust_results):
     rng = np.random.default_rng(16)
-    rust, general = _pipeline(True, **config), _pipeline(False, **config)
+    rust, composed = _pipeline(True, **config), _pipeline(False, **config)
     n_q = rust.robot.n_q
     qs = [rng.uniform(-0.8, 0.8, n_q) for _ in range(4)]
     for k in range(400):
         if k % 50 == 0:
             q = qs[(k // 50) % len(qs)]
             _ready(rust, q)
-            _ready(general, q)
+            _ready(composed, q)
         if k % 70 == 35:  # perched stretches: the xy and z loops held
             on = not rust.perching
             rust.set_perching(on)
-            general.set_perching(on)
+            composed.set_perching(on)
         state, setpoint, targets = _random_inputs(rng, n_q)
         dt = float(rng.choice([0.025, 0.02, 0.031]))
         foot = rng.normal(0.0, 5.0, 6) if rng.random() < 0.8 else None
         a = rust.step(state, setpoint, targets, foot, dt)
-        b = general.step(state, setpoint, targets, foot, dt)
+        b = composed.step(state, setpoint, targets, foot, dt)
         assert _command_bits(a) == _command_bits(b), k
-        assert _state_bits(rust) == _state_bits(general), k
+        assert _state_bits(rust) == _state_bits(composed), k
     # every tick through the Rust call: every input of this sequence is one it reads
     assert len(rust_results) == 400
     assert all(r is not None for r in rust_results)
@@ -138,79 +198,77 @@ def test_flight_axes_equal_the_general_form_over_a_random_sequence(config, rust_
     assert rust.counts["perch_entered"] > 0
 
 
-def test_wrap_of_the_yaw_error_is_the_general_forms():
+def test_wrap_of_the_yaw_error_is_atan2_of_sin_and_cos():
     """Yaw errors across many turns: the Rust sin/cos/atan2 wrap gives Python's floats."""
-    rust, general = _pipeline(True), _pipeline(False)
+    rust, composed = _pipeline(True), _pipeline(False)
     q = np.zeros(rust.robot.n_q)
     _ready(rust, q)
-    _ready(general, q)
+    _ready(composed, q)
     for yaw in [*np.linspace(-40.0, 40.0, 801).tolist(), math.pi, -math.pi, 1e-300, 3e8]:
         state = State(np.zeros(3), np.zeros(3), 0.0)
         setpoint = Setpoint(np.zeros(3), np.zeros(3), yaw)
         a = rust.step(state, setpoint, q, None, 0.025)
-        b = general.step(state, setpoint, q, None, 0.025)
+        b = composed.step(state, setpoint, q, None, 0.025)
         assert _command_bits(a) == _command_bits(b), yaw
-    assert rust.pc_axes.integrals == general.pc_axes.integrals
+    assert rust.pc_axes.integrals == composed.pc_axes.integrals
 
 
-@pytest.mark.parametrize(
-    "bad",
-    [
-        "int_position",  # an int vector: the general form converts it
-        "short_targets",  # a joint vector the units' indices do not fit
-        "nan_setpoint_z",  # the PC axes refuse it (after the position step, as before)
-        "list_velocity",  # a list, not an array: converted by the general form
-        "zero_dt",  # the PC axes refuse it (the position loop raises first, as before)
-    ],
-)
-def test_inputs_the_rust_call_does_not_read_take_the_general_form(bad):
-    rust, general = _pipeline(True), _pipeline(False)
+@pytest.mark.parametrize("odd", ["int_position", "list_velocity"])
+def test_integer_and_list_inputs_are_read_as_floats(odd, rust_results):
+    rust, composed = _pipeline(True), _pipeline(False)
     q = np.full(rust.robot.n_q, 0.1)
     _ready(rust, q)
-    _ready(general, q)
+    _ready(composed, q)
+    state = State(np.array([0.1, -0.2, 1.0]), np.array([0.01, 0.0, -0.1]), 0.2)
+    setpoint = Setpoint(np.array([0.0, 0.0, 1.2]), np.zeros(3), 0.0)
+    if odd == "int_position":
+        state = State(np.array([0, 1, 1]), state.velocity, state.yaw)
+    else:
+        state = State(state.position, [0.01, 0.0, -0.1], state.yaw)
+    a = rust.step(state, setpoint, q, None, 0.025)
+    b = composed.step(state, setpoint, q, None, 0.025)
+    assert len(rust_results) == 1 and rust_results[0] is not None
+    assert _command_bits(a) == _command_bits(b)
+    assert _state_bits(rust) == _state_bits(composed)
+
+
+@pytest.mark.parametrize("bad", ["short_targets", "nan_setpoint_z", "zero_dt"])
+def test_inputs_the_call_cannot_take_raise_with_nothing_stepped(bad):
+    rust = _pipeline(True)
+    q = np.full(rust.robot.n_q, 0.1)
+    _ready(rust, q)
     state = State(np.array([0.1, -0.2, 1.0]), np.array([0.01, 0.0, -0.1]), 0.2)
     setpoint = Setpoint(np.array([0.0, 0.0, 1.2]), np.zeros(3), 0.0)
     targets, dt = q.copy(), 0.025
-    if bad == "int_position":
-        state = State(np.array([0, 1, 1]), state.velocity, state.yaw)
-    elif bad == "short_targets":
-        targets = targets[:2]
+    if bad == "short_targets":
+        targets = targets[:2]  # a joint vector the units' indices do not fit
     elif bad == "nan_setpoint_z":
         setpoint = Setpoint(np.array([0.0, 0.0, np.nan]), np.zeros(3), 0.0)
-    elif bad == "list_velocity":
-        state = State(state.position, [0.01, 0.0, -0.1], state.yaw)
-    elif bad == "zero_dt":
+    else:
         dt = 0.0
     before = _state_bits(rust)
-    assert rust._flight_axes_rust(state, setpoint, targets, rust.terms.hover_thrust, dt) is None
-    assert _state_bits(rust) == before  # nothing stepped
-    outcomes = []
-    for ctl in (rust, general):
-        try:
-            outcomes.append(("ok", _command_bits(ctl.step(state, setpoint, targets, None, dt))))
-        except Exception as e:  # the same exception type from both forms
-            outcomes.append(("raised", type(e)))
-    assert outcomes[0] == outcomes[1]
-    assert _state_bits(rust) == _state_bits(general)
+    with pytest.raises(ValueError):
+        rust.step(state, setpoint, targets, None, dt)
+    assert _state_bits(rust) == before
 
 
 def test_truth_values_are_taken_as_python_takes_them(rust_results):
     """A perching flag or a vectoring switch that is not a bool (an int, numpy's bool) is
-    read by its truth value in both forms, and the Rust call takes it."""
+    read by its truth value, and the Rust call takes it."""
     rng = np.random.default_rng(7)
     for perching, vectoring in ((1, np.True_), (0, np.False_), (np.True_, 1)):
-        rust, general = _pipeline(True), _pipeline(False)
+        rust, composed = _pipeline(True), _pipeline(False)
         q = np.full(rust.robot.n_q, 0.2)
         _ready(rust, q)
-        _ready(general, q)
-        for ctl in (rust, general):
+        _ready(composed, q)
+        for ctl in (rust, composed):
             ctl.perching = perching
             ctl.config = dataclasses.replace(ctl.config, vectoring=vectoring)
         state, setpoint, targets = _random_inputs(rng, rust.robot.n_q)
         rust_results.clear()
         a = rust.step(state, setpoint, targets, None, 0.025)
-        b = general.step(state, setpoint, targets, None, 0.025)
-        # taken by the Rust call (the rust pipeline's one call; the general one makes none)
+        b = composed.step(state, setpoint, targets, None, 0.025)
+        # taken by the Rust call (the rust pipeline's one call; the composed one makes none)
         assert len(rust_results) == 1 and rust_results[0] is not None
         assert _command_bits(a) == _command_bits(b)
-        assert _state_bits(rust) == _state_bits(general)
+        assert _state_bits(rust) == _state_bits(composed)

@@ -460,11 +460,9 @@ class ControlPipeline:
             return None
         n_rot = self.robot.n_rotors
         ff = t.hover_thrust if self.config.feed_forward == "hover" else np.zeros(n_rot)
-        axes = self._flight_axes_rust(state, setpoint, joint_targets, ff, dt)
-        if axes is not None and axes[6]:
+        axes = self._flight_axes(state, setpoint, joint_targets, ff, dt)
+        if axes[6]:
             self.counts["vectoring_singular"] += axes[6]
-        if axes is None:
-            axes = self._flight_axes_general(state, setpoint, joint_targets, ff, dt)
         roll, pitch, yaw_term, alpha, beta, applied, _, flight, yaw_rotor = axes
         result = None
         if self.perching:
@@ -498,47 +496,7 @@ class ControlPipeline:
             yaw_rotor,
         )
 
-    def _flight_axes_rust(
-        self,
-        state: State,
-        setpoint: Setpoint,
-        joint_targets: np.ndarray,
-        feed_forward: np.ndarray,
-        dt: float,
-    ) -> tuple | None:
-        """The flight axes in one Rust call (``_rdm.flight_axes``, the tuple of
-        :meth:`_flight_axes_general`; the singular units are not counted here). None, with
-        nothing stepped, when a controller is not the core's or an input is not of the core
-        robot's shape (its rotor and vectoring-unit counts, float64 vectors): then
-        :meth:`_flight_axes_general` runs."""
-        if not (
-            self.position.__class__ is PositionController
-            and self.pc_axes.__class__ is PcAxisController
-        ):
-            return None
-        t = self.terms
-        assert t is not None
-        return _rdm.flight_axes(
-            self.position._core,
-            self.pc_axes,
-            self.gains,
-            state.position,
-            state.velocity,
-            state.yaw,
-            setpoint.position,
-            setpoint.velocity,
-            setpoint.yaw,
-            t.link_rotations,
-            joint_targets,
-            self.vectoring_joints,
-            feed_forward,
-            self.perching,
-            self.config.vectoring,
-            self.config.vectoring_min_nz,
-            dt,
-        )
-
-    def _flight_axes_general(
+    def _flight_axes(
         self,
         state: State,
         setpoint: Setpoint,
@@ -546,63 +504,42 @@ class ControlPipeline:
         feed_forward: np.ndarray,
         dt: float,
     ) -> tuple:
-        """Position loop, vectoring choice and PC-side axes of :meth:`step` for what
-        ``_rdm.flight_axes`` does not take (another robot shape, a controller of another
-        class): roll, pitch, yaw term, alpha, beta, applied, the number of singular units
-        (counted here), the base thrust, the yaw rotor."""
-        t, gains = self.terms, self.gains
-        assert t is not None and gains is not None
-        # Perched, the foot cannot translate: a horizontal error would only wind up the PID
-        # and tilt the attitude targets, i.e. press the plate onto an edge. The loop is held
-        # at zero error (φ_d = θ_d = 0, vectoring level; its integral is cleared on entry, see
-        # set_perching). ASSUMPTION (the paper's Fig. 6 shows no position loop when perched).
-        held = self.perching
-        position = state.position[:2]
-        velocity = np.zeros(2) if held else state.velocity[:2]
-        # the core's outputs as it returns them (floats and lists of floats): the values
-        # PositionController.step wraps in a PositionCommand, without building one
-        pos = self.position.step_outputs(
-            position,
-            velocity,
-            position if held else setpoint.position[:2],
-            velocity if held else setpoint.velocity[:2],
+        """Position loop (eqs. 30-36), vectoring choice and PC-side axes of :meth:`step` in
+        one Rust call (``_rdm.flight_axes``): roll, pitch, yaw term, alpha, beta, applied,
+        the number of singular units (the caller counts them), the base thrust, the yaw
+        rotor.
+
+        Perched, the foot cannot translate: the horizontal loop is held at zero error (φ_d =
+        θ_d = 0, vectoring level; its integral is cleared on entry, see set_perching), and
+        the altitude loop too (zero error, integral kept: λ_flight keeps carrying the weight
+        and λ_perch alone presses the plate, eq. 20). ASSUMPTION (the paper's Fig. 6 shows
+        no position loop when perched). A ValueError, with nothing stepped, for an input the
+        call cannot take (a joint vector the units' indices do not fit, a non-finite
+        setpoint, dt <= 0); errors of the controllers are raised as they raise them."""
+        t = self.terms
+        assert t is not None
+        axes = _rdm.flight_axes(
+            self.position._core,
+            self.pc_axes,
+            self.gains,
+            np.asarray(state.position, dtype=float),
+            np.asarray(state.velocity, dtype=float),
+            state.yaw,
+            np.asarray(setpoint.position, dtype=float),
+            np.asarray(setpoint.velocity, dtype=float),
             setpoint.yaw,
             t.link_rotations,
+            np.asarray(joint_targets, dtype=float),
+            self.vectoring_joints,
+            np.asarray(feed_forward, dtype=float),
+            self.perching,
+            self.config.vectoring,
+            self.config.vectoring_min_nz,
             dt,
         )
-        alpha, beta, applied = [], [], []
-        singular = 0
-        vectoring, min_nz = self.config.vectoring, self.config.vectoring_min_nz
-        direction, pos_alpha, pos_beta = pos["direction"], pos["alpha"], pos["beta"]
-        for i, (ja, jb) in enumerate(self.vectoring_joints):
-            ok = vectoring and abs(float(direction[i][2])) >= min_nz
-            if not ok and vectoring:
-                self.counts["vectoring_singular"] += 1
-                singular += 1
-            alpha.append(float(pos_alpha[i]) if ok else float(joint_targets[ja]))
-            beta.append(float(pos_beta[i]) if ok else float(joint_targets[jb]))
-            applied.append(ok)
-        # Perched, the altitude loop is held too (zero error, integral kept): λ_flight keeps
-        # carrying the weight and λ_perch alone presses the plate (eq. 20); a live z loop would
-        # integrate the pinned height error and cancel λ_perch. ASSUMPTION, like the xy hold.
-        z_err = 0.0 if self.perching else float(setpoint.position[2] - state.position[2])
-        vz_err = 0.0 if self.perching else float(setpoint.velocity[2] - state.velocity[2])
-        base, yaw_term, yaw_rotor = self.pc_axes.step(
-            gains,
-            z_err,
-            vz_err,
-            wrap_angle(setpoint.yaw - state.yaw),
-            np.ascontiguousarray(feed_forward, dtype=float),
-            dt,
-        )
-        return (
-            float(pos["roll"]),
-            float(pos["pitch"]),
-            float(yaw_term),
-            tuple(alpha),
-            tuple(beta),
-            tuple(applied),
-            singular,
-            np.asarray(base, dtype=float),
-            yaw_rotor,
-        )
+        if axes is None:
+            raise ValueError(
+                "flight axes: joint targets must cover the vectoring joints, the setpoint be "
+                "finite and dt > 0"
+            )
+        return axes
