@@ -20,7 +20,7 @@ from fed_byte_link import FedByteLink
 from onboard_rig import REG, assert_same_servo_state, handshake, servo_readings
 
 from rdm.nodes.onboard import OnboardNode
-from rdm.nodes.onboard_receive import servo_states_decodes
+from rdm.nodes.onboard_receive import quaternion_to_euler, servo_states_decodes
 from rdm.protocol.rosserial.codec import DecodeError
 from rdm.protocol.rosserial.events import MessageReceived
 from rdm.protocol.rosserial.framing import encode_frame
@@ -246,7 +246,7 @@ def test_imu_converted_when_read_matches_every_message():
     """The node keeps the newest valid quaternion/gyro and converts on read: the same values
     as converting every message (independent: quaternion_to_euler / np.array of the last
     valid one), invalid ones counted and skipped, non-tuple gyro through ``_vector``."""
-    from rdm.nodes.onboard import OnboardNode, quaternion_to_euler
+
     from rdm.protocol.rosserial.events import MessageReceived
     from rdm.protocol.rosserial.registry import spinal_registry
 

@@ -19,7 +19,7 @@ from onboard_rig import handshake
 
 from rdm.model import Robot
 from rdm.nodes.onboard import OnboardNode
-from rdm.nodes.onboard_send import _four_axis_payload
+from rdm.nodes.onboard_send import _floats, _four_axis_payload
 from rdm.protocol.rosserial.codec import EncodeError
 from rdm.protocol.rosserial.registry import spinal_registry
 from rdm.protocol.rosserial.server import ServerSession
@@ -186,7 +186,6 @@ def test_direct_payloads_are_the_codec_bytes():
 
 
 def test_floats_is_float_of_each():
-    from rdm.nodes.onboard import _floats
 
     rng = np.random.default_rng(8)
     for a in (

@@ -49,15 +49,8 @@ from rdm.nodes.onboard_foot import ByteLink, FootSensorReader
 from rdm.nodes.onboard_mocap import CogEstimator
 from rdm.nodes.onboard_monitors import Monitors, battery_cells
 from rdm.nodes.onboard_operator import OnboardOperator
-from rdm.nodes.onboard_operator import _vector as _vector
 from rdm.nodes.onboard_receive import _SERVO_STATE_FIELDS, OnboardReceive, servo_states_decodes
-from rdm.nodes.onboard_receive import SERVO_CACHE_SIZE as SERVO_CACHE_SIZE
-from rdm.nodes.onboard_receive import quaternion_to_euler as quaternion_to_euler
-from rdm.nodes.onboard_send import INTEGRATION_CONTROL_ON as INTEGRATION_CONTROL_ON
-from rdm.nodes.onboard_send import PUBLISHED_TOPICS as PUBLISHED_TOPICS
 from rdm.nodes.onboard_send import OnboardSend
-from rdm.nodes.onboard_send import _floats as _floats
-from rdm.nodes.onboard_send import _four_axis_payload as _four_axis_payload
 from rdm.nodes.onboard_step import OnboardStep
 from rdm.protocol.rosserial.codec import RosTime
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry

@@ -261,10 +261,10 @@ class ControlPipeline:
         #: every frame's pose) when the robot offers it and its ``evaluate`` is the core's;
         #: else (a robot model of another kind) its ``evaluate``
         core = _rdm.Robot
-        plain_evaluate = getattr(type(robot), "evaluate", None) is core.evaluate
+        core_evaluate = getattr(type(robot), "evaluate", None) is core.evaluate
         self._evaluate_control = (
             robot.evaluate_control
-            if plain_evaluate and hasattr(core, "evaluate_control") and isinstance(robot, core)
+            if core_evaluate and hasattr(core, "evaluate_control") and isinstance(robot, core)
             else None
         )
         self._p_matrix_saturated = False
