@@ -90,6 +90,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "p10..p90, passed runs); writes OUT/sweep-SCENARIO.json (docs/scenarios.md)",
     )
     parser.add_argument(
+        "--randomize",
+        type=positive_int,
+        default=None,
+        metavar="N",
+        help="perching only: N runs over randomized conditions (friction, mass, CoG, servo "
+        "stiffness, mocap latency and noise, battery; seeds SEED..SEED+N-1): success rate, "
+        "margins, OUT/robustness-perching.json and .png (docs/scenarios.md)",
+    )
+    parser.add_argument(
         "--workers",
         type=positive_int,
         default=None,
@@ -156,9 +165,11 @@ def _run(args: argparse.Namespace) -> int:
     if args.scenario == "all" and args.seeds is None:
         print("rdm sim: scenario 'all' needs --seeds N", file=sys.stderr)
         return 2
-    if args.workers is not None and args.seeds is None:
-        print("rdm sim: --workers is for --seeds", file=sys.stderr)
+    if args.workers is not None and args.seeds is None and args.randomize is None:
+        print("rdm sim: --workers is for --seeds or --randomize", file=sys.stderr)
         return 2
+    if args.randomize is not None:
+        return _randomized(args)
     if args.seeds is not None:
         return _sweep(args)
     sc = SCENARIOS[args.scenario]
@@ -319,3 +330,56 @@ def _campaign(args: argparse.Namespace, faults: list[str], seeds: list[int], ex)
         print(format_campaign(rows), flush=True)
         print(f"campaign: {target}", flush=True)
     return 0 if all(r["safe"] == r["runs"] for r in rows) else 1
+
+
+def _randomized(args: argparse.Namespace) -> int:
+    """``--randomize N``: the perching experiment over randomized conditions; exit 0 when
+    every run succeeded, 1 otherwise, 2 on bad input."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from rdm.output_files import write_atomic
+    from rdm.scenarios.robustness import plot, randomized, summarize
+
+    others = args.seeds, args.fault, args.wire_mcap or None, args.servo_lead, args.quick or None
+    if args.scenario != "perching" or any(v is not None for v in others):
+        print(
+            "rdm sim: --randomize is for the perching scenario and takes --duration, --seed, "
+            "--out, --replace, --workers, --json",
+            file=sys.stderr,
+        )
+        return 2
+    out = Path(args.out)
+    try:
+        (out / "robustness-perching").mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"rdm sim: --out {args.out!r}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    seeds = list(range(args.seed, args.seed + args.randomize))
+
+    def progress(run: dict) -> None:
+        state = "succeeded" if run["success"] else f"failed {run.get('error') or ''}".rstrip()
+        print(f"rdm sim perching --randomize: seed {run['seed']} {state}", file=sys.stderr)
+
+    with ProcessPoolExecutor(max_workers=args.workers) as ex:
+        runs = randomized(
+            out / "robustness-perching", seeds, args.duration, ex, progress, args.replace
+        )
+    doc = summarize(runs)
+    target = out / "robustness-perching.json"
+    write_atomic(target, json.dumps(doc, indent=1, allow_nan=False) + "\n")
+    plot(doc, out / "robustness-perching.png")
+    if args.json:
+        print(json_text(doc))
+    else:
+        print(f"perching over randomized conditions: {doc['succeeded']}/{doc['runs']} succeeded")
+        for name, m in doc["margins"].items():
+            if m["n"]:
+                print(
+                    f"  {name}: median {m['median']:.4g} (p10 {m['p10']:.4g}, p90 "
+                    f"{m['p90']:.4g}, min {m['min']:.4g}, n {m['n']})"
+                )
+        for f in doc["failed"]:
+            why = f["error"] or ", ".join(f["failed_metrics"])
+            print(f"  seed {f['seed']} failed: {why}")
+        print(f"robustness: {target}")
+    return 0 if doc["succeeded"] == doc["runs"] else 1
