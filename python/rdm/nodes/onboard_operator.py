@@ -20,13 +20,20 @@ from rdm.nodes.joint_motion import plan_joint_motion
 from rdm.nodes.onboard_arming import FlightState
 from rdm.nodes.onboard_control import Setpoint
 
+_F64 = np.dtype(np.float64)
+
 
 def _vector(value: Any, n: int) -> np.ndarray | None:
     """``value`` as a finite float vector of length n, else None: a list or tuple of n exact
-    floats (a decoded message field) in one Rust call, anything else through numpy."""
+    floats (a decoded message field) in one Rust call, a float64 vector as it is, anything
+    else through numpy."""
     got = _finite_float_vector(value, n)  # None: not that form; False: a value not finite
     if got is not None:
         return None if got is False else got
+    if type(value) is np.ndarray and value.dtype == _F64 and value.shape == (n,):
+        # a float vector already (a script's setpoint): the view numpy's reading below gives,
+        # its values checked as Python floats (np.isfinite's dispatch costs more)
+        return value.reshape(-1) if all(map(math.isfinite, value.tolist())) else None
     try:
         v = np.asarray(value, dtype=float).reshape(-1)
     except (TypeError, ValueError):
