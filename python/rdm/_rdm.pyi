@@ -1,5 +1,88 @@
 """Type stubs of the compiled core :mod:`rdm._rdm` (see crates/rdm_py)."""
 
+from typing import final as _final
+
+from typing_extensions import Self as _Self
+
+__all__ = [
+    "GRAVITY",
+    "JSK_TO_PAPER",
+    "LQI_STATE_NAMES",
+    "MAX_TILT_RAD",
+    "MAX_WIRE_GAIN",
+    "N_ROTORS",
+    "N_VECTORING",
+    "AttitudeController",
+    "AttitudeEstimator",
+    "CanMaster",
+    "CanMasterError",
+    "CanWire",
+    "CareSolveError",
+    "CommandRejectedError",
+    "ContactGateCore",
+    "ControlOutput",
+    "CorePlanner",
+    "DescriptionError",
+    "ImuNoiseCore",
+    "LockstepKernel",
+    "LqiSynthesisError",
+    "LqiSynthesizer",
+    "McapChunkBatch",
+    "ModelError",
+    "NeuronBank",
+    "NeuronBankError",
+    "PcAxisController",
+    "PerchController",
+    "PerchError",
+    "PerchQp",
+    "PlannerError",
+    "PlateContactCore",
+    "PositionControlError",
+    "PositionController",
+    "PwmConverter",
+    "QpInputError",
+    "QpSolver",
+    "RdmError",
+    "Robot",
+    "RotorPlantCore",
+    "SpinalStep",
+    "SpinalStepOutput",
+    "WrenchFilter",
+    "WrenchNoiseCore",
+    "__version__",
+    "augmented_system",
+    "bench_build_profile",
+    "capture_index_records",
+    "clamp_gain",
+    "duty_to_can",
+    "duty_to_dshot",
+    "duty_to_pwm_report",
+    "finite_float_vector",
+    "flight_axes",
+    "flight_thrust",
+    "gain_set_from_k",
+    "gains_from_wire_terms",
+    "gains_to_wire_terms",
+    "gyro_compensation",
+    "json_float_list",
+    "json_record",
+    "leptrino_force_frame",
+    "leptrino_ok_sample_run",
+    "rosserial_frame",
+    "rosserial_scan",
+    "servo_target_payload",
+    "solve_care",
+    "spinal_apply_commands",
+    "spinal_duty_list",
+    "spinal_imu_frame",
+    "spinal_servo_states_frame",
+    "time_lqi_synthesis",
+    "time_onboard_ticks",
+    "time_spinal_steps",
+    "time_timer_overhead",
+    "vectoring_angles",
+]
+
 __version__: str
 
 class RdmError(ValueError):
@@ -31,7 +114,7 @@ class Robot:
     (R = Rz(yaw) Ry(pitch) Rx(roll)).
     """
 
-    def __init__(self, urdf: str | PathLike[str], toml: str | PathLike[str]) -> None: ...
+    def __new__(cls, urdf: str | PathLike[str], toml: str | PathLike[str]) -> _Self: ...
     @staticmethod
     def from_strs(
         urdf_text: str, toml_text: str, urdf_name: str = "<urdf>", toml_name: str = "<toml>"
@@ -102,9 +185,10 @@ class Robot:
         base_pose: _Pose = None,
         foot_wrench: npt.ArrayLike | None = None,
         end_effector_wrench: npt.ArrayLike | None = None,
-        gravity: tuple[float, float, float] = (0.0, 0.0, -9.80665),
+        gravity: tuple[float, float, float] = ...,
     ) -> tuple[_F, _F]:
-        """(tau of eq. 61 in q order, net external wrench about the base origin)."""
+        """(tau of eq. 61 in q order, net external wrench about the base origin); ``gravity``
+        defaults to (0, 0, -9.80665) m/s^2."""
     def jacobian(self, frame: str, zeta: npt.ArrayLike) -> _F:
         """6 x (6 + n_q) w.r.t. zeta = [p, roll, pitch, yaw, q]; rows: world linear, angular."""
     def stability_gradient(self, q: npt.ArrayLike) -> _F: ...
@@ -118,8 +202,9 @@ from numpy.typing import NDArray as _NDArray
 class PerchError(RdmError):
     """Bad argument or parameter of the perching controller (the message names it)."""
 
+@_final
 class PerchQp:
-    def __init__(self, params: dict[str, _Any] | None = None) -> None: ...
+    def __new__(cls, params: dict[str, _Any] | None = None) -> _Self: ...
     def solve(
         self,
         foot_allocation: _NDArray[_np.float64],
@@ -134,10 +219,11 @@ class PerchQp:
     def counters(self) -> dict[str, int]: ...
     def params(self) -> dict[str, _Any]: ...
 
+@_final
 class PerchController:
-    def __init__(
-        self, params: dict[str, _Any] | None = None, rate_hz: float = 40.0, cutoff_hz: float = 1.0
-    ) -> None: ...
+    def __new__(
+        cls, params: dict[str, _Any] | None = None, rate_hz: float = 40.0, cutoff_hz: float = 1.0
+    ) -> _Self: ...
     def tick(
         self,
         foot_wrench: _NDArray[_np.float64],
@@ -153,8 +239,9 @@ class PerchController:
     def counters(self) -> dict[str, int]: ...
     def params(self) -> dict[str, _Any]: ...
 
+@_final
 class WrenchFilter:
-    def __init__(self, cutoff_hz: float = 1.0, sample_hz: float = 40.0) -> None: ...
+    def __new__(cls, cutoff_hz: float = 1.0, sample_hz: float = 40.0) -> _Self: ...
     def update(self, sample: _NDArray[_np.float64]) -> _NDArray[_np.float64] | None: ...
     def reset(self) -> None: ...
     def coefficients(self) -> tuple[float, float, float]: ...
@@ -169,17 +256,18 @@ N_ROTORS: int
 class CommandRejectedError(RdmError):
     """A message to the Spinal controller was rejected or ignored; names the field."""
 
+@_final
 class AttitudeEstimator:
     """Spinal complementary-filter attitude estimator (docs/spinal.md)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         rate_hz: float = 200.0,
         time_matched: bool = False,
         *,
         firmware_exact: bool = False,
         **overrides: Any,
-    ) -> None:
+    ) -> _Self:
         """``overrides``: the EstimatorConfig fields and the guards' ``gyro_range``,
         ``acc_range``, ``degraded_angle_rad``, ``reinit_angle_rad``, ``reinit_hold_s``;
         ``firmware_exact=True`` has no guards."""
@@ -216,6 +304,7 @@ class AttitudeEstimator:
     @property
     def config(self) -> dict[str, Any]: ...
 
+@_final
 class ControlOutput:
     """Output of one controller step."""
 
@@ -238,6 +327,7 @@ class ControlOutput:
     @property
     def events(self) -> list[tuple[str, Any]]: ...
 
+@_final
 class SpinalStepOutput:
     """Output of one SpinalStep.step."""
 
@@ -321,12 +411,13 @@ class _SpinalControllerMessages:
     @property
     def counters(self) -> dict[str, int]: ...
 
+@_final
 class AttitudeController(_SpinalControllerMessages):
     """Spinal attitude controller and flight state machine. ``firmware_exact=True`` selects
     the firmware-exact option of every guard; ``None`` booleans follow it."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         rate_hz: float = 200.0,
         *,
         firmware_exact: bool = False,
@@ -337,18 +428,19 @@ class AttitudeController(_SpinalControllerMessages):
         force_landing_rate: float = 2.5,
         voltage_guard: bool | None = None,
         battery_cells: int = 0,
-        cell_voltage_range: tuple[float, float] = (3.0, 4.45),
+        cell_voltage_range: tuple[float, float] = ...,  # default (3.0, 4.45) V per cell
         saturate_commands: bool | None = None,
-    ) -> None: ...
+    ) -> _Self: ...
     def step(
         self, now_s: float, rotation: npt.NDArray[np.float64], gyro: Any, voltage: float
     ) -> ControlOutput: ...
 
+@_final
 class SpinalStep(_SpinalControllerMessages):
     """Estimator + attitude controller + PWM conversion (the Spinal mirror's step)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         rate_hz: float = 200.0,
         *,
         time_matched: bool = False,
@@ -360,10 +452,10 @@ class SpinalStep(_SpinalControllerMessages):
         force_landing_rate: float = 2.5,
         voltage_guard: bool | None = None,
         battery_cells: int = 0,
-        cell_voltage_range: tuple[float, float] = (3.0, 4.45),
+        cell_voltage_range: tuple[float, float] = ...,  # default (3.0, 4.45) V per cell
         saturate_commands: bool | None = None,
         **estimator_overrides: Any,
-    ) -> None: ...
+    ) -> _Self: ...
     def step(
         self, now_s: float, gyro: Any, acc: Any, mag: Any, voltage: float
     ) -> SpinalStepOutput: ...
@@ -375,11 +467,12 @@ class SpinalStep(_SpinalControllerMessages):
         scale."""
         ...
 
+@_final
 class PwmConverter:
     """Thrust -> duty conversion as Spinal's pwmConversion."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         min_pwm: float,
         max_pwm: float,
         min_thrust: float,
@@ -389,8 +482,8 @@ class PwmConverter:
         *,
         voltage_guard: bool = True,
         battery_cells: int = 0,
-        cell_voltage_range: tuple[float, float] = (3.0, 4.45),
-    ) -> None: ...
+        cell_voltage_range: tuple[float, float] = ...,  # default (3.0, 4.45) V per cell
+    ) -> _Self: ...
     @staticmethod
     def hydrus_example() -> PwmConverter: ...
     def update_voltage(self, voltage: float, now_s: float) -> bool: ...
@@ -477,16 +570,17 @@ def flight_thrust(
 ) -> tuple[NDArray[np.float64], dict[str, object]]:
     """Eq. (29): (K x_bar + pinv(Q_bar)[0; w x I w], gyro-compensation dict)."""
 
+@_final
 class LqiSynthesizer:
     """Warm-started LQI gain synthesizer (weights default to Table V)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         q_weights: NDArray[np.float64] | None = None,
         r_weights: NDArray[np.float64] | None = None,
         clamp_gain: bool = True,
         kleinman_tolerance: float | None = None,
-    ) -> None: ...
+    ) -> _Self: ...
     def synthesize(
         self, mass: float, inertia: NDArray[np.float64], allocation: NDArray[np.float64]
     ) -> dict[str, object]:
@@ -509,10 +603,11 @@ class LqiSynthesizer:
         """Calls answered with a kept solution: their B-bar bitwise one of the last four
         solved."""
 
+@_final
 class PcAxisController:
     """PC-side altitude P-I-D (base thrust) and yaw P-I (angles[2]) of JSK sec. 4."""
 
-    def __init__(self) -> None: ...
+    def __new__(cls) -> _Self: ...
     def step(
         self,
         gains: NDArray[np.float64],
@@ -525,14 +620,15 @@ class PcAxisController:
     @property
     def integrals(self) -> tuple[float, float]: ...
 
+@_final
 class PositionController:
     """Eqs. (30)-(36); defaults Table V, integral limit 1 m/s^2 per axis and tilt bound
     ``max_tilt`` = MAX_TILT_RAD (assumptions). ``step`` returns a dict: acceleration, roll,
     pitch, alpha, beta, direction, integral_clamped, saturated (bool) and saturation (the
     names of the outputs cut to the tilt bound: "acceleration", "attitude", "vectoring")."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         x_pid: tuple[float, float, float] | None = None,
         y_pid: tuple[float, float, float] | None = None,
         integral_limit: tuple[float, float] | None = None,
@@ -542,7 +638,7 @@ class PositionController:
         k_roll_vectoring: list[float] | None = None,
         gravity: float | None = None,
         max_tilt: float | None = None,
-    ) -> None: ...
+    ) -> _Self: ...
     def step(
         self,
         position: NDArray[np.float64],
@@ -692,13 +788,14 @@ class QpInputError(RdmError):
 class PlannerError(RdmError):
     """Bad planner input: description, mode, config key, zeta (message names it)."""
 
+@_final
 class QpSolver:
     """Dense QP on Clarabel (rdm_core::qp): min ½xᵀPx + qᵀx s.t. A_eq x = b_eq, G x <= h.
     Fixed sizes; the solver is reused across solves."""
 
-    def __init__(
-        self, n: int, n_eq: int, n_ineq: int, max_iter: int = 50, tolerance: float = 1e-8
-    ) -> None: ...
+    def __new__(
+        cls, n: int, n_eq: int, n_ineq: int, max_iter: int = 50, tolerance: float = 1e-8
+    ) -> _Self: ...
     def solve(
         self,
         p: NDArray[np.float64],
@@ -713,18 +810,19 @@ class QpSolver:
     @property
     def iterations(self) -> int: ...
 
+@_final
 class CorePlanner:
     """Sec. V planner core (rdm_core::planner). ``mode``: "perched" or "flight";
     ``zeta0`` = [p, eta, q]; ``config``: parameter overrides (docs/planner.md)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         urdf: str,
         toml: str,
         mode: str,
         zeta0: NDArray[np.float64],
         config: dict[str, object] | None = None,
-    ) -> None: ...
+    ) -> _Self: ...
     @property
     def zeta(self) -> NDArray[np.float64]: ...
     def set_zeta(self, zeta: NDArray[np.float64]) -> None: ...
@@ -758,15 +856,23 @@ class CorePlanner:
 # steps toward that solution (status "rate_limited"; False: "infeasible", thrust held).
 from typing import Literal as _Literal
 
-PerchSolverName = _Literal["active_set", "clarabel"]
+_PerchSolverName = _Literal["active_set", "clarabel"]
 
 # --- fastneuron ---
 class NeuronBankError(RdmError): ...
 
+@_final
 class NeuronBank:
-    """Every Neuron of one CAN bus (reference: one ``NeuronMirror`` per board, shared bus)."""
+    """Every Neuron of one CAN bus (boards ticked in order, as boards sharing one bus)."""
 
-    def __init__(self, boards: list[dict[str, object]], tx_capacity: int = 4096) -> None: ...
+    def __new__(
+        cls,
+        boards: list[dict[str, object]],
+        tx_capacity: int = ...,  # default 4096 frames
+    ) -> _Self: ...
+    def tick_wire(self, now: float, stamp: float, wire: CanWire) -> list[int]:
+        """:meth:`tick` on a :class:`CanWire`: the frames the master sent; replies go on the
+        wire stamped ``stamp`` (the channel clock); the sending board index of each reply."""
     def tick(self, now: float, messages: list[object]) -> list[tuple[int, int, bytes]]: ...
     def sent_frames_heard(self) -> bool: ...
     def attach_bridge(
@@ -796,15 +902,16 @@ class NeuronBank:
 # --- fastsensor ---
 from collections.abc import Sequence as _Seq
 
+@_final
 class WrenchNoiseCore:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         rated: _Seq[float],
         bias: _Seq[float],
         noise_fraction: float,
         quantize: bool,
         full_scale_counts: float,
-    ) -> None: ...
+    ) -> _Self: ...
     def sample(
         self, ideal: _Seq[float], normals: _Seq[float]
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
@@ -817,16 +924,17 @@ class WrenchNoiseCore:
     ) -> tuple[float, float, float, float, float, float]:
         """The noisy wrench of :meth:`sample_at` as one tuple of six floats."""
 
+@_final
 class ImuNoiseCore:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         gyro_bias: _Seq[float],
         accel_bias: _Seq[float],
         mag_bias: _Seq[float],
         std: _Seq[float],
         range: _Seq[float],
         lsb: _Seq[float] | None,
-    ) -> None: ...
+    ) -> _Self: ...
     def sample(
         self,
         gyro: _Seq[float],
@@ -859,19 +967,20 @@ def json_float_list(values: npt.NDArray[np.float64]) -> str:
     ``null`` (the run logger's JSON convention); any stride."""
 
 # --- fastplant ---
+@_final
 class RotorPlantCore:
     """ESC state, ceiling models and rotor controls of one plant: the per-physics-step rotor
     work (ESC lag, ceiling distance and ratio, rotor ctrl) in one call (rdm.plant.Plant)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         site_ids: list[int],
         actuator_ids: list[int],
         ceiling_height: float | None,
         site_xpos: np.ndarray,
         site_xmat: np.ndarray,
         ctrl: np.ndarray,
-    ) -> None: ...
+    ) -> _Self: ...
     def __len__(self) -> int: ...
     def step(self) -> None:
         """ESC lags advance, then the ceiling-scaled thrusts go into ctrl."""
@@ -938,13 +1047,14 @@ class RotorPlantCore:
         finite."""
 
 # --- plate contact (ground truth) ---
+@_final
 class ContactGateCore:
     """The plant's collision gate (``rdm.plant.contact_gate``): proves from MjData's views that
     the next position pass can produce no contact and keeps ``mjDSBL_CONTACT`` of the model's
     ``opt.disableflags`` in step (set: contacts off for that pass)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         dt: float,
         slack: float,
         planes: list[tuple[list[float], list[float]]],
@@ -960,7 +1070,7 @@ class ContactGateCore:
         xpos: np.ndarray,
         xanchor: np.ndarray,
         qvel: np.ndarray,
-    ) -> None:
+    ) -> _Self:
         """``planes`` (point, normal) and ``boxes`` (centre, row-major rotation, half sizes)
         are the static obstacles; ``geoms`` (geom, rbound, margin per obstacle or None); the
         robot's free joint's first dof, its hinges (joint, dof) and slide dofs; its root body;
@@ -984,12 +1094,13 @@ class ContactGateCore:
     def on_steps(self) -> int:
         """Steps after which contacts were on."""
 
+@_final
 class PlateContactCore:
     """The foot plate's contact measurement of ``FootContactTracker.measure_contacts``
     (rdm.plant.truth): contact sums, foot-frame force, torque and ZMP from MuJoCo's contact
     views and ``efc_force`` (elliptic cones), the bits of the numpy forms."""
 
-    def __init__(self, geom_body: list[int], environment: list[bool], plate_body: int) -> None:
+    def __new__(cls, geom_body: list[int], environment: list[bool], plate_body: int) -> _Self:
         """``geom_body`` = ``model.geom_bodyid``; ``environment[g]``: geom g is an
         environment surface; ``plate_body``: the foot plate. ValueError on unequal lengths."""
     def measure(
@@ -1015,11 +1126,12 @@ class PlateContactCore:
 # --- canwire ---
 class CanMasterError(RdmError): ...
 
+@_final
 class CanMaster:
-    """Spinal's CAN master (reference: ``rdm.nodes.can_master.CanMaster``); wrapped by
+    """Spinal's CAN master (``rdm_core::firmware::can_master``); its Python face is
     ``rdm.nodes.can_master.CanMaster``."""
 
-    def __init__(self, boot_delay_ms: int = 5000, start_ms: int = 0) -> None: ...
+    def __new__(cls, boot_delay_ms: int = 5000, start_ms: int = 0) -> _Self: ...
     def tick_ms(
         self, now_ms: int, messages: list[object]
     ) -> tuple[int, int, list[tuple[int, bytes]]]:
@@ -1068,12 +1180,16 @@ class CanMaster:
     ) -> list[tuple[int, list[tuple[int, int, int] | None], int]]: ...
     def pop_events(self) -> list[tuple[int, str, int]]: ...
 
+@_final
 class CanWire:
     """The Neuron bus between a ``CanMaster`` and a ``NeuronBank`` without python-can."""
 
-    def __init__(
-        self, queue_capacity: int = 4096, log_capacity: int = 65536, logging: bool = True
-    ) -> None: ...
+    def __new__(
+        cls,
+        queue_capacity: int = ...,  # default 4096 frames per direction
+        log_capacity: int = ...,  # default 65536 logged frames
+        logging: bool = True,
+    ) -> _Self: ...
     @property
     def frames(self) -> int: ...
     @property
@@ -1092,13 +1208,14 @@ def json_record(values: object) -> str | None:
     lists of floats) as compact ``json.dumps`` text, NaN/inf as ``null``; None otherwise."""
 
 # --- truthlog ---
+@_final
 class McapChunkBatch:
     """Message records of one MCAP chunk in the making (rdm.sim.mcap_fast.ChunkBatchWriter):
     each add appends one Message record (log time = publish time) and its index entry; the
     add methods return 0 when they decline (nothing added), 1 when added, 2 when added and
     the chunk buffer is now over ``chunk_size`` bytes."""
 
-    def __init__(self, chunk_size: int) -> None: ...
+    def __new__(cls, chunk_size: int) -> _Self: ...
     def set_base(self, base: int) -> None:
         """The chunk buffer's size the next record follows (call with the batch empty)."""
     def next_offset(self) -> int:
@@ -1188,19 +1305,20 @@ def spinal_servo_states_frame(
 # stubbed in their classes above (crates/rdm_py/src/{sensor_sim,rotor_plant}.rs).
 
 # --- lockstep kernel ---
+@_final
 class LockstepKernel:
     """The unpaced lockstep loop in Rust with fast paths for the firmware side's steady
     milliseconds (``rdm.nodes.lockstep_kernel``, docs/sim.md)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         dt: float,
         schedule: list[list[int]],
         ticks: list[Any],
         physics: Any | None,
         clock: Any,
         owner: Any,
-    ) -> None: ...
+    ) -> _Self: ...
     def attach_plant(self, plant: Any, mujoco: Any) -> None: ...
     def attach_bridge(self, index: int, node: Any, bank: NeuronBank) -> None: ...
     def attach_bank(
