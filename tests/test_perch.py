@@ -13,7 +13,7 @@ import osqp
 import pytest
 from scipy import sparse
 
-from rdm.control.perch import PerchController, PerchError, PerchQp
+from rdm.control.perch import PerchController, PerchError, PerchQp, PerchResult
 
 G = 9.80665
 EPS_Z, MU_X, MU_Y, MU_Z, H_X, H_Y, DELTA, LMAX = 1.0, 0.9, 0.9, 0.5, 0.04, 0.07, 5.0, 30.0
@@ -452,3 +452,18 @@ def test_bad_shapes_and_params_name_the_argument() -> None:
         PerchQp(bogus=1.0)
     with pytest.raises(PerchError, match="mu_z"):
         PerchQp(mu_z=-1.0)
+
+
+def test_result_from_the_cores_dict_is_the_dataclass_of_it() -> None:
+    # Oracle: the dataclass constructor of the same fields.
+    fields = [f.name for f in dataclasses.fields(PerchResult)]
+    d = {k: np.arange(3.0) + i for i, k in enumerate(fields)}
+    d.update(status="solved", iterations=4, fallback=False)
+    got, want = PerchResult._from(dict(d)), PerchResult(**d)
+    assert type(got) is PerchResult and got.ok
+    for k in fields:
+        assert np.array_equal(getattr(got, k), getattr(want, k)), k
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        got.status = "x"  # type: ignore[misc]
+    with pytest.raises(TypeError):
+        PerchResult._from({"status": "solved"})  # fields missing: the constructor's error

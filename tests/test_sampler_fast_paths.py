@@ -1,131 +1,24 @@
 """The plant side's per-millisecond fast paths against their plain forms.
 
 Every fast path keeps its plain form reachable; these compare them bit for bit (signed zeros
-and NaN included) on real plant states and random, bad input: the Rust JSON record writer
-against ``json.dumps``, sensor samples read from ``sensordata`` in Rust against the Python
-list path, the ground truth against its reference form, the one-call duty commands against
-one ``Esc.command_duty`` per rotor, the mocap node against the array formula.
+and NaN included) on real plant states and random, bad input: sensor samples read from
+``sensordata`` in Rust against the Python list path, the ground truth against its reference
+form, the one-call duty commands against one ``Esc.command_duty`` per rotor, the mocap node
+against the array formula.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import struct
 
-import mcap
 import numpy as np
 import pytest
 from float_bits import same_bits
-from mcap.reader import make_reader
 
-from rdm._rdm import json_record
 from rdm.plant import Plant
 from rdm.plant.esc import Esc, EscParams
 from rdm.plant.truth import GroundTruth
 from rdm.scenarios.stack import MocapNode, quaternion_yaw
-from rdm.sim.json_record import encode_record, encode_record_plain
-from rdm.sim.mcap_fast import VERIFIED_MCAP
-from rdm.sim.mcap_log import McapLogger, _jsonable
-
-
-def _reference(values: dict) -> str:
-    return json.dumps(_jsonable(dict(values)), separators=(",", ":"))
-
-
-# ----------------------------------------------------------------------------- JSON records
-def _random_value(rng: np.random.Generator):
-    bits = rng.integers(0, 2**64, size=4, dtype=np.uint64).view(np.float64)
-    choices = [
-        lambda: float(bits[0]),
-        lambda: float(rng.standard_normal() * 10.0 ** rng.integers(-8, 18)),
-        lambda: np.float64(bits[1]),
-        lambda: bool(rng.integers(2)),
-        lambda: np.bool_(rng.integers(2)),
-        lambda: int(rng.integers(-(2**62), 2**62)),
-        lambda: 2**70 + int(rng.integers(100)),
-        lambda: np.int64(rng.integers(-1000, 1000)),
-        lambda: None,
-        lambda: "".join(rng.choice(list('ab "\\\n\t\x01\x7f\u00e9\u2603\U0001f600'), 5)),
-        lambda: bits.copy(),
-        lambda: np.arange(12, dtype=float).reshape(3, 4)[:, 1] * bits[2],  # strided
-        lambda: bits.reshape(2, 2),
-        lambda: bits.astype(np.float32),
-        lambda: bits.astype(">f8"),
-        lambda: np.array([True, False]),
-        lambda: [float(b) for b in bits],
-        lambda: [np.float64(b) for b in bits],
-        lambda: [1.0, 2],
-        lambda: [],
-        lambda: {"nested": 1.0},
-        lambda: (1.0, 2.0),
-    ]
-    return choices[int(rng.integers(len(choices)))]()
-
-
-@pytest.mark.filterwarnings("ignore::RuntimeWarning")
-def test_rust_record_writer_equals_json_dumps_or_declines():
-    rng = np.random.default_rng(11)
-    declined = written = 0
-    for _ in range(4000):
-        keys = rng.choice(["t", "base_position", "a/b.c:d+e-f g", 'q"uote', "\u00e9", "x"], 4)
-        record = {str(k): _random_value(rng) for k in keys}
-        if rng.integers(10) == 0:
-            record[3] = 1.0  # a non-str key
-        text = json_record(record)
-        plain = encode_record_plain(record)
-        try:
-            ref = _reference(record)
-        except TypeError:
-            ref = None  # json.dumps itself refuses (a non-str key of a mapping works...)
-        if text is None:
-            declined += 1
-        else:
-            written += 1
-            assert text == ref, record
-        # the logger's entry point: the Rust text, else the Python fast path, same bytes
-        assert encode_record(record) == (text if text is not None else plain)
-        if plain is not None:
-            assert plain == ref
-    assert declined > 100 and written > 100
-
-
-def test_rust_record_writer_edge_values():
-    record = {
-        "specials": np.array([0.0, -0.0, np.nan, np.inf, -np.inf, 5e-324, 1e16, 1e-5, 0.1]),
-        "s": 'perched \u00e9"x\\\u0000\U0001f600',
-        "big": 2**63 - 1,
-        "neg": -(2**63),
-        "f32": np.float64(-0.0),
-        "b": True,
-        "none": None,
-        "list": [float("nan"), -0.0, 1e300],
-    }
-    assert json_record(record) == _reference(record)
-    assert json_record({"big": 2**63}) is None  # beyond i64: Python writes it
-    assert encode_record({"big": 2**63}) == _reference({"big": 2**63})
-    assert json_record({"s": "\ud800"}) is None  # lone surrogate
-    assert json_record([("a", 1.0)]) is None  # not a dict
-    assert json_record({}) == "{}"
-
-
-def test_log_truth_writes_the_field_dict_bytes(tmp_path):
-    plant = Plant("rdm", seed=1, ceiling_height=1.2, floor_height=0.0)
-    plant.reset(base_position=(0.0, 0.0, 0.3), thrusts=[4.0, 4.5, 5.0, 4.2])
-    truths = []
-    for _ in range(40):
-        plant.step(5)
-        truths.append(plant.ground_truth())
-    fast, plain = tmp_path / "fast.mcap", tmp_path / "plain.mcap"
-    with McapLogger(fast) as a, McapLogger(plain) as b:
-        for gt in truths:
-            a.log_truth(gt)
-            fields = {k: getattr(gt, k) for k in gt.__dataclass_fields__}
-            b.log_json("/plant/ground_truth", float(gt.time), fields)
-    assert fast.read_bytes() == plain.read_bytes()
-    with open(fast, "rb") as f:
-        msgs = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages()]
-    assert len(msgs) == 40 and msgs[-1]["time"] == truths[-1].time
 
 
 # ------------------------------------------------------------------------------ sensors
@@ -332,64 +225,3 @@ def test_mocap_node_equals_the_array_formula():
         assert same_bits(pos, p) and same_bits(vel, v)
         assert all(type(x) is float for x in pos + vel)
         assert same_bits(yaw, quaternion_yaw(gt.base_quaternion))
-
-
-# ------------------------------------------------------------------------------- MCAP
-@pytest.mark.parametrize("chunk_size", [64 * 1024, 700, 1])
-def test_fast_message_records_give_the_same_file(tmp_path, chunk_size):
-    # On an mcap release outside VERIFIED_MCAP the fast writer stays off and both files come
-    # from the library's own path: the file checks below still hold.
-    verified = _mcap_verified()
-    files = {}
-    for fast in (True, False):
-        rng = np.random.default_rng(chunk_size)  # the same messages for both paths
-        path = tmp_path / f"{fast}.mcap"
-        with McapLogger(path, chunk_size=chunk_size, fast_messages=fast) as log:
-            assert (log._fast is not None) is (fast and verified)
-            t = 0.0
-            for k in range(600):
-                t += float(rng.choice([0.0, 0.001, 0.0105]))
-                topic = ["/plant/ground_truth", "/onboard/status", "/x/y"][k % 3]
-                n = int(rng.integers(0, 300))
-                log.log_json(topic, t, {"t": t, "v": rng.standard_normal(n), "k": k})
-                if k == 300:
-                    log.log_json("/late", 0.5 * t, {"late": True})  # earlier time: min/max
-            with pytest.raises(ValueError):
-                log.log_json("/x/y", -1.0, {"t": -1.0})
-            counted = log.messages
-        files[fast] = path.read_bytes()
-        assert counted == 601
-    assert files[True] == files[False]
-    with open(tmp_path / "True.mcap", "rb") as f:
-        reader = make_reader(f)
-        stats = reader.get_summary().statistics
-        msgs = list(reader.iter_messages())
-    assert stats.message_count == len(msgs) == 601
-
-
-def _mcap_verified() -> bool:
-    return ".".join(mcap.__version__.split(".")[:2]) in VERIFIED_MCAP
-
-
-def test_fast_writer_is_off_on_an_unverified_mcap_release(tmp_path, monkeypatch):
-    monkeypatch.setattr(mcap, "__version__", "9.9.0")
-    with McapLogger(tmp_path / "x.mcap") as log:
-        assert log._fast is None
-        log.log_json("/x", 1.0, {"t": 1.0})
-    with open(tmp_path / "x.mcap", "rb") as f:
-        assert [m.log_time for _, _, m in make_reader(f).iter_messages()] == [1_000_000_000]
-
-
-def test_fast_message_records_fail_as_the_library(tmp_path):
-    # A time beyond uint64 ns: the library's own error, on the write and again on finish
-    # (its statistics already hold the time), on both paths.
-    counters = []
-    for fast in (True, False):
-        log = McapLogger(tmp_path / f"{fast}.mcap", fast_messages=fast)
-        log.log_json("/x", 1.0, {"t": 1.0})
-        with pytest.raises(struct.error):
-            log.log_json("/x", 2e10, {"t": 1.0})
-        with pytest.raises(struct.error):
-            log.finish()
-        counters.append((log.messages, dict(log._seq)))
-    assert counters[0] == counters[1] == (1, {1: 2})

@@ -248,12 +248,13 @@ class _Uart:
         pass
 
 
-def test_leptrino_node_stream_equals_the_plain_encoder():
+def test_leptrino_node_stream_decodes_to_the_wrench_in_rated_counts():
+    # Oracle: the PC side's parser and response decoder, and the counts' rule written out
+    # (round(value * 10000 / rated), the sensor's manual).
     gen = np.random.default_rng(8)
     uart = _Uart()
     node = LeptrinoSensorNode(uart, "CFS034CA301U")
     node.streaming = True
-    expected = bytearray()
     rated = np.array(node.model.rated)
     for k in range(600):
         if k % 2 == 0:  # the bridge's 500 Hz against the node's 1 kHz
@@ -267,19 +268,22 @@ def test_leptrino_node_stream_equals_the_plain_encoder():
             node.sensor_no = 3
         uart.out.clear()
         node.tick(k * 0.001)
-        expected = node._sample_frame_plain()
-        assert bytes(uart.out).endswith(expected)
+        (event,) = lp.LeptrinoStreamParser().feed(bytes(uart.out))
+        sample = lp.parse_response(event.payload)
+        assert isinstance(sample, lp.ForceData)
+        counts = tuple(round(v * 10000 / r) for v, r in zip(node._wrench, rated, strict=True))
+        assert sample.raw == counts
+        assert sample.temperature == node.temperature and sample.term_no == node.sensor_no
+        assert sample.status == 0 and sample.result == 0
     assert node.saturated_samples > 0 and node.errors["bad_wrench"] > 0
 
 
-def test_leptrino_node_odd_field_types_take_the_plain_path():
+def test_leptrino_node_refuses_a_temperature_outside_int16():
     node = LeptrinoSensorNode(_Uart(), "CFS034CA301U")
     node.set_wrench([1.0, 2.0, 3.0], [0.1, 0.2, 0.3])
-    node.temperature = 25.0  # a float: struct refuses it, as before
-    with pytest.raises((lp.LeptrinoError, TypeError)) as fast_err:
+    node.temperature = 25.0  # a float
+    with pytest.raises(ValueError, match="temperature"):
         node._sample_frame()
-    with pytest.raises(type(fast_err.value)):
-        node._sample_frame_plain()
     node.temperature = 40000
-    with pytest.raises(lp.LeptrinoError):
+    with pytest.raises(ValueError, match="temperature"):
         node._sample_frame()

@@ -71,11 +71,6 @@ class PerchResult:
         result.__dict__.update(d)
         return result
 
-    @classmethod
-    def _from_plain(cls, d: dict[str, Any]) -> PerchResult:
-        """``cls(**d)`` (the plain form :meth:`_from` is tested against)."""
-        return cls(**d)
-
 
 _RESULT_FIELDS = frozenset(PerchResult.__dataclass_fields__)
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import bisect
 import contextlib
-import math
 import os
 import struct
 from collections.abc import Callable, Iterator, Sequence
@@ -77,8 +76,7 @@ class TimedCaptureFile:
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
         """Write ``data``: bytes a staged mark covers at its time (:meth:`marked`), the rest at
-        the clock's present time. The records come from ``capture_index_records`` (Rust);
-        :meth:`records_plain` is the same loop in Python (its reference in the tests)."""
+        the clock's present time. The records come from ``capture_index_records`` (Rust)."""
         n = len(data)
         if not n:
             return 0
@@ -89,33 +87,6 @@ class TimedCaptureFile:
         self._last_ns = last
         self._index.write(records)
         return n
-
-    def records_plain(self, start: int, n: int) -> tuple[bytes, int]:
-        """The index records of a write of ``n`` bytes at ``start`` and the new last time,
-        computed in Python (what :meth:`write` gets from Rust); changes nothing."""
-        pack = _RECORD.pack
-        last = self._last_ns  # a clock or mark that steps back is held here: ordered index
-        packed = []
-        done = 0  # bytes of data indexed so far
-        if self._staged is not None:
-            base, marks = self._staged
-            for t, end in marks:
-                stop = base + end - start  # the mark's end within data
-                if stop <= done:
-                    continue  # bytes written before, or a mark that does not advance
-                if not math.isfinite(t):
-                    break  # no time to give: the clock's
-                done = stop if stop < n else n
-                ns = time_ns(t)
-                last = ns if ns > last else last
-                packed.append(pack(last, start + done))
-                if done == n:
-                    break
-        if done < n:
-            ns = time_ns(self._clock())
-            last = ns if ns > last else last
-            packed.append(pack(last, start + n))
-        return b"".join(packed), last
 
     @contextlib.contextmanager
     def marked(self, marks: Sequence[tuple[float, int]]) -> Iterator[None]:

@@ -135,10 +135,10 @@ class LeptrinoSensorNode:
             self._write(self._sample_frame())
 
     def _sample_frame(self) -> bytes:
-        """The data frame of the latest wrench: reused while the wrench (the same tuple: a
-        new one per ``set_wrench``), temperature and sensor number are unchanged, encoded in
-        Rust otherwise (the same bytes as :meth:`_sample_frame_plain`; anything the Rust
-        encoder declines goes through the plain path and its exceptions)."""
+        """The data frame of the latest wrench, encoded in Rust (``leptrino_force_frame``) and
+        reused while the wrench (the same tuple: a new one per ``set_wrench``), temperature
+        and sensor number are unchanged. A temperature outside int16 or a sensor number
+        outside 0..254 raises ValueError."""
         w = self._wrench
         temp = self.temperature
         no = self.sensor_no
@@ -149,15 +149,12 @@ class LeptrinoSensorNode:
         if type(temp) is int and type(no) is int and -0x8000 <= temp <= 0x7FFF:
             frame = leptrino_force_frame(w, self.model.rated, temp, 0, no, 0)
         if frame is None:
-            frame = self._sample_frame_plain()
+            raise ValueError(
+                f"LeptrinoSensorNode: temperature {temp!r} must be an int in -32768..32767 "
+                f"and sensor_no {no!r} an int in 0..254"
+            )
         self._frame_cache = (w, temp, no, frame)
         return frame
-
-    def _sample_frame_plain(self) -> bytes:
-        """The data frame of the latest wrench by the Python codec."""
-        raw = lp.from_wrench(self._wrench, self.model)
-        sample = lp.ForceData(raw, self.temperature, 0, 0, self.sensor_no)
-        return lp.encode_response(sample)
 
     def _command(self, payload: bytes) -> None:
         try:

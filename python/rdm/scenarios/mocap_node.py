@@ -67,27 +67,19 @@ class MocapNode:
         self._pending: deque[tuple[float, float, list[float], list[float]]] = deque()
         self._last: list[float] | None = None
         self.enabled = True
-        #: Float64 vectors read with one ``tolist`` and the 3-vector difference written out
-        #: (the same floats as :meth:`tick_plain`, tests/test_truthlog_nodes.py); False:
-        #: always :meth:`tick_plain`.
-        self.fast_paths = True
 
     def tick(self, now: float) -> None:
         if self.sensor.source == "marker":
             self._tick_marker(now)
-            return
-        if not self.fast_paths:
-            self.tick_plain(now)
             return
         gt = self.plant.ground_truth()
         p = self._floats(gt.cog_position)
         last = self._last
         if last is None:
             v = [0.0] * len(p)
-        elif len(p) == 3 and len(last) == 3:
-            period = self.period
-            v = [(p[0] - last[0]) / period, (p[1] - last[1]) / period, (p[2] - last[2]) / period]
         else:
+            # Plain floats: the same IEEE operations as ``(p - last) / period`` on arrays, and
+            # lists of floats take the onboard node's cheap validation path.
             period = self.period
             v = [(a - b) / period for a, b in zip(p, last, strict=True)]
         self._last = p
@@ -103,24 +95,6 @@ class MocapNode:
         if type(value) is np.ndarray and value.dtype is _FLOAT64 and value.ndim == 1:
             return value.tolist()
         return np.asarray(value, dtype=float).reshape(-1).tolist()
-
-    def tick_plain(self, now: float) -> None:
-        """:meth:`tick` for any array-like truth fields (the reference form)."""
-        gt = self.plant.ground_truth()
-        # Plain floats: the same IEEE operations as the array form ``(p - last) / period``,
-        # and lists of floats take the onboard node's cheap validation path.
-        p = np.asarray(gt.cog_position, dtype=float).reshape(-1).tolist()
-        last = self._last
-        if last is None:
-            v = [0.0] * len(p)
-        else:
-            period = self.period
-            v = [(a - b) / period for a, b in zip(p, last, strict=True)]
-        self._last = p
-        if self.enabled:
-            w, x, y, z = np.asarray(gt.base_quaternion, dtype=float).reshape(-1).tolist()
-            yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-            self.onboard.set_mocap(p, v, yaw)
 
     def _tick_marker(self, now: float) -> None:
         gt = self.plant.ground_truth()

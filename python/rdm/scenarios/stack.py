@@ -493,13 +493,10 @@ class StatusNode:
 
     def __init__(self, stack: Stack) -> None:
         self.stack = stack
-        #: The record built with fewer calls (the same dict, tests/test_truthlog_nodes.py);
-        #: False: :meth:`record_plain`.
-        self.fast_paths = True
 
     def tick(self, now: float) -> None:
         s = self.stack
-        rec = self.record(now) if self.fast_paths else self.record_plain(now)
+        rec = self.record(now)
         s.status.append(rec)
         if s.logger is not None:
             s.logger.log_json("/onboard/status", now, rec)
@@ -539,8 +536,9 @@ class StatusNode:
         }
 
     def record(self, now: float) -> dict[str, Any]:
-        """:meth:`record_plain` reading each property once, an enum state's value and a
-        float64 vector's floats directly."""
+        """The status record at ``now``: the onboard state's value, the last command's base
+        thrust, perching QP status and perching thrusts, Spinal's duties and failsafe count
+        (each property read once)."""
         s = self.stack
         onboard = s.onboard
         c = onboard.last_command
@@ -560,25 +558,6 @@ class StatusNode:
             "perch_thrust": perch_thrust,
             "duties": list(s.spinal.duties),
             "failsafes": sum(failsafes.values()) if hasattr(failsafes, "values") else 0,
-        }
-
-    def record_plain(self, now: float) -> dict[str, Any]:
-        """The status record (the reference form)."""
-        s = self.stack
-        c = s.onboard.last_command
-        perch = getattr(c, "perch", None) if c is not None else None
-        return {
-            "t": now,
-            "state": s.onboard.state.value
-            if hasattr(s.onboard.state, "value")
-            else str(s.onboard.state),
-            "base_thrust": list(c.base_thrust) if c is not None else None,
-            "perch_status": _perch_status(perch),
-            "perch_thrust": _as_list(getattr(c, "perch_thrust", None)),
-            "duties": list(s.spinal.duties),
-            "failsafes": sum(s.spinal.counters.failsafes.values())
-            if hasattr(s.spinal.counters.failsafes, "values")
-            else 0,
         }
 
 

@@ -11,14 +11,14 @@ Two kinds of channel, each with a registered schema (PlotJuggler looks the schem
   arrays of numbers, nested objects).
 
 Log times are simulated time in ns. Chunks are small (64 KiB) so a crash loses little; call
-:meth:`McapLogger.finish` in a ``finally`` (it writes the summary and footer). By default a
-full chunk is compressed and written on one worker thread while the caller goes on (the same
-bytes; ``finish`` waits for it): a logger is used from one thread, as before.
+:meth:`McapLogger.finish` in a ``finally`` (it writes the summary and footer). The file is
+written by :class:`rdm.sim.mcap_writer.McapWriter` (a full chunk compressed and written on one
+worker thread while the caller goes on; ``finish`` waits for it); a logger is used from one
+thread.
 """
 
 from __future__ import annotations
 
-import contextlib
 import inspect
 import json
 import math
@@ -28,14 +28,13 @@ from collections.abc import Mapping
 from typing import Any, BinaryIO
 
 import numpy as np
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType
 
 from rdm.output_files import open_output
 from rdm.protocol.rosserial.msgdef import MsgSpec
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_registry
 
-from .json_record import encode_record
-from .mcap_fast import ChunkBatchWriter, chunk_batch_writer, chunk_message_writer
+from .mcap_writer import McapWriter
 
 CHUNK_SIZE = 64 * 1024
 #: Per dataclass type: (field names, attrgetter of them all, whether the values are the
@@ -65,8 +64,8 @@ def ros1_definition(registry: TypeRegistry, full_name: str) -> str:
 def _jsonable(value: Any) -> Any:
     if isinstance(value, np.ndarray):
         kind = value.dtype.kind
-        # Fast paths, same result as the element-wise walk: finite floats, ints and bools
-        # come out of tolist() as the Python values the walk would return.
+        # Finite floats, ints and bools come out of tolist() as the Python values the
+        # element-wise walk would return: one call for the common arrays.
         if kind in "iub":
             return value.tolist()
         if kind == "f" and value.ndim == 1:
@@ -135,25 +134,15 @@ class McapLogger:
         *,
         chunk_size: int = CHUNK_SIZE,
         compression: CompressionType = CompressionType.ZSTD,
-        fast_messages: bool = True,
-        native_messages: bool = True,
-        background_chunks: bool = True,
     ) -> None:
         self.path = path
         self._file: BinaryIO = open_output(path, "wb")
-        self._writer = Writer(self._file, chunk_size=chunk_size, compression=compression)
-        self._writer.start(profile="ros1", library="rdm")
-        #: The writer's message path in fewer calls (same bytes), None: ``add_message``.
-        #: ``native_messages``: the chunk's records built in Rust (:class:`ChunkBatchWriter`,
-        #: closed chunks compressed on a worker thread with ``background_chunks``); else the
-        #: Python form (:class:`rdm.sim.mcap_fast.ChunkMessageWriter`).
-        self._fast: Any = None
-        #: The native writer when it is the one in use (the records' one-call paths).
-        self._batch: ChunkBatchWriter | None = None
-        if fast_messages and native_messages:
-            self._fast = self._batch = chunk_batch_writer(self._writer, background_chunks)
-        if fast_messages and self._fast is None:
-            self._fast = chunk_message_writer(self._writer)
+        try:
+            self._writer = McapWriter(self._file, chunk_size=chunk_size, compression=compression)
+            self._writer.start(profile="ros1", library="rdm")
+        except BaseException:
+            self._file.close()
+            raise
         self._registry = registry
         self._channels: dict[str, tuple[int, str]] = {}  # topic -> (channel id, kind)
         self._schemas: dict[tuple[str, str], int] = {}
@@ -172,8 +161,7 @@ class McapLogger:
         key = (name, encoding)
         sid = self._schemas.get(key)
         if sid is None:
-            with self._outside():
-                sid = self._writer.register_schema(name=name, encoding=encoding, data=data)
+            sid = self._writer.register_schema(name=name, encoding=encoding, data=data)
             self._schemas[key] = sid
         return sid
 
@@ -186,13 +174,12 @@ class McapLogger:
             return known[0]
         text = ros1_definition(self.registry, type_name)
         sid = self._schema(type_name, "ros1msg", text.encode())
-        with self._outside():
-            cid = self._writer.register_channel(
-                topic=topic,
-                message_encoding="ros1",
-                schema_id=sid,
-                metadata={"md5sum": self.registry.md5(type_name)},
-            )
+        cid = self._writer.register_channel(
+            topic=topic,
+            message_encoding="ros1",
+            schema_id=sid,
+            metadata={"md5sum": self.registry.md5(type_name)},
+        )
         self._channels[topic] = (cid, f"ros1:{type_name}")
         return cid
 
@@ -204,16 +191,9 @@ class McapLogger:
         schema = _schema_of(_jsonable(dict(example)))
         name = schema_name or topic.strip("/").replace("/", ".") or "root"
         sid = self._schema(name, "jsonschema", json.dumps(schema, sort_keys=True).encode())
-        with self._outside():
-            cid = self._writer.register_channel(topic=topic, message_encoding="json", schema_id=sid)
+        cid = self._writer.register_channel(topic=topic, message_encoding="json", schema_id=sid)
         self._channels[topic] = (cid, "json")
         return cid
-
-    def _outside(self) -> contextlib.AbstractContextManager[None]:
-        """Around the writer's own calls: the native batch handed over first (see
-        :meth:`ChunkBatchWriter.outside`)."""
-        batch = self._batch
-        return batch.outside() if batch is not None else contextlib.nullcontext()
 
     # ------------------------------------------------------------------ messages
     def _time_ns(self, t: float) -> int:
@@ -224,15 +204,8 @@ class McapLogger:
     def _add(self, cid: int, t: float, data: bytes) -> None:
         ns = self._time_ns(t)
         seq = self._seq.get(cid, 0)
+        self._writer.add_message(cid, ns, seq, data)
         self._seq[cid] = seq + 1
-        fast = self._fast
-        if fast is not None:
-            fast.add(cid, ns, seq, data)
-        else:
-            with self._outside():
-                self._writer.add_message(
-                    channel_id=cid, log_time=ns, publish_time=ns, sequence=seq, data=data
-                )
         self.messages += 1
 
     def log_ros1(self, topic: str, type_name: str, t: float, message: Any) -> None:
@@ -245,36 +218,21 @@ class McapLogger:
         self._add(cid, t, data)
 
     def log_json(self, topic: str, t: float, values: Mapping[str, Any]) -> None:
-        """Log a dict of values (numpy arrays allowed; NaN/inf become null)."""
+        """Log a dict of values (numpy arrays allowed; NaN/inf become null). On a known
+        channel a flat record (the 100 Hz truth and status) is encoded in Rust straight into
+        the chunk; the text is ``json.dumps``'s, which writes any other record."""
         known = self._channels.get(topic)
         if known is not None:
-            batch = self._batch
-            if batch is not None:
-                # A flat record straight into the chunk (one Rust call; the text below).
-                cid = known[0]
-                ns = self._time_ns(t)
-                seq = self._seq.get(cid, 0)
-                if self._batched(batch, cid, seq, ns, batch.core.add_record(cid, seq, ns, values)):
-                    return
-            # Flat records (the 100 Hz truth and status): the same text, written faster.
-            text = encode_record(values)
-            if text is not None:
-                self._add(known[0], t, text.encode())
+            cid = known[0]
+            ns = self._time_ns(t)
+            seq = self._seq.get(cid, 0)
+            if self._writer.add_record(cid, ns, seq, values):
+                self._seq[cid] = seq + 1
+                self.messages += 1
                 return
         doc = _jsonable(dict(values))
         cid = self.json_channel(topic, doc)
         self._add(cid, t, json.dumps(doc, separators=(",", ":")).encode())
-
-    def _batched(self, batch: Any, cid: int, seq: int, ns: int, code: int) -> bool:
-        """After a batch ``add_*`` call returned ``code``: True when the batch took the
-        message (sequence and count advanced, a full chunk handed on), else False."""
-        if not code:
-            return False
-        self._seq[cid] = seq + 1
-        if code != 1:
-            batch.after(code, cid, ns, seq, b"")
-        self.messages += 1
-        return True
 
     def log_truth(self, truth: Any, topic: str = "/plant/ground_truth") -> None:
         """Log a :class:`rdm.plant.GroundTruth` (every field) at its own time."""
@@ -282,17 +240,17 @@ class McapLogger:
         if getter is None:
             getter = _FIELD_GETTERS[type(truth)] = _field_getter(type(truth))
         keys, values, direct = getter
-        batch = self._batch
-        if direct and batch is not None:
+        if direct:
             known = self._channels.get(topic)
             if known is not None:
                 # The fields straight from the instance dict into the chunk (one Rust call;
-                # the same text as the dict below, tests/test_truthlog_mcap.py).
+                # the same text as the dict below).
                 cid = known[0]
                 ns = self._time_ns(float(truth.time))
                 seq = self._seq.get(cid, 0)
-                code = batch.core.add_fields(cid, seq, ns, truth.__dict__, keys)
-                if self._batched(batch, cid, seq, ns, code):
+                if self._writer.add_fields(cid, ns, seq, truth.__dict__, keys):
+                    self._seq[cid] = seq + 1
+                    self.messages += 1
                     return
         # attrgetter: every field in one C call, in field order (as the dict comprehension).
         self.log_json(topic, float(truth.time), dict(zip(keys, values(truth), strict=True)))
@@ -304,14 +262,9 @@ class McapLogger:
             return
         self._finished = True
         try:
-            with self._outside():
-                self._writer.finish()
+            self._writer.finish()
         finally:
-            try:
-                if self._batch is not None:
-                    self._batch.close()
-            finally:
-                self._file.close()
+            self._file.close()
 
     def __enter__(self) -> McapLogger:
         return self
