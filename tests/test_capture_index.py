@@ -175,7 +175,7 @@ def test_a_tapped_link_with_a_clock_captures_the_same_bytes(tmp_path):
         assert index.times_ns == tuple(k * 1_000_000 for k in range(30))
 
 
-def test_write_marked_on_a_plain_capture_writes_the_bytes(tmp_path):
+def test_write_marked_on_an_untimed_capture_writes_the_bytes(tmp_path):
     dev, host = open_inproc_uart(tmp_path, "x", ".bin")
     assert isinstance(dev, TappedLink)
     assert dev.write_marked(b"abcdef", [(0.1, 3), (0.2, 6)]) == 6
