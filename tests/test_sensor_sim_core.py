@@ -185,24 +185,32 @@ def test_imu_bias_assignment_reaches_the_core_and_in_place_change_is_refused():
 # ------------------------------------------------------------------------ Leptrino frames
 
 
-def _plain_frame(wrench, rated, temperature=250, term_no=0) -> bytes | None:
-    model = lp.SensorModel("test", tuple(rated))
-    try:
-        raw = lp.from_wrench(wrench, model)
-        return lp.encode_response(lp.ForceData(raw, temperature, 0, 0, term_no))
-    except lp.LeptrinoError:
+def _counts(wrench, rated) -> tuple[int, ...] | None:
+    """The raw counts of the sensor's manual, round(value * 10000 / rated) (ties to even),
+    or None when a value is not finite or a count leaves int16."""
+    if not all(math.isfinite(w) for w in wrench):
         return None
+    raw = tuple(round(w * 10000 / r) for w, r in zip(wrench, rated, strict=True))
+    return raw if all(-0x8000 <= c <= 0x7FFF for c in raw) else None
 
 
-def test_leptrino_force_frame_equals_the_python_encoder():
+def _decoded(frame: bytes) -> lp.ForceData:
+    """One frame through the PC side's stream parser and response decoder."""
+    (event,) = lp.LeptrinoStreamParser().feed(frame)
+    assert event.error is None
+    sample = lp.parse_response(event.payload)
+    assert isinstance(sample, lp.ForceData)
+    return sample
+
+
+def test_leptrino_force_frame_decodes_to_the_rated_counts():
     gen = np.random.default_rng(3)
     rated = [10000.0] * 6  # raw = round(w): exact ties below
     model_rated = list(lp.MODELS["CFS034CA301U"].rated)
     cases = []
     for _ in range(1500):
         r = model_rated if gen.random() < 0.5 else rated
-        cases.append((gen.normal(0, 0.5, 6) * np.array(r)).tolist())
-        cases[-1] = (cases[-1], r)
+        cases.append(((gen.normal(0, 0.5, 6) * np.array(r)).tolist(), r))
     ties = [k + 0.5 for k in range(-6, 6)]
     cases += [(ties[i : i + 6], rated) for i in range(0, 7)]
     cases += [([16.0, 16.0 * 257, -16.0, 4112.0, 0.0, -0.0], rated)]  # DLE bytes: stuffing
@@ -210,18 +218,23 @@ def test_leptrino_force_frame_equals_the_python_encoder():
     cases += [([32767.5, 0.0, 0.0, 0.0, 0.0, 0.0], rated)]  # rounds to 32768: rejected
     cases += [([-32768.6, 0.0, 0.0, 0.0, 0.0, 0.0], rated)]
     cases += [([x, 0.0, 0.0, 0.0, 0.0, 0.0], rated) for x in (math.nan, math.inf, -math.inf)]
-    seen_dle = False
+    seen_dle = rejected = 0
     for wrench, r in cases:
-        want = _plain_frame(wrench, r)
+        want = _counts(wrench, r)
         got = leptrino_force_frame(wrench, r, 250, 0, 0, 0)
-        assert got == want, (wrench, got, want)
-        seen_dle |= want is not None and b"\x10\x10" in want
-    assert seen_dle
+        if want is None:
+            assert got is None, wrench
+            rejected += 1
+            continue
+        sample = _decoded(got)
+        assert sample.raw == want, wrench
+        assert (sample.temperature, sample.status, sample.term_no, sample.result) == (250, 0, 0, 0)
+        seen_dle += b"\x10\x10" in got
+    assert seen_dle and rejected == 5
     w = [1.0] * 6
     for temp, term in ((-32768, 0), (32767, 254), (-1, 16)):
-        assert leptrino_force_frame(w, rated, temp, 0, term, 0) == _plain_frame(
-            w, rated, temp, term
-        )
+        sample = _decoded(leptrino_force_frame(w, rated, temp, 0, term, 0))
+        assert (sample.raw, sample.temperature, sample.term_no) == ((1,) * 6, temp, term)
     for temp, status, term, result in (
         (32768, 0, 0, 0),
         (0, 256, 0, 0),
