@@ -2,15 +2,16 @@
 
 Perched, the flight controller holds every rotor at its hover share
 lambda_hover = Q-bar(CoG)^-1 [m g, 0, 0, 0] (eq. 6 with horizontal vectoring units), and the
-perching controller adds lambda_perch (eq. 37) on the foot rotors only (Table VII:
-Q_perch = Q(q) diag[1, 1, 0, 0]), with lambda_perch >= 0 (eq. 46) and the total at most
-the rotor maximum (eq. 47). An end-effector force F_ee = +-f e_j (j = x, y, z, world = foot
-axes) is feasible when some lambda_perch keeps every joint torque within its stall torque
-(eq. 61) and the foot perched with Table VII's conditions: normal force >= epsilon_z
-(eq. 39), friction (eq. 40), yaw friction (eq. 41) and the ZMP inside H_x, H_y (eq. 42).
-One LP per axis and sign over x = [f, lambda_perch,1, lambda_perch,2] on the dense QP
-solver (a tiny regulariser makes it a QP); the model binding gives the torques and the
-foot wrench, both affine in x.
+perching controller adds lambda_perch (eq. 37) on the rotors of the root unit only
+(Table VII: Q_perch = Q(q) diag[1, 1, 0, 0] for the RDM, whose root link carries the foot
+unit; the RCM's root link carries all four rotors, so all four perch), with
+lambda_perch >= 0 (eq. 46) and the total at most the rotor maximum (eq. 47). An
+end-effector force F_ee = +-f e_j (j = x, y, z, world = foot axes) is feasible when some
+lambda_perch keeps every joint torque within its stall torque (eq. 61) and the foot perched
+with Table VII's conditions: normal force >= epsilon_z (eq. 39), friction (eq. 40), yaw
+friction (eq. 41) and the ZMP inside H_x, H_y (eq. 42). One LP per axis and sign over
+x = [f, lambda_perch of each perching rotor] on the dense QP solver (a tiny regulariser
+makes it a QP); the model binding gives the torques and the foot wrench, both affine in x.
 """
 
 from __future__ import annotations
@@ -39,10 +40,13 @@ class PerchAuthority:
     perch_rotors: tuple[int, ...]
 
     @classmethod
-    def from_controller(cls) -> PerchAuthority:
-        """The perching QP's own parameters."""
+    def from_controller(cls, robot: Robot | None = None) -> PerchAuthority:
+        """The perching QP's own parameters; the perching rotors are Table VII's mask, or,
+        given ``robot``, the rotors of every vectoring unit on the root link."""
         p = _rdm.PerchQp(None).params()
         rotors = tuple(i for i, w in enumerate(p["perch_rotors"]) if w > 0.0)
+        if robot is not None:
+            rotors = root_rotors(robot)
         return cls(
             epsilon_z=float(p["epsilon_z"]),
             mu_xy=float(min(p["mu_x"], p["mu_y"])),
@@ -51,6 +55,16 @@ class PerchAuthority:
             half_y=float(p["half_size_y"]),
             perch_rotors=rotors,
         )
+
+
+def root_rotors(robot: Robot) -> tuple[int, ...]:
+    """Indices of the rotors whose vectoring unit sits on the foot unit's link."""
+    units = robot.vectoring_units
+    foot = next(u for u in units if u["name"].startswith("foot"))
+    root = [u["name"] for u in units if u.get("parent_link") == foot.get("parent_link")]
+    return tuple(
+        i for i, r in enumerate(robot.rotors) if any(r["parent"].startswith(n) for n in root)
+    )
 
 
 def hover_thrust(robot: Robot, q: np.ndarray) -> np.ndarray:
@@ -93,6 +107,7 @@ def perch_lp(
             signed.append(_loads(robot, q, foot, np.zeros(nr), ee, (0.0, 0.0, 0.0)))
     stall = np.asarray(robot.stall_torques)
     tmax = np.array([robot.rotors[k]["thrust_max"] for k in authority.perch_rotors])
+    tmin = np.array([robot.rotors[k]["thrust_min"] for k in authority.perch_rotors])
     a = authority
     k = len(authority.perch_rotors)
     # Rows that are affine in (f, x): (coefficient of f per signed axis, coefficient of x, h)
@@ -110,7 +125,8 @@ def perch_lp(
         push(-tau_f[:, i], -tau_x[i], stall[i] + tau0[i])
     for r in range(k):
         e = np.eye(k)[r]
-        push(np.zeros(6), -e, 0.0)  # eq. (46): lambda_perch >= 0
+        # eq. (46): lambda_perch >= 0, and the total at least the rotor minimum
+        push(np.zeros(6), -e, min(0.0, hover[authority.perch_rotors[r]] - tmin[r]))
         push(np.zeros(6), e, tmax[r] - hover[authority.perch_rotors[r]])  # eq. (47)
     # Normal force N = -w_z >= epsilon_z (eq. 39).
     n_f, n_x, n0 = -w_f[:, 2], -w_x[2], -w0[2]
@@ -126,12 +142,14 @@ def feasible_force(
 ) -> tuple[np.ndarray, float] | None:
     """Per-axis max |F_ee,j| [N] (x, y, z) and eq. (3)'s F_ee,feasible at joint vector
     ``q`` (all joints, vectoring angles included), perched; None when the foot cannot be
-    held even with no end-effector force or the hover share is outside the rotor range."""
-    a = authority or PerchAuthority.from_controller()
+    held even with no end-effector force or the hover share of a rotor that does not perch
+    is outside the rotor range (a perching rotor's total hover + lambda_perch must be)."""
+    a = authority or PerchAuthority.from_controller(robot)
     g_f, g_x, h, hover, _ = perch_lp(robot, q, a)
-    tmin = np.array([r["thrust_min"] for r in robot.rotors])
-    tmax = np.array([r["thrust_max"] for r in robot.rotors])
-    if np.any(hover < tmin) or np.any(hover > tmax):
+    fixed = [i for i in range(robot.n_rotors) if i not in a.perch_rotors]
+    tmin = np.array([robot.rotors[i]["thrust_min"] for i in fixed])
+    tmax = np.array([robot.rotors[i]["thrust_max"] for i in fixed])
+    if np.any(hover[fixed] < tmin) or np.any(hover[fixed] > tmax):
         return None
     k = g_x.shape[1]
     n = 1 + k
