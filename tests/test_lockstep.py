@@ -214,7 +214,7 @@ def test_bridge_couples_duties_goals_positions_and_sinks():
     bank = NeuronBankNode(InProcessBus("bridge_alone"), specs)
     neurons = bank.boards
     goal = round(layout.to_ticks("q1", 0.2))
-    feeder = _SpinalFrames(InProcessBus("bridge_alone"), goal)
+    feeder = SpinalFrames(InProcessBus("bridge_alone"), goal)
     imu, wrench, mocap, volts = [], [], [], []
     bridge = PlantBridge(
         plant,
@@ -254,7 +254,7 @@ def test_bridge_couples_duties_goals_positions_and_sinks():
         feeder.bus.shutdown()
 
 
-class _SpinalFrames:
+class SpinalFrames:
     """Spinal's side of the bus, written out: PWM 500 in every slot each ms; at 1 ms torque
     on for Neuron 2's first servo, from 2 ms its goal with the ack bit (fact sheet sec. 2.4)."""
 

@@ -290,8 +290,11 @@ def test_candump_capture_writes_what_python_cans_writer_writes(tmp_path):
 
 # --------------------------------------------------------------------------- joint feed
 def test_servos_see_the_plant_angle_of_the_bridge_tick():
-    """A Neuron reads its servo positions lazily; they are the plant's angles at the bridge
-    tick (before that tick's physics step), converted to ticks."""
+    """A Neuron reads its servo positions lazily, when a frame that needs them is handled;
+    they are the plant's angles at the bridge tick (before that tick's physics step),
+    converted to ticks."""
+    from test_lockstep import SpinalFrames
+
     from rdm.link.inproc_can import InProcessBus
     from rdm.nodes.lockstep import Lockstep
     from rdm.nodes.neuron_mirror import NeuronMirror
@@ -300,6 +303,8 @@ def test_servos_see_the_plant_angle_of_the_bridge_tick():
     plant = Plant("rdm", seed=1, fixed_base=True, ceiling_height=None)
     layout = default_layout(plant.description)
     buses = [InProcessBus("speed_feed") for _ in layout.neurons]
+    # Spinal's side: torque on for q1 (Neuron 2's first servo), then its goal with the ack bit
+    spinal = SpinalFrames(InProcessBus("speed_feed"), round(layout.to_ticks("q1", 0.3)))
     neurons = [
         NeuronMirror(b, nl.slave, layout.servo_configs(nl.slave), plant_driven=True)
         for b, nl in zip(buses, layout.neurons, strict=True)
@@ -315,14 +320,14 @@ def test_servos_see_the_plant_angle_of_the_bridge_tick():
         def tick(self, now):
             seen.append((servo.position, layout.to_ticks("q1", float(plant.servo_positions()[j]))))
 
-    servo.set_torque(True)
-    servo.goal = round(layout.to_ticks("q1", 0.3))
     try:
-        Lockstep([bridge, *neurons, Probe()], physics=plant).run(0.2)
+        Lockstep([bridge, *neurons, spinal, Probe()], physics=plant).run(0.2)
     finally:
-        for b in buses:
+        for b in [*buses, spinal.bus]:
             b.shutdown()
-    assert all(got == want for got, want in seen)
+    # from the first ms a frame that reads the positions reaches the board (the torque frame
+    # sent at 1 ms, handled at 2 ms; every ms after it a goal frame)
+    assert all(got == want for got, want in seen[2:])
     assert seen[-1][0] > seen[0][0] + 100  # the joint moved toward the goal
 
 
