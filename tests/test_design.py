@@ -15,6 +15,7 @@ from rdm.model import Robot
 from rdm.planner import PlannerSetup, evaluate_design, make_core
 from rdm.planner.design import PAPER_TABLE3, format_table, table_json
 from rdm.planner.perch_force import feasible_force
+from rdm.planner.plan import run_core
 from rdm.planner.reach import grid_image_voxels, voxel_volume
 
 #: Coarse grids for the tests (the documented figures use the defaults, docs/planner.md).
@@ -179,6 +180,90 @@ def test_perching_authority_is_below_every_rotor_acting():
     core = make_core(setup)
     ours = feasible_force(Robot.from_strs(setup.urdf, setup.toml), core.zeta[6:])
     assert ours is not None and 0.0 < ours[1] < core.feasible_force()[1]
+
+
+# --- the planner core's all-rotor LP (rdm_core planner/force.rs) ----------------------
+
+
+def _all_rotor_force_scipy(robot, zeta, thrust0, perch=5.0, eps_n=0.5):
+    """eq. (3) re-derived: for each axis and sign, max f with F_ee = ±f e_j held by thrust
+    changes dλ within the stall torques (eq. 61 from the model binding), the thrust range
+    with eq. (64)'s extra perching share, and the foot perched (normal force >= eps_n,
+    friction, yaw friction, ZMP in the plate). scipy's HiGHS LP."""
+    q, base = zeta[6:], list(zeta[:6])
+    ws = robot.evaluate(q, base_pose=base)
+    foot = np.array(ws["frames"]["foot"])[:3, 3]
+    base_p = np.array(zeta[:3])
+    lever = foot - base_p
+
+    def loads(thrusts, ee=None, gravity=(0.0, 0.0, 0.0)):
+        tau, res = robot.static_torques(
+            q, thrusts=list(thrusts), base_pose=base, end_effector_wrench=ee, gravity=gravity
+        )
+        f, m = np.array(res[:3]), np.array(res[3:])
+        return np.array(tau), -np.concatenate([f, m - np.cross(lever, f)])
+
+    tau0, w0 = loads(thrust0, gravity=(0.0, 0.0, -9.80665))
+    cols = [loads(np.eye(4)[k]) for k in range(4)]
+    pos = np.array(ws["rotor_positions"])
+    spin = np.array([r["spin"] for r in robot.rotors])
+    c = np.array([r["drag_to_thrust"] for r in robot.rotors])
+    z = np.array([0.0, 0.0, 1.0])
+    q_foot = np.array(
+        [np.concatenate([[1.0], np.cross(p - foot, z) - ci * s * z])
+         for p, s, ci in zip(pos, spin, c, strict=True)]
+    ).T  # fmt: skip
+    q_foot_inv = np.linalg.inv(q_foot)
+    stall = np.array(robot.stall_torques)
+    tmin = np.array([r["thrust_min"] for r in robot.rotors])
+    tmax = np.array([r["thrust_max"] for r in robot.rotors])
+    mu, mu_z = robot.friction
+    hx, hy = 0.5 * robot.plate_size[0], 0.5 * robot.plate_size[1]
+    best = np.zeros(3)
+    for j in range(3):
+        for sign in (1.0, -1.0):
+            ee = np.zeros(6)
+            ee[j] = sign
+            tau_f, w_f = loads(np.zeros(4), ee=list(ee))
+            T = np.column_stack([tau_f] + [cl[0] for cl in cols])  # torque per x
+            W = np.column_stack([w_f] + [cl[1] for cl in cols])  # foot wrench per x
+            A, b = [T, -T], [stall - tau0, stall + tau0]
+            up = np.hstack([np.zeros((4, 1)), np.eye(4)])
+            if j < 2:
+                up[:, 0] = q_foot_inv[:, 0] / mu
+            A += [up, -np.hstack([np.zeros((4, 1)), np.eye(4)])]
+            b += [tmax - thrust0, thrust0 - tmin]
+            n_row, n0 = -W[2], -w0[2]
+            A.append(-n_row[None])
+            b.append([n0 - eps_n])
+            for comp, lim in ((0, mu), (1, mu), (5, mu_z), (3, hy), (4, hx)):
+                A += [(W[comp] - lim * n_row)[None], (-W[comp] - lim * n_row)[None]]
+                b += [[lim * n0 - w0[comp]], [lim * n0 + w0[comp]]]
+            r = linprog(
+                np.r_[-1.0, np.zeros(4)], A_ub=np.vstack(A), b_ub=np.concatenate(b),
+                bounds=[(0.0, 200.0)] + [(None, None)] * 4, method="highs",
+            )  # fmt: skip
+            if r.status == 0:
+                best[j] = max(best[j], r.x[0])
+    return best
+
+
+def test_planner_all_rotor_force_matches_an_independent_lp():
+    """The planner core's own eq. (3) LP (Rust, every rotor acting; not the design sweep's)
+    against a scipy re-derivation built from the model binding's torques and wrenches, at
+    the start and two reached poses."""
+    setup = PlannerSetup.for_robot("rdm", "perched")
+    robot = Robot.from_strs(setup.urdf, setup.toml)
+    for target in (None, (0.2, -0.3, -0.7), (-0.2, 0.0, -0.7)):
+        core = make_core(setup)
+        lay = core.layout
+        if target is not None:
+            assert run_core(core, target, "perched").reached
+        t0 = core.values[lay["thrust"][0] : lay["thrust"][0] + 4]
+        per_axis, feasible = core.feasible_force()
+        ref = _all_rotor_force_scipy(robot, core.zeta.copy(), t0)
+        np.testing.assert_allclose(per_axis, ref, atol=1e-3 * (1 + ref.max()))
+        assert feasible == max(per_axis) > 0.0
 
 
 # --- the sweep ----------------------------------------------------------------------------
