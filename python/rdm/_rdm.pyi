@@ -1210,7 +1210,7 @@ def json_record(values: object) -> str | None:
 # --- truthlog ---
 @_final
 class McapChunkBatch:
-    """Message records of one MCAP chunk in the making (rdm.sim.mcap_fast.ChunkBatchWriter):
+    """Message records of one MCAP chunk in the making (rdm.sim.mcap_writer.McapWriter):
     each add appends one Message record (log time = publish time) and its index entry; the
     add methods return 0 when they decline (nothing added), 1 when added, 2 when added and
     the chunk buffer is now over ``chunk_size`` bytes."""

@@ -1,6 +1,6 @@
 //! Bindings of `rdm_core::sim::python_float_repr` and `rdm_core::sim::json_text`: JSON text
 //! written as Python's `json.dumps` writes it, for the run logger's 100 Hz records
-//! (`rdm.sim.mcap_log`, `rdm.sim.json_record`); and of `rdm_core::sim::mcap_chunk`: those
+//! (`rdm.sim.mcap_log`); and of `rdm_core::sim::mcap_chunk`: those
 //! records written straight into an MCAP chunk's message records (`McapChunkBatch`).
 
 use std::fmt::Write;
@@ -168,8 +168,8 @@ fn record_ids(
     ))
 }
 
-/// The message records of one MCAP chunk in the making, for ``rdm.sim.mcap_fast.
-/// ChunkBatchWriter``: each add appends one Message record (log time = publish time) and its
+/// The message records of one MCAP chunk in the making, for ``rdm.sim.mcap_writer.
+/// McapWriter``: each add appends one Message record (log time = publish time) and its
 /// index entry in one call, the JSON ones encoding the record straight into it; ``take``
 /// hands the batch to the ``mcap`` library's chunk builder. The add methods return 0 when
 /// they decline (nothing added: an id out of range, data that is not bytes, a record outside

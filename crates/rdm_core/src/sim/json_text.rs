@@ -2,7 +2,7 @@
 //! (`ensure_ascii=True`, compact separators): object keys restricted to characters
 //! `json.dumps` copies as they are, and string values escaped as `encode_basestring_ascii`
 //! does. With [`super::python_float_repr`] the run logger writes its 100 Hz records in one
-//! call, byte-equal with `json.dumps` (`rdm.sim.json_record`, tests/test_json_record.py).
+//! call, byte-equal with `json.dumps` (`rdm.sim.mcap_log`, tests/test_json_record.py).
 
 use std::fmt::Write;
 

@@ -1,6 +1,6 @@
 //! Message records of an MCAP chunk being built, written the way the `mcap` Python library's
 //! `Writer.add_message` writes them into its chunk buffer, with the message-index entries it
-//! keeps. The run logger (`rdm.sim.mcap_fast.ChunkBatchWriter`) appends its 100 Hz records
+//! keeps. The run logger (`rdm.sim.mcap_writer.McapWriter`) appends its 100 Hz records
 //! here in one call each and hands the batch to the library's chunk builder (bytes, index
 //! entries, time range) before the library writes anything else into that chunk or closes it,
 //! so the file is byte-identical with the library's own path (tests/test_truthlog_mcap.py).
