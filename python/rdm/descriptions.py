@@ -385,7 +385,9 @@ torque_range = [1.0, 1.0, 1.0]
 {chr(10).join(rotors)}"""
 
 
-def build_description(layout: str = "rdm", arm_unit_position: float = 1.0) -> Description:
+def build_description(
+    layout: str = "rdm", arm_unit_position: float = 1.0, foot_unit_position: float = 1.0
+) -> Description:
     """Generate a description.
 
     Args:
@@ -393,16 +395,29 @@ def build_description(layout: str = "rdm", arm_unit_position: float = 1.0) -> De
             ``"rcm"`` (both units on the root link: the rotor-concentrated comparison robot).
         arm_unit_position: for ``"rdm"``, where the arm unit sits along the middle link as a
             fraction of its length: 0 root, 0.5 middle, 1 end (Table II). Ignored for RCM.
+        foot_unit_position: for ``"rdm"``, where the foot unit sits along the root link as a
+            fraction of its length from the root joint (the plate): 1 the far tip (shipped),
+            0.3 beside the plate (the perching-envelope candidate). Ignored for RCM.
     """
     if layout == "rdm":
         if not 0.0 <= arm_unit_position <= 1.0:
             raise ValueError(f"arm_unit_position must lie in [0, 1], got {arm_unit_position}")
-        urdf = _urdf("rdm", ROOT_LINK_LENGTH, "middle_link", arm_unit_position * MIDDLE_LINK_LENGTH)
+        if not 0.0 <= foot_unit_position <= 1.0:
+            raise ValueError(f"foot_unit_position must lie in [0, 1], got {foot_unit_position}")
+        urdf = _urdf(
+            "rdm",
+            foot_unit_position * ROOT_LINK_LENGTH,
+            "middle_link",
+            arm_unit_position * MIDDLE_LINK_LENGTH,
+        )
         summary = (
             f"RDM: foot unit at the root-link tip, arm unit at fraction {_f(arm_unit_position)} "
             "(0 root, 1 end) of the middle link."
         )
         name = "rdm" if arm_unit_position == 1.0 else f"rdm_arm{round(arm_unit_position * 100)}"
+        if foot_unit_position != 1.0:
+            name += f"_foot{round(foot_unit_position * 100)}"
+            summary += f" Foot unit at fraction {_f(foot_unit_position)} of the root link."
     elif layout == "rcm":
         # Both units on the root link, ROTOR_SPACING apart along it (a quadrotor square).
         urdf = _urdf("rcm", ROOT_LINK_LENGTH - ROTOR_SPACING, "root_link", ROOT_LINK_LENGTH)

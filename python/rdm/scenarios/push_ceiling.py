@@ -43,16 +43,21 @@ def ceiling(
     mu: tuple[float, float, float] = MU,
     perch_rotors: tuple[int, ...] = (0, 1),
     thrust_min: float = 1.0,
+    thrust_gain: np.ndarray | None = None,
 ) -> np.ndarray:
     """Largest |F| [N] along each end-effector axis (x, y, z), pushed and pulled, that the
     contact conditions allow at posture ``q6`` (q1..q6; vectoring levelled as the scenario
-    does). ``half`` defaults to Table VII's H for ``"perch"``, the plate for ``"all"``."""
+    does). ``half`` defaults to Table VII's H for ``"perch"``, the plate for ``"all"``.
+    ``thrust_gain``: per-rotor factor on the thrust a command produces (the ceiling effect's
+    T/T0 near the surface), applied to ``thrust_max``; default 1."""
     if model not in ("perch", "all"):
         raise ValueError(f"model={model!r}: 'perch' or 'all'")
     half = half or (QP_HALF if model == "perch" else PLATE)
     o = robot.evaluate(leveled(np.asarray(q6, dtype=float), robot.n_q))
     qf = foot_allocation(np.asarray(o["allocation"]), np.asarray(o["foot_in_cog"]))
     tmax = np.array([r["thrust_max"] for r in robot.rotors], dtype=float)
+    if thrust_gain is not None:
+        tmax = tmax * np.asarray(thrust_gain, dtype=float)
     mg = float(o["mass"]) * GRAVITY
     ee = np.asarray(o["frames"]["end_effector"], dtype=float)
     p_ee, rot = ee[:3, 3], ee[:3, :3]
