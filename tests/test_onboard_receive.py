@@ -292,11 +292,14 @@ def test_servo_states_follow_the_servo_map():
     the present q, seen flags, joint targets and counters the servo map's rule gives, written
     out here: joint j of servo index i is i's position in ``servo_index`` (none, or j past
     the model's joints: counted unknown), q_j = sign * (raw - zero) * scale, a reading that
-    does not cover every joint counts partial, and the joint targets hold the present q once
-    every joint was seen."""
+    does not cover every joint counts partial, a reading that moves a seen joint by more than
+    SERVO_JUMP_MAX_RAD is not taken (counted implausible) unless it is the fourth such in a
+    row (counted resync), and the joint targets hold the present q once every joint was
+    seen."""
     from collections import Counter
 
     from rdm.nodes.onboard import OnboardNode
+    from rdm.nodes.onboard_receive import SERVO_JUMP_MAX_RAD
     from rdm.protocol.rosserial.registry import spinal_registry
 
     reg = spinal_registry()
@@ -304,6 +307,7 @@ def test_servo_states_follow_the_servo_map():
     node = OnboardNode(FedByteLink())
     smap, n_q = node.config.servo_map, node.robot.n_q
     q, seen, counts, targets = node.present_q.copy(), np.zeros(n_q, bool), Counter(), None
+    in_a_row = 0
     n = len(smap.servo_index)
     rng = random.Random(31)
     readings = servo_readings(rng, n, 12)
@@ -312,17 +316,27 @@ def test_servo_states_follow_the_servo_map():
         if k == 0:
             reading = readings[0][:3]  # partial first: the hold waits for every joint
         node._on_servo_states(states.new(servos=[unit.new(index=i, angle=a) for i, a in reading]))
-        covered = set()
+        covered, pairs = set(), []
         for i, a in reading:
             j = smap.servo_index.index(i) if i in smap.servo_index else None
             if j is None or j >= n_q:
                 counts["servo_unknown_index"] += 1
                 continue
-            q[j] = smap.angle_sign[j] * (a - smap.zero_point[j]) * smap.angle_scale[j]
-            seen[j] = True
+            pairs.append((j, smap.angle_sign[j] * (a - smap.zero_point[j]) * smap.angle_scale[j]))
             covered.add(j)
         if len(covered) != n_q:
             counts["servo_states_partial"] += 1
+        if any(seen[j] and abs(v - q[j]) > SERVO_JUMP_MAX_RAD for j, v in pairs):
+            in_a_row += 1
+            take = in_a_row > 3
+            counts["servo_states_resync" if take else "servo_states_implausible"] += 1
+            in_a_row = 0 if take else in_a_row
+        else:
+            take, in_a_row = True, 0
+        if take:
+            for j, v in pairs:  # a joint given twice: the last value
+                q[j] = v
+                seen[j] = True
         if targets is None and seen.all():
             targets = q.copy()
         assert node.present_q.tobytes() == q.tobytes()
@@ -334,4 +348,5 @@ def test_servo_states_follow_the_servo_map():
         if k % 50 == 0:  # someone else moves present_q: the cached writes still apply
             node.present_q[:] = q[:] = rng.random()
     assert counts["servo_unknown_index"] > 0 and counts["servo_states_partial"] > 0
+    assert counts["servo_states_implausible"] > 0 and counts["servo_states_resync"] > 0
     assert 0 < len(node._servo_cache) <= 8

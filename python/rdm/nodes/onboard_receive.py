@@ -23,6 +23,12 @@ from rdm.protocol.rosserial.services import ServiceError
 
 #: How many distinct ``servo/states`` readings the node keeps the joint writes of.
 SERVO_CACHE_SIZE = 8
+#: Largest joint change between two ``servo/states`` readings taken as real, rad. ASSUMPTION:
+#: Spinal reports at 25-50 Hz and a Dynamixel X turns at most ~6 rad/s unloaded, so a real
+#: reading moves a joint by at most ~0.25 rad; a larger jump is a damaged frame.
+SERVO_JUMP_MAX_RAD = 0.35
+#: Implausible readings in a row after which the next one is taken (the joint did move).
+SERVO_REJECTS_MAX = 3
 #: ``spinal/Imu`` payload from byte 20: gyro (3 float32), mag skipped, quaternion (4 float32).
 _IMU_GYRO_QUAT = struct.Struct("<3f12x4f")
 #: ``spinal/Imu`` payload from byte 8: the accelerometer (3 float32, m/s^2).
@@ -76,6 +82,9 @@ def servo_states_decodes(payload: bytes) -> bool:
 
 class OnboardReceive:
     """What the node takes in from Spinal (a part of :class:`rdm.nodes.onboard.OnboardNode`)."""
+
+    #: Implausible ``servo/states`` readings in a row (:meth:`_servo_plausible`).
+    _servo_rejects = 0
 
     @property
     def imu_euler(self) -> tuple[float, float, float] | None:
@@ -200,15 +209,38 @@ class OnboardReceive:
             self._servo_cache_map = smap
 
     def _apply_servo_entry(self, entry: tuple[np.ndarray, np.ndarray, int, bool]) -> None:
-        # a reading seen before: the same joint writes and counts as the loop
+        """One reading's joint values, unless implausible (:meth:`_servo_plausible`)."""
         joints, values, n_unknown, partial = entry
-        self.present_q[joints] = values
-        self._seen[joints] = True
         if n_unknown:
             self.counts["servo_unknown_index"] += n_unknown
         if partial:
             self.counts["servo_states_partial"] += 1
+        if not self._servo_plausible(joints, values):
+            return
+        self.present_q[joints] = values
+        self._seen[joints] = True
         self._hold_present_q()
+
+    def _servo_plausible(self, joints: np.ndarray, values: np.ndarray) -> bool:
+        """False for a reading with a joint more than :data:`SERVO_JUMP_MAX_RAD` from its last
+        accepted value (counted ``servo_states_implausible``): a frame damaged on the UART
+        whose 8-bit checksums still pass, which the controller must not act on. After
+        :data:`SERVO_REJECTS_MAX` rejections in a row the reading is taken (counted
+        ``servo_states_resync``): the joint did move, or the last accepted value was wrong."""
+        seen = self._seen[joints]
+        if not seen.any():
+            return True
+        jump = np.abs(values[seen] - self.present_q[joints[seen]])
+        if not (jump.max() > SERVO_JUMP_MAX_RAD):  # (a NaN never reaches here: to_rad is finite)
+            self._servo_rejects = 0
+            return True
+        self._servo_rejects += 1
+        if self._servo_rejects <= SERVO_REJECTS_MAX:
+            self.counts["servo_states_implausible"] += 1
+            return False
+        self.counts["servo_states_resync"] += 1
+        self._servo_rejects = 0
+        return True
 
     def _on_servo_states(self, msg: Any) -> tuple[np.ndarray, np.ndarray, int, bool] | None:
         """Apply one decoded reading; returns its cache entry (None when not cacheable)."""
@@ -222,32 +254,29 @@ class OnboardReceive:
         if hit is not None:
             self._apply_servo_entry(hit)
             return hit
-        covered = set()
         joints, values, n_unknown = [], [], 0
         for s in msg.servos:
             joint = smap.joint_of(int(s.index))
             if joint is None or joint >= self.robot.n_q:
-                self.counts["servo_unknown_index"] += 1
                 n_unknown += 1
                 continue
-            value = smap.to_rad(joint, int(s.angle))
-            self.present_q[joint] = value
-            self._seen[joint] = True
-            covered.add(joint)
             joints.append(joint)
-            values.append(value)
-        partial = len(covered) != self.robot.n_q
-        if partial:
-            self.counts["servo_states_partial"] += 1
-        entry = None
-        if key is not None and len(covered) == len(joints):  # no joint written twice
+            values.append(smap.to_rad(joint, int(s.angle)))
+        covered = set(joints)
+        entry = (
+            np.array(joints, dtype=np.intp),
+            np.array(values, dtype=float),
+            n_unknown,
+            len(covered) != self.robot.n_q,
+        )
+        cacheable = key is not None and len(covered) == len(joints)  # no joint written twice
+        if cacheable:
             cache = self._servo_cache
-            entry = (np.array(joints, dtype=np.intp), np.array(values), n_unknown, partial)
             cache[key] = entry
             if len(cache) > SERVO_CACHE_SIZE:
                 del cache[next(iter(cache))]  # the oldest
-        self._hold_present_q()
-        return entry
+        self._apply_servo_entry(entry)
+        return entry if cacheable else None
 
     def _hold_present_q(self) -> None:
         if self.joint_targets is None and self._trajectory is None and self._seen.all():
