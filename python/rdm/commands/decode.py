@@ -11,6 +11,13 @@ With ``--mcap OUT`` the capture, or every capture of a run folder, is written as
 instead, each message at the simulated time it crossed its wire (:mod:`rdm.sim.wire_mcap`).
 
 The CAN and Leptrino decoders live in other modules and are imported only when asked for.
+
+Decoding streams: a capture is read in chunks of :data:`CHUNK_BYTES`, each record is written
+as soon as its frame is complete, and the summary is counted on the way, so memory does not
+grow with the capture. A run of OK Leptrino samples comes from the decoder as one numpy batch
+(:class:`rdm.protocol.leptrino_capture.ForceRun`) and is written by
+:func:`rdm.commands.decode_lines.force_run_lines`: the lines :func:`format_record` and the JSON
+form give its records one by one.
 """
 
 from __future__ import annotations
@@ -26,11 +33,24 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from rdm.commands.decode_lines import force_run_lines
 from rdm.commands.output import check_output_path, json_text
 from rdm.json_values import nulled
 from rdm.protocol.capture_formats import EXTENSIONS, detect_format
 
-Records = Iterator[dict[str, Any]]
+Records = Iterator[Any]  # dicts, and ForceRun batches from the Leptrino decoder
+
+#: Bytes read from a capture at a time (the decoders keep at most a chunk's events).
+CHUNK_BYTES = 1 << 16
+#: Leptrino chunks are larger: its decoder keeps events only between frame starts.
+LEPTRINO_CHUNK_BYTES = 1 << 18
+
+
+def read_chunks(path: Path, size: int = CHUNK_BYTES) -> Iterator[bytes]:
+    """The bytes of the file at ``path``, ``size`` at a time."""
+    with open(path, "rb") as fh:
+        while chunk := fh.read(size):
+            yield chunk
 
 
 class DecoderUnavailable(RuntimeError):
@@ -94,7 +114,7 @@ def _decode_uart(path: Path, args: argparse.Namespace) -> Records:
     from rdm.protocol.rosserial.capture import decode_uart
 
     layout = None if args.no_layout else load_checked_layout(args.layout)
-    return decode_uart(path.read_bytes(), layout=layout)
+    return decode_uart(read_chunks(path), layout=layout)
 
 
 def _lazy(module: str, function: str) -> Callable[..., Records]:
@@ -116,9 +136,10 @@ def _decode_candump(path: Path, args: argparse.Namespace) -> Records:
 def _decode_leptrino(path: Path, args: argparse.Namespace) -> Records:
     """The frames, then one bad record ``discarded: N bytes outside any frame`` when the
     parser skipped bytes that belong to no frame (garbage between frames is counted)."""
-    decode = _lazy("rdm.protocol.leptrino", "decode_leptrino")
+    _lazy("rdm.protocol.leptrino", "decode_leptrino")
+    decode = _lazy("rdm.protocol.leptrino_capture", "iter_leptrino_records")
     parser = _lazy("rdm.protocol.leptrino", "LeptrinoStreamParser")()
-    yield from decode(path.read_bytes(), parser=parser)
+    yield from decode(read_chunks(path, LEPTRINO_CHUNK_BYTES), parser=parser)
     if parser.discarded_bytes:
         n = parser.discarded_bytes
         yield {
@@ -182,6 +203,11 @@ def bad_reason(rec: dict[str, Any]) -> str:
 
 def _json_line(rec: dict[str, Any]) -> str:
     """One record as valid JSON: a value that is not a finite number is null."""
+    if _plain_bad_frame(rec):  # json.dumps's own text for these keys and values
+        return (
+            f'{{"offset": {rec["offset"]}, "kind": "bad_frame", "ok": false, '
+            f'"error": "{rec["error"]}", "bytes": "{rec["bytes"]}"}}'
+        )
     try:
         return json_text(rec, default=str)
     except ValueError:
@@ -196,8 +222,29 @@ def _where(rec: dict[str, Any]) -> str:
     return "?"
 
 
+#: Bad-frame reasons of the UART decoder: plain words, written without a JSON encoder.
+_PLAIN_REASONS = frozenset(
+    ("version", "length_checksum", "oversize", "message_checksum", "timeout", "truncated")
+)
+
+
+def _plain_bad_frame(rec: dict[str, Any]) -> bool:
+    """A UART bad-frame record of the usual five keys (garbage floods are made of them)."""
+    return (
+        len(rec) == 5
+        and rec.get("kind") == "bad_frame"
+        and rec.get("error") in _PLAIN_REASONS
+        and rec.get("offset").__class__ is int
+        and rec.get("bytes").__class__ is str
+        and rec["bytes"].isalnum()
+    )
+
+
 def format_record(rec: dict[str, Any]) -> str:
     """One human-readable line for a decoded record."""
+    if _plain_bad_frame(rec):  # the general form below, without json.dumps
+        detail = f'{{"kind": "bad_frame", "bytes": "{rec["bytes"]}"}}'
+        return f"@{rec['offset']} BAD {rec['error']} {detail}"
     if not rec.get("ok", False):
         detail = {k: v for k, v in rec.items() if k not in ("offset", "line", "ok", "error")}
         return f"{_where(rec)} BAD {rec.get('error')} {json.dumps(detail, default=str)}"
@@ -308,15 +355,20 @@ def run(args: argparse.Namespace) -> int:
             print(f"rdm decode: {exc}", file=sys.stderr)
             return 2
     counts: Counter[str] = Counter()
+    write = sys.stdout.write
+    line = _json_line if args.json else format_record
     try:
         for rec in FORMATS[name].decode(path, args):
-            counts["ok" if rec.get("ok") else "bad"] += 1
-            if not rec.get("ok"):
-                counts[f"bad:{bad_reason(rec)}"] += 1
-            if args.json:
-                print(_json_line(rec))
+            if rec.__class__ is not dict:  # a batch of OK Leptrino samples
+                counts["ok"] += len(rec)
+                write(force_run_lines(rec, args.json))
+                continue
+            if rec.get("ok"):
+                counts["ok"] += 1
             else:
-                print(format_record(rec))
+                counts["bad"] += 1
+                counts[f"bad:{bad_reason(rec)}"] += 1
+            write(line(rec) + "\n")
     except DecoderUnavailable as exc:
         print(f"rdm decode: {name}: {exc}", file=sys.stderr)
         return 2

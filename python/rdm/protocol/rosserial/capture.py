@@ -14,7 +14,7 @@ the frame), ``kind``, ``ok``, ``error`` and, for frames, ``topic_id``, ``topic``
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -77,7 +77,7 @@ def load_layout(path: str | Path | None = None) -> dict[str, Any]:
 
 
 def decode_uart(
-    data: bytes,
+    data: bytes | Iterable[bytes],
     registry: TypeRegistry | None = None,
     layout: dict[str, Any] | None = None,
     max_payload: int = C.OUTPUT_SIZE - C.FRAME_OVERHEAD,
@@ -85,39 +85,52 @@ def decode_uart(
     raw: bool = False,
 ) -> Iterator[dict[str, Any]]:
     """Yield one record per frame, bad frame or run of skipped bytes, in stream order.
-    With ``raw``, a decoded frame's record also carries its payload bytes as ``raw`` (the
-    message's ROS1 serialisation)."""
+
+    ``data`` is the capture, whole or as an iterable of byte chunks (any chunking gives the
+    same records: a run of skipped bytes cut by a chunk boundary is one record), so a file
+    read piece by piece is decoded in memory bounded by the chunk size. With ``raw``, a
+    decoded frame's record also carries its payload bytes as ``raw`` (the message's ROS1
+    serialisation)."""
     registry = registry or spinal_registry()
     table = _TopicTable(registry, layout)
     topic_info = registry.msg("rosserial_msgs/TopicInfo")
     parser = FrameParser(max_payload)
+    chunks = (data,) if isinstance(data, bytes | bytearray | memoryview) else data
     covered = 0  # end of the last rejected frame: bytes skipped inside it belong to it
-    for item in parser.feed(bytes(data)):
-        if isinstance(item, SkippedBytes):
-            start = max(item.offset, covered)
-            length = item.offset + len(item.data) - start
-            if length > 0:
+    skip_start, skip_len = 0, 0  # a run of skipped bytes not yet reported (it may continue)
+    for chunk in chunks:
+        for item in parser.feed(bytes(chunk)):
+            if isinstance(item, SkippedBytes):
+                start = max(item.offset, covered)
+                length = item.offset + len(item.data) - start
+                if length <= 0:
+                    continue
+                if skip_len and skip_start + skip_len == start:
+                    skip_len += length
+                else:
+                    if skip_len:
+                        yield _skipped_record(skip_start, skip_len)
+                    skip_start, skip_len = start, length
+                continue
+            if skip_len:
+                yield _skipped_record(skip_start, skip_len)
+                skip_len = 0
+            if isinstance(item, BadFrame):
+                covered = max(covered, item.offset + len(item.data))
                 yield {
-                    "offset": start,
-                    "kind": "skipped",
+                    "offset": item.offset,
+                    "kind": "bad_frame",
                     "ok": False,
-                    "error": f"{length} bytes outside any frame",
-                    "length": length,
+                    "error": item.reason,
+                    "bytes": item.data.hex(),
                 }
-        elif isinstance(item, BadFrame):
-            covered = max(covered, item.offset + len(item.data))
-            yield {
-                "offset": item.offset,
-                "kind": "bad_frame",
-                "ok": False,
-                "error": item.reason,
-                "bytes": item.data.hex(),
-            }
-        elif isinstance(item, Frame):
-            rec = _frame_record(item, table, topic_info)
-            if raw and rec["ok"]:
-                rec["raw"] = item.payload
-            yield rec
+            elif isinstance(item, Frame):
+                rec = _frame_record(item, table, topic_info)
+                if raw and rec["ok"]:
+                    rec["raw"] = item.payload
+                yield rec
+    if skip_len:
+        yield _skipped_record(skip_start, skip_len)
     # a frame cut off at the end of the capture
     if parser.in_frame:
         offset, rest = parser.pending
@@ -128,6 +141,16 @@ def decode_uart(
             "error": "truncated",
             "bytes": rest.hex(),
         }
+
+
+def _skipped_record(start: int, length: int) -> dict[str, Any]:
+    return {
+        "offset": start,
+        "kind": "skipped",
+        "ok": False,
+        "error": f"{length} bytes outside any frame",
+        "length": length,
+    }
 
 
 def _frame_record(frame: Frame, table: _TopicTable, topic_info: MessageCodec) -> dict[str, Any]:
