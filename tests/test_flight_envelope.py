@@ -233,3 +233,31 @@ def test_hanging_flight_stage_flies_the_tracking_motion(tmp_path):
     assert e.pos_max.max() < 1.0 and e.att_max.max() < 0.2
     cog_z = np.array([g.cog_position[2] for g in res.stack.truth if g.time > 13.0])
     assert cog_z.min() > 0.5
+
+
+def test_table_v_x_loop_is_the_lightly_damped_pair_of_a_slow_pitch_loop():
+    """Table V's x PID at q = 0: the least-damped pair equals that of the reduced model
+    ``s^3 (s + 13.6)(s + 2.8) + 38.7 (7 s^2 + 4.6 s + 1.5)`` (the pitch loop as the
+    identified 38.7 / ((s + 13.6)(s + 2.8)), x = g theta / s^2, the PID over g), roots by
+    numpy; a stiffer pitch (inertia / 100) raises the damping only to ~0.24, the ceiling set
+    by Table V's sqrt(600 / 80) rad/s pitch pole; Table V's weights read in the paper's
+    eq. (26) order (angles, rates, integrals) make the loop diverge."""
+    robot = Robot.default()
+    q = fe.levelled_configuration(robot, np.zeros(6))
+    zeta, wn = fe.least_damped_pair(fe.horizontal_loop_poles(robot, q, TABLE_V_X, "x"))
+    poly = np.polyadd(
+        np.polymul([1, 0, 0, 0], np.polymul([1, 13.6], [1, 2.8])), 38.7 * np.array([7, 4.6, 1.5])
+    )
+    ref = np.roots(poly)
+    ref_pair = ref[np.abs(ref.imag) > 1.0][0]
+    assert wn == pytest.approx(abs(ref_pair), rel=0.03)
+    assert zeta == pytest.approx(-ref_pair.real / abs(ref_pair), rel=0.1)
+    assert zeta < 0.1
+    stiff, _ = fe.least_damped_pair(
+        fe.horizontal_loop_poles(robot, q, TABLE_V_X, "x", inertia_scale=0.01)
+    )
+    assert 0.2 < stiff < 0.3
+    w = TABLE_V_W1
+    paper_order = [w[0], w[4], w[1], w[5], w[2], w[6], w[3], w[7], *w[8:]]
+    ev = fe.horizontal_loop_poles(robot, q, TABLE_V_X, "x", q_weights=paper_order)
+    assert ev.real.max() > 0.05

@@ -105,18 +105,29 @@ def horizontal_loop_poles(
     axis: str,
     k_tilt: float = 1.0,
     gravity: float = GRAVITY,
+    q_weights: Sequence[float] | None = None,
+    r_weights: Sequence[float] | None = None,
+    inertia_scale: float = 1.0,
 ) -> np.ndarray:
     """Eigenvalues of the linearised hover at full configuration ``q``: the LQI loop (Table V
     weights, gains synthesised at q as the onboard node does) closed around the rigid body, and
     the position PID ``pid`` = (P, I, D) of eq. (30) on ``axis`` "y" (roll target
     φ_d = -k_tilt a_y / g, eq. 31, a_y = -g φ) or "x" (pitch target θ_d = k_tilt a_x / g,
     eq. 32, a_x = g θ). Lateral vectoring, delays and the firmware's per-rotor yaw spread are
-    not modelled. Any eigenvalue with a positive real part: that cascade diverges at q."""
+    not modelled. Any eigenvalue with a positive real part: that cascade diverges at q.
+    ``q_weights`` (12, JSK order), ``r_weights`` (4): LQI weights other than Table V's;
+    ``inertia_scale``: the inertia the LQI is synthesised for and acts on, times this."""
     if axis not in ("x", "y"):
         raise ValueError(f"axis={axis!r}: 'x' or 'y'")
     out = robot.evaluate(np.asarray(q, dtype=float))
-    res = LqiSynthesizer(clamp_gain=False).synthesize(
-        out["mass"], np.asarray(out["inertia"]), np.asarray(out["allocation_bar"])
+    res = LqiSynthesizer(
+        q_weights=None if q_weights is None else np.asarray(q_weights, dtype=float),
+        r_weights=None if r_weights is None else np.asarray(r_weights, dtype=float),
+        clamp_gain=False,
+    ).synthesize(
+        out["mass"],
+        np.asarray(out["inertia"]) * inertia_scale,
+        np.asarray(out["allocation_bar"]),
     )
     k, b = np.asarray(res.k, dtype=float), np.asarray(res.b, dtype=float)
     n = 15  # 12 LQI states, then horizontal position, velocity and its error integral
@@ -136,3 +147,13 @@ def horizontal_loop_poles(
     f[13, state] = sign * gravity
     f[14, 12] = 1.0
     return np.linalg.eigvals(f)
+
+
+def least_damped_pair(poles: np.ndarray, below: float = 20.0) -> tuple[float, float]:
+    """(damping ratio, natural frequency [rad/s]) of the least-damped oscillatory pole pair
+    slower than ``below`` rad/s (the position loop's mode); (nan, nan) if there is none."""
+    osc = [complex(e) for e in poles if abs(e.imag) > 1e-6 and abs(e) < below]
+    if not osc:
+        return math.nan, math.nan
+    e = min(osc, key=lambda v: -v.real / abs(v))
+    return -e.real / abs(e), abs(e)
