@@ -7,7 +7,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
+from rdm.descriptions import build_description
 from rdm.scenarios import perch_envelope as pe
 from rdm.scenarios.perching import leveled
 
@@ -112,3 +114,9 @@ def test_ceiling_gain_and_commanded_foot_thrust() -> None:
 def test_command_line_rejects_unknown_argument(capsys) -> None:
     assert pe.main(["--bogus"]) == 2
     assert "--bogus" in capsys.readouterr().err
+
+
+def test_foot_unit_position_out_of_range_is_named() -> None:
+    with pytest.raises(ValueError, match="foot_unit_position must lie in"):
+        build_description("rdm", 1.0, 1.5)
+    assert build_description("rdm", 1.0, 0.1).name == "rdm_foot10"

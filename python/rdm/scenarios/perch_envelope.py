@@ -135,7 +135,14 @@ def _hover(o: dict[str, Any]) -> np.ndarray:
     return np.linalg.lstsq(np.asarray(o["allocation_bar"]), [mg, 0, 0, 0], rcond=None)[0]
 
 
-def _thrust_needed(robot, q6, gain, tmax, target, kw) -> list[float]:
+def _thrust_needed(
+    robot: _rdm.Robot,
+    q6: np.ndarray,
+    gain: np.ndarray,
+    tmax: float,
+    target: tuple[float, float, float],
+    kw: dict[str, Any],
+) -> list[float]:
     """Smallest common rotor thrust limit [N] at which each axis' "perch" bound reaches
     ``target`` (log bisection in [tmax, 100 tmax]; inf beyond)."""
     out = []
@@ -186,7 +193,7 @@ def envelope(
     up = axis[cols, 2]
     lam = epsilon_z / float(np.sum(up)) * np.ones(len(cols))  # symmetric press of eps_z
     commanded = (hover[cols] + lam) / (gain[cols] * hover[cols])
-    kw = {"epsilon_z": epsilon_z, "mu": MU, "perch_rotors": foot_rotors}
+    kw: dict[str, Any] = {"epsilon_z": epsilon_z, "mu": MU, "perch_rotors": foot_rotors}
     perch = ceiling(robot, q6, "perch", thrust_gain=gain, **kw)
     allr = ceiling(robot, q6, "all", thrust_gain=gain, **kw)
     relaxed = {
