@@ -9,6 +9,7 @@ field of its widest width; the padding (NUL bytes, never part of the text) is th
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -49,14 +50,6 @@ _JSON: tuple[tuple[str, str], ...] = (
     (', "term_no": ', "term_no"),
 )
 _JSON_END = "}\n"
-_INT_FIELDS = (
-    "offset",
-    *(f"raw{k}" for k in range(6)),
-    "temperature",
-    "status",
-    "result",
-    "term_no",
-)
 
 
 def decimal_digits(values: npt.ArrayLike) -> npt.NDArray[np.uint8]:
@@ -79,6 +72,12 @@ def decimal_digits(values: npt.ArrayLike) -> npt.NDArray[np.uint8]:
     return out
 
 
+@functools.cache
+def _int16_table() -> npt.NDArray[np.uint8]:
+    """Row ``v + 32768`` is ``str(v)`` for every int16 ``v`` (6 bytes, NUL-padded)."""
+    return decimal_digits(np.arange(-32768, 32768))
+
+
 def _fixed(text: str, n: int) -> npt.NDArray[np.uint8]:
     row = np.frombuffer(text.encode("ascii"), np.uint8)
     return np.broadcast_to(row, (n, len(row)))
@@ -89,15 +88,14 @@ def force_run_lines(run: Any, as_json: bool) -> str:
     n = len(run)
     if not n:
         return ""
-    columns = np.empty((n, len(_INT_FIELDS)), np.int64)
-    columns[:, 0] = run.offsets
-    columns[:, 1:7] = run.raw
-    columns[:, 7] = run.temperature
-    columns[:, 8] = run.status
-    columns[:, 9] = run.result
-    columns[:, 10] = run.term_no
-    digits = decimal_digits(columns)
-    fields = {name: digits[:, j, :] for j, name in enumerate(_INT_FIELDS)}
+    table = _int16_table()
+    fields = {"offset": decimal_digits(run.offsets)}
+    raw = run.raw.astype(np.int64) + 32768
+    for k in range(6):
+        fields[f"raw{k}"] = table[raw[:, k]]
+    fields["temperature"] = table[run.temperature.astype(np.int64) + 32768]
+    for name in ("status", "result", "term_no"):  # uint8: the last three columns suffice
+        fields[name] = table[getattr(run, name).astype(np.int64) + 32768, -3:]
     fields["hex"] = _HEX[run.payloads].reshape(n, -1)
     layout, end = (_JSON, _JSON_END) if as_json else (_TEXT, _TEXT_END)
     parts: list[npt.NDArray[np.uint8]] = []
@@ -105,5 +103,4 @@ def force_run_lines(run: Any, as_json: bool) -> str:
         parts.append(_fixed(text, n))
         parts.append(fields[name])
     parts.append(_fixed(end, n))
-    matrix = np.hstack(parts).ravel()
-    return matrix[matrix != _PAD].tobytes().decode("ascii")
+    return np.hstack(parts).tobytes().replace(b"\0", b"").decode("ascii")
