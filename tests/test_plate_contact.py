@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from test_plant_physics import _perch_plant, _perch_thrusts
 from test_truthlog_truth import _measures_equal
+from truth_reference import measure_reference
 
 from rdm._rdm import PlateContactCore
 from rdm.plant import NoCeilingEffect
@@ -33,16 +34,13 @@ def _perched_run(steps: int, every: int):
             yield plant
 
 
-def test_the_rust_measurement_has_the_bits_of_the_float_and_array_forms():
+def test_the_rust_measurement_has_the_bits_of_mujocos_contact_forces_summed():
     seen = set()
     for plant in _perched_run(900, 3):
         tracker, d = plant._tracker, plant._fresh()
-        # same data, same anchor: each form's bookkeeping (_track) leaves the same state
+        # same data, same anchor: each one's bookkeeping (_track) leaves the same state
         rust = tracker.measure_contacts(d)
-        floats = tracker.measure_contacts_floats(d)
-        arrays = tracker.measure_contacts_arrays(d)
-        _measures_equal(rust, floats)
-        _measures_equal(rust, arrays)
+        _measures_equal(rust, measure_reference(tracker, d))
         seen.add((rust[0], rust[5] != 0.0))
     assert {n for n, _ in seen} == {0, 1, 2, 3, 4}
     assert any(n > 0 and yaw for n, yaw in seen)
@@ -68,7 +66,7 @@ def test_the_measured_force_is_the_force_mujoco_puts_on_the_plate():
     assert checked >= 15
 
 
-def test_a_pyramidal_cone_takes_the_float_form():
+def test_a_pyramidal_cone_takes_the_numpy_form():
     thrust = _perch_thrusts(4.0)
     plants = []
     for _ in range(2):
@@ -91,7 +89,7 @@ def test_a_pyramidal_cone_takes_the_float_form():
 
     fast._tracker._sums_core = Spy()
     a = fast._tracker.measure_contacts(fast._fresh())
-    b = plain._tracker.measure_plain(plain._fresh())
+    b = measure_reference(plain._tracker, plain._fresh())
     assert a[0] > 0 and calls == []
     _measures_equal(a, b)
 

@@ -1,7 +1,8 @@
 """The flying robot's ground-truth record in one Rust call (``RotorPlantCore.truth_free``)
 against the record built from the tracker's measurement and the MjData copies
-(``Plant._ground_truth_arrays``) and the reference form (``Plant._ground_truth_plain``); the
-contact measurement's float sums against its array and plain forms."""
+(``Plant._ground_truth_arrays``) and the truth derived directly from MuJoCo
+(``truth_reference.ground_truth_reference``: the contact objects, ``mj_contactForce``, numpy
+copies); the contact measurement in Rust against its numpy form and that derivation."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from contextlib import contextmanager
 import numpy as np
 import pytest
 from test_plant_physics import _perch_plant, _perch_thrusts
+from truth_reference import ground_truth_reference, measure_reference
 
 from rdm._rdm import RotorPlantCore
 from rdm.plant import NoCeilingEffect, Plant
@@ -100,7 +102,7 @@ def test_one_call_record_equals_the_other_forms_through_takeoff_and_flight(fixed
                 used += 1
             a = fast._ground_truth()
             b = arrays._ground_truth_arrays()
-            c = plain._ground_truth_plain()
+            c = ground_truth_reference(plain)
             _assert_same(a, b)
             _assert_same(a, c)
             # the tracker state stays in step too (the one-call path changes nothing)
@@ -153,20 +155,9 @@ def test_non_finite_plate_frame_takes_the_measurement_path():
         assert plant._rotors.truth_free(float(d.time), *views) is None
         with np.errstate(invalid="ignore"):
             a = plant._ground_truth()
-            _assert_same(a, ref._ground_truth_plain())
+            _assert_same(a, ground_truth_reference(ref))
         # -(R.T @ 0): NaN in the column of the non-finite entry (R[1, 1])
         assert np.isnan(a.foot_contact_force[1]) and not np.isnan(a.foot_contact_force[0])
-
-
-def test_the_flag_keeps_the_path_before():
-    fast, slow = _takeoff_plants(n=2)
-    slow.truth_free_record = False
-    for p in (fast, slow):
-        p.reset(base_position=(0.0, 0.0, 0.8))
-        p.step(3)
-    with _truth_free_calls(slow) as calls:
-        _assert_same(fast._ground_truth(), slow._ground_truth())
-    assert calls == []
 
 
 def test_negated_product_with_zeros_is_negative_zero_for_finite_frames():
@@ -212,7 +203,7 @@ def test_record_setup_and_call_errors():
     assert math.isfinite(plant._ground_truth().time)
 
 
-# ------------------------------------------------------------ contact measurement, floats
+# ------------------------------------------------------------------ contact measurement
 def test_cross3_equals_numpy_cross_bit_for_bit():
     rng = np.random.default_rng(9)
     specials = [0.0, -0.0, np.inf, -np.inf, np.nan, 5e-324, -1e308, 1e308, 1.0]
@@ -239,7 +230,7 @@ def _measures_equal(a: tuple, b: tuple) -> None:
             assert struct.pack("<d", x) == struct.pack("<d", y)
 
 
-def test_float_contact_sums_equal_the_array_and_plain_forms_when_perched():
+def test_contact_measurement_and_its_numpy_form_equal_mujocos_contacts_when_perched():
     # Perched on the ceiling (4 plate contacts), pushed sideways and twisted (slip, yaw,
     # contacts thinning out), then released: three twin plants, one per form.
     thrust = _perch_thrusts(4.0)
@@ -261,7 +252,7 @@ def test_float_contact_sums_equal_the_array_and_plain_forms_when_perched():
         if k % 3 == 0:
             a = fast._tracker.measure_contacts(fast._fresh())
             b = arrays._tracker.measure_contacts_arrays(arrays._fresh())
-            c = plain._tracker.measure_plain(plain._fresh())
+            c = measure_reference(plain._tracker, plain._fresh())
             _measures_equal(a, b)
             _measures_equal(a, c)
             seen.add((a[0], a[5] != 0.0))
@@ -320,7 +311,7 @@ def test_resting_on_other_links_takes_the_one_call_record():
                 a = fast._ground_truth()
             one_call += len(calls)
             _assert_same(a, arrays._ground_truth_arrays())
-            _assert_same(a, plain._ground_truth_plain())
+            _assert_same(a, ground_truth_reference(plain))
             if d.ncon and not plate:
                 seen += 1
     assert seen > 40  # resting on the floor, the plate free
@@ -335,4 +326,4 @@ def test_resting_on_other_links_takes_the_one_call_record():
     assert d.ncon and perched._tracker.plate_contact(d)
     a = perched._ground_truth()
     assert a.foot_contact_points > 0
-    _assert_same(a, twin._ground_truth_plain())
+    _assert_same(a, ground_truth_reference(twin))

@@ -145,56 +145,31 @@ def _ratio(period: float | None, base: float, what: str) -> int:
 
 class _JointFeed:
     """The plant's joint angles in raw ticks, snapshot at each bridge tick and converted once,
-    on the first read (``center + q * ticks_per_rad``, joint_order); shared by every servo."""
+    on the first read (``center + q * ticks_per_rad`` per joint in Python floats, joint_order);
+    shared by every servo."""
 
-    __slots__ = (
-        "_center",
-        "_pairs",
-        "_plant",
-        "_q",
-        "_qadr",
-        "_qpos",
-        "_scale",
-        "_ticks",
-        "_ticks_epoch",
-        "epoch",
-    )
+    __slots__ = ("_center", "_pairs", "_q", "_qpos", "_ticks", "_ticks_epoch", "epoch")
 
     def __init__(self, plant, center: int, scale: np.ndarray) -> None:
-        self._plant = plant
-        self._center = center
-        self._scale = scale
+        self._center = float(center)
         self.epoch = 0
-        self._qpos = getattr(plant, "_v_qpos", None)  # rdm.plant.Plant's qpos view
-        self._qadr = getattr(plant, "_qadr", None)
-        if self._qadr is None:
-            self._qpos = None
-        self._q = plant.servo_positions()
-        #: (qpos address, ticks per rad) per joint for the float path (None: array path)
-        self._pairs: list[tuple[int, float]] | None = None
-        if self._qpos is not None:
-            self._pairs = list(zip(np.asarray(self._qadr).tolist(), scale.tolist(), strict=True))
+        self._qpos = plant._v_qpos  # the plant's qpos view (stable for its data's lifetime)
+        self._q = self._qpos.copy()
+        #: (qpos address, ticks per rad) per joint
+        self._pairs = list(zip(np.asarray(plant._qadr).tolist(), scale.tolist(), strict=True))
         self._ticks: list[float] = []
         self._ticks_epoch = -1
 
     def snapshot(self) -> None:
         self.epoch += 1
-        # A copy (later physics steps do not move it); the whole qpos when the plant offers
-        # its view (one memcpy), else the joint positions.
-        self._q = self._qpos.copy() if self._qpos is not None else self._plant.servo_positions()
+        self._q = self._qpos.copy()  # later physics steps do not move it (one memcpy)
 
     def ticks(self) -> list[float]:
         if self._ticks_epoch != self.epoch:
             self._ticks_epoch = self.epoch
-            if self._pairs is not None:
-                # Plain floats: ``center + q * scale`` per joint, the same two IEEE operations
-                # as the array expression below (tests/test_plant_fast_paths.py).
-                q = self._q.tolist()
-                c = float(self._center)
-                self._ticks = [c + q[a] * s for a, s in self._pairs]
-            else:
-                q = self._q[self._qadr] if self._qpos is not None else self._q
-                self._ticks = (self._center + q * self._scale).tolist()
+            q = self._q.tolist()
+            c = self._center
+            self._ticks = [c + q[a] * s for a, s in self._pairs]
         return self._ticks
 
 
@@ -213,9 +188,13 @@ class PlantBridge:
         truth_sink: ``f(GroundTruth)``.
         *_period: seconds between calls (whole multiples of ``period``; None disables).
         rust_coupling: when every mapped Neuron is a board of one Rust
-            :class:`rdm.nodes.neuron_bank.NeuronBankNode` and the plant offers its qpos view,
-            run steps 1, 2 and 4 in one core call (``NeuronBank.bridge_tick``, same values;
-            :attr:`rust_coupling` says whether it is on); else the Python path.
+            :class:`rdm.nodes.neuron_bank.NeuronBankNode`, run steps 1, 2 and 4 inside that
+            bank (``NeuronBank.bridge_tick``: its boards' goals, ESC outputs and present
+            positions are the bank's own state, read and written in place;
+            :attr:`rust_coupling` says whether it is on). Otherwise the coupling reads the
+            boards through their Python views (:meth:`_couple`): the path for Neurons spread
+            over several banks, e.g. the process-level robot's one
+            :class:`rdm.nodes.neuron_mirror.NeuronMirror` per CAN bus.
     """
 
     def __init__(
@@ -277,19 +256,17 @@ class PlantBridge:
                 raise ValueError(f"PlantBridge: plant has no wrench sensor {key!r}")
         self._mocap_sink = mocap_sink
         self._truth_sink = truth_sink
-        #: ``Plant.wrench_force_torque`` when the plant has it (else ``Plant.wrench``)
-        self._wrench_read = getattr(plant, "wrench_force_torque", None)
-        #: Per sensor, the sink's tuple form when it is a Leptrino mirror's ``set_wrench``
-        #: and the plant gives tuples (``Plant.wrench_values``): no arrays at 1 kHz.
-        self._wrench_values = getattr(plant, "wrench_values", None)
+        #: (force, torque) of one wrench sample, for sinks ``f(force, torque)``
+        self._wrench_read = plant.wrench_force_torque
+        #: Per sensor, the sink's tuple form when every sink is a Leptrino mirror's
+        #: ``set_wrench``: one 6-tuple of floats (``Plant.wrench_values``), no arrays at 1 kHz.
+        self._wrench_values = plant.wrench_values
         self._wrench_tuple_sinks = {
             key: getattr(getattr(sink, "__self__", None), "set_wrench_values", None)
             for key, sink in self._wrench_sinks.items()
             if getattr(sink, "__name__", "") == "set_wrench"
         }
-        if self._wrench_values is None or any(
-            self._wrench_tuple_sinks.get(key) is None for key in self._wrench_sinks
-        ):
+        if any(self._wrench_tuple_sinks.get(key) is None for key in self._wrench_sinks):
             self._wrench_tuple_sinks = {}
         # Ticks between samples (each reading fires on the first tick, then every n-th).
         self._imu_n = _ratio(imu_period, period, "imu_period") or 1
@@ -325,12 +302,7 @@ class PlantBridge:
         self.ticks = 0
 
     def _rust_bank(self):
-        """The one Rust bank every mapped Neuron belongs to, if the plant has a qpos view."""
-        if (
-            getattr(self.plant, "_v_qpos", None) is None
-            or getattr(self.plant, "_qadr", None) is None
-        ):
-            return None
+        """The one Rust bank every mapped Neuron belongs to (None: boards of several banks)."""
         banks = {
             id(getattr(n, "_bank", None)): getattr(n, "_bank", None) for n, _ in self._servo_map
         }
@@ -366,7 +338,9 @@ class PlantBridge:
         self._sample(now)
 
     def _tick_rust(self, now: float) -> None:
-        """Steps 1-4 with the Rust bank: the same values and plant calls as :meth:`_couple`."""
+        """Steps 1-4 inside the one Rust bank that holds every mapped board: present
+        positions from the qpos view, changed goals into ``_targets`` and changed ESC outputs
+        into ``_duties``; the plant is commanded when they moved (or the battery changed)."""
         plant = self.plant
         duties = self._duties
         targets_changed, changed = self._bank.bridge_tick(plant._v_qpos, self._targets, duties)
@@ -393,7 +367,8 @@ class PlantBridge:
         return True
 
     def _couple(self, now: float) -> None:
-        """Steps 1-4 in Python (the reference; any Neuron mirrors)."""
+        """Steps 1-4 through the boards' Python views: any Neuron mirrors, in any number of
+        banks (a single bank's boards take :meth:`_tick_rust` with ``rust_coupling``)."""
         plant = self.plant
         # 1. Present positions: a snapshot of the plant's joints at ``now``; each servo reads
         # (and converts) it only when its Neuron needs it (state report, torque-on, config).
@@ -447,18 +422,14 @@ class PlantBridge:
             for neuron in self._imu_neurons:
                 neuron.set_imu(r.gyro, r.accel, r.mag)
         if self._wrench_on and n % self._wrench_n == 0:
-            read = self._wrench_read
             if self._wrench_tuple_sinks:  # Plant -> Leptrino mirror: one tuple of floats
                 values = self._wrench_values
                 for key, sink in self._wrench_tuple_sinks.items():
                     sink(values(key))
-            elif read is not None:  # rdm.plant.Plant: no WrenchReading (the same values)
+            else:
+                read = self._wrench_read
                 for key, sink in self._wrench_sinks.items():
                     sink(*read(key))
-            else:
-                for key, sink in self._wrench_sinks.items():
-                    w = plant.wrench(key)
-                    sink(w.force, w.torque)
         if self._mocap_on and n % self._mocap_n == 0:
             d = plant.data
             self._mocap_sink(now, d.xpos[self._foot_body].copy(), d.xquat[self._foot_body].copy())
@@ -500,7 +471,7 @@ class PlantBridge:
             if len(sinks) != 1 or len(self._wrench_sinks) != 1 or node is None:
                 return None
             ((key, sink),) = sinks.items()
-            if getattr(sink, "__self__", None) is not node or self._wrench_values is None:
+            if getattr(sink, "__self__", None) is not node:
                 return None
             if getattr(self._wrench_values, "__func__", None) is not cls.wrench_values:
                 return None

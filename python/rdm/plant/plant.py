@@ -382,17 +382,13 @@ class Plant(PlantReadings, PlantTruthReadout):
         else:
             values = _vector(duties, n, "duties").tolist()
         if self._duties_in_core and all(e._v_factor is not None for e in escs):
-            # Every ESC's clamp, count and duty -> thrust map in one Rust call (the same
-            # numbers and counters as the loop below, tests/test_sampler_fast_paths.py).
+            # Every ESC's clamp, count and duty -> thrust map in one Rust call (the numbers
+            # and counters of Esc.command_duty; an ESC whose map the core does not hold, e.g.
+            # at a voltage where Python's division raises, keeps the loop below).
             self._rotors.command_duties(values)
             return
         for esc, duty in zip(escs, values, strict=True):
             esc.command_duty(duty)
-
-    def set_rotor_duties_plain(self, duties: Sequence[float] | np.ndarray) -> None:
-        """:meth:`set_rotor_duties` one ``Esc.command_duty`` at a time (the reference)."""
-        for esc, duty in zip(self.escs, _vector(duties, len(self.escs), "duties"), strict=True):
-            esc.command_duty(float(duty))
 
     def set_rotor_thrusts(self, thrusts: Sequence[float] | np.ndarray) -> None:
         """Steady thrust command per rotor [N] (the ESC lag still applies)."""

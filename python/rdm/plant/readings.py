@@ -1,5 +1,5 @@
-"""What the plant's sensors and actuators read now: the noisy IMU and wrench samples (with
-their reference forms and the noise-free values), the servo positions, velocities, torques and
+"""What the plant's sensors and actuators read now: the noisy IMU and wrench samples (and the
+noise-free values), the servo positions, velocities, torques and
 currents, the applied rotor thrusts and the rotors' distances to the ceiling.
 
 :class:`PlantReadings` is a part of :class:`rdm.plant.plant.Plant`: every reading refers to
@@ -30,19 +30,8 @@ class PlantReadings:
         if self._stale:
             self.sync()
         g, a, m = self._imu_adr
-        # One Rust call reads the three ideal values from the sensordata view (the same
-        # numbers as :meth:`imu_plain`, tests/test_sampler_fast_paths.py).
+        # One Rust call reads the three ideal values from the sensordata view.
         return self.imu_model.sample_at(self._v_sensordata, g, a, m)
-
-    def imu_plain(self) -> ImuReading:
-        """:meth:`imu` through the Python list path (the reference of the Rust read)."""
-        if self._stale:
-            self.sync()
-        sd = self._v_sensordata
-        g, a, m = self._imu_adr
-        return self.imu_model.sample_lists(
-            sd[g : g + 3].tolist(), sd[a : a + 3].tolist(), sd[m : m + 3].tolist()
-        )
 
     def imu_ideal(self) -> ImuReading:
         """The noise-free IMU values (gyro, accelerometer, magnetometer)."""
@@ -89,15 +78,6 @@ class PlantReadings:
         model = self.wrench_models[sensor]
         return model._core.sample_values_at(
             self._v_sensordata, adr[0], adr[1], model._normals.take(6)
-        )
-
-    def wrench_plain(self, sensor: str) -> WrenchReading:
-        """:meth:`wrench` through the Python list path (the reference of the Rust read)."""
-        adr = self._wrench_address(sensor)
-        sd = self._v_sensordata
-        f, t = adr
-        return self.wrench_models[sensor].sample_list(
-            sd[f : f + 3].tolist() + sd[t : t + 3].tolist()
         )
 
     def servo_positions(self) -> np.ndarray:

@@ -33,7 +33,7 @@ class NormalStream:
     ``take(k)`` returns the next ``k`` values of the stream ``rng.normal(0.0, 1.0, k)`` calls
     would return one call after another: numpy's ``Generator.normal`` draws element by element
     with no state carried between calls, so one big draw is the concatenation of small ones
-    (checked in tests/test_plant_fast_paths.py). Saves numpy's per-call overhead at 1 kHz.
+    (checked in tests/test_plant_sensors_and_bridge.py). Saves numpy's per-call overhead at 1 kHz.
     The generator then runs ahead of what was taken: the stream owns it.
     """
 
@@ -101,8 +101,10 @@ def _bias_property(attr: str, doc: str) -> property:
 class ImuModel:
     """Adds bias, noise, saturation and quantisation to ideal IMU values.
 
-    The per-sample float work runs in Rust (``rdm._rdm.ImuNoiseCore``, the same IEEE
-    operations in the same order as :meth:`sample_lists_plain`); the normals stay numpy's.
+    The per-sample float work runs in Rust (``rdm._rdm.ImuNoiseCore``): ``x + bias + std * e``
+    per axis, saturation flags and clipping of gyro and accelerometer, quantisation to the
+    LSB with ties to even (numpy's ``np.round(v / lsb) * lsb``, signed zeros kept); the
+    normals stay numpy's.
     The bias arrays are read-only: assign a new array to change one.
     """
 
@@ -164,46 +166,11 @@ class ImuModel:
         )
         return ImuReading(g, a, m, saturated)
 
-    def sample_lists_plain(
-        self, gyro: list[float], accel: list[float], mag: list[float]
-    ) -> ImuReading:
-        """The Python form of :meth:`sample_lists` (same stream, same numbers; the reference
-        the Rust path is tested against). Scalar floats, the array form's operations."""
-        n = self._noise
-        w = self._normals.take(9)
-        gb, ab, mb = self._gyro_bias.tolist(), self._accel_bias.tolist(), self._mag_bias.tolist()
-        g = [x + b + n.gyro_std * e for x, b, e in zip(gyro, gb, w[0:3], strict=True)]
-        a = [x + b + n.accel_std * e for x, b, e in zip(accel, ab, w[3:6], strict=True)]
-        m = [x + b + n.mag_std * e for x, b, e in zip(mag, mb, w[6:9], strict=True)]
-        saturated = any(abs(v) > GYRO_RANGE for v in g) or any(abs(v) > ACCEL_RANGE for v in a)
-        g = [_clip(v, GYRO_RANGE) for v in g]
-        a = [_clip(v, ACCEL_RANGE) for v in a]
-        if n.quantize:
-            g = [_quantize(v, GYRO_LSB) for v in g]
-            a = [_quantize(v, ACCEL_LSB) for v in a]
-            m = [_quantize(v, MAG_LSB) for v in m]
-        return ImuReading(np.array(g), np.array(a), np.array(m), saturated)
-
 
 def _frozen(a: np.ndarray) -> np.ndarray:
     """``a`` made read-only (the Rust core holds a copy: an in-place change would be lost)."""
     a.flags.writeable = False
     return a
-
-
-def _clip(v: float, limit: float) -> float:
-    """``np.clip(v, -limit, limit)`` for one float (NaN passes through)."""
-    return min(max(v, -limit), limit)
-
-
-def _quantize(v: float, lsb: float) -> float:
-    """``np.round(v / lsb) * lsb`` for one float, signed zeros and non-finite values included."""
-    if not math.isfinite(v):
-        return v
-    r = float(round(v / lsb))
-    if r == 0.0:
-        r = math.copysign(0.0, v)  # np.round keeps the sign of a value that rounds to zero
-    return r * lsb
 
 
 def sensor_seed_sequences(seed: int | None, n_wrench: int) -> list[np.random.SeedSequence]:
@@ -251,8 +218,9 @@ class WrenchReading:
 class WrenchSensorModel:
     """Leptrino-style 6-axis sensor: rated-capacity clipping, noise, 1/10000 resolution.
 
-    The per-sample float work runs in Rust (``rdm._rdm.WrenchNoiseCore``, the same IEEE
-    operations in the same order as :meth:`sample_list_plain`); the normals stay numpy's.
+    The per-sample float work runs in Rust (``rdm._rdm.WrenchNoiseCore``): ``x + bias +
+    fraction * rated * e`` per axis, saturation flags (``|v| >= rated``), clipping at the
+    rated capacity, quantisation to rated / 10000 with ties to even; the normals stay numpy's.
     """
 
     def __init__(self, spec: WrenchSensorSpec, noise: WrenchNoise, rng: np.random.Generator):
@@ -296,17 +264,3 @@ class WrenchSensorModel:
             sensordata, force_adr, torque_adr, self._normals.take(6)
         )
         return WrenchReading(force, torque, saturated)
-
-    def sample_list_plain(self, wrench: list[float]) -> WrenchReading:
-        """The Python form of :meth:`sample_list` (same stream, same numbers; the reference
-        the Rust path is tested against)."""
-        noise = self._noise
-        e = self._normals.take(6)
-        frac = noise.noise_fraction_of_rated
-        rated = self._rated_list
-        w = [x + b + frac * r * n for x, b, r, n in zip(wrench, noise.bias, rated, e, strict=True)]
-        saturated = np.array([abs(v) >= r for v, r in zip(w, rated, strict=True)])
-        w = [_clip(v, r) for v, r in zip(w, rated, strict=True)]
-        if noise.quantize:
-            w = [_quantize(v, lsb) for v, lsb in zip(w, self._lsb_list, strict=True)]
-        return WrenchReading(np.array(w[:3]), np.array(w[3:]), saturated)

@@ -92,18 +92,10 @@ def _t_mul(m: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def _yaw_about(normal: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> float:
-    """Angle of the rotation r0 -> r1 about ``normal`` (x axes projected on the plane);
-    :func:`_yaw_about_plain` with the cross product of :func:`_cross3`."""
+    """Angle of the rotation r0 -> r1 about ``normal`` (x axes projected on the plane)."""
     x0 = r0[:, 0] - normal * _dot3(r0[:, 0], normal)
     x1 = r1[:, 0] - normal * _dot3(r1[:, 0], normal)
     return math.atan2(_dot3(normal, _cross3(x0, x1)), _dot3(x0, x1))
-
-
-def _yaw_about_plain(normal: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> float:
-    """:func:`_yaw_about` with ``np.cross`` (the reference)."""
-    x0 = r0[:, 0] - normal * _dot3(r0[:, 0], normal)
-    x1 = r1[:, 0] - normal * _dot3(r1[:, 0], normal)
-    return math.atan2(_dot3(normal, np.cross(x0, x1)), _dot3(x0, x1))
 
 
 def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -151,7 +143,7 @@ class FootContactTracker:
         #: Times a cached contact view was found pointing elsewhere (see :meth:`update`).
         self.view_misses = 0
         self._bodyids: list[int] | None = None
-        #: :meth:`measure_contacts` in Rust (None: :meth:`measure_contacts_floats`)
+        #: :meth:`measure_contacts` in Rust (None: :meth:`measure_contacts_arrays`)
         self._sums_core: _rdm.PlateContactCore | None = _rdm.PlateContactCore(
             model.geom_bodyid.tolist(),
             [g in env_geoms for g in range(model.ngeom)],
@@ -163,8 +155,8 @@ class FootContactTracker:
 
         MuJoCo keeps the contact list at the start of mjData's arena, so the
         ``data.contact.geom`` view (~5 us to build through the bindings) is built again only
-        when ``ncon`` changes; the same pairs as :meth:`update_plain` (re-checked against a
-        fresh view at every :meth:`measure`, tests/test_plant_fast_paths2.py)."""
+        when ``ncon`` changes (its address is re-checked at every :meth:`measure`; a moved
+        list is counted in ``view_misses`` and read again)."""
         ncon = data.ncon
         if ncon:
             cached = self._geom_view
@@ -193,15 +185,6 @@ class FootContactTracker:
             return None
         anchored = self._anchor_pos is not None and self._anchor_rot is not None
         return (cached[1], cached[3], sorted(self._plate_geoms), anchored)
-
-    def update_plain(self, data: mujoco.MjData) -> None:
-        """:meth:`update` reading a fresh contact list every step (the reference)."""
-        in_contact = False
-        if data.ncon:
-            in_contact = not self._plate_geoms.isdisjoint(data.contact.geom.ravel().tolist())
-        elif self._anchor_pos is None and self._last_contact_time == -math.inf:
-            return
-        self._track(data, in_contact)
 
     def idle(self) -> bool:
         """No contact anchor and no contact time to release: :meth:`measure` of an empty
@@ -259,8 +242,8 @@ class FootContactTracker:
     ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """(points, force, torque, zmp, slip, slip_yaw) for the present contacts.
 
-        No contact at all (a flying robot): the numbers :meth:`measure_plain` gives for an
-        empty contact list, with fewer numpy calls (tests/test_sampler_fast_paths.py)."""
+        No contact at all (a flying robot): the numbers of an empty contact list (no
+        points, -(R.T @ 0) force and torque, NaN ZMP) and the anchor's slip and yaw."""
         if data.ncon:
             return self.measure_contacts(data)
         if self._views[0] is not data:
@@ -268,7 +251,7 @@ class FootContactTracker:
         _, xpos, xmat = self._views
         pb = self._plate_body
         rot = xmat[pb].reshape(3, 3)
-        # The plain form's -(rot.T @ zeros) for the force and the torque: one product.
+        # -(rot.T @ zeros) for the force and the torque: one product.
         force = -_t_mul(rot, _ZEROS3)
         torque = force.copy()
         if self._anchor_pos is not None or self._last_contact_time != -math.inf:
@@ -285,17 +268,18 @@ class FootContactTracker:
     def measure_contacts(
         self, data: mujoco.MjData
     ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """:meth:`measure_contacts_floats` in Rust (``rdm._rdm.PlateContactCore``: the
-        contact sums, the foot-frame force, torque and ZMP, and the slip yaw, the same IEEE
-        operations in the same order on the ``data.contact`` views and ``efc_force``, so the
-        same bits; tests/test_truthlog_truth.py, tests/test_plate_contact.py). A
-        pyramidal-cone model (whose contact forces need MuJoCo's pyramid decoding) takes
-        :meth:`measure_contacts_floats`; sums holding a NaN take
+        """(points, force, torque, zmp, slip, slip_yaw) of the plate's present contacts, in
+        Rust (``rdm._rdm.PlateContactCore``): per plate contact the force ``mj_contactForce``
+        gives for an elliptic cone (its constraint forces copied from ``efc_force``), summed
+        into force, torque about the plate origin and the centre of pressure, reported in the
+        plate frame, and the slip yaw; products summed in index order (no fused multiply-add),
+        the order of :meth:`measure_contacts_arrays`, so the same bits. A pyramidal-cone model
+        (whose contact forces need MuJoCo's pyramid decoding) and sums holding a NaN take
         :meth:`measure_contacts_arrays`."""
         self._check_view(data)
         core = self._sums_core
         if core is None or self._model.opt.cone != _ELLIPTIC:
-            return self.measure_contacts_floats(data)
+            return self.measure_contacts_arrays(data)
         contact = data.contact
         pb = self._plate_body
         origin = data.xpos[pb]
@@ -323,87 +307,14 @@ class FootContactTracker:
             yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot.reshape(3, 3))
         return points, force, torque, zmp, slip.copy(), yaw
 
-    def measure_contacts_floats(
-        self, data: mujoco.MjData
-    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """:meth:`measure_contacts_arrays` with the per-contact sums in Python floats: the
-        contact-frame products (``frame.T @ buf``) and every later sum are the same IEEE
-        operations in the same order on floats (the products as :func:`_t_mul` orders them,
-        the cross product as numpy writes it: ``a1 * b2 - a2 * b1``, ...), so the same bits;
-        sums holding a NaN (NaN payloads could differ) take :meth:`measure_contacts_arrays`
-        (tests/test_truthlog_truth.py, tests/test_plant_fast_paths2.py)."""
-        self._check_view(data)
-        m = self._model
-        pb = self._plate_body
-        env = self._env_geoms
-        bodyid = self._bodyid_list()
-        contact = data.contact
-        pairs = contact.geom.tolist()
-        frames = contact.frame
-        positions = None
-        buf = self._buf
-        head = buf[:3]
-        tail = buf[3:]
-        origin = data.xpos[pb]
-        o0, o1, o2 = origin.tolist()
-        fx = fy = fz = tx = ty = tz = cx = cy = cz = 0.0
-        normal_sum = 0.0
-        points = 0
-        for i, (g1, g2) in enumerate(pairs):
-            if bodyid[g1] == pb and g2 in env:
-                sign = -1.0
-            elif bodyid[g2] == pb and g1 in env:
-                sign = 1.0
-            else:
-                continue
-            mujoco.mj_contactForce(m, data, i, buf)
-            frame = frames[i].reshape(3, 3)
-            f0, f1, f2 = _t_mul(frame, head).tolist()
-            t0, t1, t2 = _t_mul(frame, tail).tolist()
-            f0, f1, f2 = sign * f0, sign * f1, sign * f2
-            if positions is None:
-                positions = contact.pos.tolist()
-            p0, p1, p2 = positions[i]
-            r0, r1, r2 = p0 - o0, p1 - o1, p2 - o2
-            fx += f0
-            fy += f1
-            fz += f2
-            tx += sign * t0 + (r1 * f2 - r2 * f1)
-            ty += sign * t1 + (r2 * f0 - r0 * f2)
-            tz += sign * t2 + (r0 * f1 - r1 * f0)
-            n = abs(buf.item(0))
-            cx += n * r0
-            cy += n * r1
-            cz += n * r2
-            normal_sum += n
-            points += 1
-        sums = (fx, fy, fz, tx, ty, tz, cx, cy, cz, normal_sum)
-        if any(v != v for v in sums):
-            return self.measure_contacts_arrays(data)
-        rot = data.xmat[pb].reshape(3, 3)
-        force = -_t_mul(rot, np.array((fx, fy, fz)))
-        torque = -_t_mul(rot, np.array((tx, ty, tz)))
-        self._track(data, points > 0)
-        zmp = (
-            _t_mul(rot, np.array((cx, cy, cz)) / normal_sum)[:2]
-            if normal_sum > 0
-            else np.full(2, np.nan)
-        )
-        if self._anchor_pos is None or self._anchor_rot is None:
-            return points, force, torque, zmp, np.zeros(2), 0.0
-        anchor_rot = self._anchor_rot
-        slip = (origin - self._anchor_pos)[:2]
-        yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
-        return points, force, torque, zmp, slip.copy(), yaw
-
     def measure_contacts_arrays(
         self, data: mujoco.MjData
     ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """:meth:`measure_plain` reading the contact list as three arrays (geom pairs,
-        frames, positions) instead of one ``data.contact[i]`` object per contact: the same
-        per-contact numpy operations in the same order, so the same numbers
-        (tests/test_plant_fast_paths2.py); the form :meth:`measure_contacts` takes when its
-        float sums hold a NaN."""
+        """The contact measurement in numpy over the contact list read as three arrays
+        (geom pairs, frames, positions): per contact ``mj_contactForce`` rotated out of the
+        contact frame, summed into force, torque about the plate origin and the centre of
+        pressure, reported in the plate frame; the form :meth:`measure_contacts` takes for a
+        pyramidal cone and when its sums hold a NaN."""
         self._check_view(data)
         m = self._model
         pb = self._plate_body
@@ -447,7 +358,7 @@ class FootContactTracker:
             return points, force, torque, zmp, np.zeros(2), 0.0
         anchor_rot = self._anchor_rot
         slip = (origin - self._anchor_pos)[:2]
-        yaw = _yaw_about_plain(anchor_rot[:, 2], anchor_rot, rot)
+        yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
         return points, force, torque, zmp, slip.copy(), yaw
 
     def _bodyid_list(self) -> list[int]:
@@ -455,47 +366,3 @@ class FootContactTracker:
         if ids is None:
             ids = self._bodyids = self._model.geom_bodyid.tolist()
         return ids
-
-    def measure_plain(
-        self, data: mujoco.MjData
-    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """(points, force, torque, zmp, slip, slip_yaw) for the present contacts (the
-        reference form, any contact list)."""
-        m = self._model
-        origin = data.xpos[self._plate_body]
-        rot = data.xmat[self._plate_body].reshape(3, 3)
-        force_w = np.zeros(3)  # environment on robot, world
-        torque_w = np.zeros(3)
-        cop_num = np.zeros(3)
-        normal_sum = 0.0
-        points = 0
-        for i in range(data.ncon):
-            c = data.contact[i]
-            b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
-            if b1 == self._plate_body and c.geom2 in self._env_geoms:
-                sign = -1.0  # force on geom2 from geom1 is +f: the plate is geom1
-            elif b2 == self._plate_body and c.geom1 in self._env_geoms:
-                sign = 1.0
-            else:
-                continue
-            mujoco.mj_contactForce(m, data, i, self._buf)
-            frame = c.frame.reshape(3, 3)  # rows: normal, tangent1, tangent2
-            f = sign * _t_mul(frame, self._buf[:3])
-            t = sign * _t_mul(frame, self._buf[3:])
-            force_w += f
-            torque_w += t + np.cross(c.pos - origin, f)
-            n = abs(self._buf[0])
-            cop_num += n * (c.pos - origin)
-            normal_sum += n
-            points += 1
-        # Report what the robot applies to the environment, in the foot frame.
-        force = -_t_mul(rot, force_w)
-        torque = -_t_mul(rot, torque_w)
-        self._track(data, points > 0)
-        zmp = _t_mul(rot, cop_num / normal_sum)[:2] if normal_sum > 0 else np.full(2, np.nan)
-        if self._anchor_pos is None or self._anchor_rot is None:
-            return points, force, torque, zmp, np.zeros(2), 0.0
-        anchor_rot = self._anchor_rot
-        slip = (origin - self._anchor_pos)[:2]
-        yaw = _yaw_about_plain(anchor_rot[:, 2], anchor_rot, rot)
-        return points, force, torque, zmp, slip.copy(), yaw

@@ -1,6 +1,5 @@
 """The plant's true state now (:meth:`PlantTruthReadout.ground_truth`): the flying robot's
-record in one Rust call, any contact state through the foot contact tracker's measurement, and
-the reference form the tests hold the fast ones against.
+record in one Rust call, any contact state through the foot contact tracker's measurement.
 
 :class:`PlantTruthReadout` is a part of :class:`rdm.plant.plant.Plant`.
 """
@@ -16,10 +15,6 @@ from rdm.plant.truth import GroundTruth
 class PlantTruthReadout:
     """The ground truth of :class:`rdm.plant.plant.Plant` (a part of it)."""
 
-    #: The flying robot's record through ``RotorPlantCore.truth_free`` (False: always
-    #: :meth:`_ground_truth_arrays`, the measurement and copies in Python).
-    truth_free_record = True
-
     def ground_truth(self) -> GroundTruth:
         """The true state now (see :class:`GroundTruth`). Asked twice for the same state
         (e.g. a logger and a mocap node in one tick), it returns the same object: treat
@@ -34,11 +29,7 @@ class PlantTruthReadout:
     def _ground_truth(self) -> GroundTruth:
         d = self._fresh()
         tracker = self._tracker
-        if (
-            self.truth_free_record
-            and tracker.idle()
-            and (d.ncon == 0 or not tracker.plate_contact(d))
-        ):
+        if tracker.idle() and (d.ncon == 0 or not tracker.plate_contact(d)):
             # No plate contact and no contact anchor (the flying robot, or one resting on
             # other links): the whole record in one Rust call, the numbers
             # :meth:`_ground_truth_arrays` gives (contacts without the plate are not summed;
@@ -63,7 +54,7 @@ class PlantTruthReadout:
         d = self._fresh()
         points, force, torque, zmp, slip, yaw = self._tracker.measure(d)
         # Every MjData copy (and the applied thrusts) in one Rust call over the cached views
-        # (stable for the data's lifetime): the same values as the plain form's numpy copies.
+        # (stable for the data's lifetime): bit copies of MjData's arrays.
         pos, quat, lin, ang, qj, vj, cog, ee_pos, thrusts = self._rotors.truth_arrays(
             self._v_xpos, self._v_xquat, self._v_qpos, self._v_qvel, self._v_subtree_com
         )
@@ -88,39 +79,4 @@ class PlantTruthReadout:
             zmp,
             slip,
             yaw,
-        )
-
-    def _ground_truth_plain(self) -> GroundTruth:
-        """The reference form of :meth:`_ground_truth` (fresh MjData views, keyword
-        construction), for tests/test_sampler_fast_paths.py."""
-        d = self._fresh()
-        points, force, torque, zmp, slip, yaw = self._tracker.measure_plain(d)
-        fb = self._foot_body
-        if self.options.fixed_base:
-            lin = np.zeros(3)
-            ang = np.zeros(3)
-        else:
-            lin = d.qvel[0:3].copy()
-            ang = d.qvel[3:6].copy()
-        ee_quat = np.zeros(4)
-        mujoco.mju_mat2Quat(ee_quat, d.xmat[self._ee_body])
-        return GroundTruth(
-            time=float(d.time),
-            base_position=d.xpos[fb].copy(),
-            base_quaternion=d.xquat[fb].copy(),
-            base_linear_velocity=lin,
-            base_angular_velocity=ang,
-            joint_positions=self.servo_positions(),
-            joint_velocities=self.servo_velocities(),
-            cog_position=d.subtree_com[fb].copy(),
-            end_effector_position=d.xpos[self._ee_body].copy(),
-            end_effector_quaternion=ee_quat,
-            rotor_thrusts=self.rotor_thrusts(),
-            foot_in_contact=points > 0,
-            foot_contact_points=points,
-            foot_contact_force=force,
-            foot_contact_torque=torque,
-            foot_zmp=zmp,
-            foot_slip=slip,
-            foot_slip_yaw=yaw,
         )

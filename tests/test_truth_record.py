@@ -1,6 +1,6 @@
-"""Fast paths of the 100 Hz ground-truth record: the Ryu float writer
-against Python's own ``repr`` / ``json.dumps``; the one-call MjData copies against the
-plain numpy copies; the 1 kHz foot-sensor tuple path against the array path."""
+"""The 100 Hz ground-truth record: the Ryu float writer against Python's own ``repr`` /
+``json.dumps``; the one-call MjData copies against MuJoCo's arrays (``truth_reference``),
+bad layouts and views named in the errors."""
 
 from __future__ import annotations
 
@@ -10,10 +10,9 @@ import struct
 
 import numpy as np
 import pytest
+from truth_reference import ground_truth_reference
 
 from rdm._rdm import RotorPlantCore, json_float_list, json_record
-from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
-from rdm.nodes.plant_bridge import BusLayout, PlantBridge
 from rdm.plant import Plant
 from rdm.plant.truth import GroundTruth
 
@@ -91,7 +90,7 @@ def _assert_bits_equal(a: GroundTruth, b: GroundTruth) -> None:
 
 
 @pytest.mark.parametrize("fixed_base", [False, True])
-def test_ground_truth_one_call_equals_the_numpy_copies(fixed_base):
+def test_ground_truth_one_call_equals_mujocos_arrays(fixed_base):
     plant = Plant("rdm", seed=4, ceiling_height=1.6, floor_height=0.0, fixed_base=fixed_base)
     plant.reset(base_position=(0.0, 0.0, 0.05))
     rng = np.random.default_rng(11)
@@ -101,7 +100,7 @@ def test_ground_truth_one_call_equals_the_numpy_copies(fixed_base):
             plant.set_servo_targets(rng.uniform(-0.5, 0.5, len(plant._qadr)))
         plant.step(1)
         if k % 7 == 0:
-            _assert_bits_equal(plant._ground_truth(), plant._ground_truth_plain())
+            _assert_bits_equal(plant._ground_truth(), ground_truth_reference(plant))
     # The arrays are copies: the next step does not change a record already taken.
     gt = plant._ground_truth()
     before = {k: np.copy(getattr(gt, k)) for k in ("base_position", "joint_positions")}
@@ -118,7 +117,7 @@ def test_ground_truth_one_call_copies_nan_and_inf_state_bits():
     d.qvel[:6] = [np.nan, -0.0, np.inf, -np.inf, 5e-324, -np.nan]
     d.qpos[plant._qadr[0]] = np.nan
     d.xpos[plant._foot_body] = [np.nan, -0.0, 1e308]
-    _assert_bits_equal(plant._ground_truth(), plant._ground_truth_plain())
+    _assert_bits_equal(plant._ground_truth(), ground_truth_reference(plant))
 
 
 def test_truth_arrays_errors_name_the_field():
@@ -148,137 +147,5 @@ def test_truth_arrays_errors_name_the_field():
     with pytest.raises(TypeError):
         fresh.truth_arrays(d.xpos.astype(np.float32), d.xquat, d.qpos, d.qvel, d.subtree_com)
     # The plant's own layout still works after all that on another core.
-    _assert_bits_equal(plant._ground_truth(), plant._ground_truth_plain())
+    _assert_bits_equal(plant._ground_truth(), ground_truth_reference(plant))
     assert core is plant._rotors
-
-
-# --------------------------------------------------------- 1 kHz foot sensor as a tuple
-class _CaptureUart:
-    def __init__(self) -> None:
-        self.sent = bytearray()
-
-    def read_available(self) -> bytes:
-        return b""
-
-    def write(self, data: bytes) -> int:
-        self.sent += data
-        return len(data)
-
-    def close(self) -> None:
-        pass
-
-
-def _node_state(node: LeptrinoSensorNode) -> tuple:
-    return (
-        node._wrench,
-        dict(node.errors),
-        node.saturated_samples,
-        node.frames_sent,
-        bytes(node.uart.sent),
-    )
-
-
-def test_wrench_values_equal_the_array_read_and_consume_the_same_normals():
-    plants = [Plant("rdm", seed=9, ceiling_height=1.6, floor_height=0.0) for _ in range(2)]
-    for p in plants:
-        p.reset(base_position=(0.0, 0.0, 0.05))
-    fast, plain = plants
-    rng = np.random.default_rng(5)
-    for k in range(600):
-        if k % 100 == 0:
-            thrusts = rng.uniform(0.0, 12.0, 4)
-            for p in plants:
-                p.set_rotor_thrusts(thrusts)
-        for p in plants:
-            p.step(1)
-        values = fast.wrench_values("foot_wrench")
-        force, torque = plain.wrench_force_torque("foot_wrench")
-        assert type(values) is tuple and all(type(v) is float for v in values)
-        assert struct.pack("<6d", *values) == struct.pack("<6d", *force, *torque)
-    with pytest.raises(ValueError, match="sensor"):
-        fast.wrench_values("nope")
-
-
-def test_sample_values_at_equals_sample_at_on_random_and_bad_sensordata():
-    plant = Plant("rdm", seed=1)
-    core = plant.wrench_models["foot_wrench"]._core
-    rng = np.random.default_rng(17)
-    specials = np.array([np.nan, np.inf, -np.inf, 0.0, -0.0, 1e300, -1e300, 5e-324])
-    for _ in range(2000):
-        sd = rng.normal(0.0, 50.0, 12)
-        mask = rng.random(12) < 0.15
-        sd[mask] = rng.choice(specials, mask.sum())
-        normals = rng.normal(size=6).tolist()
-        fa, ta = rng.integers(0, 10, 2).tolist()
-        values = core.sample_values_at(sd, fa, ta, normals)
-        force, torque, _ = core.sample_at(sd, fa, ta, normals)
-        assert struct.pack("<6d", *values) == struct.pack("<6d", *force, *torque)
-    for fa, ta, field in [(10, 0, "force_adr"), (0, 11, "torque_adr"), (2**40, 0, "force_adr")]:
-        with pytest.raises(ValueError, match=field) as fast_err:
-            core.sample_values_at(np.zeros(12), fa, ta, [0.0] * 6)
-        with pytest.raises(ValueError) as plain_err:
-            core.sample_at(np.zeros(12), fa, ta, [0.0] * 6)
-        assert str(fast_err.value) == str(plain_err.value)
-    with pytest.raises(ValueError, match="normals") as fast_err:
-        core.sample_values_at(np.zeros(12), 0, 0, [0.0] * 5)
-    with pytest.raises(ValueError) as plain_err:
-        core.sample_at(np.zeros(12), 0, 0, [0.0] * 5)
-    assert str(fast_err.value) == str(plain_err.value)
-
-
-def test_set_wrench_values_equals_set_wrench_on_random_and_bad_wrenches():
-    nodes = [LeptrinoSensorNode(_CaptureUart(), "CFS034CA301U") for _ in range(2)]
-    for node in nodes:
-        node.streaming = True
-    fast, plain = nodes
-    lim = np.array(fast._limits)
-    rng = np.random.default_rng(23)
-    for k in range(3000):
-        w = rng.normal(0.0, 0.7, 6) * lim
-        if k % 5 == 1:
-            w[rng.integers(6)] = rng.choice([np.nan, np.inf, -np.inf])
-        elif k % 5 == 2:
-            w = lim * rng.choice([1.0, -1.0, 1.0 + 1e-12, -0.0], 6)
-        if k % 50 == 3:
-            fast.set_wrench_values(tuple(w[:5].tolist()))  # wrong length: refused alike
-            plain.set_wrench(w[:3], w[3:5])
-        else:
-            fast.set_wrench_values(tuple(w.tolist()))
-            plain.set_wrench(w[:3], w[3:])
-        for node in nodes:
-            node.tick(k * 1e-3)
-        assert _node_state(fast) == _node_state(plain)
-    assert fast.errors["bad_wrench"] > 0 and fast.saturated_samples > 0
-
-
-def test_bridge_sends_the_same_leptrino_bytes_through_the_tuple_path():
-    plants = [Plant("rdm", seed=3, ceiling_height=1.6, floor_height=0.0) for _ in range(2)]
-    nodes = [LeptrinoSensorNode(_CaptureUart(), "CFS034CA301U") for _ in range(2)]
-    for p, node in zip(plants, nodes, strict=True):
-        p.reset(base_position=(0.0, 0.0, 0.05))
-        node.streaming = True
-    tuple_bridge = PlantBridge(
-        plants[0],
-        layout=BusLayout(()),  # no Neuron mirrors: only the sampling steps run
-        wrench_sinks={"foot_wrench": nodes[0].set_wrench},
-        imu_period=None,
-    )
-    array_bridge = PlantBridge(
-        plants[1],
-        layout=BusLayout(()),
-        wrench_sinks={"foot_wrench": lambda f, t: nodes[1].set_wrench(f, t)},
-        imu_period=None,
-    )
-    assert set(tuple_bridge._wrench_tuple_sinks) == {"foot_wrench"}
-    assert array_bridge._wrench_tuple_sinks == {}
-    for k in range(400):
-        if k == 100:
-            for p in plants:
-                p.set_rotor_thrusts([9.0, 9.5, 9.0, 9.5])
-        for p, bridge, node in zip(plants, (tuple_bridge, array_bridge), nodes, strict=True):
-            now = p.time
-            bridge.tick(now)
-            node.tick(now)
-            p.step(1)
-    assert _node_state(nodes[0]) == _node_state(nodes[1])
-    assert nodes[0].frames_sent == 400

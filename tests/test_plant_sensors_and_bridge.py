@@ -1,8 +1,11 @@
-"""The plant bridge's, sensor models' and CAN master's fast paths against their plain forms.
+"""The plant's sensor noise, the plant bridge's joint ticks and sampling schedule, the ceiling
+effect in the rotor actuators and the CAN master's PWM frames.
 
 Each check compares bit for bit (signed zeros and NaN included) with an independent numpy
 computation: numpy's own generator called once per sample, the array forms of the noise
-models, the array expression of the tick conversion, the tick arithmetic of the schedule.
+models on MuJoCo's ideal sensor values, the array expression of the tick conversion, the tick
+arithmetic of the schedule, each ceiling model's ratio at the rotor distances, Spinal's PWM
+packing.
 """
 
 from __future__ import annotations
@@ -89,7 +92,7 @@ def test_plant_imu_and_wrench_equal_the_array_form_of_the_ideal_values():
         raise AssertionError("unknown wrench sensor accepted")
 
 
-def test_joint_feed_float_path_equals_the_array_expression():
+def test_joint_feed_ticks_equal_the_array_expression():
     plant = Plant("rdm", seed=0, fixed_base=True, ceiling_height=None)
     n = len(plant.joint_names)
     scale = np.random.default_rng(2).uniform(-900.0, 900.0, n)
@@ -114,7 +117,7 @@ def test_bridge_samples_on_the_first_tick_then_every_nth():
 
     plant = Plant("rdm", seed=1, fixed_base=True, ceiling_height=None)
     layout = default_layout(plant.description)
-    buses = [InProcessBus("fastbridge_sched") for _ in layout.neurons]
+    buses = [InProcessBus("bridge_sched") for _ in layout.neurons]
     calls: dict[str, list[int]] = {"imu": [], "wrench": [], "truth": []}
     tick = [0]
     try:
@@ -202,9 +205,9 @@ def test_can_master_pwm_frames_follow_each_new_duty_list():
     from rdm.link.inproc_can import InProcessBus
     from rdm.protocol import neuron as nr
 
-    master = _booted_master("fastbridge_pwm")
-    listener = InProcessBus("fastbridge_pwm_tx")
-    master.bus = InProcessBus("fastbridge_pwm_tx")
+    master = _booted_master("bridge_pwm")
+    listener = InProcessBus("bridge_pwm_tx")
+    master.bus = InProcessBus("bridge_pwm_tx")
     gen = np.random.default_rng(3)
     try:
         t = 10_000

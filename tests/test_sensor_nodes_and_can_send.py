@@ -1,6 +1,7 @@
-"""Python fast paths of the sensor nodes and the candump capture against their plain forms.
+"""The Leptrino node's wrench input, the candump capture and the in-process CAN send path
+against independent references.
 
-The Leptrino node's in-range ``set_wrench`` shortcut (vs a numpy clip and saturation count),
+The Leptrino node's ``set_wrench`` (vs a numpy clip and saturation count),
 the candump line memo (vs python-can's ``CanutilsLogWriter`` on frames stamped by the
 simulated clock, several per tick, memo overflow included), the inlined delivery of
 ``InProcessBus.send_standard`` (vs ``send`` of a ``Message`` with bounded queues that drop)
@@ -14,6 +15,7 @@ import random
 
 import can
 import numpy as np
+import pytest
 
 from rdm.link.inproc_can import InProcessBus, SimClock, set_channel_clock
 from rdm.nodes.can_master import CanMaster
@@ -32,8 +34,10 @@ class _NullUart:
         pass
 
 
-def test_set_wrench_equals_a_numpy_clip_and_counts_saturation_alike():
+@pytest.mark.parametrize("entry", ["set_wrench", "set_wrench_values"])
+def test_set_wrench_equals_a_numpy_clip_and_counts_saturation_alike(entry: str):
     node = LeptrinoSensorNode(_NullUart(), "CFS034CA301U")
+    values = entry == "set_wrench_values"  # one 6-tuple (the plant bridge's 1 kHz input)
     lim = np.array(node._limits)
     gen = np.random.default_rng(12)
     saturated = bad = 0
@@ -49,8 +53,13 @@ def test_set_wrench_equals_a_numpy_clip_and_counts_saturation_alike():
         before = node._wrench
         if kind == 3:
             ints = [int(v) for v in w]
-            node.set_wrench(ints[:3], ints[3:])
+            if values:
+                node.set_wrench_values(tuple(float(v) for v in ints))
+            else:
+                node.set_wrench(ints[:3], ints[3:])
             w = np.array(ints, dtype=float)  # int(-0.0) is 0
+        elif values:
+            node.set_wrench_values(tuple(w.tolist()))
         elif kind == 4:
             node.set_wrench(list(w[:2]), list(w[2:]))  # 2 + 4 values: still six
         else:
@@ -63,14 +72,17 @@ def test_set_wrench_equals_a_numpy_clip_and_counts_saturation_alike():
         saturated += bool(np.any(np.abs(w) > lim))
         got = np.array(node._wrench, dtype=float)
         assert np.array_equal(got, want) and np.array_equal(np.signbit(got), np.signbit(want))
-    node.set_wrench([1.0, 2.0], [3.0])  # five values: refused
+    if values:
+        node.set_wrench_values((1.0, 2.0, 3.0, 4.0, 5.0))  # five values: refused
+    else:
+        node.set_wrench([1.0, 2.0], [3.0])
     assert node.errors["bad_wrench"] == bad + 1
     assert node.saturated_samples == saturated and saturated > 100
 
 
 def test_candump_memo_writes_what_python_cans_writer_writes(tmp_path, monkeypatch):
     monkeypatch.setattr(candump_mod, "REST_CACHE_SIZE", 5)  # overflow the memo often
-    name = "fastsensor_candump"
+    name = "sensor_candump"
     clock = SimClock(0.0)
     set_channel_clock(name, clock)
     tx = InProcessBus(name)
@@ -110,18 +122,18 @@ def test_send_standard_into_full_queues_drops_as_send_does():
     frames = [(gen.randrange(0x800), bytes(gen.randrange(256) for _ in range(gen.randrange(9))))
               for _ in range(200)]  # fmt: skip
     seen = {}
-    for name, fast in (("fastsensor_q_a", False), ("fastsensor_q_b", True)):
+    for name, standard in (("sensor_q_a", False), ("sensor_q_b", True)):
         tx = InProcessBus(name, receive_own_messages=True, rx_queue_size=7)
         small = InProcessBus(name, rx_queue_size=3)
         big = InProcessBus(name)
         filt = InProcessBus(name, rx_queue_size=2, can_filters=[{"can_id": 0, "can_mask": 0x001}])
         for can_id, data in frames:
-            if fast:
+            if standard:
                 tx.send_standard(can_id, data)
             else:
                 tx.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
         buses = (tx, small, big, filt)
-        seen[fast] = (
+        seen[standard] = (
             [[fields(m) for m in iter(lambda b=b: b.recv(timeout=0), None)] for b in buses],
             [b.rx_dropped for b in buses],
         )
@@ -135,9 +147,9 @@ def test_send_standard_into_full_queues_drops_as_send_does():
 
 def test_can_master_sends_through_the_bus_it_holds_and_counts_refusals():
     enum_request = (0x70F, b"")  # the first frame after boot (fact sheet sec. 2.5)
-    master = CanMaster(InProcessBus("fastsensor_master_a"), boot_delay_ms=0)
-    listener = InProcessBus("fastsensor_master_b")
-    master.bus = InProcessBus("fastsensor_master_b")  # the send path follows the bus
+    master = CanMaster(InProcessBus("sensor_master_a"), boot_delay_ms=0)
+    listener = InProcessBus("sensor_master_b")
+    master.bus = InProcessBus("sensor_master_b")  # the send path follows the bus
     master.tick_ms(0)
     got = listener.recv(timeout=0)
     assert (got.arbitration_id, bytes(got.data)) == enum_request
@@ -150,13 +162,13 @@ def test_can_master_sends_through_the_bus_it_holds_and_counts_refusals():
         def send_standard(self, can_id: int, data: bytes) -> None:
             raise can.CanOperationError("TX refused")
 
-    refused = CanMaster(RefusingBus("fastsensor_master_c"), boot_delay_ms=0)
+    refused = CanMaster(RefusingBus("sensor_master_c"), boot_delay_ms=0)
     refused.tick_ms(0)  # refused: counted, the node goes on
     assert refused.tx_count == 0 and refused.tx_errors == 1
     refused.close()
     # A python-can bus without send_standard takes the generic path.
-    virt_tx = can.Bus(interface="virtual", channel="fastsensor_virt")
-    virt_rx = can.Bus(interface="virtual", channel="fastsensor_virt")
+    virt_tx = can.Bus(interface="virtual", channel="sensor_virt")
+    virt_rx = can.Bus(interface="virtual", channel="sensor_virt")
     generic = CanMaster(virt_tx, boot_delay_ms=0)
     generic.tick_ms(0)
     got = virt_rx.recv(timeout=1.0)
