@@ -1,10 +1,11 @@
 """Spinal's steady command frames applied in one call (``rdm._rdm.spinal_apply_commands``,
-``SpinalMirror._apply_command_run``) against the per-frame paths they replace.
+``SpinalMirror._apply_command_run``) against the per-frame paths (each frame's field values,
+and the message handlers that a subscriber of another layout takes).
 
 * Random streams of the five command topics (good, rejected, NaN, wrong motor counts, cut
   and extended payloads) mixed with other topics, corrupt bytes and frames split across
   ticks, written by the PC into three mirrors: command runs on, the value routes only (runs
-  off) and the plain message path. After every tick: the same UART output, diagnostics
+  off) and the message handlers only. After every tick: the same UART output, diagnostics
   (counters, rejections), controller targets, thrusts and duties.
 * Servo goals on a running Rust master (a hover stack past the CAN boot): the call against
   ``ServoBridge.target_states_values`` on random index/angle lists, invalid ones included.
@@ -43,14 +44,17 @@ COMMANDS = {
 _BUSES = itertools.count()
 
 
-def _mirror(fast: bool, runs: bool) -> tuple[sm.SpinalMirror, Any]:
-    """A mirror on an in-process UART (and the PC's end of it) and a bus of its own."""
+def _mirror(values: bool, runs: bool) -> tuple[sm.SpinalMirror, Any]:
+    """A mirror on an in-process UART (and the PC's end of it) and a bus of its own;
+    without ``values`` every command goes through the message handlers."""
     from rdm.link.can import open_can
     from rdm.link.uart_pipe import open_inproc_uart
 
     dev, host = open_inproc_uart()
     bus = open_can(f"virtual:spinal_commands_{next(_BUSES)}")
-    mirror = sm.SpinalMirror(dev, bus, fast_paths=fast, boot_delay_ms=0)
+    mirror = sm.SpinalMirror(dev, bus, boot_delay_ms=0)
+    if not values:
+        mirror._value_routes = {}  # armed by the first receive: no topic delivered as values
     if not runs:
         mirror._command_kinds = bytes(len(mirror._command_kinds))  # no run is armed
     return mirror, host
@@ -141,9 +145,11 @@ def test_command_runs_equal_value_routes_and_messages(
             assert m.session.configured
             m.core.set_uav_info(4, UAV_HYDRUS)
             m.core.set_pwm_info_hydrus_example()
-        runs, values, plain = (m for m, _ in mirrors)
+        runs, values, messages = (m for m, _ in mirrors)
         assert runs.session.command_run is not None
-        assert values.session.command_run is None and plain.session.command_run is None
+        assert values.session.command_run is None and messages.session.command_run is None
+        assert not any(slot.values for slot in messages.session.subscribers)
+        assert any(slot.values for slot in values.session.subscribers)
         slots = {s.name: s for s in runs.session.subscribers}
         held = b""
         for k in range(1, 500):

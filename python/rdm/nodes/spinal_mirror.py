@@ -38,7 +38,6 @@ import numpy as np
 from rdm.control.attitude import CommandRejectedError, SpinalStep
 from rdm.link.can_wire import DRAIN_AT
 from rdm.link.inproc_can import SimClock
-from rdm.nodes.base import to_ms
 from rdm.nodes.can_master import BOOT_DELAY_MS, IDLE_DUTY, CanMaster, MasterState
 from rdm.nodes.spinal_mirror_commands import (
     _COMMAND_KINDS,
@@ -123,7 +122,6 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         boot_delay_ms: int = BOOT_DELAY_MS,
         registry: TypeRegistry | None = None,
         layout: Any = None,
-        fast_paths: bool = True,
         **spinal_options: Any,
     ) -> None:
         if not (isinstance(rate_hz, (int, float)) and 0 < rate_hz <= MAX_RATE_HZ):
@@ -138,11 +136,9 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         self.uart = UartPump(uart)
         self.master = CanMaster(can_bus, boot_delay_ms=boot_delay_ms)
         self.core = SpinalStep(self.rate_hz, **spinal_options)
-        # fast_paths=False keeps the plain per-ms path (the reference of the fast one).
-        self._fast = bool(fast_paths)
         #: The lockstep kernel may run the routine busy ms (control step, battery sample,
         #: ``imu`` / ``servo/states`` publications) itself (:meth:`kernel_plan`'s busy part);
-        #: False: only the idle ms (the plain kernel path, docs/spinal.md).
+        #: False: only the idle ms (docs/spinal.md).
         self.kernel_busy = True
         #: A ms with bytes to read: this mirror receives them (:meth:`kernel_receive_tick`)
         #: and the kernel runs the rest of the ms from its plan; False: the whole tick here.
@@ -196,10 +192,10 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
             "servo/torque_enable": self.servos.torque_enable,
             "set_adc_scale": self._on_adc_scale,
         }
-        #: The fast path's command handlers taking ``decode_values`` field values instead of
-        #: a message (``_route_values``); each returns False, having applied nothing, when
-        #: the values do not convert (then the message path runs and decides).
-        #: Armed on the session while ``_fast`` is on (``_receive`` follows a change).
+        #: The command handlers taking ``decode_values`` field values instead of a message
+        #: (``_route_values``); each returns False, having applied nothing, when the values
+        #: do not convert (then the message path runs and decides). Armed on the session by
+        #: the first ``_receive``.
         self._value_routes: dict[str, Any] = {}
         handlers = {
             "four_axes/command": self._four_axis_values,
@@ -256,7 +252,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         self._idle_lo = self._idle_hi = 0  # ClientSession.idle_window after the last spin
         # The Rust master on a CanWireLink: tick's steady-state CAN ms in one core call.
         wire = self.master.wire
-        self._wire_link = wire if self._fast else None
+        self._wire_link = wire
         self._wire_channel = None if wire is None else wire._ch
         self._tick_wire_steady = None if wire is None else self.master.core.tick_wire_steady
         self._core_try_duties = None if wire is None else self.master.core.try_set_motor_duties
@@ -277,12 +273,9 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
     # ---------------------------------------------------------------- node interface
     def tick(self, now: float) -> None:
         """Advance to ``now`` (s): UART in, due control steps, CAN ms ticks, publish, UART out."""
-        if not self._fast:
-            self._tick_plain(now)
-            return
-        # The plain tick with every step's own "nothing to do" check inline, so that an idle
-        # ms (no UART byte, no control step or publisher due, one steady CAN ms) costs one
-        # Rust call and a few comparisons. Each skip is exactly the guarded step's no-op.
+        # Every step's own "nothing to do" check is inline, so that an idle ms (no UART
+        # byte, no control step or publisher due, one steady CAN ms) costs one Rust call and
+        # a few comparisons. Each skip is exactly the guarded step's no-op.
         now_ms = self._tick_begin(now)
         inbox = self.uart.inbox
         if inbox is None or inbox or not self._idle_lo <= now_ms < self._idle_hi:
@@ -292,7 +285,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
     def _tick_begin(self, now: float) -> int:
         """:meth:`tick`'s clock: the ms of ``now`` (never before the last one) and ``_now_s``.
         Calling it again with the same ``now`` changes nothing."""
-        now_ms = _floor(now * 1000.0 + 1e-6)  # to_ms(now)
+        now_ms = _floor(now * 1000.0 + 1e-6)  # rdm.nodes.base.to_ms(now)
         last_ms = self.now_ms
         if last_ms is not None and now_ms < last_ms:
             now_ms = last_ms  # time never goes back
@@ -360,21 +353,6 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
             return True
         return False
 
-    def _tick_plain(self, now: float) -> None:
-        """The reference tick: every step every ms (``fast_paths=False``)."""
-        now_ms = to_ms(now)
-        if self.now_ms is not None and now_ms < self.now_ms:
-            now_ms = self.now_ms  # time never goes back
-        self._now_s = max(self._now_s, float(now))
-        self.now_ms = now_ms
-        self._receive(now_ms)
-        self._battery(now_ms)
-        self._control(self._now_s)
-        self._can(now_ms)
-        self._forward_can_events()
-        self._publish(now_ms)
-        self.uart.send(self.session.take_output())
-
     def close(self) -> None:
         """Close the UART and the CAN bus."""
         try:
@@ -385,7 +363,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
     # ---------------------------------------------------------------- CAN
     def _can(self, now_ms: int) -> None:
         can_ms = self._can_ms
-        if self._fast and self._master_was_running and can_ms is not None and now_ms == can_ms + 1:
+        if self._master_was_running and can_ms is not None and now_ms == can_ms + 1:
             # The steady state: one new ms, the model adopted; the loop below for t = now_ms.
             master = self.master
             if master.state is MasterState.RUNNING:

@@ -1,5 +1,5 @@
 """What reaches the Spinal mirror on its UART: the rosserial events of each received chunk,
-the subscribers routed into the core and the CAN master (with their fast forms from field
+the subscribers routed into the core and the CAN master (the common commands from their field
 values, and the steady command frames applied in one Rust call), their rejections, and the
 services.
 
@@ -30,7 +30,7 @@ from rdm.protocol.rosserial.events import (
     SyncLost,
 )
 
-#: The commands the fast path applies from their field values (``_route_values``), with
+#: The commands applied from their field values (``_route_values``), with
 #: the message type whose layout those handlers read (a slot of another type or layout is
 #: routed as a message).
 _VALUE_ROUTE_TYPES = {
@@ -57,8 +57,8 @@ _MAG_SET = 1  # spinal/MagDeclination SET
 def _applied(setter: Any, *args: Any) -> bool:
     """Call a core ``*_rows`` setter (plain Python ints, no numpy array); False when its
     arguments do not convert (floats, out-of-range ints, wrong lengths: nothing applied), so
-    that the caller's array path runs and decides as the reference does. The core's own
-    rejections (:class:`RdmError`) are the reference's and propagate."""
+    that the caller's array path runs and decides (and names the bad field). The core's own
+    rejections (:class:`RdmError`) propagate."""
     try:
         setter(*args)
     except RdmError:
@@ -102,11 +102,11 @@ class SpinalCommands:
     """The receive side of :class:`rdm.nodes.spinal_mirror.SpinalMirror` (a part of it)."""
 
     def _receive(self, now_ms: int) -> None:
-        if self._values_armed is not self._fast:  # the value routes follow fast_paths
-            self.session.deliver_values(self._value_routes if self._fast else ())
-            runs = self._fast and _apply_commands is not None and any(self._command_kinds)
+        if not self._values_armed:  # the value routes and command runs, once
+            self.session.deliver_values(self._value_routes)
+            runs = _apply_commands is not None and any(self._command_kinds)
             self.session.command_run = self._apply_command_run if runs else None
-            self._values_armed = self._fast
+            self._values_armed = True
         data = self.uart.read()
         for event in self.session.spin(data, now_ms):
             if event.__class__ is tuple:  # (slot, values, payload): see _route_values
@@ -123,7 +123,7 @@ class SpinalCommands:
                 self.counters.configured += 1
             elif isinstance(event, SyncLost):
                 self.counters.sync_lost += 1
-        # the ms from here up to hi need no spin while no byte comes (the fast tick's skip)
+        # the ms from here up to hi need no spin while no byte comes (tick's skip)
         self._idle_lo, self._idle_hi = self.session.idle_window()
 
     def _route(self, topic: str, msg: Any) -> None:
@@ -199,8 +199,8 @@ class SpinalCommands:
             self._log(C.LogLevel.ERROR, text)
 
     # ---------------------------------------------------------------- subscribers
-    # The *_values handlers are the fast forms of the _on_* handlers below, from the field
-    # values of ``MessageCodec.decode_values`` (nested messages as tuples); same core calls.
+    # The *_values handlers take the field values of ``MessageCodec.decode_values`` (nested
+    # messages as tuples) and make the core calls of the _on_* handlers below.
     def _four_axis_values(self, values: tuple[Any, ...]) -> bool:
         angles, base = values  # list of 3 floats, list of floats: _on_four_axis_command's
         return _applied(self.core.four_axis_command_list, angles, base, self._now_s)
@@ -220,26 +220,24 @@ class SpinalCommands:
         return True
 
     def _on_four_axis_command(self, msg: Any) -> None:
-        if self._fast:
-            try:
-                angles = [float(a) for a in msg.angles]
-            except (TypeError, ValueError):
-                angles = None  # the array path below raises as the reference does
-            if angles is not None and _applied(
-                self.core.four_axis_command_list, angles, msg.base_thrust, self._now_s
-            ):
-                return
+        try:
+            angles = [float(a) for a in msg.angles]
+        except (TypeError, ValueError):
+            angles = None  # the array path below raises and names the field
+        if angles is not None and _applied(
+            self.core.four_axis_command_list, angles, msg.base_thrust, self._now_s
+        ):
+            return
         base = np.asarray(msg.base_thrust, dtype=np.float64)
         self.core.four_axis_command([float(a) for a in msg.angles], base, self._now_s)
 
     def _on_gain(self, msg: Any) -> None:
-        if self._fast:
-            rows = [
-                (m.roll_p, m.roll_i, m.roll_d, m.pitch_p, m.pitch_i, m.pitch_d, m.yaw_d)
-                for m in msg.motors
-            ]
-            if _applied(self.core.set_gains_wire_rows, rows):
-                return
+        rows = [
+            (m.roll_p, m.roll_i, m.roll_d, m.pitch_p, m.pitch_i, m.pitch_d, m.yaw_d)
+            for m in msg.motors
+        ]
+        if _applied(self.core.set_gains_wire_rows, rows):
+            return
         terms = np.array(
             [
                 [m.roll_p, m.roll_i, m.roll_d, m.pitch_p, m.pitch_i, m.pitch_d, m.yaw_d]
@@ -250,11 +248,10 @@ class SpinalCommands:
         self.core.set_gains_wire(terms)
 
     def _on_pinv_inertia(self, msg: Any) -> None:
-        if self._fast:
-            pinv = [(u.r, u.p, u.y) for u in msg.pseudo_inverse]
-            inertia = [int(v) for v in msg.inertia]
-            if _applied(self.core.set_pinv_inertia_wire_rows, pinv, inertia):
-                return
+        pinv = [(u.r, u.p, u.y) for u in msg.pseudo_inverse]
+        inertia = [int(v) for v in msg.inertia]
+        if _applied(self.core.set_pinv_inertia_wire_rows, pinv, inertia):
+            return
         rows = np.array([[u.r, u.p, u.y] for u in msg.pseudo_inverse], dtype=np.int16).reshape(
             -1, 3
         )

@@ -78,7 +78,7 @@ class SpinalControl:
         out = self.core.step(now, self.gyro, self.acc, self.mag, voltage)
         self.last_output = out
         self.counters.control_steps += 1
-        if self._fast and _duty_list is not None and self.pwm_test is None:
+        if _duty_list is not None and self.pwm_test is None:
             # No event and the controller's own duties: the list _step_tail builds, from
             # the core's output in one call (None: an event or another case, below).
             n = self.master.motor_number

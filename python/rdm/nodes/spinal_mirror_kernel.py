@@ -37,13 +37,13 @@ class SpinalKernelInterface:
         ``rdm._rdm.LockstepKernel`` (docs/sim.md): (now_ms, _now_s, idle window lo, hi,
         battery due ms, next control time, CAN ms, next publisher ms); the kernel runs a
         tick at ms m itself when m is inside the idle window, before the battery, control and
-        publisher times, and one past the CAN ms. None when no tick can run so: the plain
-        tick, bytes waiting, the master not steady on the wire, events or output pending.
+        publisher times, and one past the CAN ms. None when no tick can run so: bytes
+        waiting, the master not steady on the wire, events or output pending.
         Before the master first runs, the last item is its phase index (the kernel then runs
         the idle ms of the boot: a CAN ms that stays in that phase); else None.
         The kernel writes ``now_ms``, ``_now_s``, ``_can_ms`` and the master's ``tx_count``
         and ``_pending_events`` back itself, as the steady tick leaves them."""
-        if not self._fast or self.now_ms is None or self._next_control is None:
+        if self.now_ms is None or self._next_control is None:
             return None
         inbox = self.uart.inbox
         link = self._wire_link
@@ -87,8 +87,8 @@ class SpinalKernelInterface:
         :meth:`kernel_plan` when the idle part applies):
 
         * ``step_core``: the :class:`SpinalStep` when a control step's routine is
-          ``_step``'s fast path (no pwm test, the Rust master's one-call duty hand-over), else
-          None; ``period`` (``1 / rate_hz``) and the idle duty;
+          ``_step``'s one-call duty list (no pwm test, the Rust master's one-call duty
+          hand-over), else None; ``period`` (``1 / rate_hz``) and the idle duty;
         * the battery filter and sample period;
         * ``configured``, ``last_output``; ``imu_topic`` when the ``imu`` publication is
           :meth:`_publish_imu_frame`'s (the checked codec, a :class:`ClientClock`), the
@@ -181,9 +181,6 @@ class SpinalKernelInterface:
         runs the rest (battery, control, CAN ms, publishers, output) as in any ms of its plan,
         or calls :meth:`kernel_receive_rest` when that ms is not one it runs. The same calls
         in the same order as :meth:`tick` (docs/spinal.md "In the simulated stack")."""
-        if not self._fast:
-            self._tick_plain(now)
-            return None
         now_ms = self._tick_begin(now)
         inbox = self.uart.inbox
         if inbox is None or inbox or not self._idle_lo <= now_ms < self._idle_hi:

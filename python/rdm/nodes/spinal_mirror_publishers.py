@@ -26,26 +26,8 @@ MOTOR_PWMS_PUB_MS = 100  # > 100 ms, attitude_control.cpp
 SERVO_STATES_PUB_MS = 20  # >= 20 ms (50 Hz), spine.cpp
 SERVO_TORQUE_PUB_MS = 1000  # >= 1000 ms
 
-#: (key, period ms, strict) of every periodic publisher, as ``_publish_due`` checks them.
-_PUBLISHERS = (
-    ("imu", IMU_PUB_MS, False),
-    ("battery_voltage_status", BATTERY_PUB_MS, True),
-    ("motor_pwms", MOTOR_PWMS_PUB_MS, True),
-    ("servo/states", SERVO_STATES_PUB_MS, False),
-    ("servo/torque_states", SERVO_TORQUE_PUB_MS, False),
-)
-
-
-#: ``_next_due`` of a publisher that never published (due at once).
+#: The next due ms of a publisher that never published (due at once).
 _NEVER = -(2**62)
-
-
-def _next_due(last_pub: dict[str, int], key: str, period_ms: int, strict: bool) -> int:
-    """First ms at which ``SpinalMirror._due(key, ...)`` returns True again."""
-    last = last_pub.get(key)
-    if last is None:
-        return _NEVER
-    return last + period_ms + (1 if strict else 0)
 
 
 #: The ``spinal/Imu`` layout ``rdm._rdm.spinal_imu_frame`` writes (``codec._FlatLayout``).
@@ -62,32 +44,18 @@ _IMU_FORMAT = "<II3f3f3f4f"
 class SpinalPublishers:
     """The publishers of :class:`rdm.nodes.spinal_mirror.SpinalMirror` (a part of it)."""
 
-    def _due(self, key: str, now_ms: int, period_ms: int, strict: bool) -> bool:
-        last = self._last_pub.get(key)
-        if last is not None:
-            elapsed = now_ms - last
-            if (elapsed <= period_ms) if strict else (elapsed < period_ms):
-                return False
-        self._last_pub[key] = now_ms
-        return True
-
     def _publish(self, now_ms: int) -> None:
         if not self.session.configured or self.last_output is None:
             return
         if now_ms < self._next_pub_ms:
-            return  # no publisher due (exact: the earliest time any _due below fires)
-        if self._fast:
-            self._next_pub_ms = self._publish_due_fast(now_ms)
-            return
-        self._publish_due(now_ms)
-        last = self._last_pub
-        self._next_pub_ms = min(
-            _next_due(last, key, period, strict) for key, period, strict in _PUBLISHERS
-        )
+            return  # no publisher due (exact: the earliest ms any check below fires)
+        self._next_pub_ms = self._publish_due(now_ms)
 
-    def _publish_due_fast(self, now_ms: int) -> int:
-        """:meth:`_publish_due` with the five ``_due`` checks inline (same order, same
-        ``_last_pub`` updates); returns the first ms a publisher is due again."""
+    def _publish_due(self, now_ms: int) -> int:
+        """Each publisher due at ``now_ms`` publishes, in this order, and stamps its
+        ``_last_pub``: ``imu`` (every >= 5 ms), ``battery_voltage_status`` (> 100 ms),
+        ``motor_pwms`` (> 100 ms), ``servo/states`` (>= 20 ms), ``servo/torque_states``
+        (>= 1000 ms), the firmware's comparisons. Returns the first ms one is due again."""
         last = self._last_pub
         get = last.get
         stamp = None
@@ -196,29 +164,6 @@ class SpinalPublishers:
             mag=list(self.mag),
             quaternion=out.quaternion.tolist(),
         )
-
-    def _publish_due(self, now_ms: int) -> None:
-        stamp = self.session.now(now_ms)
-        if self._due("imu", now_ms, IMU_PUB_MS, strict=False):
-            self._publish_topic("imu", self._imu_message(stamp))
-        if (
-            self._due("battery_voltage_status", now_ms, BATTERY_PUB_MS, strict=True)
-            and self.battery_voltage is not None
-        ):
-            self._publish_topic(
-                "battery_voltage_status", self._msg.float32.new(data=self.battery_voltage)
-            )
-        if self._due("motor_pwms", now_ms, MOTOR_PWMS_PUB_MS, strict=True):
-            values = [int(d * 2000.0) for d in self.duties]
-            self._publish_topic("motor_pwms", self._msg.pwms.new(motor_value=values))
-        if self._due("servo/states", now_ms, SERVO_STATES_PUB_MS, strict=False):
-            msg = self.servos.states(self._msg, stamp)
-            if msg is not None:
-                self._publish_topic("servo/states", msg)
-        if self._due("servo/torque_states", now_ms, SERVO_TORQUE_PUB_MS, strict=False):
-            msg = self.servos.torque_states(self._msg)
-            if msg is not None:
-                self._publish_topic("servo/torque_states", msg)
 
     def _publish_topic(self, topic: str, msg: Any) -> None:
         if self.session.publish(topic, msg) > 0:

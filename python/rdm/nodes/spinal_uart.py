@@ -50,7 +50,7 @@ def inproc_chain(link: Any) -> tuple[Any, Any, InProcessUartEnd] | None:
     ``[DroppableLink ->] [TappedLink ->] InProcessUartEnd`` (each optional wrapper None when
     absent; exact classes, no subclass), else None. :meth:`UartPump.read` and
     :meth:`UartPump._write` then do what the chain's ``read_available`` / ``write`` do
-    without the calls through the wrappers (``UartPump.fast``)."""
+    without the calls through the wrappers."""
     droppable = tapped = None
     if _kind(link) == _DROPPABLE:
         droppable, link = link, link.link
@@ -65,13 +65,8 @@ class UartPump:
     """Non-blocking reads and writes on a :class:`rdm.link.serial.SerialLink` (or any object
     with ``read_available()`` and ``port``/``write``)."""
 
-    def __init__(
-        self, link: Any, max_pending: int = DEFAULT_MAX_PENDING, *, fast: bool = True
-    ) -> None:
+    def __init__(self, link: Any, max_pending: int = DEFAULT_MAX_PENDING) -> None:
         self.link = link  # resolves inbox (see the property)
-        #: With nothing queued, :meth:`send` writes ``data`` itself (no copy through the
-        #: queue); False keeps the plain queue-then-pump path (same bytes, same counters).
-        self.fast = fast
         self.max_pending = max_pending
         self.pending = bytearray()
         self.bytes_in = 0
@@ -96,17 +91,14 @@ class UartPump:
         #: :func:`source_inbox` of the link: while it is empty, :meth:`read` returns ``b""``
         #: and changes nothing (callers may skip it); None when that is not known.
         self.inbox = source_inbox(link)
-        #: :func:`inproc_chain` of the link (the fast read / write through it), or None.
+        #: :func:`inproc_chain` of the link (read and written directly), or None.
         self._chain = inproc_chain(link)
 
     def read(self) -> bytes:
         """Everything received so far (``b""`` if nothing or on a port error, counted)."""
         try:
             chain = self._chain
-            if chain is not None and self.fast:
-                data = self._read_chain(chain)
-            else:
-                data = self.link.read_available()
+            data = self.link.read_available() if chain is None else self._read_chain(chain)
         except (OSError, ValueError) as exc:  # SerialException is an OSError
             del exc
             self.read_errors += 1
@@ -135,8 +127,9 @@ class UartPump:
         return data
 
     def send(self, data: bytes) -> None:
-        """Queue ``data`` and write as much as the port takes now."""
-        if self.fast and data and not self.pending and type(data) is bytes:
+        """Write as much of ``data`` as the port takes now and queue the rest (behind any
+        bytes already queued); a queue over ``max_pending`` bytes is discarded and counted."""
+        if data and not self.pending and type(data) is bytes:  # written without a copy
             if len(data) > self.max_pending:
                 self.bytes_discarded += len(data)
                 return
@@ -167,7 +160,7 @@ class UartPump:
         error, counted)."""
         try:
             chain = self._chain
-            if chain is not None and self.fast:
+            if chain is not None:
                 return self._write_chain(chain, data)
             if self._fd is not None:
                 _, writable, _ = select.select([], [self._fd], [], 0)
@@ -184,13 +177,13 @@ class UartPump:
 
     def writes_whole(self) -> bool:
         """Whether :meth:`send` of any ``bytes`` of 1 to :attr:`max_pending` bytes writes
-        them all now, through the fast chain, with nothing left pending: the fast in-process
+        them all now, through the chain, with nothing left pending: the in-process
         chain with nothing queued and the line cut (the bytes are counted lost) or both ends
         open. Then several such sends and one send of their bytes joined (up to
         ``max_pending``) leave the same bytes, counters and captures; this holds until
         Python code changes the chain (the lockstep kernel's deferred Spinal output)."""
         chain = self._chain
-        if chain is None or not self.fast or self.pending:
+        if chain is None or self.pending:
             return False
         droppable, _tapped, end = chain
         if droppable is not None and droppable.dropped:

@@ -21,12 +21,7 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-from rdm.protocol.rosserial.checksums import (
-    byte_sum,
-    length_checksum,
-    length_ok,
-    message_checksum,
-)
+from rdm.protocol.rosserial.checksums import byte_sum, length_ok
 from rdm.protocol.rosserial.constants import FRAME_OVERHEAD, PROTOCOL_VERSION, SYNC
 
 BAD_FRAME_REASONS = ("version", "length_checksum", "oversize", "message_checksum", "timeout")
@@ -113,7 +108,7 @@ def encode_frame(topic_id: int, payload: bytes) -> bytes:
     if n > 0xFFFF:
         raise FrameError(f"payload of {n} bytes does not fit the uint16 length field")
     if payload.__class__ is not bytes:
-        payload = bytes(payload)  # what the reference form accepts (bytearray, ints, ...)
+        payload = bytes(payload)  # a bytearray, a list of ints ...
     # checksums as in checksums.py, inlined: this runs for every frame either end sends
     length_chk = 255 - (((n & 0xFF) + (n >> 8)) % 256)
     message_chk = 255 - (((topic_id & 0xFF) + (topic_id >> 8) + byte_sum(payload)) % 256)
@@ -125,27 +120,6 @@ def encode_frame(topic_id: int, payload: bytes) -> bytes:
 
 
 _CHECKSUM_BYTE = [bytes((i,)) for i in range(256)]
-
-
-def encode_frame_plain(topic_id: int, payload: bytes) -> bytes:
-    """Reference form of :func:`encode_frame` (byte by byte from checksums.py)."""
-    if not 0 <= topic_id <= 0xFFFF:
-        raise FrameError(f"topic_id {topic_id} outside 0..65535")
-    n = len(payload)
-    if n > 0xFFFF:
-        raise FrameError(f"payload of {n} bytes does not fit the uint16 length field")
-    header = bytes(
-        (
-            SYNC,
-            PROTOCOL_VERSION,
-            n & 0xFF,
-            n >> 8,
-            length_checksum(n),
-            topic_id & 0xFF,
-            topic_id >> 8,
-        )
-    )
-    return header + bytes(payload) + bytes((message_checksum(topic_id, payload),))
 
 
 class FrameParser:

@@ -1,24 +1,26 @@
-"""The Spinal mirror's busy-ms fast paths (docs/spinal.md) against their plain paths.
+"""The Spinal mirror's busy ms (docs/spinal.md): its Rust-built frames and one-call steps
+against the Python codec and the rules written out, and its command handlers.
 
 * ``rdm._rdm.spinal_imu_frame`` (stamp + ``spinal/Imu`` pack + frame in Rust) against
   ``ClientClock.now`` + the Python codec + ``encode_frame`` on random values, clocks, ticks
   and topic ids: the same bytes whenever it answers, and it answers whenever the values are
   finite float32s and the stamp fits; other argument types are declined.
-* ``rdm._rdm.spinal_duty_list`` against ``SpinalMirror._step_tail``'s list on the steps of
-  an armed ``SpinalStep`` with random commands; None when the step has events.
+* ``rdm._rdm.spinal_duty_list`` against the clamp rule (each duty in [idle, 1.0]) on the
+  steps of an armed ``SpinalStep`` with random commands; None when the step has events.
 * ``MessageCodec.decode_values`` against ``decode`` on random valid, cut and extended
-  payloads of every Spinal type with a fast layout: values exactly when ``decode`` succeeds.
-* ``ClientSession.deliver_values`` against a session without it on a random stream: the
-  same events (values vs messages), output bytes and counters; ``send_frame`` /
-  ``send_payload`` against ``_send`` (too large, ring full, not configured).
+  payloads of every Spinal type with a flat or variable layout: values exactly when
+  ``decode`` succeeds.
+* ``ClientSession.deliver_values`` against a session delivering messages on a random
+  stream: the same events (values vs decoded messages), output bytes and counters;
+  ``send_frame`` / ``send_payload`` against ``_send`` (too large, ring full, not configured).
 * ``ServoBridge.states_frame`` (the master's table framed in one call) against encoding
   ``states()`` with the Python codec; declines for stamps, topic ids and codecs it does not
   take. ``servo/target_states`` against its rules written out (lengths, indices, 15-bit
   values, the last of a repeated index).
-* The command handlers from field values against the message handlers on random good and
-  bad commands (rejections, logs, counters, core state).
-* The whole hover stack with the fast paths on and off: same bytes in every log and the
-  same counters, and each new fast path was taken.
+* The command handlers from field values against the message handlers (the ones a
+  subscriber of another layout takes) on random good and bad commands (rejections, logs,
+  counters, core state).
+* A whole hover stack: the busy ms take the Rust frames, duty lists and value routes.
 """
 
 from __future__ import annotations
@@ -28,7 +30,6 @@ import math
 import random
 import struct
 import tempfile
-from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
@@ -72,7 +73,7 @@ def _float(rng: random.Random) -> float:
 
 
 def _packs(x: float) -> bool:
-    """The value the fast path must take: finite and a float32 (struct packs it)."""
+    """The value the Rust frame must take: finite and a float32 (struct packs it)."""
     try:
         struct.pack("<f", x)
     except OverflowError:
@@ -118,7 +119,7 @@ def test_imu_frame_equals_python_codec_and_declines_only_what_it_must() -> None:
             else tuple(_float(rng) for _ in range(3))
         )
         out = rng.choice(outs)
-        fast = _rdm.spinal_imu_frame(
+        frame = _rdm.spinal_imu_frame(
             topic, now_ms, clock.synced, clock._sync_tick, clock._sync_ns, acc, out, mag
         )
         stamp = clock.now(now_ms)
@@ -135,19 +136,19 @@ def test_imu_frame_equals_python_codec_and_declines_only_what_it_must() -> None:
             reference = None
         values = [*acc, *msg.gyro, *mag, *msg.quaternion]
         must = stamp.sec < 2**32 and all(_packs(x) for x in values)
-        if fast is None:
+        if frame is None:
             declined += 1
             assert not must, (acc, mag, stamp)
         else:
             answered += 1
-            assert must and fast == reference
+            assert must and frame == reference
     assert answered > 1000 and declined > 500
 
 
 @pytest.mark.parametrize(
     "change",
     [
-        {"acc": [0, 0, 9]},  # ints: struct packs them, the fast path leaves them to it
+        {"acc": [0, 0, 9]},  # ints: struct packs them, the Rust frame leaves them to it
         {"acc": np.array([0.0, 0.0, 9.8])},
         {"mag": (1.0, 2.0)},
         {"mag": (np.float64(1.0), 2.0, 3.0)},
@@ -178,11 +179,11 @@ def test_imu_frame_declines_other_argument_types(change: dict[str, Any]) -> None
 
 
 # ----------------------------------------------------------------------------- duty list
-def _tail_duties(out: Any, n: int) -> list[float]:
+def _clamped_duties(out: Any, n: int) -> list[float]:
     return [min(1.0, max(IDLE_DUTY, d)) for d in out.duty.tolist()[:n]]
 
 
-def test_duty_list_equals_the_python_tail() -> None:
+def test_duty_list_is_the_clamped_duties() -> None:
     rng = np.random.default_rng(5)
     step = SpinalStep(200.0, gyro_calib_duration_s=0.05)
     step.set_uav_info(4, UAV_HYDRUS)
@@ -206,7 +207,7 @@ def test_duty_list_equals_the_python_tail() -> None:
                 assert got is None
                 with_events += 1
             else:
-                assert got == _tail_duties(out, n)
+                assert got == _clamped_duties(out, n)
                 assert all(type(d) is float for d in got)
                 compared += 1
         for bad in (0, 5, -1, 4.0, True, None):
@@ -224,7 +225,7 @@ def test_duty_list_equals_the_python_tail() -> None:
 
 # ----------------------------------------------------------------------------- decode_values
 def _payload(codec: Any, rng: random.Random) -> bytes:
-    """A valid payload of a fast-layout codec: random bytes in the layout's shape."""
+    """A valid payload of a flat or variable layout codec: random bytes in its shape."""
     if codec._flat is not None:
         return rng.randbytes(codec._flat.size)
     out = b""
@@ -273,8 +274,8 @@ def test_decode_values_equals_decode() -> None:
                 taken += 1
             assert codec.decode_values(bytearray(data)) is None
     assert taken > 500
-    plain = REG.msg("rosserial_msgs/Log")  # a string: no fast layout
-    assert plain.decode_values(plain.encode(plain.new(level=1, msg="x"))) is None
+    log = REG.msg("rosserial_msgs/Log")  # a string: no flat or variable layout
+    assert log.decode_values(log.encode(log.new(level=1, msg="x"))) is None
 
 
 # ----------------------------------------------------------------------------- sessions
@@ -324,22 +325,22 @@ def _event_form(event: Any) -> Any:
 @pytest.mark.parametrize("seed", range(4))
 def test_deliver_values_session_equals_message_session(seed: int) -> None:
     rng = random.Random(seed)
-    plain, fast = ClientSession.from_layout(), ClientSession.from_layout()
-    marked = fast.deliver_values([*FIVE, "uav_info", "imu_calib", "no such topic"])
+    messages, values = ClientSession.from_layout(), ClientSession.from_layout()
+    marked = values.deliver_values([*FIVE, "uav_info", "imu_calib", "no such topic"])
     assert sorted(s.name for s in marked) == sorted([*FIVE, "uav_info"])  # no service half
     tuples = 0
     for t in range(400):
-        data = b"".join(_stream_piece(rng, plain) for _ in range(rng.randrange(4)))
+        data = b"".join(_stream_piece(rng, messages) for _ in range(rng.randrange(4)))
         cut = rng.randrange(len(data) + 1)
         for chunk in (data[:cut], data[cut:]):
-            a, b = plain.spin(chunk, t), fast.spin(chunk, t)
+            a, b = messages.spin(chunk, t), values.spin(chunk, t)
             tuples += sum(e.__class__ is tuple for e in b)
             assert [_event_form(e) for e in a] == [_event_form(e) for e in b]
-            assert plain.take_output() == fast.take_output()
-    assert dict(plain.counts) == dict(fast.counts)
-    assert dict(plain.parser.counts) == dict(fast.parser.counts)
+            assert messages.take_output() == values.take_output()
+    assert dict(messages.counts) == dict(values.counts)
+    assert dict(messages.parser.counts) == dict(values.parser.counts)
     assert tuples > 150
-    assert fast.deliver_values(()) == [] and not any(s.values for s in fast.subscribers)
+    assert values.deliver_values(()) == [] and not any(s.values for s in values.subscribers)
 
 
 def test_send_frame_and_send_payload_equal_send() -> None:
@@ -465,14 +466,19 @@ def test_servo_targets_follow_the_topic_rules() -> None:
 _BUSES = itertools.count()
 
 
-def _mirror(fast: bool) -> tuple[sm.SpinalMirror, Any]:
-    """A mirror on an in-process UART (and the PC's end of it) and a bus of its own."""
+def _mirror(values: bool) -> tuple[sm.SpinalMirror, Any]:
+    """A mirror on an in-process UART (and the PC's end of it) and a bus of its own;
+    without ``values`` every command goes through the message handlers."""
     from rdm.link.can import open_can
     from rdm.link.uart_pipe import open_inproc_uart
 
     dev, host = open_inproc_uart()
     bus = open_can(f"virtual:spinal_busy_{next(_BUSES)}")
-    return sm.SpinalMirror(dev, bus, fast_paths=fast, boot_delay_ms=0), host
+    mirror = sm.SpinalMirror(dev, bus, boot_delay_ms=0)
+    if not values:
+        mirror._value_routes = {}  # armed by the first receive: no topic delivered as values
+        mirror._command_kinds = bytes(len(mirror._command_kinds))
+    return mirror, host
 
 
 def _command(topic: str, rng: random.Random) -> Any:
@@ -506,10 +512,10 @@ def _command(topic: str, rng: random.Random) -> Any:
 
 def test_value_handlers_equal_message_handlers() -> None:
     rng = random.Random(9)
-    (fast, fast_pc), (plain, plain_pc) = _mirror(True), _mirror(False)
+    (by_values, values_pc), (by_messages, messages_pc) = _mirror(True), _mirror(False)
     try:
         # configured (the PC's topic request on the wire) and set up alike
-        for m, pc in ((fast, fast_pc), (plain, plain_pc)):
+        for m, pc in ((by_values, values_pc), (by_messages, messages_pc)):
             pc.write(encode_frame(C.TopicId.PUBLISHER, b""))
             m.tick(0.0)
             assert m.session.configured
@@ -521,37 +527,42 @@ def test_value_handlers_equal_message_handlers() -> None:
             topic = rng.choice(list(FIVE))
             msg = _command(topic, rng)
             payload = REG.msg(FIVE[topic]).encode(msg)
-            slot = next(s for s in fast.session.subscribers if s.name == topic)
+            slot = next(s for s in by_values.session.subscribers if s.name == topic)
             if k == 50:
-                for m in (fast, plain):
+                for m in (by_values, by_messages):
                     m.core.flight_config(ARM_ON, now)
-            for m in (fast, plain):
+            for m in (by_values, by_messages):
                 m._now_s = now
             values = slot.codec.decode_values(payload)
-            assert values is not None and topic in fast._value_routes
-            fast._route_values(slot, values, payload)
-            plain._route(topic, slot.codec.decode(payload))
+            assert values is not None and topic in by_values._value_routes
+            by_values._route_values(slot, values, payload)
+            by_messages._route(topic, slot.codec.decode(payload))
             routed += 1
-            for m in (fast, plain):
+            for m in (by_values, by_messages):
                 m.tick(now)
-            assert fast_pc.read_available() == plain_pc.read_available()
-            assert fast.diagnostics() == plain.diagnostics()
-            assert fast.core.target_angles.tolist() == plain.core.target_angles.tolist()
-            assert fast.core.base_thrust.tolist() == plain.core.base_thrust.tolist()
-            assert repr(fast.last_output.duty) == repr(plain.last_output.duty)
-        rejected = fast.counters.rejected
+            assert values_pc.read_available() == messages_pc.read_available()
+            assert by_values.diagnostics() == by_messages.diagnostics()
+            assert by_values.core.target_angles.tolist() == by_messages.core.target_angles.tolist()
+            assert by_values.core.base_thrust.tolist() == by_messages.core.base_thrust.tolist()
+            assert repr(by_values.last_output.duty) == repr(by_messages.last_output.duty)
+        rejected = by_values.counters.rejected
         assert routed and sum(rejected.values()) > 20 and len(rejected) >= 3, rejected
-        assert sum(fast.counters.received.values()) > 100
+        assert sum(by_values.counters.received.values()) > 100
     finally:
-        fast.close()
-        plain.close()
+        by_values.close()
+        by_messages.close()
 
 
 # ----------------------------------------------------------------------------- whole stack
 TICKS = 4300  # past the 2 s CAN boot, servo reports, a UART cut and its restore
 
 
-def _run(base: str, fast: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[dict, dict, dict]:
+def test_stack_busy_ms_take_the_rust_frames_duties_and_value_routes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A hover stack with a UART cut: the ``imu`` and ``servo/states`` publications are the
+    Rust-built frames, the control steps' duty lists the one-call ones, and the commands
+    arrive as field values (no silent fallback to the message paths)."""
     taken = {"imu": 0, "duties": 0, "values": 0, "servo_states": 0}
 
     def counting(name: str, inner: Any) -> Any:
@@ -565,139 +576,37 @@ def _run(base: str, fast: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[dict, 
 
     monkeypatch.setattr(sm_publishers, "_imu_frame", counting("imu", sm_publishers._imu_frame))
     monkeypatch.setattr(sm_control, "_duty_list", counting("duties", sm_control._duty_list))
-    stack = _stack(base)
-    spinal = stack.spinal
-    spinal._fast = fast
-    spinal.servos._fast = fast
-    spinal.master.fast = fast
-    spinal.uart.fast = fast
-    # The Python busy paths under test: the lockstep kernel runs only the idle ms (its own
-    # busy ms are compared in tests/test_spinal_kernel_busy.py).
-    spinal.kernel_busy = False
-    route_values = spinal._route_values
+    with tempfile.TemporaryDirectory() as base:
+        stack = _stack(base)
+        spinal = stack.spinal
+        # The Python busy ms (the lockstep kernel runs only the idle ms; its own busy ms are
+        # checked in tests/test_spinal_kernel_busy.py).
+        spinal.kernel_busy = False
+        route_values = spinal._route_values
 
-    def counting_values(*args: Any) -> None:
-        taken["values"] += 1
-        route_values(*args)
+        def counting_values(*args: Any) -> None:
+            taken["values"] += 1
+            route_values(*args)
 
-    spinal._route_values = counting_values
-    command_run = spinal._apply_command_run  # the same routes, a run of frames in one call
+        spinal._route_values = counting_values
+        command_run = spinal._apply_command_run  # the same routes, a run of frames in one call
 
-    def counting_run(items: list) -> int:
-        done = command_run(items)
-        taken["values"] += done
-        return done
+        def counting_run(items: list) -> int:
+            done = command_run(items)
+            taken["values"] += done
+            return done
 
-    spinal._apply_command_run = counting_run
-    states = spinal.servos.states_frame
-    spinal.servos.states_frame = counting("servo_states", states)
-    stack.loop.run_ticks(3000)
-    stack.spinal_link.dropped = True
-    stack.loop.run_ticks(700)
-    stack.spinal_link.dropped = False
-    stack.loop.run_ticks(TICKS - 3700)
-    diag = spinal.diagnostics()
-    stack.close()
-    paths = sorted(p for p in Path(base).rglob("*") if p.is_file())
-    return {str(p.relative_to(base)): p.read_bytes() for p in paths}, diag, taken
-
-
-def test_stack_bytes_and_counters_equal_with_busy_fast_paths_on_and_off(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    with tempfile.TemporaryDirectory() as a, tempfile.TemporaryDirectory() as b:
-        fast_files, fast_diag, taken = _run(a, True, monkeypatch)
-        plain_files, plain_diag, plain_taken = _run(b, False, monkeypatch)
-    assert fast_diag == plain_diag
-    published, received = fast_diag["published"], fast_diag["received"]
+        spinal._apply_command_run = counting_run
+        spinal.servos.states_frame = counting("servo_states", spinal.servos.states_frame)
+        stack.loop.run_ticks(3000)
+        stack.spinal_link.dropped = True
+        stack.loop.run_ticks(700)
+        stack.spinal_link.dropped = False
+        stack.loop.run_ticks(TICKS - 3700)
+        diag = spinal.diagnostics()
+        stack.close()
+    published, received = diag["published"], diag["received"]
     assert taken["imu"] >= published["imu"] - 5 > 500  # all but the first few (no output)
     assert taken["duties"] > 300
     assert taken["values"] >= received["servo/target_states"] + received["rpy/gain"] > 100
     assert taken["servo_states"] >= published["servo/states"] > 50
-    assert plain_taken == {"imu": 0, "duties": 0, "values": 0, "servo_states": 0}
-    assert sorted(fast_files) == sorted(plain_files)
-    for name in fast_files:
-        assert fast_files[name] == plain_files[name], name
-
-
-# ----------------------------------------------------------------------------- UART chain
-def _chain(base: Path, name: str, cut: bool, tapped: bool) -> tuple[Any, ...]:
-    from rdm.link.tapped_link import TappedLink
-    from rdm.link.uart_pipe import InProcessUartEnd
-    from rdm.scenarios.stack import DroppableLink
-
-    dev, host = InProcessUartEnd("device"), InProcessUartEnd("host")
-    dev.peer, host.peer = host, dev
-    link: Any = dev
-    tap = None
-    if tapped:
-        link = tap = TappedLink(dev, base / f"{name}.tx", base / f"{name}.rx")
-    drop = DroppableLink(link) if cut else None
-    return (drop or link), drop, tap, dev, host
-
-
-def _pump_state(rig: tuple[Any, ...]) -> tuple[Any, ...]:
-    pump, drop, tap, dev, host = rig
-    return (
-        pump.bytes_in,
-        pump.bytes_out,
-        pump.bytes_discarded,
-        pump.write_errors,
-        pump.read_errors,
-        bytes(pump.pending),
-        None if drop is None else (drop.dropped, drop.bytes_lost),
-        None if tap is None else (tap.tx_bytes, tap.rx_bytes),
-        bytes(host.inbox),
-        bytes(dev.inbox),
-    )
-
-
-@pytest.mark.parametrize(
-    ("cut", "tapped"), [(True, True), (False, True), (True, False), (False, False)]
-)
-def test_uart_pump_chain_equals_calls_through_the_wrappers(cut: bool, tapped: bool) -> None:
-    from rdm.nodes.spinal_uart import UartPump
-
-    rng = random.Random(int(cut) * 2 + int(tapped))
-    with tempfile.TemporaryDirectory() as tmp:
-        base = Path(tmp)
-        rigs = []
-        for name, fast in (("fast", True), ("plain", False)):
-            link, drop, tap, dev, host = _chain(base, name, cut, tapped)
-            pump = UartPump(link, max_pending=300, fast=fast)
-            assert pump._chain == (drop, tap, dev)  # the plain pump has it too, unused
-            rigs.append((pump, drop, tap, dev, host))
-        ops = ["send", "send", "pump", "pc_send", "pc_send", "pc_read", "drop", "peer", "end"]
-        for step in range(3000):
-            op = rng.choice(ops)
-            data = rng.randbytes(rng.choice([0, 1, 7, 70, 400]))
-            outs = []
-            for pump, drop, tap, dev, host in rigs:
-                if step == 2900 and tap is not None:
-                    tap._tx.close()  # captures closed: ValueError on their writes, counted
-                    tap._rx.close()
-                if op == "send":
-                    pump.send(data)
-                elif op == "pump":
-                    outs.append(pump.pump())
-                elif op == "pc_send":
-                    if not host.closed:
-                        host.write(data)
-                    outs.append(pump.read())
-                elif op == "pc_read":
-                    outs.append(host.read_available())
-                elif op == "drop" and drop is not None:
-                    drop.dropped = not drop.dropped
-                elif op == "peer":  # the PC end goes away / comes back: writes are lost
-                    host.closed = not host.closed
-                elif op == "end" and step % 5 == 0:  # our end closed: OSError, counted
-                    dev.closed = not dev.closed
-            assert outs[:1] == outs[1:]
-            assert _pump_state(rigs[0]) == _pump_state(rigs[1])
-        assert rigs[0][0].write_errors > 0 and rigs[0][0].bytes_out > 1000
-        for pump, *_ in rigs:
-            pump.link.close()
-        if tapped:
-            for kind in ("tx", "rx"):
-                fast_bytes = (base / f"fast.{kind}").read_bytes()
-                assert fast_bytes == (base / f"plain.{kind}").read_bytes() and fast_bytes
