@@ -2,7 +2,7 @@
 
 Each measurement writes a capture to a temporary folder and decodes it with ``rdm decode``
 (text output to ``/dev/null``) in a child process, which reports its wall and CPU time around
-the decode and its peak RSS (``ru_maxrss``). The same child decoding a capture of a few bytes
+the decode and its peak RSS (:func:`peak_rss_kb`). The same child decoding a capture of a few bytes
 gives the baseline RSS (interpreter, numpy, the extension), so the reported growth is what the
 capture's size adds. The summary is microseconds per MB of capture over the runs.
 
@@ -27,18 +27,36 @@ from rdm.bench.statistics import summarize_ns
 
 #: The child: decode argv[2:] with stdout to /dev/null, write the figures to argv[1].
 _CHILD = """
-import json, os, resource, sys, time
+import json, os, sys, time
 from rdm.cli import main
+from rdm.bench.decode import peak_rss_kb
 out = sys.argv[1]
 sys.stdout = open(os.devnull, "w")
 w0, c0 = time.perf_counter(), time.process_time()
 rc = main(["decode", *sys.argv[2:]])
 sys.stdout.flush()
 wall, cpu = time.perf_counter() - w0, time.process_time() - c0
-rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 with open(out, "w") as fh:
-    json.dump({"rc": rc, "wall": wall, "cpu": cpu, "maxrss_kb": rss}, fh)
+    json.dump({"rc": rc, "wall": wall, "cpu": cpu, "maxrss_kb": peak_rss_kb()}, fh)
 """
+
+
+def peak_rss_kb() -> int:
+    """Peak resident set of this process in kB: ``VmHWM`` of ``/proc/self/status`` (the
+    high-water mark of this program's own memory). ``ru_maxrss`` is the fallback where there
+    is no ``/proc``; on Linux it also keeps the parent's size across the fork and exec that
+    started the process, so it is not used there."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1])
+    except OSError:
+        pass
+    import resource
+
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+
 
 MB = 1e6
 #: Leptrino throughput target (MB of capture per second).
