@@ -10,10 +10,14 @@ packing.
 
 from __future__ import annotations
 
+import math
+
+import mujoco
 import numpy as np
 
 from rdm.nodes.plant_bridge import _JointFeed
 from rdm.plant import Plant
+from rdm.plant.mjcf import rotor_site
 from rdm.plant.sensors import (
     ACCEL_LSB,
     ACCEL_RANGE,
@@ -148,11 +152,22 @@ def test_bridge_samples_on_the_first_tick_then_every_nth():
 
 
 # --------------------------------------------------------------------------- ceiling effect
-def test_rotor_thrusts_equal_thrust_ratio_of_each_effect_at_the_plain_distances():
+def _sanchez_cuevas(effect, distance: float) -> float:
+    """T/T0 = 1 / (1 - (R / (z + k2))^2 / k1), k2 = k2_over_radius * R, capped at
+    max_ratio; z = 0 in contact; 1 without a ceiling ahead or for NoCeilingEffect."""
+    if not hasattr(effect, "radius") or math.isinf(distance):
+        return 1.0
+    z = max(distance, 0.0)
+    s = (effect.radius / (z + effect.k2_over_radius * effect.radius)) ** 2 / effect.k1
+    return effect.max_ratio if s >= 1.0 else min(effect.max_ratio, 1.0 / (1.0 - s))
+
+
+def test_rotor_thrusts_equal_the_ceiling_formula_at_mujocos_rotor_distances():
     from rdm.plant import NoCeilingEffect
     from rdm.plant.ceiling import ParametricCeilingEffect
 
-    plant = Plant("rdm", seed=0, ceiling_height=0.75, floor_height=0.0)
+    h = 0.75
+    plant = Plant("rdm", seed=0, ceiling_height=h, floor_height=0.0)
     ratios = []
     for z in (0.3, 0.55, 0.6, 0.62, 0.65, 0.7, 0.74):
         plant.reset(
@@ -167,11 +182,18 @@ def test_rotor_thrusts_equal_thrust_ratio_of_each_effect_at_the_plain_distances(
         ):
             plant.ceiling_effects = effects
             d = plant._fresh()
-            dist = plant._rotor_distances()  # the plain form: numpy, per rotor
             plant._apply_rotor_thrusts()
-            r = [e.thrust_ratio(float(x)) for e, x in zip(effects, dist, strict=True)]
-            want = [esc._thrust * k for esc, k in zip(plant.escs, r, strict=True)]
-            assert _same(d.ctrl[plant._rotor_act], want), (z, effects)
+            m = plant.model
+            r, dist = [], []
+            for e, name in zip(effects, plant.rotor_names, strict=True):
+                sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, rotor_site(name))
+                axis_z = d.site_xmat[sid].reshape(3, 3)[2, 2]  # the rotor axis' world z
+                gap = max(h - d.site_xpos[sid][2], 0.0)
+                dist.append(gap / axis_z if axis_z > 1e-6 else math.inf)
+                r.append(_sanchez_cuevas(e, dist[-1]))
+            np.testing.assert_allclose(plant.rotor_distances_to_ceiling(), dist, rtol=1e-12)
+            want = [esc.thrust * k for esc, k in zip(plant.escs, r, strict=True)]
+            np.testing.assert_allclose(d.ctrl[plant._rotor_act], want, rtol=1e-12, atol=0)
             ratios += r
     assert any(1.01 < k < 1.2 for k in ratios) and 1.5 in ratios and 1.0 in ratios
 

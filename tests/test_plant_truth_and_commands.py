@@ -178,7 +178,7 @@ def test_ground_truth_equals_mujocos_data_through_contact_and_flight():
         p = Plant("rdm", seed=2, ceiling_height=1.6, floor_height=0.0)
         p.reset(base_position=(0.0, 0.0, 0.05))
         plants.append(p)
-    fast, plain = plants
+    plant, twin = plants
     saw = set()
     for k in range(900):
         if k == 200:
@@ -187,7 +187,7 @@ def test_ground_truth_equals_mujocos_data_through_contact_and_flight():
         for p in plants:
             p.step(1)
         if k % 3 == 0:
-            a, b = fast._ground_truth(), ground_truth_reference(plain)
+            a, b = plant._ground_truth(), ground_truth_reference(twin)
             _assert_same_truth(a, b)
             saw.add((a.foot_contact_points > 0, bool(np.any(a.foot_slip != 0))))
     assert (True, False) in saw or (True, True) in saw  # in contact at some point
@@ -286,14 +286,14 @@ class _MocapRecorder:
 
 
 def test_mocap_node_equals_the_array_formula():
-    fast = _flying_plant(seed=6)
+    plant = _flying_plant(seed=6)
     rec = _MocapRecorder()
-    node = MocapNode(fast, rec, period=0.01)  # type: ignore[arg-type]
+    node = MocapNode(plant, rec, period=0.01)  # type: ignore[arg-type]
     last = None
     for _ in range(60):
-        fast.step(10)
-        node.tick(fast.time)
-        gt = fast.ground_truth()
+        plant.step(10)
+        node.tick(plant.time)
+        gt = plant.ground_truth()
         p = np.asarray(gt.cog_position, dtype=float)
         v = np.zeros(3) if last is None else (p - last) / 0.01
         last = p
