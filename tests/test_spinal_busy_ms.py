@@ -368,12 +368,12 @@ def test_send_frame_and_send_payload_equal_send() -> None:
 
 
 # ----------------------------------------------------------------------------- servo states
-def _stack(base: str):
+def _stack(base: str, **options: Any):
     from rdm.scenarios.common import sim_stack_options
     from rdm.scenarios.hover import HOVER_Z, make_script
     from rdm.scenarios.stack import build_stack
 
-    opts = sim_stack_options(0, "inproc", speed=None)
+    opts = sim_stack_options(0, "inproc", speed=None, **options)
     return build_stack("busy", base, opts, make_script(np.array([0.483, 0.0, HOVER_Z])))
 
 
@@ -577,11 +577,10 @@ def test_stack_busy_ms_take_the_rust_frames_duties_and_value_routes(
     monkeypatch.setattr(sm_publishers, "_imu_frame", counting("imu", sm_publishers._imu_frame))
     monkeypatch.setattr(sm_control, "_duty_list", counting("duties", sm_control._duty_list))
     with tempfile.TemporaryDirectory() as base:
-        stack = _stack(base)
+        # The mirror's own tick every ms (the lockstep kernel's busy ms are checked in
+        # tests/test_spinal_kernel_busy.py).
+        stack = _stack(base, lockstep_kernel=False)
         spinal = stack.spinal
-        # The Python busy ms (the lockstep kernel runs only the idle ms; its own busy ms are
-        # checked in tests/test_spinal_kernel_busy.py).
-        spinal.kernel_busy = False
         route_values = spinal._route_values
 
         def counting_values(*args: Any) -> None:

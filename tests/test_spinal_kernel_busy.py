@@ -26,61 +26,6 @@ from rdm.scenarios.stack import Stack
 SPINAL = NODES.index("spinal")
 
 
-def test_kernel_busy_off_is_the_idle_kernel_path(tmp_path: Path) -> None:
-    """``SpinalMirror.kernel_busy = False``: the kernel runs only Spinal's idle ms (the
-    plain kernel path); switched on again, the busy ms come back to the kernel."""
-    counts: list[dict] = []
-
-    def steps(stack: Stack) -> None:
-        stack.spinal.kernel_busy = False
-        stack.loop.run(2.5)
-        if stack.loop.kernel is not None:
-            counts.append(dict(stack.loop.kernel.stats()["spinal_busy"]))
-        stack.spinal.kernel_busy = True
-        stack.loop.run(1.0)
-
-    stats = _same(tmp_path, steps)
-    assert len(counts) == 1
-    received = counts[0].pop("receive_then_python")
-    assert counts == [
-        {
-            "steps": 0,
-            "battery_samples": 0,
-            "imu_frames": 0,
-            "servo_frames": 0,
-            "finish_step": 0,
-            "finish_publish": 0,
-            # the onboard node's commands arrive in ms with a control step: busy, Python's
-            "receive_then_kernel": 0,
-        }
-    ]
-    assert received > 100  # received in Python, then the rest there too
-    busy = stats["spinal_busy"]
-    assert busy["steps"] > 180 and busy["imu_frames"] > 150 and busy["battery_samples"] > 40
-    # busy off: every control step and publication was a Python tick
-    assert stats["python"][SPINAL] > 2.5 * 400
-
-
-def test_kernel_receive_off_runs_the_whole_receiving_tick_in_python(tmp_path: Path) -> None:
-    """``SpinalMirror.kernel_receive = False``: a ms with bytes to read is the mirror's
-    whole tick again (the path before the split); on again, the kernel runs its rest."""
-    seen: list[tuple[int, int]] = []
-
-    def steps(stack: Stack) -> None:
-        stack.spinal.kernel_receive = False
-        stack.loop.run(2.5)
-        kernel = stack.loop.kernel
-        if kernel is not None:
-            b = kernel.stats()["spinal_busy"]
-            seen.append((b["receive_then_kernel"], b["receive_then_python"]))
-        stack.spinal.kernel_receive = True
-        stack.loop.run(1.0)
-
-    stats = _same(tmp_path, steps)
-    assert seen[0][0] == 0 and seen[0][1] > 100
-    assert stats["spinal_busy"]["receive_then_kernel"] > 20
-
-
 def test_declined_frames_battery_and_step_events_go_to_python(tmp_path: Path) -> None:
     """Each hand-over: a TX ring too small for the imu frame and an output size too small
     for servo/states (``finish_publish``; the session counts ``tx_ring_full`` /
@@ -144,33 +89,6 @@ def test_battery_and_imu_set_from_outside_are_read_when_used(tmp_path: Path) -> 
     stats = _same(tmp_path, steps)
     busy = stats["spinal_busy"]
     assert busy["battery_samples"] > 50 and busy["steps"] > 200
-
-
-def test_output_written_by_the_mirrors_commit_method_is_the_same(tmp_path: Path) -> None:
-    """``kernel_tx_direct = False``: the kernel hands its deferred frames to
-    ``SpinalMirror.kernel_commit_tx`` (the plain path of its own write through the UART
-    chain), the line open and cut."""
-    calls: list[int] = []
-
-    def steps(stack: Stack) -> None:
-        spinal = stack.spinal
-        spinal.kernel_tx_direct = False
-        inner = spinal.kernel_commit_tx
-
-        def commit(data: bytes, frames: int, imu: int, servo: int, marks: list) -> None:
-            calls.append(frames)
-            inner(data, frames, imu, servo, marks)
-
-        spinal.kernel_commit_tx = commit
-        stack.loop.run(2.4)
-        stack.drop_uart(True)
-        stack.loop.run(0.3)
-        stack.drop_uart(False)
-        stack.loop.run(0.5)
-
-    stats = _same(tmp_path, steps)
-    assert stats["spinal_busy"]["imu_frames"] > 250
-    assert sum(calls) == stats["spinal_busy"]["imu_frames"] + stats["spinal_busy"]["servo_frames"]
 
 
 def test_a_clock_of_another_class_leaves_the_publications_to_python(tmp_path: Path) -> None:

@@ -136,16 +136,6 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         self.uart = UartPump(uart)
         self.master = CanMaster(can_bus, boot_delay_ms=boot_delay_ms)
         self.core = SpinalStep(self.rate_hz, **spinal_options)
-        #: The lockstep kernel may run the routine busy ms (control step, battery sample,
-        #: ``imu`` / ``servo/states`` publications) itself (:meth:`kernel_plan`'s busy part);
-        #: False: only the idle ms (docs/spinal.md).
-        self.kernel_busy = True
-        #: A ms with bytes to read: this mirror receives them (:meth:`kernel_receive_tick`)
-        #: and the kernel runs the rest of the ms from its plan; False: the whole tick here.
-        self.kernel_receive = True
-        #: The kernel writes its deferred output and the TX counters itself, through the
-        #: UART chain (as :meth:`kernel_commit_tx` does); False: it calls that method.
-        self.kernel_tx_direct = True
         self.servos = ServoBridge(self.master)
         #: The Rust master's one-call duty hand-over (None: the Python master).
         self._try_duties = getattr(self.master, "try_set_motor_duties", None)

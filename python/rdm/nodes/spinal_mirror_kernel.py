@@ -76,9 +76,7 @@ class SpinalKernelInterface:
             next_pub,
             # In the boot a busy ms needs an output already (else the kernel's step would
             # make _publish live while next_pub above says never).
-            self._kernel_busy_plan()
-            if self.kernel_busy and (not boot or self.last_output is not None)
-            else None,
+            self._kernel_busy_plan() if not boot or self.last_output is not None else None,
             master.core.state_index if boot else None,
         )
 
@@ -98,8 +96,8 @@ class SpinalKernelInterface:
           and the first ms any other publisher is due;
         * the TX ring (output size, chunk size, chunks; -1 when not empty) and whether the
           UART writes any send of up to ``max_pending`` bytes whole (``UartPump.writes_whole``),
-          and the UART chain (``UartPump._chain``) when the kernel writes the output itself
-          (:attr:`kernel_tx_direct`), else None (it calls :meth:`kernel_commit_tx`).
+          and the UART chain (``UartPump._chain``) through which the kernel writes the
+          output itself (None: no in-process chain; then it calls :meth:`kernel_commit_tx`).
 
         The kernel reads the IMU sample, battery input, ADC scale and battery voltage from
         the mirror itself when it uses them (another node may set them without a re-read)."""
@@ -163,7 +161,7 @@ class SpinalKernelInterface:
             session._tx_chunks if session._tx_used == 0 else -1,
             uart.writes_whole(),
             uart.max_pending,
-            uart._chain if self.kernel_tx_direct else None,
+            uart._chain,
         )
 
     def _kernel_publisher(self, name: str) -> Any:
@@ -177,15 +175,15 @@ class SpinalKernelInterface:
         """The lockstep kernel's tick of a ms it cannot run from its plan (bytes to read, the
         idle window over): :meth:`tick` up to and with its UART receive, then either the rest
         here (returns None: the whole tick ran) or, when :meth:`kernel_plan` applies after the
-        receive and ``kernel_receive`` is on, nothing more: returns that plan, and the kernel
-        runs the rest (battery, control, CAN ms, publishers, output) as in any ms of its plan,
-        or calls :meth:`kernel_receive_rest` when that ms is not one it runs. The same calls
+        receive, nothing more: returns that plan, and the kernel runs the rest (battery,
+        control, CAN ms, publishers, output) as in any ms of its plan, or calls
+        :meth:`kernel_receive_rest` when that ms is not one it runs. The same calls
         in the same order as :meth:`tick` (docs/spinal.md "In the simulated stack")."""
         now_ms = self._tick_begin(now)
         inbox = self.uart.inbox
         if inbox is None or inbox or not self._idle_lo <= now_ms < self._idle_hi:
             self._receive(now_ms)
-        plan = self.kernel_plan() if self.kernel_receive else None
+        plan = self.kernel_plan()
         if plan is None:
             self._tick_rest(now_ms)
         return plan
@@ -225,7 +223,7 @@ class SpinalKernelInterface:
         ``data`` their bytes in order, written in one :meth:`UartPump.send` (whole, as the
         plan's ``writes_whole`` said: the same bytes and counters as one send per tick);
         ``marks`` each tick's ``(time s, end)`` in ``data`` for the capture's time index.
-        With :attr:`kernel_tx_direct` the kernel does the same without this call: the
+        With the plan's UART chain the kernel does the same without this call: the
         counters, then ``UartPump._write_chain``'s effect of a whole write and ``bytes_out``."""
         self.session.counts["tx_frames"] += frames
         published = self.counters.published
