@@ -41,7 +41,7 @@ from rdm.protocol.capture_formats import EXTENSIONS, detect_format
 Records = Iterator[Any]  # dicts, and ForceRun batches from the Leptrino decoder
 
 #: Bytes read from a capture at a time (the decoders keep at most a chunk's events).
-CHUNK_BYTES = 1 << 16
+CHUNK_BYTES = 1 << 14
 #: Leptrino chunks are larger: its decoder keeps events only between frame starts.
 LEPTRINO_CHUNK_BYTES = 1 << 18
 
