@@ -1,9 +1,9 @@
-"""The rosserial fast paths (generated whole-message codecs for fixed and variable layouts, the
-local-variable frame parser, the inlined frame encoder, the idle spin, Adler-32 byte sums) give
-the bytes, values, events, counters and errors of their reference forms, which stay reachable:
-a registry compiled with both layouts off, :class:`PlainFrameParser` and Python's ``sum``. The
-frame encoder is checked against the frame written out with ``struct``, and bytes against
-firmware_protocol/spinal/golden_frames.json.
+"""The rosserial fast paths: the generated whole-message codecs for fixed and variable layouts
+give the bytes, values and errors of the per-field path (a registry compiled with both layouts
+off) and of an independent ``struct`` packing; the frame encoder and the Rust frame builder
+give the frame written out with ``struct``; the Rust frame scan and the Python loop give the
+same events, each found in the stream at its offset; Adler-32 byte sums equal Python's
+``sum``; bytes are also checked against firmware_protocol/spinal/golden_frames.json.
 """
 
 from __future__ import annotations
@@ -25,9 +25,11 @@ from rdm.protocol.rosserial.checksums import byte_sum
 from rdm.protocol.rosserial.client import ClientSession
 from rdm.protocol.rosserial.codec import RosTime
 from rdm.protocol.rosserial.framing import (
+    BadFrame,
+    Frame,
     FrameError,
     FrameParser,
-    PlainFrameParser,
+    SkippedBytes,
     encode_frame,
 )
 from rdm.protocol.rosserial.registry import TypeRegistry, spinal_msgs_dir
@@ -290,52 +292,83 @@ def _stream(rng: random.Random) -> bytes:
     return b"".join(parts)
 
 
-@pytest.mark.parametrize("native", [True, False])
+def _check_against_stream(events: list[Any], stream: bytes) -> None:
+    """Every event is the stream's bytes at its offset: a frame the protocol's frame of its
+    topic and payload (``_frame``), a bad candidate and skipped bytes the bytes there."""
+    for e in events:
+        if isinstance(e, tuple):  # the sessions' raw form (topic id, payload, offset)
+            e = Frame(*e)
+        if isinstance(e, Frame):
+            frame = _frame(e.topic_id, e.payload)
+            assert stream[e.offset : e.offset + len(frame)] == frame
+        else:
+            assert stream[e.offset : e.offset + len(e.data)] == e.data
+
+
 @pytest.mark.parametrize("rescan", [True, False])
 @pytest.mark.parametrize("max_payload", [512, 1022, 40, 0])
-def test_parser_same_events_counters_and_pending_as_plain(native, rescan, max_payload):
-    """The Rust scan (native) and the Python loop against the reference parser."""
+def test_parser_events_are_the_streams_bytes_and_the_scan_equals_the_python_loop(
+    rescan, max_payload
+):
+    """The Rust scan and the Python loop (which takes a ``max_payload`` the scan does not)
+    give events found in the stream at their offsets, in the same order and counts."""
     rng = random.Random(max_payload * 2 + rescan)
+    frames = 0
     for trial in range(120):
         data = _stream(rng)
         timeout = rng.choice([None, 20, 0.5])
-        fast = FrameParser(max_payload, timeout, rescan=rescan)
-        assert fast.native is True or not native  # the extension has the scanner
-        fast.native = native
-        plain = PlainFrameParser(max_payload, timeout, rescan=rescan)
+        scan = FrameParser(max_payload, timeout, rescan=rescan)
+        assert scan.native is True  # the extension has the scanner
+        loop = FrameParser(max_payload, timeout, rescan=rescan)
+        loop.native = False
+        stream = bytearray()
         now, i = 0, 0
         while i <= len(data):
             step = rng.choice([0, 0, 1, 3, 17, 64, 400])
             now += rng.choice([0, 1, 5, 25])
             chunk = data[i : i + step]
-            assert fast.feed(chunk, now) == plain.feed(chunk, now), trial
-            assert fast.pending == plain.pending and fast.in_frame == plain.in_frame
+            stream += chunk
+            got = scan.feed(chunk, now)
+            assert got == loop.feed(chunk, now), trial
+            _check_against_stream(got, bytes(stream))
+            frames += sum(isinstance(e, Frame) for e in got)
+            assert scan.pending == loop.pending and scan.in_frame == loop.in_frame
+            offset, pending = scan.pending
+            assert bytes(stream[offset:]) == pending  # the candidate is the stream's tail
             i += max(step, 1)
-        assert fast.poll(now + 100) == plain.poll(now + 100)
+        assert scan.poll(now + 100) == loop.poll(now + 100)
         for raw in (True, False):  # the sessions' raw form too
             tail = encode_frame(150, b"ab") + b"\xff\xfe\x05"
-            assert fast._feed(tail, now + 101, raw) == plain._feed(tail, now + 101, raw)
-        assert dict(fast.counts) == dict(plain.counts)
-        assert list(fast.counts) == list(plain.counts)  # same insertion order too
+            stream += tail
+            got = scan._feed(tail, now + 101, raw)
+            assert got == loop._feed(tail, now + 101, raw)
+            _check_against_stream(got, bytes(stream))
+        assert dict(scan.counts) == dict(loop.counts)
+        assert list(scan.counts) == list(loop.counts)  # same insertion order too
+    assert frames > 500 or max_payload < 80
 
 
 def test_native_scanner_is_used_and_odd_max_payload_takes_the_python_loop():
     parser = FrameParser(512)
     assert parser.native  # built with the extension that has rosserial_scan
     frame = encode_frame(150, b"xyz")
-    for odd in (512.0, -1, True):
-        fast, plain = FrameParser(odd), PlainFrameParser(odd)  # type: ignore[arg-type]
-        assert fast.feed(frame + frame[:3]) == plain.feed(frame + frame[:3])
-        assert dict(fast.counts) == dict(plain.counts) and fast.pending == plain.pending
+    oversize = [BadFrame("oversize", 0, frame[:5]), SkippedBytes(1, frame[1:])]  # to the next 0xFF
+    for odd, events, counts in (
+        (512.0, [Frame(150, b"xyz", 0)], {"frames": 1}),
+        (-1, oversize, None),
+        (True, oversize, None),
+    ):
+        parser = FrameParser(odd)  # type: ignore[arg-type]
+        assert parser.feed(frame + frame[:3]) == events, odd
+        if counts is not None:
+            assert dict(parser.counts) == counts
+        else:  # 3 bytes are over a limit of -1 or True (1)
+            assert dict(parser.counts) == {"oversize": 1, "skipped_bytes": len(frame) - 1}
+        assert parser.pending == (len(frame), frame[:3])
 
 
-def _pair(registry: TypeRegistry, plain_parser: bool) -> tuple[ClientSession, ServerSession]:
-    client = ClientSession.from_layout(registry=registry)
-    server = ServerSession(registry)
-    if plain_parser:
-        client.parser = PlainFrameParser(512, 20)
-        server.parser = PlainFrameParser(1022, None)
-    return client, server
+def _pair(registry: TypeRegistry) -> tuple[ClientSession, ServerSession]:
+    return ClientSession.from_layout(registry=registry), ServerSession(registry)
 
 
 def _events(events: list[Any]) -> list[Any]:
@@ -348,9 +381,9 @@ def _events(events: list[Any]) -> list[Any]:
 
 def test_sessions_fast_and_plain_give_the_same_events_bytes_and_counters():
     """A handshake then 3 s of link traffic with corrupt bytes and silent gaps, on a fast
-    pair and on a pair with plain codecs and plain parsers."""
+    pair and on a pair with per-field codecs."""
     rng_msgs = random.Random(9)
-    pairs = [_pair(FAST, False), _pair(PLAIN, True)]
+    pairs = [_pair(FAST), _pair(PLAIN)]
     logs: list[list[Any]] = [[], []]
     pc_topics = [
         "rpy/gain",

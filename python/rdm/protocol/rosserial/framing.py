@@ -21,7 +21,7 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-from rdm.protocol.rosserial.checksums import byte_sum, length_ok
+from rdm.protocol.rosserial.checksums import byte_sum
 from rdm.protocol.rosserial.constants import FRAME_OVERHEAD, PROTOCOL_VERSION, SYNC
 
 BAD_FRAME_REASONS = ("version", "length_checksum", "oversize", "message_checksum", "timeout")
@@ -227,8 +227,8 @@ class FrameParser:
         not a non-negative int)."""
         started = self._started
         buf = self._buf
-        # The loop of :class:`PlainFrameParser` with the attributes in locals and the header
-        # checksum inlined; tests compare the two on valid, corrupt and random streams.
+        # Sync, version, length and its checksum, size limit, message checksum, classified
+        # as the Rust scan (rosserial_frame::next_candidate) does; the attributes in locals.
         events: list[ParseEvent] = []
         counts = self.counts
         base = self._base
@@ -295,80 +295,4 @@ class FrameParser:
         del buf[:pos]
         self._base = base + pos
         self._started = started
-        return events
-
-
-class PlainFrameParser(FrameParser):
-    """The reference form of :meth:`FrameParser.feed` (kept reachable for the tests that
-    compare it with the fast one): the same events and counters, step by step."""
-
-    def _feed(self, data: bytes, now: float, raw: bool) -> list[Any]:
-        events = self.feed(data, now)
-        if not raw:
-            return events
-        return [(e.topic_id, e.payload, e.offset) if isinstance(e, Frame) else e for e in events]
-
-    def feed(self, data: bytes, now: float = 0.0) -> list[ParseEvent]:
-        """Consume ``data`` received at ``now``; return the events it completes."""
-        events: list[ParseEvent] = []
-        buf = self._buf
-        pos = 0
-        if (
-            self._started is not None
-            and self.frame_timeout is not None
-            and now - self._started > self.frame_timeout
-        ):
-            used = 1 if self.rescan else len(buf)
-            events.append(BadFrame("timeout", self._base, bytes(buf)))
-            self.counts["timeout"] += 1
-            pos = used
-            self._started = None
-        buf += data
-        end = len(buf)
-        while pos < end:
-            if buf[pos] != SYNC:
-                nxt = buf.find(SYNC, pos)
-                stop = end if nxt < 0 else nxt
-                events.append(SkippedBytes(self._base + pos, bytes(buf[pos:stop])))
-                self.counts["skipped_bytes"] += stop - pos
-                pos = stop
-                continue
-            if self._started is None:
-                self._started = now
-            if end - pos < 2:
-                break
-            reason = ""
-            used = 0
-            if buf[pos + 1] != PROTOCOL_VERSION:
-                reason, used = "version", 2
-            elif end - pos < 7:
-                break
-            else:
-                n = buf[pos + 2] | (buf[pos + 3] << 8)
-                if not length_ok(buf[pos + 2], buf[pos + 3], buf[pos + 4]):
-                    reason, used = "length_checksum", 5
-                elif n > self.max_payload:
-                    reason, used = "oversize", 5
-                elif end - pos < n + FRAME_OVERHEAD:
-                    break
-                else:
-                    used = n + FRAME_OVERHEAD
-                    body = buf[pos + 5 : pos + 7 + n]  # topic id + payload
-                    if (sum(body) + buf[pos + 7 + n]) % 256 == 255:
-                        topic = buf[pos + 5] | (buf[pos + 6] << 8)
-                        events.append(
-                            Frame(topic, bytes(buf[pos + 7 : pos + 7 + n]), self._base + pos)
-                        )
-                        self.counts["frames"] += 1
-                    else:
-                        reason = "message_checksum"
-            if reason:
-                events.append(BadFrame(reason, self._base + pos, bytes(buf[pos : pos + used])))
-                self.counts[reason] += 1
-                if self.rescan:
-                    used = 1
-            pos += used
-            self._started = None
-        del buf[:pos]
-        self._base += pos
         return events
