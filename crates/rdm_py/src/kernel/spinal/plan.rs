@@ -60,8 +60,8 @@ pub(super) struct Busy {
     pub(super) chunks: Option<usize>,
     pub(super) writes_whole: bool,
     pub(super) max_pending: usize,
-    /// The UART chain `(droppable, tapped, end)` when the kernel writes the output itself
-    /// (`SpinalMirror.kernel_tx_direct`); None: `kernel_commit_tx`.
+    /// The UART chain `(droppable, tapped, end)` the kernel writes the output through; None
+    /// (no chain to write through): `kernel_commit_tx`.
     pub(super) chain: Option<Chain>,
 }
 
