@@ -140,7 +140,8 @@ def test_bridge_wrench_reads_equal_the_array_form_of_the_ideal_values():
         plant.step(1)
         for key in keys:
             if step % 2:
-                force, torque = plant.wrench_force_torque(key)
+                reading = plant.wrench(key)
+                force, torque = reading.force, reading.torque
             else:
                 values = plant.wrench_values(key)
                 assert type(values) is tuple and all(type(v) is float for v in values)
@@ -148,7 +149,7 @@ def test_bridge_wrench_reads_equal_the_array_form_of_the_ideal_values():
             want = _wrench_reference(plant, key, rngs[key])
             assert same_bits(force, want[:3]) and same_bits(torque, want[3:]), (step, key)
     with pytest.raises(ValueError, match="unknown wrench sensor 'nope'"):
-        plant.wrench_force_torque("nope")
+        plant.wrench("nope")
     with pytest.raises(ValueError, match="unknown wrench sensor 'nope'"):
         plant.wrench_values("nope")
 

@@ -29,8 +29,8 @@ def _plant(lazy: bool) -> Plant:
 
 def _readings(plant: Plant) -> bytes:
     imu = plant.imu()
-    force, torque = plant.wrench_force_torque("foot_wrench")
-    values = [imu.gyro, imu.accel, imu.mag, force, torque]
+    wrench = plant.wrench("foot_wrench")
+    values = [imu.gyro, imu.accel, imu.mag, wrench.force, wrench.torque]
     return b"".join(np.asarray(v, dtype=float).tobytes() for v in values)
 
 

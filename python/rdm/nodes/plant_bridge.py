@@ -256,8 +256,6 @@ class PlantBridge:
                 raise ValueError(f"PlantBridge: plant has no wrench sensor {key!r}")
         self._mocap_sink = mocap_sink
         self._truth_sink = truth_sink
-        #: (force, torque) of one wrench sample, for sinks ``f(force, torque)``
-        self._wrench_read = plant.wrench_force_torque
         #: Per sensor, the sink's tuple form when every sink is a Leptrino mirror's
         #: ``set_wrench``: one 6-tuple of floats (``Plant.wrench_values``), no arrays at 1 kHz.
         self._wrench_values = plant.wrench_values
@@ -427,9 +425,9 @@ class PlantBridge:
                 for key, sink in self._wrench_tuple_sinks.items():
                     sink(values(key))
             else:
-                read = self._wrench_read
                 for key, sink in self._wrench_sinks.items():
-                    sink(*read(key))
+                    w = plant.wrench(key)
+                    sink(w.force, w.torque)
         if self._mocap_on and n % self._mocap_n == 0:
             d = plant.data
             self._mocap_sink(now, d.xpos[self._foot_body].copy(), d.xquat[self._foot_body].copy())

@@ -61,16 +61,6 @@ class PlantReadings:
         f, t = adr
         return self.wrench_models[sensor].sample_at(self._v_sensordata, f, t)
 
-    def wrench_force_torque(self, sensor: str) -> tuple[np.ndarray, np.ndarray]:
-        """(force, torque) of :meth:`wrench` without the :class:`WrenchReading` (the bridge's
-        1 kHz foot-sensor read): the same normals and numbers."""
-        adr = self._wrench_address(sensor)
-        model = self.wrench_models[sensor]
-        force, torque, _ = model._core.sample_at(
-            self._v_sensordata, adr[0], adr[1], model._normals.take(6)
-        )
-        return force, torque
-
     def wrench_values(self, sensor: str) -> tuple[float, float, float, float, float, float]:
         """(Fx, Fy, Fz, Mx, My, Mz) of :meth:`wrench` as one tuple of floats (the bridge's
         1 kHz foot-sensor read into the Leptrino mirror): the same normals and numbers."""
