@@ -11,15 +11,19 @@ from __future__ import annotations
 
 import json
 import random
+import struct
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import rdm.commands.decode as decode_cmd
 import rdm.protocol.leptrino_capture as lepcap
 from rdm.cli import main
+from rdm.commands.decode import format_record
+from rdm.commands.decode_lines import force_run_lines
 from rdm.protocol.leptrino import LeptrinoStreamParser, decode_leptrino
 
 DATA = Path(__file__).resolve().parent / "data" / "decode"
@@ -110,6 +114,8 @@ _CHILD = """
 import os, sys
 from rdm.bench.decode import peak_rss_kb
 from rdm.cli import main
+from rdm.commands.decode import format_record
+from rdm.commands.decode_lines import force_run_lines
 sys.stdout = open(os.devnull, "w")
 rc = main(["decode", sys.argv[1]]) if sys.argv[1] != "-" else 0
 hold = bytearray(int(sys.argv[2]) << 20)
@@ -154,3 +160,39 @@ def test_memory_does_not_grow_with_a_20_mb_garbage_capture(tmp_path, suffix):
     small.write_bytes(data[:64])
     growth = _peak_rss_mb(big) - _peak_rss_mb(small)
     assert growth < 12.0, f"peak RSS grew {growth:.1f} MB for a {len(data) / 1e6:.0f} MB capture"
+
+
+def test_force_run_lines_hold_every_int16_and_offset_width():
+    """Column-wise Leptrino lines against json.loads and struct.unpack of each payload, and
+    the text line against format_record of the parsed record (json.dumps's formatting)."""
+    rng = np.random.default_rng(5)
+    n = 3000
+    payloads = rng.integers(0, 256, (n, 20), dtype=np.uint8)
+    payloads[:, 0], payloads[:, 2], payloads[:, 3] = 20, 0x32, 0
+    extremes = np.array([-32768, 32767, -1, 0, 1, -10, 10, 9999, -10000], np.int16)
+    counts = payloads[:, 4:18].copy().view("<i2")
+    counts[: len(extremes), :] = extremes[:, None]
+    payloads[:, 4:18] = counts.view(np.uint8)
+    offsets = np.sort(rng.integers(0, 2**40, n)).astype(np.int64)
+    offsets[:3] = (0, 9, 10)
+    run = lepcap.ForceRun(offsets, payloads)
+    json_lines = force_run_lines(run, True).splitlines()
+    text_lines = force_run_lines(run, False).splitlines()
+    assert len(json_lines) == len(text_lines) == n
+    for k in range(n):
+        rec = json.loads(json_lines[k])
+        data = payloads[k].tobytes()
+        *raw, temperature, status = struct.unpack("<6hhBx", data[4:])
+        assert rec == {
+            "offset": int(offsets[k]),
+            "kind": "force_data",
+            "ok": True,
+            "error": None,
+            "payload": data.hex(),
+            "raw": raw,
+            "temperature": temperature,
+            "status": status,
+            "result": data[3],
+            "term_no": data[1],
+        }
+        assert text_lines[k] == format_record(rec)
