@@ -340,7 +340,7 @@ impl RotorPlantCore {
     /// The ground truth's MjData copies in one call: (base position, base quaternion, base
     /// linear velocity, base angular velocity, joint positions, joint velocities, CoG,
     /// end-effector position, applied thrusts), each a new float64 array holding the same
-    /// values as the numpy copies of ``Plant._ground_truth_plain``.
+    /// values as numpy copies of the MuJoCo data fields (tests/truth_reference.py).
     fn truth_arrays<'py>(
         &self,
         py: Python<'py>,

@@ -41,7 +41,7 @@ impl PythonFloatRepr {
     ///
     /// Ryu gives the shortest digits that read back as the same double, the closest to the
     /// exact value among them, and breaks an exact tie to the even digit: Python's dtoa mode
-    /// 0 choice (tested against `repr` on random bit patterns, tests/test_truth_fast_paths.py).
+    /// 0 choice (tested against `repr` on random bit patterns, tests/test_truth_record.py).
     fn shortest_digits(&mut self, magnitude: f64) -> i32 {
         let mut buffer = ryu::Buffer::new();
         let text = buffer.format_finite(magnitude);

@@ -7,8 +7,8 @@
 //! both give bit-identical samples. NaN passes through the clip and the quantiser; inf is
 //! clipped (to the range) or passed through (unclipped magnetometer).
 //!
-//! Where the Python form raises (a finite value whose `v / lsb` overflows to inf, an lsb of
-//! 0) this form returns the IEEE result (inf or NaN) instead: no panic, no error path.
+//! A finite value whose `v / lsb` overflows to inf, or an lsb of 0, gives the IEEE result
+//! (inf or NaN): no panic, no error path.
 
 /// `min(max(v, -limit), limit)` with Python's builtin `min`/`max` semantics: a NaN `v`
 /// passes through (no comparison with NaN is true), ties keep `v`.
