@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures import Executor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -31,6 +31,8 @@ from typing import Any
 import numpy as np
 
 from rdm.json_values import nulled
+
+from .seed_sweep import run_calls
 
 #: The perching metrics whose spread the report shows (name in the scenario's summary).
 MARGINS = (
@@ -137,20 +139,8 @@ def randomized(
 ) -> list[dict[str, Any]]:
     """One perching run per seed on ``executor`` (default: a process per core; a Ray or Dask
     ``concurrent.futures`` executor scales it out); the runs in seed order."""
-    own = executor is None
-    ex = ProcessPoolExecutor() if own else executor
-    try:
-        futures = [ex.submit(run_drawn, str(base), int(s), duration, replace) for s in seeds]
-        runs = []
-        for f in futures:
-            run = f.result()
-            if progress is not None:
-                progress(run)
-            runs.append(run)
-        return runs
-    finally:
-        if own:
-            ex.shutdown(cancel_futures=True)
+    calls = [(run_drawn, str(base), int(s), duration, replace) for s in seeds]
+    return run_calls(calls, executor, progress)
 
 
 def summarize(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -122,20 +122,30 @@ def sweep(
 ) -> list[RunOutcome]:
     """Run ``scenario`` once per seed on ``executor`` (default: a process per core); the
     outcomes in seed order. ``progress(outcome)`` is called as each run ends."""
+    calls = [
+        (run_seed, scenario, str(base), int(s), duration, dict(extra or {}), replace) for s in seeds
+    ]
+    return run_calls(calls, executor, progress)
+
+
+def run_calls(
+    calls: Sequence[tuple[Any, ...]],
+    executor: Executor | None = None,
+    progress: Callable[[Any], None] | None = None,
+) -> list[Any]:
+    """Each ``(fn, *args)`` of ``calls`` on ``executor`` (default: a process per core); the
+    results in call order, ``progress(result)`` as each one is taken."""
     own = executor is None
     ex = ProcessPoolExecutor() if own else executor
     try:
-        futures = [
-            ex.submit(run_seed, scenario, str(base), int(s), duration, dict(extra or {}), replace)
-            for s in seeds
-        ]
-        outcomes = []
+        futures = [ex.submit(*call) for call in calls]
+        results = []
         for f in futures:
-            outcome = f.result()
+            result = f.result()
             if progress is not None:
-                progress(outcome)
-            outcomes.append(outcome)
-        return outcomes
+                progress(result)
+            results.append(result)
+        return results
     finally:
         if own:
             ex.shutdown(cancel_futures=True)
