@@ -95,8 +95,8 @@ def _us(x: float) -> str:
 
 def _target_text(t: Target) -> str:
     mark = {True: "met", False: "MISSED", None: "n/a"}[t.met]
-    if t.kind in ("median_us", "p999_us"):
-        name = "median" if t.kind == "median_us" else "p99.9"
+    if t.kind in ("median_us", "p99_us", "p999_us"):
+        name = {"median_us": "median", "p99_us": "p99", "p999_us": "p99.9"}[t.kind]
         value = "-" if t.value is None else f"{t.value:.2f}"
         return f"{name} {value} <= {t.limit:g} us: {mark}"
     kind, peer = t.kind.split(":", 1)
@@ -145,6 +145,7 @@ def format_text(doc: dict[str, Any]) -> str:
             lines.append(
                 "    target: " + _target_text(Target(kind, t["limit"], t["value"], t["met"]))
             )
+        lines.extend(f"    note: {note}" for note in c["notes"])
     lines.append("")
     lines.append("peers (same run, same problems; speed-up = peer median / ours):")
     groups: dict[str, list[str]] = {}

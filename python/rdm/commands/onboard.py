@@ -20,11 +20,18 @@ port is refused unless ``--insecure-control`` says so explicitly (unsigned datag
 accepted; a warning is printed). Stops on Ctrl-C / SIGTERM or after ``--duration`` seconds;
 prints a JSON status line every ``--status-interval`` seconds and at exit (the ground link's
 counts under ``ground_link``).
+
+The loop (docs/onboard.md, "The real-time loop"): the status carries ``loop`` (late ticks
+past ``late_tolerance_s``, p50/p99/max of tick duration, lateness, command period and its
+jitter), ``uart_writes`` (the UART is written without blocking: backlog and dropped writes)
+and ``realtime`` (``--rt-priority N``, ``--cpu K``, ``--mlock``, ``--gc-freeze``; an option
+the OS refuses ends the command with a one-line message).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import signal
 import sys
@@ -36,6 +43,12 @@ from rdm.commands.arg_types import positive_finite
 from rdm.ground.heartbeat import GROUND_TIMEOUT_S
 from rdm.link.serial import SerialLink, SerialSpecError, open_pty_pair, open_serial
 from rdm.nodes.base import run_realtime
+from rdm.nodes.loop_timing import LoopTiming
+from rdm.nodes.realtime_os import RealtimeOptionError, apply_realtime_options
+
+#: Bytes of Spinal-bound output the UART backlog holds before a tick's output is dropped
+#: (about 0.18 s of the 921600 baud line).
+UART_BACKLOG_BYTES = 16384
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -94,6 +107,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--status-interval", type=float, default=0.0, help="print status every S s (0: at exit)"
     )
+    parser.add_argument(
+        "--late-tolerance",
+        type=float,
+        default=None,
+        help="s after its due time a tick counts late (default: late_tolerance_s, 0.002)",
+    )
+    parser.add_argument(
+        "--rt-priority",
+        type=int,
+        default=None,
+        help="run the loop under SCHED_FIFO at this priority (1..99)",
+    )
+    parser.add_argument("--cpu", type=int, default=None, help="pin the process to this CPU")
+    parser.add_argument("--mlock", action="store_true", help="lock the process's memory (mlockall)")
+    parser.add_argument(
+        "--gc-freeze",
+        action="store_true",
+        help="gc.freeze() after setup: the collector skips what setup made",
+    )
 
 
 def _configuration(args: argparse.Namespace) -> Any:
@@ -126,6 +158,7 @@ def _configuration(args: argparse.Namespace) -> Any:
             ("rate_hz", args.rate),
             ("lqi_every", args.lqi_every),
             ("servo_lead_s", args.servo_lead),
+            ("late_tolerance_s", args.late_tolerance),
         )
         if value is not None
     }
@@ -186,14 +219,28 @@ def _control_port(args: argparse.Namespace, node: Any, key: bytes | None) -> Any
     )
 
 
+def _status(node: Any, timing: LoopTiming, uart: SerialLink, realtime: dict) -> dict:
+    """The node's status with the loop's figures, the UART writes and the OS settings."""
+    status = node.status()
+    status["loop"] = timing.status()
+    status["uart_writes"] = {
+        "nonblocking": uart.backlog_limit is not None,
+        "backlog_bytes": len(uart.backlog),
+        "dropped_writes": uart.dropped_writes,
+        "dropped_bytes": uart.dropped_bytes,
+    }
+    status["realtime"] = realtime
+    return status
+
+
 class _StatusPrinter:
     name = "onboard_status"
 
-    def __init__(self, node: Any, period: float) -> None:
-        self.node, self.period = node, period
+    def __init__(self, status: Any, period: float) -> None:
+        self.status, self.period = status, period
 
     def tick(self, now: float) -> None:
-        print(json.dumps(self.node.status()), flush=True)
+        print(json.dumps(self.status()), flush=True)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -203,6 +250,7 @@ def run(args: argparse.Namespace) -> int:
 
     keep: list[Any] = []
     links: list[SerialLink] = []
+    control = None
     try:
         config = _configuration(args)
         key = _control_key(args)
@@ -212,21 +260,32 @@ def run(args: argparse.Namespace) -> int:
         uart, k = _open(args.uart, "uart")
         links.append(uart)
         keep.append(k)
+        with contextlib.suppress(ValueError):  # a URL port (no descriptor) keeps blocking
+            uart.nonblocking_writes(UART_BACKLOG_BYTES)
         foot = None
         if args.foot_sensor != "none":
             foot, k = _open(args.foot_sensor, "foot-sensor")
             links.append(foot)
             keep.append(k)
         node = OnboardNode(uart, foot, robot, config=config)
+        timing = LoopTiming(node.period, config.late_tolerance_s)
+        realtime: dict[str, Any] = {}
         nodes: list[Any] = []
         control = _control_port(args, node, key)
         if control is not None:
             nodes.append(control)
         nodes.append(node)
         if args.status_interval > 0:
-            nodes.append(_StatusPrinter(node, args.status_interval))
-    except (SerialSpecError, OSError, ValueError) as exc:
-        for link in links:
+            nodes.append(
+                _StatusPrinter(lambda: _status(node, timing, uart, realtime), args.status_interval)
+            )
+        realtime.update(
+            apply_realtime_options(args.rt_priority, args.cpu, args.mlock, args.gc_freeze)
+        )
+    except (SerialSpecError, OSError, ValueError, RealtimeOptionError) as exc:
+        if control is not None:
+            control.close()
+        for link in [*links, *(k for k in keep if k is not None)]:
             link.close()
         print(f"rdm onboard: {exc}", file=sys.stderr)
         return 2
@@ -238,7 +297,7 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(sig, lambda *_: stop.set())
     print(f"rdm onboard: ready robot={args.robot} rate={config.rate_hz} Hz", flush=True)
     try:
-        stats = run_realtime(nodes, duration=args.duration, stop=stop)
+        stats = run_realtime(nodes, duration=args.duration, stop=stop, timing={node.name: timing})
     finally:
         node.close()
         if control is not None:
@@ -248,7 +307,7 @@ def run(args: argparse.Namespace) -> int:
         for k in keep:
             if k is not None:
                 k.close()
-    status = node.status()
+    status = _status(node, timing, uart, realtime)
     status["ticks"] = stats.ticks.get(node.name, 0)
     status["overruns"] = stats.overruns.get(node.name, 0)
     if control is not None:

@@ -18,6 +18,14 @@ link then tries to open the same path again every :attr:`SerialLink.reopen_s` (0
 reads, counting each success in :attr:`SerialLink.reopens`. Meanwhile reads give ``b""`` and
 writes hand over nothing. A udev name such as ``/dev/flight_controller`` follows the adapter to
 its new ``ttyUSB``/``ttyACM`` node. Other links raise the ``OSError`` to their caller.
+
+Writes block by default (pyserial's ``write`` waits until the kernel took every byte). A
+real-time loop calls :meth:`SerialLink.nonblocking_writes`: from then on :meth:`SerialLink.write`
+never waits. Each write's bytes join a bounded backlog whole, or are dropped whole when the
+backlog would exceed its limit (counted in :attr:`SerialLink.dropped_writes` and
+:attr:`SerialLink.dropped_bytes`); the backlog goes to the port with non-blocking
+``os.write`` calls on each write and each read, so a frame is never cut and a reader that
+stops reading costs dropped writes, not the loop's time.
 """
 
 from __future__ import annotations
@@ -99,6 +107,36 @@ class SerialLink:
         self.reopens = 0
         self._lost_at: float | None = None
         self._closed = False
+        #: bytes the port has not taken yet (non-blocking writes only) and their limit
+        self.backlog = bytearray()
+        self.backlog_limit: int | None = None
+        self.dropped_writes = 0
+        self.dropped_bytes = 0
+
+    def nonblocking_writes(self, backlog_limit: int = 16384) -> None:
+        """Make :meth:`write` non-blocking with a backlog of at most ``backlog_limit``
+        bytes (see the module doc). ValueError for a port without a file descriptor (a
+        ``socket://``/``loop://`` URL) or a limit < 1."""
+        if not isinstance(backlog_limit, int) or backlog_limit < 1:
+            raise ValueError(f"backlog_limit={backlog_limit!r} must be an integer >= 1")
+        if not isinstance(getattr(self.port, "fd", None), int):
+            raise ValueError(f"{self.spec}: non-blocking writes need a port with a descriptor")
+        self.backlog_limit = backlog_limit
+
+    def _flush_backlog(self) -> None:
+        """Hand the port what it takes of the backlog now, without waiting."""
+        if not self.backlog or self._lost_at is not None:
+            return
+        try:
+            n = os.write(self.port.fd, self.backlog)
+        except BlockingIOError:
+            return
+        except OSError as exc:
+            self.dropped_bytes += len(self.backlog)
+            self.backlog.clear()
+            self._lose(exc)
+            return
+        del self.backlog[:n]
 
     @property
     def connected(self) -> bool:
@@ -132,6 +170,8 @@ class SerialLink:
         """All bytes received so far (``b""`` if none); never blocks."""
         if self._lost_at is not None and not self._reopen():
             return b""
+        if self.backlog:
+            self._flush_backlog()
         try:
             waiting = self.port.in_waiting
             return self.port.read(waiting) if waiting else b""
@@ -140,9 +180,20 @@ class SerialLink:
             return b""
 
     def write(self, data: bytes) -> int:
-        """Write ``data``; returns the number of bytes handed to the port."""
+        """Write ``data``; returns the number of bytes handed to the port (with
+        :meth:`nonblocking_writes`: taken into the backlog, 0 when dropped)."""
         if not data or self._lost_at is not None:
             return 0
+        limit = self.backlog_limit
+        if limit is not None:
+            if len(self.backlog) + len(data) > limit:
+                self.dropped_writes += 1
+                self.dropped_bytes += len(data)
+                self._flush_backlog()
+                return 0
+            self.backlog += data
+            self._flush_backlog()
+            return len(data)
         try:
             written = self.port.write(data)
         except OSError as exc:

@@ -18,11 +18,14 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import can
+
+if TYPE_CHECKING:
+    from rdm.nodes.loop_timing import LoopTiming
 
 #: Upper bound of frames taken from one port in one tick, so a flooded bus cannot stall a node.
 MAX_FRAMES_PER_TICK = 10_000
@@ -75,6 +78,7 @@ def run_realtime(
     clock: Callable[[], float] = time.monotonic,
     sleep: Callable[[float], None] = time.sleep,
     start_time: float = 0.0,
+    timing: Mapping[str, LoopTiming] | None = None,
 ) -> RealtimeStats:
     """Tick ``nodes`` on the wall clock, each at its own ``period``, until ``duration`` seconds
     have passed or ``stop`` is set. Times passed to ``tick`` start at ``start_time`` (node
@@ -83,6 +87,10 @@ def run_realtime(
     A node that falls more than one period behind is re-phased (its missed ticks are dropped,
     counted in ``overruns``) rather than ticked in a burst. Nodes due at the same instant tick
     in list order. Signal handling is the caller's job: set ``stop`` from the handler.
+
+    ``timing``: per node name, a :class:`~rdm.nodes.loop_timing.LoopTiming` that records each
+    of that node's ticks (when it was due, when it started and ended on ``clock``); the
+    caller reads it while the loop runs (a status node) and after.
     """
     if not nodes:
         raise ValueError("run_realtime: no nodes given")
@@ -94,6 +102,7 @@ def run_realtime(
     stop = stop or threading.Event()
     stats = RealtimeStats({n.name: 0 for n in nodes}, {n.name: 0 for n in nodes})
     due = [0.0] * len(nodes)
+    timed = [None if timing is None else timing.get(n.name) for n in nodes]
     start = clock()
     now = 0.0
     while not stop.is_set():
@@ -102,7 +111,13 @@ def run_realtime(
             break
         for i, node in enumerate(nodes):
             if now >= due[i] - _DUE_SLACK:
-                node.tick(start_time + now)
+                record = timed[i]
+                if record is None:
+                    node.tick(start_time + now)
+                else:
+                    began = clock() - start
+                    node.tick(start_time + now)
+                    record.record(due[i], began, clock() - start)
                 stats.ticks[node.name] += 1
                 due[i] += node.period
                 if now - due[i] > node.period:

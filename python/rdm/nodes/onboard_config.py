@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rdm.nodes.loop_timing import LATE_TOLERANCE_S, check_late_tolerance
 from rdm.nodes.onboard_flight import FlightLimits
 from rdm.nodes.onboard_mocap import MocapConfig
 from rdm.nodes.onboard_monitors import MonitorLimits
@@ -176,6 +177,9 @@ class OnboardConfig:
     #: at ``now``. Identify the value on the robot (docs/scenarios.md, "Servo goals ahead of
     #: the plan").
     servo_lead_s: float = 0.0
+    #: ``rdm onboard`` counts a control tick late (status ``loop.late``) when it starts more
+    #: than this many seconds after it was due (:class:`rdm.nodes.loop_timing.LoopTiming`).
+    late_tolerance_s: float = LATE_TOLERANCE_S
     #: The operator layer: take-off, go-to, landing, touchdown, command hold, tilt limit,
     #: geofence (:class:`rdm.nodes.onboard_flight.FlightLimits`).
     flight: FlightLimits = field(default_factory=FlightLimits)
@@ -208,6 +212,7 @@ class OnboardConfig:
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}={v!r} must be finite and > 0")
         check_servo_lead(self.servo_lead_s)
+        check_late_tolerance(self.late_tolerance_s)
         if len(self.foot_sensor_offset) != 6:
             raise ValueError("foot_sensor_offset needs 6 values")
 
