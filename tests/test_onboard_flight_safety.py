@@ -278,3 +278,64 @@ def test_a_spinal_reset_in_flight_is_noticed_and_never_rearms_by_itself(flight) 
     assert flight.node.takeoff(1.0) is None
     flight.run_until(lambda: flight.node.flight.mode.value == "hover", 20.0)
     assert abs(flight.plant.z - 1.0) < 0.05
+
+
+@pytest.mark.parametrize(
+    ("rotvec_deg", "allowed"),
+    [
+        ((8.0, 0.0, 0.0), True),
+        ((0.0, -12.0, 0.0), False),
+        ((12.0, 0.0, 0.0), False),
+        # roll and pitch 7.5 deg each: each inside 10 deg, the body z axis 10.6 deg off vertical
+        ((7.5, 7.5, 0.0), False),
+        ((6.0, 6.0, 90.0), True),
+    ],
+)
+def test_takeoff_is_refused_from_a_tilted_rest(flight, rotvec_deg, allowed) -> None:
+    """A robot resting tilted beyond ``FlightLimits.takeoff_max_tilt`` (10 deg) does not arm:
+    the tilt is the angle of the body z axis from vertical (scipy's rotation as the oracle),
+    refused in a message that names the limit, counted and logged."""
+    from scipy.spatial.transform import Rotation
+
+    rot = Rotation.from_euler("xyz", rotvec_deg, degrees=True)
+    tilt = np.degrees(np.arccos(rot.apply([0.0, 0.0, 1.0])[2]))
+    limit = np.degrees(FlightLimits().takeoff_max_tilt)
+    assert (tilt <= limit) == allowed  # the cases straddle the limit as intended
+    flight.rig.imu_quaternion = list(rot.as_quat())  # x, y, z, w
+    flight.run(0.3)
+    reason = flight.node.takeoff(1.0)
+    flight.run(1.0)
+    if allowed:
+        assert reason is None
+        assert flight.spinal.core.armed
+    else:
+        assert reason is not None and "takeoff_max_tilt" in reason
+        assert f"{tilt:.1f} deg" in reason
+        assert not flight.spinal.core.armed and flight.node.flight.mode.value == "ground"
+        assert flight.node.monitors.counts["takeoff_refused_tilt"] == 1
+        assert not any(m.cmd == 0 for _, m in flight.rig.by_topic["flight_config_cmd"])
+
+
+def test_takeoff_is_refused_without_a_fresh_attitude(flight) -> None:
+    """No ``imu`` from Spinal (silent since boot; on a second rig, silent for longer than
+    ``takeoff_imu_max_age`` after a good start): no take-off, each refusal counted."""
+    flight.rig.silent = True
+    flight.run(0.3)
+    reason = flight.node.takeoff(1.0)
+    assert reason is not None and "no imu" in reason
+    flight.run(0.5)
+    assert not flight.spinal.core.armed
+    assert flight.node.monitors.counts["takeoff_refused_tilt"] == 1
+    stale = Flight()
+    try:
+        stale.run(0.3)
+        assert stale.node.imu_euler is not None
+        stale.rig.silent = True
+        stale.run(0.6)  # the newest attitude is now more than 0.5 s old
+        reason = stale.node.takeoff(1.0)
+        assert reason is not None and "s old" in reason
+        stale.run(0.5)
+        assert not stale.spinal.core.armed
+        assert stale.node.monitors.counts["takeoff_refused_tilt"] == 1
+    finally:
+        stale.close()

@@ -73,6 +73,12 @@ class FlightLimits:
 
     #: Take-off height above the ground z at arming, m (JSK: an absolute height, 0.6-1.2 m).
     takeoff_height: float = 1.0
+    #: Take-off is refused when the IMU's roll or pitch at rest is beyond this, rad, or when
+    #: no ``imu`` message came within ``takeoff_imu_max_age``, s. A robot resting tilted (on a
+    #: line of contacts, a leg on an object) would spend its first thrust rolling over. JSK's
+    #: take-off has no such check. ASSUMPTION: 10 deg, and an attitude at most 0.5 s old.
+    takeoff_max_tilt: float = 0.175
+    takeoff_imu_max_age: float = 0.5
     takeoff_z_tol: float = 0.05
     takeoff_xy_tol: float = 0.15
     hover_convergent_s: float = 1.0
@@ -125,6 +131,8 @@ class FlightLimits:
     def __post_init__(self) -> None:
         for name in (
             "takeoff_height",
+            "takeoff_max_tilt",
+            "takeoff_imu_max_age",
             "takeoff_z_tol",
             "takeoff_xy_tol",
             "hover_convergent_s",
@@ -155,6 +163,10 @@ class FlightLimits:
             raise ValueError(f"FlightLimits.press_offset={self.press_offset!r} must be >= 0")
         if self.approach_speed > self.max_velocity[2]:
             raise ValueError("FlightLimits.approach_speed must not exceed max_velocity's z")
+        if self.takeoff_max_tilt >= 1.0:
+            raise ValueError(
+                "FlightLimits.takeoff_max_tilt must be below Spinal's 1.0 rad fail-safe"
+            )
         if self.max_tilt_cmd >= 1.0:
             raise ValueError("FlightLimits.max_tilt_cmd must be below Spinal's 1.0 rad fail-safe")
         for name in ("max_velocity", "max_acceleration", "max_jerk"):

@@ -19,6 +19,7 @@ from rdm._rdm import finite_float_vector as _finite_float_vector
 from rdm.nodes.joint_motion import plan_joint_motion
 from rdm.nodes.onboard_arming import FlightState
 from rdm.nodes.onboard_control import Setpoint
+from rdm.nodes.onboard_flight import FlightMode
 
 _F64 = np.dtype(np.float64)
 
@@ -223,12 +224,41 @@ class OnboardOperator:
     def takeoff(self, height: float | None = None) -> str | None:
         """Arm if needed, then climb ``height`` m (default ``FlightLimits.takeoff_height``)
         above the ground z at arming; the refusal reason or None."""
+        idle = self.arming.state in (FlightState.IDLE, FlightState.DISARMING)
+        if idle and self.flight.mode is FlightMode.GROUND:
+            refusal = self._takeoff_attitude_refusal()
+            if refusal is not None:
+                self.monitors.trip("takeoff_refused_tilt", refusal, self._now)
+                return refusal
         reason = self.flight.request_takeoff(height)
-        if reason is None and self.arming.state in (FlightState.IDLE, FlightState.DISARMING):
+        if reason is None and idle:
             reason = self.arm()
             if reason is not None:
                 self.flight.cancel_takeoff()
         return reason
+
+    def _takeoff_attitude_refusal(self) -> str | None:
+        """Why the robot may not take off from its resting attitude (None: it may): no fresh
+        ``imu`` message, or roll/pitch beyond ``FlightLimits.takeoff_max_tilt``."""
+        limits = self.flight.limits
+        euler = self.imu_euler
+        if euler is None or self._imu_at is None:
+            return "no attitude from Spinal yet (no imu message)"
+        age = self._now - self._imu_at
+        if age > limits.takeoff_imu_max_age:
+            return (
+                f"attitude {age:.2f} s old (> takeoff_imu_max_age {limits.takeoff_imu_max_age} s)"
+            )
+        roll, pitch = euler[0], euler[1]
+        # The tilt of the body z axis from vertical (ZYX Euler: cos tilt = cos roll cos pitch).
+        tilt = math.acos(max(-1.0, min(1.0, math.cos(roll) * math.cos(pitch))))
+        if not math.isfinite(tilt) or tilt > limits.takeoff_max_tilt:
+            return (
+                f"resting tilt {math.degrees(tilt):.1f} deg (roll {math.degrees(roll):.1f}, "
+                f"pitch {math.degrees(pitch):.1f}) beyond takeoff_max_tilt "
+                f"{math.degrees(limits.takeoff_max_tilt):.1f} deg"
+            )
+        return None
 
     def land(self) -> str | None:
         """Descend at ``FlightLimits.land_descend_rate``, detect touchdown, disarm."""
