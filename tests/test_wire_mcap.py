@@ -269,3 +269,70 @@ def test_rdm_decode_mcap_of_a_run_folder(run, tmp_path):
     assert r.returncode == 0
     assert "left out" in r.stderr and "spinal.host_tx.bin" in r.stderr
     assert "/wire/spinal/host_tx/" not in r.stdout
+
+
+def _repeated_capture(src, dest, times: int) -> int:
+    """``src``'s bytes ``times`` over into ``dest``, timed 1 ms per 512-byte write."""
+    from rdm.link.capture_index import TimedCaptureFile
+
+    data = src.read_bytes()
+    t = [0.0]
+    out = TimedCaptureFile(dest, lambda: t[0])
+    for _ in range(times):
+        for i in range(0, len(data), 512):
+            out.write(data[i : i + 512])
+            t[0] += 1e-3
+    out.close()
+    return len(data) * times
+
+
+def test_memory_does_not_grow_with_the_capture(run, tmp_path):
+    """A capture 40 times the run's is converted with Python allocations far below its size
+    (tracemalloc's peak): the capture is read in chunks and its messages written as they are
+    decoded, not gathered first (which peaks near ten times the capture)."""
+    import tracemalloc
+
+    folder, _, report, _ = run
+    capture = tmp_path / "spinal.device_tx.bin"
+    size = _repeated_capture(folder / "uart" / capture.name, capture, 40)
+    assert size > 1_000_000
+    tracemalloc.start()
+    try:
+        big = write_wire_mcap([capture], tmp_path / "big.mcap")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert big.total == 40 * sum(
+        n for t, n in report.messages.items() if t.startswith("/wire/spinal/device_tx/")
+    )
+    assert peak < size / 2, f"peak {peak} B for a {size} B capture"
+
+
+def test_captures_merge_in_time_order_and_a_step_back_is_counted(run, tmp_path):
+    """Two captures interleave by time in the file (equal times: the captures' order); a
+    candump line stamped earlier than the one before it is still written at its own time and
+    counted in the report and its warnings."""
+    folder, _, _, _ = run
+    lines = (folder / "can.log").read_text().splitlines(keepends=True)
+    stamp = lambda line: float(line[1 : line.index(")")])  # noqa: E731
+    i = len(lines) // 2
+    moved = lines[i].replace(f"({lines[i][1 : lines[i].index(')')]})", f"({stamp(lines[1]):.6f})")
+    assert stamp(moved) < stamp(lines[i - 1])
+    can_log = tmp_path / "can.log"
+    can_log.write_text("".join([*lines[:i], moved, *lines[i + 1 :]]))
+    uart = folder / "uart" / "spinal.device_tx.bin"
+    r = write_wire_mcap([can_log, uart], tmp_path / "m.mcap")
+    assert r.out_of_order == Counter({"can.log": 1})
+    assert any("can.log: 1 messages earlier" in w for w in r.warnings())
+    with open(tmp_path / "m.mcap", "rb") as f:
+        in_file = [
+            (ch.topic, m.log_time)
+            for _, ch, m in make_reader(f).iter_messages(log_time_order=False)
+        ]
+    times = [t for _, t in in_file]
+    back = [k for k in range(1, len(times)) if times[k] < times[k - 1]]
+    assert len(back) == 1 and in_file[back[0]][1] == round(stamp(lines[1]) * 1e9)
+    rest = times[: back[0]] + times[back[0] + 1 :]
+    assert rest == sorted(rest)  # merged by time: both wires interleaved
+    topics = {t.split("/")[2] for t, _ in in_file[: len(in_file) // 2]}
+    assert topics == {"can", "spinal"}

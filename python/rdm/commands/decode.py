@@ -36,21 +36,15 @@ from typing import Any
 from rdm.commands.decode_lines import force_run_lines
 from rdm.commands.output import check_output_path, json_text
 from rdm.json_values import nulled
-from rdm.protocol.capture_formats import EXTENSIONS, detect_format
+from rdm.protocol import capture_formats
+from rdm.protocol.capture_formats import EXTENSIONS, detect_format, read_chunks
 
 Records = Iterator[Any]  # dicts, and ForceRun batches from the Leptrino decoder
 
-#: Bytes read from a capture at a time (the decoders keep at most a chunk's events).
-CHUNK_BYTES = 1 << 14
+#: Bytes read from a UART capture at a time (read when called, so a test can shrink it).
+CHUNK_BYTES = capture_formats.CHUNK_BYTES
 #: Leptrino chunks are larger: its decoder keeps events only between frame starts.
 LEPTRINO_CHUNK_BYTES = 1 << 18
-
-
-def read_chunks(path: Path, size: int = CHUNK_BYTES) -> Iterator[bytes]:
-    """The bytes of the file at ``path``, ``size`` at a time."""
-    with open(path, "rb") as fh:
-        while chunk := fh.read(size):
-            yield chunk
 
 
 class DecoderUnavailable(RuntimeError):
@@ -114,7 +108,7 @@ def _decode_uart(path: Path, args: argparse.Namespace) -> Records:
     from rdm.protocol.rosserial.capture import decode_uart
 
     layout = None if args.no_layout else load_checked_layout(args.layout)
-    return decode_uart(read_chunks(path), layout=layout)
+    return decode_uart(read_chunks(path, CHUNK_BYTES), layout=layout)
 
 
 def _lazy(module: str, function: str) -> Callable[..., Records]:

@@ -6,11 +6,13 @@
 * ``leptrino``: raw bytes of a Leptrino force/torque sensor link (:mod:`rdm.protocol.leptrino`).
 
 ``rdm decode`` (:mod:`rdm.commands.decode`) and the wire MCAP (:mod:`rdm.sim.wire_mcap`) both
-name a capture's format with :func:`detect_format`.
+name a capture's format with :func:`detect_format`, and read it piece by piece with
+:func:`read_chunks` (the decoders take chunks, so memory does not grow with the file).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 #: Format name -> the file extensions (lower case, with the dot) that carry it.
@@ -33,3 +35,14 @@ def detect_format(path: Path) -> str | None:
 def known_extensions() -> str:
     """Every extension of every format, space-separated (for error messages)."""
     return " ".join(ext for extensions in EXTENSIONS.values() for ext in extensions)
+
+
+#: Bytes read from a capture at a time (the decoders keep at most a chunk's events).
+CHUNK_BYTES = 1 << 14
+
+
+def read_chunks(path: Path, size: int = CHUNK_BYTES) -> Iterator[bytes]:
+    """The bytes of the file at ``path``, ``size`` at a time."""
+    with open(path, "rb") as fh:
+        while chunk := fh.read(size):
+            yield chunk

@@ -23,10 +23,18 @@ a capture without one is skipped and named in the report. A capture and index of
 before it closed them may disagree in length (each file loses its own unwritten buffer): the
 messages are all kept, those past the index at its last time, and the report names the
 capture (``partial``). Decoding runs in Python: about 10 s for the ~110k CAN frames of a 40 s run.
+
+Memory does not grow with the captures: each is read in chunks
+(:func:`rdm.protocol.capture_formats.read_chunks`) and decoded lazily, and the captures' message
+streams are merged by time (:func:`heapq.merge`, equal times in the order the captures are
+given) as they are written. Each capture is in time order as written (candump stamps ascend,
+an index's times ascend with the offset); a message earlier than its capture's previous one is
+still written, at its own time (MCAP readers order by time), and counted (``out_of_order``).
 """
 
 from __future__ import annotations
 
+import heapq
 import os
 from collections import Counter
 from collections.abc import Iterator, Sequence
@@ -35,7 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from rdm.link.capture_index import CaptureIndex, CaptureIndexError, read_capture_index, time_ns
-from rdm.protocol.capture_formats import detect_format, known_extensions
+from rdm.protocol.capture_formats import detect_format, known_extensions, read_chunks
 from rdm.sim.mcap_log import McapLogger
 
 #: Record keys that say where a record came from or whether it decoded, not what it holds.
@@ -64,6 +72,8 @@ class WireMcapReport:
     #: captures whose index covers other than all their bytes: (capture, indexed, size);
     #: records past the index are timed at its last entry
     partial: list[tuple[Path, int, int]] = field(default_factory=list)
+    #: messages earlier than the previous one of the same capture, per capture file name
+    out_of_order: Counter[str] = field(default_factory=Counter)
 
     @property
     def total(self) -> int:
@@ -76,6 +86,10 @@ class WireMcapReport:
             f"{capture}: its index covers {indexed} of {size} bytes (a run that did not close "
             "its files?); messages past it are timed at its last entry"
             for capture, indexed, size in self.partial
+        ]
+        lines += [
+            f"{name}: {n} messages earlier than the one before them (written at their own time)"
+            for name, n in self.out_of_order.items()
         ]
         return lines
 
@@ -186,18 +200,37 @@ def _capture_messages(path: Path, report: WireMcapReport) -> Iterator[_Message] 
         return None
     except CaptureIndexError as exc:
         raise WireMcapError(str(exc)) from exc
-    data = path.read_bytes()
-    if index.size != len(data):
-        report.partial.append((path, index.size, len(data)))
+    size = path.stat().st_size
+    if index.size != size:
+        report.partial.append((path, index.size, size))
     if kind == "uart":
         from rdm.protocol.rosserial.capture import decode_uart, load_layout
 
-        records = decode_uart(data, layout=load_layout(None), raw=True)
+        records = decode_uart(read_chunks(path), layout=load_layout(None), raw=True)
     else:
-        from rdm.protocol.leptrino import decode_leptrino
-
-        records = decode_leptrino(data, from_sensor=".host_tx." not in path.name)
+        records = _leptrino_records(path, from_sensor=".host_tx." not in path.name)
     return _indexed_messages(path, records, index, report)
+
+
+def _leptrino_records(path: Path, from_sensor: bool) -> Iterator[dict[str, Any]]:
+    """The Leptrino capture's records, read in chunks through one stream parser."""
+    from rdm.protocol.leptrino import LeptrinoStreamParser, decode_leptrino
+
+    parser = LeptrinoStreamParser()
+    for chunk in read_chunks(path):
+        yield from decode_leptrino(chunk, from_sensor=from_sensor, parser=parser)
+
+
+def _in_order(
+    messages: Iterator[_Message], name: str, report: WireMcapReport
+) -> Iterator[_Message]:
+    """``messages`` unchanged, each one earlier than its predecessor counted."""
+    last = None
+    for m in messages:
+        if last is not None and m.ns < last:
+            report.out_of_order[name] += 1
+        last = m.ns
+        yield m
 
 
 def write_wire_mcap(
@@ -210,12 +243,13 @@ def write_wire_mcap(
     channel and are counted in the report.
     """
     report = WireMcapReport(Path(out))
-    messages: list[_Message] = []
+    streams = []
     for capture in captures:
         found = _capture_messages(Path(capture), report)
         if found is not None:
-            messages.extend(found)
-    messages.sort(key=lambda m: m.ns)  # stable: each wire keeps its own order at equal times
+            streams.append(_in_order(found, Path(capture).name, report))
+    # equal times keep the order of the captures as given (merge breaks ties by stream)
+    messages = heapq.merge(*streams, key=lambda m: m.ns)
     log = McapLogger(out)
     try:
         for m in messages:
