@@ -57,6 +57,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "plan": ("plan", "plan an end-effector motion (differential-kinematics planner, Sec. V)"),
     "plant": ("plant", "build the MuJoCo model of a robot; export it for MuJoCo's viewer"),
+    "replay": (
+        "replay",
+        "feed a flight recording of rdm onboard through the node and compare its output bytes",
+    ),
     "sim": (
         "sim",
         "run the paper's experiments on the simulated robot with every byte on its wire",

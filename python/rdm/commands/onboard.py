@@ -26,6 +26,11 @@ past ``late_tolerance_s``, p50/p99/max of tick duration, lateness, command perio
 jitter), ``uart_writes`` (the UART is written without blocking: backlog and dropped writes)
 and ``realtime`` (``--rt-priority N``, ``--cpu K``, ``--mlock``, ``--gc-freeze``; an option
 the OS refuses ends the command with a one-line message).
+
+The flight recorder (docs/onboard.md, "Flight recorder and replay";
+:mod:`rdm.commands.onboard_record`) writes every UART and foot-sensor byte and every input
+into ``--record DIR`` (default ``runs/onboard-<UTC time>``; ``--no-record``, ``--replace``,
+``--record-max-mb``); ``rdm replay DIR`` reproduces the node's output bytes from it.
 """
 
 from __future__ import annotations
@@ -40,6 +45,12 @@ from dataclasses import replace
 from typing import Any
 
 from rdm.commands.arg_types import positive_finite
+from rdm.commands.onboard_record import (
+    SignalLog,
+    add_record_arguments,
+    mcap_available,
+    open_recorder,
+)
 from rdm.ground.heartbeat import GROUND_TIMEOUT_S
 from rdm.link.serial import SerialLink, SerialSpecError, open_pty_pair, open_serial
 from rdm.nodes.base import run_realtime
@@ -126,6 +137,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="gc.freeze() after setup: the collector skips what setup made",
     )
+    add_record_arguments(parser)
 
 
 def _configuration(args: argparse.Namespace) -> Any:
@@ -251,6 +263,8 @@ def run(args: argparse.Namespace) -> int:
     keep: list[Any] = []
     links: list[SerialLink] = []
     control = None
+    recorder = None
+    signals = None
     try:
         config = _configuration(args)
         key = _control_key(args)
@@ -268,6 +282,7 @@ def run(args: argparse.Namespace) -> int:
             links.append(foot)
             keep.append(k)
         node = OnboardNode(uart, foot, robot, config=config)
+        recorder = open_recorder(args, node)
         timing = LoopTiming(node.period, config.late_tolerance_s)
         realtime: dict[str, Any] = {}
         nodes: list[Any] = []
@@ -275,6 +290,17 @@ def run(args: argparse.Namespace) -> int:
         if control is not None:
             nodes.append(control)
         nodes.append(node)
+        if recorder is not None:
+            if mcap_available():
+                signals = SignalLog(node, recorder)
+                nodes.append(signals)
+            else:
+                print(
+                    "rdm onboard: the recording holds no signals.mcap: it needs the sim extra "
+                    '(pip install "rdm[sim]"); the byte captures and the journal are complete',
+                    file=sys.stderr,
+                    flush=True,
+                )
         if args.status_interval > 0:
             nodes.append(
                 _StatusPrinter(lambda: _status(node, timing, uart, realtime), args.status_interval)
@@ -285,6 +311,8 @@ def run(args: argparse.Namespace) -> int:
     except (SerialSpecError, OSError, ValueError, RealtimeOptionError) as exc:
         if control is not None:
             control.close()
+        if recorder is not None:
+            recorder.close(reason=f"rdm onboard did not start: {exc}")
         for link in [*links, *(k for k in keep if k is not None)]:
             link.close()
         print(f"rdm onboard: {exc}", file=sys.stderr)
@@ -296,10 +324,16 @@ def run(args: argparse.Namespace) -> int:
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: stop.set())
     print(f"rdm onboard: ready robot={args.robot} rate={config.rate_hz} Hz", flush=True)
+    failure: str | None = "rdm onboard ended by an error"
     try:
         stats = run_realtime(nodes, duration=args.duration, stop=stop, timing={node.name: timing})
+        failure = None
     finally:
         node.close()
+        if signals is not None:
+            signals.close()
+        if recorder is not None:
+            recorder.close(reason=failure)
         if control is not None:
             control.close()
         for link in links:

@@ -321,6 +321,8 @@ def run(
             str(key_path),
             "--servo-lead",
             f"{stack.onboard.config.servo_lead_s}",
+            "--record",  # the flight recorder: rdm replay RUN_FOLDER
+            str(stack.folder.root / "onboard"),
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,

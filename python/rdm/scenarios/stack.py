@@ -190,6 +190,9 @@ class StackOptions:
     #: (``Plant(lazy_sensors=...)``, docs/plant.md "Lazy sensors"): the same bytes either
     #: way, ~5k instructions less per simulated ms. False: sensors in every step.
     plant_lazy_sensors: bool = True
+    #: Record the in-process onboard node into this folder (:mod:`rdm.nodes.flight_recorder`:
+    #: its port bytes and inputs, for ``rdm replay``); None: not recorded.
+    record_onboard: str | None = None
 
 
 #: Feed-forward lead of the joint servo goals on a planned path that the scenarios configure
@@ -403,6 +406,12 @@ def _wire(
         else OnboardNode(onboard_link, f_host, config=config)
     )
     opened.append(onboard.close)
+    recorder = None
+    if opt.record_onboard is not None and not external:
+        from rdm.nodes.flight_recorder import record_node
+
+        recorder = record_node(onboard, opt.record_onboard, "rdm")
+        opened.append(recorder.close)
     sensor = LeptrinoSensorNode(f_dev, "CFS034CA301U", rate_hz=opt.leptrino_rate_hz)
     logger = McapLogger(folder.mcap) if opt.log else None
     if logger is not None:
@@ -476,6 +485,7 @@ def _wire(
         f_dev.close,
         f_host.close,
         *[n.close for n in neuron_nodes],
+        *([recorder.close] if recorder is not None else []),
     ]
     return stack
 

@@ -1,0 +1,109 @@
+"""``rdm onboard``'s flight recorder options (docs/onboard.md, "Flight recorder and replay").
+
+``--record DIR`` (default ``runs/onboard-<UTC time>``), ``--no-record``, ``--replace``,
+``--record-max-mb``: :func:`open_recorder` prepares the folder and attaches a
+:class:`rdm.nodes.flight_recorder.FlightRecorder` to the node; :class:`SignalLog` writes the
+node's status into each segment's ``signals.mcap`` when the ``mcap`` package (the ``sim``
+extra) is installed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from rdm.nodes.flight_recorder import DEFAULT_MAX_MB, FlightRecorder, record_node
+
+#: Seconds between two status records in ``signals.mcap``.
+SIGNAL_PERIOD_S = 0.1
+
+
+def add_record_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--record",
+        default=None,
+        metavar="DIR",
+        help="flight recorder folder: every UART and foot-sensor byte and every input, for "
+        "rdm replay (default runs/onboard-<UTC time>)",
+    )
+    parser.add_argument("--no-record", action="store_true", help="record nothing")
+    parser.add_argument(
+        "--replace", action="store_true", help="empty a non-empty --record folder first"
+    )
+    parser.add_argument(
+        "--record-max-mb",
+        type=float,
+        default=DEFAULT_MAX_MB,
+        help=f"bound of the recording; the oldest segments go first (default {DEFAULT_MAX_MB:g})",
+    )
+
+
+def _default_folder() -> Path:
+    """``runs/onboard-<UTC YYYYmmddTHHMMSSZ>``, with ``-2``, ``-3`` ... when taken."""
+    stem = Path("runs") / f"onboard-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
+    path, k = stem, 1
+    while path.exists() or path.is_symlink():
+        k += 1
+        path = stem.with_name(f"{stem.name}-{k}")
+    return path
+
+
+def open_recorder(args: argparse.Namespace, node: Any) -> FlightRecorder | None:
+    """The recorder of ``node`` as the options ask (None with ``--no-record``); ValueError
+    (a folder refused, a bad bound) names the option and the rule."""
+    if args.no_record:
+        if args.record is not None:
+            raise ValueError("--record and --no-record exclude each other")
+        return None
+    mb = args.record_max_mb
+    if not (math.isfinite(mb) and mb > 0):
+        raise ValueError(f"--record-max-mb {mb}: must be a finite number > 0")
+    folder = Path(args.record) if args.record is not None else _default_folder()
+    recorder = record_node(
+        node, folder, args.robot, replace=args.replace, max_bytes=max(1, int(mb * 1e6))
+    )
+    print(f"rdm onboard: recording into {folder}", flush=True)
+    return recorder
+
+
+def mcap_available() -> bool:
+    """Whether the ``mcap`` package (``sim`` extra) is installed."""
+    return importlib.util.find_spec("mcap") is not None
+
+
+class SignalLog:
+    """A node writing the onboard node's status (``/onboard/status``, as ``rdm sim`` logs
+    it) into the recorder's present segment's ``signals.mcap``: finished when the segment
+    closes, a new file in the next; its bytes counted in the segment's size."""
+
+    name = "onboard_signals"
+
+    def __init__(self, node: Any, recorder: FlightRecorder) -> None:
+        self.node, self.recorder = node, recorder
+        self.period = SIGNAL_PERIOD_S
+        self._logger: Any = None
+        self._segment = -1
+        self._size = 0
+        recorder.segment_closing.append(lambda _segment: self.close())
+
+    def tick(self, now: float) -> None:
+        seg = self.recorder.segment
+        if self._logger is None:
+            from rdm.sim.mcap_log import McapLogger
+
+            self._logger = McapLogger(seg.folder / "signals.mcap")
+            self._segment, self._size = seg.index, 0
+        self._logger.log_json("/onboard/status", now, self.node.status())
+        size = os.path.getsize(self._logger.path)
+        seg.size += size - self._size
+        self._size = size
+
+    def close(self) -> None:
+        if self._logger is not None:
+            self._logger.finish()
+            self._logger = None
