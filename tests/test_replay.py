@@ -212,6 +212,11 @@ def test_a_process_run_replays_byte_for_byte(spinal_pty, tmp_path) -> None:
     summary = json.loads((record / "summary.json").read_text())
     assert summary["replayable"] and summary["calls"] >= 21
     assert status["ticks"] == summary["ticks"]
+    lines = (record / "seg0000" / "journal.jsonl").read_text().splitlines()
+    datagrams = [bytes.fromhex(json.loads(x)["datagram"]) for x in lines if '"note"' in x]
+    assert sum(b'"cmd":"mocap"' in d for d in datagrams) == 20  # each as it arrived
+    calls = [json.loads(x)["call"] for x in lines if '"call"' in x]
+    assert calls.count("set_mocap") == 20 and calls[0] == "arm" and "takeoff" in calls
 
     result = rdm("replay", str(record))
     assert result.returncode == 0, result.stdout + result.stderr

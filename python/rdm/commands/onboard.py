@@ -50,6 +50,7 @@ from rdm.commands.onboard_record import (
     add_record_arguments,
     mcap_available,
     open_recorder,
+    record_datagrams,
 )
 from rdm.ground.heartbeat import GROUND_TIMEOUT_S
 from rdm.link.serial import SerialLink, SerialSpecError, open_pty_pair, open_serial
@@ -289,6 +290,8 @@ def run(args: argparse.Namespace) -> int:
         control = _control_port(args, node, key)
         if control is not None:
             nodes.append(control)
+            if recorder is not None:
+                record_datagrams(control, recorder)
         nodes.append(node)
         if recorder is not None:
             if mcap_available():

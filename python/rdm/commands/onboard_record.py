@@ -2,7 +2,8 @@
 
 ``--record DIR`` (default ``runs/onboard-<UTC time>``), ``--no-record``, ``--replace``,
 ``--record-max-mb``: :func:`open_recorder` prepares the folder and attaches a
-:class:`rdm.nodes.flight_recorder.FlightRecorder` to the node; :class:`SignalLog` writes the
+:class:`rdm.nodes.flight_recorder.FlightRecorder` to the node, :func:`record_datagrams` adds
+what reaches the ground link to its journal; :class:`SignalLog` writes the
 node's status into each segment's ``signals.mcap`` when the ``mcap`` package (the ``sim``
 extra) is installed.
 """
@@ -69,6 +70,20 @@ def open_recorder(args: argparse.Namespace, node: Any) -> FlightRecorder | None:
     )
     print(f"rdm onboard: recording into {folder}", flush=True)
     return recorder
+
+
+def record_datagrams(port: Any, recorder: FlightRecorder) -> None:
+    """Journal every datagram the ground link ``port`` (:class:`rdm.ground.port.GroundPort`)
+    takes, before it is handled: its bytes (hex), sender and node time, accepted or not. A
+    replay skips these lines; the node calls they caused are journaled after them."""
+    handle = port.handle
+
+    def recorded(data: bytes, addr: Any, now: float) -> Any:
+        sender = f"{addr[0]}:{addr[1]}" if isinstance(addr, tuple) and len(addr) >= 2 else None
+        recorder.note({"datagram": bytes(data).hex(), "from": sender, "t": now})
+        return handle(data, addr, now)
+
+    port.handle = recorded
 
 
 def mcap_available() -> bool:

@@ -308,6 +308,10 @@ class FlightRecorder:
         self.segment.line(entry)
         return True
 
+    def note(self, entry: dict[str, Any]) -> None:
+        """A journal line a replay does not act on (a ground-link datagram as it arrived)."""
+        self.segment.line({"note": True, **entry})
+
     def io(self, link: str, kind: str, data: bytes, result: int | str) -> None:
         """A read (``r``) or write (``w``) on ``link``: the bytes into its capture, the
         result (bytes returned or taken, ``"E"`` for an OSError) into the journal."""

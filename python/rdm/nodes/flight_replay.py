@@ -162,7 +162,10 @@ def _build_node(header: dict[str, Any], links: dict[str, ReplayLink], where: Pat
 
 
 def _apply(entry: dict[str, Any], node: Any, links: dict[str, ReplayLink]) -> str:
-    """Replay one journal entry; its kind (``call``, ``tick``, ``close`` or ``io``)."""
+    """Replay one journal entry; its kind (``call``, ``tick``, ``close``, ``note`` or
+    ``io``)."""
+    if "note" in entry:  # what arrived at the ground link: its effect is the calls after it
+        return "note"
     if "call" in entry:
         name = entry["call"]
         if name not in INPUT_METHODS or "unrecordable" in entry:
