@@ -208,7 +208,7 @@ def test_ctl_heartbeat_keeps_the_link_and_its_end_trips_the_loss(port, key_file)
 
 def _onboard(port: int, *extra: str) -> subprocess.Popen:
     return subprocess.Popen(
-        [*RDM, "onboard", "--uart", "pty", "--foot-sensor", "none",
+        [*RDM, "onboard", "--no-record", "--uart", "pty", "--foot-sensor", "none",
          "--control", f"udp:127.0.0.1:{port}", *extra],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
     )  # fmt: skip

@@ -44,6 +44,7 @@ def test_rdm_onboard_process_arms_and_commands(tmp_path) -> None:
             "-m",
             "rdm.cli",
             "onboard",
+            "--no-record",
             "--uart",
             "pty",
             "--foot-sensor",
@@ -129,7 +130,17 @@ def test_rdm_onboard_refuses_a_negative_servo_lead() -> None:
     """``--servo-lead`` reaches the node's configuration: an invalid lead is a clear error
     (exit 2) before any port is opened."""
     out = subprocess.run(
-        [sys.executable, "-m", "rdm.cli", "onboard", "--uart", "pty", "--servo-lead", "-0.1"],
+        [
+            sys.executable,
+            "-m",
+            "rdm.cli",
+            "onboard",
+            "--no-record",
+            "--uart",
+            "pty",
+            "--servo-lead",
+            "-0.1",
+        ],
         capture_output=True,
         text=True,
         timeout=60,

@@ -29,7 +29,18 @@ def _unprivileged() -> None:
 
 def onboard(*args: str, unprivileged: bool = False) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "rdm.cli", "onboard", "--uart", "pty", "--duration", "0.3", *args],
+        [
+            sys.executable,
+            "-m",
+            "rdm.cli",
+            "onboard",
+            "--no-record",
+            "--uart",
+            "pty",
+            "--duration",
+            "0.3",
+            *args,
+        ],
         capture_output=True,
         text=True,
         timeout=120,

@@ -206,7 +206,9 @@ def run_onboard(
     control = f"udp:127.0.0.1:{_free_udp_port()}"
     command = [sys.executable, "-m", "rdm.cli", "onboard", *NODE_ARGS, "--control", control]
     command += ["--insecure-control", "--duration", f"{seconds + 1.0:g}", *options]
-    with tempfile.TemporaryFile("w+") as err_file:
+    # The flight recorder runs as on the robot (on by default), into a folder of its own.
+    with tempfile.TemporaryFile("w+") as err_file, tempfile.TemporaryDirectory() as rec:
+        command += ["--record", os.path.join(rec, "onboard")]
         proc = subprocess.Popen(
             command,
             stdout=subprocess.PIPE,
