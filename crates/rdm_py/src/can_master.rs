@@ -1,5 +1,5 @@
 //! Bindings of `rdm_core::firmware::can_master`: Spinal's CAN master (python-can messages in,
-//! `(can_id, payload)` frames out). The Python node `rdm.nodes.can_master_rust` wraps it.
+//! `(can_id, payload)` frames out). The Python node `rdm.nodes.can_master` wraps it.
 
 use pyo3::create_exception;
 use pyo3::prelude::*;

@@ -1,12 +1,10 @@
 //! rosserial v2 frame scanning on the Spinal UART (`jsk-wire-protocols.md`, rosserial
 //! section): `FF FE len_lo len_hi len_chk topic_lo topic_hi payload[len] msg_chk`.
 //!
-//! [`next_candidate`] classifies what starts at one position of a receive buffer exactly as
-//! the Python reference parser (`rdm.protocol.rosserial.framing.PlainFrameParser`) does,
-//! step by step: bytes outside any frame, a frame candidate that needs more bytes, a good
-//! frame, or a rejected candidate with its reason. The caller owns the buffer, the stream
-//! offset, the frame timer and the re-scan policy. Pure slice arithmetic: it allocates
-//! nothing and never panics.
+//! [`next_candidate`] classifies what starts at one position of a receive buffer: bytes
+//! outside any frame, a frame candidate that needs more bytes, a good frame, or a rejected
+//! candidate with its reason. The caller owns the buffer, the stream offset, the frame timer
+//! and the re-scan policy. Pure slice arithmetic: it allocates nothing and never panics.
 //!
 //! The sending side: [`seal_frame`] writes a frame's header and checksums around a payload
 //! already in place, [`client_stamp`] is the rosserial client's ROS time at a tick
