@@ -1,6 +1,5 @@
-"""Random rosserial messages of any registered type, for the codec fast-path tests: every
-field filled with an edge or random value of its ROS type (shared by the flat-codec and the
-fast-path tests)."""
+"""Random rosserial messages of any registered type, for the codec tests: every field filled
+with an edge or random value of its ROS type."""
 
 from __future__ import annotations
 
