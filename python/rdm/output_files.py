@@ -16,7 +16,9 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import shutil
 import stat
+from pathlib import Path
 from typing import IO, Any
 
 #: Flags of every output file: write only, never through a symbolic link, not inherited by
@@ -97,3 +99,34 @@ def write_atomic(path: str | os.PathLike[str], data: str | bytes) -> None:
     except BaseException:
         os.unlink(tmp)
         raise
+
+
+class OutputFolderError(ValueError):
+    """A folder that cannot be used as asked (not empty, a symbolic link, a file)."""
+
+
+def prepare_empty_folder(root: Path, replace: bool, name: str) -> None:
+    """Make ``root`` an empty real folder. Without ``replace`` a symbolic link, a file or a
+    non-empty folder in its place is refused (:class:`OutputFolderError`, the message starting
+    with ``name``, e.g. ``"run folder runs/x"``); with it a link or file is removed (never
+    what a link points to) and a folder's content is removed without following a link."""
+    if root.is_symlink():
+        if not replace:
+            raise OutputFolderError(
+                f"{name} is a symbolic link; rdm writes only into a real folder "
+                "(--replace removes the link, never what it points to)"
+            )
+        os.unlink(root)
+    elif root.exists() and not root.is_dir():
+        if not replace:
+            raise OutputFolderError(f"{name} exists and is not a folder (--replace)")
+        os.unlink(root)
+    elif root.is_dir() and any(os.scandir(root)):
+        if not replace:
+            raise OutputFolderError(f"{name} is not empty; --replace removes its content first")
+        for entry in os.scandir(root):
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path)  # the fd-based rmtree: links inside are unlinked
+            else:
+                os.unlink(entry.path)
+    root.mkdir(parents=True, exist_ok=True)

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from rdm.link.capture_index import INDEX_SUFFIX, TimedCaptureFile
-from rdm.output_files import open_output, write_atomic
+from rdm.output_files import OutputFolderError, open_output, prepare_empty_folder, write_atomic
 
 #: The node methods an outside caller (ground link, mocap, scenario script) drives it by.
 INPUT_METHODS = (
@@ -175,28 +175,10 @@ def prepare_folder(root: Path, replace: bool) -> None:
     """Make ``root`` an empty real folder marked :data:`INCOMPLETE` (the run-folder rules of
     :mod:`rdm.sim.run_folder`: a non-empty folder is refused unless ``replace``, whose content
     is then removed without following a symbolic link; a link in its place is refused)."""
-    if root.is_symlink():
-        if not replace:
-            raise RecorderError(
-                f"--record {root}: a symbolic link; rdm writes only into a "
-                "real folder (--replace removes the link, never its target)"
-            )
-        os.unlink(root)
-    elif root.exists() and not root.is_dir():
-        if not replace:
-            raise RecorderError(f"--record {root}: exists and is not a folder (--replace)")
-        os.unlink(root)
-    elif root.is_dir() and any(os.scandir(root)):
-        if not replace:
-            raise RecorderError(
-                f"--record {root}: the folder is not empty; --replace removes its content first"
-            )
-        for entry in os.scandir(root):
-            if entry.is_dir(follow_symlinks=False):
-                shutil.rmtree(entry.path)
-            else:
-                os.unlink(entry.path)
-    root.mkdir(parents=True, exist_ok=True)
+    try:
+        prepare_empty_folder(root, replace, f"--record {root}:")
+    except OutputFolderError as exc:
+        raise RecorderError(str(exc)) from None
     with open_output(root / INCOMPLETE, "w", exclusive=True, encoding="utf-8") as f:
         f.write("this recording has not finished: summary.json is written when it does\n")
 

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import os
 import re
-import shutil
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
@@ -36,7 +35,7 @@ from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 
-from rdm.output_files import open_output, write_atomic
+from rdm.output_files import OutputFolderError, open_output, prepare_empty_folder, write_atomic
 
 _NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
 
@@ -71,36 +70,13 @@ def run_folders(*, replace: bool = False) -> Iterator[list[RunFolder]]:
         _SCOPE.reset(token)
 
 
-def _empty(root: Path) -> None:
-    """Remove everything inside ``root`` (a real folder), following no symbolic link."""
-    for entry in os.scandir(root):
-        if entry.is_dir(follow_symlinks=False):
-            shutil.rmtree(entry.path)  # the fd-based rmtree: links inside are unlinked
-        else:
-            os.unlink(entry.path)
-
-
 def _prepare(root: Path, replace: bool) -> None:
     """Make ``root`` an empty real folder, or raise :class:`RunFolderError`."""
-    if root.is_symlink():
-        if not replace:
-            raise RunFolderError(
-                f"run folder {root} is a symbolic link; rdm writes only into a real folder "
-                "(--replace removes the link, never what it points to)"
-            )
-        os.unlink(root)
-    elif root.exists() and not root.is_dir():
-        if not replace:
-            raise RunFolderError(f"run folder {root} exists and is not a folder (--replace)")
-        os.unlink(root)
-    elif root.is_dir() and any(os.scandir(root)):
-        if not replace:
-            raise RunFolderError(
-                f"run folder {root} is not empty; --replace removes its content first "
-                "(or choose another --out or --seed)"
-            )
-        _empty(root)
-    root.mkdir(parents=True, exist_ok=True)
+    try:
+        prepare_empty_folder(root, replace, f"run folder {root}")
+    except OutputFolderError as exc:
+        hint = " (or choose another --out or --seed)" if "not empty" in str(exc) else ""
+        raise RunFolderError(f"{exc}{hint}") from None
 
 
 @dataclass(frozen=True)
