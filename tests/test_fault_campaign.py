@@ -6,6 +6,10 @@
 * The campaign's rows against each run folder's own ``summary.json`` (read back with
   ``json.loads``): counts of safe ends, detections, outcomes, the fault-to-touchdown times.
   The UART-noise and battery-sag faults must end safe and be detected in every run.
+* The plant-side faults (``rdm.scenarios.mission_faults``): IMU outliers at their rate and
+  beyond Spinal's ranges, each one dropped by Spinal's estimator (its ``out_of_range``
+  counter equals the injected count) and the flight ending safe; a dead rotor gives no
+  thrust, Spinal's tilt fail-safe notices, and the record says "crashed", not safe.
 """
 
 from __future__ import annotations
@@ -21,6 +25,16 @@ import numpy as np
 import pytest
 
 import rdm
+from rdm.plant.ceiling import NoCeilingEffect
+from rdm.plant.sensors import ImuReading
+from rdm.scenarios import mission
+from rdm.scenarios.mission_faults import (
+    SPIKE_ACC,
+    SPIKE_GYRO,
+    SPIKE_PROBABILITY,
+    DeadRotor,
+    SpikingImu,
+)
 from rdm.sim.byte_faults import CorruptingLink
 
 
@@ -94,3 +108,47 @@ def test_campaign_refuses_bad_options():
     ):
         out = _sim(args, timeout=120)
         assert out.returncode == 2 and "--fault" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_imu_spikes_are_rare_outliers_beyond_the_sensor_range():
+    clean = ImuReading(np.array([0.1, -0.2, 0.3]), np.array([0.0, 0.0, 9.8]), np.ones(3), False)
+    imu = SpikingImu(lambda: clean, seed=4)
+    n = 40_000
+    samples = [imu() for _ in range(n)]
+    changed = [r for r in samples if r is not clean]
+    assert len(changed) == imu.spikes
+    sigma = math.sqrt(n * SPIKE_PROBABILITY * (1 - SPIKE_PROBABILITY))
+    assert abs(imu.spikes - n * SPIKE_PROBABILITY) < 5 * sigma
+    for r in changed:  # one gyro and one accelerometer axis beyond the range, the rest kept
+        g = np.abs(r.gyro) == SPIKE_GYRO
+        a = np.abs(r.accel) == SPIKE_ACC
+        assert g.sum() == 1 and a.sum() == 1
+        assert np.array_equal(r.gyro[~g], clean.gyro[~g])
+        assert np.array_equal(r.accel[~a], clean.accel[~a])
+        assert np.array_equal(r.mag, clean.mag)
+    assert SPIKE_GYRO > 34.91 and SPIKE_ACC > 78.5  # Spinal's estimator ranges
+    assert DeadRotor(NoCeilingEffect()).thrust_ratio(0.3) == 0.0
+
+
+def test_imu_spikes_mission_ends_safe_and_each_spike_is_dropped(tmp_path):
+    result = mission.run(
+        tmp_path, duration=mission.QUICK_DURATION, seed=0, fault="imu-spikes", quick=True
+    )
+    record, stack = result.facts["mission"], result.stack
+    spikes = stack.plant.imu.spikes
+    assert spikes > 10  # the injection ran: about 3 a second after the fault
+    # every outlier reached Spinal's estimator and was dropped there, no other sample was
+    assert stack.spinal.core.estimator_counters["out_of_range"] == spikes
+    assert record["safe"] and record["fault_detected"] and record["outcome"] == "landed"
+
+
+def test_dead_esc_mission_is_detected_and_reported_as_a_crash(tmp_path):
+    result = mission.run(
+        tmp_path, duration=mission.QUICK_DURATION, seed=0, fault="dead-esc", quick=True
+    )
+    record, stack = result.facts["mission"], result.stack
+    assert isinstance(stack.plant.ceiling_effects[0], DeadRotor)
+    assert stack.spinal.counters.failsafes["failsafe_tilt"] >= 1
+    # a quadrotor without one rotor cannot stay level: the record must not claim a safe end
+    assert record["fault_detected"] and not record["safe"]
+    assert record["outcome"] == "crashed" and record["max_tilt_deg"] > mission.MAX_TILT_DEG

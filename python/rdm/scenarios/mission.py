@@ -30,6 +30,7 @@ from rdm.sim.byte_faults import CorruptingLink
 
 from . import perching
 from .common import ScenarioResult, finish, roll_pitch, run_stack, sim_stack_options, truth_arrays
+from .mission_faults import DeadRotor, SpikingImu
 from .mocap_node import MocapSensor
 from .stack import DroppableLink, Stack, build_stack
 
@@ -66,6 +67,8 @@ FAULTS = (
     "uart-noise-1e-3",  # ... at p = 1e-3 (about one damaged frame in 30)
     "battery-sag",  # the battery sags 1 V/s from where it is (the node lands by itself)
     "foot-sensor-loss",  # the foot sensor's cable is cut once perched (the node holds)
+    "imu-spikes",  # IMU samples beyond the sensor's range, about 3 a second (Spinal drops them)
+    "dead-esc",  # rotor 0 gives no thrust from the fault on (a quadrotor cannot hover)
 )
 #: Byte-fault probability of the ``uart-noise-*`` faults (sim.byte_faults.CorruptingLink).
 UART_NOISE = {"uart-noise-1e-4": 1e-4, "uart-noise-1e-3": 1e-3}
@@ -195,6 +198,12 @@ class MissionScript:
             foot = stack.onboard.foot
             foot.link = DroppableLink(foot.link)
             foot.link.dropped = True
+        elif self.fault == "imu-spikes":  # the plant's IMU read by the bridge for Spinal
+            stack.plant.imu = SpikingImu(stack.plant.imu, int(stack.plant.seed))
+        elif self.fault == "dead-esc":
+            effects = list(stack.plant.ceiling_effects)
+            effects[0] = DeadRotor(effects[0])
+            stack.plant.ceiling_effects = effects
 
 
 #: Which monitor or counter shows that the node noticed each fault.
@@ -208,6 +217,8 @@ _DETECTED_BY = {
     "uart-noise-1e-3": ("parser", "bad_frames"),
     "battery-sag": ("monitors", "battery_low"),
     "foot-sensor-loss": ("monitors", "foot_stale"),
+    "imu-spikes": ("estimator", "out_of_range"),
+    "dead-esc": ("failsafes", "failsafe_tilt"),
 }
 
 
@@ -247,6 +258,8 @@ def outcome(stack: Stack, script: MissionScript, a: dict[str, np.ndarray]) -> di
         "node": node.counts,
         "spinal": stack.spinal.counters.rejected,
         "parser": {"bad_frames": node.session.parser.bad_frames},
+        "estimator": stack.spinal.core.estimator_counters,
+        "failsafes": stack.spinal.counters.failsafes,
     }.get(where, {})
     touchdowns = [e["t"] for e in node.monitors.events if e["monitor"] == "touchdown"]
     return {
