@@ -48,7 +48,7 @@ _COMMAND_KINDS = {
     "desire_coordinate": 4,
     "servo/target_states": 5,
 }
-_apply_commands = getattr(_rdm, "spinal_apply_commands", None)
+_apply_commands = _rdm.spinal_apply_commands
 _IMU_CALIB_GET = 0  # spinal/ImuCalib GET_CALIB_DATA
 _IMU_CALIB_GYRO = 2  # spinal/ImuCalib CALIB_GYRO
 _MAG_SET = 1  # spinal/MagDeclination SET
@@ -104,7 +104,7 @@ class SpinalCommands:
     def _receive(self, now_ms: int) -> None:
         if not self._values_armed:  # the value routes and command runs, once
             self.session.deliver_values(self._value_routes)
-            runs = _apply_commands is not None and any(self._command_kinds)
+            runs = any(self._command_kinds)
             self.session.command_run = self._apply_command_run if runs else None
             self._values_armed = True
         data = self.uart.read()
@@ -169,7 +169,6 @@ class SpinalCommands:
         (the parser's good frames) applied in one call, ``rdm._rdm.spinal_apply_commands``:
         the core calls of :meth:`_route_values` for each, with its counters and rejections.
         Returns how many frames are done; the session hands the rest to the usual path."""
-        assert _apply_commands is not None
         n, exc = _apply_commands(
             items,
             self._command_kinds,

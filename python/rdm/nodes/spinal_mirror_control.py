@@ -11,14 +11,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from rdm._rdm import spinal_duty_list as _duty_list
 from rdm.control.attitude import N_ROTORS
 from rdm.nodes.can_master import IDLE_DUTY
 from rdm.protocol.rosserial import constants as C
-
-try:  # the busy-ms helper (crates/rdm_py/src/spinal_mirror.rs); without it: Python only
-    from rdm._rdm import spinal_duty_list as _duty_list
-except ImportError:
-    _duty_list = None
 
 BATTERY_SAMPLE_MS = 20  # HAL ms: the battery task runs every 20 ms
 #: Battery low-pass ``v = 0.99 v + 0.01 new`` per 20 ms sample.
@@ -78,7 +74,7 @@ class SpinalControl:
         out = self.core.step(now, self.gyro, self.acc, self.mag, voltage)
         self.last_output = out
         self.counters.control_steps += 1
-        if _duty_list is not None and self.pwm_test is None:
+        if self.pwm_test is None:
             # No event and the controller's own duties: the list _step_tail builds, from
             # the core's output in one call (None: an event or another case, below).
             n = self.master.motor_number

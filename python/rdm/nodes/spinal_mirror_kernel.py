@@ -15,7 +15,7 @@ from rdm.control.attitude import SpinalStep
 from rdm.link.capture_index import timed_capture_of
 from rdm.link.inproc_can import SimClock
 from rdm.nodes.can_master import IDLE_DUTY, MasterState
-from rdm.nodes.spinal_mirror_control import BATTERY_FILTER, BATTERY_SAMPLE_MS, _duty_list
+from rdm.nodes.spinal_mirror_control import BATTERY_FILTER, BATTERY_SAMPLE_MS
 from rdm.nodes.spinal_mirror_publishers import (
     _NEVER,
     BATTERY_PUB_MS,
@@ -23,7 +23,6 @@ from rdm.nodes.spinal_mirror_publishers import (
     MOTOR_PWMS_PUB_MS,
     SERVO_STATES_PUB_MS,
     SERVO_TORQUE_PUB_MS,
-    _imu_frame,
 )
 from rdm.protocol.rosserial.timesync import ClientClock
 
@@ -102,11 +101,7 @@ class SpinalKernelInterface:
         The kernel reads the IMU sample, battery input, ADC scale and battery voltage from
         the mirror itself when it uses them (another node may set them without a re-read)."""
         core = self.core
-        step_core = (
-            core
-            if core.__class__ is SpinalStep and self.pwm_test is None and _duty_list is not None
-            else None
-        )
+        step_core = core if core.__class__ is SpinalStep and self.pwm_test is None else None
         session = self.session
         clock = session.clock
         # session.publisher(name) for its cache hit, inline (else the lookup itself)
@@ -114,7 +109,7 @@ class SpinalKernelInterface:
         fresh = session._cached_slots == len(session.publishers)
         imu_topic = None
         client_clock = clock.__class__ is ClientClock  # the stamps the kernel computes
-        if _imu_frame is not None and client_clock:
+        if client_clock:
             slot = cache.get("imu") if fresh else None
             if slot is None or slot.service is not None:
                 slot = self._kernel_publisher("imu")

@@ -11,13 +11,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from rdm._rdm import spinal_imu_frame as _imu_frame
 from rdm.protocol.rosserial import constants as C
 from rdm.protocol.rosserial.timesync import ClientClock
-
-try:  # the busy-ms helper (crates/rdm_py/src/spinal_mirror.rs); without it: Python only
-    from rdm._rdm import spinal_imu_frame as _imu_frame
-except ImportError:
-    _imu_frame = None
 
 #: Publication periods in HAL ms and whether the firmware compares with ``>`` (strict).
 IMU_PUB_MS = 5  # >= 5 ms (200 Hz), attitude_estimate.h
@@ -101,11 +97,11 @@ class SpinalPublishers:
     def _publish_imu_frame(self, now_ms: int) -> bool:
         """The ``imu`` publication of :meth:`_publish_due` as one frame built in Rust
         (``rdm._rdm.spinal_imu_frame``: stamp, message, frame and checksums): the same bytes,
-        TX ring and counters. False, having done nothing, when that path does not apply (no
-        extension function, another publisher codec or clock class, values it declines)."""
+        TX ring and counters. False, having done nothing, when that path does not apply
+        (another publisher codec or clock class, values it declines)."""
         session = self.session
         clock = session.clock
-        if _imu_frame is None or clock.__class__ is not ClientClock:
+        if clock.__class__ is not ClientClock:
             return False
         try:
             slot = session.publisher("imu")

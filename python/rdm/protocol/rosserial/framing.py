@@ -21,6 +21,8 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
+from rdm._rdm import rosserial_frame as _native_frame
+from rdm._rdm import rosserial_scan as _native_scan
 from rdm.protocol.rosserial.checksums import byte_sum
 from rdm.protocol.rosserial.constants import FRAME_OVERHEAD, PROTOCOL_VERSION, SYNC
 
@@ -75,15 +77,6 @@ def _new_frame(topic_id: int, payload: bytes, offset: int) -> Frame:
     return frame
 
 
-try:
-    from rdm._rdm import rosserial_scan as _native_scan
-except ImportError:  # an extension without the scanner: the Python loop
-    _native_scan = None
-try:
-    from rdm._rdm import rosserial_frame as _native_frame
-except ImportError:  # an extension without it: the frame built below
-    _native_frame = None
-
 _HEADER = struct.Struct("<BBHBH")  # FF FE len(u16) len_chk topic(u16)
 
 
@@ -94,10 +87,9 @@ _HEADERS_MAX = 4096
 def encode_frame(topic_id: int, payload: bytes) -> bytes:
     """Build one v2 frame."""
     if payload.__class__ is bytes:
-        if _native_frame is not None:  # one Rust call: the same bytes, None where it declines
-            frame = _native_frame(topic_id, payload)
-            if frame is not None:
-                return frame
+        frame = _native_frame(topic_id, payload)  # one Rust call; None where it declines
+        if frame is not None:
+            return frame
         header = _HEADERS.get((topic_id, len(payload)))
         if header is not None:  # this topic id and length passed the checks below before
             chk = 255 - (((topic_id & 0xFF) + (topic_id >> 8) + byte_sum(payload)) % 256)
@@ -137,7 +129,7 @@ class FrameParser:
         self.frame_timeout = frame_timeout
         self.rescan = rescan
         self.counts: Counter[str] = Counter()
-        self.native = _native_scan is not None  # the Rust scan; False: the Python loop
+        self.native = True  # the Rust scan; False: the Python loop
         self._buf = bytearray()
         self._base = 0  # stream offset of _buf[0]
         self._started: float | None = None  # time the current candidate's 0xFF was seen
@@ -223,8 +215,8 @@ class FrameParser:
         return events
 
     def _feed_python(self, data: bytes, now: float, raw: bool) -> list[Any]:
-        """:meth:`_feed` without the Rust scanner (no extension, or a ``max_payload`` that is
-        not a non-negative int)."""
+        """:meth:`_feed` without the Rust scanner: a ``max_payload`` that is not a
+        non-negative int, or :attr:`native` set False."""
         started = self._started
         buf = self._buf
         # Sync, version, length and its checksum, size limit, message checksum, classified
