@@ -8,7 +8,8 @@ and the message handlers that a subscriber of another layout takes).
   off) and the message handlers only. After every tick: the same UART output, diagnostics
   (counters, rejections), controller targets, thrusts and duties.
 * Servo goals on a running Rust master (a hover stack past the CAN boot): the call against
-  ``ServoBridge.target_states_values`` on random index/angle lists, invalid ones included.
+  the ``servo/target_states`` rules written out, on random index/angle lists, invalid ones
+  included.
 * The call's declines (a topic it does not take, items that are not good frames) and a
   core rejection handed back as the core's own exception.
 """
@@ -23,12 +24,12 @@ from typing import Any
 
 import numpy as np
 import pytest
+from test_spinal_busy_ms import _expected_targets
 
 from rdm import _rdm
 from rdm.control.attitude import ARM_ON, UAV_HYDRUS
 from rdm.nodes import spinal_mirror as sm
 from rdm.nodes import spinal_mirror_commands as sm_commands
-from rdm.nodes.spinal_servo_bridge import MirrorRejection
 from rdm.protocol.rosserial import constants as C
 from rdm.protocol.rosserial.framing import encode_frame
 from rdm.protocol.rosserial.registry import spinal_registry
@@ -192,7 +193,11 @@ def _stack(base: str):
     return build_stack("commands", base, opts, make_script(np.array([0.483, 0.0, HOVER_Z])))
 
 
-def test_servo_targets_equal_the_bridge_on_a_running_master() -> None:
+def test_servo_targets_follow_the_topic_rules_on_a_running_master() -> None:
+    """Random index/angle lists, bad ones included, against the ``servo/target_states`` rules
+    written out (``_expected_targets``): a frame the call applies sets exactly the goals of
+    the rules; one the rules refuse is declined with nothing changed (the bridge then
+    rejects it). Catches a repeated index keeping its first value instead of its last."""
     rng = random.Random(5)
     codec = REG.msg("spinal/ServoControlCmd")
     with tempfile.TemporaryDirectory() as base:
@@ -204,7 +209,8 @@ def test_servo_targets_equal_the_bridge_on_a_running_master() -> None:
             core = spinal.servos.command_core()
             assert core is master.core
             slot = next(s for s in spinal.session.subscribers if s.name == "servo/target_states")
-            n = len(master.servo_keys())
+            keys = master.servo_keys()
+            n = len(keys)
             applied = declined = 0
             for case in range(500):
                 k = rng.choice([0, 1, 3, n, n + 2])
@@ -217,31 +223,35 @@ def test_servo_targets_equal_the_bridge_on_a_running_master() -> None:
                 if case % 13 == 0:
                     angles = angles[:-1] if angles else [5]
                 payload = codec.encode(codec.new(index=index, angles=angles))
-                start = _goals(master)
-                reset = [(s, i, g) for (s, i), g in zip(master.servo_keys(), start, strict=True)]
-                item = (slot.topic_id, payload, 0)
+                start = [rng.randint(-2000, 2000) for _ in range(n)]
+                master.core.set_servo_target_list(
+                    [(s, i, g) for (s, i), g in zip(keys, start, strict=True)]
+                )
                 got, exc = _rdm.spinal_apply_commands(
-                    [item], spinal._command_kinds, C.FIRST_USER_TOPIC_ID, spinal.core, core, 0.0
+                    [(slot.topic_id, payload, 0)],
+                    spinal._command_kinds,
+                    C.FIRST_USER_TOPIC_ID,
+                    spinal.core,
+                    core,
+                    0.0,
                 )
                 assert exc is None
-                after_call = _goals(master)
-                master.core.set_servo_target_list(reset)
-                try:
-                    spinal.servos.target_states_values(index, angles)
-                    outcome = "ok"
-                except MirrorRejection:
-                    outcome = "rejected"
-                if got == 1:  # applied: what the bridge's one-call path sets
-                    assert outcome == "ok" and after_call == _goals(master), (index, angles)
+                outcome, goals = _expected_targets(keys, start, index, angles)
+                if got == 1:
+                    assert (outcome, _goals(master)) == ("ok", goals), (index, angles)
                     applied += 1
-                else:  # declined, nothing changed: the bridge decides (and may reject)
-                    assert got == 0 and after_call == start, (index, angles)
-                    declined += 1
-                master.core.set_servo_target_list(reset)
+                else:
+                    assert got == 0 and _goals(master) == start, (index, angles)
+                    declined += outcome != "ok"
             assert applied > 200 and declined > 100
             # a master that is not the mirror's one-call core: servo frames are declined
             got, exc = _rdm.spinal_apply_commands(
-                [item], spinal._command_kinds, C.FIRST_USER_TOPIC_ID, spinal.core, None, 0.0
+                [(slot.topic_id, payload, 0)],
+                spinal._command_kinds,
+                C.FIRST_USER_TOPIC_ID,
+                spinal.core,
+                None,
+                0.0,
             )
             assert (got, exc) == (0, None)
         finally:
