@@ -45,6 +45,7 @@ from dataclasses import replace
 from typing import Any
 
 from rdm.commands.arg_types import positive_finite
+from rdm.commands.live import OnboardLive, add_live_arguments, start_live
 from rdm.commands.onboard_record import (
     SignalLog,
     add_record_arguments,
@@ -139,6 +140,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="gc.freeze() after setup: the collector skips what setup made",
     )
     add_record_arguments(parser)
+    add_live_arguments(parser, "rdm onboard")
 
 
 def _configuration(args: argparse.Namespace) -> Any:
@@ -266,6 +268,7 @@ def run(args: argparse.Namespace) -> int:
     control = None
     recorder = None
     signals = None
+    live = None
     try:
         config = _configuration(args)
         key = _control_key(args)
@@ -283,6 +286,8 @@ def run(args: argparse.Namespace) -> int:
             links.append(foot)
             keep.append(k)
         node = OnboardNode(uart, foot, robot, config=config)
+        if args.live:
+            live = start_live(args, "rdm onboard", advertise=OnboardLive.advertise(node))
         recorder = open_recorder(args, node)
         timing = LoopTiming(node.period, config.late_tolerance_s)
         realtime: dict[str, Any] = {}
@@ -304,6 +309,8 @@ def run(args: argparse.Namespace) -> int:
                     file=sys.stderr,
                     flush=True,
                 )
+        if live is not None:
+            nodes.append(OnboardLive(node, live))
         if args.status_interval > 0:
             nodes.append(
                 _StatusPrinter(lambda: _status(node, timing, uart, realtime), args.status_interval)
@@ -316,6 +323,8 @@ def run(args: argparse.Namespace) -> int:
             control.close()
         if recorder is not None:
             recorder.close(reason=f"rdm onboard did not start: {exc}")
+        if live is not None:
+            live.close()
         for link in [*links, *(k for k in keep if k is not None)]:
             link.close()
         print(f"rdm onboard: {exc}", file=sys.stderr)
@@ -339,6 +348,8 @@ def run(args: argparse.Namespace) -> int:
             recorder.close(reason=failure)
         if control is not None:
             control.close()
+        if live is not None:
+            live.close()
         for link in links:
             link.close()
         for k in keep:

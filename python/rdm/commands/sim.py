@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from rdm.commands.arg_types import positive_finite, positive_int, seed
+from rdm.commands.live import add_live_arguments, open_live
 from rdm.commands.output import json_text
 
 if TYPE_CHECKING:
@@ -105,6 +106,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="with --seeds: processes running seeds at once (default: cores)",
     )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    add_live_arguments(parser, "rdm sim")
     parser.add_argument(
         "--wire-mcap",
         action="store_true",
@@ -158,15 +160,16 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from rdm.scenarios import SCENARIOS
-    from rdm.scenarios.common import progress_to, servo_lead
-    from rdm.sim import format_metrics_table
-    from rdm.sim.plot_worker import plots_in_background
+    from rdm.scenarios.common import servo_lead
 
     if args.scenario == "all" and args.seeds is None:
         print("rdm sim: scenario 'all' needs --seeds N", file=sys.stderr)
         return 2
     if args.workers is not None and args.seeds is None and args.randomize is None:
         print("rdm sim: --workers is for --seeds or --randomize", file=sys.stderr)
+        return 2
+    if args.live and (args.seeds is not None or args.randomize is not None):
+        print("rdm sim: --live is for one run (no --seeds or --randomize)", file=sys.stderr)
         return 2
     if args.randomize is not None:
         return _randomized(args)
@@ -204,11 +207,32 @@ def _run(args: argparse.Namespace) -> int:
         duration = QUICK_DURATION if args.duration is None else args.duration
     # no --servo-lead: each scenario's own default (docs/scenarios.md)
     lead = nullcontext() if args.servo_lead is None else servo_lead(args.servo_lead)
+    live = open_live(args, "rdm sim")
+    if live is False:
+        return 2
+    try:
+        return _run_one(args, sc, duration, extra, lead, live)
+    finally:
+        if live is not None:
+            live.close()
+
+
+def _run_one(args: argparse.Namespace, sc, duration: float, extra: dict, lead, live) -> int:
+    """One scenario run (``live``: the Foxglove publisher of ``--live``, or None)."""
+    from rdm.scenarios.common import progress_to
+    from rdm.sim import format_metrics_table
+    from rdm.sim.live import live_to
+    from rdm.sim.plot_worker import plots_in_background
+
     print(f"rdm sim {sc.name}: {sc.description}", file=sys.stderr)
     # the PNG figures are drawn by a worker process on the other core (docs/sim.md
     # "Start-up and figures"), waited for before the run folder is named
     with plots_in_background() as worker:
-        with lead, progress_to(sys.stderr, duration):
+        with (
+            lead,
+            progress_to(sys.stderr, duration),
+            nullcontext() if live is None else live_to(live),
+        ):
             result = sc.run(
                 args.out,
                 duration=duration,

@@ -36,12 +36,14 @@ from rdm.nodes.neuron_mirror import NeuronMirror
 from rdm.nodes.onboard import OnboardNode
 from rdm.nodes.onboard_arming import FlightState
 from rdm.nodes.onboard_config import OnboardConfig
+from rdm.nodes.onboard_signals import onboard_signals
 from rdm.nodes.plant_bridge import BusLayout, PlantBridge, default_layout
 from rdm.nodes.servo_model import ServoConfig
 from rdm.nodes.spinal_mirror import SpinalMirror
 from rdm.plant import EscParams, Plant, ServoParams
 from rdm.plant.sensors import imu_model_of_seed
 from rdm.sim import CandumpCapture, McapLogger, RunFolder, open_tapped_pty
+from rdm.sim.live import LiveTee, live_publisher
 from rdm.sim.pty_pair import open_device_pty
 
 from .external_onboard import ExternalOnboard
@@ -219,7 +221,8 @@ class Stack:
     mocap: MocapNode
     loop: Lockstep
     folder: RunFolder
-    logger: McapLogger | None
+    #: the signal log: a McapLogger, a LiveTee (rdm sim --live) or None
+    logger: Any
     candump: CandumpCapture | None
     spinal_link: DroppableLink
     onboard_link: DroppableLink
@@ -413,9 +416,12 @@ def _wire(
         recorder = record_node(onboard, opt.record_onboard, "rdm")
         opened.append(recorder.close)
     sensor = LeptrinoSensorNode(f_dev, "CFS034CA301U", rate_hz=opt.leptrino_rate_hz)
-    logger = McapLogger(folder.mcap) if opt.log else None
+    logger: Any = McapLogger(folder.mcap) if opt.log else None
     if logger is not None:
         opened.append(logger.finish)
+    live = live_publisher()
+    if live is not None:  # rdm sim --live: the same records to the Foxglove server
+        logger = LiveTee(logger, live)
     candump: Any = None
     if opt.log:
         candump = (
@@ -513,37 +519,9 @@ class StatusNode:
             s.logger.log_json("/onboard/signals", now, self.signals(now))
 
     def signals(self, now: float) -> dict[str, Any]:
-        """What the onboard PC's controller saw and commanded at its last tick, for plots
-        beside the ground truth: Spinal's attitude and gyro as received over the UART, the
-        mocap sample and the setpoint it used, its attitude targets, flight thrusts and
-        vectoring angles, the joint angles Spinal reported and the goals sent back, the foot
-        sensor's wrench. A flat record of floats and float lists (None where there is no
-        value yet), read without copies beyond ``tolist``."""
-        o = self.stack.onboard
-        c = o.last_command
-        euler = o.imu_euler
-        mocap = o.mocap
-        sp = o.setpoint
-        foot = o.foot.wrench if o.foot is not None else None
-        goals = o.last_servo_goals
-        return {
-            "t": now,
-            "imu_euler": list(euler) if euler is not None else None,
-            "imu_gyro": _floats_of(o.imu_gyro),
-            "mocap_position": _floats_of(mocap[0]) if mocap is not None else None,
-            "mocap_velocity": _floats_of(mocap[1]) if mocap is not None else None,
-            "mocap_yaw": (float(mocap[2]) if mocap is not None and mocap[2] is not None else None),
-            "setpoint_position": _floats_of(sp.position),
-            "setpoint_velocity": _floats_of(sp.velocity),
-            "setpoint_yaw": float(sp.yaw),
-            "target_angles": list(c.angles) if c is not None else None,
-            "flight_thrust": _floats_of(c.flight_thrust) if c is not None else None,
-            "vectoring_alpha": list(c.alpha) if c is not None else None,
-            "vectoring_beta": list(c.beta) if c is not None else None,
-            "present_q": _floats_of(o.present_q),
-            "servo_goals": list(goals) if goals is not None else None,
-            "foot_wrench": _floats_of(foot),
-        }
+        """What the onboard PC's controller saw and commanded at its last tick
+        (:func:`rdm.nodes.onboard_signals.onboard_signals`)."""
+        return onboard_signals(self.stack.onboard, now)
 
     def record(self, now: float) -> dict[str, Any]:
         """The status record at ``now``: the onboard state's value, the last command's base
