@@ -86,9 +86,18 @@ def record_datagrams(port: Any, recorder: FlightRecorder) -> None:
     port.handle = recorded
 
 
+#: Modules of an extra that the recorder looks for (never imports unless found): with
+#: ``mcap`` each segment also gets a ``signals.mcap``.
+OPTIONAL_PROBES = ("mcap",)
+
+
 def mcap_available() -> bool:
-    """Whether the ``mcap`` package (``sim`` extra) is installed."""
-    return importlib.util.find_spec("mcap") is not None
+    """Whether the ``mcap`` package (``sim`` extra) is installed. A finder that refuses the
+    name (an import hook, a broken install) counts as not installed."""
+    try:
+        return importlib.util.find_spec("mcap") is not None
+    except (ImportError, ValueError):
+        return False
 
 
 class SignalLog:
