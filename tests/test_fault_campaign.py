@@ -152,3 +152,19 @@ def test_dead_esc_mission_is_detected_and_reported_as_a_crash(tmp_path):
     # a quadrotor without one rotor cannot stay level: the record must not claim a safe end
     assert record["fault_detected"] and not record["safe"]
     assert record["outcome"] == "crashed" and record["max_tilt_deg"] > mission.MAX_TILT_DEG
+
+
+def test_the_help_names_every_fault() -> None:
+    """``rdm sim --help`` (written out so the parser imports no scenario) lists each fault
+    of ``mission.FAULTS``."""
+    import argparse
+    import re
+
+    from rdm.commands.sim import add_arguments
+    from rdm.scenarios.mission import FAULTS
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    text = " ".join(parser.format_help().split())
+    named = set(re.findall(r"[a-z]+(?:-[a-z0-9]+)+", text))
+    assert set(FAULTS) - {"none"} <= named

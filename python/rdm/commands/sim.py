@@ -75,8 +75,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="mission only: inject one fault once the robot hovers (heartbeat-loss, "
         "mocap-loss, uart-cut, low-battery, bad-adc-scale, uart-noise-1e-4, uart-noise-1e-3, "
-        "battery-sag) or once perched (foot-sensor-loss); with --seeds also all: the fault "
-        "campaign; docs/flying.md",
+        "battery-sag, imu-spikes, dead-esc) or once perched (foot-sensor-loss); with --seeds "
+        "also all: the fault campaign; docs/flying.md",
     )
     parser.add_argument(
         "--quick",
