@@ -103,3 +103,43 @@ fn a_new_magnetometer_sample_pulls_the_heading_by_one_over_k_plus_one() {
         assert_eq!(estimator.heading_vector(), after);
     }
 }
+
+#[test]
+fn rotation_from_euler_is_rz_ry_rx() {
+    use nalgebra::Rotation3;
+    for &(roll, pitch, yaw) in &[
+        (0.3, -0.2, 1.1),
+        (-1.2, 0.7, -2.5),
+        (2.9, -1.4, 0.4),
+        (0.0, 0.0, 3.0),
+    ] {
+        let expected = Rotation3::from_euler_angles(roll, pitch, yaw).into_inner();
+        let got = rdm_core::estimate::rotation_from_euler(roll, pitch, yaw);
+        assert!((got - expected).amax() < 1e-14, "{roll} {pitch} {yaw}");
+        let back = rdm_core::estimate::euler_zyx(&got);
+        for (a, b) in back.iter().zip([roll, pitch, yaw]) {
+            assert!((a - b).abs() < 1e-12);
+        }
+    }
+}
+
+#[test]
+fn a_level_still_estimate_is_ok_and_not_degraded_with_or_without_guards() {
+    for config in [
+        EstimatorConfig::new(200.0),
+        EstimatorConfig::firmware(200.0),
+    ] {
+        let samples = (config.gyro_calib_duration_s * config.rate_hz) as usize + 20;
+        let mut estimator = AttitudeEstimator::new(config).unwrap();
+        let mut last = None;
+        for _ in 0..samples {
+            last = Some(estimator.step(&ImuSample {
+                gyro: [0.0; 3],
+                acc: [0.0, 0.0, 9.80665],
+                mag: [20.0, 0.0, -40.0],
+            }));
+        }
+        assert_eq!(last, Some(rdm_core::estimate::EstimateStatus::Ok));
+        assert!(!estimator.degraded());
+    }
+}

@@ -150,3 +150,62 @@ fn every_non_finite_input_field_is_refused_by_name() {
     assert_eq!(controller.integral(), Vector2::zeros());
     assert!(controller.step(&good).is_ok());
 }
+
+#[test]
+fn vectoring_angles_turn_the_z_axis_onto_the_direction() {
+    use nalgebra::{Rotation3, Vector3};
+    use rdm_core::control::position::vectoring_angles;
+    let directions = [
+        Vector3::new(0.3, -0.2, 0.9),
+        Vector3::new(-0.5, 0.4, 0.7),
+        Vector3::new(0.1, 0.6, 0.3),
+        Vector3::new(0.0, 0.0, 1.0),
+        Vector3::new(0.7, 0.0, 0.7),
+    ];
+    for n in directions {
+        let n = n.normalize();
+        let (alpha, beta) = vectoring_angles(&n);
+        // eqs. (33)-(34): R_x(alpha) R_y(beta) e_z = n
+        let turned = Rotation3::from_axis_angle(&Vector3::x_axis(), alpha)
+            * Rotation3::from_axis_angle(&Vector3::y_axis(), beta)
+            * Vector3::z();
+        assert!(
+            (turned - n).amax() < 1e-12,
+            "{n:?}: {alpha} {beta} -> {turned:?}"
+        );
+    }
+}
+
+#[test]
+fn a_gain_switch_carries_the_integral_action_and_a_zero_gain_starts_at_zero() {
+    let mut old_gains = PositionGains::table_v();
+    old_gains.x.i = 1.5;
+    old_gains.y.i = 0.4;
+    let mut old = PositionController::new(old_gains).unwrap();
+    for _ in 0..20 {
+        old.step(&input(Vector2::new(0.2, -0.3), 0.0)).unwrap();
+    }
+    let action = Vector2::new(1.5 * old.integral().x, 0.4 * old.integral().y);
+    assert!(action.x.abs() > 1e-3 && action.y.abs() > 1e-3);
+    let mut new_gains = old_gains;
+    new_gains.x.i = 3.0;
+    new_gains.y.i = 0.0;
+    let mut new = PositionController::new(new_gains).unwrap();
+    new.take_integral_action(&old);
+    assert!((3.0 * new.integral().x - action.x).abs() < 1e-12);
+    assert_eq!(new.integral().y, 0.0);
+}
+
+#[test]
+fn a_target_exactly_at_the_tilt_bound_is_not_a_cut() {
+    let mut gains = p_only(0.0, 0.0);
+    gains.k_pitch = 1.0;
+    gains.x.p = 1.0;
+    let edge = gains.gravity * gains.max_tilt; // pitch = k_pitch * a / g = max_tilt
+    let mut controller = PositionController::new(gains).unwrap();
+    let out = controller
+        .step(&input(Vector2::new(edge, 0.0), 0.0))
+        .unwrap();
+    assert!((out.pitch - gains.max_tilt).abs() < 1e-15);
+    assert!(!out.saturation.attitude);
+}
