@@ -1,0 +1,66 @@
+"""The wall reach of the perched arm (rdm.scenarios.wall_reach): the paper's 0.5 m vertical
+painting stroke (Sec. VII-D, Fig. 14 B) against the task IK."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rdm.model import Robot
+from rdm.scenarios import task_ik, wall_reach
+from rdm.scenarios import task_objects as obj
+
+DEPTHS = np.round(np.arange(0.35, 0.8501, 0.05), 3)
+WALL_DX = 0.80
+
+
+@pytest.fixture(scope="module")
+def line():
+    return wall_reach.wall_line(Robot.default(), WALL_DX, DEPTHS)
+
+
+def test_tip_is_on_the_wall_by_forward_kinematics(line) -> None:
+    """Independent check: the solved joints put the brush tip on the wall plane at its depth
+    (forward kinematics, not the IK's own error); the tilt is the tool axis' angle to +x."""
+    robot = Robot.default()
+    fx, fy, fz = obj.TaskLayout().nominal_foot
+    base = np.array([fx, fy, fz, 0.0, 0.0, 0.0])
+    for p in line:
+        assert p.q is not None
+        tip, axis = task_ik.tool_pose(robot, base, p.q, wall_reach.tool_tip())
+        assert tip[0] == pytest.approx(fx + WALL_DX, abs=wall_reach.POSITION_TOL)
+        assert tip[2] == pytest.approx(fz - p.depth, abs=wall_reach.POSITION_TOL)
+        assert p.tilt_deg == pytest.approx(math.degrees(math.acos(axis[0])), abs=1e-6)
+
+
+def test_half_metre_vertical_stroke_at_0_8_m(line) -> None:
+    """ASSUMPTION (wall_reach): tilt <= 50 deg. The wall 0.80 m in front of the foot is
+    reachable from 0.35 to 0.85 m below it (tilt 0-37 deg measured): the paper's > 0.5 m
+    vertical stroke."""
+    top, bottom = wall_reach.longest_stroke(line)
+    assert bottom - top >= 0.5 - 1e-9
+    assert max(p.tilt_deg for p in line) < 40.0
+
+
+def test_a_too_close_wall_gives_no_half_metre_stroke() -> None:
+    """0.30 m in front of the foot the arm folds: the tip reaches the wall only low down
+    (0.9-1.1 m below the foot measured), the stroke is shorter than 0.5 m."""
+    pts = wall_reach.wall_line(Robot.default(), 0.30, np.arange(0.45, 1.0001, 0.05))
+    top, bottom = wall_reach.longest_stroke(pts)
+    assert math.isnan(top) or bottom - top < 0.5
+
+
+def test_longest_stroke_picks_the_longest_run() -> None:
+    def pt(d, ok):
+        return wall_reach.WallPoint(d, ok, 0.0, None)
+
+    pts = [pt(0.1, True), pt(0.2, False), pt(0.3, True), pt(0.4, True), pt(0.5, True)]
+    assert wall_reach.longest_stroke(pts) == (0.3, 0.5)
+    assert all(math.isnan(v) for v in wall_reach.longest_stroke([pt(0.1, False)]))
+
+
+def test_wall_behind_the_foot_is_refused() -> None:
+    with pytest.raises(ValueError, match="wall_dx"):
+        wall_reach.wall_line(Robot.default(), 0.0, DEPTHS)
