@@ -64,3 +64,27 @@ def test_longest_stroke_picks_the_longest_run() -> None:
 def test_wall_behind_the_foot_is_refused() -> None:
     with pytest.raises(ValueError, match="wall_dx"):
         wall_reach.wall_line(Robot.default(), 0.0, DEPTHS)
+
+
+def test_planner_reaches_a_half_metre_wall_line_behind_the_foot() -> None:
+    """The Sec. V planner (orientation free) plans the end-effector origin onto the wall
+    0.5 m behind the foot at 0.30 and 0.85 m below it; forward kinematics of the final
+    state (Robot.evaluate, not the planner's record) puts it there."""
+    robot = Robot.default()
+    pts = wall_reach.planner_line(-0.5, [0.30, 0.85])
+    for p in pts:
+        assert p.reached and p.blocking is None
+        z = p.zeta
+        frame = np.asarray(robot.evaluate(z[6:], list(z[:6]))["frames"]["end_effector"])
+        assert frame[0, 3] == pytest.approx(-0.5, abs=1e-3)
+        assert frame[2, 3] == pytest.approx(-p.depth, abs=1e-3)
+        assert 0.0 <= p.tilt_deg <= 180.0
+    assert pts[1].depth - pts[0].depth >= 0.5
+
+
+def test_planner_in_front_of_the_foot_is_blocked_by_thrust() -> None:
+    """0.8 m in front of the foot the plan stops on a constraint (rotor_thrust measured)."""
+    (p,) = wall_reach.planner_line(0.8, [0.6])
+    assert not p.reached
+    assert p.blocking == "rotor_thrust"
+    assert p.error > 0.1

@@ -104,3 +104,53 @@ def longest_stroke(points: list[WallPoint]) -> tuple[float, float]:
                 best = (top, bottom)
             start = None
     return best
+
+
+@dataclass
+class PlannedPoint:
+    """One wall target planned by the Sec. V planner (``rdm.planner.plan``)."""
+
+    depth: float  # m below the foot
+    reached: bool
+    error: float  # m, final end-effector position error
+    blocking: str | None  # the constraint that stopped the plan (None: reached)
+    zeta: np.ndarray  # final planner state [p, eta, q]
+    tilt_deg: float  # angle end-effector x axis <-> wall normal into the wall
+
+
+def planner_line(wall_dx: float, depths: np.ndarray, robot: str = "rdm") -> list[PlannedPoint]:
+    """Plan the end-effector frame origin (orientation free) to x = ``wall_dx``, y = 0,
+    z = -depth in the perched planner's frame (foot at the origin), each target from the
+    planner's default perched start.
+
+    Measured (5 cm steps): a wall 0.50 m behind the foot (``wall_dx`` = -0.5) is reached from
+    0.30 to 0.85 m below it (0.55 m), elsewhere "joint_limit"; in front (+0.3 to +0.8 m) the
+    plans stop on "rotor_thrust" / "joint_torque" (+0.3 m: only 0.85-0.95 m below the foot).
+    With the orientation free the tool axis is not into the wall (-0.5 m: tilts ~49-58 deg at
+    depths 0.30, 0.60, 0.85 m, the axis partly along y): a brush stroke needs 6-D targets.
+    The planner's frame is its own (q = (1.2, 0.8, 0, -0.9, 0, 0) start), not the task
+    scenarios' hanging posture q1 = pi/2 (see :mod:`rdm.scenarios.task_ik`)."""
+    from rdm.model import Robot
+    from rdm.planner.core import PlannerSetup, make_core
+    from rdm.planner.plan import run_core
+
+    setup = PlannerSetup.for_robot(robot, "perched")
+    model = Robot.from_strs(setup.urdf, setup.toml)
+    into = math.copysign(1.0, wall_dx)
+    out = []
+    for depth in np.asarray(depths, dtype=float):
+        tr = run_core(make_core(setup), (float(wall_dx), 0.0, -float(depth)), "perched")
+        zeta = np.asarray(tr.zeta[-1], dtype=float)
+        frame = np.asarray(model.evaluate(zeta[6:], list(zeta[:6]))["frames"]["end_effector"])
+        cos = max(-1.0, min(1.0, into * float(frame[0, 0])))
+        out.append(
+            PlannedPoint(
+                float(depth),
+                bool(tr.reached),
+                float(tr.error[-1]),
+                getattr(tr, "blocking", None),
+                zeta,
+                math.degrees(math.acos(cos)),
+            )
+        )
+    return out
