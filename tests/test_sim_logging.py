@@ -232,3 +232,28 @@ def test_plots_write_pngs(tmp_path):
         assert img.shape[0] > 100 and img.shape[1] > 100
     with pytest.raises(ValueError):
         plot_panels(tmp_path / "d.png", t, [("x", {"bad": t[:5]}, "")])
+
+
+def test_every_json_record_meets_its_channels_schema(tmp_path):
+    """The schema is inferred from the first record: a field null there (no value yet) must
+    not pin a type that later records break. Checked with the jsonschema package."""
+    import jsonschema
+
+    path = tmp_path / "s.mcap"
+    log = McapLogger(path)
+    records = [
+        {"a": None, "b": 1.5, "c": [1.0, 2.0], "d": {"e": None, "f": True}},
+        {"a": [1.0, 2.0], "b": None, "c": [], "d": {"e": "x", "f": False}},
+        {"a": {"g": 1}, "b": float("nan"), "c": [3.0], "d": {"e": 2.5, "f": True}},
+    ]
+    for k, r in enumerate(records):
+        log.log_json("/x", 0.1 * k, r)
+    log.finish()
+    with open(path, "rb") as f:
+        seen = 0
+        for schema, _, m in make_reader(f).iter_messages():
+            assert schema.encoding == "jsonschema"
+            jsonschema.validate(json.loads(m.data), json.loads(schema.data))
+            seen += 1
+    assert seen == 3
+    assert json.loads(schema.data)["properties"]["b"] == {"type": ["number", "null"]}

@@ -336,3 +336,22 @@ def test_captures_merge_in_time_order_and_a_step_back_is_counted(run, tmp_path):
     assert rest == sorted(rest)  # merged by time: both wires interleaved
     topics = {t.split("/")[2] for t, _ in in_file[: len(in_file) // 2]}
     assert topics == {"can", "spinal"}
+
+
+def test_the_runs_signal_records_meet_their_schemas(run):
+    """Every JSON record of the run's ``signals.mcap`` (ground truth, the onboard PC's status
+    and signals) validates against its channel's schema (jsonschema)."""
+    import jsonschema
+
+    folder, _, _, _ = run
+    counts: Counter[str] = Counter()
+    validators: dict[int, jsonschema.protocols.Validator] = {}
+    with open(folder / "signals.mcap", "rb") as f:
+        for schema, ch, m in make_reader(f).iter_messages():
+            if schema.encoding != "jsonschema":
+                continue
+            if schema.id not in validators:
+                validators[schema.id] = jsonschema.Draft202012Validator(json.loads(schema.data))
+            validators[schema.id].validate(json.loads(m.data))
+            counts[ch.topic] += 1
+    assert {"/plant/ground_truth", "/onboard/status", "/onboard/signals"} <= set(counts)

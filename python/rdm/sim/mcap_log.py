@@ -8,7 +8,8 @@ Two kinds of channel, each with a registered schema (PlotJuggler looks the schem
   ROS1 serialisation by the rosserial registry's codec, and the channel carries the md5;
 * ``jsonschema`` / ``json`` for everything else (plant ground truth, sensor values, node
   diagnostics): the schema is inferred from the first message (numbers, booleans, strings,
-  arrays of numbers, nested objects).
+  arrays of numbers, nested objects); a field that is null in it is left open (``{}``: any
+  value), since its type is not known yet, so every later record still meets the schema.
 
 Log times are simulated time in ns. Chunks are small (64 KiB) so a crash loses little; call
 :meth:`McapLogger.finish` in a ``finally`` (it writes the summary and footer). The file is
@@ -110,7 +111,9 @@ def _schema_of(value: Any) -> dict[str, Any]:
         return {"type": "boolean"}
     if isinstance(value, int):
         return {"type": "integer"}
-    if isinstance(value, float) or value is None:
+    if value is None:  # no value yet: the field's type is not known from this record
+        return {}
+    if isinstance(value, float):
         return {"type": ["number", "null"]}
     if isinstance(value, str):
         return {"type": "string"}
