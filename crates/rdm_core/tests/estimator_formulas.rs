@@ -143,3 +143,26 @@ fn a_level_still_estimate_is_ok_and_not_degraded_with_or_without_guards() {
         assert!(!estimator.degraded());
     }
 }
+
+#[test]
+fn half_turns_about_each_axis_take_the_branch_that_can_divide() {
+    // 180 deg about x, y, z: w = 0 and only the axis's own branch has a non-zero divisor.
+    let cases = [
+        (
+            Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0),
+            [1.0, 0.0, 0.0, 0.0],
+        ),
+        (
+            Matrix3::new(-1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0),
+            [0.0, 1.0, 0.0, 0.0],
+        ),
+        (
+            Matrix3::new(-1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0),
+            [0.0, 0.0, 1.0, 0.0],
+        ),
+    ];
+    for (r, q) in cases {
+        assert_eq!(matrix_of(q), r);
+        assert_eq!(quaternion_xyzw(&r), q, "{r:?}");
+    }
+}
