@@ -6,6 +6,7 @@ subtracted, an offset not passed on, an open range edge."""
 
 from __future__ import annotations
 
+import struct
 from fractions import Fraction
 
 import numpy as np
@@ -16,8 +17,12 @@ from rdm.protocol.leptrino import (
     RAW_AT_RATED,
     ForceData,
     LeptrinoError,
+    LeptrinoStreamParser,
     cfs_node_wrench,
+    decode_leptrino,
+    encode_response,
     from_wrench,
+    parse_response,
     to_wrench,
 )
 
@@ -75,3 +80,44 @@ def test_every_refusal_is_a_value_error_with_its_reason(call) -> None:
     with pytest.raises(LeptrinoError) as err:
         call()
     assert err.value.reason == "value" and str(err.value).startswith("value: ")
+
+
+def _framed(payload: bytes) -> bytes:
+    """DLE STX, the payload with each DLE doubled, DLE ETX, then the BCC: the XOR of the
+    payload and ETX (the Leptrino manual's frame, written out here)."""
+    bcc = 0x03
+    for b in payload:
+        bcc ^= b
+    return b"\x10\x02" + payload.replace(b"\x10", b"\x10\x10") + b"\x10\x03" + bytes([bcc])
+
+
+@pytest.mark.parametrize(
+    ("cmd", "body", "expected"),
+    [
+        (0x2B, struct.pack("<6f", 150, 150, 300, 4, 4, 4), "RatedValues"),
+        (0x32, struct.pack("<6hhBx", *RAW, 25, 0), "ForceData"),
+        (0xB6, bytes([3, 0, 0, 0]), "DigitalFilter"),
+        (0x33, b"", "Ack"),
+    ],
+)
+def test_a_response_keeps_its_result_and_sensor_number(cmd, body, expected) -> None:
+    """Header bytes ``len, term_no, command, result`` (written out): a parsed response keeps
+    the sensor's result code and sensor number, which name the sensor that answered."""
+    payload = bytes([4 + len(body), 7, cmd, 3]) + body
+    resp = parse_response(payload)
+    assert type(resp).__name__ == expected
+    assert (resp.result, resp.term_no) == (3, 7)
+    assert encode_response(resp) == _framed(payload)
+
+
+def test_each_damaged_frame_is_counted() -> None:
+    """Two frames with a wrong BCC and one with a bad escape: the counters say 2 and 1."""
+    good = _framed(bytes([4, 0, 0x32, 0]))
+    bad_bcc = good[:-1] + bytes([good[-1] ^ 0xFF])
+    bad_escape = b"\x10\x02\x04\x00\x10\x41"
+    parser = LeptrinoStreamParser()
+    events = parser.feed(bad_bcc + bad_bcc + bad_escape + good)
+    assert parser.errors == {"bcc": 2, "escape": 1}
+    assert [e.error is None for e in events] == [False, False, False, True]
+    records = list(decode_leptrino(bad_bcc + bad_bcc + good))
+    assert [r["ok"] for r in records] == [False, False, True]
