@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Mutation campaign (docs/mutation.md): mutmut over the Python modules of the robot path,
+# Mutation campaign (docs/fuzzing.md, "Mutation testing"): mutmut over the Python modules of the robot path,
 # cargo-mutants over the Rust wire codecs, position controller and estimator.
 #
 #   bash scripts/mutation.sh python [OUT]   # mutmut; survivors listed in OUT/mutmut.txt
