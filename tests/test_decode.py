@@ -189,13 +189,14 @@ def test_leptrino_garbage_between_frames_is_counted(tmp_path, capsys):
 def test_cli_module_entry_point(tmp_path):
     path = tmp_path / "one.bin"
     path.write_bytes(hexframe(GOLDEN["reserved"][0]))
-    env_path = str(REPO / "python")
+    # the installed package (its compiled extension included), in a bare environment
     out = subprocess.run(
         [sys.executable, "-m", "rdm.cli", "decode", "--json", str(path)],
         capture_output=True,
         text=True,
-        env={"PYTHONPATH": env_path, "PATH": "/usr/bin:/bin"},
+        env={"PATH": "/usr/bin:/bin"},
         check=True,
+        cwd=tmp_path,
     )
     rec = json.loads(out.stdout)
     assert rec["kind"] == "time" and rec["fields"] == {
