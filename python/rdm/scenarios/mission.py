@@ -77,6 +77,9 @@ UART_NOISE = {"uart-noise-1e-4": 1e-4, "uart-noise-1e-3": 1e-3}
 SAG_V_PER_S = 1.0
 #: Faults injected once perched (the others: once hovering after take-off).
 PERCHED_FAULTS = ("foot-sensor-loss",)
+#: Faults the airframe cannot survive: detected, but a four-rotor robot cannot fly on three
+#: rotors, so the run ends crashed (docs/flying.md). Every other fault must end safe.
+BEYOND_AIRFRAME = ("dead-esc",)
 #: The safety bounds of a run.
 MAX_TILT_DEG = 30.0
 
