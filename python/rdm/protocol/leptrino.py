@@ -21,14 +21,11 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from rdm._rdm import leptrino_ok_sample_run as _ok_sample_run  # the Rust scan of OK samples
+
 DLE, STX, ETX = 0x10, 0x02, 0x03
 DLE_BYTE = bytes([DLE])
 #: A whole frame from its DLE STX: stuffed payload (plain bytes or DLE DLE), DLE ETX, BCC.
-try:  # the Rust scan of whole OK-sample frames (LeptrinoStreamParser.feed_ok_samples)
-    from rdm._rdm import leptrino_ok_sample_run as _ok_sample_run
-except ImportError:  # pure-Python use: feed_ok_samples falls back to feed
-    _ok_sample_run = None
-
 _WHOLE_FRAME = re.compile(rb"\x10\x02((?:[^\x10]|\x10\x10)*)\x10\x03(.)", re.S)
 #: Leptrino's receiver drops frames whose unstuffed payload exceeds this.
 MAX_PAYLOAD = 255
@@ -135,7 +132,7 @@ class LeptrinoStreamParser:
         Parser state and counters end as after :meth:`feed`; the run is scanned in Rust
         (``rdm._rdm.leptrino_ok_sample_run``) when the parser is idle, else count is 0."""
         data = bytes(data)
-        if self._state is _State.IDLE and _ok_sample_run is not None:
+        if self._state is _State.IDLE:
             end, count, last_start, payload = _ok_sample_run(data)
             if count:
                 # what feed's whole-frame path leaves behind after the run's last frame

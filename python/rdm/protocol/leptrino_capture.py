@@ -150,11 +150,7 @@ def _records(
         n = len(data)
         i = 0
         while i < n:
-            if (
-                run_scan is not None
-                and p._state is lep._State.IDLE
-                and data.startswith(_SAMPLE_HEAD, i)
-            ):
+            if p._state is lep._State.IDLE and data.startswith(_SAMPLE_HEAD, i):
                 end, count, _, _ = run_scan(data[i : i + _WINDOW])
                 if count:
                     # the parser's state and counters as after feeding the run
