@@ -37,6 +37,19 @@ def test_each_trip_is_counted_logged_and_kept(caplog) -> None:
     assert status["events"] == list(m.events) and status["battery_cells"] == 6
 
 
+def test_the_status_keeps_the_latest_32_events_and_counts_every_trip() -> None:
+    m = Monitors(MonitorLimits(), cells=6)
+    for k in range(40):
+        if k % 2:
+            m.note("takeoff", f"note {k}", float(k))
+        else:
+            m.trip("geofence", f"trip {k}", float(k))
+    assert m.counts == {"geofence": 20, "takeoff": 20}
+    kept = m.status()["events"]
+    assert [e["t"] for e in kept] == [float(k) for k in range(8, 40)]
+    assert kept[0]["reason"] == "trip 8" and kept[-1]["reason"] == "note 39"
+
+
 def test_a_freshness_monitor_trips_once_per_episode_and_again_after_recovery() -> None:
     m = Monitors(MonitorLimits(), cells=6)
     assert m.stale("spinal_silent", True, 1.0, "no imu for 0.11 s")

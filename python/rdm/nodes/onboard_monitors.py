@@ -74,6 +74,10 @@ def battery_cells(voltages: list[float]) -> int:
     return max(1, round(top / CELL_FULL_V))
 
 
+#: How many of the latest monitor events the status carries.
+EVENTS_KEPT = 32
+
+
 class Monitors:
     """Trip counters, the event list and the battery state (see the module doc)."""
 
@@ -81,7 +85,10 @@ class Monitors:
         self.limits = limits
         self.cells = cells
         self.counts: Counter[str] = Counter()
-        self.events: deque[dict[str, Any]] = deque(maxlen=32)
+        #: The latest trips and notes, for the status line (``counts`` counts every one and
+        #: each is logged). ASSUMPTION: 32 is enough to see how a flight ended while keeping
+        #: a status line short.
+        self.events: deque[dict[str, Any]] = deque(maxlen=EVENTS_KEPT)
         self.voltage: float | None = None
         self._low_since: float | None = None
         self._stale: set[str] = set()
