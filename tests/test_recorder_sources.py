@@ -207,6 +207,26 @@ def test_rdm_sim_record_onboard_replays_byte_for_byte(tmp_path) -> None:
     report = json.loads(result.stdout)
     assert report["identical"] and report["ticks"] == 120 and report["notes"] == []
     assert report["streams"]["spinal"]["replayed_bytes"] == len(sent)
+    # a version-1 header (a shipped robot by name, no copies) still replays
+    old = tmp_path / "v1"
+    shutil.copytree(rec, old)
+    (old / "robot.urdf").unlink()
+    (old / "robot.toml").unlink()
+    journal = old / "seg0000" / "journal.jsonl"
+    lines = journal.read_text().splitlines()
+    head = json.loads(lines[0])
+    del head["files"]
+    head["version"] = 1
+    journal.write_text("\n".join([json.dumps(head), *lines[1:]]) + "\n")
+    assert rdm_cli("replay", str(old)).returncode == 0
+    # a segment missing between two kept ones is named
+    (old / "seg0002").mkdir()
+    (old / "seg0002" / "journal.jsonl").write_text(lines[0] + "\n")
+    out = rdm_cli("replay", str(old))
+    assert out.returncode == 2 and out.stderr == (
+        f"rdm replay: {old}: seg0001/journal.jsonl is missing, seg0002 follows it; a replay "
+        "needs every segment in order\n"
+    )
 
 
 def test_rdm_sim_record_onboard_is_for_one_run(tmp_path) -> None:
