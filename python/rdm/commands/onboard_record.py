@@ -149,7 +149,7 @@ class SignalLog:
         self._now = now
         self._logger.log_json("/onboard/status", now, self.node.status())
         if self.timing is not None and now >= self._timing_due:
-            self._logger.log_json(LOOP_TIMING_TOPIC, now, self.timing.histograms())
+            self._logger.log_json(LOOP_TIMING_TOPIC, now, _as_arrays(self.timing.histograms()))
             self._timing_due = now + LOOP_TIMING_PERIOD_S
         size = os.path.getsize(self._logger.path)
         seg.size += size - self._size
@@ -159,9 +159,24 @@ class SignalLog:
         """Finish the present file (its last record: the histograms as they are now)."""
         if self._logger is not None:
             if self.timing is not None:
-                self._logger.log_json(LOOP_TIMING_TOPIC, self._now, self.timing.histograms())
+                doc = _as_arrays(self.timing.histograms())
+                self._logger.log_json(LOOP_TIMING_TOPIC, self._now, doc)
             self._logger.finish()
             self._logger = None
+
+
+def _as_arrays(histograms: dict[str, Any]) -> dict[str, Any]:
+    """``histograms`` with each ``[bin, count]`` list as an integer array: the same JSON, which
+    the MCAP logger writes in one call instead of a walk over every pair (about 2 ms less
+    per record for a few hundred bins)."""
+    import numpy as np
+
+    out = dict(histograms)
+    for name in LoopTiming.NAMES:
+        h = dict(out[name])
+        h["counts"] = np.array(h["counts"], dtype=np.int64).reshape(-1, 2)
+        out[name] = h
+    return out
 
 
 def write_loop_timing(recorder: FlightRecorder, timing: LoopTiming) -> None:

@@ -16,6 +16,7 @@ more than ``late_tolerance`` seconds after it was due (default 2 ms).
 from __future__ import annotations
 
 import math
+from itertools import compress
 from typing import Any
 
 #: Width of every histogram bin [s]: the resolution of the reported quantiles.
@@ -80,10 +81,11 @@ class Histogram:
         ``[bin, count]`` pairs of the bins that hold a sample (bin ``i`` holds samples in
         ``[i bin_s, (i + 1) bin_s)``, a negative sample in bin 0), ``overflow`` (samples past
         the last bin), ``n`` and the exact ``max_s``; :meth:`quantile` follows from these."""
+        counts = self.counts
         return {
             "bin_s": self.bin_s,
             "bins": len(self.counts),
-            "counts": [[i, c] for i, c in enumerate(self.counts) if c],
+            "counts": [[i, counts[i]] for i in compress(range(len(counts)), counts)],
             "overflow": self.overflow,
             "n": self.n,
             "max_s": self.max,
