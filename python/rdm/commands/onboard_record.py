@@ -129,7 +129,9 @@ class SignalLog:
 
     name = "onboard_signals"
 
-    def __init__(self, node: Any, recorder: FlightRecorder, timing: LoopTiming | None = None):
+    def __init__(
+        self, node: Any, recorder: FlightRecorder, timing: LoopTiming | None = None
+    ) -> None:
         self.node, self.recorder, self.timing = node, recorder, timing
         self.period = SIGNAL_PERIOD_S
         self._logger: Any = None

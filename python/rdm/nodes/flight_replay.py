@@ -74,7 +74,7 @@ def find_recording(path: str | Path) -> Path:
 
 def _segments(root: Path) -> list[Path]:
     """Every segment from ``seg0000`` on; ReplayError when one in between is missing."""
-    out = []
+    out: list[Path] = []
     while (root / segment_name(len(out)) / JOURNAL).is_file():
         out.append(root / segment_name(len(out)))
     later = [k for k in _segment_indexes(root) if k > len(out)]

@@ -14,6 +14,7 @@ version): the replay uses the recorded copy either way. Rotation never deletes t
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +31,9 @@ class SourceError(ValueError):
     """A stored copy that is missing, unreadable or not the content the header names."""
 
 
-def source_texts(robot: RobotSource, config_file: str | Path | None) -> dict[str, tuple[str, str]]:
+def source_texts(
+    robot: RobotSource, config_file: str | os.PathLike[str] | None
+) -> dict[str, tuple[str, str]]:
     """``{stored name: (text, origin)}`` of ``robot``'s description and ``config_file`` (read
     now; OSError names the file)."""
     files = {
