@@ -30,7 +30,11 @@ the OS refuses ends the command with a one-line message).
 The flight recorder (docs/onboard.md, "Flight recorder and replay";
 :mod:`rdm.commands.onboard_record`) writes every UART and foot-sensor byte and every input
 into ``--record DIR`` (default ``runs/onboard-<UTC time>``; ``--no-record``, ``--replace``,
-``--record-max-mb``); ``rdm replay DIR`` reproduces the node's output bytes from it.
+``--record-max-mb``), with copies of the robot description and the ``--config`` file and the
+loop's timing histograms; ``rdm replay DIR`` reproduces the node's output bytes from it.
+
+``--robot`` takes a shipped name or the path of a description's TOML file (its URDF beside
+it, same stem).
 """
 
 from __future__ import annotations
