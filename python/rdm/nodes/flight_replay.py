@@ -2,12 +2,12 @@
 node: ``rdm replay RUN``.
 
 The node is built from the journal's header (the recorded copies of its robot description,
-its configuration), its links are
-:class:`ReplayLink` ends that hand it, read by read, the bytes it read in flight (each read
-as long as the journal says), and the journal's inputs are called and its ticks ticked at
-their recorded times, in their recorded order. What the node writes is compared byte for
-byte with what it wrote in flight: :func:`replay` reports, per link, the first differing
-byte offset and its time. A node that reads no clock of its own writes the same bytes.
+its configuration), its links are :class:`ReplayLink` ends that hand it, read by read, the
+bytes it read in flight (each read as long as the journal says), and the journal's inputs
+are called and its ticks ticked at their recorded times, in their recorded order. What the
+node writes is compared byte for byte with what it wrote in flight: :func:`replay` reports,
+per link, the first differing byte offset and its time. A node that reads no clock of its
+own writes the same bytes.
 
 A replay starts at the flight's start: the recorder stores the node's inputs, not its state,
 so a recording whose first segments rotation deleted is refused in one line that names the
