@@ -5,8 +5,12 @@ publishes ``imu`` and ``servo/states`` (the joints at their zeros) as the firmwa
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from rdm.protocol.rosserial import spinal_registry
@@ -27,6 +31,29 @@ def read_line(proc: Any, prefix: str, timeout: float = 60.0) -> str:
         if not line and proc.poll() is not None:
             break
     raise AssertionError(f"no line starting with {prefix!r}")
+
+
+@contextmanager
+def spinal_mirror_pty(channel: str) -> Iterator[str]:
+    """``rdm spinal`` (the Spinal mirror) on a pty with its CAN on ``virtual:<channel>``;
+    yields the path the node opens, ends the mirror by SIGTERM."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    mirror = subprocess.Popen(
+        [sys.executable, "-m", "rdm.cli", "spinal", "--uart", "pty", "--can", f"virtual:{channel}"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        yield read_line(mirror, "rdm spinal: ready uart=").split("uart=")[1].split()[0]
+    finally:
+        mirror.send_signal(signal.SIGTERM)
+        try:
+            mirror.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            mirror.kill()
+            mirror.communicate()
 
 
 def drive_spinal(

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from spinal_peer import read_line
+from spinal_peer import read_line, spinal_mirror_pty
 from test_onboard_cli import free_udp_port
 
 from rdm.ground.auth import load_key, write_key
@@ -155,22 +155,8 @@ def test_input_values_keep_their_type_and_bits() -> None:
 @pytest.fixture
 def spinal_pty():
     """``rdm spinal`` (the Spinal mirror) on a pty; yields the path the node opens."""
-    mirror = subprocess.Popen(
-        [*RDM, "spinal", "--uart", "pty", "--can", f"virtual:replay{os.getpid()}"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=ENV,
-    )
-    try:
-        yield read_line(mirror, "rdm spinal: ready uart=").split("uart=")[1].split()[0]
-    finally:
-        mirror.send_signal(signal.SIGTERM)
-        try:
-            mirror.communicate(timeout=30)
-        except subprocess.TimeoutExpired:
-            mirror.kill()
-            mirror.communicate()
+    with spinal_mirror_pty(f"replay{os.getpid()}") as path:
+        yield path
 
 
 def test_a_process_run_replays_byte_for_byte(spinal_pty, tmp_path) -> None:
@@ -240,11 +226,19 @@ def test_rotation_bounds_the_folder(spinal_pty, tmp_path) -> None:
     # ASSUMPTION: one tick adds at most 4 kB (the handshake's burst) to a full segment
     assert folder_bytes(record) <= 30_000 + 3_750 + 4_000
     assert not (record / "seg0000").exists()
+    kept = sorted(p.name for p in record.glob("seg*"))
+    assert kept[0] == f"seg{summary['dropped_segments']:04d}" == f"seg{summary['segments'][0]:04d}"
     result = rdm("replay", str(record))
-    assert result.returncode == 2
-    assert result.stderr.strip() == (
-        f"rdm replay: {record}: seg0000 is missing (the recording rotated it away); a replay "
-        "needs every segment from the flight's start"
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr == (
+        f"rdm replay: {record}: cannot replay exactly: rotation deleted seg0000.."
+        f"seg{summary['dropped_segments'] - 1:04d} and the first segment kept is {kept[0]}; a "
+        "replay starts at the flight's start (the node's state at a later segment is not "
+        "recorded)\n"
+    )
+    # the robot description's copies are kept and counted in the bound
+    assert summary["copies_bytes"] == sum(
+        (record / n).stat().st_size for n in ("robot.urdf", "robot.toml")
     )
 
 

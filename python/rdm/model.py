@@ -12,9 +12,11 @@ Joint order everywhere: ``q = [q1, q2, q3, q4, q5, q6, alpha1, beta1, alpha2, be
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
@@ -26,6 +28,9 @@ __all__ = [
     "DescriptionError",
     "ModelError",
     "Robot",
+    "RobotSource",
+    "robot_source",
+    "sha256_text",
     "shipped_robot_files",
 ]
 
@@ -86,3 +91,52 @@ class Robot(_rdm.Robot):
 
         desc = build_description(layout, arm_unit_position)
         return _rdm.Robot.from_strs(desc.urdf, desc.toml, f"{desc.name}.urdf", f"{desc.name}.toml")
+
+
+def sha256_text(text: str) -> str:
+    """Hex SHA-256 of ``text`` encoded as UTF-8 (how a recording names a file's content)."""
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+@dataclass(frozen=True)
+class RobotSource:
+    """A robot description's two files as text and where they were read: what a flight
+    recording stores so that a replay builds the same robot after the files moved."""
+
+    #: as given: a shipped name (``rdm``, ``rcm``) or the path of a description's TOML
+    spec: str
+    urdf: str
+    toml: str
+    #: ``shipped:<name>/<file>`` or the absolute path each text was read from
+    urdf_origin: str
+    toml_origin: str
+
+    def robot(self) -> _rdm.Robot:
+        """The robot these texts describe (errors name the origin and field)."""
+        return _rdm.Robot.from_strs(self.urdf, self.toml, self.urdf_origin, self.toml_origin)
+
+
+def robot_source(spec: str | Path) -> RobotSource:
+    """Read a robot description: a shipped name, or the path of its TOML file with the URDF
+    beside it (same stem). DescriptionError names the robot and the missing file."""
+    spec = str(spec)
+    if Path(spec).suffix != ".toml":
+        with shipped_robot_files(spec) as (urdf, toml):
+            return RobotSource(
+                spec,
+                urdf.read_text(encoding="utf-8"),
+                toml.read_text(encoding="utf-8"),
+                f"shipped:{spec}/{urdf.name}",
+                f"shipped:{spec}/{toml.name}",
+            )
+    toml_path = Path(spec).absolute()
+    urdf_path = toml_path.with_suffix(".urdf")
+    for path in (toml_path, urdf_path):
+        if not path.is_file():
+            raise DescriptionError(f"--robot {spec}: no file {path}")
+    try:
+        urdf_text = urdf_path.read_text(encoding="utf-8")
+        toml_text = toml_path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DescriptionError(f"--robot {spec}: {exc}") from None
+    return RobotSource(spec, urdf_text, toml_text, str(urdf_path), str(toml_path))

@@ -33,7 +33,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "check", help="check an onboard configuration file and print it resolved, as JSON"
     )
     check.add_argument("file", help="the TOML file (rdm onboard --config FILE)")
-    check.add_argument("--robot", default="rdm", help="shipped robot: rdm (default) or rcm")
+    check.add_argument(
+        "--robot",
+        default="rdm",
+        help="shipped robot (rdm, the default, or rcm) or the path of a description's TOML "
+        "file with its URDF beside it",
+    )
     sub.add_parser("example", help="print the shipped example file (every default)")
     deploy = sub.add_parser(
         "deploy",
@@ -52,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.action == "deploy":
         return _deploy(Path(args.dir))
-    from rdm.model import Robot
+    from rdm.model import robot_source
     from rdm.nodes.onboard_config_file import (
         config_json,
         load_onboard_file,
@@ -61,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         loaded = load_onboard_file(args.file)
-        robot = Robot.shipped(args.robot)
+        robot = robot_source(args.robot).robot()
         config = resolve_for_robot(loaded, robot)
     except ValueError as exc:  # ConfigFileError names the file; a robot name names itself
         print(f"rdm config: {exc}", file=sys.stderr)

@@ -30,7 +30,11 @@ the OS refuses ends the command with a one-line message).
 The flight recorder (docs/onboard.md, "Flight recorder and replay";
 :mod:`rdm.commands.onboard_record`) writes every UART and foot-sensor byte and every input
 into ``--record DIR`` (default ``runs/onboard-<UTC time>``; ``--no-record``, ``--replace``,
-``--record-max-mb``); ``rdm replay DIR`` reproduces the node's output bytes from it.
+``--record-max-mb``), with copies of the robot description and the ``--config`` file and the
+loop's timing histograms; ``rdm replay DIR`` reproduces the node's output bytes from it.
+
+``--robot`` takes a shipped name or the path of a description's TOML file (its URDF beside
+it, same stem).
 """
 
 from __future__ import annotations
@@ -52,6 +56,7 @@ from rdm.commands.onboard_record import (
     mcap_available,
     open_recorder,
     record_datagrams,
+    write_loop_timing,
 )
 from rdm.ground.heartbeat import GROUND_TIMEOUT_S
 from rdm.link.serial import SerialLink, SerialSpecError, open_pty_pair, open_serial
@@ -80,7 +85,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="Leptrino foot sensor: serial:/dev/ttyACM0@460800 | pty | none "
         "(default: ports.foot_sensor, else none)",
     )
-    parser.add_argument("--robot", default="rdm", help="shipped robot: rdm (default) or rcm")
+    parser.add_argument(
+        "--robot",
+        default="rdm",
+        help="shipped robot (rdm, the default, or rcm) or the path of a description's TOML "
+        "file with its URDF beside it",
+    )
     parser.add_argument(
         "--rate", type=float, default=None, help="control rate, Hz (default: rate_hz, 40)"
     )
@@ -259,7 +269,7 @@ class _StatusPrinter:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rdm.model import Robot
+    from rdm.model import robot_source
     from rdm.nodes.onboard import OnboardNode
     from rdm.nodes.onboard_config_file import resolve_for_robot
 
@@ -272,7 +282,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         config = _configuration(args)
         key = _control_key(args)
-        robot = Robot.shipped(args.robot)
+        source = robot_source(args.robot)
+        robot = source.robot()
         if args.config is not None:
             config = resolve_for_robot(replace(args.loaded, config=config), robot)
         uart, k = _open(args.uart, "uart")
@@ -288,7 +299,7 @@ def run(args: argparse.Namespace) -> int:
         node = OnboardNode(uart, foot, robot, config=config)
         if args.live:
             live = start_live(args, "rdm onboard", advertise=OnboardLive.advertise(node))
-        recorder = open_recorder(args, node)
+        recorder = open_recorder(args, node, source)
         timing = LoopTiming(node.period, config.late_tolerance_s)
         realtime: dict[str, Any] = {}
         nodes: list[Any] = []
@@ -300,7 +311,7 @@ def run(args: argparse.Namespace) -> int:
         nodes.append(node)
         if recorder is not None:
             if mcap_available():
-                signals = SignalLog(node, recorder)
+                signals = SignalLog(node, recorder, timing)
                 nodes.append(signals)
             else:
                 print(
@@ -345,6 +356,7 @@ def run(args: argparse.Namespace) -> int:
         if signals is not None:
             signals.close()
         if recorder is not None:
+            write_loop_timing(recorder, timing)
             recorder.close(reason=failure)
         if control is not None:
             control.close()

@@ -7,7 +7,10 @@ Examples::
     rdm replay runs/hover-seed0 --json      # a run folder that holds onboard/
 
 Exit 0 when every written byte is the same, 1 at the first difference (its link, byte
-offset and time are printed), 2 when the recording cannot be read.
+offset and time are printed), 2 when the recording cannot be read or cannot be replayed
+exactly (one line: a rotated recording names its first segment kept). The node is built from
+the robot description and configuration copies inside the recording; a note on stderr says
+when the files they were copied from changed or moved since (the copies are used).
 """
 
 from __future__ import annotations
@@ -55,5 +58,7 @@ def run(args: argparse.Namespace) -> int:
     except (ReplayError, OSError, ValueError) as exc:
         print(f"rdm replay: {exc}", file=sys.stderr)
         return 2
+    for note in report["notes"]:
+        print(f"rdm replay: note: {note}", file=sys.stderr, flush=True)
     print(json.dumps(report, indent=2) if args.json else _line(report), flush=True)
     return 0 if report["identical"] else 1

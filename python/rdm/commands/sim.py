@@ -106,6 +106,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="with --seeds: processes running seeds at once (default: cores)",
     )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    parser.add_argument(
+        "--record-onboard",
+        action="store_true",
+        help="record the onboard node into the run folder's onboard/ (its port bytes and "
+        "inputs, as rdm onboard --record does): rdm replay RUN reproduces its output bytes",
+    )
     add_live_arguments(parser, "rdm sim")
     parser.add_argument(
         "--wire-mcap",
@@ -168,9 +174,10 @@ def _run(args: argparse.Namespace) -> int:
     if args.workers is not None and args.seeds is None and args.randomize is None:
         print("rdm sim: --workers is for --seeds or --randomize", file=sys.stderr)
         return 2
-    if args.live and (args.seeds is not None or args.randomize is not None):
-        print("rdm sim: --live is for one run (no --seeds or --randomize)", file=sys.stderr)
-        return 2
+    for flag, on in (("--live", args.live), ("--record-onboard", args.record_onboard)):
+        if on and (args.seeds is not None or args.randomize is not None):
+            print(f"rdm sim: {flag} is for one run (no --seeds or --randomize)", file=sys.stderr)
+            return 2
     if args.randomize is not None:
         return _randomized(args)
     if args.seeds is not None:
@@ -219,7 +226,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _run_one(args: argparse.Namespace, sc, duration: float, extra: dict, lead, live) -> int:
     """One scenario run (``live``: the Foxglove publisher of ``--live``, or None)."""
-    from rdm.scenarios.common import progress_to
+    from rdm.scenarios.common import progress_to, record_onboard
     from rdm.sim import format_metrics_table
     from rdm.sim.live import live_to
     from rdm.sim.plot_worker import plots_in_background
@@ -232,6 +239,7 @@ def _run_one(args: argparse.Namespace, sc, duration: float, extra: dict, lead, l
             lead,
             progress_to(sys.stderr, duration),
             nullcontext() if live is None else live_to(live),
+            record_onboard() if args.record_onboard else nullcontext(),
         ):
             result = sc.run(
                 args.out,
@@ -257,6 +265,8 @@ def _run_one(args: argparse.Namespace, sc, duration: float, extra: dict, lead, l
     if not args.json:
         f = result.facts
         print(f"run folder: {result.folder}")
+        if args.record_onboard:
+            print(f"onboard recording: {result.folder / 'onboard'} (rdm replay {result.folder})")
         print(
             f"{f['simulated_s']:g} simulated s in {f['wall_s']:.1f} wall s "
             f"({f['sim_s_per_wall_s']:.2f} simulated s per wall s)"

@@ -9,6 +9,8 @@ on the instance. The recording is a folder of segments::
     <folder>/
         INCOMPLETE                  while recording (an interrupted run keeps it)
         summary.json                the recorder's counts, written when it closes
+        robot.urdf, robot.toml      the robot description the node was built for
+        config.toml                 the configuration file it was given (if one was)
         seg0000/
             journal.jsonl           header line, then one line per input and per tick
             uart/spinal.device_tx.bin         bytes the node read from Spinal   (+ .idx)
@@ -25,9 +27,13 @@ index keeps microseconds), how many bytes each read returned (and each write too
 ``OSError``), and each input call with its arguments, in the order they happened. The node
 reads no clock of its own (:mod:`rdm.nodes.base`), so these are all its inputs.
 
+The description and configuration copies (:mod:`rdm.nodes.recording_sources`, their
+SHA-256 in the header) let a replay rebuild the node after those files moved or changed.
+
 Segments rotate: once a segment holds ``segment_bytes`` the next tick starts another, and the
-oldest segments are deleted while the folder holds more than ``max_bytes``. A replay needs
-every segment from ``seg0000`` on (the node's state is not stored, only its inputs).
+oldest segments are deleted while the folder (segments and copies) holds more than
+``max_bytes``. A replay needs every segment from ``seg0000`` on (the node's state is not
+stored, only its inputs).
 """
 
 from __future__ import annotations
@@ -43,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from rdm.link.capture_index import INDEX_SUFFIX, TimedCaptureFile
+from rdm.model import RobotSource, robot_source
 from rdm.output_files import OutputFolderError, open_output, prepare_empty_folder, write_atomic
 
 #: The node methods an outside caller (ground link, mocap, scenario script) drives it by.
@@ -71,7 +78,9 @@ INPUT_METHODS = (
 
 JOURNAL = "journal.jsonl"
 JOURNAL_FORMAT = "rdm-onboard-journal"
-JOURNAL_VERSION = 1
+#: 2: the header's ``files`` (robot description and configuration copies); a replay reads 1
+#: (a shipped robot by name) and 2.
+JOURNAL_VERSION = 2
 INCOMPLETE = "INCOMPLETE"
 SUMMARY = "summary.json"
 #: The captured links: name -> file extension (``rdm sim``'s capture names).
@@ -227,14 +236,22 @@ class FlightRecorder:
         *,
         max_bytes: int = int(DEFAULT_MAX_MB * 1e6),
         segment_bytes: int | None = None,
+        reserved_bytes: int = 0,
     ) -> None:
         if max_bytes < 1:
             raise RecorderError(f"max_bytes={max_bytes} must be >= 1")
+        if reserved_bytes >= max_bytes:
+            raise RecorderError(
+                f"max_bytes={max_bytes} must exceed the {reserved_bytes} bytes of the robot "
+                "description and configuration copies"
+            )
         self.root = Path(root)
         self.header = {"format": JOURNAL_FORMAT, "version": JOURNAL_VERSION, **header}
         self.links = links
         self.max_bytes = max_bytes
         self.segment_bytes = segment_bytes or max(1, max_bytes // SEGMENTS_PER_BOUND)
+        #: bytes outside the segments that count in the bound (the copies in the root)
+        self.reserved_bytes = reserved_bytes
         self.now = 0.0
         self.ticks = 0
         self.calls = 0
@@ -320,7 +337,8 @@ class FlightRecorder:
         self._closed_sizes.append((old.index, self._close_segment()))
         self.segment = self._open_segment(old.index + 1)
         while self._closed_sizes and (
-            sum(s for _, s in self._closed_sizes) + self.segment.size > self.max_bytes
+            sum(s for _, s in self._closed_sizes) + self.segment.size + self.reserved_bytes
+            > self.max_bytes
         ):
             index, _ = self._closed_sizes.pop(0)
             shutil.rmtree(self.root / segment_name(index))
@@ -338,6 +356,7 @@ class FlightRecorder:
             "unrecordable_calls": self.unrecordable,
             "max_bytes": self.max_bytes,
             "segment_bytes": self.segment_bytes,
+            "copies_bytes": self.reserved_bytes,
             "replayable": self.dropped_segments == 0 and self.unrecordable == 0,
         }
         write_atomic(self.root / SUMMARY, json.dumps(summary, indent=2) + "\n")
@@ -435,19 +454,47 @@ def capture_paths(segment: Path, link: str) -> dict[str, Path]:
 def record_node(
     node: Any,
     folder: str | os.PathLike[str],
-    robot: str,
+    robot: str | RobotSource,
     *,
+    config_file: str | os.PathLike[str] | None = None,
     replace: bool = False,
     max_bytes: int = int(DEFAULT_MAX_MB * 1e6),
     segment_bytes: int | None = None,
 ) -> FlightRecorder:
-    """Prepare ``folder`` (:func:`prepare_folder`) and record ``node`` (built for the shipped
-    ``robot``) into it; the caller closes the returned recorder after the node."""
+    """Prepare ``folder`` (:func:`prepare_folder`) and record ``node`` into it; the caller
+    closes the returned recorder after the node. ``robot``: the description the node was
+    built from (a shipped name or a TOML path is read here); ``config_file``: the file its
+    configuration came from. Both are copied into the folder for the replay."""
+    from rdm.nodes.recording_sources import source_texts, store_sources, stored_bytes
+
     doc = check_config_document(node.config)
+    source = robot if isinstance(robot, RobotSource) else robot_source(robot)
+    try:
+        files = source_texts(source, config_file)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RecorderError(f"--config {config_file}: {exc}") from None
+    reserved = stored_bytes(files)
+    if reserved >= max_bytes:
+        raise RecorderError(
+            f"--record-max-mb {max_bytes / 1e6:g}: the bound must exceed the {reserved} bytes "
+            "of the robot description and configuration copies"
+        )
     root = Path(folder)
     prepare_folder(root, replace)
     links = ("spinal", "leptrino_foot") if node.foot is not None else ("spinal",)
-    header = {"robot": robot, "config": doc, "links": list(links)}
-    recorder = FlightRecorder(root, header, links, max_bytes=max_bytes, segment_bytes=segment_bytes)
+    header = {
+        "robot": source.spec,
+        "files": store_sources(root, files),
+        "config": doc,
+        "links": list(links),
+    }
+    recorder = FlightRecorder(
+        root,
+        header,
+        links,
+        max_bytes=max_bytes,
+        segment_bytes=segment_bytes,
+        reserved_bytes=reserved,
+    )
     attach_recorder(node, recorder)
     return recorder

@@ -1,12 +1,18 @@
 """Replay of a flight recording (:mod:`rdm.nodes.flight_recorder`) through a fresh onboard
 node: ``rdm replay RUN``.
 
-The node is built from the journal's header (robot and configuration), its links are
-:class:`ReplayLink` ends that hand it, read by read, the bytes it read in flight (each read
-as long as the journal says), and the journal's inputs are called and its ticks ticked at
-their recorded times, in their recorded order. What the node writes is compared byte for
-byte with what it wrote in flight: :func:`replay` reports, per link, the first differing
-byte offset and its time. A node that reads no clock of its own writes the same bytes.
+The node is built from the journal's header (the recorded copies of its robot description,
+its configuration), its links are :class:`ReplayLink` ends that hand it, read by read, the
+bytes it read in flight (each read as long as the journal says), and the journal's inputs
+are called and its ticks ticked at their recorded times, in their recorded order. What the
+node writes is compared byte for byte with what it wrote in flight: :func:`replay` reports,
+per link, the first differing byte offset and its time. A node that reads no clock of its
+own writes the same bytes.
+
+A replay starts at the flight's start: the recorder stores the node's inputs, not its state,
+so a recording whose first segments rotation deleted is refused in one line that names the
+first segment kept (docs/onboard.md, "Flight recorder and replay", on why a later segment
+cannot start a replay).
 """
 
 from __future__ import annotations
@@ -32,30 +38,51 @@ from rdm.nodes.flight_recorder import (
     segment_name,
 )
 
+#: Journal versions a replay reads (1: the robot named by a shipped name only).
+READ_VERSIONS = (1, JOURNAL_VERSION)
+
 
 class ReplayError(ValueError):
     """A recording that cannot be replayed (missing segment, bad journal); names the file."""
 
 
+def _segment_indexes(root: Path) -> list[int]:
+    """Indexes of the ``segNNNN`` folders in ``root``, in order."""
+    return sorted(
+        int(p.name[3:]) for p in root.glob("seg[0-9][0-9][0-9][0-9]") if p.name[3:].isdigit()
+    )
+
+
 def find_recording(path: str | Path) -> Path:
     """The recording folder ``path`` names: a recorder folder (``seg0000/``) or a run folder
-    that holds one in ``onboard/`` (``rdm sim`` with the onboard node recorded)."""
+    that holds one in ``onboard/`` (``rdm sim --record-onboard``). ReplayError (one line) when
+    rotation deleted the first segments: it names the first segment kept."""
     p = Path(path)
     for root in (p, p / "onboard"):
         if (root / segment_name(0) / JOURNAL).is_file():
             return root
-        if root.is_dir() and any(root.glob("seg[0-9][0-9][0-9][0-9]")):
+        kept = _segment_indexes(root) if root.is_dir() else []
+        if kept:
             raise ReplayError(
-                f"{root}: {segment_name(0)} is missing (the recording rotated it away); a "
-                "replay needs every segment from the flight's start"
+                f"{root}: cannot replay exactly: rotation deleted {segment_name(0)}.."
+                f"{segment_name(kept[0] - 1)} and the first segment kept is "
+                f"{segment_name(kept[0])}; a replay starts at the flight's start (the node's "
+                "state at a later segment is not recorded)"
             )
     raise ReplayError(f"{p}: holds no flight recording ({segment_name(0)}/{JOURNAL})")
 
 
 def _segments(root: Path) -> list[Path]:
-    out = []
+    """Every segment from ``seg0000`` on; ReplayError when one in between is missing."""
+    out: list[Path] = []
     while (root / segment_name(len(out)) / JOURNAL).is_file():
         out.append(root / segment_name(len(out)))
+    later = [k for k in _segment_indexes(root) if k > len(out)]
+    if later:
+        raise ReplayError(
+            f"{root}: {segment_name(len(out))}/{JOURNAL} is missing, {segment_name(later[0])} "
+            "follows it; a replay needs every segment in order"
+        )
     return out
 
 
@@ -75,8 +102,11 @@ def _journal(segment: Path) -> tuple[dict[str, Any], list[dict[str, Any]], bool]
             raise ReplayError(f"{path}: line {k} is not JSON ({exc.msg})") from None
     if not entries or entries[0].get("format") != JOURNAL_FORMAT:
         raise ReplayError(f"{path}: line 1 is not a {JOURNAL_FORMAT} header")
-    if entries[0].get("version") != JOURNAL_VERSION:
-        raise ReplayError(f"{path}: version {entries[0].get('version')!r}, expected 1")
+    if entries[0].get("version") not in READ_VERSIONS:
+        raise ReplayError(
+            f"{path}: version {entries[0].get('version')!r}, expected one of "
+            f"{', '.join(map(str, READ_VERSIONS))}"
+        )
     return entries[0], entries[1:], cut
 
 
@@ -146,19 +176,43 @@ def _first_difference(a: bytes, b: bytes) -> int | None:
     return None if len(a) == len(b) else n
 
 
-def _build_node(header: dict[str, Any], links: dict[str, ReplayLink], where: Path) -> Any:
+def _robot(header: dict[str, Any], root: Path) -> tuple[Any, list[str]]:
+    """The robot of the header (the recorded description copies; a version-1 header: the
+    shipped robot it names) and the notes on the copies' origins."""
     from rdm.model import Robot
+    from rdm.nodes.recording_sources import ROBOT_TOML, ROBOT_URDF, load_sources
+
+    files = header.get("files")
+    if files is None:
+        return Robot.shipped(str(header.get("robot", "rdm"))), []
+    if not isinstance(files, dict) or not {ROBOT_URDF, ROBOT_TOML} <= set(files):
+        raise ValueError(f"files must name {ROBOT_URDF} and {ROBOT_TOML}")
+    texts, notes = load_sources(root, files)
+    robot = Robot.from_strs(
+        texts[ROBOT_URDF], texts[ROBOT_TOML], str(root / ROBOT_URDF), str(root / ROBOT_TOML)
+    )
+    return robot, notes
+
+
+def _build_node(
+    header: dict[str, Any], links: dict[str, ReplayLink], where: Path, root: Path
+) -> tuple[Any, list[str]]:
+    """The node the header describes and the notes on its files."""
     from rdm.nodes.onboard import OnboardNode
     from rdm.nodes.onboard_config_file import parse_onboard
 
     try:
-        robot = Robot.shipped(str(header.get("robot", "rdm")))
+        robot, notes = _robot(header, root)
         config = parse_onboard(header["config"], where).config
     except (KeyError, ValueError, OSError) as exc:
         raise ReplayError(f"{where}: header: {exc}") from None
     if config_document(config) != header["config"]:
         raise ReplayError(f"{where}: header: the configuration does not read back the same")
-    return OnboardNode(links["spinal"], links.get("leptrino_foot"), robot, config=config)
+    try:
+        node = OnboardNode(links["spinal"], links.get("leptrino_foot"), robot, config=config)
+    except ValueError as exc:
+        raise ReplayError(f"{where}: header: the node cannot be built: {exc}") from None
+    return node, notes
 
 
 def _apply(entry: dict[str, Any], node: Any, links: dict[str, ReplayLink]) -> str:
@@ -191,10 +245,11 @@ def _apply(entry: dict[str, Any], node: Any, links: dict[str, ReplayLink]) -> st
 
 def replay(path: str | Path) -> dict[str, Any]:
     """Replay the recording at ``path`` (:func:`find_recording`); the report (JSON-ready):
-    ``identical``, per link the recorded and replayed byte counts and ``first_difference``
-    (``offset``, its recorded and replayed time in s, the two bytes), ticks and calls,
-    ``truncated`` (the files end early: the bytes both hold are compared) and ``incomplete``
-    (the recording's ``INCOMPLETE`` marker is there)."""
+    ``identical``, ``notes`` (a robot or configuration file changed since the recording:
+    the recorded copy was used), per link the recorded and replayed byte counts and
+    ``first_difference`` (``offset``, its recorded and replayed time in s, the two bytes),
+    ticks and calls, ``truncated`` (the files end early: the bytes both hold are compared)
+    and ``incomplete`` (the recording's ``INCOMPLETE`` marker is there)."""
     root = find_recording(path)
     segments = _segments(root)
     header, _, _ = _journal(segments[0])
@@ -202,7 +257,7 @@ def replay(path: str | Path) -> dict[str, Any]:
     if "spinal" not in names:
         raise ReplayError(f"{segments[0] / JOURNAL}: header: links must include spinal")
     links = {n: ReplayLink(n) for n in names}
-    node = _build_node(header, links, segments[0] / JOURNAL)
+    node, notes = _build_node(header, links, segments[0] / JOURNAL, root)
     streams = {n: Stream() for n in names}
     ticks = calls = 0
     cut = short = False
@@ -271,6 +326,7 @@ def replay(path: str | Path) -> dict[str, Any]:
         "calls": calls,
         "truncated": short or cut,
         "incomplete": (root / INCOMPLETE).exists(),
+        "notes": notes,
         "streams": report_streams,
     }
 

@@ -16,6 +16,7 @@ more than ``late_tolerance`` seconds after it was due (default 2 ms).
 from __future__ import annotations
 
 import math
+from itertools import compress
 from typing import Any
 
 #: Width of every histogram bin [s]: the resolution of the reported quantiles.
@@ -75,6 +76,21 @@ class Histogram:
                 return min((i + 1) * self.bin_s, self.max)
         return self.max
 
+    def counts_json(self) -> dict[str, Any]:
+        """The whole histogram, JSON-ready: ``bin_s``, ``bins`` (their number), ``counts`` as
+        ``[bin, count]`` pairs of the bins that hold a sample (bin ``i`` holds samples in
+        ``[i bin_s, (i + 1) bin_s)``, a negative sample in bin 0), ``overflow`` (samples past
+        the last bin), ``n`` and the exact ``max_s``; :meth:`quantile` follows from these."""
+        counts = self.counts
+        return {
+            "bin_s": self.bin_s,
+            "bins": len(self.counts),
+            "counts": [[i, counts[i]] for i in compress(range(len(counts)), counts)],
+            "overflow": self.overflow,
+            "n": self.n,
+            "max_s": self.max,
+        }
+
     def summary_ms(self) -> dict[str, Any]:
         """``{"n", "p50_ms", "p99_ms", "max_ms"}`` (None figures before a sample)."""
         if self.n == 0:
@@ -117,14 +133,28 @@ class LoopTiming:
             self.jitter.add(abs(period - self.period))
         self._last_start = start
 
+    #: The histograms by the names :meth:`status` and :meth:`histograms` give them.
+    NAMES = ("tick", "lateness", "period", "period_jitter")
+
+    def _by_name(self) -> dict[str, Histogram]:
+        hists = (self.tick, self.lateness, self.period_hist, self.jitter)
+        return dict(zip(self.NAMES, hists, strict=True))
+
+    def histograms(self) -> dict[str, Any]:
+        """Every histogram whole (:meth:`Histogram.counts_json`) with the late count, the
+        tolerance and the nominal period [s]: what the flight recorder writes."""
+        return {
+            "period_s": self.period,
+            "late_tolerance_s": self.late_tolerance,
+            "late": self.late,
+            **{name: h.counts_json() for name, h in self._by_name().items()},
+        }
+
     def status(self) -> dict[str, Any]:
         """JSON-ready figures: late count and tolerance, p50/p99/max of each histogram."""
         return {
             "late": self.late,
             "late_tolerance_ms": round(self.late_tolerance * 1e3, 6),
             "bin_ms": round(BIN_S * 1e3, 6),
-            "tick": self.tick.summary_ms(),
-            "lateness": self.lateness.summary_ms(),
-            "period": self.period_hist.summary_ms(),
-            "period_jitter": self.jitter.summary_ms(),
+            **{name: h.summary_ms() for name, h in self._by_name().items()},
         }

@@ -72,10 +72,29 @@ def servo_lead(seconds: float) -> Iterator[None]:
         _SERVO_LEAD.reset(token)
 
 
+_RECORD_ONBOARD: ContextVar[bool] = ContextVar("rdm_sim_record_onboard", default=False)
+#: Where :func:`record_onboard` puts the recording, inside the run folder.
+ONBOARD_RECORDING = "onboard"
+
+
+@contextmanager
+def record_onboard() -> Iterator[None]:
+    """Every stack built inside the block records its onboard node into the run folder's
+    :data:`ONBOARD_RECORDING` (``rdm sim --record-onboard``; ``rdm replay RUN``)."""
+    token = _RECORD_ONBOARD.set(True)
+    try:
+        yield
+    finally:
+        _RECORD_ONBOARD.reset(token)
+
+
 def sim_stack_options(seed: int, uart: str, **overrides: Any) -> StackOptions:
     """Stack options of the scenarios (assumptions in docs/sim.md and :class:`StackOptions`).
-    Inside :func:`progress_to` the stack reports its progress."""
+    Inside :func:`progress_to` the stack reports its progress; inside :func:`record_onboard`
+    it records its onboard node."""
     kw: dict[str, Any] = {"seed": seed, "uart": uart, "progress": _PROGRESS.get()}
+    if _RECORD_ONBOARD.get():
+        kw["record_onboard"] = ONBOARD_RECORDING
     kw.update(overrides)
     if "onboard" not in kw:
         # the paper's Table V gains (the core defaults); joint goals lead the plan by the

@@ -193,7 +193,8 @@ class StackOptions:
     #: way, ~5k instructions less per simulated ms. False: sensors in every step.
     plant_lazy_sensors: bool = True
     #: Record the in-process onboard node into this folder (:mod:`rdm.nodes.flight_recorder`:
-    #: its port bytes and inputs, for ``rdm replay``); None: not recorded.
+    #: its port bytes and inputs, for ``rdm replay``); a relative path is inside the run
+    #: folder (``rdm sim --record-onboard``: ``onboard``); None: not recorded.
     record_onboard: str | None = None
 
 
@@ -413,7 +414,7 @@ def _wire(
     if opt.record_onboard is not None and not external:
         from rdm.nodes.flight_recorder import record_node
 
-        recorder = record_node(onboard, opt.record_onboard, "rdm")
+        recorder = record_node(onboard, folder.root / opt.record_onboard, "rdm")
         opened.append(recorder.close)
     sensor = LeptrinoSensorNode(f_dev, "CFS034CA301U", rate_hz=opt.leptrino_rate_hz)
     logger: Any = McapLogger(folder.mcap) if opt.log else None
