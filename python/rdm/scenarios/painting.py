@@ -59,6 +59,9 @@ PAINT_SAG_FROM = 0.30
 PAINT_SAG_EXTRA = 0.008
 #: Wall: the stroke starts WALL_TOP m below the foot and runs STROKE m down the wall.
 WALL_TOP = 0.30
+#: m below the stroke start where the brush first hovers off the wall: 3 cm off the wall at
+#: the stroke start itself needs q2 past its -90 deg limit (IK 0.6 mm off, clamped).
+WALL_APPROACH_BELOW = 0.05
 #: Wall sag compensation (tuned from runs, ASSUMPTION): with a constant squeeze the measured
 #: compression fell from 7.7 mm to 0 (the brush on its stop) ~0.3 m down the stroke: the
 #: arm reaching lower sags (the contact point ends 36 mm below the command) and, rotating
@@ -122,7 +125,7 @@ def stroke_of(task: str, lay: obj.TaskLayout) -> Stroke:
             np.array([0.0, 0.0, -1.0]),
             np.array([-1.0, 0.0, 0.0]),
             STROKE,
-            start,
+            start + np.array([0.0, 0.0, -WALL_APPROACH_BELOW]),
             wall_squeeze,
             IK_SEED_WALL,
         )
