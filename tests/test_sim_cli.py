@@ -109,6 +109,7 @@ def test_every_registered_scenario_resolves_to_its_module():
         "tracking": (tracking.run, tracking.DEFAULT_DURATION),
         "drilling": (tasks.run_drilling, tasks.duration_of("drilling")),
         "painting": (tasks.run_painting, tasks.duration_of("painting")),
+        "painting-panel": (tasks.run_painting_panel, tasks.duration_of("painting-panel")),
         "valve": (tasks.run_valve, tasks.duration_of("valve")),
     }
     assert set(SCENARIOS) == set(expect)

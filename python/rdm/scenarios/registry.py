@@ -82,9 +82,17 @@ SCENARIOS: dict[str, Scenario] = {
             "painting",
             "tasks",
             "run_painting",
-            "perch, then slide a compliant brush over 0.5 m in contact along a panel (Fig. 14 B)",
+            "perch, then paint a wall: a 0.5 m vertical brush stroke in contact (Fig. 14 B)",
             "duration_of",
             "painting",
+        ),
+        Scenario(
+            "painting-panel",
+            "tasks",
+            "run_painting_panel",
+            "perch, then slide a compliant brush over 0.5 m in contact along a panel below",
+            "duration_of",
+            "painting-panel",
         ),
         Scenario(
             "valve",

@@ -22,8 +22,8 @@ object, so one perch can run every task):
 Objects (positions relative to the foot, see :class:`TaskLayout`; compiled around the nominal
 perch spot and moved by :func:`place_objects` to the measured perched foot when the task
 starts):
-a horizontal wood board below the arm (drilling), a horizontal panel (painting; the paper
-paints a wall, see docs/scenarios.md for why the hanging arm cannot), and a
+a horizontal wood board below the arm (drilling), a vertical wall facing the robot
+(painting, the paper's) or a horizontal panel below the arm (painting-panel), and a
 valve: a hand-wheel on a vertical hinge with damping and dry friction (opening resistance).
 """
 
@@ -68,11 +68,12 @@ GRIPPER_AT = 0.07  # m: where the handle bar sits between the fingers (tool axis
 
 BOARD = "task_board"
 PANEL = "task_panel"
+WALL = "task_wall"
 VALVE = "task_valve"
 VALVE_JOINT = "task_valve_hinge"
 VALVE_STEM = "task_valve_stem"
 #: The world bodies of the objects (:func:`place_objects` moves them together).
-OBJECT_BODIES = (BOARD, PANEL, VALVE, VALVE_STEM)
+OBJECT_BODIES = (BOARD, PANEL, WALL, VALVE, VALVE_STEM)
 DRILL_GEOM = "tool_drill"
 BRUSH_GEOM = "tool_brush"
 FINGER_GEOMS = ("tool_finger_lf", "tool_finger_rf", "tool_finger_lb", "tool_finger_rb")
@@ -84,10 +85,13 @@ class TaskLayout:
     """Where the objects are, relative to the nominal foot position on the ceiling.
 
     ASSUMPTIONS (the paper shows photos only): ``nominal_foot`` is where the perching
-    scenario's foot lands (seed 0); the board, panel and valve are placed inside
-    the hanging arm's reach in the x-z plane of the arm. Stiffness/friction: wood-like stiff
-    contacts (2 ms time constant), board/valve friction 0.6, painted panel 0.2 (a wet brush
-    slides), valve damping 0.3 N m s/rad and dry friction 0.15 N m.
+    scenario's foot lands (seed 0); the board, panel, wall and valve are placed inside
+    the perched arm's reach in the x-z plane of the arm. Stiffness/friction: wood-like stiff
+    contacts (2 ms time constant), board/valve friction 0.6, painted panel and wall 0.2 (a
+    wet brush slides), valve damping 0.3 N m s/rad and dry friction 0.15 N m. The wall's face
+    is the plane x = foot x + ``wall_dx`` (normal -x, toward the robot), from ``wall_bottom_z``
+    up to the ceiling (the foot's z), ``wall_half_y`` either side of the foot; ``wall_dx``
+    from :mod:`rdm.scenarios.wall_reach` (docs/scenarios.md "Painting a wall").
     """
 
     nominal_foot: tuple[float, float, float] = (0.523, 0.020, 1.600)
@@ -97,6 +101,9 @@ class TaskLayout:
     panel_top_z: float = 0.60  # m, world: the painted panel (horizontal, facing up)
     panel_x: tuple[float, float] = (-0.08, 0.62)  # relative to the foot x
     panel_half_y: float = 0.15
+    wall_dx: float = 0.75  # m, wall face in front of the foot (x)
+    wall_bottom_z: float = 0.40  # m, world
+    wall_half_y: float = 0.30
     valve_x: float = 0.19  # relative to the foot x
     valve_handle_z: float = 0.48  # m, world, handle bar centre
     valve_damping: float = 0.3  # N m s/rad
@@ -164,7 +171,7 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
             fromto=[0.0, 0.0, 0.0, DRILL_LEN - DRILL_RADIUS, 0.0, 0.0],
             size=[DRILL_RADIUS, 0, 0],
         )
-    if "painting" in tasks:
+    if "painting" in tasks or "painting-panel" in tasks:
         head = tool.add_body(name=BRUSH_BODY, pos=[BRUSH_AT, 0.0, 0.0])
         head.mass = BRUSH_MASS
         head.inertia = [1e-6, 1e-6, 1e-6]
@@ -219,7 +226,21 @@ def edit_spec(spec: mujoco.MjSpec, layout: TaskLayout, tasks: tuple[str, ...], e
     if "drilling" in tasks:
         plate(BOARD, DRILL_BIT, layout.board_friction, layout.board_x, layout.board_half_y,
               layout.board_top_z, [0.7, 0.55, 0.35, 1.0])  # fmt: skip
-    if "painting" in tasks:
+    if "painting" in tasks:  # the wall: 2 cm thick, its face toward the robot
+        top_z = layout.nominal_foot[2]
+        body = spec.worldbody.add_body(name=WALL)
+        _object_geom(
+            body,
+            BRUSH_BIT,
+            layout.panel_friction,
+            layout.panel_solref,
+            name=WALL,
+            type=box,
+            size=[0.01, layout.wall_half_y, (top_z - layout.wall_bottom_z) / 2],
+            pos=[fx + layout.wall_dx + 0.01, fy, (top_z + layout.wall_bottom_z) / 2],
+            rgba=[0.9, 0.9, 0.85, 0.6],
+        )
+    if "painting-panel" in tasks:
         plate(PANEL, BRUSH_BIT, layout.panel_friction, layout.panel_x, layout.panel_half_y,
               layout.panel_top_z, [0.9, 0.9, 0.85, 0.6], layout.panel_solref)  # fmt: skip
     if "valve" in tasks:

@@ -1,5 +1,6 @@
-"""Perching manipulation tasks (paper Sec. VII-D, Fig. 14): ``drilling``, ``painting`` and
-``valve``, each a scenario of its own (``rdm sim drilling`` ...).
+"""Perching manipulation tasks (paper Sec. VII-D, Fig. 14): ``drilling``, ``painting`` (and
+its ``painting-panel`` variant) and ``valve``, each a scenario of its own (``rdm sim
+drilling`` ...).
 
 The robot perches exactly as in :mod:`rdm.scenarios.perching` (same script, constants and
 tuning; no joint motion of its own) and then the arm does the task against objects added to
@@ -15,15 +16,16 @@ end-effector F/T sensor (Leptrino CFS018CA201 ranges, noisy) and its noise-free 
   contact point of the bit tip (force-weighted while pressing) minus the target, in the board
   plane (paper: ~0.01 m);
 * painting: a compliant brush (preloaded spring on a slide joint, task_objects BRUSH_*)
-  pressed on a horizontal panel by commanding its compression along the tool axis
-  (``PAINT_SQUEEZE``) and slid ``STROKE`` m along x; path length of the contact point while
-  in contact, time in contact, contact force (paper: over 0.5 m, on a wall; ASSUMPTION: the
-  hanging arm reaches only ~0.3 m vertically on a wall, so the panel lies below the arm);
+  pressed on a vertical wall in front of the robot by commanding its compression along the
+  tool axis and slid down the wall (paper: over 0.5 m in the vertical direction);
+  ``painting-panel`` slides it along x on a horizontal panel below the arm. Stroke planning
+  and metrics (contact path along the stroke while in contact, time in contact, contact
+  force, compression): :mod:`rdm.scenarios.painting`;
 * valve: four fingers straddle the handle bar of a hinged hand-wheel (tool axis on the hinge)
   and q6 turns it; valve angle reached (hinge, truth) and the moment about the tool axis at
   the end-effector sensor (noisy and noise-free).
 
-Status: all three meet their metrics (registered, tested); docs/scenarios.md ``## tasks``.
+Status: every task meets its metrics (registered, tested); docs/scenarios.md ``## tasks``.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ import numpy as np
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels
 
-from . import perching, task_ik
+from . import painting, perching, task_ik
 from . import task_objects as obj
 from .common import (
     ScenarioResult,
@@ -51,7 +53,7 @@ from .common import (
 )
 from .stack import Stack, build_stack
 
-TASKS = ("drilling", "painting", "valve")
+TASKS = ("drilling", *painting.PAINT_TASKS, "valve")
 EE_SENSOR = "end_effector_wrench"
 #: Hole targets (dx, dy) relative to the nominal foot, on the board top. ASSUMPTION.
 DRILL_TARGETS: tuple[tuple[float, float], ...] = ((0.24, 0.0), (0.30, 0.05), (0.27, -0.05))
@@ -62,49 +64,6 @@ DRILL_TARGETS: tuple[tuple[float, float], ...] = ((0.24, 0.0), (0.30, 0.05), (0.
 PRESS_DEPTH = 0.001
 HOVER = 0.03  # m above a target before and after pressing
 MOVE_S, PRESS_S, RETRACT_S = 2.0, 2.0, 1.0
-#: Painting (ASSUMPTIONS, see module doc and docs/scenarios.md): the brush slides along +x
-#: on the panel from dx = STROKE_START to STROKE_START + STROKE (relative to the nominal foot
-#: x). IK sweep at the press height (panel z 0.60): on the elbow-forward branch q4 stays in
-#: about [0.3, 1.5] over dx -0.01 -> 0.51 (q4 reaches 0, the stretched arm, near dx 0.55:
-#: the former 0.08 -> 0.58 ended at the reach boundary). The hover pose 3 cm above dx < 0.11
-#: needs q4 past its +pi/2 limit (the former first waypoint missed by 10.6 mm), so the brush
-#: hovers above PAINT_APPROACH_DX, moves to TOUCH_HOVER above the stroke start and touches
-#: down there. STROKE is 0.52 m so that the measured contact path covers the paper's 0.5 m
-#: (the contact point lands ~1 cm off the commanded start: sag, tilted tool).
-STROKE_START = -0.01
-STROKE = 0.52
-STROKE_S = 10.0  # s for the stroke: 5.2 cm/s
-STROKE_SAMPLES = 52  # IK samples along the stroke (1 cm apart, linear in joint space)
-PAINT_APPROACH_DX = 0.20
-#: Pressing the compliant brush (task_objects BRUSH_*): the IK puts the centre of the brush
-#: sphere, compressed by PAINT_SQUEEZE along the tool axis, one radius above the panel. The
-#: tool axis is tilted (up to ~47 deg from vertical at the stroke start), so commanding the
-#: squeeze along the axis (not a depth along z) keeps the contact point under the commanded
-#: one. Spring force BRUSH_PRELOAD + BRUSH_STIFFNESS * squeeze = 3.5 N; the arm's sag
-#: (+-5 mm along the stroke) changes it by +-0.5 N (the stiff servos: ~7.5 N/mm).
-PAINT_SQUEEZE = 0.010
-#: Sag compensation (tuned from a run, ASSUMPTION): with a constant squeeze the measured
-#: compression stayed 8-9 mm up to dx 0.35 and fell to 0 at the stroke end (the arm, near
-#: stretched there, rides higher: contact lost for a few ticks). The commanded squeeze grows
-#: linearly by PAINT_SAG_EXTRA from dx = PAINT_SAG_FROM to the stroke end.
-PAINT_SAG_FROM = 0.30
-PAINT_SAG_EXTRA = 0.008
-
-
-def paint_squeeze(dx: float) -> float:
-    """Commanded brush compression [m] at stroke position ``dx`` (relative to the foot x)."""
-    end = STROKE_START + STROKE
-    ramp = min(1.0, max(0.0, (dx - PAINT_SAG_FROM) / (end - PAINT_SAG_FROM)))
-    return PAINT_SQUEEZE + PAINT_SAG_EXTRA * ramp
-
-
-#: Touch-down: from the hover pose above PAINT_APPROACH_DX to TOUCH_HOVER (brush tip above
-#: the panel) at the stroke start (APPROACH_S; joint-space path), then down (TOUCH_S).
-TOUCH_HOVER = 0.01
-APPROACH_S, TOUCH_S = 2.0, 1.5
-#: s the last stroke sample is held inside the stroke window: the brush trails its command
-#: (servo compliance against the brush friction) and catches up while still in contact.
-STROKE_DWELL = 1.0
 #: Valve: joint configuration whose gripper centre defines the valve axis (end link
 #: vertical: q1 + q2 + q4 = pi/2), and the q6 turn commanded. q1 = 1.4, not pi/2: q1's
 #: upper limit is pi/2 and raising the gripper with the end link kept vertical needs q1 to
@@ -123,10 +82,6 @@ VALVE_AXIS_WEIGHT = 0.1
 #: IK seed of the drilling targets: middle link leaning forward, end link down (keeps the
 #: arm rotors off the vertical through the foot: pitch authority, docs/planner.md rho).
 IK_SEED_DRILL = (math.pi / 2, -0.7, 0.0, 0.7, 0.0, 0.0)
-#: IK seed of the painting stroke: the same elbow-forward branch (q2 < 0, q4 > 0). The other
-#: branch (q2 > 0) passes the middle link through the vertical under the foot, where rho of
-#: eq. (65) drops to ~1e-4; on this one it stays 2-3e-3 over the whole 0.5 m (IK sweep).
-IK_SEED_PAINT = (math.pi / 2, -0.7, 0.0, 1.45, 0.0, 0.0)
 START_AFTER = 0.5  # s after the perching script's hold begins
 #: The task starts only on a settled perch: the foot's roll and pitch (mocap) within
 #: SETTLED_TILT_DEG of level for the last SETTLED_FOR_S. The plan and the objects' placement
@@ -191,6 +146,8 @@ class TaskScript(perching.PerchingScript):
         #: (start, end, label) of the pressing/sliding/turning windows
         self.windows: list[tuple[float, float, str]] = []
         self.ik_errors: list[float] = []
+        #: the painting tasks' stroke (painting.Stroke), None for the others
+        self.stroke: painting.Stroke | None = None
         self.targets: list[np.ndarray] = []
         self._geoms: tuple[set[int], set[int]] | None = None
         #: when the objects' contacts switch on: once the tool is at its first hover pose
@@ -268,28 +225,14 @@ class TaskScript(perching.PerchingScript):
                 self.windows.append((t - 0.5 * PRESS_S, t + 0.5 * PRESS_S, "press"))
                 t += go(target - [0.0, 0.0, PRESS_DEPTH], obj.DRILL_LEN, PRESS_S * 0.5)
                 t += go(up, obj.DRILL_LEN, RETRACT_S)
-        elif self.task == "painting":
-            fx, fy, _ = lay.nominal_foot
-            tip = obj.BRUSH_AT + obj.BRUSH_RADIUS  # tip of the free (uncompressed) brush
-            centre = obj.BRUSH_AT - PAINT_SQUEEZE  # centre of the pressed brush (start)
-            start = np.array([fx + STROKE_START, fy, lay.panel_top_z])
-            self.targets = [start, start + np.array([STROKE, 0.0, 0.0])]
-            up_r = np.array([0.0, 0.0, obj.BRUSH_RADIUS])
-            q = task_ik.level(np.r_[IK_SEED_PAINT, np.zeros(robot.n_q - 6)])
-            approach = np.array([fx + PAINT_APPROACH_DX, fy, lay.panel_top_z + HOVER])
-            t += go(approach, tip, 2 * MOVE_S)
-            t += go(start + np.array([0.0, 0.0, TOUCH_HOVER]), tip, APPROACH_S)
-            t += go(start + up_r, centre, TOUCH_S)
-            t += go(start + up_r, centre, 0.5 * PRESS_S)  # settle on the panel
-            t_stroke = t
-            for k in range(1, STROKE_SAMPLES + 1):
-                dx = STROKE * k / STROKE_SAMPLES
-                p = start + up_r + np.array([dx, 0.0, 0.0])
-                centre = obj.BRUSH_AT - paint_squeeze(STROKE_START + dx)
-                t += go(p, centre, STROKE_S / STROKE_SAMPLES, linear=True)
-            t += go(p, centre, STROKE_DWELL, linear=True)
-            self.windows.append((t_stroke, t, "stroke"))
-            t += go(self.targets[1] + [0.0, 0.0, HOVER], tip, RETRACT_S)
+        elif self.task in painting.PAINT_TASKS:
+            self.stroke = painting.stroke_of(self.task, lay)
+            s = self.stroke
+            self.targets = [s.start, s.point(s.length)]
+            q = task_ik.level(np.r_[s.seed, np.zeros(robot.n_q - 6)])
+            took, w0, w1 = painting.waypoints(go, s, HOVER, MOVE_S, PRESS_S, RETRACT_S)
+            self.windows.append((t + w0, t + w1, "stroke"))
+            t += took
         else:
             axis = lay.valve_axis
             self.targets = [axis]
@@ -319,11 +262,13 @@ class TaskScript(perching.PerchingScript):
         tools = {
             "drilling": (obj.DRILL_GEOM,),
             "painting": (obj.BRUSH_GEOM,),
+            "painting-panel": (obj.BRUSH_GEOM,),
             "valve": obj.FINGER_GEOMS,
         }[self.task]
         objects = {
             "drilling": (obj.BOARD,),
-            "painting": (obj.PANEL,),
+            "painting": (obj.WALL,),
+            "painting-panel": (obj.PANEL,),
             "valve": (obj.HANDLE_GEOM,),
         }[self.task]
         return {model.geom(g).id for g in tools}, {model.geom(g).id for g in objects}
@@ -371,7 +316,7 @@ class TaskScript(perching.PerchingScript):
             angle = float(d.qpos[m.jnt_qposadr[m.joint(obj.VALVE_JOINT).id]])
         lg.valve_angle.append(angle)
         squeeze = math.nan
-        if self.task == "painting":
+        if self.task in painting.PAINT_TASKS:
             squeeze = -float(d.qpos[m.jnt_qposadr[m.joint(obj.BRUSH_JOINT).id]])
         lg.brush_compression.append(squeeze)
         lg.phase.append(self.phase)
@@ -397,7 +342,8 @@ def _trajectory(t0: float, q_start: np.ndarray, way, n_q: int) -> list:
 
 def duration_of(task: str) -> float:
     """Simulated seconds that cover perching (~15 s) and the task."""
-    return {"drilling": 36.0, "painting": 39.0, "valve": 28.0}[task] + SETTLE_ALLOWANCE_S
+    durations = {"drilling": 36.0, "painting": 39.0, "painting-panel": 39.0, "valve": 28.0}
+    return durations[task] + SETTLE_ALLOWANCE_S
 
 
 def run_task(
@@ -440,6 +386,7 @@ def _runner(task: str):
 
 run_drilling = _runner("drilling")
 run_painting = _runner("painting")
+run_painting_panel = _runner("painting-panel")
 run_valve = _runner("valve")
 
 
@@ -483,23 +430,6 @@ def hole_errors(script: TaskScript, ta: dict) -> list[float]:
         p = np.average(ta["p"][sel], axis=0, weights=ta["f"][sel])
         out.append(float(np.hypot(*(p[:2] - target[:2]))))
     return out
-
-
-def stroke_in_contact(script: TaskScript, ta: dict) -> tuple[float, float, float]:
-    """(path length [m] of the brush contact point while in contact during the stroke,
-    fraction of the stroke window in contact, mean normal force [N])."""
-    if not script.windows:
-        return math.nan, math.nan, math.nan
-    t0, t1, _ = script.windows[0]
-    sel = (ta["t"] >= t0) & (ta["t"] <= t1)
-    if not sel.any():
-        return math.nan, math.nan, math.nan
-    f, p = ta["f"][sel], ta["p"][sel]
-    on = f > 0
-    steps = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    both = on[1:] & on[:-1]
-    length = float(np.nansum(steps[both]))
-    return length, float(np.mean(on)), float(np.mean(f[on])) if on.any() else math.nan
 
 
 def evaluate(stack: Stack, script: TaskScript) -> ScenarioResult:
@@ -583,37 +513,9 @@ def evaluate(stack: Stack, script: TaskScript) -> ScenarioResult:
                 "info",
             ),
         ]
-    elif script.task == "painting":
-        length, frac, force = stroke_in_contact(script, ta)
-        metrics += [
-            Metric("brush path length in contact", length, 0.5, "m", "min", limit=0.5),
-            Metric("stroke time in contact", frac, 1.0, "fraction", "min", limit=0.95),
-            Metric("mean brush contact force", force, None, "N", "info"),
-        ]
-        stroke = np.zeros(len(ta["t"]), bool)
-        if script.windows:
-            stroke = (ta["t"] >= script.windows[0][0]) & (ta["t"] <= script.windows[0][1])
-        if stroke.any():
-            squeeze = ta["brush"][stroke] * 1e3
-            metrics += [
-                Metric(
-                    "max brush contact force",
-                    float(np.max(ta["f"][stroke])),
-                    None,
-                    "N",
-                    "max",
-                    limit=15.0,
-                ),
-                Metric("brush compression min", float(np.min(squeeze)), None, "mm", "info"),
-                Metric(
-                    "brush compression max",
-                    float(np.max(squeeze)),
-                    None,
-                    "mm",
-                    "max",
-                    limit=obj.BRUSH_TRAVEL * 1e3 - 1.0,
-                ),
-            ]
+    elif script.task in painting.PAINT_TASKS:
+        window = script.windows[0][:2] if script.windows else None
+        metrics += painting.metrics(ta, window, script.stroke)
     else:
         ang = ta["valve"]
         turned = float(np.nanmax(np.abs(ang))) if np.isfinite(ang).any() else nan
@@ -670,7 +572,7 @@ def _plots(stack: Stack, a: dict, ta: dict, script: TaskScript) -> None:
     ]
     if script.task == "valve":
         panels.append(("valve angle", {"angle": np.degrees(ta["valve"])}, "deg"))
-    if script.task == "painting":
+    if script.task in painting.PAINT_TASKS:
         panels.append(("brush compression (truth)", {"s": ta["brush"] * 1e3}, "mm"))
     plot_panels(stack.folder.plot(script.task), t, panels, title=f"{script.task} (Fig. 14)")
     slip = a["slip"][sel]

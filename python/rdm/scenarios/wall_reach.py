@@ -14,6 +14,8 @@ The vertical stroke this gives is the longest run of consecutive reachable depth
 (5 cm steps, foot level at TaskLayout.nominal_foot): a wall 0.80 m in front of the foot is
 reached from 0.35 to 0.85 m below it with tilts 0-37 deg (0.5 m, the paper's stroke); 0.70 m:
 0.45-0.95 m, tilts up to 46 deg; 0.30 m: only 0.90-1.10 m below the foot (the arm folds).
+The ``painting`` scenario's wall stands at 0.75 m (:mod:`rdm.scenarios.painting`: at 0.80 m
+the pressed brush is out of reach at the bottom of the stroke).
 """
 
 from __future__ import annotations
