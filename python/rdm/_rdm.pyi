@@ -691,7 +691,7 @@ def spinal_apply_commands(
     rosserial parser's good frames, ``(topic_id, payload, offset)``) whose subscriber kind
     (``kinds[topic_id - first_user_id]``: 1 four_axes/command, 2 rpy/gain, 3 pinv+inertia,
     4 desire_coordinate, 5 servo/target_states, 0 none) it takes, decoded and applied to
-    ``core`` (and to ``master``'s servo goals) as the mirror's value routes do. Returns
+    ``core`` (and to ``master``'s servo goals) as the mirror's message handlers do. Returns
     ``(n, error)``: the first ``n`` applied; ``error``, when not None, is what item ``n``'s
     core call raised (that item is done too); otherwise item ``n`` is one it does not take
     (nothing of it applied)."""
