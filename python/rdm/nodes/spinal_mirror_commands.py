@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 
 from rdm import _rdm
-from rdm._rdm import RdmError
 from rdm.control.attitude import ARM_OFF, CommandRejectedError
 from rdm.nodes.can_master import IDLE_DUTY, MasterState
 from rdm.nodes.onboard_monitors import MonitorLimits, battery_cells
@@ -53,20 +52,6 @@ _apply_commands = _rdm.spinal_apply_commands
 _IMU_CALIB_GET = 0  # spinal/ImuCalib GET_CALIB_DATA
 _IMU_CALIB_GYRO = 2  # spinal/ImuCalib CALIB_GYRO
 _MAG_SET = 1  # spinal/MagDeclination SET
-
-
-def _applied(setter: Any, *args: Any) -> bool:
-    """Call a core ``*_rows`` setter (plain Python ints, no numpy array); False when its
-    arguments do not convert (floats, out-of-range ints, wrong lengths: nothing applied), so
-    that the caller's array path runs and decides (and names the bad field). The core's own
-    rejections (:class:`RdmError`) propagate."""
-    try:
-        setter(*args)
-    except RdmError:
-        raise
-    except (TypeError, OverflowError, ValueError):
-        return False
-    return True
 
 
 def _wire_layout(codec: Any) -> tuple[Any, ...]:
@@ -181,42 +166,19 @@ class SpinalCommands:
 
     # ---------------------------------------------------------------- subscribers
     def _on_four_axis_command(self, msg: Any) -> None:
-        try:
-            angles = [float(a) for a in msg.angles]
-        except (TypeError, ValueError):
-            angles = None  # the array path below raises and names the field
-        if angles is not None and _applied(
-            self.core.four_axis_command_list, angles, msg.base_thrust, self._now_s
-        ):
-            return
-        base = np.asarray(msg.base_thrust, dtype=np.float64)
-        self.core.four_axis_command([float(a) for a in msg.angles], base, self._now_s)
+        angles = [float(a) for a in msg.angles]
+        self.core.four_axis_command_list(angles, msg.base_thrust, self._now_s)
 
     def _on_gain(self, msg: Any) -> None:
         rows = [
             (m.roll_p, m.roll_i, m.roll_d, m.pitch_p, m.pitch_i, m.pitch_d, m.yaw_d)
             for m in msg.motors
         ]
-        if _applied(self.core.set_gains_wire_rows, rows):
-            return
-        terms = np.array(
-            [
-                [m.roll_p, m.roll_i, m.roll_d, m.pitch_p, m.pitch_i, m.pitch_d, m.yaw_d]
-                for m in msg.motors
-            ],
-            dtype=np.int64,
-        ).reshape(-1, 7)
-        self.core.set_gains_wire(terms)
+        self.core.set_gains_wire_rows(rows)
 
     def _on_pinv_inertia(self, msg: Any) -> None:
         pinv = [(u.r, u.p, u.y) for u in msg.pseudo_inverse]
-        inertia = [int(v) for v in msg.inertia]
-        if _applied(self.core.set_pinv_inertia_wire_rows, pinv, inertia):
-            return
-        rows = np.array([[u.r, u.p, u.y] for u in msg.pseudo_inverse], dtype=np.int16).reshape(
-            -1, 3
-        )
-        self.core.set_pinv_inertia_wire(rows, [int(v) for v in msg.inertia])
+        self.core.set_pinv_inertia_wire_rows(pinv, [int(v) for v in msg.inertia])
 
     def _on_torque_allocation_inv(self, msg: Any) -> None:
         rows = np.array([[v.x, v.y, v.z] for v in msg.rows], dtype=np.int16).reshape(-1, 3)
