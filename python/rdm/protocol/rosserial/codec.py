@@ -4,6 +4,14 @@ Wire rules (fact sheet sec. 1.4): little-endian; ``float64`` is a real 8-byte do
 ``duration`` are two 32-bit words; ``string`` and variable arrays carry a uint32 count; fixed
 arrays do not; nested messages are inlined. Each message type gets a dataclass whose fields are
 the ``.msg`` fields (arrays as lists) and whose class attributes are the ``.msg`` constants.
+
+Two forms serialize a message (docs/rosserial.md "One implementation per job"): the per-field
+path (one compiled closure per field) is the only one for strings, nested messages with their
+own variable arrays, dict and pair input, and the precise :class:`EncodeError` /
+:class:`DecodeError` texts; the generated whole-message layouts (:class:`_FlatLayout`,
+:class:`_VarLayout`) are the hot path of the types made of fixed-size fields and variable
+arrays of primitives or flat messages, and hand anything they do not take to the per-field
+path. Both are checked against rosbags' ROS1 serializer, not against each other.
 """
 
 from __future__ import annotations
