@@ -252,6 +252,7 @@ class ClientSession:
                 return p
         raise KeyError(f"no publisher {name!r}")
 
+    # -- sending --------------------------------------------------------------------------
     def _send(self, topic_id: int, payload: bytes) -> int:
         return self.send_frame(topic_id, encode_frame(topic_id, payload))
 
