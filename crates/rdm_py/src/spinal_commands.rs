@@ -136,7 +136,7 @@ fn decode(kind: Kind, bytes: &[u8]) -> Option<Command> {
 }
 
 /// The `(slave, servo)` pairs of `index` in the master's servo order, when
-/// `SpinalServoBridge._targets_in_one_call` would take them all: as many indices as angles,
+/// `ServoBridge.target_states_values` would accept them all: as many indices as angles,
 /// at least one, every index a servo and every angle a servo word. None otherwise.
 fn servo_targets(master: &CanMaster, index: &[u8], angles: &[i16]) -> Option<Vec<(u8, u8, i32)>> {
     if index.len() != angles.len() || index.is_empty() {
