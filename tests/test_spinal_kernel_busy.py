@@ -16,12 +16,10 @@ samples and frames, and the hand-overs to Python (``finish_step``: a step with a
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
-import os
 from pathlib import Path
 
+import golden_digests
 import numpy as np
 from test_lockstep_kernel import NODES, _fast_counts, _run, _spinal_state
 
@@ -30,24 +28,7 @@ from rdm.scenarios.hover import HOVER_Z, make_script
 from rdm.scenarios.stack import Stack
 
 SPINAL = NODES.index("spinal")
-GOLDEN = Path(__file__).parent / "data" / "spinal_kernel_busy.json"
-
-
-def _sha(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
-
-
-def _golden_check(name: str, digests: dict[str, str]) -> None:
-    """``digests`` against the golden ones of ``name`` (or recorded, with RDM_WRITE_GOLDEN)."""
-    golden = json.loads(GOLDEN.read_text()) if GOLDEN.exists() else {}
-    if os.environ.get("RDM_WRITE_GOLDEN"):
-        golden[name] = digests
-        GOLDEN.write_text(json.dumps(golden, indent=1, sort_keys=True) + "\n")
-    want = golden.get(name)
-    assert want is not None, f"{GOLDEN.name} holds no run {name!r}"
-    assert sorted(digests) == sorted(want), name
-    for key in want:
-        assert digests[key] == want[key], (name, key)
+GOLDEN = "spinal_kernel_busy.json"
 
 
 def _golden(tmp_path: Path, name: str, steps, make_script_=None, **options) -> dict:
@@ -56,9 +37,11 @@ def _golden(tmp_path: Path, name: str, steps, make_script_=None, **options) -> d
     hover); ``options`` go to the stack options."""
     script = make_script_() if make_script_ is not None else None
     files, state, stats = _run(tmp_path / "kernel", True, steps, script, **options)
-    digests = {f"file:{key}": _sha(data) for key, data in files.items()}
-    digests.update({f"state:{key}": _sha(repr(value).encode()) for key, value in state.items()})
-    _golden_check(name, digests)
+    digests = {f"file:{key}": golden_digests.sha(data) for key, data in files.items()}
+    digests.update(
+        {f"state:{key}": golden_digests.sha(repr(value).encode()) for key, value in state.items()}
+    )
+    golden_digests.check(GOLDEN, name, digests)
     assert stats is not None
     return stats
 
@@ -181,7 +164,9 @@ def test_python_code_sees_the_same_spinal_state_at_every_script_tick(tmp_path: P
     stats = _golden(tmp_path, "script_ticks", steps, make)
     (kernel,) = records
     assert len(kernel) == 330
-    _golden_check("script_ticks/records", {"all": _sha(repr(kernel).encode())})
+    golden_digests.check(
+        GOLDEN, "script_ticks/records", {"all": golden_digests.sha(repr(kernel).encode())}
+    )
     assert stats["spinal_busy"]["steps"] > 300
 
 
