@@ -10,7 +10,6 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from rdm.protocol.rosserial.checksums import length_checksum, message_checksum
 from rdm.protocol.rosserial.framing import (
     BadFrame,
     Frame,
@@ -52,11 +51,11 @@ def test_fact_sheet_example_frames_byte_for_byte():
 
 @given(st.integers(0, 0xFFFF), st.binary(max_size=300))
 def test_checksums_match_the_independent_formula(topic_id, payload):
-    assert encode_frame(topic_id, payload) == oracle.frame(topic_id, payload)
+    raw = encode_frame(topic_id, payload)
+    assert raw == oracle.frame(topic_id, payload)
     n = len(payload)
-    assert (n % 256 + n // 256 + length_checksum(n)) % 256 == 255
-    total = topic_id % 256 + topic_id // 256 + sum(payload) + message_checksum(topic_id, payload)
-    assert total % 256 == 255
+    assert (n % 256 + n // 256 + raw[4]) % 256 == 255  # the receiver's length test
+    assert (topic_id % 256 + topic_id // 256 + sum(payload) + raw[-1]) % 256 == 255
 
 
 def test_a_topic_id_above_255_is_in_the_checksum_byte_for_byte():
@@ -73,10 +72,31 @@ def test_a_topic_id_above_255_is_in_the_checksum_byte_for_byte():
 
 
 def test_encode_frame_limits():
-    with pytest.raises(FrameError, match="topic_id"):
-        encode_frame(70000, b"")
-    with pytest.raises(FrameError, match="uint16"):
-        encode_frame(1, bytes(70000))
+    """Each refusal is a FrameError (a ValueError) naming the argument and the rule."""
+    assert issubclass(FrameError, ValueError)
+    for topic, payload, text in (
+        (70000, b"", "topic_id 70000 outside 0..65535"),
+        (-1, b"", "topic_id -1 outside 0..65535"),
+        (2**70, b"", "outside 0..65535"),
+        (150.0, b"ab", "topic_id 150.0 is not an integer"),
+        (True, b"ab", "topic_id True is not an integer"),
+        (1, bytes(70000), "payload of 70000 bytes does not fit the uint16 length field"),
+        (1, bytearray(65536), "payload of 65536 bytes does not fit"),
+        (1, [1, 2, 3], "payload of type list is not bytes, bytearray or memoryview"),
+        (1, "ab", "payload of type str is not bytes"),
+    ):
+        with pytest.raises(FrameError, match=text):
+            encode_frame(topic, payload)
+
+
+def test_max_payload_must_be_a_non_negative_int():
+    """Catches a limit the scan would read differently from the caller (a float, a bool,
+    a negative number): refused when the parser is made."""
+    for odd in (512.0, -1, True, None, "512"):
+        with pytest.raises(FrameError, match=r"max_payload .* is not an integer >= 0"):
+            FrameParser(odd)  # type: ignore[arg-type]
+    frame = encode_frame(150, bytes(600))
+    assert frames(FrameParser(2**80).feed(frame))  # any int above the uint16 range: no limit
 
 
 @pytest.mark.parametrize("vec", GOLDEN["bad_frames"], ids=lambda v: v["reason"] + ":" + v["name"])
@@ -127,8 +147,7 @@ def test_truncated_frame_followed_by_valid_frame():
 
 def test_oversize_is_rejected_before_buffering():
     parser = FrameParser(512)
-    n = 513
-    header = bytes([0xFF, 0xFE, n & 0xFF, n >> 8, length_checksum(n), 100, 0])
+    header = bytes([0xFF, 0xFE, 0x01, 0x02, 255 - 3, 100, 0])  # 513 = 0x0201
     events = parser.feed(header)
     assert [b.reason for b in bad(events)] == ["oversize"]
     exact = encode_frame(100, bytes(512))

@@ -1,14 +1,17 @@
 """Spinal's busy milliseconds inside the lockstep kernel (docs/spinal.md).
 
-Oracle: the Python loop (``StackOptions.lockstep_kernel=False``), through
-``test_lockstep_kernel._same``: the same bytes in every log file and the same state of every
-node, the Spinal mirror's busy-ms state included (``_spinal_state``: control clock and
-counter, ``last_output``, duty lists and their identity, ``_last_pub``, publisher and
-battery times, the session's counters and TX ring, the UART pump's and the chain's counters,
-the bytes waiting at the PC's end). The kernel's ``stats()["spinal_busy"]`` shows which of
-its paths ran: routine steps, battery samples and frames, and the hand-overs to Python
-(``finish_step``: a step with an event; ``finish_publish``: a frame the builders, the TX
-ring or the output size decline).
+Oracle: golden runs (``tests/data/spinal_kernel_busy.json``): the SHA-256 of every log file
+the kernel run writes and of the state of every node (``test_lockstep_kernel._state``), the
+Spinal mirror's busy-ms state included (``_spinal_state``: control clock and counter,
+``last_output``, duty lists and their identity, ``_last_pub``, publisher and battery times,
+the session's counters and TX ring, the UART pump's and the chain's counters, the bytes
+waiting at the PC's end). The golden digests were recorded from runs whose files and state
+equalled those of the stack's Python loop (``StackOptions.lockstep_kernel=False``); after a
+deliberate change of the simulated bytes, ``RDM_WRITE_GOLDEN=1 python -m pytest
+tests/test_spinal_kernel_busy.py`` records them again (say why in the commit). The
+kernel's ``stats()["spinal_busy"]`` shows which of its paths ran: routine steps, battery
+samples and frames, and the hand-overs to Python (``finish_step``: a step with an event;
+``finish_publish``: a frame the builders, the TX ring or the output size decline).
 """
 
 from __future__ import annotations
@@ -16,14 +19,31 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import golden_digests
 import numpy as np
-from test_lockstep_kernel import NODES, _fast_counts, _same, _spinal_state
+from test_lockstep_kernel import NODES, _fast_counts, _run, _spinal_state
 
 from rdm.protocol.rosserial.timesync import ClientClock
 from rdm.scenarios.hover import HOVER_Z, make_script
 from rdm.scenarios.stack import Stack
 
 SPINAL = NODES.index("spinal")
+GOLDEN = "spinal_kernel_busy.json"
+
+
+def _golden(tmp_path: Path, name: str, steps, make_script_=None, **options) -> dict:
+    """Run ``steps`` with the kernel; every file and the state against the golden run
+    ``name``; the kernel's stats. ``make_script_()`` gives the scenario script (default:
+    hover); ``options`` go to the stack options."""
+    script = make_script_() if make_script_ is not None else None
+    files, state, stats = _run(tmp_path / "kernel", True, steps, script, **options)
+    digests = {f"file:{key}": golden_digests.sha(data) for key, data in files.items()}
+    digests.update(
+        {f"state:{key}": golden_digests.sha(repr(value).encode()) for key, value in state.items()}
+    )
+    golden_digests.check(GOLDEN, name, digests)
+    assert stats is not None
+    return stats
 
 
 def test_declined_frames_battery_and_step_events_go_to_python(tmp_path: Path) -> None:
@@ -63,8 +83,8 @@ def test_declined_frames_battery_and_step_events_go_to_python(tmp_path: Path) ->
             )
         )
 
-    stats = _same(tmp_path, steps, log=False)
-    # the run drove each case (the same counts in both loops: _same compared them)
+    stats = _golden(tmp_path, "declined_frames", steps, log=False)
+    # the run drove each case
     ring_full, too_large, battery, failsafe = seen[0]
     assert ring_full >= 9 and too_large >= 4 and battery == 5 and failsafe >= 1
     busy = stats["spinal_busy"]
@@ -86,7 +106,7 @@ def test_battery_and_imu_set_from_outside_are_read_when_used(tmp_path: Path) -> 
         stack.bridge._battery = lambda t: 25.2 - 0.7 * math.floor((t - 1.8) / 0.13)
         stack.loop.run(1.2)
 
-    stats = _same(tmp_path, steps)
+    stats = _golden(tmp_path, "battery_and_imu", steps)
     busy = stats["spinal_busy"]
     assert busy["battery_samples"] > 50 and busy["steps"] > 200
 
@@ -108,7 +128,7 @@ def test_a_clock_of_another_class_leaves_the_publications_to_python(tmp_path: Pa
         stack.spinal.session.clock.__class__ = OtherClock
         stack.loop.run(0.6)
 
-    stats = _same(tmp_path, steps)
+    stats = _golden(tmp_path, "other_clock", steps)
     before, after = counts[0], stats["spinal_busy"]
     assert before["imu_frames"] > 100 and before["servo_frames"] > 25
     assert after["imu_frames"] == before["imu_frames"]
@@ -119,7 +139,7 @@ def test_a_clock_of_another_class_leaves_the_publications_to_python(tmp_path: Pa
 def test_python_code_sees_the_same_spinal_state_at_every_script_tick(tmp_path: Path) -> None:
     """A scenario script (100 Hz; it may read anything: the kernel writes every part back
     before it) records the Spinal mirror's busy-ms state each time: the same records in
-    both loops, through the cut and restore of the UART."""
+    golden run, through the cut and restore of the UART."""
     records: list[list] = []
 
     def make() -> object:
@@ -141,11 +161,12 @@ def test_python_code_sees_the_same_spinal_state_at_every_script_tick(tmp_path: P
         stack.drop_uart(False)
         stack.loop.run(0.5)
 
-    stats = _same(tmp_path, steps, make)
-    kernel, python = records
-    assert len(kernel) == len(python) == 330
-    for a, b in zip(kernel, python, strict=True):
-        assert a == b, a[0]
+    stats = _golden(tmp_path, "script_ticks", steps, make)
+    (kernel,) = records
+    assert len(kernel) == 330
+    golden_digests.check(
+        GOLDEN, "script_ticks/records", {"all": golden_digests.sha(repr(kernel).encode())}
+    )
     assert stats["spinal_busy"]["steps"] > 300
 
 
@@ -153,9 +174,9 @@ def test_boot_busy_ms_run_in_the_kernel_with_the_same_state(tmp_path: Path) -> N
     """Before the CAN master first runs (booting, enumerating, configuring: 0-1.5 s) the
     busy ms are the kernel's too: the control step with no duty hand-over (the master's
     motor number is still 0: an empty duty list, as ``_step_tail``), the imu frames, and
-    servo/states with no message (no servo reported yet). The same bytes and state as the
-    Python loop at the end of the boot, across the switch to RUNNING and after it; the
-    Spinal mirror's Python ticks in the boot are only those with UART bytes."""
+    servo/states with no message (no servo reported yet). The golden bytes and state at the
+    end of the boot, across the switch to RUNNING and after it; the Spinal mirror's Python
+    ticks in the boot are only those with UART bytes."""
     seen: list[tuple] = []
 
     def steps(stack: Stack) -> None:
@@ -174,9 +195,9 @@ def test_boot_busy_ms_run_in_the_kernel_with_the_same_state(tmp_path: Path) -> N
         )
         stack.loop.run(0.35)
 
-    stats = _same(tmp_path, steps)
-    (k_state, k_motors, k_duties, k_servo, k_busy, k_python), py_seen = seen
-    assert (k_state, k_motors, k_duties, k_servo) == py_seen[:4] == ("CONFIGURING", 0, [], True)
+    stats = _golden(tmp_path, "boot", steps)
+    ((k_state, k_motors, k_duties, k_servo, k_busy, k_python),) = seen
+    assert (k_state, k_motors, k_duties, k_servo) == ("CONFIGURING", 0, [], True)
     assert k_busy is not None and k_python is not None
     # 1.45 s at 200 Hz: every step but the first ones (before the session's first frame)
     assert k_busy["steps"] > 280 and k_busy["imu_frames"] > 200

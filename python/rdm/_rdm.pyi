@@ -44,6 +44,7 @@ __all__ = [
     "QpSolver",
     "RdmError",
     "Robot",
+    "RosserialFrameError",
     "RotorPlantCore",
     "SpinalStep",
     "SpinalStepOutput",
@@ -690,7 +691,7 @@ def spinal_apply_commands(
     rosserial parser's good frames, ``(topic_id, payload, offset)``) whose subscriber kind
     (``kinds[topic_id - first_user_id]``: 1 four_axes/command, 2 rpy/gain, 3 pinv+inertia,
     4 desire_coordinate, 5 servo/target_states, 0 none) it takes, decoded and applied to
-    ``core`` (and to ``master``'s servo goals) as the mirror's value routes do. Returns
+    ``core`` (and to ``master``'s servo goals) as the mirror's message handlers do. Returns
     ``(n, error)``: the first ``n`` applied; ``error``, when not None, is what item ``n``'s
     core call raised (that item is done too); otherwise item ``n`` is one it does not take
     (nothing of it applied)."""
@@ -1255,7 +1256,11 @@ def capture_index_records(
 def leptrino_ok_sample_run(data: bytes) -> tuple[int, int, int, bytes | None]:
     """(end, count, last_start, last_payload) of the leading run of whole OK-sample frames."""
 
-# --- rosrs ---
+# --- rosserial frames ---
+class RosserialFrameError(RdmError):
+    """A rosserial frame that cannot be built or scanned (topic id, payload type or length,
+    max_payload out of range); the message names the argument and the rule."""
+
 def rosserial_scan(
     buf: bytearray, pos: int, base: int, max_payload: int, rescan: bool
 ) -> tuple[list[tuple[Any, ...]], int, int, bool, bool, bool]:
@@ -1263,12 +1268,13 @@ def rosserial_scan(
 
     Returns ``(events, pos, frames, clean, broke, reset)``: good frames as
     ``(topic_id, payload, offset)``, other events as ``(kind, offset, data)`` with kind
-    ``"skip"`` or the reject reason; used by ``rdm.protocol.rosserial.framing.FrameParser``."""
+    ``"skip"`` or the reject reason; used by ``rdm.protocol.rosserial.framing.FrameParser``.
+    Raises :class:`RosserialFrameError` for a ``max_payload`` that is not an ``int >= 0``."""
 
-def rosserial_frame(topic_id: int, payload: bytes) -> bytes | None:
-    """``framing.encode_frame(topic_id, payload)`` for a ``bytes`` payload; None when the
-    topic id or the length does not fit its uint16 field or ``payload`` is not exactly
-    ``bytes`` (``encode_frame`` then converts or raises)."""
+def rosserial_frame(topic_id: int, payload: bytes | bytearray | memoryview) -> bytes:
+    """The rosserial v2 frame of ``payload`` on ``topic_id`` (``framing.encode_frame``).
+    Raises :class:`RosserialFrameError` naming the rule for a topic id that is not an int in
+    0..65535, a payload of another type, or one longer than the uint16 length field."""
 
 # --- spinalbusy ---
 def spinal_imu_frame(

@@ -1,22 +1,59 @@
-//! The rosserial frame scanner (`rdm_core::firmware::rosserial_frame`) for
-//! `rdm.protocol.rosserial.framing.FrameParser`: one call scans the parser's whole buffer;
-//! and the frame builder of a payload for the PC side's publish path.
+//! The rosserial frame scanner and frame builder (`rdm_core::firmware::rosserial_frame`):
+//! `rosserial_scan` scans `rdm.protocol.rosserial.framing.FrameParser`'s whole buffer in one
+//! call; `rosserial_frame` is `framing.encode_frame`, the one frame builder of the project.
 
+use pyo3::create_exception;
 use pyo3::prelude::*;
-use pyo3::types::{PyByteArray, PyBytes, PyList};
+use pyo3::types::{PyBool, PyByteArray, PyBytes, PyInt, PyList, PyMemoryView};
 use rdm_core::firmware::rosserial_frame::{next_candidate, seal_frame, Step, FRAME_OVERHEAD};
+
+use crate::errors::RdmError;
+
+create_exception!(
+    _rdm,
+    RosserialFrameError,
+    RdmError,
+    "A rosserial frame that cannot be built or scanned (topic id, payload type or length, \
+     max_payload out of range); the message names the argument and the rule."
+);
 
 /// What one scan found; see `rosserial_scan`.
 type ScanResult<'py> = (Bound<'py, PyList>, usize, usize, bool, bool, bool);
 
-/// Scan `buf` from `pos` as the reference parser's loop does (the caller handles the frame
-/// timer and the buffer). `base` is the stream offset of `buf[0]`.
+/// `value` as a non-negative integer limit: a Python `int` (not a `bool`) >= 0; any size
+/// above `usize::MAX` saturates (no length field reaches it).
+fn max_payload_of(value: &Bound<'_, PyAny>) -> PyResult<usize> {
+    let rule = || {
+        RosserialFrameError::new_err(format!(
+            "max_payload {} is not an integer >= 0",
+            value
+                .repr()
+                .map_or_else(|_| "?".to_owned(), |r| r.to_string())
+        ))
+    };
+    if value.is_instance_of::<PyBool>() || !value.is_instance_of::<PyInt>() {
+        return Err(rule());
+    }
+    if let Ok(n) = value.extract::<usize>() {
+        return Ok(n);
+    }
+    // an int outside usize: huge (saturate) or negative (refused)
+    if value.lt(0).unwrap_or(true) {
+        Err(rule())
+    } else {
+        Ok(usize::MAX)
+    }
+}
+
+/// Scan `buf` from `pos` as the receiver's loop does (the caller handles the frame timer and
+/// the buffer). `base` is the stream offset of `buf[0]`; `max_payload` any `int >= 0`.
 ///
 /// Returns `(events, pos, frames, clean, broke, reset)`: `events` in stream order, a good
 /// frame as `(topic_id, payload, offset)`, anything else as `(kind, offset, data)` with kind
 /// `"skip"` or the reject reason; `pos` the first byte not consumed; `frames` good frames;
 /// `clean` no event but good frames; `broke` the scan stopped on an incomplete candidate;
 /// `reset` at least one candidate was completed (the frame timer restarts).
+/// Raises `RosserialFrameError` for a `max_payload` that is not an `int >= 0`.
 #[pyfunction]
 #[pyo3(signature = (buf, pos, base, max_payload, rescan))]
 fn rosserial_scan<'py>(
@@ -24,9 +61,10 @@ fn rosserial_scan<'py>(
     buf: &Bound<'py, PyByteArray>,
     pos: usize,
     base: i64,
-    max_payload: usize,
+    max_payload: &Bound<'py, PyAny>,
     rescan: bool,
 ) -> PyResult<ScanResult<'py>> {
+    let max_payload = max_payload_of(max_payload)?;
     let data = buf.to_vec(); // a copy: no Python code can change it while we read
     let events = PyList::empty(py);
     let end = data.len();
@@ -67,29 +105,77 @@ fn rosserial_scan<'py>(
     Ok((events, pos, frames, clean, broke, reset))
 }
 
-/// Add the scanner to the module.
-/// `framing.encode_frame(topic_id, payload)` for a `bytes` payload: the same frame, or None
-/// (nothing built) when the topic id or the length does not fit its `u16` field or
-/// `payload` is not exactly `bytes` (`encode_frame` then converts or raises).
+/// The one rosserial v2 frame of `payload` (`bytes`, `bytearray` or `memoryview`) on topic
+/// `topic_id`: `FF FE len_lo len_hi len_chk topic_lo topic_hi payload msg_chk`.
+/// Raises `RosserialFrameError` naming the rule for a topic id that is not an int in
+/// 0..65535, a payload of another type, or one longer than the uint16 length field.
 #[pyfunction]
 fn rosserial_frame<'py>(
     py: Python<'py>,
     topic_id: &Bound<'py, PyAny>,
     payload: &Bound<'py, PyAny>,
-) -> Option<Bound<'py, PyBytes>> {
-    let topic: u16 = topic_id.extract().ok()?;
-    let payload = payload.cast_exact::<PyBytes>().ok()?.as_bytes();
+) -> PyResult<Bound<'py, PyBytes>> {
+    let topic = topic_of(topic_id)?;
+    if let Ok(bytes) = payload.cast::<PyBytes>() {
+        return frame_of(py, topic, bytes.as_bytes());
+    }
+    if let Ok(array) = payload.cast::<PyByteArray>() {
+        return frame_of(py, topic, &array.to_vec());
+    }
+    if payload.is_instance_of::<PyMemoryView>() {
+        let copy = py.get_type::<PyBytes>().call1((payload,))?;
+        return frame_of(py, topic, copy.cast::<PyBytes>()?.as_bytes());
+    }
+    let kind = payload
+        .get_type()
+        .name()
+        .map_or_else(|_| "?".to_owned(), |n| n.to_string());
+    Err(RosserialFrameError::new_err(format!(
+        "payload of type {kind} is not bytes, bytearray or memoryview"
+    )))
+}
+
+/// `topic_id` as the frame's uint16 topic field.
+fn topic_of(topic_id: &Bound<'_, PyAny>) -> PyResult<u16> {
+    let text = || {
+        topic_id
+            .repr()
+            .map_or_else(|_| "?".to_owned(), |r| r.to_string())
+    };
+    if topic_id.is_instance_of::<PyBool>() || !topic_id.is_instance_of::<PyInt>() {
+        return Err(RosserialFrameError::new_err(format!(
+            "topic_id {} is not an integer",
+            text()
+        )));
+    }
+    topic_id
+        .extract::<u16>()
+        .map_err(|_| RosserialFrameError::new_err(format!("topic_id {} outside 0..65535", text())))
+}
+
+/// The frame of `payload` on `topic`.
+fn frame_of<'py>(py: Python<'py>, topic: u16, payload: &[u8]) -> PyResult<Bound<'py, PyBytes>> {
     let n = payload.len();
-    u16::try_from(n).ok()?;
+    if u16::try_from(n).is_err() {
+        return Err(RosserialFrameError::new_err(format!(
+            "payload of {n} bytes does not fit the uint16 length field"
+        )));
+    }
     PyBytes::new_with(py, n + FRAME_OVERHEAD, |frame| {
-        frame[7..7 + n].copy_from_slice(payload);
+        if let Some(body) = frame.get_mut(7..7 + n) {
+            body.copy_from_slice(payload);
+        }
         seal_frame(topic, frame);
         Ok(())
     })
-    .ok()
 }
 
+/// Add the scanner, the frame builder and their error type to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add(
+        "RosserialFrameError",
+        m.py().get_type::<RosserialFrameError>(),
+    )?;
     m.add_function(wrap_pyfunction!(rosserial_scan, m)?)?;
     m.add_function(wrap_pyfunction!(rosserial_frame, m)?)?;
     Ok(())

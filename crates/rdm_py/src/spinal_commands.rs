@@ -1,7 +1,8 @@
 //! Spinal's steady command frames in one call: the PC's `four_axes/command`, `rpy/gain`,
 //! `p_matrix_pseudo_inverse_inertia`, `desire_coordinate` and `servo/target_states`, decoded
 //! from their rosserial payloads and applied to the controller and the CAN master with the
-//! calls the Spinal mirror's value routes make (`SpinalMirror._four_axis_values`, ...).
+//! calls the Spinal mirror's message handlers make (`SpinalCommands._on_four_axis_command`,
+//! ...).
 //!
 //! Why: the PC sends five or six such frames every 40 Hz tick; in Python each one costs a
 //! decode, a route and a core call (~12 us). Here the whole run costs one call.
@@ -135,7 +136,7 @@ fn decode(kind: Kind, bytes: &[u8]) -> Option<Command> {
 }
 
 /// The `(slave, servo)` pairs of `index` in the master's servo order, when
-/// `SpinalServoBridge._targets_in_one_call` would take them all: as many indices as angles,
+/// `ServoBridge.target_states_values` would accept them all: as many indices as angles,
 /// at least one, every index a servo and every angle a servo word. None otherwise.
 fn servo_targets(master: &CanMaster, index: &[u8], angles: &[i16]) -> Option<Vec<(u8, u8, i32)>> {
     if index.len() != angles.len() || index.is_empty() {
@@ -155,7 +156,7 @@ fn servo_targets(master: &CanMaster, index: &[u8], angles: &[i16]) -> Option<Vec
         .collect()
 }
 
-/// Applies `command` as the mirror's value route does. Ok(false): the route would decline
+/// Applies `command` as the mirror's message handler does. Ok(false): the call declines
 /// (nothing applied); Err: the exception its core call raises.
 fn apply(
     command: Command,
@@ -191,7 +192,7 @@ fn apply(
 }
 
 /// Applies the leading run of `items` (the parser's good frames, `(topic_id, payload,
-/// offset)`) that are steady commands, in order, as `SpinalMirror._route_values` would.
+/// offset)`) that are steady commands, in order, as `SpinalMirror._route` would.
 ///
 /// `kinds[topic_id - first_user_id]` is the subscriber's kind code (0: not one of these).
 /// `master` is the CAN master's core when `servo/target_states` may be applied (the servo

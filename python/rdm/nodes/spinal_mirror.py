@@ -41,7 +41,7 @@ from rdm.link.inproc_can import SimClock
 from rdm.nodes.can_master import BOOT_DELAY_MS, IDLE_DUTY, CanMaster, MasterState
 from rdm.nodes.spinal_mirror_commands import (
     _COMMAND_KINDS,
-    _VALUE_ROUTE_TYPES,
+    _COMMAND_TYPES,
     SpinalCommands,
     _wire_layout,
     rejection_reason,
@@ -182,21 +182,12 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
             "servo/torque_enable": self.servos.torque_enable,
             "set_adc_scale": self._on_adc_scale,
         }
-        #: The command handlers taking ``decode_values`` field values instead of a message
-        #: (``_route_values``); each returns False, having applied nothing, when the values
-        #: do not convert (then the message path runs and decides). Armed on the session by
-        #: the first ``_receive``.
-        self._value_routes: dict[str, Any] = {}
-        handlers = {
-            "four_axes/command": self._four_axis_values,
-            "rpy/gain": self._gain_values,
-            "p_matrix_pseudo_inverse_inertia": self._pinv_values,
-            "desire_coordinate": self._desire_values,
-            "servo/target_states": self._servo_targets_values,
-        }
+        #: The subscribers whose frames ``rdm._rdm.spinal_apply_commands`` decodes: a plain
+        #: slot of the type it reads, with that type's wire layout and a message handler.
         builtin = spinal_registry()
+        applied = set()
         for slot in self.session.subscribers:
-            type_ = _VALUE_ROUTE_TYPES.get(slot.name)
+            type_ = _COMMAND_TYPES.get(slot.name)
             if (
                 type_ is not None
                 and slot.service is None
@@ -204,12 +195,12 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
                 and _wire_layout(slot.codec) == _wire_layout(builtin.msg(type_))
                 and self._routes.get(slot.name) is not None
             ):
-                self._value_routes[slot.name] = handlers[slot.name]
-        self._values_armed = False  # whether the session delivers _value_routes as values
+                applied.add(slot.name)
+        self._runs_armed = False  # whether the session hands command runs to the call
         #: Per subscriber index: the ``rdm._rdm.spinal_apply_commands`` kind of its frames
         #: (0: not one it applies) and its topic, for :meth:`_apply_command_run`.
         self._command_kinds = bytes(
-            _COMMAND_KINDS[slot.name] if slot.name in self._value_routes else 0
+            _COMMAND_KINDS[slot.name] if slot.name in applied else 0
             for slot in self.session.subscribers
         )
         self._command_topics = tuple(slot.name for slot in self.session.subscribers)

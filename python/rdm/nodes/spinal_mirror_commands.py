@@ -1,7 +1,8 @@
 """What reaches the Spinal mirror on its UART: the rosserial events of each received chunk,
-the subscribers routed into the core and the CAN master (the common commands from their field
-values, and the steady command frames applied in one Rust call), their rejections, and the
-services.
+the subscribers routed into the core and the CAN master (each through its message handler;
+a leading run of the five steady command frames applied in one Rust call,
+``rdm._rdm.spinal_apply_commands``, which makes the core calls of those handlers), their
+rejections, and the services.
 
 :class:`SpinalCommands` is a part of :class:`rdm.nodes.spinal_mirror.SpinalMirror`: its
 methods read and change the mirror's state (``session``, ``core``, ``servos``, ``counters`` ...).
@@ -15,7 +16,6 @@ from typing import Any
 import numpy as np
 
 from rdm import _rdm
-from rdm._rdm import RdmError
 from rdm.control.attitude import ARM_OFF, CommandRejectedError
 from rdm.nodes.can_master import IDLE_DUTY, MasterState
 from rdm.nodes.onboard_monitors import MonitorLimits, battery_cells
@@ -30,17 +30,17 @@ from rdm.protocol.rosserial.events import (
     SyncLost,
 )
 
-#: The commands applied from their field values (``_route_values``), with
-#: the message type whose layout those handlers read (a slot of another type or layout is
-#: routed as a message).
-_VALUE_ROUTE_TYPES = {
+#: The steady commands ``rdm._rdm.spinal_apply_commands`` decodes and applies, with the
+#: message type whose layout it reads (a slot of another type or layout is routed as a
+#: message).
+_COMMAND_TYPES = {
     "four_axes/command": "spinal/FourAxisCommand",
     "rpy/gain": "spinal/RollPitchYawTerms",
     "p_matrix_pseudo_inverse_inertia": "spinal/PMatrixPseudoInverseWithInertia",
     "desire_coordinate": "spinal/DesireCoord",
     "servo/target_states": "spinal/ServoControlCmd",
 }
-#: ``rdm._rdm.spinal_apply_commands``' kind codes of the value-route topics.
+#: ``rdm._rdm.spinal_apply_commands``' kind codes of those topics.
 _COMMAND_KINDS = {
     "four_axes/command": 1,
     "rpy/gain": 2,
@@ -52,20 +52,6 @@ _apply_commands = _rdm.spinal_apply_commands
 _IMU_CALIB_GET = 0  # spinal/ImuCalib GET_CALIB_DATA
 _IMU_CALIB_GYRO = 2  # spinal/ImuCalib CALIB_GYRO
 _MAG_SET = 1  # spinal/MagDeclination SET
-
-
-def _applied(setter: Any, *args: Any) -> bool:
-    """Call a core ``*_rows`` setter (plain Python ints, no numpy array); False when its
-    arguments do not convert (floats, out-of-range ints, wrong lengths: nothing applied), so
-    that the caller's array path runs and decides (and names the bad field). The core's own
-    rejections (:class:`RdmError`) propagate."""
-    try:
-        setter(*args)
-    except RdmError:
-        raise
-    except (TypeError, OverflowError, ValueError):
-        return False
-    return True
 
 
 def _wire_layout(codec: Any) -> tuple[Any, ...]:
@@ -102,16 +88,13 @@ class SpinalCommands:
     """The receive side of :class:`rdm.nodes.spinal_mirror.SpinalMirror` (a part of it)."""
 
     def _receive(self, now_ms: int) -> None:
-        if not self._values_armed:  # the value routes and command runs, once
-            self.session.deliver_values(self._value_routes)
+        if not self._runs_armed:  # the command runs, once
             runs = any(self._command_kinds)
             self.session.command_run = self._apply_command_run if runs else None
-            self._values_armed = True
+            self._runs_armed = True
         data = self.uart.read()
         for event in self.session.spin(data, now_ms):
-            if event.__class__ is tuple:  # (slot, values, payload): see _route_values
-                self._route_values(*event)
-            elif isinstance(event, MessageReceived):
+            if isinstance(event, MessageReceived):
                 self._route(event.topic, event.message)
             elif isinstance(event, ServiceHandled):
                 self.counters.received[event.service] += 1
@@ -148,26 +131,10 @@ class SpinalCommands:
         else:  # shapes the core refuses (RdmError), bad arrays
             self._reject("invalid", f"{topic}: {exc}", log=True)
 
-    def _route_values(self, slot: Any, values: tuple[Any, ...], payload: bytes) -> None:
-        """:meth:`_route` of ``slot.codec.decode(payload)`` from its field ``values``
-        (``ClientSession.deliver_values``): the same calls into the core, the same counters
-        and rejections. A handler that declines (False, nothing applied) hands over to the
-        message path."""
-        topic = slot.name
-        try:
-            done = self._value_routes[topic](values)
-        except ValueError as exc:
-            self._route_failed(topic, exc)
-            return
-        if done:
-            self.counters.received[topic] += 1
-        else:
-            self._route(topic, slot.codec.decode(payload))
-
     def _apply_command_run(self, items: list) -> int:
         """``ClientSession.command_run``: the leading steady command frames of ``items``
         (the parser's good frames) applied in one call, ``rdm._rdm.spinal_apply_commands``:
-        the core calls of :meth:`_route_values` for each, with its counters and rejections.
+        the core calls of each frame's message handler, with its counters and rejections.
         Returns how many frames are done; the session hands the rest to the usual path."""
         n, exc = _apply_commands(
             items,
@@ -182,7 +149,7 @@ class SpinalCommands:
         received = self.counters.received
         for i in range(n):
             received[topics[items[i][0] - first]] += 1
-        if exc is not None:  # item n's core call raised: routed as _route_values does
+        if exc is not None:  # item n's core call raised: routed as _route does
             topic = topics[items[n][0] - first]
             if not isinstance(exc, ValueError):
                 raise exc
@@ -198,63 +165,20 @@ class SpinalCommands:
             self._log(C.LogLevel.ERROR, text)
 
     # ---------------------------------------------------------------- subscribers
-    # The *_values handlers take the field values of ``MessageCodec.decode_values`` (nested
-    # messages as tuples) and make the core calls of the _on_* handlers below.
-    def _four_axis_values(self, values: tuple[Any, ...]) -> bool:
-        angles, base = values  # list of 3 floats, list of floats: _on_four_axis_command's
-        return _applied(self.core.four_axis_command_list, angles, base, self._now_s)
-
-    def _gain_values(self, values: tuple[Any, ...]) -> bool:
-        return _applied(self.core.set_gains_wire_rows, values[0])  # the 7-int rows
-
-    def _pinv_values(self, values: tuple[Any, ...]) -> bool:
-        return _applied(self.core.set_pinv_inertia_wire_rows, values[0], values[1])
-
-    def _desire_values(self, values: tuple[Any, ...]) -> bool:
-        self.core.set_desire_coordinate(*values)  # three floats
-        return True
-
-    def _servo_targets_values(self, values: tuple[Any, ...]) -> bool:
-        self.servos.target_states_values(values[0], values[1])
-        return True
-
     def _on_four_axis_command(self, msg: Any) -> None:
-        try:
-            angles = [float(a) for a in msg.angles]
-        except (TypeError, ValueError):
-            angles = None  # the array path below raises and names the field
-        if angles is not None and _applied(
-            self.core.four_axis_command_list, angles, msg.base_thrust, self._now_s
-        ):
-            return
-        base = np.asarray(msg.base_thrust, dtype=np.float64)
-        self.core.four_axis_command([float(a) for a in msg.angles], base, self._now_s)
+        angles = [float(a) for a in msg.angles]
+        self.core.four_axis_command_list(angles, msg.base_thrust, self._now_s)
 
     def _on_gain(self, msg: Any) -> None:
         rows = [
             (m.roll_p, m.roll_i, m.roll_d, m.pitch_p, m.pitch_i, m.pitch_d, m.yaw_d)
             for m in msg.motors
         ]
-        if _applied(self.core.set_gains_wire_rows, rows):
-            return
-        terms = np.array(
-            [
-                [m.roll_p, m.roll_i, m.roll_d, m.pitch_p, m.pitch_i, m.pitch_d, m.yaw_d]
-                for m in msg.motors
-            ],
-            dtype=np.int64,
-        ).reshape(-1, 7)
-        self.core.set_gains_wire(terms)
+        self.core.set_gains_wire_rows(rows)
 
     def _on_pinv_inertia(self, msg: Any) -> None:
         pinv = [(u.r, u.p, u.y) for u in msg.pseudo_inverse]
-        inertia = [int(v) for v in msg.inertia]
-        if _applied(self.core.set_pinv_inertia_wire_rows, pinv, inertia):
-            return
-        rows = np.array([[u.r, u.p, u.y] for u in msg.pseudo_inverse], dtype=np.int16).reshape(
-            -1, 3
-        )
-        self.core.set_pinv_inertia_wire(rows, [int(v) for v in msg.inertia])
+        self.core.set_pinv_inertia_wire_rows(pinv, [int(v) for v in msg.inertia])
 
     def _on_torque_allocation_inv(self, msg: Any) -> None:
         rows = np.array([[v.x, v.y, v.z] for v in msg.rows], dtype=np.int16).reshape(-1, 3)

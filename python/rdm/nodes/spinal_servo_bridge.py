@@ -119,50 +119,23 @@ class ServoBridge:
         self.target_states_values(msg.index, msg.angles)
 
     def target_states_values(self, index: Sequence[int], angles: Sequence[int]) -> None:
-        """:meth:`target_states` of a message's ``index`` and ``angles`` fields."""
-        if self._targets_in_one_call(index, angles):
-            return
-        pairs = self._resolve("servo/target_states", index, angles)
-        for (slave, idx), value in pairs:  # every value, also one a repeated index overrides
+        """:meth:`target_states` of a message's ``index`` and ``angles`` fields: every pair
+        checked (lengths, servo index, 15-bit value; a :class:`MirrorRejection` names the
+        first bad one, nothing applied), then the goals in index order in one core call (a
+        repeated index leaves its last value), as ``rdm._rdm.spinal_apply_commands`` sets
+        them."""
+        targets = []
+        for (slave, idx), value in self._resolve("servo/target_states", index, angles):
             if not WORD_VALUE_MIN <= value <= WORD_VALUE_MAX:
                 raise MirrorRejection(
                     "servo_value",
                     f"servo/target_states: servo ({slave}, {idx}) target {value} not a 15-bit int",
                 )
-        try:
-            self.master.set_servo_targets(dict(pairs))
-        except ValueError as exc:
-            raise target_rejection(exc) from exc
-
-    def _targets_in_one_call(self, index: Sequence[int], angles: Sequence[int]) -> bool:
-        """The goal positions from ``index``/``angles`` in one core call when every pair is
-        valid (a repeated index sets the same goal again, leaving the last value). False,
-        nothing applied, for anything else (not running, lengths, an index or value out of
-        range, not an int): :meth:`_resolve` and ``CanMaster.set_servo_targets`` then raise
-        the precise rejection."""
-        if self.master.state is not MasterState.RUNNING or len(index) != len(angles):
-            return False
-        core = self._frame_core
-        keys = core.servo_keys()
-        n = len(keys)
-        targets = []
-        for i, value in zip(index, angles, strict=True):
-            if (
-                i.__class__ is not int
-                or value.__class__ is not int
-                or not 0 <= i < n
-                or not WORD_VALUE_MIN <= value <= WORD_VALUE_MAX
-            ):
-                return False
-            slave, idx = keys[i]
             targets.append((slave, idx, value))
-        if not targets:
-            return False  # nothing to set (or servo_not_ready): _resolve decides
         try:
-            core.set_servo_target_list(targets)
+            self._frame_core.set_servo_target_list(targets)
         except ValueError as exc:  # the core's own refusal
             raise target_rejection(exc) from exc
-        return True
 
     def command_core(self) -> Any | None:
         """The master's core while it runs, else None: for ``rdm._rdm.spinal_apply_commands``,

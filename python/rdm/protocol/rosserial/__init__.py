@@ -2,9 +2,9 @@
 
 One concept per module: :mod:`.msgdef` (.msg/.srv parser), :mod:`.md5` (ROS md5 sums),
 :mod:`.codec` (ROS1 serialization and message classes), :mod:`.registry` (types of a package
-tree; :func:`spinal_registry`), :mod:`.checksums`, :mod:`.framing` (frames and the resyncing
-parser), :mod:`.timesync` (client clock), :mod:`.services`, :mod:`.client` (Spinal role),
-:mod:`.server` (PC role), :mod:`.events`, :mod:`.constants`.
+tree; :func:`spinal_registry`), :mod:`.framing` (frames and the resyncing parser, over the
+Rust frame builder and scan), :mod:`.timesync` (client clock), :mod:`.services`,
+:mod:`.client` (Spinal role), :mod:`.server` (PC role), :mod:`.events`, :mod:`.constants`.
 """
 
 from rdm.protocol.rosserial.client import ClientSession

@@ -65,8 +65,6 @@ class ClientEndpoint:
     codec: MessageCodec
     endpoint: C.Endpoint
     service: DeviceServiceServer | None = None
-    #: Deliver received messages as field values (:meth:`ClientSession.deliver_values`).
-    values: bool = False
 
 
 class ClientSession:
@@ -110,10 +108,9 @@ class ClientSession:
         self._log = self.registry.msg("rosserial_msgs/Log")
         self._publisher_cache: dict[str, ClientEndpoint] = {}  # name -> first plain slot
         self._cached_slots = 0  # len(publishers) when the cache was filled
-        self._values = False  # a subscriber delivers field values (deliver_values)
         #: ``f(items) -> n``: takes the leading run of good user frames it applies itself
         #: (the Spinal mirror's steady commands, :meth:`SpinalMirror._apply_command_run`);
-        #: only while field values are delivered and before any other event of a spin.
+        #: only before any other event of a spin, so that nothing changes order.
         self.command_run: Callable[[list], int] | None = None
 
     # -- slot set-up (advertise / subscribe / advertiseService) ---------------------------
@@ -255,24 +252,6 @@ class ClientSession:
                 return p
         raise KeyError(f"no publisher {name!r}")
 
-    def deliver_values(self, names: Any) -> list[ClientEndpoint]:
-        """Have exactly the plain subscribers named in ``names`` deliver their messages as
-        field values (an empty ``names``: none). :meth:`spin` then gives a ``(slot, values,
-        payload)`` tuple instead of a :class:`MessageReceived` for a payload that
-        ``slot.codec.decode_values`` takes (``values`` as that method returns them;
-        ``slot.codec.decode(payload)`` is the message the event would carry). Any other
-        payload of the slot takes the usual path (the event, or a drop with its reason), and
-        nothing else changes: same counters, same order of events and of what is sent.
-        Returns the slots marked."""
-        wanted = set(names)
-        marked = []
-        for slot in self.subscribers:
-            slot.values = slot.name in wanted and slot.service is None
-            if slot.values:
-                marked.append(slot)
-        self._values = bool(marked)
-        return marked
-
     # -- sending --------------------------------------------------------------------------
     def _send(self, topic_id: int, payload: bytes) -> int:
         return self.send_frame(topic_id, encode_frame(topic_id, payload))
@@ -387,11 +366,9 @@ class ClientSession:
 
     def _receive(self, data: bytes, now_ms: int, events: list[SessionEvent]) -> list[SessionEvent]:
         # good frames come as (topic_id, payload, offset): no Frame object for user topics
-        values = self._values
-        subscribers = self.subscribers
         items = self.parser._feed(data, now_ms, True)
         run = self.command_run
-        if run is not None and values and items and not events:
+        if run is not None and items and not events:
             # the leading frames it takes are done (in order, before any event); the rest
             # below, as always
             taken = run(items)
@@ -400,14 +377,6 @@ class ClientSession:
         for item in items:
             if item.__class__ is tuple:
                 if item[0] >= C.FIRST_USER_TOPIC_ID:
-                    if values:  # deliver_values: the field values when they decode
-                        index = item[0] - C.FIRST_USER_TOPIC_ID
-                        slot = subscribers[index] if index < len(subscribers) else None
-                        if slot is not None and slot.values:
-                            got = slot.codec.decode_values(item[1])
-                            if got is not None:
-                                events.append((slot, got, item[1]))
-                                continue
                     events.extend(self._dispatch_user(*item))
                 else:
                     events.extend(self._dispatch(_new_frame(*item), now_ms))

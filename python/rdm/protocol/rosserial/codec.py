@@ -4,6 +4,14 @@ Wire rules (fact sheet sec. 1.4): little-endian; ``float64`` is a real 8-byte do
 ``duration`` are two 32-bit words; ``string`` and variable arrays carry a uint32 count; fixed
 arrays do not; nested messages are inlined. Each message type gets a dataclass whose fields are
 the ``.msg`` fields (arrays as lists) and whose class attributes are the ``.msg`` constants.
+
+Two forms serialize a message (docs/rosserial.md "One implementation per job"): the per-field
+path (one compiled closure per field) is the only one for strings, nested messages with their
+own variable arrays, dict and pair input, and the precise :class:`EncodeError` /
+:class:`DecodeError` texts; the generated whole-message layouts (:class:`_FlatLayout`,
+:class:`_VarLayout`) are the hot path of the types made of fixed-size fields and variable
+arrays of primitives or flat messages, and hand anything they do not take to the per-field
+path. Both are checked against rosbags' ROS1 serializer, not against each other.
 """
 
 from __future__ import annotations
@@ -242,26 +250,6 @@ class MessageCodec:
             values[name], pos = dec(buf, pos)
         return self.cls(**values), pos
 
-    def decode_values(self, data: bytes) -> tuple[Any, ...] | None:
-        """The field values of ``decode(data)`` in field order, without message objects: an
-        array of nested messages as a list of tuples of their field values, everything else
-        as :meth:`decode` gives it. None when the fast layouts do not take ``data`` (not
-        ``bytes``, a type without a fast layout, a wrong length, trailing bytes: then call
-        :meth:`decode`, which decodes or raises as always). For receivers that apply the
-        values directly (the Spinal mirror's commands)."""
-        if data.__class__ is not bytes:
-            return None
-        flat = self._flat
-        if flat is not None:
-            return flat.unpack(data, 0) if len(data) == flat.size else None
-        var = self._var
-        if var is None:
-            return None
-        done = var.unpack_values(data, 0)
-        if done is None or done[1] != len(data):
-            return None
-        return done[0]
-
     def decode(self, data: bytes) -> Any:
         """Decode exactly one message; trailing bytes are an error."""
         flat = self._flat
@@ -419,7 +407,6 @@ class _VarLayout:
         args: list[str] = []
         counts: list[str] = []
         values: list[str] = []
-        nested_as_tuples: dict[str, str] = {}  # unpack_values: nested elements stay tuples
         for k, seg in enumerate(segments):
             if seg[0] == "fixed":
                 parts, fmt = seg[1], seg[2]
@@ -463,9 +450,6 @@ class _VarLayout:
                 grab = "append" if len(names) == 1 else "extend"
                 pack_lines.append(f"e{k} = []\n    for e in a{k}:\n        e{k}.{grab}(_get{k}(e))")
                 args.append(f"n{k}, *e{k}")
-                nested_as_tuples[f"[_cls{k}(*t) for t in _iter{k}(buf[pos:stop])]"] = (
-                    f"list(_iter{k}(buf[pos:stop]))"
-                )
                 unpack_lines += [
                     f"stop = pos + n{k} * {size}",
                     f"f{k} = [_cls{k}(*t) for t in _iter{k}(buf[pos:stop])]",
@@ -491,16 +475,6 @@ class _VarLayout:
         )
         self._env = env
         self.unpack: Callable[[bytes, int], tuple[Any, int] | None] = lambda buf, pos: None
-        for built, kept in nested_as_tuples.items():
-            body = body.replace(built, kept)
-        #: :meth:`unpack` without message objects: ``(field values, pos)`` or None, arrays
-        #: of nested messages as lists of tuples (:meth:`MessageCodec.decode_values`)
-        self.unpack_values: Callable[[bytes, int], tuple[tuple[Any, ...], int] | None] = _generate(
-            f"def unpack_values(buf, pos):\n    {body}\n"
-            f"    return ({''.join(v + ', ' for v in values)}), pos\n",
-            env,
-            "unpack_values",
-        )
 
     def bind(self, cls: type) -> _VarLayout:
         """Generate the decoder for message class ``cls`` (built after the layout)."""

@@ -1,4 +1,5 @@
-"""rosserial v2 frames: encoder and a sans-IO, resynchronising parser (fact sheet sec. 1.2).
+"""rosserial v2 frames: the encoder (``encode_frame``, in Rust) and a sans-IO,
+resynchronising parser over the Rust scan (fact sheet sec. 1.2).
 
 Frame: ``FF FE len_lo len_hi len_chk topic_lo topic_hi payload[len] msg_chk``.
 
@@ -16,21 +17,27 @@ frame's 0xFF, so a valid frame hidden behind garbage or a truncated frame is sti
 
 from __future__ import annotations
 
-import struct
 from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-from rdm._rdm import rosserial_frame as _native_frame
-from rdm._rdm import rosserial_scan as _native_scan
-from rdm.protocol.rosserial.checksums import byte_sum
-from rdm.protocol.rosserial.constants import FRAME_OVERHEAD, PROTOCOL_VERSION, SYNC
+from rdm._rdm import RosserialFrameError as FrameError
+from rdm._rdm import rosserial_frame as encode_frame
+from rdm._rdm import rosserial_scan as _scan
+from rdm.protocol.rosserial.constants import FRAME_OVERHEAD
 
 BAD_FRAME_REASONS = ("version", "length_checksum", "oversize", "message_checksum", "timeout")
 
-
-class FrameError(ValueError):
-    """A frame that cannot be built (topic id or payload length out of range)."""
+__all__ = [
+    "BAD_FRAME_REASONS",
+    "BadFrame",
+    "Frame",
+    "FrameError",
+    "FrameParser",
+    "ParseEvent",
+    "SkippedBytes",
+    "encode_frame",
+]
 
 
 @dataclass(frozen=True)
@@ -77,59 +84,23 @@ def _new_frame(topic_id: int, payload: bytes, offset: int) -> Frame:
     return frame
 
 
-_HEADER = struct.Struct("<BBHBH")  # FF FE len(u16) len_chk topic(u16)
-
-
-_HEADERS: dict[tuple[int, int], bytes] = {}  # (topic id, length) -> header bytes already built
-_HEADERS_MAX = 4096
-
-
-def encode_frame(topic_id: int, payload: bytes) -> bytes:
-    """Build one v2 frame."""
-    if payload.__class__ is bytes:
-        frame = _native_frame(topic_id, payload)  # one Rust call; None where it declines
-        if frame is not None:
-            return frame
-        header = _HEADERS.get((topic_id, len(payload)))
-        if header is not None:  # this topic id and length passed the checks below before
-            chk = 255 - (((topic_id & 0xFF) + (topic_id >> 8) + byte_sum(payload)) % 256)
-            return b"".join((header, payload, _CHECKSUM_BYTE[chk]))
-    if not 0 <= topic_id <= 0xFFFF:
-        raise FrameError(f"topic_id {topic_id} outside 0..65535")
-    n = len(payload)
-    if n > 0xFFFF:
-        raise FrameError(f"payload of {n} bytes does not fit the uint16 length field")
-    if payload.__class__ is not bytes:
-        payload = bytes(payload)  # a bytearray, a list of ints ...
-    # checksums as in checksums.py, inlined: this runs for every frame either end sends
-    length_chk = 255 - (((n & 0xFF) + (n >> 8)) % 256)
-    message_chk = 255 - (((topic_id & 0xFF) + (topic_id >> 8) + byte_sum(payload)) % 256)
-    header = _HEADER.pack(SYNC, PROTOCOL_VERSION, n, length_chk, topic_id)
-    if len(_HEADERS) >= _HEADERS_MAX:
-        _HEADERS.clear()
-    _HEADERS[(topic_id, n)] = header
-    return b"".join((header, payload, _CHECKSUM_BYTE[message_chk]))
-
-
-_CHECKSUM_BYTE = [bytes((i,)) for i in range(256)]
-
-
 class FrameParser:
     """Incremental frame parser; feed it bytes in any chunking.
 
-    ``max_payload``: largest accepted length field (512 on the Spinal client, 1022 on the
-    rosserial_server side). ``frame_timeout``: None (no timeout) or the allowed time between a
-    frame's 0xFF and its last byte, in the units of ``now``.
+    ``max_payload``: largest accepted length field, an ``int >= 0`` (512 on the Spinal
+    client, 1022 on the rosserial_server side; :class:`FrameError` otherwise).
+    ``frame_timeout``: None (no timeout) or the allowed time between a frame's 0xFF and its
+    last byte, in the units of ``now``.
     """
 
     def __init__(
         self, max_payload: int, frame_timeout: float | None = None, rescan: bool = True
     ) -> None:
+        _scan(bytearray(), 0, 0, max_payload, rescan)  # FrameError for a bad max_payload
         self.max_payload = max_payload
         self.frame_timeout = frame_timeout
         self.rescan = rescan
         self.counts: Counter[str] = Counter()
-        self.native = True  # the Rust scan; False: the Python loop
         self._buf = bytearray()
         self._base = 0  # stream offset of _buf[0]
         self._started: float | None = None  # time the current candidate's 0xFF was seen
@@ -169,11 +140,8 @@ class FrameParser:
         buf = self._buf
         if not data and started is None and not buf:
             return []  # idle: nothing buffered, no timer running, nothing new
-        max_payload = self.max_payload
-        if not (self.native and max_payload.__class__ is int and max_payload >= 0):
-            return self._feed_python(data, now, raw)
         # The scan runs in Rust (rdm_core::firmware::rosserial_frame); the frame timer, the
-        # buffer, the counters and the event objects stay here, in the reference's order.
+        # buffer, the counters and the event objects stay here, in stream order.
         events: list[Any] = []
         counts = self.counts
         base = self._base
@@ -185,8 +153,8 @@ class FrameParser:
             counts["timeout"] += 1
             started = None
         buf += data
-        items, pos, frames, clean, broke, reset = _native_scan(
-            buf, pos, base, max_payload, self.rescan
+        items, pos, frames, clean, broke, reset = _scan(
+            buf, pos, base, self.max_payload, self.rescan
         )
         if clean and not events:
             if frames:
@@ -208,81 +176,6 @@ class FrameParser:
             if reset or started is None:
                 started = now
         elif reset:
-            started = None
-        del buf[:pos]
-        self._base = base + pos
-        self._started = started
-        return events
-
-    def _feed_python(self, data: bytes, now: float, raw: bool) -> list[Any]:
-        """:meth:`_feed` without the Rust scanner: a ``max_payload`` that is not a
-        non-negative int, or :attr:`native` set False."""
-        started = self._started
-        buf = self._buf
-        # Sync, version, length and its checksum, size limit, message checksum, classified
-        # as the Rust scan (rosserial_frame::next_candidate) does; the attributes in locals.
-        events: list[ParseEvent] = []
-        counts = self.counts
-        base = self._base
-        pos = 0
-        if (
-            started is not None
-            and self.frame_timeout is not None
-            and now - started > self.frame_timeout
-        ):
-            used = 1 if self.rescan else len(buf)
-            events.append(BadFrame("timeout", base, bytes(buf)))
-            counts["timeout"] += 1
-            pos = used
-            started = None
-        buf += data
-        end = len(buf)
-        max_payload = self.max_payload
-        while pos < end:
-            if buf[pos] != 0xFF:  # SYNC
-                nxt = buf.find(0xFF, pos)
-                stop = end if nxt < 0 else nxt
-                events.append(SkippedBytes(base + pos, bytes(buf[pos:stop])))
-                counts["skipped_bytes"] += stop - pos
-                pos = stop
-                continue
-            if started is None:
-                started = now
-            if end - pos < 2:
-                break
-            reason = ""
-            used = 0
-            if buf[pos + 1] != 0xFE:  # PROTOCOL_VERSION
-                reason, used = "version", 2
-            elif end - pos < 7:
-                break
-            else:
-                lo, hi = buf[pos + 2], buf[pos + 3]
-                n = lo | (hi << 8)
-                if (lo + hi + buf[pos + 4]) % 256 != 255:
-                    reason, used = "length_checksum", 5
-                elif n > max_payload:
-                    reason, used = "oversize", 5
-                elif end - pos < n + 8:  # FRAME_OVERHEAD
-                    break
-                else:
-                    used = n + 8
-                    payload = bytes(buf[pos + 7 : pos + 7 + n])
-                    lo, hi = buf[pos + 5], buf[pos + 6]  # topic id
-                    if (lo + hi + byte_sum(payload) + buf[pos + 7 + n]) % 256 == 255:
-                        if raw:
-                            events.append((lo | (hi << 8), payload, base + pos))
-                        else:
-                            events.append(_new_frame(lo | (hi << 8), payload, base + pos))
-                        counts["frames"] += 1
-                    else:
-                        reason = "message_checksum"
-            if reason:
-                events.append(BadFrame(reason, base + pos, bytes(buf[pos : pos + used])))
-                counts[reason] += 1
-                if self.rescan:
-                    used = 1
-            pos += used
             started = None
         del buf[:pos]
         self._base = base + pos
