@@ -67,6 +67,26 @@ class Robot(_rdm.Robot):
             return cls(urdf, toml)
 
     @classmethod
+    def load(cls, name_or_path: str | Path) -> Robot:
+        """A shipped robot by name (``rdm``, ``rcm``), or any robot by the path of its TOML
+        file, whose ``urdf`` key names the URDF (relative to the TOML's folder)."""
+        p = Path(name_or_path)
+        if p.suffix != ".toml":
+            return cls.shipped(str(name_or_path))
+        import tomllib
+
+        try:
+            with open(p, "rb") as f:
+                urdf = tomllib.load(f).get("urdf")
+        except OSError as exc:
+            raise DescriptionError(f"{p}: {exc.strerror or exc}") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise DescriptionError(f"{p}: not valid TOML: {exc}") from None
+        if not isinstance(urdf, str) or not urdf:
+            raise DescriptionError(f"{p}: urdf: missing (the URDF file next to the TOML)")
+        return cls.from_files(p.parent / urdf, p)
+
+    @classmethod
     def default(cls) -> Robot:
         """The paper's RDM (arm vectoring apparatus at the end of the middle link)."""
         return cls.shipped("rdm")

@@ -64,7 +64,7 @@ fn steps_do_not_allocate() {
     let k = synthesizer.last().unwrap().k;
     let gains = synthesizer.last().unwrap().gains;
     let (thrust, n) = count(|| {
-        let gyro = GyroCompensation::new(&moved.2, &moved.1)?;
+        let gyro = GyroCompensation::new(&moved.2, &moved.1, 4)?;
         flight_thrust(
             &k,
             &LqiState::from_element(0.01),

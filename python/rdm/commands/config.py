@@ -33,7 +33,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "check", help="check an onboard configuration file and print it resolved, as JSON"
     )
     check.add_argument("file", help="the TOML file (rdm onboard --config FILE)")
-    check.add_argument("--robot", default="rdm", help="shipped robot: rdm (default) or rcm")
+    check.add_argument(
+        "--robot",
+        default="rdm",
+        help="shipped robot (rdm, the default, or rcm) or the path of a robot TOML",
+    )
     sub.add_parser("example", help="print the shipped example file (every default)")
     deploy = sub.add_parser(
         "deploy",
@@ -61,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         loaded = load_onboard_file(args.file)
-        robot = Robot.shipped(args.robot)
+        robot = Robot.load(args.robot)
         config = resolve_for_robot(loaded, robot)
     except ValueError as exc:  # ConfigFileError names the file; a robot name names itself
         print(f"rdm config: {exc}", file=sys.stderr)

@@ -80,7 +80,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="Leptrino foot sensor: serial:/dev/ttyACM0@460800 | pty | none "
         "(default: ports.foot_sensor, else none)",
     )
-    parser.add_argument("--robot", default="rdm", help="shipped robot: rdm (default) or rcm")
+    parser.add_argument(
+        "--robot",
+        default="rdm",
+        help="shipped robot (rdm, the default, or rcm) or the path of a robot TOML",
+    )
     parser.add_argument(
         "--rate", type=float, default=None, help="control rate, Hz (default: rate_hz, 40)"
     )
@@ -272,7 +276,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         config = _configuration(args)
         key = _control_key(args)
-        robot = Robot.shipped(args.robot)
+        robot = Robot.load(args.robot)
         if args.config is not None:
             config = resolve_for_robot(replace(args.loaded, config=config), robot)
         uart, k = _open(args.uart, "uart")
