@@ -279,6 +279,8 @@ def run(args: argparse.Namespace) -> int:
         robot = Robot.load(args.robot)
         if args.config is not None:
             config = resolve_for_robot(replace(args.loaded, config=config), robot)
+        elif config.motor_num != robot.n_rotors:  # no file: uav_info follows the robot
+            config = replace(config, motor_num=robot.n_rotors)
         uart, k = _open(args.uart, "uart")
         links.append(uart)
         keep.append(k)
