@@ -107,7 +107,7 @@ class LqiSynthesizer:
     ) -> tuple[np.ndarray, np.ndarray | None, bytes | None, bool, bool, bool]:
         """:meth:`synthesize` (the same solve and gains) in the form the onboard tick uses:
         ``(gains, wire, payload, finite, fell_back, clamped)``. ``wire`` is
-        ``gains_to_wire_terms(gains)`` (int16, N_ROTORS x 7) and ``payload`` its
+        ``gains_to_wire_terms(gains)`` (int16, rotors x 7) and ``payload`` its
         ``spinal/RollPitchYawTerms`` bytes, both None where that raises (NaN/inf term);
         ``finite``: every gain finite; ``clamped``: a clamp scale is not 1. A result with
         ``wire`` and ``finite`` is kept for :meth:`kept_result`. The last result again
