@@ -8,10 +8,11 @@ __all__ = [
     "GRAVITY",
     "JSK_TO_PAPER",
     "LQI_STATE_NAMES",
+    "MAX_ROTORS",
     "MAX_TILT_RAD",
     "MAX_WIRE_GAIN",
-    "N_ROTORS",
     "N_VECTORING",
+    "PERCH_ROTORS",
     "AttitudeController",
     "AttitudeEstimator",
     "CanMaster",
@@ -252,7 +253,10 @@ class WrenchFilter:
 import numpy as np
 import numpy.typing as npt
 
-N_ROTORS: int
+#: Capacity of the per-rotor storage of the real-time core (a robot has 1..MAX_ROTORS).
+MAX_ROTORS: int
+#: Rotors of the perching QP.
+PERCH_ROTORS: int
 
 class CommandRejectedError(RdmError):
     """A message to the Spinal controller was rejected or ignored; names the field."""
@@ -431,6 +435,7 @@ class AttitudeController(_SpinalControllerMessages):
         battery_cells: int = 0,
         cell_voltage_range: tuple[float, float] = ...,  # default (3.0, 4.45) V per cell
         saturate_commands: bool | None = None,
+        motor_outputs: int = 4,
     ) -> _Self: ...
     def step(
         self, now_s: float, rotation: npt.NDArray[np.float64], gyro: Any, voltage: float
@@ -455,6 +460,7 @@ class SpinalStep(_SpinalControllerMessages):
         battery_cells: int = 0,
         cell_voltage_range: tuple[float, float] = ...,  # default (3.0, 4.45) V per cell
         saturate_commands: bool | None = None,
+        motor_outputs: int = 4,
         **estimator_overrides: Any,
     ) -> _Self: ...
     def step(
@@ -581,7 +587,12 @@ class LqiSynthesizer:
         r_weights: NDArray[np.float64] | None = None,
         clamp_gain: bool = True,
         kleinman_tolerance: float | None = None,
-    ) -> _Self: ...
+        rotors: int | None = None,
+    ) -> _Self:
+        """``rotors`` (1..MAX_ROTORS) fixed for the synthesizer's life; None: the length of
+        ``r_weights``, or 4 without them."""
+    @property
+    def rotors(self) -> int: ...
     def synthesize(
         self, mass: float, inertia: NDArray[np.float64], allocation: NDArray[np.float64]
     ) -> dict[str, object]:
@@ -589,8 +600,8 @@ class LqiSynthesizer:
     def synthesize_wire(
         self, mass: float, inertia: NDArray[np.float64], allocation: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.int16] | None, bytes | None, bool, bool, bool]:
-        """The same synthesis as ``synthesize`` as (gains (N_ROTORS, 4, 3), rpy/gain int16
-        terms (N_ROTORS, 7) or None, their RollPitchYawTerms payload or None, every gain
+        """The same synthesis as ``synthesize`` as (gains (rotors, 4, 3), rpy/gain int16
+        terms (rotors, 7) or None, their RollPitchYawTerms payload or None, every gain
         finite, fell_back, a clamp scale != 1). A result with terms and finite gains is kept
         (``kept_result``). GIL released while solving. While the same problem is asked
         again the same objects are returned again; the arrays are read-only."""
@@ -1295,7 +1306,8 @@ def spinal_imu_frame(
 
 def spinal_duty_list(output: SpinalStepOutput, n: int, idle: float) -> list[float] | None:
     """``[min(1.0, max(idle, d)) for d in output.duty.tolist()[:n]]``, or None when the step
-    has events or ``n`` is not in 1..N_ROTORS (the mirror's Python path then decides)."""
+    has events or ``n`` is not in 1..(the step's ESC outputs) (the mirror's Python path then
+    decides)."""
 
 def spinal_servo_states_frame(
     topic_id: int, sec: int, nsec: int, master: CanMaster

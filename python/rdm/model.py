@@ -24,6 +24,7 @@ from rdm import _rdm
 from rdm._rdm import DescriptionError, ModelError
 
 __all__ = [
+    "SHIPPED_ORIGIN",
     "VERTICAL_Q",
     "DescriptionError",
     "ModelError",
@@ -72,6 +73,16 @@ class Robot(_rdm.Robot):
             return cls(urdf, toml)
 
     @classmethod
+    def load(cls, name_or_path: str | Path) -> Robot:
+        """A shipped robot by name (``rdm``, ``rcm``), or any robot by the path of its TOML
+        file, whose ``urdf`` key names the URDF (relative to the TOML's folder); the files
+        are found as :func:`robot_source` finds them."""
+        source = robot_source(name_or_path)
+        if source.toml_origin.startswith(SHIPPED_ORIGIN):
+            return cls.shipped(source.spec)
+        return cls.from_files(source.urdf_origin, source.toml_origin)
+
+    @classmethod
     def default(cls) -> Robot:
         """The paper's RDM (arm vectoring apparatus at the end of the middle link)."""
         return cls.shipped("rdm")
@@ -91,6 +102,10 @@ class Robot(_rdm.Robot):
 
         desc = build_description(layout, arm_unit_position)
         return _rdm.Robot.from_strs(desc.urdf, desc.toml, f"{desc.name}.urdf", f"{desc.name}.toml")
+
+
+#: How a :class:`RobotSource` names a file of a shipped description (``shipped:rdm/rdm.urdf``).
+SHIPPED_ORIGIN = "shipped:"
 
 
 def sha256_text(text: str) -> str:
@@ -117,8 +132,11 @@ class RobotSource:
 
 
 def robot_source(spec: str | Path) -> RobotSource:
-    """Read a robot description: a shipped name, or the path of its TOML file with the URDF
-    beside it (same stem). DescriptionError names the robot and the missing file."""
+    """Read a robot description: a shipped name, or the path of its TOML file, whose ``urdf``
+    key names the URDF (relative to the TOML's folder). DescriptionError names the robot and
+    the missing file or key."""
+    import tomllib
+
     spec = str(spec)
     if Path(spec).suffix != ".toml":
         with shipped_robot_files(spec) as (urdf, toml):
@@ -126,17 +144,26 @@ def robot_source(spec: str | Path) -> RobotSource:
                 spec,
                 urdf.read_text(encoding="utf-8"),
                 toml.read_text(encoding="utf-8"),
-                f"shipped:{spec}/{urdf.name}",
-                f"shipped:{spec}/{toml.name}",
+                f"{SHIPPED_ORIGIN}{spec}/{urdf.name}",
+                f"{SHIPPED_ORIGIN}{spec}/{toml.name}",
             )
     toml_path = Path(spec).absolute()
-    urdf_path = toml_path.with_suffix(".urdf")
-    for path in (toml_path, urdf_path):
-        if not path.is_file():
-            raise DescriptionError(f"--robot {spec}: no file {path}")
+    if not toml_path.is_file():
+        raise DescriptionError(f"--robot {spec}: no file {toml_path}")
+    try:
+        toml_text = toml_path.read_text(encoding="utf-8")
+        urdf_name = tomllib.loads(toml_text).get("urdf")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DescriptionError(f"--robot {spec}: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise DescriptionError(f"{toml_path}: not valid TOML: {exc}") from None
+    if not isinstance(urdf_name, str) or not urdf_name:
+        raise DescriptionError(f"{toml_path}: urdf: missing (the URDF file next to the TOML)")
+    urdf_path = toml_path.parent / urdf_name
+    if not urdf_path.is_file():
+        raise DescriptionError(f"{toml_path}: urdf: no file {urdf_path}")
     try:
         urdf_text = urdf_path.read_text(encoding="utf-8")
-        toml_text = toml_path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise DescriptionError(f"--robot {spec}: {exc}") from None
     return RobotSource(spec, urdf_text, toml_text, str(urdf_path), str(toml_path))

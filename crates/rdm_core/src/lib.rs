@@ -15,10 +15,39 @@ pub mod pwm;
 pub mod qp;
 pub mod sim;
 
-/// Number of rotors the real-time controllers are built for.
+/// Capacity of the rotor storage of the real-time controllers (Spinal's `MAX_MOTOR_NUMBER`
+/// in the same role): the 200 Hz and 40 Hz steps keep fixed-size arrays and matrices of this
+/// size and use the first `rotors` entries, the count fixed when they are built
+/// ([`check_rotor_count`]). Entries past the count stay zero.
+pub const MAX_ROTORS: usize = 8;
+
+/// Rotors of the perching QP (eqs. 37-49).
 ///
-/// Assumption: the paper's RDM and its RCM comparison robot both have four rotors
-/// (two dual-rotor vectoring apparatuses), so the 200 Hz and 40 Hz steps use fixed-size
-/// matrices of this size. The model itself reads any number of rotors from the
-/// description; building a controller for a robot with another count is a setup error.
-pub const N_ROTORS: usize = 4;
+/// ASSUMPTION: the perching controller is built for the paper's RDM, four rotors on two
+/// dual-rotor vectoring apparatuses; a robot with another count flies (LQI, attitude,
+/// position control) but has no perching controller.
+pub const PERCH_ROTORS: usize = 4;
+
+/// A rotor count outside `1..=MAX_ROTORS`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RotorCountError {
+    /// The count given.
+    pub rotors: usize,
+}
+
+impl core::fmt::Display for RotorCountError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "rotor count {} is not in 1..={MAX_ROTORS}", self.rotors)
+    }
+}
+
+impl std::error::Error for RotorCountError {}
+
+/// `rotors` if it is in `1..=MAX_ROTORS`, else the typed error.
+pub fn check_rotor_count(rotors: usize) -> Result<usize, RotorCountError> {
+    if (1..=MAX_ROTORS).contains(&rotors) {
+        Ok(rotors)
+    } else {
+        Err(RotorCountError { rotors })
+    }
+}

@@ -6,7 +6,7 @@ use std::alloc::System;
 
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 
-use lqi_common::{perturb, random_robot, rng};
+use lqi_common::{perturb, random_robot, random_robot_with, rng};
 use nalgebra::{Matrix3, Vector2, Vector3};
 use rdm_core::control::lqi::{
     flight_thrust, GyroCompensation, LqiConfig, LqiState, LqiSynthesizer, PcAxisController,
@@ -28,9 +28,39 @@ fn count<T>(f: impl FnOnce() -> T) -> (T, usize) {
 // own threads would otherwise allocate while a step is being counted.
 fn main() {
     steps_do_not_allocate();
+    other_rotor_counts_do_not_allocate();
     println!(
-        "lqi_alloc: zero allocations per step (cold, warm, error path, eq. 29, PC axes, position)"
+        "lqi_alloc: zero allocations per step (cold, warm, error path, eq. 29, PC axes, position; \
+         4, 6 and 8 rotors)"
     );
+}
+
+/// Six and eight rotors (the count fixed at construction): synthesis and eq. (29) allocate
+/// nothing either.
+fn other_rotor_counts_do_not_allocate() {
+    let mut rng = rng(6);
+    for rotors in [6, 8] {
+        let robot = random_robot_with(&mut rng, rotors);
+        let moved = perturb(&mut rng, &robot, 0.02);
+        let mut synthesizer = LqiSynthesizer::new(LqiConfig::for_rotors(rotors)).unwrap();
+        for (m, i, a) in [&robot, &moved] {
+            let (result, n) = count(|| synthesizer.synthesize(*m, i, a).map(|g| g.report));
+            result.expect("synthesis");
+            assert_eq!(n, 0, "{rotors}-rotor synthesis allocated");
+        }
+        let k = synthesizer.last().unwrap().k;
+        let (thrust, n) = count(|| {
+            let gyro = GyroCompensation::new(&moved.2, &moved.1, rotors)?;
+            flight_thrust(
+                &k,
+                &LqiState::from_element(0.01),
+                &gyro,
+                &Vector3::new(0.1, -0.2, 0.3),
+            )
+        });
+        thrust.expect("eq. 29");
+        assert_eq!(n, 0, "{rotors}-rotor eq. (29) allocated");
+    }
 }
 
 fn steps_do_not_allocate() {
@@ -64,7 +94,7 @@ fn steps_do_not_allocate() {
     let k = synthesizer.last().unwrap().k;
     let gains = synthesizer.last().unwrap().gains;
     let (thrust, n) = count(|| {
-        let gyro = GyroCompensation::new(&moved.2, &moved.1)?;
+        let gyro = GyroCompensation::new(&moved.2, &moved.1, 4)?;
         flight_thrust(
             &k,
             &LqiState::from_element(0.01),

@@ -50,7 +50,7 @@ fn random_robots_give_stabilising_gains_warm_and_cold() {
 fn bad_warm_start_falls_back_to_cold() {
     let mut rng = rng(11);
     let (mass, inertia, allocation) = random_robot(&mut rng);
-    let b = rdm_core::control::lqi::augmented_input_matrix(mass, &inertia, &allocation).unwrap();
+    let b = rdm_core::control::lqi::augmented_input_matrix(mass, &inertia, &allocation, 4).unwrap();
     let a = rdm_core::control::lqi::augmented_state_matrix();
     let q = StateMatrix::from_diagonal(&SVector::from(
         rdm_core::control::lqi::LqiWeights::table_v().q,

@@ -64,13 +64,15 @@ fn voltage_guard_rejects_and_duty_never_exceeds_max() {
         .events
         .iter()
         .any(|e| *e == SpinalEvent::VoltageRejected));
-    assert!(out.duty.iter().all(|d| (0.59 - 0.01..=0.9375).contains(d)));
+    assert!(out.duty[..out.outputs]
+        .iter()
+        .all(|d| (0.59 - 0.01..=0.9375).contains(d)));
 
     let mut exact = armed(AttitudeControlConfig::firmware(200.0));
     let out = exact.step(0.0, &Matrix3::identity(), &Vector3::zeros(), 1e-300);
     assert!(exact.pwm().unwrap().voltage_factor().is_infinite());
-    assert_eq!(out.duty, [0.59; 4]); // min_duty = convert(min_thrust) = inf -> min_pwm
+    assert_eq!(out.duty[..4], [0.59; 4]); // min_duty = convert(min_thrust) = inf -> min_pwm
     let out = exact.step(0.6, &Matrix3::identity(), &Vector3::zeros(), 1.75);
-    assert_eq!(out.duty, [0.9375; 4]); // min_duty capped at max_pwm
-    assert_eq!(out.pwm_report, [1875; 4]);
+    assert_eq!(out.duty[..4], [0.9375; 4]); // min_duty capped at max_pwm
+    assert_eq!(out.pwm_report[..4], [1875; 4]);
 }

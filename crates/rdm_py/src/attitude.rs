@@ -61,17 +61,17 @@ impl ControlOutput {
     /// Target thrust per rotor, N.
     #[getter]
     fn thrust<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_slice(py, &self.inner.thrust)
+        PyArray1::from_slice(py, &self.inner.thrust[..self.inner.outputs])
     }
     /// Duty per rotor (0.5 = stopped).
     #[getter]
     fn duty<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_slice(py, &self.inner.duty)
+        PyArray1::from_slice(py, &self.inner.duty[..self.inner.outputs])
     }
     /// `motor_pwms` values (duty x 2000).
     #[getter]
     fn pwm_report<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u16>> {
-        PyArray1::from_slice(py, &self.inner.pwm_report)
+        PyArray1::from_slice(py, &self.inner.pwm_report[..self.inner.outputs])
     }
     /// Base-thrust saturation factor alpha.
     #[getter]
@@ -131,12 +131,12 @@ impl SpinalStepOutput {
     /// Duty per rotor.
     #[getter]
     fn duty<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_slice(py, &self.inner.control.duty)
+        PyArray1::from_slice(py, &self.inner.control.duty[..self.inner.control.outputs])
     }
     /// Thrust per rotor, N.
     #[getter]
     fn thrust<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_slice(py, &self.inner.control.thrust)
+        PyArray1::from_slice(py, &self.inner.control.thrust[..self.inner.control.outputs])
     }
     /// Estimated roll, pitch, yaw (body, ZYX), rad.
     #[getter]
@@ -229,9 +229,9 @@ macro_rules! controller_pymethods {
                 self.ctrl().four_axis_command(angles, &base_thrust, now_s).map_err(rejected)
             }
 
-            /// `rpy/gain` from a gain set of shape (N_ROTORS, 4, 3).
+            /// `rpy/gain` from a gain set of shape (motor_number, 4, 3).
             fn set_gains(&mut self, gains: PyReadonlyArray3<'_, f64>) -> PyResult<()> {
-                let set = wire::gain_set(&gains)?;
+                let (set, _) = wire::gain_set(&gains)?;
                 self.ctrl().set_gains(&set).map_err(rejected)
             }
 
@@ -297,7 +297,7 @@ macro_rules! controller_pymethods {
             /// Base thrust per rotor, N.
             #[getter]
             fn base_thrust<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-                PyArray1::from_slice(py, &self.ctrl_ref().base_thrust())
+                PyArray1::from_slice(py, &self.ctrl_ref().base_thrust()[..self.ctrl_ref().config().motor_outputs])
             }
             /// Roll/pitch error integrals, rad s.
             #[getter]
@@ -312,12 +312,13 @@ macro_rules! controller_pymethods {
             /// Rotor with the largest positive yaw d gain, or None.
             #[getter]
             fn max_yaw_index(&self) -> Option<usize> { self.ctrl_ref().max_yaw_index() }
-            /// Per-rotor thrust gains Spinal applies, shape (3, N_ROTORS, 3): P, I, D x
+            /// Per-rotor thrust gains Spinal applies, shape (3, motor_outputs * 3): P, I, D x
             /// rotor x axis (roll, pitch, yaw).
             #[getter]
             fn thrust_gains<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
                 let (p, i, d) = self.ctrl_ref().thrust_gains();
-                let rows: Vec<Vec<f64>> = [p, i, d].iter().map(|g| g.iter().flatten().copied().collect()).collect();
+                let n = self.ctrl_ref().config().motor_outputs;
+                let rows: Vec<Vec<f64>> = [p, i, d].iter().map(|g| g[..n].iter().flatten().copied().collect()).collect();
                 Ok(PyArray2::from_vec2(py, &rows)?)
             }
             /// (min_duty, max_duty, voltage_factor, reference_index), or None before motor_info.
@@ -377,7 +378,7 @@ controller_pymethods!(PyAttitudeController, {
                         integral_limit = 1.0, command_timeout_s = 0.5, max_tilt_rad = 1.0,
                         force_landing_rate = 2.5, voltage_guard = None, battery_cells = 0,
                         cell_voltage_range = (rdm_core::pwm::CELL_MIN_V, rdm_core::pwm::CELL_MAX_V),
-                        saturate_commands = None))]
+                        saturate_commands = None, motor_outputs = 4))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         rate_hz: f64,
@@ -391,6 +392,7 @@ controller_pymethods!(PyAttitudeController, {
         battery_cells: u32,
         cell_voltage_range: (f64, f64),
         saturate_commands: Option<bool>,
+        motor_outputs: usize,
     ) -> PyResult<Self> {
         let config = control_config(&ControlOptions {
             rate_hz,
@@ -404,6 +406,7 @@ controller_pymethods!(PyAttitudeController, {
             battery_cells,
             cell_voltage_range,
             saturate_commands,
+            motor_outputs,
         })?;
         let inner = AttitudeController::new(config)
             .map_err(|f| RdmError::new_err(format!("{f}: out of range")))?;
@@ -484,7 +487,7 @@ controller_pymethods!(PySpinalStep, {
                         max_tilt_rad = 1.0, force_landing_rate = 2.5, voltage_guard = None,
                         battery_cells = 0,
                         cell_voltage_range = (rdm_core::pwm::CELL_MIN_V, rdm_core::pwm::CELL_MAX_V),
-                        saturate_commands = None, **estimator_overrides))]
+                        saturate_commands = None, motor_outputs = 4, **estimator_overrides))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         rate_hz: f64,
@@ -499,6 +502,7 @@ controller_pymethods!(PySpinalStep, {
         battery_cells: u32,
         cell_voltage_range: (f64, f64),
         saturate_commands: Option<bool>,
+        motor_outputs: usize,
         estimator_overrides: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let config = SpinalConfig {
@@ -520,6 +524,7 @@ controller_pymethods!(PySpinalStep, {
                 battery_cells,
                 cell_voltage_range,
                 saturate_commands,
+                motor_outputs,
             })?,
         };
         let inner =
@@ -574,7 +579,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
         "CommandRejectedError",
         m.py().get_type::<CommandRejectedError>(),
     )?;
-    m.add("N_ROTORS", rdm_core::N_ROTORS)?;
+    m.add("MAX_ROTORS", rdm_core::MAX_ROTORS)?;
     m.add_class::<PyAttitudeController>()?;
     m.add_class::<PySpinalStep>()?;
     m.add_class::<ControlOutput>()?;

@@ -18,7 +18,7 @@ use rdm_core::control::perch::{PerchController, PerchParams, PerchStatus};
 use rdm_core::control::position::{PositionController, PositionGains, PositionInput, N_VECTORING};
 use rdm_core::estimate::{EstimatorConfig, ImuSample};
 use rdm_core::pwm::PwmInfo;
-use rdm_core::N_ROTORS;
+use rdm_core::{check_rotor_count, MAX_ROTORS, PERCH_ROTORS};
 
 use crate::errors::RdmError;
 
@@ -75,15 +75,16 @@ fn matrix_rows_to_py<'py, const C: usize>(py: Python<'py>, v: &[[f64; C]]) -> Bo
 }
 
 /// An armed, integrating Spinal step configured like the Python `SpinalStep` would be by
-/// `set_uav_info(4, 16)`, `set_pwm_info_hydrus_example()`, `set_gains`,
+/// `set_uav_info(rotors, 16)`, `set_pwm_info_hydrus_example()`, `set_gains`,
 /// `set_pinv_inertia`, `flight_config(0)`, `flight_config(160)`.
 fn armed_spinal(
     rate_hz: f64,
     gyro_calib_duration_s: f64,
     gains: &GainSet,
-    pinv: &[[f64; 3]; N_ROTORS],
+    pinv: &[[f64; 3]],
     inertia: [f64; 6],
 ) -> PyResult<SpinalStep> {
+    let rotors = pinv.len();
     let config = SpinalConfig {
         estimator: EstimatorConfig {
             gyro_calib_duration_s,
@@ -91,13 +92,15 @@ fn armed_spinal(
         },
         control: AttitudeControlConfig {
             rate_hz,
+            motor_outputs: rotors,
             ..AttitudeControlConfig::default()
         },
     };
     let mut spinal = SpinalStep::new(config).map_err(|f| bad(format!("{f}: out of range")))?;
     let c = spinal.controller_mut();
     let rejected = |e: rdm_core::control::attitude::CommandError| bad(e.to_string());
-    c.set_uav_info(N_ROTORS as u8, 16).map_err(rejected)?;
+    let motor_num = u8::try_from(rotors).map_err(|_| bad(format!("{rotors} rotors")))?;
+    c.set_uav_info(motor_num, 16).map_err(rejected)?;
     c.set_pwm_info(PwmInfo::hydrus_example())
         .map_err(rejected)?;
     c.set_gains(gains).map_err(rejected)?;
@@ -107,15 +110,27 @@ fn armed_spinal(
     Ok(spinal)
 }
 
-fn gain_set(a: &PyReadonlyArray3<'_, f64>) -> PyResult<GainSet> {
-    crate::gains::gain_set_from_view(a.as_array().into_dyn())
+fn gain_set(a: &PyReadonlyArray3<'_, f64>) -> PyResult<(GainSet, usize)> {
+    crate::gains::gain_set_from_view(a.as_array().into_dyn(), None)
+}
+
+/// The first `rotors` entries of each row, as an (n, rotors) array.
+fn rotor_rows_to_py<'py>(
+    py: Python<'py>,
+    v: &[[f64; MAX_ROTORS]],
+    rotors: usize,
+) -> Bound<'py, PyAny> {
+    Array2::from_shape_fn((v.len(), rotors), |(k, j)| v[k][j])
+        .into_pyarray(py)
+        .into_any()
 }
 
 /// Times `SpinalStep::step` (estimator + attitude control + PWM) once per row of the
 /// inputs. Every `command_every` steps (before the step, untimed) a `four_axis_command`
-/// with `command_angles` / `command_base_thrust` is sent, as the PC does. Returns a dict
-/// `ns` (n,), `duty` (n, 4), `thrust` (n, 4), `euler` (n, 3), `invalid` (count of steps
-/// whose status was `invalid_input`).
+/// with `command_angles` / `command_base_thrust` is sent, as the PC does. The rotor count is
+/// the rows of `gains` (rotors, 4, 3); `pinv` and `command_base_thrust` have as many.
+/// Returns a dict `ns` (n,), `duty` (n, rotors), `thrust` (n, rotors), `euler` (n, 3),
+/// `invalid` (count of steps whose status was `invalid_input`).
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
 #[pyo3(signature = (gains, pinv, inertia, now, gyro, acc, mag, voltage, command_every,
@@ -133,29 +148,29 @@ fn time_spinal_steps<'py>(
     voltage: f64,
     command_every: usize,
     command_angles: [f64; 3],
-    command_base_thrust: [f64; N_ROTORS],
+    command_base_thrust: Vec<f64>,
     rate_hz: f64,
     gyro_calib_duration_s: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let (gains, rotors) = gain_set(&gains)?;
+    if command_base_thrust.len() != rotors {
+        return Err(bad(format!(
+            "`command_base_thrust` must have {rotors} values (the rows of `gains`), got {}",
+            command_base_thrust.len()
+        )));
+    }
     let now: Vec<f64> = now.as_array().to_vec();
     let n = now.len();
     let gyro = rows::<3>("gyro", &gyro, n)?;
     let acc = rows::<3>("acc", &acc, n)?;
     let mag = rows::<3>("mag", &mag, n)?;
-    let pinv_rows = rows::<3>("pinv", &pinv, N_ROTORS)?;
-    let pinv: [[f64; 3]; N_ROTORS] = std::array::from_fn(|i| pinv_rows[i]);
+    let pinv = rows::<3>("pinv", &pinv, rotors)?;
     let every = command_every.max(1);
-    let mut spinal = armed_spinal(
-        rate_hz,
-        gyro_calib_duration_s,
-        &gain_set(&gains)?,
-        &pinv,
-        inertia,
-    )?;
+    let mut spinal = armed_spinal(rate_hz, gyro_calib_duration_s, &gains, &pinv, inertia)?;
     let (ns, duty, thrust, euler, invalid) = py.detach(move || {
         let mut ns = vec![0i64; n];
-        let mut duty = vec![[0.0; N_ROTORS]; n];
-        let mut thrust = vec![[0.0; N_ROTORS]; n];
+        let mut duty = vec![[0.0; MAX_ROTORS]; n];
+        let mut thrust = vec![[0.0; MAX_ROTORS]; n];
         let mut euler = vec![[0.0; 3]; n];
         let mut invalid = 0usize;
         for k in 0..n {
@@ -187,8 +202,8 @@ fn time_spinal_steps<'py>(
     });
     let d = PyDict::new(py);
     d.set_item("ns", ns.into_pyarray(py))?;
-    d.set_item("duty", matrix_rows_to_py(py, &duty))?;
-    d.set_item("thrust", matrix_rows_to_py(py, &thrust))?;
+    d.set_item("duty", rotor_rows_to_py(py, &duty, rotors))?;
+    d.set_item("thrust", rotor_rows_to_py(py, &thrust, rotors))?;
     d.set_item("euler", matrix_rows_to_py(py, &euler))?;
     d.set_item("invalid", invalid)?;
     Ok(d)
@@ -198,7 +213,8 @@ fn time_spinal_steps<'py>(
 /// configurations `(masses[k], inertias[k], allocations[k])`. `warm`: one synthesizer
 /// for the whole sequence (Kleinman from the previous configuration's gains, as at
 /// 40 Hz); otherwise the warm start is forgotten (untimed) before every call. Returns a
-/// dict `ns` (n,), `k` (n, N_ROTORS, 12; NaN where synthesis failed), `failures`,
+/// dict `ns` (n,), `k` (n, rotors, 12; NaN where synthesis failed; rotors: the last axis
+/// of `allocations` (n, 4, rotors)), `failures`,
 /// `fell_back` (warm starts that fell back to the cold method).
 #[pyfunction]
 #[pyo3(signature = (masses, inertias, allocations, warm=true))]
@@ -212,9 +228,20 @@ fn time_lqi_synthesis<'py>(
     let masses: Vec<f64> = masses.as_array().to_vec();
     let n = masses.len();
     let inertias = blocks::<3, 3>("inertias", &inertias, n)?;
-    let allocations = blocks::<4, N_ROTORS>("allocations", &allocations, n)?;
-    let mut synth = LqiSynthesizer::new(LqiConfig::default()).map_err(|e| bad(e.to_string()))?;
-    type Gain = SMatrix<f64, N_ROTORS, 12>;
+    let view = allocations.as_array();
+    let rotors = view.shape()[2];
+    if view.shape()[..2] != [n, 4] || check_rotor_count(rotors).is_err() {
+        return Err(bad(format!(
+            "`allocations` must have shape ({n}, 4, 1..={MAX_ROTORS}), got {:?}",
+            view.shape()
+        )));
+    }
+    let allocations: Vec<SMatrix<f64, 4, MAX_ROTORS>> = (0..n)
+        .map(|k| SMatrix::from_fn(|i, j| if j < rotors { view[[k, i, j]] } else { 0.0 }))
+        .collect();
+    let mut synth =
+        LqiSynthesizer::new(LqiConfig::for_rotors(rotors)).map_err(|e| bad(e.to_string()))?;
+    type Gain = SMatrix<f64, MAX_ROTORS, 12>;
     let (ns, ks, failures, fell_back) = py.detach(move || {
         let mut ns = vec![0i64; n];
         let mut ks: Vec<Gain> = vec![Gain::from_element(f64::NAN); n];
@@ -241,7 +268,7 @@ fn time_lqi_synthesis<'py>(
         }
         (ns, ks, failures, fell_back)
     });
-    let k_array = Array3::from_shape_fn((n, N_ROTORS, 12), |(k, i, j)| ks[k][(i, j)]);
+    let k_array = Array3::from_shape_fn((n, rotors, 12), |(k, i, j)| ks[k][(i, j)]);
     let d = PyDict::new(py);
     d.set_item("ns", ns.into_pyarray(py))?;
     d.set_item("k", k_array.into_pyarray(py))?;
@@ -283,7 +310,7 @@ fn time_onboard_ticks<'py>(
     foot_allocation: PyReadonlyArray3<'py, f64>,
     allocation: PyReadonlyArray3<'py, f64>,
     mass: f64,
-    initial_thrust: [f64; N_ROTORS],
+    initial_thrust: [f64; PERCH_ROTORS],
     rate_hz: f64,
     cutoff_hz: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -328,7 +355,7 @@ fn time_onboard_ticks<'py>(
     perch.reset(initial_thrust);
     struct TickOutput {
         ns: i64,
-        thrust: [f64; N_ROTORS],
+        thrust: [f64; PERCH_ROTORS],
         status: u8,
         alpha: [f64; N_VECTORING],
         beta: [f64; N_VECTORING],
@@ -382,7 +409,7 @@ fn time_onboard_ticks<'py>(
         "ns",
         Array1::from_iter(out.iter().map(|o| o.ns)).into_pyarray(py),
     )?;
-    let thrust: Vec<[f64; N_ROTORS]> = out.iter().map(|o| o.thrust).collect();
+    let thrust: Vec<[f64; PERCH_ROTORS]> = out.iter().map(|o| o.thrust).collect();
     d.set_item("thrust", matrix_rows_to_py(py, &thrust))?;
     d.set_item(
         "status",

@@ -13,10 +13,10 @@ use pyo3::types::PyTuple;
 
 use rdm_core::control::lqi::{PcAxisErrors, RotorVector};
 use rdm_core::control::position::{PositionInput, N_VECTORING};
-use rdm_core::N_ROTORS;
+use rdm_core::MAX_ROTORS;
 
 use crate::gains::gain_set_from_view;
-use crate::lqi::{lqi_error, vector_to_py, PcAxisController};
+use crate::lqi::{head_to_py, lqi_error, PcAxisController};
 use crate::position::{position_error, PositionController};
 
 /// What one call returns: roll and pitch targets, the yaw term, alpha, beta and applied per
@@ -53,20 +53,21 @@ fn unit_joints(value: &Bound<'_, PyAny>) -> Option<([(usize, usize); N_VECTORING
     Some((pairs, n))
 }
 
-/// The first `N` values of a float64 vector of exactly `len` values; None for anything else.
+/// The values of a float64 vector of exactly `len` (<= `N`) values, zeros after them; None
+/// for anything else.
 fn head<const N: usize>(value: &Bound<'_, PyAny>, len: usize) -> Option<[f64; N]> {
     let view = readonly::<Ix1>(value)?;
     let v = view.as_array();
-    if v.len() != len {
+    if v.len() != len || len > N {
         return None;
     }
-    Some(std::array::from_fn(|i| v[i]))
+    Some(std::array::from_fn(|i| if i < len { v[i] } else { 0.0 }))
 }
 
 /// `ControlPipeline.step`'s flight part (see the module docs). `held`: perched (the
 /// horizontal loop at zero error, the z loop at zero error). Returns None, having changed
 /// nothing, when an input is not of the form this path reads (float64 vectors of 3 values,
-/// (N_VECTORING, 3, 3) rotations, N_ROTORS feed-forward, (N_ROTORS, 4, 3) gains, a float64
+/// (N_VECTORING, 3, 3) rotations, (rotors, 4, 3) gains and as many feed-forward, a float64
 /// joint vector): the caller then runs the plain form, which converts or raises as before.
 /// Errors of the controllers themselves are raised as the plain form raises them.
 #[pyfunction]
@@ -124,9 +125,6 @@ fn flight_axes<'py>(
         return Ok(None);
     };
     let vectoring_joints = &joint_pairs[..n];
-    let Some(ff) = head::<N_ROTORS>(feed_forward, N_ROTORS) else {
-        return Ok(None);
-    };
     let Some(rotations) = readonly::<Ix3>(link_rotations) else {
         return Ok(None);
     };
@@ -137,7 +135,10 @@ fn flight_axes<'py>(
     let Some(gains) = readonly::<IxDyn>(gains) else {
         return Ok(None);
     };
-    let Ok(gains) = gain_set_from_view(gains.as_array()) else {
+    let Ok((gains, rotors)) = gain_set_from_view(gains.as_array(), None) else {
+        return Ok(None);
+    };
+    let Some(ff) = head::<MAX_ROTORS>(feed_forward, rotors) else {
         return Ok(None);
     };
     let Some(targets) = readonly::<Ix1>(joint_targets) else {
@@ -231,7 +232,7 @@ fn flight_axes<'py>(
         PyTuple::new(py, &beta[..n])?,
         PyTuple::new(py, &applied[..n])?,
         singular,
-        vector_to_py(py, &command.base_thrust),
+        head_to_py(py, &command.base_thrust, rotors),
         command.yaw_rotor,
     )))
 }

@@ -26,6 +26,7 @@ mod plate_contact;
 mod position;
 mod qp;
 mod rosserial;
+mod rotor_arrays;
 mod rotor_plant;
 mod sensor_sim;
 mod servo_goals;

@@ -20,7 +20,11 @@ use rdm_core::control::riccati::{
     CareConfig, CareError, CareMethod, CareReport, CareSolver, GainMatrix, InputMatrix,
     InputWeight, StateMatrix, N_STATE,
 };
-use rdm_core::N_ROTORS;
+use rdm_core::{check_rotor_count, MAX_ROTORS};
+
+pub(crate) use crate::rotor_arrays::{
+    block_to_py, head_to_py, to_rotor_columns, to_rotor_rows, to_rotor_vector,
+};
 
 use crate::errors::RdmError;
 
@@ -118,16 +122,23 @@ fn report_dict<'py>(py: Python<'py>, report: &CareReport) -> PyResult<Bound<'py,
     Ok(d)
 }
 
-/// Gain set as an (N_ROTORS, 4, 3) array: axes (roll, pitch, yaw, z), columns (P, I, D).
-pub(crate) fn gain_set_to_py<'py>(py: Python<'py>, set: &GainSet) -> Bound<'py, PyAny> {
-    crate::gains::gain_set_to_array(py, set).into_any()
+/// Gain set as a (rotors, 4, 3) array: axes (roll, pitch, yaw, z), columns (P, I, D).
+pub(crate) fn gain_set_to_py<'py>(
+    py: Python<'py>,
+    set: &GainSet,
+    rotors: usize,
+) -> Bound<'py, PyAny> {
+    crate::gains::gain_set_to_array(py, set, rotors).into_any()
 }
 
-fn gain_set_from_py(array: &PyReadonlyArrayDyn<'_, f64>) -> PyResult<GainSet> {
-    crate::gains::gain_set_from_view(array.as_array())
+fn gain_set_from_py(
+    array: &PyReadonlyArrayDyn<'_, f64>,
+    rotors: Option<usize>,
+) -> PyResult<(GainSet, usize)> {
+    crate::gains::gain_set_from_view(array.as_array(), rotors)
 }
 
-/// Solves the 12-state, N_ROTORS-input CARE. With `k0`, Kleinman warm start from `k0`
+/// Solves the 12-state CARE with m inputs (m in 1..=MAX_ROTORS, the columns of `b`). With `k0`, Kleinman warm start from `k0`
 /// (`u = k0 x`) with the cold sign-function method as fallback; otherwise cold.
 /// Returns `(P, K, report)` with `K = -R⁻¹BᵀP`.
 #[pyfunction]
@@ -141,10 +152,24 @@ fn solve_care<'py>(
     k0: Option<PyReadonlyArray2<'py, f64>>,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyDict>)> {
     let a: StateMatrix = to_matrix(&a, "a")?;
-    let b: InputMatrix = to_matrix(&b, "b")?;
+    let (b, m): (InputMatrix, usize) = to_rotor_columns(&b, "b", None)?;
     let q: StateMatrix = to_matrix(&q, "q")?;
-    let r: InputWeight = to_matrix(&r, "r")?;
-    let k0: Option<GainMatrix> = k0.map(|k| to_matrix(&k, "k0")).transpose()?;
+    let r_view = r.as_array();
+    if r_view.shape() != [m, m] {
+        return Err(RdmError::new_err(format!(
+            "`r` must have shape ({m}, {m}) (the columns of `b`), got {:?}",
+            r_view.shape()
+        )));
+    }
+    // The inputs past m: unit weight on a zero column of B (they change neither P nor K).
+    let r = InputWeight::from_fn(|i, j| match (i < m && j < m, i == j) {
+        (true, _) => r_view[[i, j]],
+        (false, true) => 1.0,
+        (false, false) => 0.0,
+    });
+    let k0: Option<GainMatrix> = k0
+        .map(|k| to_rotor_rows(&k, "k0", Some(m)).map(|(k, _)| k))
+        .transpose()?;
     let (result, p, k) = py.detach(move || {
         let mut solver = CareSolver::new(CareConfig::default());
         let result = match k0 {
@@ -156,7 +181,7 @@ fn solve_care<'py>(
     let report = result.map_err(care_error)?;
     Ok((
         matrix_to_py(py, &p),
-        matrix_to_py(py, &k),
+        block_to_py(py, &k, m, N_STATE),
         report_dict(py, &report)?,
     ))
 }
@@ -170,16 +195,16 @@ fn augmented_system<'py>(
     allocation: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
     let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
-    let allocation: Allocation = to_matrix(&allocation, "allocation")?;
-    let b = core_lqi::augmented_input_matrix(mass, &inertia, &allocation).map_err(lqi_error)?;
+    let (allocation, n): (Allocation, usize) = to_rotor_columns(&allocation, "allocation", None)?;
+    let b = core_lqi::augmented_input_matrix(mass, &inertia, &allocation, n).map_err(lqi_error)?;
     Ok((
         matrix_to_py(py, &core_lqi::augmented_state_matrix()),
-        matrix_to_py(py, &b),
+        block_to_py(py, &b, N_STATE, n),
     ))
 }
 
-/// The sec. 4 mapping of K (N_ROTORS x 12) onto the gain set, optionally with `clampGain`.
-/// Returns the (N_ROTORS, 4, 3) gain array (axes roll, pitch, yaw, z; P, I, D).
+/// The sec. 4 mapping of K (rotors x 12) onto the gain set, optionally with `clampGain`.
+/// Returns the (rotors, 4, 3) gain array (axes roll, pitch, yaw, z; P, I, D).
 #[pyfunction]
 #[pyo3(signature = (k, clamp=true))]
 fn gain_set_from_k<'py>(
@@ -187,19 +212,23 @@ fn gain_set_from_k<'py>(
     k: PyReadonlyArray2<'py, f64>,
     clamp: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let k: GainMatrix = to_matrix(&k, "k")?;
+    let (k, n): (GainMatrix, usize) = to_rotor_rows(&k, "k", None)?;
     let mut set = core_lqi::gain_set_from_k(&k);
     if clamp {
         core_lqi::clamp_gain(&mut set);
     }
-    Ok(gain_set_to_py(py, &set))
+    Ok(gain_set_to_py(py, &set, n))
 }
 
-fn gyro_dict<'py>(py: Python<'py>, gyro: &GyroCompensation) -> PyResult<Bound<'py, PyDict>> {
+fn gyro_dict<'py>(
+    py: Python<'py>,
+    gyro: &GyroCompensation,
+    rotors: usize,
+) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
-    d.set_item("pinv_roll", vector_to_py(py, &gyro.pinv_roll))?;
-    d.set_item("pinv_pitch", vector_to_py(py, &gyro.pinv_pitch))?;
-    d.set_item("pinv_yaw", vector_to_py(py, &gyro.pinv_yaw))?;
+    d.set_item("pinv_roll", head_to_py(py, &gyro.pinv_roll, rotors))?;
+    d.set_item("pinv_pitch", head_to_py(py, &gyro.pinv_pitch, rotors))?;
+    d.set_item("pinv_yaw", head_to_py(py, &gyro.pinv_yaw, rotors))?;
     d.set_item("inertia", matrix_to_py(py, &gyro.inertia))?;
     let (pseudo, rank) = match gyro.inverse {
         AllocationInverse::Exact => (false, 4),
@@ -217,10 +246,10 @@ fn gyro_compensation<'py>(
     allocation: PyReadonlyArray2<'py, f64>,
     inertia: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let allocation: Allocation = to_matrix(&allocation, "allocation")?;
+    let (allocation, n): (Allocation, usize) = to_rotor_columns(&allocation, "allocation", None)?;
     let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
-    let gyro = GyroCompensation::new(&allocation, &inertia).map_err(lqi_error)?;
-    gyro_dict(py, &gyro)
+    let gyro = GyroCompensation::new(&allocation, &inertia, n).map_err(lqi_error)?;
+    gyro_dict(py, &gyro, n)
 }
 
 /// Eq. (29): `λ_flight = K x̄ + Q̄⁻¹[0; ω×Iω]`; returns (thrust, gyro-compensation dict).
@@ -233,9 +262,9 @@ fn flight_thrust<'py>(
     inertia: PyReadonlyArray2<'py, f64>,
     omega: PyReadonlyArray1<'py, f64>,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
-    let k: GainMatrix = to_matrix(&k, "k")?;
+    let (allocation, n): (Allocation, usize) = to_rotor_columns(&allocation, "allocation", None)?;
+    let (k, _): (GainMatrix, usize) = to_rotor_rows(&k, "k", Some(n))?;
     let state: LqiState = to_vector::<N_STATE>(&state, "state")?;
-    let allocation: Allocation = to_matrix(&allocation, "allocation")?;
     let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
     let omega: Vector3<f64> = to_vector::<3>(&omega, "omega")?;
     if k.iter().any(|v| !v.is_finite()) {
@@ -243,9 +272,9 @@ fn flight_thrust<'py>(
             "invalid argument `k`: not finite",
         ));
     }
-    let gyro = GyroCompensation::new(&allocation, &inertia).map_err(lqi_error)?;
+    let gyro = GyroCompensation::new(&allocation, &inertia, n).map_err(lqi_error)?;
     let thrust = core_lqi::flight_thrust(&k, &state, &gyro, &omega).map_err(lqi_error)?;
-    Ok((vector_to_py(py, &thrust), gyro_dict(py, &gyro)?))
+    Ok((head_to_py(py, &thrust, n), gyro_dict(py, &gyro, n)?))
 }
 
 /// Stateful LQI gain synthesizer (warm-starts from its previous solution).
@@ -283,12 +312,12 @@ fn gain_set_finite(set: &GainSet) -> bool {
     })
 }
 
-fn gains_dict<'py>(py: Python<'py>, g: &LqiGains) -> PyResult<Bound<'py, PyDict>> {
+fn gains_dict<'py>(py: Python<'py>, g: &LqiGains, rotors: usize) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
-    d.set_item("k", matrix_to_py(py, &g.k))?;
+    d.set_item("k", block_to_py(py, &g.k, rotors, N_STATE))?;
     d.set_item("p", matrix_to_py(py, &g.p))?;
-    d.set_item("b", matrix_to_py(py, &g.b))?;
-    d.set_item("gains", gain_set_to_py(py, &g.gains))?;
+    d.set_item("b", block_to_py(py, &g.b, N_STATE, rotors))?;
+    d.set_item("gains", gain_set_to_py(py, &g.gains, rotors))?;
     let s = &g.clamp_scales;
     d.set_item(
         "clamp_scales",
@@ -300,17 +329,25 @@ fn gains_dict<'py>(py: Python<'py>, g: &LqiGains) -> PyResult<Bound<'py, PyDict>
 
 #[pymethods]
 impl LqiSynthesizer {
+    /// `rotors`: the rotor count (1..=MAX_ROTORS), fixed for the synthesizer's life; None:
+    /// the length of `r_weights`, or 4 (the paper's RDM) without them.
     #[new]
-    #[pyo3(signature = (q_weights=None, r_weights=None, clamp_gain=true, kleinman_tolerance=None))]
+    #[pyo3(signature = (q_weights=None, r_weights=None, clamp_gain=true, kleinman_tolerance=None, rotors=None))]
     fn new(
         q_weights: Option<PyReadonlyArray1<'_, f64>>,
         r_weights: Option<PyReadonlyArray1<'_, f64>>,
         clamp_gain: bool,
         kleinman_tolerance: Option<f64>,
+        rotors: Option<usize>,
     ) -> PyResult<Self> {
+        let rotors = rotors
+            .or_else(|| r_weights.as_ref().map(|w| w.as_array().len()))
+            .unwrap_or(4);
+        check_rotor_count(rotors)
+            .map_err(|e| LqiSynthesisError::new_err(format!("invalid argument `rotors`: {e}")))?;
         let mut config = LqiConfig {
             clamp_gain,
-            ..LqiConfig::default()
+            ..LqiConfig::for_rotors(rotors)
         };
         let defaults = LqiWeights::table_v();
         let q = match q_weights {
@@ -318,7 +355,7 @@ impl LqiSynthesizer {
             None => defaults.q,
         };
         let r = match r_weights {
-            Some(w) => to_vector::<N_ROTORS>(&w, "r_weights")?.into(),
+            Some(w) => to_rotor_vector(&w, "r_weights", rotors)?.into(),
             None => defaults.r,
         };
         config.weights = LqiWeights { q, r };
@@ -338,7 +375,13 @@ impl LqiSynthesizer {
         })
     }
 
-    /// Synthesizes gains for (mass, inertia 3x3, allocation 4xN_ROTORS). GIL released.
+    /// The rotor count fixed at construction.
+    #[getter]
+    fn rotors(&self) -> usize {
+        self.inner.config().rotors
+    }
+
+    /// Synthesizes gains for (mass, inertia 3x3, allocation 4 x rotors). GIL released.
     fn synthesize<'py>(
         &mut self,
         py: Python<'py>,
@@ -347,7 +390,9 @@ impl LqiSynthesizer {
         allocation: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
-        let allocation: Allocation = to_matrix(&allocation, "allocation")?;
+        let rotors = self.inner.config().rotors;
+        let (allocation, _): (Allocation, usize) =
+            to_rotor_columns(&allocation, "allocation", Some(rotors))?;
         let changes_before = self.inner.changes();
         let inner = &mut self.inner;
         let result = py.detach(move || inner.synthesize(mass, &inertia, &allocation).copied());
@@ -355,13 +400,13 @@ impl LqiSynthesizer {
             // solved, another kept solution or failed: the wire objects kept are not its own
             self.last_wire = None;
         }
-        gains_dict(py, &result.map_err(lqi_error)?)
+        gains_dict(py, &result.map_err(lqi_error)?, rotors)
     }
 
     /// The synthesis of `synthesize` (same solver, same result) in the form the onboard
     /// control tick uses, without the dict of matrices: returns `(gains, wire, payload,
-    /// finite, fell_back, clamped)` with `gains` the (N_ROTORS, 4, 3) gain array, `wire`
-    /// the `rpy/gain` int16 (N_ROTORS, 7) terms of `gains_to_wire_terms(gains)` and
+    /// finite, fell_back, clamped)` with `gains` the (rotors, 4, 3) gain array, `wire`
+    /// the `rpy/gain` int16 (rotors, 7) terms of `gains_to_wire_terms(gains)` and
     /// `payload` their `spinal/RollPitchYawTerms` bytes (uint32 count, then the int16 terms
     /// little-endian), both None when a term does not convert (NaN/inf); `finite`: every
     /// gain is finite; `fell_back` as in the report; `clamped`: a `clamp_scales` factor is
@@ -383,7 +428,9 @@ impl LqiSynthesizer {
         bool,
     )> {
         let inertia: Matrix3<f64> = to_matrix(&inertia, "inertia")?;
-        let allocation: Allocation = to_matrix(&allocation, "allocation")?;
+        let rotors = self.inner.config().rotors;
+        let (allocation, _): (Allocation, usize) =
+            to_rotor_columns(&allocation, "allocation", Some(rotors))?;
         let changes_before = self.inner.changes();
         let inner = &mut self.inner;
         let result = py.detach(move || inner.synthesize(mass, &inertia, &allocation).copied());
@@ -407,7 +454,7 @@ impl LqiSynthesizer {
                 ));
             }
         }
-        let gains = gain_set_to_py(py, &result.gains);
+        let gains = gain_set_to_py(py, &result.gains, rotors);
         // Handed out again while the solution is reused: read-only, so no caller can change
         // what the next call returns.
         read_only(&gains)?;
@@ -419,19 +466,22 @@ impl LqiSynthesizer {
         let fell_back = result.report.fell_back;
         let (wire, payload) = match gains_to_wire(&result.gains) {
             Ok(terms) => {
-                let mut flat = [0i16; N_ROTORS * 7];
-                let mut bytes = [0u8; 4 + N_ROTORS * 7 * 2];
-                bytes[..4].copy_from_slice(&(N_ROTORS as u32).to_le_bytes());
-                for (r, term) in terms.iter().enumerate() {
+                let mut flat = [0i16; MAX_ROTORS * 7];
+                let mut bytes = [0u8; 4 + MAX_ROTORS * 7 * 2];
+                bytes[..4].copy_from_slice(&(rotors as u32).to_le_bytes());
+                for (r, term) in terms.iter().enumerate().take(rotors) {
                     for (c, v) in term.to_array().into_iter().enumerate() {
                         let at = r * 7 + c;
                         flat[at] = v;
                         bytes[4 + 2 * at..6 + 2 * at].copy_from_slice(&v.to_le_bytes());
                     }
                 }
-                let wire = PyArray1::from_slice(py, &flat).reshape([N_ROTORS, 7])?;
+                let wire = PyArray1::from_slice(py, &flat[..rotors * 7]).reshape([rotors, 7])?;
                 read_only(wire.as_any())?;
-                (Some(wire.into_any()), Some(PyBytes::new(py, &bytes)))
+                (
+                    Some(wire.into_any()),
+                    Some(PyBytes::new(py, &bytes[..4 + rotors * 7 * 2])),
+                )
             }
             Err(_) => (None, None),
         };
@@ -452,7 +502,11 @@ impl LqiSynthesizer {
     /// The dict `synthesize` returns, for the last result `synthesize_wire` kept (None
     /// before one).
     fn kept_result<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        self.kept.as_ref().map(|g| gains_dict(py, g)).transpose()
+        let rotors = self.inner.config().rotors;
+        self.kept
+            .as_ref()
+            .map(|g| gains_dict(py, g, rotors))
+            .transpose()
     }
 
     /// Forgets the warm start.
@@ -489,7 +543,8 @@ impl PcAxisController {
         }
     }
 
-    /// One step; returns (base_thrust, yaw_command, yaw_rotor or None).
+    /// One step for the rotors of `gains` (rotors, 4, 3) and `feed_forward` (rotors,);
+    /// returns (base_thrust, yaw_command, yaw_rotor or None).
     #[allow(clippy::too_many_arguments)]
     #[pyo3(signature = (gains, z_error, z_rate_error, yaw_error, feed_forward, dt))]
     fn step<'py>(
@@ -502,8 +557,8 @@ impl PcAxisController {
         feed_forward: PyReadonlyArray1<'py, f64>,
         dt: f64,
     ) -> PyResult<(Bound<'py, PyAny>, f64, Option<usize>)> {
-        let gains = gain_set_from_py(&gains)?;
-        let feed_forward: RotorVector = to_vector::<N_ROTORS>(&feed_forward, "feed_forward")?;
+        let (gains, n) = gain_set_from_py(&gains, None)?;
+        let feed_forward: RotorVector = to_rotor_vector(&feed_forward, "feed_forward", n)?;
         let errors = PcAxisErrors {
             z: z_error,
             z_rate: z_rate_error,
@@ -514,7 +569,7 @@ impl PcAxisController {
             .step(&gains, &errors, &feed_forward, dt)
             .map_err(lqi_error)?;
         Ok((
-            vector_to_py(py, &command.base_thrust),
+            head_to_py(py, &command.base_thrust, n),
             command.yaw_command,
             command.yaw_rotor,
         ))

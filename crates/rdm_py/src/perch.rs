@@ -9,7 +9,7 @@ use rdm_core::control::perch::{
     PerchController as CoreController, PerchInput, PerchParams, PerchQp as CoreQp, PerchSolution,
     PerchSolver, PerchStatus, WrenchFilter as CoreFilter, N_ROWS, N_VARS, N_ZERO_ROWS,
 };
-use rdm_core::N_ROTORS;
+use rdm_core::PERCH_ROTORS;
 
 use crate::errors::RdmError;
 
@@ -200,8 +200,8 @@ fn problem_dict<'py>(py: Python<'py>, qp: &CoreQp) -> PyResult<Bound<'py, PyDict
 fn optional_thrust(
     name: &str,
     a: Option<PyReadonlyArray1<'_, f64>>,
-) -> PyResult<Option<[f64; N_ROTORS]>> {
-    a.map(|a| vector::<N_ROTORS>(name, &a)).transpose()
+) -> PyResult<Option<[f64; PERCH_ROTORS]>> {
+    a.map(|a| vector::<PERCH_ROTORS>(name, &a)).transpose()
 }
 
 /// The perching QP of eq. (49) with every input explicit (no filter, no memory).
@@ -239,7 +239,7 @@ impl PyPerchQp {
             allocation: matrix4("allocation", &allocation)?,
             mass,
             foot_wrench: vector::<6>("foot_wrench", &foot_wrench)?,
-            previous_thrust: vector::<N_ROTORS>("previous_thrust", &previous_thrust)?,
+            previous_thrust: vector::<PERCH_ROTORS>("previous_thrust", &previous_thrust)?,
             previous_foot_wrench: vector::<4>("previous_foot_wrench", &previous_foot_wrench)?,
             flight_thrust: optional_thrust("flight_thrust", flight_thrust)?,
         };
@@ -305,7 +305,7 @@ impl PyPerchController {
     /// Start a perching phase from `thrust` (zeros if omitted); the filter restarts.
     #[pyo3(signature = (thrust=None))]
     fn reset(&mut self, thrust: Option<PyReadonlyArray1<'_, f64>>) -> PyResult<()> {
-        let thrust = optional_thrust("thrust", thrust)?.unwrap_or([0.0; N_ROTORS]);
+        let thrust = optional_thrust("thrust", thrust)?.unwrap_or([0.0; PERCH_ROTORS]);
         self.inner.reset(thrust);
         Ok(())
     }
@@ -380,6 +380,7 @@ impl PyWrenchFilter {
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("PerchError", m.py().get_type::<PerchError>())?;
+    m.add("PERCH_ROTORS", PERCH_ROTORS)?;
     m.add_class::<PyPerchQp>()?;
     m.add_class::<PyPerchController>()?;
     m.add_class::<PyWrenchFilter>()?;

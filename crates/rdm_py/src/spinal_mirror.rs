@@ -11,7 +11,6 @@ use rdm_core::firmware::rosserial_frame::{
     client_stamp, imu_frame, servo_states_frame_len, write_servo_states_frame, ImuValues,
     ServoStateValues,
 };
-use rdm_core::N_ROTORS;
 
 use crate::attitude::SpinalStepOutput;
 use crate::can_master::CanMaster;
@@ -93,7 +92,7 @@ fn spinal_imu_frame<'py>(
 /// The duty list of a control step as `SpinalMirror._step` builds it for `n` motors:
 /// `[min(1.0, max(idle, d)) for d in output.duty.tolist()[:n]]` (Python's `max`/`min`
 /// comparisons, so NaN gives `idle`), or None when the step has events (the Python path
-/// handles them first), `n` is not in 1..=N_ROTORS or `output` is not a
+/// handles them first), `n` is not in 1..=(the step's ESC outputs) or `output` is not a
 /// `SpinalStepOutput`.
 #[pyfunction]
 fn spinal_duty_list<'py>(
@@ -109,7 +108,7 @@ fn spinal_duty_list<'py>(
         return Ok(None);
     };
     let control = &out.get().inner.control;
-    if n == 0 || n > N_ROTORS || !control.events.is_empty() || control.events.dropped() > 0 {
+    if n == 0 || n > control.outputs || !control.events.is_empty() || control.events.dropped() > 0 {
         return Ok(None);
     }
     let list = PyList::empty(py);

@@ -36,8 +36,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     check.add_argument(
         "--robot",
         default="rdm",
-        help="shipped robot (rdm, the default, or rcm) or the path of a description's TOML "
-        "file with its URDF beside it",
+        help="shipped robot (rdm, the default, or rcm) or the path of a robot TOML (its urdf "
+        "key names the URDF beside it)",
     )
     sub.add_parser("example", help="print the shipped example file (every default)")
     deploy = sub.add_parser(

@@ -88,8 +88,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--robot",
         default="rdm",
-        help="shipped robot (rdm, the default, or rcm) or the path of a description's TOML "
-        "file with its URDF beside it",
+        help="shipped robot (rdm, the default, or rcm) or the path of a robot TOML (its urdf "
+        "key names the URDF beside it)",
     )
     parser.add_argument(
         "--rate", type=float, default=None, help="control rate, Hz (default: rate_hz, 40)"
@@ -286,6 +286,8 @@ def run(args: argparse.Namespace) -> int:
         robot = source.robot()
         if args.config is not None:
             config = resolve_for_robot(replace(args.loaded, config=config), robot)
+        elif config.motor_num != robot.n_rotors:  # no file: uav_info follows the robot
+            config = replace(config, motor_num=robot.n_rotors)
         uart, k = _open(args.uart, "uart")
         links.append(uart)
         keep.append(k)

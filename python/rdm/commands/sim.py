@@ -71,6 +71,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "folder is refused); symbolic links in it are removed, never followed",
     )
     parser.add_argument(
+        "--robot",
+        default=None,
+        help="hover only: the robot, a shipped name or the path of a robot TOML (any rotor "
+        "count 1..8; docs/onboard.md)",
+    )
+    parser.add_argument(
         "--fault",
         default=None,
         help="mission only: inject one fault once the robot hovers (heartbeat-loss, "
@@ -207,6 +213,18 @@ def _run(args: argparse.Namespace) -> int:
             )
             return 2
         extra["fault"] = args.fault
+    if args.robot is not None:
+        from rdm.model import Robot
+
+        if sc.name != "hover":
+            print("rdm sim: --robot is for the hover scenario", file=sys.stderr)
+            return 2
+        try:  # a clear error now, not a traceback from the stack builder
+            Robot.load(args.robot)
+        except ValueError as exc:
+            print(f"rdm sim: --robot {args.robot!r}: {exc}", file=sys.stderr)
+            return 2
+        extra["robot"] = args.robot
     if args.quick:
         from rdm.scenarios.mission import QUICK_DURATION
 

@@ -6,8 +6,10 @@
   state machine (ARM_ON/OFF, FORCE_LANDING, 500 ms command timeout, 1 rad tilt limit).
 * :class:`SpinalStep` chains the attitude estimator and the controller: the Spinal mirror's
   200 Hz step.
-* Gain sets are float arrays of shape ``(N_ROTORS, 4, 3)`` (rotor, axis roll/pitch/yaw/z,
-  term P/I/D); their ``rpy/gain`` wire form is int16 ``(N_ROTORS, 7)`` x 1000.
+* Gain sets are float arrays of shape ``(rotors, 4, 3)`` (rotor, axis roll/pitch/yaw/z,
+  term P/I/D); their ``rpy/gain`` wire form is int16 ``(rotors, 7)`` x 1000. The rotor
+  count is the robot's, at most ``MAX_ROTORS`` (8); a controller drives ``motor_outputs``
+  ESCs (its per-rotor outputs have that length).
 
 Every method takes the caller's timestamp; nothing reads a clock. Rejected messages raise
 :class:`CommandRejectedError` (a :class:`rdm._rdm.RdmError`) and are counted. Guards the
@@ -21,7 +23,7 @@ See ``docs/spinal.md``.
 from __future__ import annotations
 
 from rdm._rdm import (
-    N_ROTORS,
+    MAX_ROTORS,
     AttitudeController,
     CommandRejectedError,
     ControlOutput,
@@ -51,7 +53,7 @@ __all__ = [
     "FORCE_LANDING",
     "INTEGRATION_CONTROL_OFF",
     "INTEGRATION_CONTROL_ON",
-    "N_ROTORS",
+    "MAX_ROTORS",
     "UAV_DRAGON",
     "UAV_DRONE",
     "UAV_HYDRUS",

@@ -5,7 +5,7 @@ State order (JSK ``lqi_mode`` 4)::
     x = [z, z_dot, roll, roll_dot, pitch, pitch_dot, yaw, yaw_dot, int_z, int_roll,
          int_pitch, int_yaw]
 
-Gain arrays have shape ``(N_ROTORS, 4, 3)``: axes ``(roll, pitch, yaw, z)``, terms
+Gain arrays have shape ``(rotors, 4, 3)``: axes ``(roll, pitch, yaw, z)``, terms
 ``(P, I, D)``. Weights default to the paper's Table V (see docs/lqi.md).
 """
 
@@ -80,13 +80,21 @@ class LqiSynthesizer:
         r_weights: np.ndarray | None = None,
         clamp_gain: bool = True,
         kleinman_tolerance: float | None = None,
+        rotors: int | None = None,
     ) -> None:
+        """``rotors``: the rotor count (1..8), fixed for this synthesizer; None: the length
+        of ``r_weights``, or 4 (the paper's RDM) without them."""
         q = None if q_weights is None else np.ascontiguousarray(q_weights, dtype=float)
         r = None if r_weights is None else np.ascontiguousarray(r_weights, dtype=float)
-        self._core = _rdm.LqiSynthesizer(q, r, clamp_gain, kleinman_tolerance)
+        self._core = _rdm.LqiSynthesizer(q, r, clamp_gain, kleinman_tolerance, rotors)
+
+    @property
+    def rotors(self) -> int:
+        """The rotor count fixed at construction."""
+        return int(self._core.rotors)
 
     def synthesize(self, mass: float, inertia: np.ndarray, allocation: np.ndarray) -> LqiResult:
-        """Gains for mass [kg], inertia (3x3, CoG frame) and allocation Q_bar (4 x N_ROTORS)."""
+        """Gains for mass [kg], inertia (3x3, CoG frame) and allocation Q_bar (4 x rotors)."""
         out = self._core.synthesize(
             float(mass),
             np.ascontiguousarray(inertia, dtype=float),
@@ -99,7 +107,7 @@ class LqiSynthesizer:
     ) -> tuple[np.ndarray, np.ndarray | None, bytes | None, bool, bool, bool]:
         """:meth:`synthesize` (the same solve and gains) in the form the onboard tick uses:
         ``(gains, wire, payload, finite, fell_back, clamped)``. ``wire`` is
-        ``gains_to_wire_terms(gains)`` (int16, N_ROTORS x 7) and ``payload`` its
+        ``gains_to_wire_terms(gains)`` (int16, rotors x 7) and ``payload`` its
         ``spinal/RollPitchYawTerms`` bytes, both None where that raises (NaN/inf term);
         ``finite``: every gain finite; ``clamped``: a clamp scale is not 1. A result with
         ``wire`` and ``finite`` is kept for :meth:`kept_result`. The last result again

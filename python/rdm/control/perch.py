@@ -16,11 +16,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from rdm._rdm import PERCH_ROTORS, PerchError, WrenchFilter
 from rdm._rdm import PerchController as _Controller
-from rdm._rdm import PerchError, WrenchFilter
 from rdm._rdm import PerchQp as _Qp
 
 __all__ = [
+    "PERCH_ROTORS",
     "PerchController",
     "PerchError",
     "PerchProblem",

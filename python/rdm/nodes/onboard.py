@@ -294,6 +294,11 @@ class OnboardNode(OnboardOperator, OnboardReceive, OnboardStep, OnboardSend):
         """The last accepted mocap sample ``(position, velocity, yaw)`` (None before one)."""
         return self._mocap
 
+    @property
+    def servo_states_at(self) -> float | None:
+        """When Spinal's last ``servo/states`` arrived (None before the first)."""
+        return self._servo_at
+
     # ---------------------------------------------------------------------- diagnostics
     @property
     def state(self) -> FlightState:

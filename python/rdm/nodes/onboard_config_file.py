@@ -308,6 +308,7 @@ def _check_consumers(reader: _Reader, config: OnboardConfig) -> None:
     """The checks of the parts the configuration feeds (robot-independent)."""
     import numpy as np
 
+    from rdm.control.attitude import MAX_ROTORS
     from rdm.control.lqi import LqiSynthesizer
     from rdm.control.perch import PerchController
     from rdm.pwm import PwmConverter
@@ -315,8 +316,10 @@ def _check_consumers(reader: _Reader, config: OnboardConfig) -> None:
     if config.uav_model not in UAV_MODELS.values():
         models = ", ".join(f"{k} {v}" for k, v in UAV_MODELS.items())
         raise reader.fail("uav_model", f"{config.uav_model} is not one of {models}")
-    if not 1 <= config.motor_num <= 255:
-        raise reader.fail("motor_num", f"{config.motor_num} is not in 1..255 (uint8, > 0)")
+    if not 1 <= config.motor_num <= MAX_ROTORS:
+        raise reader.fail(
+            "motor_num", f"{config.motor_num} is not in 1..{MAX_ROTORS} (the rotors the core holds)"
+        )
     p = config.pwm_info
     for i, row in enumerate(p.motor_info):
         if len(row) != len(MOTOR_INFO_COLUMNS):
@@ -344,6 +347,7 @@ def _check_consumers(reader: _Reader, config: OnboardConfig) -> None:
                 None if config.lqi_q_weights is None else np.array(config.lqi_q_weights),
                 None if config.lqi_r_weights is None else np.array(config.lqi_r_weights),
                 clamp_gain=True,
+                rotors=config.motor_num,
             ),
         ),
         (

@@ -24,7 +24,7 @@ import numpy as np
 
 from rdm import _rdm
 from rdm.control.lqi import LqiSynthesizer, PcAxisController, gyro_compensation
-from rdm.control.perch import PerchController, PerchResult
+from rdm.control.perch import PERCH_ROTORS, PerchController, PerchResult
 from rdm.control.position import PositionController
 from rdm.nodes.onboard_config import OnboardConfig
 
@@ -227,13 +227,20 @@ class ControlPipeline:
             None if config.lqi_q_weights is None else np.array(config.lqi_q_weights),
             None if config.lqi_r_weights is None else np.array(config.lqi_r_weights),
             clamp_gain=True,
+            rotors=robot.n_rotors,
         )
         self.position = PositionController(**config.position_gains)
         self.pc_axes = PcAxisController()
-        # λ_rotor_max of eq. (47) defaults to the robot's rotor limit (assumption)
-        perch_params = {"rotor_thrust_max": list(self.thrust_max), **config.perch_params}
-        self.perch = PerchController(config.rate_hz, config.perch_cutoff_hz, **perch_params)
-        self._delta_perch = np.asarray(self.perch.params()["thrust_rate_limit"], dtype=float)
+        #: The perching QP is built for PERCH_ROTORS rotors (ASSUMPTION, docs/onboard.md): a
+        #: robot with another count flies without it and its perch requests are refused.
+        self.perch: PerchController | None = None
+        if robot.n_rotors == PERCH_ROTORS:
+            # λ_rotor_max of eq. (47) defaults to the robot's rotor limit (assumption)
+            perch_params = {"rotor_thrust_max": list(self.thrust_max), **config.perch_params}
+            self.perch = PerchController(config.rate_hz, config.perch_cutoff_hz, **perch_params)
+            self._delta_perch = np.asarray(self.perch.params()["thrust_rate_limit"], dtype=float)
+        else:
+            self._delta_perch = np.ones(robot.n_rotors)
         # with every rate limit > 0, max(x - limit, 0) of an all-(+0.0) array is all +0.0 again
         self._delta_positive = bool(self._delta_perch.size == robot.n_rotors) and all(
             v > 0.0 and math.isfinite(v) for v in self._delta_perch.tolist()
@@ -422,6 +429,11 @@ class ControlPipeline:
 
     # -- 3-5. one control step -------------------------------------------------------------
     def set_perching(self, on: bool) -> None:
+        """Enter (``on``) or leave the perching mode; without a perching controller (a robot
+        of another rotor count than PERCH_ROTORS) entering is refused and counted."""
+        if on and self.perch is None:
+            self.counts["perch_unavailable"] += 1
+            return
         if on and not self.perching:
             self.perch.reset(np.zeros(self.robot.n_rotors))
             self.position.reset()  # the horizontal loop is held while perched (see step)
@@ -465,7 +477,7 @@ class ControlPipeline:
             self.counts["vectoring_singular"] += axes[6]
         roll, pitch, yaw_term, alpha, beta, applied, _, flight, yaw_rotor = axes
         result = None
-        if self.perching:
+        if self.perching and self.perch is not None:
             w = foot_wrench if foot_wrench is not None else np.full(6, np.nan)
             if foot_wrench is None:
                 self.counts["perch_no_foot_sample"] += 1

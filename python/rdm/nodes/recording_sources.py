@@ -18,13 +18,12 @@ import os
 from pathlib import Path
 from typing import Any
 
-from rdm.model import RobotSource, sha256_text, shipped_robot_files
+from rdm.model import SHIPPED_ORIGIN, RobotSource, sha256_text, shipped_robot_files
 from rdm.output_files import open_output
 
 ROBOT_URDF = "robot.urdf"
 ROBOT_TOML = "robot.toml"
 CONFIG_TOML = "config.toml"
-SHIPPED = "shipped:"
 
 
 class SourceError(ValueError):
@@ -65,8 +64,8 @@ def store_sources(root: Path, files: dict[str, tuple[str, str]]) -> dict[str, An
 def _current_text(origin: str) -> str | None:
     """The text at ``origin`` today (None: gone or unreadable)."""
     try:
-        if origin.startswith(SHIPPED):
-            name, _, file = origin[len(SHIPPED) :].partition("/")
+        if origin.startswith(SHIPPED_ORIGIN):
+            name, _, file = origin[len(SHIPPED_ORIGIN) :].partition("/")
             with shipped_robot_files(name) as (urdf, toml):
                 path = urdf if file.endswith(".urdf") else toml
                 return path.read_text(encoding="utf-8")
@@ -86,7 +85,7 @@ def origin_note(name: str, entry: dict[str, Any]) -> str | None:
     sha = sha256_text(now)
     if sha == entry["sha256"]:
         return None
-    what = "differs in this package version" if origin.startswith(SHIPPED) else "was edited"
+    what = "differs in this package version" if origin.startswith(SHIPPED_ORIGIN) else "was edited"
     return (
         f"{origin} {what} since the recording (sha256 {entry['sha256'][:12]} recorded, "
         f"{sha[:12]} now); the recorded copy {name} is used"

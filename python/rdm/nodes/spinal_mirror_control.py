@@ -12,7 +12,7 @@ import math
 from typing import Any
 
 from rdm._rdm import spinal_duty_list as _duty_list
-from rdm.control.attitude import N_ROTORS
+from rdm.control.attitude import MAX_ROTORS
 from rdm.nodes.can_master import IDLE_DUTY
 from rdm.protocol.rosserial import constants as C
 
@@ -103,7 +103,7 @@ class SpinalControl:
         n = self.master.motor_number
         if self.pwm_test is not None:
             duties = (self.pwm_test + [IDLE_DUTY] * n)[:n]
-        elif n and n == self.core.motor_number and n <= N_ROTORS:
+        elif n and n == self.core.motor_number and n <= MAX_ROTORS:
             # tolist: the same Python floats as float() of each element, in one call
             duties = [min(1.0, max(IDLE_DUTY, d)) for d in out.duty.tolist()[:n]]
         else:

@@ -122,6 +122,9 @@ class StackOptions:
     """Everything the stack builder takes (defaults: the documented simulated robot)."""
 
     seed: int = 0
+    #: The robot: a shipped name or the path of a robot TOML. Its rotor count sets the
+    #: onboard node's ``motor_num`` and Spinal's ESC outputs; its description the plant's.
+    robot: str = "rdm"
     uart: str = "inproc"  # or "pty"
     ceiling_height: float | None = 1.6
     floor_height: float | None = 0.0
@@ -256,7 +259,7 @@ def make_plant(opt: StackOptions) -> tuple[Plant, np.ndarray]:
     """The MuJoCo plant of the options, reset to ``q0`` at ``base_position``; returns it and q0
     (shared by the lockstep stack and the ``rdm hil`` robot process)."""
     plant = Plant(
-        "rdm",
+        opt.robot,
         seed=opt.seed,
         ceiling_height=opt.ceiling_height,
         floor_height=opt.floor_height,
@@ -395,6 +398,7 @@ def _wire(
         boot_delay_ms=opt.boot_delay_ms,
         gyro_calib_duration_s=opt.gyro_calib_duration_s,
         time_matched=opt.spinal_time_matched,
+        motor_outputs=len(plant.description.rotors),
         **spinal_flash_calibration(opt),
     )
     opened.append(spinal.close)
@@ -403,11 +407,13 @@ def _wire(
 
     if config.initial_q is None:
         config = replace(config, initial_q=tuple(q0.tolist()))
+    if config.motor_num != len(plant.description.rotors):
+        config = replace(config, motor_num=len(plant.description.rotors))
     external = opt.uart == "external"
     onboard: Any = (
         ExternalOnboard(config, s_host.port.port, f_host.port.port)
         if external
-        else OnboardNode(onboard_link, f_host, config=config)
+        else OnboardNode(onboard_link, f_host, robot=_onboard_robot(opt.robot), config=config)
     )
     opened.append(onboard.close)
     recorder = None
@@ -495,6 +501,15 @@ def _wire(
         *([recorder.close] if recorder is not None else []),
     ]
     return stack
+
+
+def _onboard_robot(robot: str) -> Any:
+    """The onboard node's model of ``robot`` (None: its default, the shipped RDM)."""
+    if robot == "rdm":
+        return None
+    from rdm.model import Robot
+
+    return Robot.load(robot)
 
 
 class StatusNode:

@@ -1,7 +1,7 @@
 //! The gain set that links the PC-side LQI synthesis to the Spinal-side attitude step
 //! (`jsk-wire-protocols.md` sec. 3.4 and 4).
 
-use crate::N_ROTORS;
+use crate::MAX_ROTORS;
 
 /// Proportional, integral and derivative gain of one axis.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -23,5 +23,5 @@ pub struct RotorGains {
     pub z: PidGains,
 }
 
-/// One [`RotorGains`] per rotor, in rotor order.
-pub type GainSet = [RotorGains; N_ROTORS];
+/// One [`RotorGains`] per rotor, in rotor order; entries past the rotor count are zero.
+pub type GainSet = [RotorGains; MAX_ROTORS];

@@ -13,10 +13,11 @@
 
 use nalgebra::{Matrix3, Vector2, Vector3};
 
-use crate::N_ROTORS;
-
-/// Number of vectoring apparatuses (two rotors each).
-pub const N_VECTORING: usize = N_ROTORS / 2;
+/// Number of vectoring apparatuses.
+///
+/// ASSUMPTION: the robot has two vectoring apparatuses (the RDM's foot and arm units), each
+/// carrying any number of rotors.
+pub const N_VECTORING: usize = 2;
 
 /// Standard gravity [m/s²] (assumption: the paper's g).
 pub const GRAVITY: f64 = 9.80665;

@@ -6,7 +6,6 @@ use nalgebra::{Matrix3, Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rdm_core::control::lqi::Allocation;
-use rdm_core::N_ROTORS;
 
 /// Thrust-to-drag-moment ratio c of eq. (9) (typical small propeller).
 pub const DRAG_RATIO: f64 = 0.016;
@@ -15,9 +14,17 @@ pub fn rng(seed: u64) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(seed)
 }
 
-/// Mass, inertia and allocation of a random rotor layout: rotors within 0.8 m of the
-/// CoG, thrust axes tilted up to 0.3 rad, alternating spin (eqs. 8-9).
+/// Rotors of [`random_robot`] (the paper's RDM count).
+pub const ROTORS: usize = 4;
+
+/// Mass, inertia and allocation of a random four-rotor layout ([`random_robot_with`]).
 pub fn random_robot(rng: &mut ChaCha8Rng) -> (f64, Matrix3<f64>, Allocation) {
+    random_robot_with(rng, ROTORS)
+}
+
+/// Mass, inertia and allocation of a random layout of `rotors` rotors: within 0.8 m of the
+/// CoG, thrust axes tilted up to 0.3 rad, alternating spin (eqs. 8-9).
+pub fn random_robot_with(rng: &mut ChaCha8Rng, rotors: usize) -> (f64, Matrix3<f64>, Allocation) {
     let mass = rng.random_range(1.5..8.0);
     let principal = Vector3::new(
         rng.random_range(0.02..0.3),
@@ -31,9 +38,8 @@ pub fn random_robot(rng: &mut ChaCha8Rng) -> (f64, Matrix3<f64>, Allocation) {
     );
     let inertia = rotation * Matrix3::from_diagonal(&principal) * rotation.transpose();
     let mut allocation = Allocation::zeros();
-    for i in 0..N_ROTORS {
-        let angle =
-            i as f64 * std::f64::consts::TAU / N_ROTORS as f64 + rng.random_range(-0.4..0.4);
+    for i in 0..rotors {
+        let angle = i as f64 * std::f64::consts::TAU / rotors as f64 + rng.random_range(-0.4..0.4);
         let radius = rng.random_range(0.2..0.8);
         let p = Vector3::new(
             radius * angle.cos(),

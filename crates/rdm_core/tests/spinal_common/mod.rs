@@ -23,5 +23,9 @@ pub fn example_gains() -> GainSet {
         },
         z: PidGains::default(),
     };
-    [rotor; 4]
+    let mut set = GainSet::default();
+    for g in set.iter_mut().take(4) {
+        *g = rotor;
+    }
+    set
 }

@@ -22,6 +22,7 @@ pub(crate) struct ControlOptions {
     pub battery_cells: u32,
     pub cell_voltage_range: (f64, f64),
     pub saturate_commands: Option<bool>,
+    pub motor_outputs: usize,
 }
 
 /// A checked controller configuration from the keyword options.
@@ -49,12 +50,14 @@ pub(crate) fn control_config(o: &ControlOptions) -> PyResult<AttitudeControlConf
             VoltageGuard::Off
         },
         saturate_commands: o.saturate_commands.unwrap_or(guarded),
+        motor_outputs: o.motor_outputs,
     };
     config.validate().map_err(|field| {
         let field = match field {
             "voltage_guard.cells" => "battery_cells (0..=24)",
             "voltage_guard.min_cell_v" => "cell_voltage_range[0] (> 0)",
             "voltage_guard.max_cell_v" => "cell_voltage_range[1] (> cell_voltage_range[0])",
+            "motor_outputs" => "motor_outputs (1..=MAX_ROTORS = 8)",
             other => other,
         };
         RdmError::new_err(format!("{field}: out of range"))

@@ -1,7 +1,7 @@
 //! Bindings of `rdm_core::control::attitude::wire`: gain sets <-> `rpy/gain` int16 x 1000.
 //!
-//! A gain set in Python is a float array of shape (N_ROTORS, 4, 3): rotor, axis (roll,
-//! pitch, yaw, z), term (P, I, D). The wire form is an int16 array of shape (N_ROTORS, 7):
+//! A gain set in Python is a float array of shape (rotors, 4, 3): rotor, axis (roll,
+//! pitch, yaw, z), term (P, I, D). The wire form is an int16 array of shape (rotors, 7):
 //! roll_p, roll_i, roll_d, pitch_p, pitch_i, pitch_d, yaw_d.
 
 use numpy::{
@@ -12,21 +12,22 @@ use rdm_core::control::attitude::wire::{
     clamp_gain, gains_from_wire, gains_to_wire, RollPitchYawTermWire,
 };
 use rdm_core::control::gains::GainSet;
-use rdm_core::N_ROTORS;
+use rdm_core::MAX_ROTORS;
 
 use crate::errors::RdmError;
 
-/// A (N_ROTORS, 4, 3) array into a gain set.
-pub(crate) fn gain_set(gains: &PyReadonlyArray3<'_, f64>) -> PyResult<GainSet> {
-    crate::gains::gain_set_from_view(gains.as_array().into_dyn())
+/// A (rotors, 4, 3) array into a gain set and its rotor count (1..=MAX_ROTORS).
+pub(crate) fn gain_set(gains: &PyReadonlyArray3<'_, f64>) -> PyResult<(GainSet, usize)> {
+    crate::gains::gain_set_from_view(gains.as_array().into_dyn(), None)
 }
 
-/// A gain set into a (N_ROTORS, 4, 3) array.
+/// The first `rotors` entries of a gain set as a (rotors, 4, 3) array.
 pub(crate) fn gain_array<'py>(
     py: Python<'py>,
     set: &GainSet,
+    rotors: usize,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    Ok(crate::gains::gain_set_to_array(py, set))
+    Ok(crate::gains::gain_set_to_array(py, set, rotors))
 }
 
 /// Rows of 7 integers (a list of tuples) into wire terms; the same checks and messages as
@@ -64,30 +65,33 @@ pub(crate) fn wire_terms(terms: &PyReadonlyArray2<'_, i64>) -> PyResult<Vec<Roll
     Ok(out)
 }
 
-/// Gain set (N_ROTORS, 4, 3) -> `rpy/gain` int16 (N_ROTORS, 7): x1000, truncated toward
+/// Gain set (rotors, 4, 3) -> `rpy/gain` int16 (rotors, 7): x1000, truncated toward
 /// zero, saturated to int16. Raises on NaN/inf naming the gain.
 #[pyfunction]
 fn gains_to_wire_terms<'py>(
     py: Python<'py>,
     gains: PyReadonlyArray3<'py, f64>,
 ) -> PyResult<Bound<'py, numpy::PyArray2<i16>>> {
-    let set = gain_set(&gains)?;
+    let (set, n) = gain_set(&gains)?;
     let wire = gains_to_wire(&set).map_err(|e| RdmError::new_err(format!("gains.{e}")))?;
-    let flat: Vec<i16> = wire.iter().flat_map(|w| w.to_array()).collect();
-    PyArray1::from_vec(py, flat).reshape([N_ROTORS, 7])
+    let flat: Vec<i16> = wire.iter().take(n).flat_map(|w| w.to_array()).collect();
+    PyArray1::from_vec(py, flat).reshape([n, 7])
 }
 
-/// `rpy/gain` int16 (N_ROTORS, 7) -> the gain set Spinal applies (x 0.001; yaw P/I and z 0).
+/// `rpy/gain` int16 (rotors, 7) -> the gain set Spinal applies (x 0.001; yaw P/I and z 0).
 #[pyfunction]
 fn gains_from_wire_terms<'py>(
     py: Python<'py>,
     terms: PyReadonlyArray2<'py, i64>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let terms = wire_terms(&terms)?;
-    let fixed: [RollPitchYawTermWire; N_ROTORS] = terms
-        .try_into()
-        .map_err(|_| RdmError::new_err(format!("terms: need {N_ROTORS} rows")))?;
-    gain_array(py, &gains_from_wire(&fixed))
+    if !(1..=MAX_ROTORS).contains(&terms.len()) {
+        return Err(RdmError::new_err(format!(
+            "terms: need 1..={MAX_ROTORS} rows (one per rotor), got {}",
+            terms.len()
+        )));
+    }
+    gain_array(py, &gains_from_wire(&terms), terms.len())
 }
 
 /// PC-side `clampGain`: returns (scaled gain set, whether anything was scaled).
@@ -96,9 +100,9 @@ fn py_clamp_gain<'py>(
     py: Python<'py>,
     gains: PyReadonlyArray3<'py, f64>,
 ) -> PyResult<(Bound<'py, PyArray3<f64>>, bool)> {
-    let mut set = gain_set(&gains)?;
+    let (mut set, n) = gain_set(&gains)?;
     let scaled = clamp_gain(&mut set);
-    Ok((gain_array(py, &set)?, scaled))
+    Ok((gain_array(py, &set, n)?, scaled))
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -41,6 +41,10 @@ pub struct AttitudeControlConfig {
     /// term into `[-command_thrust_max, command_thrust_max]` (the largest reference
     /// `max_thrust` times the rotor divider); default true, false is firmware-exact.
     pub saturate_commands: bool,
+    /// ESC outputs the board drives (1..=[`crate::MAX_ROTORS`]): the length of every
+    /// per-rotor output, and the largest `uav_info.motor_num` accepted. ASSUMPTION: 4 by
+    /// default, the paper's RDM; a robot description with another rotor count sets its own.
+    pub motor_outputs: usize,
 }
 
 impl Default for AttitudeControlConfig {
@@ -53,6 +57,7 @@ impl Default for AttitudeControlConfig {
             force_landing_rate: FIRMWARE_FORCE_LANDING_STEP * 1000.0,
             voltage_guard: VoltageGuard::default(),
             saturate_commands: true,
+            motor_outputs: 4,
         }
     }
 }
@@ -75,6 +80,9 @@ impl AttitudeControlConfig {
     pub fn validate(&self) -> Result<(), &'static str> {
         if !(self.rate_hz.is_finite() && self.rate_hz > 0.0 && self.rate_hz <= 10_000.0) {
             return Err("rate_hz");
+        }
+        if crate::check_rotor_count(self.motor_outputs).is_err() {
+            return Err("motor_outputs");
         }
         if let AntiWindup::ClampAndConditional { limit } = self.anti_windup {
             if !(limit.is_finite() && limit >= 0.0) {

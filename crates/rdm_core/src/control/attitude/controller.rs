@@ -19,7 +19,7 @@ use super::config::{AntiWindup, AttitudeControlConfig};
 use super::events::{CommandError, EventList, FlightConfigCmd, SpinalEvent};
 use crate::estimate::euler_zyx;
 use crate::pwm::{duty_to_report, PwmConverter, IDLE_DUTY};
-use crate::N_ROTORS;
+use crate::MAX_ROTORS;
 
 /// `spinal/UavInfo.DRAGON`: dual rotors per link, so thrust is halved before conversion.
 pub const UAV_MODEL_DRAGON: u8 = 32;
@@ -42,12 +42,15 @@ pub enum ControlStatus {
 pub struct AttitudeOutput {
     /// Flight state.
     pub status: ControlStatus,
+    /// ESC outputs (`AttitudeControlConfig::motor_outputs`): the valid length of `thrust`,
+    /// `duty` and `pwm_report`.
+    pub outputs: usize,
     /// Target thrust per rotor, N (`f_i = rp_i + (1+alpha) base_i + (1+beta) yaw_i`).
-    pub thrust: [f64; N_ROTORS],
+    pub thrust: [f64; MAX_ROTORS],
     /// Duty per rotor (0.5 = stopped), clamped to `[min_duty, max_duty]` while armed.
-    pub duty: [f64; N_ROTORS],
+    pub duty: [f64; MAX_ROTORS],
     /// `motor_pwms` values (duty x 2000, us).
-    pub pwm_report: [u16; N_ROTORS],
+    pub pwm_report: [u16; MAX_ROTORS],
     /// Base-thrust saturation factor alpha (<= 0).
     pub alpha: f64,
     /// Yaw saturation factor beta in [-1, 0].
@@ -61,7 +64,7 @@ pub struct AttitudeOutput {
 }
 
 /// Per-rotor gains, one `[roll, pitch, yaw]` row per rotor.
-pub type RotorAxisGains = [[f64; 3]; N_ROTORS];
+pub type RotorAxisGains = [[f64; 3]; MAX_ROTORS];
 
 /// Counters of rejected or ignored messages and fail-safe triggers.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -104,24 +107,24 @@ pub struct AttitudeController {
     failsafe_armed: bool,
     last_command_s: f64,
     // Gains: per rotor, axes roll, pitch, yaw (yaw uses d only).
-    p_gain: [[f64; 3]; N_ROTORS],
-    i_gain: [[f64; 3]; N_ROTORS],
-    d_gain: [[f64; 3]; N_ROTORS],
+    p_gain: [[f64; 3]; MAX_ROTORS],
+    i_gain: [[f64; 3]; MAX_ROTORS],
+    d_gain: [[f64; 3]; MAX_ROTORS],
     torque_gain: [[f64; 3]; 3],
-    torque_allocation_inv: [[f64; 3]; N_ROTORS],
+    torque_allocation_inv: [[f64; 3]; MAX_ROTORS],
     max_yaw_index: Option<usize>,
-    pinv: [[f64; 3]; N_ROTORS],
+    pinv: [[f64; 3]; MAX_ROTORS],
     inertia: Matrix3<f64>,
     offset_rot: Matrix3<f64>,
     // Command and control state.
     target_angle: [f64; 2],
     error_i: [f64; 2],
-    base_thrust: [f64; N_ROTORS],
-    extra_yaw: [f64; N_ROTORS],
-    rp_term: [f64; N_ROTORS],
-    yaw_term: [f64; N_ROTORS],
-    thrust: [f64; N_ROTORS],
-    duty: [f64; N_ROTORS],
+    base_thrust: [f64; MAX_ROTORS],
+    extra_yaw: [f64; MAX_ROTORS],
+    rp_term: [f64; MAX_ROTORS],
+    yaw_term: [f64; MAX_ROTORS],
+    thrust: [f64; MAX_ROTORS],
+    duty: [f64; MAX_ROTORS],
     alpha: f64,
     beta: f64,
     euler: [f64; 3],
@@ -152,23 +155,23 @@ impl AttitudeController {
             integrate: false,
             failsafe_armed: false,
             last_command_s: 0.0,
-            p_gain: [[0.0; 3]; N_ROTORS],
-            i_gain: [[0.0; 3]; N_ROTORS],
-            d_gain: [[0.0; 3]; N_ROTORS],
+            p_gain: [[0.0; 3]; MAX_ROTORS],
+            i_gain: [[0.0; 3]; MAX_ROTORS],
+            d_gain: [[0.0; 3]; MAX_ROTORS],
             torque_gain: [[0.0; 3]; 3],
-            torque_allocation_inv: [[0.0; 3]; N_ROTORS],
+            torque_allocation_inv: [[0.0; 3]; MAX_ROTORS],
             max_yaw_index: None,
-            pinv: [[0.0; 3]; N_ROTORS],
+            pinv: [[0.0; 3]; MAX_ROTORS],
             inertia: Matrix3::zeros(),
             offset_rot: Matrix3::identity(),
             target_angle: [0.0; 2],
             error_i: [0.0; 2],
-            base_thrust: [0.0; N_ROTORS],
-            extra_yaw: [0.0; N_ROTORS],
-            rp_term: [0.0; N_ROTORS],
-            yaw_term: [0.0; N_ROTORS],
-            thrust: [0.0; N_ROTORS],
-            duty: [IDLE_DUTY; N_ROTORS],
+            base_thrust: [0.0; MAX_ROTORS],
+            extra_yaw: [0.0; MAX_ROTORS],
+            rp_term: [0.0; MAX_ROTORS],
+            yaw_term: [0.0; MAX_ROTORS],
+            thrust: [0.0; MAX_ROTORS],
+            duty: [IDLE_DUTY; MAX_ROTORS],
             alpha: 0.0,
             beta: 0.0,
             euler: [0.0; 3],
@@ -204,7 +207,7 @@ impl AttitudeController {
         self.integrate
     }
     /// Current base thrust per rotor, N (ramps down during force landing).
-    pub fn base_thrust(&self) -> [f64; N_ROTORS] {
+    pub fn base_thrust(&self) -> [f64; MAX_ROTORS] {
         self.base_thrust
     }
     /// Roll/pitch error integrals, rad s.
@@ -315,6 +318,7 @@ impl AttitudeController {
         self.events.clear();
         AttitudeOutput {
             status,
+            outputs: self.config.motor_outputs,
             thrust: self.thrust,
             duty: self.duty,
             pwm_report: self.duty.map(duty_to_report),
@@ -347,7 +351,7 @@ impl AttitudeController {
         }
         if self.force_landing {
             self.target_angle = [0.0; 2];
-            self.extra_yaw = [0.0; N_ROTORS];
+            self.extra_yaw = [0.0; MAX_ROTORS];
         }
 
         // Roll/pitch errors and their integral.
@@ -363,7 +367,7 @@ impl AttitudeController {
 
         // Per-rotor P-I-D terms plus the gyro-moment compensation of eq. (29).
         let gyro_moment = vel.cross(&(self.inertia * vel));
-        for i in 0..self.motor_number.min(N_ROTORS) {
+        for i in 0..self.motor_number.min(MAX_ROTORS) {
             let mut rp = 0.0;
             for axis in 0..2 {
                 rp += error[axis] * self.p_gain[i][axis]
@@ -378,7 +382,7 @@ impl AttitudeController {
 
         // Force-landing ramp: the average base thrust falls at force_landing_rate.
         if self.force_landing && self.motor_number > 0 {
-            let n = self.motor_number.min(N_ROTORS);
+            let n = self.motor_number.min(MAX_ROTORS);
             let average = self.base_thrust[..n].iter().sum::<f64>() / n as f64;
             let landing_thrust = self
                 .pwm
@@ -422,7 +426,7 @@ impl AttitudeController {
             self.voltage_rejecting = false;
         }
         let pwm = &*pwm;
-        let n = self.motor_number.min(N_ROTORS);
+        let n = self.motor_number.min(MAX_ROTORS);
         let rd = self.rotor_divider;
         let limit = pwm.thrust_limit();
 

@@ -61,7 +61,7 @@ pub enum CommandError {
     BelowForceLandingThrust,
     /// The motor number is not known yet (no `uav_info`), so the message is ignored.
     MotorNumberUnknown,
-    /// More motors than this core handles ([`crate::N_ROTORS`]).
+    /// More motors than the board drives (`AttitudeControlConfig::motor_outputs`).
     TooManyMotors(usize),
     /// ARM_ON while `motor_number > 0 && uav_model >= 0 && max_duty > min_duty` is false:
     /// ignored without ack.
@@ -90,8 +90,7 @@ impl core::fmt::Display for CommandError {
             Self::TooManyMotors(n) => {
                 write!(
                     f,
-                    "motor_num: {n} > {} rotors of this core",
-                    crate::N_ROTORS
+                    "motor_num: {n} > the rotors of this core (its ESC outputs)"
                 )
             }
             Self::NotActivated => write!(

@@ -6,7 +6,7 @@
 //! keeps the P and D columns inside the int16 range before publishing.
 
 use crate::control::gains::GainSet;
-use crate::N_ROTORS;
+use crate::MAX_ROTORS;
 
 /// Largest gain magnitude that fits an int16 in thousandths (`clampGain` threshold).
 pub const MAX_WIRE_GAIN: f64 = 32.767;
@@ -81,9 +81,12 @@ pub fn from_wire(value: i16) -> f64 {
     f64::from(value) * 0.001
 }
 
-/// The `rpy/gain` form of a gain set: roll p/i/d, pitch p/i/d and yaw d of every rotor.
-pub fn gains_to_wire(gains: &GainSet) -> Result<[RollPitchYawTermWire; N_ROTORS], WireValueError> {
-    let mut out = [RollPitchYawTermWire::default(); N_ROTORS];
+/// The `rpy/gain` form of a gain set: roll p/i/d, pitch p/i/d and yaw d of every rotor
+/// (all [`MAX_ROTORS`] entries; the message carries the first `motor_num`).
+pub fn gains_to_wire(
+    gains: &GainSet,
+) -> Result<[RollPitchYawTermWire; MAX_ROTORS], WireValueError> {
+    let mut out = [RollPitchYawTermWire::default(); MAX_ROTORS];
     for (wire, g) in out.iter_mut().zip(gains.iter()) {
         *wire = RollPitchYawTermWire {
             roll_p: to_wire(g.roll.p, "roll.p")?,
@@ -99,8 +102,8 @@ pub fn gains_to_wire(gains: &GainSet) -> Result<[RollPitchYawTermWire; N_ROTORS]
 }
 
 /// The gain set Spinal reconstructs from `rpy/gain` (yaw P/I and z stay zero: the PC
-/// applies them).
-pub fn gains_from_wire(wire: &[RollPitchYawTermWire; N_ROTORS]) -> GainSet {
+/// applies them). At most [`MAX_ROTORS`] terms are read; the rotors past them stay zero.
+pub fn gains_from_wire(wire: &[RollPitchYawTermWire]) -> GainSet {
     let mut gains = GainSet::default();
     for (g, w) in gains.iter_mut().zip(wire.iter()) {
         g.roll.p = from_wire(w.roll_p);

@@ -3,7 +3,6 @@
 
 use crate::control::gains::{GainSet, PidGains, RotorGains};
 use crate::control::riccati::GainMatrix;
-use crate::N_ROTORS;
 
 /// Largest gain that fits the int16 x 0.001 wire format of `rpy/gain`.
 pub const MAX_WIRE_GAIN: f64 = 32.767;
@@ -89,10 +88,11 @@ pub fn clamp_gain(set: &mut GainSet) -> ClampScales {
 }
 
 /// Index of the rotor with the largest positive yaw D gain (JSK `maxYawGainIndex`),
-/// or `None` if no rotor has a positive yaw D gain.
+/// or `None` if no rotor has a positive yaw D gain (the zero entries past the rotor count
+/// never count).
 pub fn max_yaw_gain_index(set: &GainSet) -> Option<usize> {
     let mut best: Option<(usize, f64)> = None;
-    for (rotor, gains) in set.iter().enumerate().take(N_ROTORS) {
+    for (rotor, gains) in set.iter().enumerate() {
         let d = gains.yaw.d;
         if d > 0.0 && best.is_none_or(|(_, b)| d > b) {
             best = Some((rotor, d));

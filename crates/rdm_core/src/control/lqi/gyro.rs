@@ -6,10 +6,10 @@ use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use super::system::{inertia_inverse, Allocation};
 use super::LqiError;
 use crate::control::riccati::{GainMatrix, N_STATE};
-use crate::N_ROTORS;
+use crate::MAX_ROTORS;
 
-/// Per-rotor thrusts.
-pub type RotorVector = SVector<f64, N_ROTORS>;
+/// Per-rotor thrusts (entries past the rotor count zero).
+pub type RotorVector = SVector<f64, MAX_ROTORS>;
 /// The LQI state `x̄` in JSK order.
 pub type LqiState = SVector<f64, N_STATE>;
 
@@ -44,17 +44,15 @@ pub struct GyroCompensation {
 const RANK_TOLERANCE: f64 = 1e-10;
 /// Bound on the SVD sweeps (nalgebra's own iteration bound).
 const SVD_MAX_ITERATIONS: usize = 200;
+// The size dispatch of `GyroCompensation::new` covers 1..=8.
+const _: () = assert!(MAX_ROTORS == 8);
 
-impl GyroCompensation {
-    /// Pseudo-inverts the allocation and keeps the inertia.
-    pub fn new(allocation: &Allocation, inertia: &Matrix3<f64>) -> Result<Self, LqiError> {
-        if allocation.iter().any(|v| !v.is_finite()) {
-            return Err(LqiError::InvalidInput {
-                argument: "allocation",
-            });
-        }
-        inertia_inverse(inertia)?;
-        let svd = nalgebra::SVD::try_new(*allocation, true, true, f64::EPSILON, SVD_MAX_ITERATIONS)
+/// `pinv` of the first `$n` columns of an allocation (rows past `$n` zero) and its rank, at
+/// the literal size `$n` (nalgebra's SVD bounds need a concrete dimension).
+macro_rules! pseudo_inverse {
+    ($allocation:expr, $n:literal) => {{
+        let a: SMatrix<f64, 4, $n> = $allocation.fixed_columns::<$n>(0).into_owned();
+        let svd = nalgebra::SVD::try_new(a, true, true, f64::EPSILON, SVD_MAX_ITERATIONS)
             .ok_or(LqiError::SingularAllocation)?;
         let largest = svd.singular_values.max();
         let threshold = RANK_TOLERANCE * largest;
@@ -62,9 +60,43 @@ impl GyroCompensation {
         if rank == 0 {
             return Err(LqiError::SingularAllocation);
         }
-        let pinv: SMatrix<f64, N_ROTORS, 4> = svd
+        let pinv: SMatrix<f64, $n, 4> = svd
             .pseudo_inverse(threshold)
             .map_err(|_| LqiError::SingularAllocation)?;
+        let mut out = SMatrix::<f64, MAX_ROTORS, 4>::zeros();
+        out.fixed_rows_mut::<$n>(0).copy_from(&pinv);
+        (out, rank)
+    }};
+}
+
+impl GyroCompensation {
+    /// Pseudo-inverts the first `rotors` columns of the allocation (`rotors` in
+    /// `1..=MAX_ROTORS`) and keeps the inertia.
+    pub fn new(
+        allocation: &Allocation,
+        inertia: &Matrix3<f64>,
+        rotors: usize,
+    ) -> Result<Self, LqiError> {
+        if crate::check_rotor_count(rotors).is_err() {
+            return Err(LqiError::InvalidInput { argument: "rotors" });
+        }
+        if allocation.columns(0, rotors).iter().any(|v| !v.is_finite()) {
+            return Err(LqiError::InvalidInput {
+                argument: "allocation",
+            });
+        }
+        inertia_inverse(inertia)?;
+        // The SVD runs at the robot's own size (a zero column would change its rounding).
+        let (pinv, rank) = match rotors {
+            1 => pseudo_inverse!(allocation, 1),
+            2 => pseudo_inverse!(allocation, 2),
+            3 => pseudo_inverse!(allocation, 3),
+            4 => pseudo_inverse!(allocation, 4),
+            5 => pseudo_inverse!(allocation, 5),
+            6 => pseudo_inverse!(allocation, 6),
+            7 => pseudo_inverse!(allocation, 7),
+            _ => pseudo_inverse!(allocation, 8),
+        };
         let inverse = if rank == 4 {
             AllocationInverse::Exact
         } else {

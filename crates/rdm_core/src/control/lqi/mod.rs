@@ -19,7 +19,7 @@ use crate::control::riccati::{
     CareConfig, CareError, CareReport, CareSolver, GainMatrix, InputMatrix, InputWeight,
     StateMatrix, N_STATE,
 };
-use crate::N_ROTORS;
+use crate::MAX_ROTORS;
 
 pub use gain_map::{clamp_gain, gain_set_from_k, ClampScales, MAX_WIRE_GAIN};
 pub use gyro::{flight_thrust, AllocationInverse, GyroCompensation, LqiState, RotorVector};
@@ -31,8 +31,8 @@ pub use system::{augmented_input_matrix, augmented_state_matrix, Allocation, JSK
 pub struct LqiWeights {
     /// `diag(W1)` for `[z, ż, φ, φ̇, θ, θ̇, ψ, ψ̇, ∫z, ∫φ, ∫θ, ∫ψ]`.
     pub q: [f64; N_STATE],
-    /// `diag(W2)`, one per rotor.
-    pub r: [f64; N_ROTORS],
+    /// `diag(W2)`, one per rotor (the entries past the rotor count are not read).
+    pub r: [f64; MAX_ROTORS],
 }
 
 impl LqiWeights {
@@ -44,24 +44,31 @@ impl LqiWeights {
             q: [
                 20.0, 30.0, 90.0, 12.8, 600.0, 80.0, 100.0, 50.0, 20.0, 0.15, 1.0, 0.5,
             ],
-            r: [1.0; N_ROTORS],
+            r: [1.0; MAX_ROTORS],
         }
     }
 
-    fn validate(&self) -> Result<(StateMatrix, InputWeight), LqiError> {
+    /// Q and R for `rotors` rotors: the R entries past the count are 1 (their columns of B
+    /// are zero, so they change nothing but keep R positive definite).
+    fn validate(&self, rotors: usize) -> Result<(StateMatrix, InputWeight), LqiError> {
+        if crate::check_rotor_count(rotors).is_err() {
+            return Err(LqiError::InvalidInput { argument: "rotors" });
+        }
         if !self.q.iter().all(|w| w.is_finite() && *w >= 0.0) {
             return Err(LqiError::InvalidInput {
                 argument: "weights.q",
             });
         }
-        if !self.r.iter().all(|w| w.is_finite() && *w > 0.0) {
+        if !self.r[..rotors].iter().all(|w| w.is_finite() && *w > 0.0) {
             return Err(LqiError::InvalidInput {
                 argument: "weights.r",
             });
         }
+        let mut r = [1.0; MAX_ROTORS];
+        r[..rotors].copy_from_slice(&self.r[..rotors]);
         Ok((
             StateMatrix::from_diagonal(&self.q.into()),
-            InputWeight::from_diagonal(&self.r.into()),
+            InputWeight::from_diagonal(&r.into()),
         ))
     }
 }
@@ -75,6 +82,8 @@ impl Default for LqiWeights {
 /// Synthesis configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LqiConfig {
+    /// Rotor count, `1..=MAX_ROTORS` (the inputs of the ARE).
+    pub rotors: usize,
     /// ARE weights.
     pub weights: LqiWeights,
     /// Apply JSK `clampGain` to the gain set (JSK default: true).
@@ -83,9 +92,21 @@ pub struct LqiConfig {
     pub care: CareConfig,
 }
 
+impl LqiConfig {
+    /// The default configuration for `rotors` rotors.
+    pub fn for_rotors(rotors: usize) -> Self {
+        Self {
+            rotors,
+            ..Self::default()
+        }
+    }
+}
+
 impl Default for LqiConfig {
+    /// Table V weights for the paper's four-rotor RDM.
     fn default() -> Self {
         Self {
+            rotors: 4,
             weights: LqiWeights::table_v(),
             clamp_gain: true,
             care: CareConfig::default(),
@@ -128,7 +149,8 @@ impl From<CareError> for LqiError {
 /// Result of one synthesis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LqiGains {
-    /// Optimal gain `K = −R⁻¹B̄ᵀP` (`λ̄ = K x̄`), N_ROTORS x 12.
+    /// Optimal gain `K = −R⁻¹B̄ᵀP` (`λ̄ = K x̄`), MAX_ROTORS x 12 (rows past the rotor
+    /// count zero).
     pub k: GainMatrix,
     /// Stabilising ARE solution.
     pub p: StateMatrix,
@@ -190,9 +212,9 @@ pub struct LqiSynthesizer {
 }
 
 impl LqiSynthesizer {
-    /// Validates the weights once; synthesis then allocates nothing.
+    /// Validates the rotor count and the weights once; synthesis then allocates nothing.
     pub fn new(config: LqiConfig) -> Result<Self, LqiError> {
-        let (q, r) = config.weights.validate()?;
+        let (q, r) = config.weights.validate(config.rotors)?;
         Ok(Self {
             config,
             a: augmented_state_matrix(),
@@ -245,7 +267,7 @@ impl LqiSynthesizer {
         inertia: &Matrix3<f64>,
         allocation: &Allocation,
     ) -> Result<&LqiGains, LqiError> {
-        let b = augmented_input_matrix(mass, inertia, allocation)?;
+        let b = augmented_input_matrix(mass, inertia, allocation, self.config.rotors)?;
         if self.solver.has_solution() {
             if same_bits(&b, &self.last.b) {
                 self.reused += 1;

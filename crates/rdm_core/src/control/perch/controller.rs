@@ -7,7 +7,7 @@ use super::filter::WrenchFilter;
 use super::params::{ParamError, PerchParams};
 use super::qp::{PerchInput, PerchQp, PerchSolution};
 use super::status::PerchCounters;
-use crate::N_ROTORS;
+use crate::PERCH_ROTORS;
 
 /// Cutoff of the foot-wrench filter (Sec. VII-B) [Hz].
 pub const FOOT_WRENCH_CUTOFF_HZ: f64 = 1.0;
@@ -18,7 +18,7 @@ pub const PERCH_RATE_HZ: f64 = 40.0;
 pub struct PerchController {
     qp: PerchQp,
     filter: WrenchFilter,
-    previous_thrust: [f64; N_ROTORS],
+    previous_thrust: [f64; PERCH_ROTORS],
     previous_foot_wrench: [f64; 4],
     has_previous_wrench: bool,
 }
@@ -34,7 +34,7 @@ impl PerchController {
         Ok(Self {
             qp: PerchQp::new(params)?,
             filter,
-            previous_thrust: [0.0; N_ROTORS],
+            previous_thrust: [0.0; PERCH_ROTORS],
             previous_foot_wrench: [0.0; 4],
             has_previous_wrench: false,
         })
@@ -42,7 +42,7 @@ impl PerchController {
 
     /// Start a new perching phase from `thrust` (e.g. zeros at touchdown): the filter
     /// restarts at the next sample and the feedback of eq. (38) starts at zero.
-    pub fn reset(&mut self, thrust: [f64; N_ROTORS]) {
+    pub fn reset(&mut self, thrust: [f64; PERCH_ROTORS]) {
         self.filter.reset();
         self.previous_thrust = thrust.map(|v| if v.is_finite() { v.max(0.0) } else { 0.0 });
         self.has_previous_wrench = false;
@@ -57,7 +57,7 @@ impl PerchController {
         foot_allocation: &Matrix4<f64>,
         allocation: &Matrix4<f64>,
         mass: f64,
-        flight_thrust: Option<[f64; N_ROTORS]>,
+        flight_thrust: Option<[f64; PERCH_ROTORS]>,
     ) -> PerchSolution {
         let filtered = self.filter.update(raw_foot_wrench);
         let foot_wrench = filtered.unwrap_or(*raw_foot_wrench);
@@ -93,7 +93,7 @@ impl PerchController {
     }
 
     /// `λ_perch,t−1` the next tick will rate-limit against.
-    pub fn previous_thrust(&self) -> [f64; N_ROTORS] {
+    pub fn previous_thrust(&self) -> [f64; PERCH_ROTORS] {
         self.previous_thrust
     }
 

@@ -1,6 +1,6 @@
 //! Parameters of the perching QP. Defaults are Table VII; the rest are named assumptions.
 
-use crate::N_ROTORS;
+use crate::PERCH_ROTORS;
 
 /// Which solver answers the perching QP of eq. (49).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
@@ -37,13 +37,13 @@ impl PerchSolver {
 #[derive(Clone, Debug, PartialEq)]
 pub struct PerchParams {
     /// Diagonal of the thrust weight `N` of eq. (37) (Table VII: all 1.0). Must be > 0.
-    pub weight: [f64; N_ROTORS],
+    pub weight: [f64; PERCH_ROTORS],
     /// Diagonal of `U_mask` of eq. (38) over the wrench `[F_z, M_x, M_y, M_z]` (Table VII:
     /// only `F_z`). A masked-out component is not controlled: it is fixed to its measured value.
     pub wrench_mask: [bool; 4],
     /// Rotors used for perching: `Q̄_perch = Q̄_foot diag(perch_rotors)` (Table VII:
     /// `diag[1, 1, 0, 0]`, the two foot rotors).
-    pub perch_rotors: [bool; N_ROTORS],
+    pub perch_rotors: [bool; PERCH_ROTORS],
     /// `ε_z` of eq. (39) [N] (Table VII: 1.0).
     pub epsilon_z: f64,
     /// `μ_x` of eq. (40) (Table VII: 0.9).
@@ -60,10 +60,10 @@ pub struct PerchParams {
     /// Not given by the paper; 0.0 because the foot frame origin is on the footplate (Sec. III).
     pub zmp_z: f64,
     /// `δλ_perch` of eq. (48): largest thrust change per tick [N] (Table VII: 5.0 each).
-    pub thrust_rate_limit: [f64; N_ROTORS],
+    pub thrust_rate_limit: [f64; PERCH_ROTORS],
     /// `λ_rotor_max` of eq. (47): maximum thrust of each rotor [N]. Not given by the paper;
     /// 30 N is a placeholder to be replaced by the rotor's measured thrust curve.
-    pub rotor_thrust_max: [f64; N_ROTORS],
+    pub rotor_thrust_max: [f64; PERCH_ROTORS],
     /// Gain of the feedback term `λ''` of eq. (38) (the paper's is 1; 0 disables it).
     pub feedback_gain: f64,
     /// Gravity `g` of eq. (47) [m/s²].
@@ -87,7 +87,7 @@ pub struct PerchParams {
 impl Default for PerchParams {
     fn default() -> Self {
         Self {
-            weight: [1.0; N_ROTORS],
+            weight: [1.0; PERCH_ROTORS],
             wrench_mask: [true, false, false, false],
             perch_rotors: [true, true, false, false],
             epsilon_z: 1.0,
@@ -97,8 +97,8 @@ impl Default for PerchParams {
             half_size_x: 0.04,
             half_size_y: 0.07,
             zmp_z: 0.0,
-            thrust_rate_limit: [5.0; N_ROTORS],
-            rotor_thrust_max: [30.0; N_ROTORS],
+            thrust_rate_limit: [5.0; PERCH_ROTORS],
+            rotor_thrust_max: [30.0; PERCH_ROTORS],
             feedback_gain: 1.0,
             gravity: 9.80665,
             solver: PerchSolver::ActiveSet,

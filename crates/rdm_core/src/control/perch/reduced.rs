@@ -16,7 +16,7 @@ use nalgebra::Vector4;
 
 use super::active_set::DualActiveSet;
 use super::dims::{N_ROWS, N_VARS, N_ZERO_ROWS};
-use crate::N_ROTORS;
+use crate::PERCH_ROTORS;
 
 /// Inequality rows of the reduced problem (rows 4-28 of the full one, same order).
 pub const REDUCED_ROWS: usize = N_ROWS - N_ZERO_ROWS;
@@ -26,14 +26,14 @@ pub const REDUCED_ROWS: usize = N_ROWS - N_ZERO_ROWS;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Elimination {
     w_offset: [f64; 4],
-    w_gain: [[f64; N_ROTORS]; 4],
-    inv_sqrt_cost: [f64; N_ROTORS],
+    w_gain: [[f64; PERCH_ROTORS]; 4],
+    inv_sqrt_cost: [f64; PERCH_ROTORS],
 }
 
 impl Elimination {
     /// Scaled thrusts `λ/s` from the solver's `y`.
-    pub fn thrust(&self, y: &Vector4<f64>) -> [f64; N_ROTORS] {
-        let mut x = [0.0; N_ROTORS];
+    pub fn thrust(&self, y: &Vector4<f64>) -> [f64; PERCH_ROTORS] {
+        let mut x = [0.0; PERCH_ROTORS];
         for (i, xi) in x.iter_mut().enumerate() {
             *xi = y[i] * self.inv_sqrt_cost[i];
         }
@@ -41,7 +41,7 @@ impl Elimination {
     }
 
     /// Scaled `W_foot,t / s` implied by eq. (38) for scaled thrusts `x`.
-    pub fn foot_wrench(&self, x: &[f64; N_ROTORS]) -> [f64; 4] {
+    pub fn foot_wrench(&self, x: &[f64; PERCH_ROTORS]) -> [f64; 4] {
         let mut w = self.w_offset;
         for (wk, gain) in w.iter_mut().zip(self.w_gain.iter()) {
             for (g, xi) in gain.iter().zip(x.iter()) {
@@ -59,15 +59,15 @@ pub fn load(
     solver: &mut DualActiveSet<REDUCED_ROWS>,
     a: &[[f64; N_VARS]; N_ROWS],
     b: &[f64],
-    cost: &[f64; N_ROTORS],
+    cost: &[f64; PERCH_ROTORS],
 ) -> Option<Elimination> {
     if b.len() != N_ROWS {
         return None;
     }
     let mut elim = Elimination {
         w_offset: [0.0; 4],
-        w_gain: [[0.0; N_ROTORS]; 4],
-        inv_sqrt_cost: [0.0; N_ROTORS],
+        w_gain: [[0.0; PERCH_ROTORS]; 4],
+        inv_sqrt_cost: [0.0; PERCH_ROTORS],
     };
     for (inv, c) in elim.inv_sqrt_cost.iter_mut().zip(cost.iter()) {
         if !(c.is_finite() && *c > 0.0) {
@@ -76,7 +76,7 @@ pub fn load(
         *inv = 1.0 / c.sqrt();
     }
     for (k, (row, rhs)) in a.iter().zip(b.iter()).enumerate().take(N_ZERO_ROWS) {
-        let pivot = row[N_ROTORS + k];
+        let pivot = row[PERCH_ROTORS + k];
         if !(pivot.is_finite() && pivot != 0.0) {
             return None;
         }
@@ -88,11 +88,11 @@ pub fn load(
     solver.clear_rows();
     for (r, (row, rhs)) in a.iter().zip(b.iter()).enumerate().skip(N_ZERO_ROWS) {
         // row·[x_λ; w] ≤ rhs with w = w_offset + w_gain x_λ.
-        let mut coef = [0.0; N_ROTORS];
-        coef.copy_from_slice(&row[..N_ROTORS]);
+        let mut coef = [0.0; PERCH_ROTORS];
+        coef.copy_from_slice(&row[..PERCH_ROTORS]);
         let mut bound = *rhs;
         for k in 0..4 {
-            let a_w = row[N_ROTORS + k];
+            let a_w = row[PERCH_ROTORS + k];
             if a_w != 0.0 {
                 bound -= a_w * elim.w_offset[k];
                 for (c, g) in coef.iter_mut().zip(elim.w_gain[k].iter()) {

@@ -7,7 +7,9 @@
 //! sign is then not −I) so the caller can fall back to the cold method.
 
 use super::dense::{invert_in_place, mul_into, norm1, transpose_into};
-use super::{CareConfig, CareError, CareProblem, GainMatrix, InputWeight, StateMatrix, N_STATE};
+use super::{
+    CareConfig, CareError, CareProblem, GainMatrix, InputWeight, StateMatrix, N_INPUT, N_STATE,
+};
 
 /// Step below which the Roberts iteration has converged.
 const LYAPUNOV_STEP_TOLERANCE: f64 = 1e-7;
@@ -31,9 +33,9 @@ pub(super) fn solve(
     k0: &GainMatrix,
     config: &CareConfig,
 ) -> Result<KleinmanOutcome, CareError> {
-    // R is recovered from R⁻¹ once (4x4); the gain update only needs R⁻¹.
+    // R is recovered from R⁻¹ once; the gain update only needs R⁻¹.
     let mut r = problem.r_inv;
-    if invert_in_place::<4>(&mut r).is_err() {
+    if invert_in_place::<N_INPUT>(&mut r).is_err() {
         return Err(CareError::InvalidInput { argument: "r" });
     }
     let r: InputWeight = (r + r.transpose()) * 0.5;

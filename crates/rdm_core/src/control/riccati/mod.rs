@@ -3,7 +3,9 @@
 //! Solves `AᵀP + PA − PBR⁻¹BᵀP + Q = 0` for the stabilising P and returns the gain
 //! `K = −R⁻¹BᵀP` (so that `u = K x`, the sign convention of eq. (28)).
 //!
-//! Fixed size: [`N_STATE`] = 12 states, [`N_INPUT`] = [`N_ROTORS`] inputs. Two methods:
+//! Fixed size: [`N_STATE`] = 12 states, [`N_INPUT`] = [`MAX_ROTORS`] inputs; a robot with
+//! fewer rotors leaves the extra columns of B zero (their rows of K come out zero and P is
+//! the P of the smaller problem: `B R⁻¹ Bᵀ` does not see them). Two methods:
 //! - cold: Newton iteration for the matrix sign function of the 24x24 Hamiltonian with
 //!   determinant scaling ([`sign`]);
 //! - warm: Kleinman (Newton-Lyapunov) iteration started from the previous gain, each
@@ -20,12 +22,12 @@ mod sign;
 
 use nalgebra::{Cholesky, SMatrix};
 
-use crate::N_ROTORS;
+use crate::MAX_ROTORS;
 
 /// Number of LQI states (`x = [z, ż, φ, φ̇, θ, θ̇, ψ, ψ̇, ∫z, ∫φ, ∫θ, ∫ψ]`).
 pub const N_STATE: usize = 12;
 /// Number of inputs (one thrust per rotor).
-pub const N_INPUT: usize = N_ROTORS;
+pub const N_INPUT: usize = MAX_ROTORS;
 
 /// n x n state matrix (A, Q, P).
 pub type StateMatrix = SMatrix<f64, N_STATE, N_STATE>;

@@ -5,7 +5,7 @@
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
 use rdm_core::control::attitude::SpinalOutput;
-use rdm_core::N_ROTORS;
+use rdm_core::MAX_ROTORS;
 
 use super::names::Names;
 use super::plan::Chain;
@@ -16,7 +16,7 @@ use crate::kernel::attr::Name;
 /// A duty list: values and length.
 #[derive(Clone, Copy)]
 pub(super) struct Duties {
-    pub(super) values: [f64; N_ROTORS],
+    pub(super) values: [f64; MAX_ROTORS],
     pub(super) n: usize,
 }
 

@@ -3,7 +3,7 @@
 
 use pyo3::prelude::*;
 use rdm_core::firmware::rosserial_frame::client_stamp;
-use rdm_core::N_ROTORS;
+use rdm_core::MAX_ROTORS;
 
 use super::plan::exact_f64;
 use super::SpinalFast;
@@ -120,7 +120,7 @@ impl SpinalFast {
             let from_output = motors != 0 && motors == core.bind(py).try_borrow()?.motor_count();
             // The steady master: the controller's own duties only. During the boot
             // `_step_tail` gives `motors` idle duties when the numbers differ (no hand-over).
-            if motors > N_ROTORS || (p.boot_state.is_none() && !from_output) {
+            if motors > MAX_ROTORS || (p.boot_state.is_none() && !from_output) {
                 return Ok(false);
             }
             let three = |name: &Name| -> PyResult<Option<[f64; 3]>> {

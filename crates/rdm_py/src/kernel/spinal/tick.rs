@@ -3,7 +3,7 @@
 
 use pyo3::prelude::*;
 use rdm_core::firmware::rosserial_frame::{imu_frame, ImuValues};
-use rdm_core::N_ROTORS;
+use rdm_core::MAX_ROTORS;
 
 use super::flush::Duties;
 use super::ready::{Decision, Publish, StepInput};
@@ -71,7 +71,7 @@ impl SpinalFast {
                     return Ok(SpinalTick::FinishStep(m, true));
                 }
                 let mut duties = Duties {
-                    values: [0.0; N_ROTORS],
+                    values: [0.0; MAX_ROTORS],
                     n: motors,
                 };
                 for (v, &x) in duties.values.iter_mut().zip(out.control.duty.iter()) {

@@ -8,14 +8,14 @@ use super::{AttitudeController, UAV_MODEL_DRAGON};
 use crate::control::gains::GainSet;
 use crate::estimate::rotation_from_euler;
 use crate::pwm::{PwmConverter, PwmInfo, IDLE_DUTY};
-use crate::N_ROTORS;
+use crate::MAX_ROTORS;
 
 impl AttitudeController {
     /// `uav_info`: motor number and model. As the firmware: a motor number different from
     /// an already known one sets it to 0 (blocks arming); DRAGON sets the rotor divider 2.
     pub fn set_uav_info(&mut self, motor_num: u8, uav_model: u8) -> Result<(), CommandError> {
         let motors = usize::from(motor_num);
-        if motors > N_ROTORS {
+        if motors > self.config.motor_outputs {
             return Err(self.reject(CommandError::TooManyMotors(motors)));
         }
         if self.motor_number > 0 {
@@ -124,8 +124,8 @@ impl AttitudeController {
             self.enter_force_landing(SpinalEvent::FailsafeCommandTilt);
         }
         self.check_length("base_thrust", base_thrust.len())?;
-        let n = self.motor_number.min(N_ROTORS);
-        let mut base = [0.0; N_ROTORS];
+        let n = self.motor_number.min(MAX_ROTORS);
+        let mut base = [0.0; MAX_ROTORS];
         for (dst, &src) in base.iter_mut().zip(base_thrust) {
             *dst = src;
         }
@@ -231,7 +231,7 @@ impl AttitudeController {
             self.thrust_gain_mapping();
         } else {
             self.check_length("rpy/gain.motors", terms.len())?;
-            for (i, t) in terms.iter().enumerate().take(N_ROTORS) {
+            for (i, t) in terms.iter().enumerate().take(MAX_ROTORS) {
                 self.p_gain[i] = [from_wire(t.roll_p), from_wire(t.pitch_p), 0.0];
                 self.i_gain[i] = [from_wire(t.roll_i), from_wire(t.pitch_i), 0.0];
                 self.d_gain[i] = [
@@ -297,7 +297,7 @@ impl AttitudeController {
     }
 
     fn thrust_gain_mapping(&mut self) {
-        for i in 0..self.motor_number.min(N_ROTORS) {
+        for i in 0..self.motor_number.min(MAX_ROTORS) {
             let t = self.torque_allocation_inv[i];
             for (axis, &t_axis) in t.iter().enumerate() {
                 self.p_gain[i][axis] = t_axis * self.torque_gain[0][axis];
@@ -310,7 +310,7 @@ impl AttitudeController {
     fn update_max_yaw_index(&mut self) {
         let mut best = 0.0;
         self.max_yaw_index = None;
-        for i in 0..self.motor_number.min(N_ROTORS) {
+        for i in 0..self.motor_number.min(MAX_ROTORS) {
             if self.d_gain[i][2] > best {
                 best = self.d_gain[i][2];
                 self.max_yaw_index = Some(i);
@@ -321,16 +321,16 @@ impl AttitudeController {
     /// Firmware `reset()` (on ARM_OFF): gains, integrals, terms and the fail-safe timer
     /// cleared, targets zero, every duty to idle. Vehicle description and PWM info stay.
     fn reset(&mut self, now_s: f64) {
-        self.thrust = [0.0; N_ROTORS];
-        self.duty = [IDLE_DUTY; N_ROTORS];
-        self.base_thrust = [0.0; N_ROTORS];
-        self.rp_term = [0.0; N_ROTORS];
-        self.yaw_term = [0.0; N_ROTORS];
-        self.extra_yaw = [0.0; N_ROTORS];
-        self.p_gain = [[0.0; 3]; N_ROTORS];
-        self.i_gain = [[0.0; 3]; N_ROTORS];
-        self.d_gain = [[0.0; 3]; N_ROTORS];
-        self.torque_allocation_inv = [[0.0; 3]; N_ROTORS];
+        self.thrust = [0.0; MAX_ROTORS];
+        self.duty = [IDLE_DUTY; MAX_ROTORS];
+        self.base_thrust = [0.0; MAX_ROTORS];
+        self.rp_term = [0.0; MAX_ROTORS];
+        self.yaw_term = [0.0; MAX_ROTORS];
+        self.extra_yaw = [0.0; MAX_ROTORS];
+        self.p_gain = [[0.0; 3]; MAX_ROTORS];
+        self.i_gain = [[0.0; 3]; MAX_ROTORS];
+        self.d_gain = [[0.0; 3]; MAX_ROTORS];
+        self.torque_allocation_inv = [[0.0; 3]; MAX_ROTORS];
         self.torque_gain = [[0.0; 3]; 3];
         self.target_angle = [0.0; 2];
         self.error_i = [0.0; 2];

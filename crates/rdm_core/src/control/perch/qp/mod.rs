@@ -59,7 +59,7 @@ use super::dims::{N_ROWS, N_VARS, N_ZERO_ROWS};
 use super::params::{ParamError, PerchParams};
 use super::reduced::REDUCED_ROWS;
 use super::status::{PerchCounters, PerchStatus};
-use crate::N_ROTORS;
+use crate::PERCH_ROTORS;
 use rows::{a_pattern, controlled_rows_independent, input_is_finite};
 use solve::solver_settings;
 
@@ -77,12 +77,12 @@ pub struct PerchInput {
     /// Measured (filtered) foot wrench `W̃ = [F_x, F_y, F_z, M_x, M_y, M_z]`.
     pub foot_wrench: [f64; 6],
     /// `λ_perch,t−1` [N], for eq. (48).
-    pub previous_thrust: [f64; N_ROTORS],
+    pub previous_thrust: [f64; PERCH_ROTORS],
     /// `W_foot,t−1 = [F_z, M_x, M_y, M_z]` decided at the previous tick, for eq. (38).
     pub previous_foot_wrench: [f64; 4],
     /// `None`: eq. (47). `Some(λ_flight)`: bound the total thrust instead,
     /// `λ_max = λ_rotor_max − λ_flight` (eq. 20 with the flight thrust actually commanded).
-    pub flight_thrust: Option<[f64; N_ROTORS]>,
+    pub flight_thrust: Option<[f64; PERCH_ROTORS]>,
 }
 
 /// Result of one perching QP. Every field is finite whatever the input.
@@ -92,7 +92,7 @@ pub struct PerchSolution {
     /// command.
     pub status: PerchStatus,
     /// `λ_perch,t` [N], inside `[thrust_min, thrust_max]`.
-    pub thrust: [f64; N_ROTORS],
+    pub thrust: [f64; PERCH_ROTORS],
     /// `W_foot,t = [F_z, M_x, M_y, M_z]` of the solution (previous one on failure).
     pub foot_wrench: [f64; 4],
     /// ZMP `[p_x, p_y]` of eqs. (43)-(44) with `foot_wrench`'s `F_z` [m].
@@ -102,9 +102,9 @@ pub struct PerchSolution {
     /// `[H_x − |p_x|, H_y − |p_y|]` (≥ 0 when eq. 42 holds).
     pub zmp_margin: [f64; 2],
     /// `λ_min` of eq. (46).
-    pub thrust_min: [f64; N_ROTORS],
+    pub thrust_min: [f64; PERCH_ROTORS],
     /// `λ_max` used this tick (eq. 47 or the flight-thrust form; last valid one on failure).
-    pub thrust_max: [f64; N_ROTORS],
+    pub thrust_max: [f64; PERCH_ROTORS],
     /// Iterations of the solver that answered: active-set add/drop passes, or Clarabel's
     /// interior-point iterations on a fallback or with `PerchSolver::Clarabel` (0 when no
     /// solver ran).
@@ -131,8 +131,8 @@ pub struct PerchQp {
     /// `(row, col)` of each entry of `a_nzval`, in CSC order.
     a_entries: Vec<(usize, usize)>,
     dense_a: [[f64; N_VARS]; N_ROWS],
-    last_thrust: [f64; N_ROTORS],
-    last_thrust_max: [f64; N_ROTORS],
+    last_thrust: [f64; PERCH_ROTORS],
+    last_thrust_max: [f64; PERCH_ROTORS],
     last_foot_wrench: [f64; 4],
     counters: PerchCounters,
 }
@@ -146,11 +146,11 @@ impl PerchQp {
         // P: upper-triangular CSC, diagonal on the thrust block only.
         let max_weight = params.weight.iter().fold(0.0_f64, |a, b| a.max(*b));
         let mut p_colptr = Vec::with_capacity(N_VARS + 1);
-        let mut p_rowval = Vec::with_capacity(N_ROTORS);
-        let mut p_nzval = Vec::with_capacity(N_ROTORS);
+        let mut p_rowval = Vec::with_capacity(PERCH_ROTORS);
+        let mut p_nzval = Vec::with_capacity(PERCH_ROTORS);
         p_colptr.push(0);
         for col in 0..N_VARS {
-            if col < N_ROTORS {
+            if col < PERCH_ROTORS {
                 p_rowval.push(col);
                 p_nzval.push(params.weight[col] / max_weight);
             }
@@ -217,8 +217,8 @@ impl PerchQp {
             b,
             a_entries,
             dense_a: [[0.0; N_VARS]; N_ROWS],
-            last_thrust: [0.0; N_ROTORS],
-            last_thrust_max: [0.0; N_ROTORS],
+            last_thrust: [0.0; PERCH_ROTORS],
+            last_thrust_max: [0.0; PERCH_ROTORS],
             last_foot_wrench: [0.0; 4],
             counters: PerchCounters::default(),
         })
@@ -349,7 +349,7 @@ impl PerchQp {
     }
 
     /// Change the weight `N` of eq. (37) in place (`update_P`, same pattern).
-    pub fn set_weight(&mut self, weight: [f64; N_ROTORS]) -> Result<(), ParamError> {
+    pub fn set_weight(&mut self, weight: [f64; PERCH_ROTORS]) -> Result<(), ParamError> {
         if weight.iter().any(|w| !(w.is_finite() && *w > 0.0)) {
             return Err(ParamError {
                 field: "weight",

@@ -5,9 +5,9 @@
 use nalgebra::{Matrix4, Vector4};
 
 use super::{PerchInput, PerchQp};
-use crate::N_ROTORS;
+use crate::PERCH_ROTORS;
 
-const W: usize = N_ROTORS; // first column of w = [F_z, M_x, M_y, M_z]
+const W: usize = PERCH_ROTORS; // first column of w = [F_z, M_x, M_y, M_z]
 const FZ: usize = W;
 const MX: usize = W + 1;
 const MY: usize = W + 2;
@@ -23,19 +23,19 @@ const MAX_ALLOCATION_CONDITION: f64 = 1e10;
 /// (a coefficient that is 0 now is still stored, so later updates keep the pattern).
 pub(super) fn a_pattern(row: usize, col: usize) -> bool {
     match row {
-        0..=3 => col < N_ROTORS || col == W + row,
+        0..=3 => col < PERCH_ROTORS || col == W + row,
         4..=6 => col == FZ,
         7 | 8 => col == FZ || col == MZ,
         9 | 10 => col == FZ || col == MY,
         11 | 12 => col == FZ || col == MX,
-        13..=28 => col == (row - ROW_BOUND_LOW) % N_ROTORS,
+        13..=28 => col == (row - ROW_BOUND_LOW) % PERCH_ROTORS,
         _ => false,
     }
 }
 
 impl PerchQp {
     /// `λ_max` of eq. (47) (or the flight-thrust form), `None` if `Q̄` is singular.
-    pub(super) fn thrust_max(&self, input: &PerchInput) -> Option<[f64; N_ROTORS]> {
+    pub(super) fn thrust_max(&self, input: &PerchInput) -> Option<[f64; PERCH_ROTORS]> {
         let mut out = self.params.rotor_thrust_max;
         if let Some(flight) = input.flight_thrust {
             for (o, f) in out.iter_mut().zip(flight.iter()) {
@@ -73,7 +73,7 @@ impl PerchQp {
         &mut self,
         input: &PerchInput,
         perch_allocation: &Matrix4<f64>,
-        thrust_max: &[f64; N_ROTORS],
+        thrust_max: &[f64; PERCH_ROTORS],
     ) {
         let p = &self.params;
         let s = self.scale;
@@ -87,7 +87,7 @@ impl PerchQp {
         // Rows 0-3, eq. (38): in scaled variables the right side is divided by s.
         for k in 0..4 {
             if p.wrench_mask[k] {
-                for i in 0..N_ROTORS {
+                for i in 0..PERCH_ROTORS {
                     a[k][i] = perch_allocation[(k, i)];
                 }
                 a[k][W + k] = -1.0;
@@ -127,7 +127,7 @@ impl PerchQp {
         a[12][MX] = -1.0;
         b[12] = fy * p.zmp_z / s;
         // Eqs. (45)-(48).
-        for i in 0..N_ROTORS {
+        for i in 0..PERCH_ROTORS {
             a[ROW_BOUND_LOW + i][i] = -1.0;
             b[ROW_BOUND_LOW + i] = 0.0;
             a[ROW_BOUND_HIGH + i][i] = 1.0;
@@ -155,7 +155,7 @@ impl PerchQp {
     /// Open the rate rows of eq. (48) so that they never bind inside the bounds of eqs.
     /// (45)-(47): `λ ≤ max(λ_max, 0) + δ` and `−λ ≤ δ` (their coefficients are ±1, so the row
     /// normalisation of `fill_rows` left them unscaled).
-    pub(super) fn open_rate_rows(&mut self, thrust_max: &[f64; N_ROTORS]) {
+    pub(super) fn open_rate_rows(&mut self, thrust_max: &[f64; PERCH_ROTORS]) {
         let s = self.scale;
         let rates = self.params.thrust_rate_limit;
         for (i, (max, rate)) in thrust_max.iter().zip(rates.iter()).enumerate() {
@@ -168,7 +168,7 @@ impl PerchQp {
     /// `Q̄_perch,k λ − κ (W_t−1,k − W̃_k)`, the others the measured `W̃_k`.
     pub(super) fn commanded_wrench(
         &self,
-        thrust: &[f64; N_ROTORS],
+        thrust: &[f64; PERCH_ROTORS],
         perch_allocation: &Matrix4<f64>,
         input: &PerchInput,
     ) -> [f64; 4] {
@@ -177,7 +177,7 @@ impl PerchQp {
         let mut out = measured;
         for (k, w) in out.iter_mut().enumerate() {
             if self.params.wrench_mask[k] {
-                let produced: f64 = (0..N_ROTORS)
+                let produced: f64 = (0..PERCH_ROTORS)
                     .map(|i| perch_allocation[(k, i)] * thrust[i])
                     .sum();
                 *w = produced

@@ -11,7 +11,7 @@ use crate::control::perch::dims::N_VARS;
 use crate::control::perch::params::{ParamError, PerchParams, PerchSolver};
 use crate::control::perch::reduced;
 use crate::control::perch::status::PerchStatus;
-use crate::N_ROTORS;
+use crate::PERCH_ROTORS;
 
 pub(super) fn solver_settings(params: &PerchParams) -> Result<DefaultSettings<f64>, ParamError> {
     DefaultSettingsBuilder::default()
@@ -37,7 +37,7 @@ impl PerchQp {
     pub(super) fn solve_rows(
         &mut self,
         input: &PerchInput,
-        thrust_max: &[f64; N_ROTORS],
+        thrust_max: &[f64; PERCH_ROTORS],
     ) -> PerchSolution {
         if self.params.solver == PerchSolver::ActiveSet {
             if let Some(solution) = self.solve_active_set(input, thrust_max) {
@@ -54,9 +54,9 @@ impl PerchQp {
     fn solve_active_set(
         &mut self,
         input: &PerchInput,
-        thrust_max: &[f64; N_ROTORS],
+        thrust_max: &[f64; PERCH_ROTORS],
     ) -> Option<PerchSolution> {
-        let mut cost = [0.0; N_ROTORS];
+        let mut cost = [0.0; PERCH_ROTORS];
         for (c, p) in cost.iter_mut().zip(self.p_nzval.iter()) {
             *c = *p;
         }
@@ -103,7 +103,11 @@ impl PerchQp {
     }
 
     /// Clarabel on the full problem (rows already written by `fill_rows`).
-    fn solve_clarabel(&mut self, input: &PerchInput, thrust_max: [f64; N_ROTORS]) -> PerchSolution {
+    fn solve_clarabel(
+        &mut self,
+        input: &PerchInput,
+        thrust_max: [f64; PERCH_ROTORS],
+    ) -> PerchSolution {
         if self.solver.update_A(&self.a_nzval).is_err() || self.solver.update_b(&self.b).is_err() {
             return self.failure(
                 PerchStatus::NumericalError,
@@ -140,12 +144,12 @@ impl PerchQp {
             );
         }
 
-        let mut thrust = [0.0; N_ROTORS];
+        let mut thrust = [0.0; PERCH_ROTORS];
         let mut foot_wrench = [0.0; 4];
         for (t, v) in thrust.iter_mut().zip(x.iter()) {
             *t = v * self.scale;
         }
-        for (w, v) in foot_wrench.iter_mut().zip(x.iter().skip(N_ROTORS)) {
+        for (w, v) in foot_wrench.iter_mut().zip(x.iter().skip(PERCH_ROTORS)) {
             *w = v * self.scale;
         }
         // Remove solver-tolerance overshoot so the command is exactly inside eqs. (45), (48).
@@ -161,9 +165,9 @@ impl PerchQp {
     pub(super) fn solution(
         &self,
         status: PerchStatus,
-        thrust: [f64; N_ROTORS],
+        thrust: [f64; PERCH_ROTORS],
         foot_wrench: [f64; 4],
-        thrust_max: [f64; N_ROTORS],
+        thrust_max: [f64; PERCH_ROTORS],
         input: &PerchInput,
         iterations: u32,
     ) -> PerchSolution {
@@ -193,7 +197,7 @@ impl PerchQp {
             ]
             .map(finite_or_zero),
             zmp_margin: zmp_margin.map(finite_or_zero),
-            thrust_min: [0.0; N_ROTORS],
+            thrust_min: [0.0; PERCH_ROTORS],
             thrust_max,
             iterations,
             fallback: false,
@@ -205,8 +209,8 @@ impl PerchQp {
     pub(super) fn failure(
         &self,
         status: PerchStatus,
-        previous: &[f64; N_ROTORS],
-        thrust_max: Option<[f64; N_ROTORS]>,
+        previous: &[f64; PERCH_ROTORS],
+        thrust_max: Option<[f64; PERCH_ROTORS]>,
         input: &PerchInput,
         iterations: u32,
     ) -> PerchSolution {
