@@ -368,6 +368,11 @@ class NeuronBankNode:
         )
         self._bridged = True
 
+    def stick_joint(self, joint: int) -> None:
+        """Fault hook: joint ``joint``'s servo output stops following its goal (the
+        attached coupling's ``_rdm.NeuronBank.stick_joint``)."""
+        self._core.stick_joint(joint)
+
     def bridge_tick(self, qpos: Any, targets: Any, duties: Any) -> tuple[bool, bool]:
         """Snapshot + goals -> ``targets`` + ESC outputs -> ``duties`` (``NeuronBank.
         bridge_tick``); returns ``(targets_changed, duties_changed)``."""
