@@ -169,7 +169,8 @@ def test_the_help_names_every_fault() -> None:
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)
-    text = " ".join(parser.format_help().split())
+    # (a name wrapped at one of its hyphens is joined again)
+    text = " ".join(re.sub(r"-\n\s*", "-", parser.format_help()).split())
     named = set(re.findall(r"[a-z]+(?:-[a-z0-9]+)+", text))
     assert set(FAULTS) - {"none"} <= named
 
@@ -262,7 +263,8 @@ def test_can_bus_off_silences_the_bus_for_the_disturbance_and_the_recovery_bits(
     assert silence <= stamps[k + 1] - at < silence + 1.5e-3
     assert np.sort(gaps)[-2] < 0.01
     counters = stack.spinal.master.wire.wire.fault_counters()
-    assert counters["bus_off"] == 1 and counters["bus_off_lost"] > 50
+    # 21.4 ms of Spinal's schedule lost: 10 PWM broadcasts, 10 angle + current pairs, replies
+    assert counters["bus_off"] == 1 and counters["bus_off_lost"] >= 30
     assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
 
 
@@ -281,3 +283,44 @@ def test_can_loss_drops_its_share_of_the_pwm_broadcasts(tmp_path):
     counters = stack.spinal.master.wire.wire.fault_counters()
     assert counters["error_frames"] == counters["lost"] >= before - after
     assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
+
+
+def test_neuron_reset_is_detected_the_board_comes_back_and_the_crash_is_reported(tmp_path):
+    record, stack = _quick(tmp_path, "neuron-reset")
+    at = record["fault_at_s"]
+    k = mission.RESET_BOARD
+    board = stack.neurons[k].state()
+    slave = board["slave_id"]
+    # the candump, parsed here: the board's servo-state replies (DLC 8 on SERVO ids from its
+    # slave id) stop for its reboot time, then come back
+    replies = []
+    for line in stack.folder.candump.read_text().splitlines():
+        stamp, _, frame = line.split()[:3]
+        can_id, data = frame.split("#")
+        ident = int(can_id, 16)
+        if ident >> 8 == 2 and ident & 0xF == slave and len(data) == 16:
+            replies.append(float(stamp.strip("()")))
+    replies = np.array(replies)
+    gaps = np.diff(replies[replies > mission.ARM_AT + 0.5])
+    # 100 ms of reboot, plus up to 8 ms on each side: the board is asked every 8 ms (four
+    # Neurons, one servo-angle frame on every second ms)
+    assert 0.1 <= gaps.max() <= 0.116
+    silent_from = replies[replies > mission.ARM_AT + 0.5][int(np.argmax(gaps))]
+    assert at - 0.009 < silent_from <= at
+    # back at power-on and turned on again by Spinal's torque bits (the goal-sync handshake)
+    assert board["reboots"] == 1 and not board["rebooting"] and board["connected"]
+    assert all(s["torque_enable"] for s in board["servos"])
+    reporting = sum(1 for s in board["servos"] if s["config"]["send_data_flag"])
+    assert stack.spinal.master.goal_resyncs >= reporting > 0
+    # the ESC stopped meanwhile: rotor 0's true thrust near zero 40-90 ms after the reset
+    # (the rotor's 10 ms lag)
+    a = truth_arrays(stack)
+    window = (a["t"] > at + 0.04) & (a["t"] < at + 0.09)
+    assert a["thrust"][window, 0].max() < 0.5
+    # a quadrotor without one rotor for 0.1 s flips: detected, and not claimed safe
+    assert record["fault_detected"] and not record["safe"] and record["outcome"] == "crashed"
+
+
+def test_no_goal_resync_without_a_fault(tmp_path):
+    record, stack = _quick(tmp_path, "none")
+    assert stack.spinal.master.goal_resyncs == 0 and record["safe"]

@@ -242,6 +242,12 @@ impl CanMaster {
         self.core.events_dropped
     }
 
+    /// Servo goal reports after the goal-sync handshake with torque on (a Neuron reset).
+    #[getter]
+    fn goal_resyncs(&self) -> u64 {
+        self.core.goal_resyncs
+    }
+
     /// `[(reason, count), ...]` in first-counted order.
     fn rx_errors(&self) -> Vec<(&'static str, u64)> {
         self.core

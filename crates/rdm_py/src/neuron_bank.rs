@@ -355,6 +355,12 @@ impl NeuronBank {
         Ok((b.esc_held_value(), b.esc_stopped()))
     }
 
+    /// Fault hook: board `k`'s MCU resets now (deaf for its reboot time, ESC stopped, its
+    /// servos back to power-on: torque off, goal at the present position).
+    fn power_cycle(&mut self, k: usize) -> PyResult<()> {
+        self.core.power_cycle(k).map_err(bank_err)
+    }
+
     /// Set board `k`'s held ESC value (a test hook, as writing the reference's attribute).
     fn set_esc_held_value(&mut self, k: usize, value: u16) -> PyResult<()> {
         self.core

@@ -230,6 +230,11 @@ class NeuronBoardView:
             self._outputs_at = c
         return self._outputs_cache
 
+    def power_cycle(self) -> None:
+        """Fault hook: this board's MCU resets now (``_rdm.NeuronBank.power_cycle``)."""
+        self._bank._core.power_cycle(self._k)
+        self._outputs_at = -1  # read again
+
     def state(self) -> dict[str, Any]:
         """Everything the core holds about this board (see ``NeuronBank.board_state``)."""
         return self._bank._core.board_state(self._k)
