@@ -355,7 +355,7 @@ impl NeuronBank {
         Ok((b.esc_held_value(), b.esc_stopped()))
     }
 
-    /// Fault hook: board `k`'s MCU resets now (deaf for its reboot time, ESC stopped, its
+    /// Fault hook: board `k`'s MCU resets at the call (deaf for its reboot time, ESC stopped, its
     /// servos back to power-on: torque off, goal at the present position).
     fn power_cycle(&mut self, k: usize) -> PyResult<()> {
         self.core.power_cycle(k).map_err(bank_err)

@@ -231,7 +231,7 @@ class NeuronBoardView:
         return self._outputs_cache
 
     def power_cycle(self) -> None:
-        """Fault hook: this board's MCU resets now (``_rdm.NeuronBank.power_cycle``)."""
+        """Fault hook: this board's MCU resets at the call (``_rdm.NeuronBank.power_cycle``)."""
         self._bank._core.power_cycle(self._k)
         self._outputs_at = -1  # read again
 

@@ -336,7 +336,7 @@ mod tests {
             .couple(&bank, &mut targets, &mut duties)
             .expect("couple");
         assert!(!c.targets);
-        assert_eq!(targets, [0.3]); // a new goal no longer reaches it
+        assert_eq!(targets, [0.3]); // a later goal no longer reaches it
         assert_eq!(bridge.stuck_joints().collect::<Vec<_>>(), vec![0]);
     }
 }

@@ -84,7 +84,7 @@ impl NeuronBank {
         self.boards.get_mut(k).ok_or(BankError::BoardIndex(k))
     }
 
-    /// Fault hook: board `board`'s MCU resets now ([`NeuronBoard::power_cycle`]).
+    /// Fault hook: board `board`'s MCU resets at the call ([`NeuronBoard::power_cycle`]).
     pub fn power_cycle(&mut self, board: usize) -> Result<(), BankError> {
         self.board_mut(board)?.power_cycle();
         Ok(())

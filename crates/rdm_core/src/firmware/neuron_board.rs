@@ -441,7 +441,7 @@ impl NeuronBoard {
         self.changes = changes;
     }
 
-    /// Fault hook (the fault campaign's `neuron-reset`): the MCU resets now, unasked (a
+    /// Fault hook (the fault campaign's `neuron-reset`): the MCU resets at the call, unasked (a
     /// brown-out or watchdog reset, not a REBOOT sub-command). Deaf for the reboot time with
     /// the ESC stopped, as after REBOOT; its RAM back to the power-on state: every servo
     /// torque off, its goal at the present position (the shaft stays where it is), no
