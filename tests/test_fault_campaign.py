@@ -28,6 +28,7 @@ import rdm
 from rdm.plant.ceiling import NoCeilingEffect
 from rdm.plant.sensors import ImuReading
 from rdm.scenarios import mission
+from rdm.scenarios.common import truth_arrays
 from rdm.scenarios.mission_faults import (
     SPIKE_ACC,
     SPIKE_GYRO,
@@ -96,6 +97,9 @@ def test_campaign_rows_are_the_runs_records(tmp_path, fault):
     times = [r["touchdown_s"] - r["fault_at_s"] for r in records if r["outcome"] == "landed"]
     assert row["fault_to_touchdown_s"]["max"] == pytest.approx(max(times))
     assert row["max_tilt_deg"] == max(r["max_tilt_deg"] for r in records)
+    detect = [r["detected_at_s"] - r["fault_at_s"] for r in records if r["detected_at_s"]]
+    if detect:  # battery-sag: the node's battery_low monitor
+        assert row["fault_to_detection_s"]["max"] == pytest.approx(max(detect))
     # the safety claim: every run ends safe and the node noticed the fault
     assert row["safe"] == 2 and row["detected"] == 2 and out.returncode == 0
     assert all(r["fault"] == fault and r["fault_at_s"] > 0 for r in records)
@@ -165,6 +169,158 @@ def test_the_help_names_every_fault() -> None:
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)
-    text = " ".join(parser.format_help().split())
+    # (a name wrapped at one of its hyphens is joined again)
+    text = " ".join(re.sub(r"-\n\s*", "-", parser.format_help()).split())
     named = set(re.findall(r"[a-z]+(?:-[a-z0-9]+)+", text))
     assert set(FAULTS) - {"none"} <= named
+
+
+def _perched_run(tmp_path, fault: str):
+    result = mission.run(tmp_path, duration=mission.DEFAULT_DURATION, seed=1, fault=fault)
+    return result.facts["mission"], truth_arrays(result.stack), result.stack
+
+
+def test_stuck_servo_is_held_perched_where_it_stuck(tmp_path):
+    record, a, stack = _perched_run(tmp_path, "stuck-servo")
+    j = list(stack.plant.joint_names).index(mission.STUCK_JOINT)
+    t, q = a["t"], a["q"][:, j]
+    at = record["fault_at_s"]
+    after = t > at + 0.05
+    # the ground truth: the shaft stays where it was while the goal moved on (stiff servo:
+    # within a few mrad under the arm's load); the other moved joint (q2) did move
+    assert np.ptp(q[after]) < 0.01
+    q2 = a["q"][:, list(stack.plant.joint_names).index("q2")]
+    assert abs(q2[-1] - q2[np.searchsorted(t, at)]) > 0.05
+    node = stack.onboard
+    trip = [e for e in node.monitors.events if e["monitor"] == "joint_tracking"]
+    assert len(trip) == 1 and at < trip[0]["t"] < at + 2.0
+    # held where they are: the goals sent equal the present angles again
+    np.testing.assert_allclose(node.joint_targets[:6], node.present_q[:6], atol=1e-9)
+    assert node.counts["joint_tracking_hold"] == 1
+    assert record["outcome"] == "perched" and record["safe"] and record["fault_detected"]
+    assert a["contact"][t > at].all()
+
+
+def test_infeasible_qp_is_held_perched_and_the_problem_has_no_solution(tmp_path):
+    from scipy.optimize import linprog
+
+    record, a, stack = _perched_run(tmp_path, "infeasible-qp")
+    node = stack.onboard
+    perch = node.control.perch
+    assert perch.params()["mu_x"] == perch.params()["mu_y"] == mission.INFEASIBLE_MU
+    # an independent solver on the last tick's QP rows: no point satisfies them
+    prob = perch.problem_data()
+    z = prob.zero_cone
+    A = prob.A.toarray()
+    lp = linprog(
+        np.zeros(A.shape[1]),
+        A_ub=A[z:],
+        b_ub=prob.b[z:],
+        A_eq=A[:z] if z else None,
+        b_eq=prob.b[:z] if z else None,
+        bounds=(None, None),
+        method="highs",
+    )
+    assert lp.status == 2, lp.message  # infeasible
+    assert perch.counters()["infeasible"] > 0
+    assert node.last_command.perch.status == "infeasible"
+    trip = [e for e in node.monitors.events if e["monitor"] == "perch_qp_failed"]
+    at = record["fault_at_s"]
+    limit = node.config.monitors.perch_qp_fail_s
+    assert len(trip) == 1 and at + limit - 0.05 < trip[0]["t"] < at + limit + 0.1
+    assert node.counts["perch_qp_failed_hold"] == 1
+    assert record["outcome"] == "perched" and record["safe"] and record["fault_detected"]
+    assert a["contact"][a["t"] > at].all()
+
+
+def _candump(path: Path) -> tuple[np.ndarray, list[int]]:
+    """Stamps and ids of a ``candump -L`` file, parsed here (not by the package)."""
+    stamps, ids = [], []
+    for line in path.read_text().splitlines():
+        stamp, _, frame = line.split()[:3]
+        stamps.append(float(stamp.strip("()")))
+        ids.append(int(frame.split("#")[0], 16))
+    return np.array(stamps), ids
+
+
+def _quick(tmp_path, fault: str):
+    result = mission.run(tmp_path, duration=mission.QUICK_DURATION, seed=0, fault=fault, quick=True)
+    return result.facts["mission"], result.stack
+
+
+def test_can_bus_off_silences_the_bus_for_the_disturbance_and_the_recovery_bits(tmp_path):
+    record, stack = _quick(tmp_path, "can-bus-off")
+    stamps, _ = _candump(stack.folder.candump)
+    at = record["fault_at_s"]
+    flying = stamps > mission.ARM_AT + 0.5  # the CAN master's enumeration is over
+    stamps = stamps[flying]
+    gaps = np.diff(stamps)
+    k = int(np.argmax(gaps))  # the longest silence from then on is the bus-off
+    silence = mission.BUS_OFF_S + 128 * 11 / 1e6
+    assert stamps[k] <= at + 1e-3 < stamps[k + 1]
+    # the bus carries nothing from the fault until 1.408 ms after the disturbance (the next
+    # 1 kHz tick after it), then Spinal's and the Neurons' frames flow as before
+    assert silence <= stamps[k + 1] - at < silence + 1.5e-3
+    assert np.sort(gaps)[-2] < 0.01
+    counters = stack.spinal.master.wire.wire.fault_counters()
+    # 21.4 ms of Spinal's schedule lost: 10 PWM broadcasts, 10 angle + current pairs, replies
+    assert counters["bus_off"] == 1 and counters["bus_off_lost"] >= 30
+    assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
+
+
+def test_can_loss_drops_its_share_of_the_pwm_broadcasts(tmp_path):
+    record, stack = _quick(tmp_path, "can-loss-1e-1")
+    stamps, ids = _candump(stack.folder.candump)
+    at = record["fault_at_s"]
+    pwm = np.array([i == 0x00F for i in ids])
+    window = 4.0  # s after the fault: Spinal broadcasts PWM every 2 ms
+    before = ((stamps >= at - window - 0.5) & (stamps < at - 0.5) & pwm).sum()
+    after = ((stamps >= at + 0.01) & (stamps < at + 0.01 + window) & pwm).sum()
+    assert before == pytest.approx(window * 500, abs=2)  # none lost before the fault
+    expected = before * (1 - mission.CAN_LOSS["can-loss-1e-1"])
+    sigma = math.sqrt(before * 0.1 * 0.9)
+    assert abs(after - expected) < 5 * sigma, (before, after)
+    counters = stack.spinal.master.wire.wire.fault_counters()
+    assert counters["error_frames"] == counters["lost"] >= before - after
+    assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
+
+
+def test_neuron_reset_is_detected_the_board_comes_back_and_the_crash_is_reported(tmp_path):
+    record, stack = _quick(tmp_path, "neuron-reset")
+    at = record["fault_at_s"]
+    k = mission.RESET_BOARD
+    board = stack.neurons[k].state()
+    slave = board["slave_id"]
+    # the candump, parsed here: the board's servo-state replies (DLC 8 on SERVO ids from its
+    # slave id) stop for its reboot time, then come back
+    replies = []
+    for line in stack.folder.candump.read_text().splitlines():
+        stamp, _, frame = line.split()[:3]
+        can_id, data = frame.split("#")
+        ident = int(can_id, 16)
+        if ident >> 8 == 2 and ident & 0xF == slave and len(data) == 16:
+            replies.append(float(stamp.strip("()")))
+    replies = np.array(replies)
+    gaps = np.diff(replies[replies > mission.ARM_AT + 0.5])
+    # 100 ms of reboot, plus up to 8 ms on each side: the board is asked every 8 ms (four
+    # Neurons, one servo-angle frame on every second ms)
+    assert 0.1 <= gaps.max() <= 0.116
+    silent_from = replies[replies > mission.ARM_AT + 0.5][int(np.argmax(gaps))]
+    assert at - 0.009 < silent_from <= at
+    # back at power-on and turned on again by Spinal's torque bits (the goal-sync handshake)
+    assert board["reboots"] == 1 and not board["rebooting"] and board["connected"]
+    assert all(s["torque_enable"] for s in board["servos"])
+    reporting = sum(1 for s in board["servos"] if s["config"]["send_data_flag"])
+    assert stack.spinal.master.goal_resyncs >= reporting > 0
+    # the ESC stopped meanwhile: rotor 0's true thrust near zero 40-90 ms after the reset
+    # (the rotor's 10 ms lag)
+    a = truth_arrays(stack)
+    window = (a["t"] > at + 0.04) & (a["t"] < at + 0.09)
+    assert a["thrust"][window, 0].max() < 0.5
+    # a quadrotor without one rotor for 0.1 s flips: detected, and not claimed safe
+    assert record["fault_detected"] and not record["safe"] and record["outcome"] == "crashed"
+
+
+def test_no_goal_resync_without_a_fault(tmp_path):
+    record, stack = _quick(tmp_path, "none")
+    assert stack.spinal.master.goal_resyncs == 0 and record["safe"]

@@ -27,7 +27,8 @@ from rdm.scenarios.mission import (
 )
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
-#: The faults that must end safe; the dead ESC's crash is asserted in test_fault_campaign.py.
+#: The faults that must end safe; the crashes of a dead ESC and a Neuron reset are asserted
+#: in test_fault_campaign.py.
 SURVIVABLE = [f for f in FAULTS if f not in BEYOND_AIRFRAME]
 
 

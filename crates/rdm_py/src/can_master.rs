@@ -242,6 +242,12 @@ impl CanMaster {
         self.core.events_dropped
     }
 
+    /// Servo goal reports after the goal-sync handshake with torque on (a Neuron reset).
+    #[getter]
+    fn goal_resyncs(&self) -> u64 {
+        self.core.goal_resyncs
+    }
+
     /// `[(reason, count), ...]` in first-counted order.
     fn rx_errors(&self) -> Vec<(&'static str, u64)> {
         self.core
@@ -462,6 +468,36 @@ impl CanWire {
     #[getter]
     fn dropped(&self) -> (u64, u64) {
         (self.core.queue_dropped, self.core.log_dropped)
+    }
+
+    /// Fault hook: each later frame is lost with probability `p` (0: off), seeded.
+    fn set_loss(&mut self, p: f64, seed: u64) -> PyResult<()> {
+        self.core.set_loss(p, seed).map_err(|_| {
+            pyo3::exceptions::PyValueError::new_err(format!("set_loss: p={p} not in [0, 1]"))
+        })
+    }
+
+    /// Fault hook: the bus disturbed from channel time `start` for `disturbed_s` s; bus-off
+    /// until 128 x 11 recessive bits after its end.
+    fn bus_off(&mut self, start: f64, disturbed_s: f64) -> PyResult<()> {
+        self.core.bus_off(start, disturbed_s).map_err(|_| {
+            pyo3::exceptions::PyValueError::new_err(format!(
+                "bus_off: start={start} and disturbed_s={disturbed_s} must be finite, \
+                 disturbed_s >= 0"
+            ))
+        })
+    }
+
+    /// The fault hooks' counters: `lost`, `error_frames`, `bus_off`, `bus_off_lost`, and
+    /// `silent_until` (channel time the bus carries frames again; -inf: never off).
+    fn fault_counters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let d = pyo3::types::PyDict::new(py);
+        d.set_item("lost", self.core.lost)?;
+        d.set_item("error_frames", self.core.error_frames)?;
+        d.set_item("bus_off", self.core.bus_off)?;
+        d.set_item("bus_off_lost", self.core.bus_off_lost)?;
+        d.set_item("silent_until", self.core.silent_until())?;
+        Ok(d)
     }
 
     /// Frames waiting in the capture log.

@@ -243,6 +243,29 @@ impl NeuronBank {
         Ok((c.targets, c.duties))
     }
 
+    /// Fault hook: joint `joint`'s servo output stops following its goal (its plant target
+    /// frozen at the next snapshot's angle; `BankBridge::stick_joint`).
+    fn stick_joint(&mut self, joint: usize) -> PyResult<()> {
+        let bridge = self
+            .bridge
+            .as_mut()
+            .ok_or_else(|| err("stick_joint: no bridge attached".into()))?;
+        if bridge.stick_joint(joint) {
+            Ok(())
+        } else {
+            Err(err(format!(
+                "stick_joint: joint {joint} outside the joint table"
+            )))
+        }
+    }
+
+    /// The joints whose servo is stuck (fault hook), in joint order.
+    fn stuck_joints(&self) -> Vec<usize> {
+        self.bridge
+            .as_ref()
+            .map_or_else(Vec::new, |b| b.stuck_joints().collect())
+    }
+
     /// Push the last bridge snapshot's present positions to the servos (once per snapshot).
     fn bridge_push_positions(&mut self) -> PyResult<()> {
         if let Some(b) = self.bridge.as_mut() {
@@ -330,6 +353,12 @@ impl NeuronBank {
     fn esc(&self, k: usize) -> PyResult<(u16, bool)> {
         let b = self.core.board(k).map_err(bank_err)?;
         Ok((b.esc_held_value(), b.esc_stopped()))
+    }
+
+    /// Fault hook: board `k`'s MCU resets at the call (deaf for its reboot time, ESC stopped, its
+    /// servos back to power-on: torque off, goal at the present position).
+    fn power_cycle(&mut self, k: usize) -> PyResult<()> {
+        self.core.power_cycle(k).map_err(bank_err)
     }
 
     /// Set board `k`'s held ESC value (a test hook, as writing the reference's attribute).

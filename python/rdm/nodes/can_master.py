@@ -362,6 +362,12 @@ class CanMaster:
         return self._core.rx_count
 
     @property
+    def goal_resyncs(self) -> int:
+        """Servo goal reports after the goal-sync handshake with torque on (a Neuron that
+        reset, or missed an acknowledgement)."""
+        return self._core.goal_resyncs
+
+    @property
     def rx_errors(self) -> Counter[str]:
         return Counter(dict(self._core.rx_errors()))
 

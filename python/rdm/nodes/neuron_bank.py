@@ -230,6 +230,11 @@ class NeuronBoardView:
             self._outputs_at = c
         return self._outputs_cache
 
+    def power_cycle(self) -> None:
+        """Fault hook: this board's MCU resets at the call (``_rdm.NeuronBank.power_cycle``)."""
+        self._bank._core.power_cycle(self._k)
+        self._outputs_at = -1  # read again
+
     def state(self) -> dict[str, Any]:
         """Everything the core holds about this board (see ``NeuronBank.board_state``)."""
         return self._bank._core.board_state(self._k)
@@ -367,6 +372,11 @@ class NeuronBankNode:
             int(center), list(qadr), list(scale), list(servos), list(rotors), list(group_boards)
         )
         self._bridged = True
+
+    def stick_joint(self, joint: int) -> None:
+        """Fault hook: joint ``joint``'s servo output stops following its goal (the
+        attached coupling's ``_rdm.NeuronBank.stick_joint``)."""
+        self._core.stick_joint(joint)
 
     def bridge_tick(self, qpos: Any, targets: Any, duties: Any) -> tuple[bool, bool]:
         """Snapshot + goals -> ``targets`` + ESC outputs -> ``duties`` (``NeuronBank.

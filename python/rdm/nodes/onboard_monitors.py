@@ -48,9 +48,28 @@ class MonitorLimits:
     cell_arm_min: float = 3.6
     #: What losing the ground station does while perched: "hold" (stay perched) or "land".
     ground_loss_perched: str = "hold"
+    #: Joint tracking: a joint whose present angle (``servo/states``) stays further than
+    #: ``joint_tracking_rad`` from the goal last sent for ``joint_tracking_s`` trips
+    #: ``joint_tracking`` (a stuck or overloaded servo). ASSUMPTION: 0.2 rad for 0.25 s; the
+    #: whole mission's largest error is 0.09 rad (the 50 ms servo lead at 0.5 rad/s and the
+    #: servos' lag; docs/flying.md).
+    joint_tracking_rad: float = 0.2
+    joint_tracking_s: float = 0.25
+    #: Perching QP: no solution (``infeasible`` or another failed status; the controller then
+    #: gives its safe command) in every control tick for ``perch_qp_fail_s`` trips
+    #: ``perch_qp_failed``. ASSUMPTION: 2 s (80 ticks at 40 Hz): the contact transient of a
+    #: normal perch gives up to 28 infeasible ticks in a row (whole mission, seeds 0-7).
+    perch_qp_fail_s: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ("imu_timeout_s", "servo_timeout_s", "low_battery_s"):
+        for name in (
+            "imu_timeout_s",
+            "servo_timeout_s",
+            "low_battery_s",
+            "joint_tracking_rad",
+            "joint_tracking_s",
+            "perch_qp_fail_s",
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"MonitorLimits.{name}={v!r} must be finite and > 0")
@@ -92,6 +111,7 @@ class Monitors:
         self.voltage: float | None = None
         self._low_since: float | None = None
         self._stale: set[str] = set()
+        self._since: dict[str, float] = {}
 
     def trip(self, name: str, reason: str, now: float) -> None:
         """Count, log and remember one trip."""
@@ -157,6 +177,16 @@ class Monitors:
         self._stale.add(name)
         self.trip(name, reason, now)
         return True
+
+    def sustained(self, name: str, condition: bool, hold_s: float, now: float, reason: str) -> bool:
+        """:meth:`stale` of ``condition`` held without a break for ``hold_s`` s (one trip per
+        episode; a tick without it starts the wait again)."""
+        if not condition:
+            self._since.pop(name, None)
+        else:
+            self._since.setdefault(name, now)
+        held = condition and now - self._since[name] >= hold_s - 1e-9
+        return self.stale(name, held, now, reason)
 
     def active(self, name: str) -> bool:
         """Whether the condition of ``name`` holds at the last check."""

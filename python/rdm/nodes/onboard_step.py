@@ -218,6 +218,46 @@ class OnboardStep:
         if self.foot is not None and self.control.perching:
             missing = self.foot.latest(now, self.config.foot_timeout_s) is None
             m.stale("foot_stale", missing, now, "no foot-sensor sample while perched")
+        self._monitor_joints(now)
+        self._monitor_perch_qp(now)
+
+    def _monitor_joints(self, now: float) -> None:
+        """Joint tracking: the goals last sent against the present angles (``servo/states``);
+        on a trip the joints are held where they are (the trajectory dropped) and the node
+        reacts as to any fault (in flight land, perched hold)."""
+        goals = self.last_servo_goals
+        if goals is None:
+            return
+        lim = self.config.monitors
+        n = min(len(goals), self.present_q.size)
+        err = np.abs(np.asarray(goals[:n], dtype=float) - self.present_q[:n])
+        worst = int(np.argmax(err)) if n else 0
+        off = bool(n) and float(err[worst]) > lim.joint_tracking_rad
+        reason = f"joint {worst} {float(err[worst]) if n else 0.0:.3f} rad from its goal"
+        if self.monitors.sustained("joint_tracking", off, lim.joint_tracking_s, now, reason):
+            self._trajectory = None
+            self.joint_targets = self.present_q.copy()
+            self.counts["joints_held"] += 1
+            self._react("joint_tracking", now)
+
+    def _monitor_perch_qp(self, now: float) -> None:
+        """Perching QP status: every perched tick without a solution (the controller's safe
+        command) for ``perch_qp_fail_s`` trips ``perch_qp_failed`` (perched: hold)."""
+        c, at = self.last_command, self._command_at  # the previous control tick's
+        failed = (
+            self.control.perching
+            and c is not None
+            and c.perch is not None
+            and at is not None
+            and now - at <= 1.5 * self.period + 1e-9
+            and not c.perch.ok
+        )
+        status = "-" if c is None or c.perch is None else c.perch.status
+        lim = self.config.monitors
+        if self.monitors.sustained(
+            "perch_qp_failed", failed, lim.perch_qp_fail_s, now, f"perching QP {status}"
+        ):
+            self._react("perch_qp_failed", now)
 
     def _react(self, monitor: str, now: float) -> None:
         """A fault's reaction: in flight land; perched hold (or land when configured)."""

@@ -347,6 +347,17 @@ class PlantBridge:
         if self._apply_battery(now) or changed:
             plant.set_rotor_duties(duties)
 
+    def stick_servo(self, joint: str) -> None:
+        """Fault hook (``rdm sim mission --fault stuck-servo``): the servo of ``joint`` stops
+        following its goal, its shaft held where it is (the Rust coupling's
+        ``NeuronBank.stick_joint``); its Neuron still reports the true (stuck) position."""
+        if self._bank is None:
+            raise ValueError("stick_servo: needs the Rust coupling (StackOptions.rust_bridge)")
+        names = list(self.plant.joint_names)
+        if joint not in names:
+            raise ValueError(f"stick_servo: joint {joint!r} not one of {', '.join(names)}")
+        self._bank.stick_joint(names.index(joint))
+
     def set_battery(self, volts: float | Callable[[float], float]) -> None:
         """The battery voltage from now on (volts, or a function of simulated time): the
         plant's ESCs and the battery sinks take it at the next tick."""

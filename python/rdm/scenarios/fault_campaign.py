@@ -6,7 +6,8 @@ off, go to, land; the perched faults perch first) once per seed, on any
 ``concurrent.futures.Executor`` (:func:`rdm.scenarios.seed_sweep.sweep`). Per fault the
 campaign counts the runs, the safe ends (disarmed on the floor or held perched, tilt never
 above 30 deg in flight, no duty above ``motor_info``'s maximum: the mission's own record),
-the detections (the monitor or counter that shows the node noticed, ``mission._DETECTED_BY``)
+the detections (the monitor or counter that shows the node noticed, ``mission._DETECTED_BY``),
+the time from the fault to the node monitor's trip (the safe state of a perched fault: held)
 and the time from the fault to touchdown.
 """
 
@@ -50,6 +51,11 @@ def fault_row(fault: str, outcomes: Sequence[RunOutcome]) -> dict[str, Any]:
         for r in records
         if r["outcome"] == "landed" and r["touchdown_s"] is not None and r["fault_at_s"]
     ]
+    to_detection = [
+        r["detected_at_s"] - r["fault_at_s"]
+        for r in records
+        if r.get("detected_at_s") is not None and r["fault_at_s"] is not None
+    ]
     detected = [r["fault_detected"] for r in records if r["fault_detected"] is not None]
     return nulled(
         {
@@ -63,6 +69,10 @@ def fault_row(fault: str, outcomes: Sequence[RunOutcome]) -> dict[str, Any]:
             "fault_to_touchdown_s": {
                 "median": float(np.median(to_safe)) if to_safe else None,
                 "max": float(max(to_safe)) if to_safe else None,
+            },
+            "fault_to_detection_s": {
+                "median": float(np.median(to_detection)) if to_detection else None,
+                "max": float(max(to_detection)) if to_detection else None,
             },
             "failed_runs": [{"seed": o.seed, "error": o.error} for o in outcomes if o.error],
             "unsafe_seeds": [
@@ -79,8 +89,18 @@ def _num(v: float | None, fmt: str = "{:.1f}") -> str:
 
 
 def format_campaign(rows: Sequence[dict[str, Any]]) -> str:
-    """Columns: fault, runs, safe, detected, outcomes, max tilt, fault -> touchdown."""
-    header = ("fault", "runs", "safe", "detected", "outcomes", "max tilt deg", "to touchdown s")
+    """Columns: fault, runs, safe, detected, outcomes, max tilt, fault -> detection (a node
+    monitor's trip), fault -> touchdown."""
+    header = (
+        "fault",
+        "runs",
+        "safe",
+        "detected",
+        "outcomes",
+        "max tilt deg",
+        "to detection s",
+        "to touchdown s",
+    )
     lines = [
         (
             r["fault"],
@@ -89,6 +109,8 @@ def format_campaign(rows: Sequence[dict[str, Any]]) -> str:
             "-" if r["detected"] is None else str(r["detected"]),
             " ".join(f"{k} {v}" for k, v in sorted(r["outcomes"].items())),
             _num(r["max_tilt_deg"]),
+            f"{_num(r['fault_to_detection_s']['median'], '{:.2f}')} "
+            f"(max {_num(r['fault_to_detection_s']['max'], '{:.2f}')})",
             f"{_num(r['fault_to_touchdown_s']['median'])} "
             f"(max {_num(r['fault_to_touchdown_s']['max'])})",
         )

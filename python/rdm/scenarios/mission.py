@@ -12,9 +12,9 @@ latency (:class:`rdm.scenarios.mocap_node.MocapSensor`), the CoG state estimated
 5. ``unperch``, unfold (``joints``), ``land`` (touchdown, ARM_OFF).
 
 ``fault`` injects one fault (:data:`FAULTS`): the flight faults once the robot hovers after
-take-off, ``foot-sensor-loss`` once perched and settled. The robot must end safe: disarmed on
-the floor or held perched, never beyond 30 deg of tilt in flight, never a duty above
-``motor_info``'s maximum.
+take-off, the perched ones (:data:`PERCHED_FAULTS`) once perched and settled. The robot must
+end safe: disarmed on the floor or held perched, never beyond 30 deg of tilt in flight, never
+a duty above ``motor_info``'s maximum (but for the faults of :data:`BEYOND_AIRFRAME`).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from rdm.sim.byte_faults import CorruptingLink
 
 from . import perching
 from .common import ScenarioResult, finish, roll_pitch, run_stack, sim_stack_options, truth_arrays
-from .mission_faults import DeadRotor, SpikingImu
+from .mission_faults import DeadRotor, SpikingImu, infeasible_perch_qp
 from .mocap_node import MocapSensor
 from .stack import DroppableLink, Stack, build_stack
 
@@ -69,17 +69,43 @@ FAULTS = (
     "foot-sensor-loss",  # the foot sensor's cable is cut once perched (the node holds)
     "imu-spikes",  # IMU samples beyond the sensor's range, about 3 a second (Spinal drops them)
     "dead-esc",  # rotor 0 gives no thrust from the fault on (a quadrotor cannot hover)
+    "stuck-servo",  # perched, q4's servo stops following its goal as the arm moves (held)
+    "infeasible-qp",  # perched, the QP's friction limit set below what the contact needs
+    "can-loss-1e-2",  # each frame on the Neuron CAN bus lost with p = 1e-2
+    "can-loss-1e-1",  # ... with p = 1e-1
+    "can-bus-off",  # the CAN bus disturbed for 20 ms: bus-off, then the recovery bits
+    "neuron-reset",  # Neuron slave 1 (rotor 0's ESC) resets unasked: 100 ms deaf, power-on
 )
 #: Byte-fault probability of the ``uart-noise-*`` faults (sim.byte_faults.CorruptingLink).
 UART_NOISE = {"uart-noise-1e-4": 1e-4, "uart-noise-1e-3": 1e-3}
+#: Frame-loss probability of the ``can-loss-*`` faults (``rdm._rdm.CanWire.set_loss``).
+CAN_LOSS = {"can-loss-1e-2": 1e-2, "can-loss-1e-1": 1e-1}
+#: How long ``can-bus-off`` disturbs the bus, s; the controllers rejoin 128 x 11 recessive
+#: bits (1.408 ms) after it. ASSUMPTION: a connector glitch of 20 ms. The ESCs hold their
+#: last pulse meanwhile; with 50 ms the held pulses tip the attitude loop over in 9 of 20
+#: seeds (docs/flying.md); beyond the Neurons' 100 ms watchdog every motor stops.
+BUS_OFF_S = 0.02
+#: The board ``neuron-reset`` resets (bank index 0: slave 1, rotor 0's ESC and its servos).
+RESET_BOARD = 0
 #: The sag of ``battery-sag``, V/s (ASSUMPTION: a failing cell under hover load), down to
 #: 3.0 V per cell. The operator then holds at the goal: the node must land by itself.
 SAG_V_PER_S = 1.0
 #: Faults injected once perched (the others: once hovering after take-off).
-PERCHED_FAULTS = ("foot-sensor-loss",)
+PERCHED_FAULTS = ("foot-sensor-loss", "stuck-servo", "infeasible-qp")
+#: Perched faults injected as the arm motion starts (the others: once settled).
+ARM_FAULTS = ("stuck-servo",)
+#: The joint whose servo sticks (``stuck-servo``): q4, the joint the perched arm motion
+#: moves furthest (0.5 rad).
+STUCK_JOINT = "q4"
+#: The friction coefficient ``infeasible-qp`` gives the perching QP (both axes): below what
+#: the perched contact's tangential force needs, so eq. (49)'s friction rows cannot hold.
+#: ASSUMPTION: a corrupted parameter (the configured values are 0.9).
+INFEASIBLE_MU = 1e-4
 #: Faults the airframe cannot survive: detected, but a four-rotor robot cannot fly on three
-#: rotors, so the run ends crashed (docs/flying.md). Every other fault must end safe.
-BEYOND_AIRFRAME = ("dead-esc",)
+#: rotors, so the run ends crashed (docs/flying.md): a dead ESC, and a Neuron reset (its ESC
+#: stopped for the 100 ms the board reboots flips the robot within 0.5 s). Every other fault
+#: must end safe.
+BEYOND_AIRFRAME = ("dead-esc", "neuron-reset")
 #: The safety bounds of a run.
 MAX_TILT_DEG = 30.0
 
@@ -128,6 +154,8 @@ class MissionScript:
             self.phase, self._until = "perched", now + SETTLE_S
         elif self.phase == "perched" and self._until is not None and now >= self._until:
             if self.fault in PERCHED_FAULTS:  # once settled on the perch
+                if self.fault in ARM_FAULTS:  # the arm starts to move, then the fault
+                    self._joints(node, now, PERCHED_ARM, "arm")
                 self._inject(stack, now)
                 self.phase, self._until = "hold", now + HOLD_PERCHED_S
             else:
@@ -207,6 +235,26 @@ class MissionScript:
             effects = list(stack.plant.ceiling_effects)
             effects[0] = DeadRotor(effects[0])
             stack.plant.ceiling_effects = effects
+        elif self.fault in CAN_LOSS:  # on the wire between Spinal and the Neurons
+            link = _can_wire(stack)
+            link.wire.set_loss(CAN_LOSS[self.fault], 1000 * int(stack.plant.seed) + 2)
+        elif self.fault == "can-bus-off":
+            link = _can_wire(stack)
+            link.wire.bus_off(link.clock(), BUS_OFF_S)
+        elif self.fault == "neuron-reset":  # the board's MCU, in the Rust Neuron bank
+            stack.neurons[RESET_BOARD].power_cycle()
+        elif self.fault == "stuck-servo":  # the shaft, behind its Neuron (the Rust bank)
+            stack.bridge.stick_servo(STUCK_JOINT)
+        elif self.fault == "infeasible-qp":
+            infeasible_perch_qp(stack.onboard.control, INFEASIBLE_MU)
+
+
+def _can_wire(stack: Stack) -> Any:
+    """The Neuron bus of the stack (:class:`rdm.link.can_wire.CanWireLink`)."""
+    link = stack.spinal.master.wire
+    if link is None:
+        raise ValueError("the CAN faults need the Rust CAN wire (StackOptions.can_wire)")
+    return link
 
 
 #: Which monitor or counter shows that the node noticed each fault.
@@ -222,6 +270,14 @@ _DETECTED_BY = {
     "foot-sensor-loss": ("monitors", "foot_stale"),
     "imu-spikes": ("estimator", "out_of_range"),
     "dead-esc": ("failsafes", "failsafe_tilt"),
+    "stuck-servo": ("monitors", "joint_tracking"),
+    "infeasible-qp": ("monitors", "perch_qp_failed"),
+    # Spinal's CAN peripheral: the error frames of damaged frames, the bus-off episode
+    "can-loss-1e-2": ("can", "error_frames"),
+    "can-loss-1e-1": ("can", "error_frames"),
+    "can-bus-off": ("can", "bus_off"),
+    # Spinal's CAN master: a servo goal report after the goal-sync handshake, torque on
+    "neuron-reset": ("spinal_can", "goal_resyncs"),
 }
 
 
@@ -263,9 +319,11 @@ def outcome(stack: Stack, script: MissionScript, a: dict[str, np.ndarray]) -> di
         "parser": {"bad_frames": node.session.parser.bad_frames},
         "estimator": stack.spinal.core.estimator_counters,
         "failsafes": stack.spinal.counters.failsafes,
+        "can": _can_wire(stack).wire.fault_counters() if where == "can" else {},
+        "spinal_can": {"goal_resyncs": stack.spinal.master.goal_resyncs},
     }.get(where, {})
     touchdowns = [e["t"] for e in node.monitors.events if e["monitor"] == "touchdown"]
-    return {
+    record = {
         "outcome": result,
         "safe": result in ("landed", "perched")
         and max_tilt <= MAX_TILT_DEG
@@ -280,6 +338,14 @@ def outcome(stack: Stack, script: MissionScript, a: dict[str, np.ndarray]) -> di
         "operator": script.events,
         "monitors": dict(node.monitors.counts),
     }
+    if script.fault != "none":  # when the node's monitor first tripped (None: another counter)
+        trips = [
+            e["t"]
+            for e in node.monitors.events
+            if where == "monitors" and e["monitor"] == key and e["t"] >= (script.fault_at or 0)
+        ]
+        record["detected_at_s"] = trips[0] if trips else None
+    return record
 
 
 def run(

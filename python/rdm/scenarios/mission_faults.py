@@ -1,16 +1,21 @@
-"""Plant-side faults of the ``mission`` scenario: IMU outliers and a dead rotor.
+"""Faults of the ``mission`` scenario outside the wires: IMU outliers, a dead rotor, a
+perching QP made infeasible.
 
 :class:`SpikingImu` replaces the plant's ``imu`` reading (the bridge then samples the IMU in
 Python, not in the lockstep kernel); :class:`DeadRotor` is a ceiling-effect model whose
-thrust ratio is 0 (the plant then applies rotor thrusts in Python).
+thrust ratio is 0 (the plant then applies rotor thrusts in Python);
+:func:`infeasible_perch_qp` gives the node's perching QP a friction limit the contact cannot
+satisfy.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
+from rdm.control.perch import PerchController
 from rdm.plant.ceiling import CeilingEffect
 from rdm.plant.sensors import ImuReading
 
@@ -54,3 +59,18 @@ class DeadRotor:
     def thrust_ratio(self, distance_to_ceiling: float) -> float:
         """Always 0: the rotor gives no thrust."""
         return 0.0
+
+
+def infeasible_perch_qp(control: Any, mu: float) -> None:
+    """Replace the perching controller of ``control`` (:class:`rdm.nodes.onboard_control.
+    ControlPipeline`) by one whose friction coefficients are ``mu`` on both axes, every other
+    parameter kept, started from the thrust it commands now. With ``mu`` below the ratio of
+    the contact's tangential to normal force, eq. (49)'s friction rows (eq. 40) have no
+    solution: every tick is ``infeasible`` and gives the safe command (docs/perch.md)."""
+    old = control.perch
+    params = dict(old.params())
+    params.update(mu_x=float(mu), mu_y=float(mu))
+    rate, cutoff = control.config.rate_hz, control.config.perch_cutoff_hz
+    new = PerchController(rate, cutoff, **params)
+    new.reset(np.asarray(control.perch_thrust, dtype=float))
+    control.perch = new

@@ -9,6 +9,11 @@
 //! - goals of servos with torque on -> servo targets `(goal - center) / ticks_per_rad` (rad),
 //!   read only from boards whose change counter moved;
 //! - ESC outputs -> rotor duties `pulse_us / 2000` of those boards.
+//!
+//! Fault hook (the fault campaign's `stuck-servo`): [`BankBridge::stick_joint`] makes a
+//! joint's servo stop following its goal: its target is frozen at the joint angle of the
+//! next snapshot and no later goal reaches it. Off (no joint stuck), the coupling is the
+//! reference's, unchanged.
 
 use super::neuron_bank::NeuronBank;
 
@@ -70,6 +75,10 @@ pub struct BankBridge {
     q: Vec<f64>,
     epoch: u64,
     pushed_epoch: Option<u64>,
+    /// Per joint: its output shaft stopped following the goal (fault hook).
+    stuck: Vec<bool>,
+    /// A joint stuck since the last coupling: its target still to be frozen.
+    stick_pending: bool,
 }
 
 impl BankBridge {
@@ -136,7 +145,31 @@ impl BankBridge {
             q: vec![0.0; qadr.len()],
             epoch: 0,
             pushed_epoch: None,
+            stuck: vec![false; qadr.len()],
+            stick_pending: false,
         })
+    }
+
+    /// Fault hook: joint `joint`'s servo output stops following its goal from the next
+    /// coupling on (its target frozen at that snapshot's angle). Returns false (nothing
+    /// changed) for a joint outside the joint table.
+    pub fn stick_joint(&mut self, joint: usize) -> bool {
+        match self.stuck.get_mut(joint) {
+            Some(s) => {
+                *s = true;
+                self.stick_pending = true;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The joints whose servo is stuck (fault hook), in joint order.
+    pub fn stuck_joints(&self) -> impl Iterator<Item = usize> + '_ {
+        self.stuck
+            .iter()
+            .enumerate()
+            .filter_map(|(j, s)| s.then_some(j))
     }
 
     /// Snapshot of the joint angles at this tick (`qpos`: the plant's whole qpos).
@@ -186,6 +219,18 @@ impl BankBridge {
             return Err(BridgeError::Length);
         }
         let mut out = Coupled::default();
+        if self.stick_pending {
+            self.stick_pending = false;
+            for (j, stuck) in self.stuck.iter().enumerate() {
+                let (Some(t), Some(q)) = (targets.get_mut(j), self.q.get(j)) else {
+                    continue;
+                };
+                if *stuck && *t != *q {
+                    *t = *q;
+                    out.targets = true;
+                }
+            }
+        }
         let mut any_changed = false;
         for (g, (b, start, end)) in self.groups.iter().enumerate() {
             let board = bank
@@ -209,6 +254,9 @@ impl BankBridge {
                     continue;
                 };
                 let goal = servo.goal();
+                if self.stuck.get(e.joint).copied().unwrap_or(false) {
+                    continue; // the shaft no longer follows (fault hook)
+                }
                 if servo.torque_enable() && *last != Some(goal) {
                     *last = Some(goal);
                     let s = self.scale.get(e.joint).copied().unwrap_or(f64::NAN);
@@ -235,5 +283,60 @@ impl BankBridge {
             }
         }
         Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::firmware::neuron_board::BoardSettings;
+
+    /// Torque on and a goal of `ticks` on the one servo of board 0 (as CAN frames would).
+    fn command(bank: &mut NeuronBank, ticks: i64) {
+        let b = bank.board_mut(0).expect("board 0");
+        let mut changes = b.changes;
+        let servo = &mut b.servos_mut()[0];
+        servo.set_torque(true, &mut changes);
+        assert!(servo.command_goal(ticks, true, &mut changes));
+        b.changes = changes;
+    }
+
+    #[test]
+    fn a_stuck_joint_keeps_the_angle_it_stuck_at() {
+        let mut s = BoardSettings::new(1);
+        s.servo_count = 1;
+        s.plant_driven = true;
+        let mut bank = NeuronBank::new(&[s], 16).expect("bank");
+        let entry = ServoEntry {
+            board: 0,
+            servo: 0,
+            joint: 0,
+        };
+        let mut bridge =
+            BankBridge::new(&bank, 2048, &[0], &[1000.0], &[entry], &[], &[0]).expect("bridge");
+        let (mut targets, mut duties) = ([0.0], [0.0; 0]);
+        command(&mut bank, 2548);
+        bridge.snapshot(&[0.1]).expect("snapshot");
+        let c = bridge
+            .couple(&bank, &mut targets, &mut duties)
+            .expect("couple");
+        assert!(c.targets);
+        assert_eq!(targets, [0.5]); // (2548 - 2048) / 1000
+        assert!(bridge.stick_joint(0));
+        assert!(!bridge.stick_joint(1)); // outside the joint table
+        bridge.snapshot(&[0.3]).expect("snapshot");
+        let c = bridge
+            .couple(&bank, &mut targets, &mut duties)
+            .expect("couple");
+        assert!(c.targets);
+        assert_eq!(targets, [0.3]); // frozen where the shaft was
+        command(&mut bank, 2948);
+        bridge.snapshot(&[0.31]).expect("snapshot");
+        let c = bridge
+            .couple(&bank, &mut targets, &mut duties)
+            .expect("couple");
+        assert!(!c.targets);
+        assert_eq!(targets, [0.3]); // a later goal no longer reaches it
+        assert_eq!(bridge.stuck_joints().collect::<Vec<_>>(), vec![0]);
     }
 }

@@ -84,6 +84,12 @@ impl NeuronBank {
         self.boards.get_mut(k).ok_or(BankError::BoardIndex(k))
     }
 
+    /// Fault hook: board `board`'s MCU resets at the call ([`NeuronBoard::power_cycle`]).
+    pub fn power_cycle(&mut self, board: usize) -> Result<(), BankError> {
+        self.board_mut(board)?.power_cycle();
+        Ok(())
+    }
+
     /// Plant feedback: servo `servo` of board `board` is at `ticks` (raw, float).
     pub fn set_position(
         &mut self,

@@ -441,6 +441,26 @@ impl NeuronBoard {
         self.changes = changes;
     }
 
+    /// Fault hook (the fault campaign's `neuron-reset`): the MCU resets at the call, unasked (a
+    /// brown-out or watchdog reset, not a REBOOT sub-command). Deaf for the reboot time with
+    /// the ESC stopped, as after REBOOT; its RAM back to the power-on state: every servo
+    /// torque off, its goal at the present position (the shaft stays where it is), no
+    /// handshake pending, the goal current and hardware error of power-on. Flash settings
+    /// (slave id, IMU flag, servo configuration) are kept. Spinal's next torque bits turn the
+    /// servos on again, each reporting its goal (the goal-sync handshake) until acknowledged.
+    pub fn power_cycle(&mut self) {
+        self.start_reboot();
+        let mut changes = self.changes;
+        for servo in self.servos_mut() {
+            let (position, velocity) = (servo.position, servo.velocity);
+            *servo = ServoModel::new(servo.config);
+            servo.position = position;
+            servo.velocity = velocity;
+            servo.set_goal(servo.present_position(), &mut changes);
+        }
+        self.changes = changes.wrapping_add(1);
+    }
+
     fn finish_reboot(&mut self) {
         self.rebooting_until = None;
         self.slave_id = self.flash_slave_id;
@@ -518,5 +538,49 @@ impl NeuronBoard {
                 self.send(board, tx, imu_frame(s, sensor, xyz));
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn power_cycle_is_deaf_then_back_at_power_on() {
+        let mut s = BoardSettings::new(1);
+        s.servo_count = 1;
+        s.plant_driven = true;
+        let mut board = NeuronBoard::new(&s).expect("board");
+        let mut tx = TxQueue::with_capacity(16);
+        board.begin_tick(1000);
+        let mut changes = board.changes;
+        let servo = &mut board.servos_mut()[0];
+        servo.set_torque(true, &mut changes);
+        assert!(servo.command_goal(3000, true, &mut changes));
+        servo.position = 2500.4;
+        board.changes = changes;
+        board.set_esc_held_value(600);
+        board.end_tick(1.0, 0, &mut tx);
+        assert_eq!(board.esc_value(), 600);
+        let before = board.changes;
+        board.power_cycle();
+        assert!(board.changes != before);
+        let servo = board.servos()[0];
+        assert!(!servo.torque_enable() && !servo.send_goal_position);
+        assert_eq!(servo.goal(), 2500); // the goal at the shaft, not the old 3000
+        assert_eq!(servo.position, 2500.4);
+        for ms in 1001..1100 {
+            board.begin_tick(ms);
+            board.end_tick(ms as f64 / 1000.0, 0, &mut tx);
+            assert!(
+                board.rebooting() && board.esc_value() == PWM_STOP_VALUE,
+                "{ms}"
+            );
+        }
+        board.begin_tick(1100); // the reboot time (100 ms) after the reset
+        board.end_tick(1.1, 0, &mut tx);
+        assert!(!board.rebooting());
+        assert_eq!(board.counters.reboots, 1);
+        assert_eq!(board.esc_held_value(), PWM_STOP_VALUE); // until the next PWM frame
     }
 }

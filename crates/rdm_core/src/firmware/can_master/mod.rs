@@ -145,6 +145,9 @@ pub struct CanMaster {
     event_len: usize,
     /// Events lost because the queue was full.
     pub events_dropped: u64,
+    /// Servo goal reports (status bit 2) after the goal-sync handshake with torque on: a
+    /// Neuron that reset (its servos back to power-on) or missed an acknowledgement.
+    pub goal_resyncs: u64,
     tx: TxQueue,
 }
 
@@ -180,6 +183,7 @@ impl CanMaster {
             events: [None; EVENT_QUEUE],
             event_len: 0,
             events_dropped: 0,
+            goal_resyncs: 0,
             tx: TxQueue::with_capacity(TX_CAPACITY),
         }
     }

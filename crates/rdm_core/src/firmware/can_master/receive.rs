@@ -167,6 +167,11 @@ impl CanMaster {
                     entry.torque_enable = false;
                     entry.goal_valid = false;
                 }
+                if goal_reported && entry.goal_valid && entry.torque_enable {
+                    // A goal report after the handshake, torque still on: the Neuron lost
+                    // its servo state (a reset) or missed the acknowledgement.
+                    self.goal_resyncs += 1;
+                }
                 if goal_reported {
                     // Handshake step 2: take the Neuron's goal, acknowledge it with bit 15.
                     entry.goal_position = clamp_word(angle);
