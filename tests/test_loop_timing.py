@@ -189,3 +189,62 @@ def test_nonblocking_writes_need_a_descriptor_and_a_positive_limit() -> None:
         slave.nonblocking_writes(0)
     slave.close()
     loop.close()
+
+
+class _OversleepingClock:
+    """A fake monotonic clock: each read costs ``read_s``; ``sleep(d)`` returns ``late_s``
+    after ``d`` (the OS's wake-up latency)."""
+
+    def __init__(self, read_s: float, late_s: float) -> None:
+        self.t, self.read_s, self.late_s = 0.0, read_s, late_s
+        self.sleeps: list[float] = []
+
+    def clock(self) -> float:
+        self.t += self.read_s
+        return self.t
+
+    def sleep(self, d: float) -> None:
+        self.sleeps.append(d)
+        self.t += d + self.late_s
+
+
+class _Recorder:
+    name, period = "rec", 0.025
+
+    def __init__(self) -> None:
+        self.at: list[float] = []
+
+    def tick(self, now: float) -> None:
+        self.at.append(now)
+
+
+def _lateness(spin: float) -> tuple[np.ndarray, _OversleepingClock]:
+    fake, node = _OversleepingClock(read_s=1e-6, late_s=7e-4), _Recorder()
+    run_realtime([node], duration=0.5, clock=fake.clock, sleep=fake.sleep, spin=spin)
+    due = np.arange(len(node.at)) * node.period
+    return np.asarray(node.at) - due, fake
+
+
+def test_spin_starts_each_tick_at_its_due_time_despite_a_late_wake_up() -> None:
+    late_sleeping, _ = _lateness(spin=0.0)
+    late_spinning, fake = _lateness(spin=1e-3)
+    assert len(late_sleeping) == len(late_spinning) == 20
+    # sleeping through the wait: every tick after the first starts the wake-up latency late
+    assert late_sleeping[1:].min() >= 7e-4
+    # polling the last 1 ms: within a few clock reads of the due time
+    assert late_spinning.min() >= 0.0 and late_spinning.max() <= 5e-6
+    # and the sleep before the poll leaves the spin margin: due - now - spin each time
+    assert fake.sleeps and all(0.023 < d < 0.024 for d in fake.sleeps)
+
+
+def test_a_wake_up_later_than_the_spin_margin_is_not_hidden() -> None:
+    fake, node = _OversleepingClock(read_s=1e-6, late_s=2e-3), _Recorder()
+    run_realtime([node], duration=0.3, clock=fake.clock, sleep=fake.sleep, spin=1e-3)
+    late = np.asarray(node.at[1:]) - np.arange(1, len(node.at)) * node.period
+    assert late.min() >= 1e-3 - 1e-5  # 2 ms late wake-up, 1 ms of it covered by the spin
+
+
+@pytest.mark.parametrize("spin", [-1e-3, float("nan"), float("inf")])
+def test_spin_is_validated(spin: float) -> None:
+    with pytest.raises(ValueError, match="spin"):
+        run_realtime([_Recorder()], duration=0.1, spin=spin)

@@ -86,6 +86,7 @@ def test_granted_options_and_the_loop_figures_are_in_the_status() -> None:
         "cpus": [cpu],
         "mlock": False,
         "gc_freeze": True,
+        "spin_us": 0,
     }
     loop = status["loop"]
     assert loop["late_tolerance_ms"] == 3.0
@@ -118,3 +119,16 @@ def test_late_tolerance_in_the_configuration_file(tmp_path) -> None:
     assert out.returncode != 0
     assert "Traceback" not in out.stderr
     assert "late_tolerance_s" in out.stderr and "bad.toml" in out.stderr
+
+
+def test_the_spin_is_in_the_status_and_validated() -> None:
+    out = onboard("--spin-us", "500")
+    assert out.returncode == 0, out.stderr
+    status = json.loads(out.stdout.strip().splitlines()[-1])
+    assert status["realtime"]["spin_us"] == 500
+    assert status["ticks"] > 0
+    for bad, says in (("-1", "-1 must be 0..5000"), ("5001", "5001 must be 0..5000"),
+                      ("0.5", "'0.5': not an integer")):  # fmt: skip
+        out = onboard("--spin-us", bad)
+        assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+        assert f"argument --spin-us: {says}" in out.stderr

@@ -24,8 +24,8 @@ counts under ``ground_link``).
 The loop (docs/onboard.md, "The real-time loop"): the status carries ``loop`` (late ticks
 past ``late_tolerance_s``, p50/p99/max of tick duration, lateness, command period and its
 jitter), ``uart_writes`` (the UART is written without blocking: backlog and dropped writes)
-and ``realtime`` (``--rt-priority N``, ``--cpu K``, ``--mlock``, ``--gc-freeze``; an option
-the OS refuses ends the command with a one-line message).
+and ``realtime`` (``--rt-priority N``, ``--cpu K``, ``--mlock``, ``--gc-freeze``,
+``--spin-us N``; an option the OS refuses ends the command with a one-line message).
 
 The flight recorder (docs/onboard.md, "Flight recorder and replay";
 :mod:`rdm.commands.onboard_record`) writes every UART and foot-sensor byte and every input
@@ -149,8 +149,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="gc.freeze() after setup: the collector skips what setup made",
     )
+    parser.add_argument(
+        "--spin-us",
+        type=_spin_us,
+        default=0,
+        metavar="N",
+        help=f"poll the clock for the last N us before each tick instead of sleeping through "
+        f"them (0..{MAX_SPIN_US}; one CPU stays busy N us per tick; default 0: sleep)",
+    )
     add_record_arguments(parser)
     add_live_arguments(parser, "rdm onboard")
+
+
+#: The longest spin ``--spin-us`` takes: a fifth of the 25 ms control period.
+MAX_SPIN_US = 5000
+
+
+def _spin_us(text: str) -> int:
+    """``--spin-us``: an integer 0..MAX_SPIN_US."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: not an integer") from None
+    if not 0 <= v <= MAX_SPIN_US:
+        raise argparse.ArgumentTypeError(f"{v} must be 0..{MAX_SPIN_US}")
+    return v
 
 
 def _configuration(args: argparse.Namespace) -> Any:
@@ -331,6 +354,7 @@ def run(args: argparse.Namespace) -> int:
         realtime.update(
             apply_realtime_options(args.rt_priority, args.cpu, args.mlock, args.gc_freeze)
         )
+        realtime["spin_us"] = args.spin_us
     except (SerialSpecError, OSError, ValueError, RealtimeOptionError) as exc:
         if control is not None:
             control.close()
@@ -351,7 +375,13 @@ def run(args: argparse.Namespace) -> int:
     print(f"rdm onboard: ready robot={args.robot} rate={config.rate_hz} Hz", flush=True)
     failure: str | None = "rdm onboard ended by an error"
     try:
-        stats = run_realtime(nodes, duration=args.duration, stop=stop, timing={node.name: timing})
+        stats = run_realtime(
+            nodes,
+            duration=args.duration,
+            stop=stop,
+            timing={node.name: timing},
+            spin=args.spin_us * 1e-6,
+        )
         failure = None
     finally:
         node.close()

@@ -79,6 +79,7 @@ def run_realtime(
     sleep: Callable[[float], None] = time.sleep,
     start_time: float = 0.0,
     timing: Mapping[str, LoopTiming] | None = None,
+    spin: float = 0.0,
 ) -> RealtimeStats:
     """Tick ``nodes`` on the wall clock, each at its own ``period``, until ``duration`` seconds
     have passed or ``stop`` is set. Times passed to ``tick`` start at ``start_time`` (node
@@ -91,6 +92,11 @@ def run_realtime(
     ``timing``: per node name, a :class:`~rdm.nodes.loop_timing.LoopTiming` that records each
     of that node's ticks (when it was due, when it started and ended on ``clock``); the
     caller reads it while the loop runs (a status node) and after.
+
+    ``spin``: the last ``spin`` seconds before the next due tick are waited by polling
+    ``clock`` instead of sleeping through them, so the tick starts within a clock read of its
+    due time rather than after the OS's wake-up latency (one CPU stays busy for ``spin`` of
+    every period). ``0`` sleeps the whole wait.
     """
     if not nodes:
         raise ValueError("run_realtime: no nodes given")
@@ -99,6 +105,8 @@ def run_realtime(
             raise ValueError(f"run_realtime: node {node.name!r} period {node.period!r} invalid")
         if node.period <= 0:
             raise ValueError(f"run_realtime: node {node.name!r} period must be > 0")
+    if not (math.isfinite(spin) and spin >= 0.0):
+        raise ValueError(f"run_realtime: spin {spin!r} must be finite and >= 0")
     stop = stop or threading.Event()
     stats = RealtimeStats({n.name: 0 for n in nodes}, {n.name: 0 for n in nodes})
     due = [0.0] * len(nodes)
@@ -123,10 +131,12 @@ def run_realtime(
                 if now - due[i] > node.period:
                     stats.overruns[node.name] += 1
                     due[i] = now + node.period
-        wait = min(due) - (clock() - start)
-        if duration is not None:
-            wait = min(wait, duration - (clock() - start))
-        if wait > 0:
-            sleep(wait)
+        target = min(due) if duration is None else min(min(due), duration)
+        wait = target - (clock() - start)
+        if wait > spin:
+            sleep(wait - spin)
+        if spin > 0.0:  # ends when the clock reaches the target (or at a stop)
+            while clock() - start < target - _DUE_SLACK and not stop.is_set():
+                pass
     stats.end_time = start_time + now
     return stats
