@@ -17,7 +17,8 @@ consecutive arrivals of the node's per-tick output (``four_axes/command`` once a
 first :data:`WARMUP_S` seconds, handshake and arming, are left out). Target: p99 at most 1
 ms. ``onboard_loop_rt`` is the same with ``--rt-priority 50 --mlock --gc-freeze`` (and this
 process at SCHED_FIFO 49 while it measures); left out, with a note, when the OS refuses
-them. Each measurement's notes carry the command period (p50/p99/max) and, from the node's
+them. ``onboard_loop_spin`` is the default loop with ``--spin-us 1000`` alone. Each
+measurement's notes carry the command period (p50/p99/max) and, from the node's
 final status, its UART-in to command-out latency (each control tick from its UART read to
 the hand-over of its output to the port: the ``loop.tick`` histogram), its late ticks and
 its dropped writes.
@@ -54,6 +55,9 @@ PERIODS_QUICK = 200
 TARGET_P99_US = 1000.0
 #: Options of the ``onboard_loop_rt`` run.
 RT_OPTIONS = ("--rt-priority", "50", "--mlock", "--gc-freeze")
+#: Options of the ``onboard_loop_spin`` run: the default loop polling the clock for the last
+#: 1 ms before each tick (``--spin-us``), without the other real-time options.
+SPIN_OPTIONS = ("--spin-us", "1000")
 #: The peer's publishing interval [s].
 PUBLISH_S = 0.01
 #: ``rdm onboard``'s options in every run (the ground link's are added).
@@ -309,6 +313,19 @@ def run_onboard_loop(ctx: Context) -> list[Measurement]:
                 n,
             )
         )
+    ctx.progress(f"onboard-loop: the same with {' '.join(SPIN_OPTIONS)}")
+    spin = run_onboard(seconds, SPIN_OPTIONS, count=n + 1)
+    if spin.refused is not None or spin.arrivals.size < 2:
+        raise RuntimeError(f"onboard-loop: rdm onboard {' '.join(SPIN_OPTIONS)}: {spin.refused}")
+    out.append(
+        _measure(
+            "onboard_loop_spin",
+            "the default loop with the clock polled for its last 1 ms",
+            spin,
+            SPIN_OPTIONS,
+            n,
+        )
+    )
     return out
 
 
@@ -317,7 +334,7 @@ register(
         "onboard-loop",
         "rdm onboard as a process: command-period jitter and UART-in to command-out",
         run_onboard_loop,
-        ("onboard_loop", "onboard_loop_rt"),
+        ("onboard_loop", "onboard_loop_rt", "onboard_loop_spin"),
         (),
     )
 )
