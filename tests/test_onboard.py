@@ -21,6 +21,7 @@ from rdm.model import Robot
 from rdm.nodes.onboard import OnboardNode
 from rdm.nodes.onboard_config import OnboardConfig
 from rdm.nodes.onboard_control import to_wire
+from rdm.nodes.onboard_monitors import MonitorLimits
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -37,7 +38,15 @@ Q_BENT = np.array([0.3, -0.2, 0.25, 0.4, 0.1, 0.0, 0.0, 0.0, 0.0, 0.0])
 Q_FLY = np.array([0.1, -0.1, 0.1, 0.2, 0.05, 0.0, 0.0, 0.0, 0.0, 0.0])
 
 
+#: The rig's Spinal reports the servo angles a test sets, never the goals the node sends:
+#: to the node's joint-tracking monitor that is a stuck servo. 7 rad is more than any joint
+#: can be from its goal, so that monitor stays out of these tests (its own tests:
+#: test_onboard_monitor_rules.py, the stuck-servo fault of test_fault_campaign.py).
+RIG_MONITORS = MonitorLimits(joint_tracking_rad=7.0)
+
+
 def make_rig(foot: bool = False, **cfg) -> Rig:
+    cfg.setdefault("monitors", RIG_MONITORS)
     return Rig(lambda uart, f: OnboardNode(uart, f, ROBOT, config=OnboardConfig(**cfg)), foot=foot)
 
 
