@@ -222,7 +222,7 @@ def test_bridge_couples_duties_goals_positions_and_sinks():
         battery_voltage=lambda t: 24.0 - t,
         battery_sinks=[volts.append],
         imu_sink=lambda g, a, m: imu.append(a.copy()),
-        wrench_sinks={"foot_wrench": lambda f, t: wrench.append(f)},
+        wrench_sinks={"foot_wrench": lambda w: wrench.append(w[:3])},
         mocap_sink=lambda t, p, q: mocap.append((t, p, q)),
         mocap_period=0.005,
     )

@@ -40,7 +40,7 @@ def kind_of(node: Any) -> str | None:
 def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKernel:
     """Attach a kernel to ``loop`` (``loop.kernel``) and give it the fast paths its nodes
     allow: ``plant`` (an :class:`rdm.plant.Plant`, the loop's physics) steps in the kernel;
-    a :class:`PlantBridge` with the Rust coupling, a :class:`NeuronBankNode` on a
+    a :class:`PlantBridge` whose boards are one bank's, a :class:`NeuronBankNode` on a
     :class:`CanWireLink`, a :class:`SpinalMirror` whose Rust master ticks on that wire and a
     :class:`LeptrinoSensorNode` get their steady ticks run there. After any other node's
     Python tick every part is flushed and every plan re-read, unless the node (its class or
@@ -76,10 +76,10 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         if touches is not None and kind_of(node) is None:
             kernel.set_touches(i, list(touches))
     for i, node in enumerate(nodes):
-        bridged = type(node) is PlantBridge and node.rust_coupling
+        bridged = type(node) is PlantBridge and len(node.banks) == 1
         if bridged and plant is node.plant and plant is loop.physics:
             node.kernel_wrench_node = leptrino
             node.kernel_imu_node = spinal
-            kernel.attach_bridge(i, node, node._bank._core)
+            kernel.attach_bridge(i, node, node.banks[0]._core)
     loop.kernel = kernel
     return kernel

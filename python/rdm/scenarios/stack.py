@@ -153,10 +153,6 @@ class StackOptions:
     #: bytes, docs/canbus.md). The channel then admits no other python-can endpoint
     #: (CanWireError); False puts them on an in-process python-can channel.
     can_wire: bool = True
-    #: The plant bridge's per-millisecond coupling (joint snapshot,
-    #: goals -> servo targets, ESC outputs -> rotor duties) runs in the Rust bank in one call
-    #: (byte-identical files, tests/test_bridge_rust.py); False keeps the Python path.
-    rust_bridge: bool = True
     #: Rotor (ESC + motor) first-order lag [s]; None = the plant's default (0.05 s).
     #: ASSUMPTION 0.01 s: with 0.05 s the LQI roll loop (I_xx = 0.004 kg m^2) is unstable.
     esc_tau: float | None = 0.01
@@ -326,11 +322,10 @@ def make_bridge(
         imu_sink=imu_sink,
         battery_voltage=opt.battery_voltage,
         battery_sinks=[battery_sink],
-        wrench_sinks={"foot_wrench": foot_sensor.set_wrench},
+        wrench_sinks={"foot_wrench": foot_sensor.set_wrench_values},
         wrench_period=1.0 / opt.leptrino_rate_hz,
         truth_sink=truth_sink,
         truth_period=opt.truth_period,
-        rust_coupling=opt.rust_bridge,
     )
 
 
