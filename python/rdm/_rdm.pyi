@@ -1345,10 +1345,27 @@ class LockstepKernel:
         clock: Any,
         owner: Any,
     ) -> _Self: ...
-    def attach_plant(self, plant: Any, mujoco: Any) -> None: ...
+    def attach_plant(
+        self,
+        plant: Any,
+        model: Any,
+        data: Any,
+        mj: Sequence[Any],
+        flags: tuple[int | None, int | None, int],
+        opt: Any,
+        rotors: RotorPlantCore,
+        gate: ContactGateCore | None,
+        tracker: Any,
+        qpos: _F,
+        sensordata: _F,
+        ctrl: _F,
+        servo_act: Sequence[int],
+        sleep: tuple[Any, ...] | None,
+    ) -> None:
+        """The plant and its parts (typed, read by ``rdm.nodes.lockstep_kernel``)."""
     def attach_bridge(self, index: int, node: Any, bank: NeuronBank) -> None: ...
     def attach_bank(
-        self, index: int, node: Any, bank: NeuronBank, wire: CanWire, n_boards: int
+        self, index: int, node: Any, bank: NeuronBank, wire: CanWire, boards: Sequence[Any]
     ) -> None: ...
     def attach_spinal(
         self, index: int, node: Any, master: CanMaster, wire: CanWire, drain_at: int

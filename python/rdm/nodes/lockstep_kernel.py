@@ -19,6 +19,8 @@ import mujoco
 
 from rdm import _rdm
 from rdm.link.can_wire import DRAIN_AT, CanWireLink
+from rdm.plant import option_flags
+from rdm.plant import sleep as plant_sleep
 
 from .leptrino_sensor import LeptrinoSensorNode
 from .lockstep import Lockstep
@@ -35,6 +37,49 @@ def kind_of(node: Any) -> str | None:
         SpinalMirror: "spinal",
         LeptrinoSensorNode: "leptrino",
     }.get(type(node))
+
+
+def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
+    """Hand the kernel the plant's parts it holds for the plant's lifetime (typed values:
+    MuJoCo's model, data and step functions, the option-flags address, the Rust cores, the
+    MjData views, the servo actuators and the resting-sleep arrays)."""
+    model = plant.model
+    sleep = plant.sleep
+    kernel.attach_plant(
+        plant,
+        model,
+        plant._data,
+        [
+            mujoco.mj_step1,
+            mujoco.mj_step2,
+            mujoco.mj_forward,
+            mujoco.mj_sensorPos,
+            mujoco.mj_sensorVel,
+        ],
+        (plant._flags_address, getattr(model, "_address", None), option_flags.SEARCH_BYTES),
+        model.opt,
+        plant._rotors,
+        plant._contact_gate,
+        plant._tracker,
+        plant._v_qpos,
+        plant._v_sensordata,
+        plant._v_ctrl,
+        [int(a) for a in plant._servo_act],
+        None
+        if sleep is None
+        else (
+            sleep,
+            list(sleep.trees),
+            list(sleep.rotors),
+            plant_sleep.ALLOWED,
+            plant_sleep.NEVER,
+            plant_sleep.SLEEP_ENABLE_BIT,
+            sleep._v_policy,
+            sleep._v_tree_asleep,
+            sleep._v_last_ctrl,
+            sleep._opt,
+        ),
+    )
 
 
 def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKernel:
@@ -58,7 +103,7 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         loop.dt, schedule, [n.tick for n in nodes], physics, loop.clock, loop
     )
     if plant is not None and plant is loop.physics:
-        kernel.attach_plant(plant, mujoco)
+        _attach_plant(kernel, plant)
     leptrino = spinal = None
     for i, node in enumerate(nodes):
         cls = type(node)
@@ -67,7 +112,7 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
                 kernel.attach_leptrino(i, node)
                 leptrino = node
         elif cls is NeuronBankNode and isinstance(node._wire, CanWireLink):
-            kernel.attach_bank(i, node, node._core, node._wire.wire, len(node.boards))
+            kernel.attach_bank(i, node, node._core, node._wire.wire, list(node.boards))
         elif cls is SpinalMirror and node._wire_link is not None and spinal is None:
             kernel.attach_spinal(i, node, node.master.core, node._wire_link.wire, DRAIN_AT)
             spinal = node

@@ -179,7 +179,7 @@ class PlantBridge:
         battery_sinks: Sequence[Callable[[float], None]] = (),
         imu_sink: Callable[[np.ndarray, np.ndarray, np.ndarray], None] | None = None,
         imu_period: float | None = 0.005,
-        wrench_sinks: dict[str, Callable[[np.ndarray, np.ndarray], None]] | None = None,
+        wrench_sinks: dict[str, Callable[[tuple[float, ...]], None]] | None = None,
         wrench_period: float | None = 0.001,
         mocap_sink: Callable[[float, np.ndarray, np.ndarray], None] | None = None,
         mocap_period: float | None = 0.01,

@@ -34,13 +34,13 @@ impl BankFast {
         node: &Bound<'_, PyAny>,
         bank: Py<NeuronBank>,
         wire: Py<CanWire>,
-        n_boards: usize,
+        boards_py: Vec<Py<PyAny>>,
     ) -> PyResult<Self> {
         let py = node.py();
-        let boards_py: Vec<Py<PyAny>> = node.getattr("boards")?.extract()?;
-        if boards_py.len() != n_boards {
+        let n_boards = boards_py.len();
+        if bank.bind(py).borrow().board_count() != n_boards {
             return Err(pyo3::exceptions::PyValueError::new_err(
-                "attach_bank: n_boards differs from the node's boards",
+                "attach_bank: boards differs from the bank's board count",
             ));
         }
         Ok(BankFast {

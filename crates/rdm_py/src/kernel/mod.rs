@@ -24,11 +24,28 @@ mod spinal;
 use pyo3::prelude::*;
 
 use crate::can_master::{CanMaster, CanWire};
+use crate::contact_gate::ContactGateCore;
 use crate::neuron_bank::NeuronBank;
+use crate::rotor_plant::RotorPlantCore;
 use bank::BankFast;
 use bridge::BridgeFast;
 use leptrino::LeptrinoFast;
-use plant::PlantLink;
+use plant::{PlantLink, PlantParts};
+use sleep::SleepParts;
+
+/// `attach_plant`'s `sleep` tuple (see there).
+type SleepTuple = (
+    Py<PyAny>,
+    Vec<usize>,
+    Vec<usize>,
+    i32,
+    i32,
+    i64,
+    Py<numpy::PyArray1<i32>>,
+    Py<numpy::PyArray1<i32>>,
+    Py<numpy::PyArray1<f64>>,
+    Py<PyAny>,
+);
 use spinal::{SpinalFast, SpinalTick};
 
 /// What a Python call may change, as a mask of the fast parts it invalidates.
@@ -296,12 +313,10 @@ impl LockstepKernel {
     }
 
     fn leptrino_node<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let i = self
-            .kinds
-            .iter()
-            .position(|k| *k == Kind::Leptrino)
-            .ok_or_else(|| pyo3::exceptions::PyRuntimeError::new_err("kernel: no Leptrino node"))?;
-        self.ticks[i].bind(py).getattr("__self__")
+        self.leptrino
+            .as_ref()
+            .map(|l| l.node(py))
+            .ok_or_else(|| pyo3::exceptions::PyRuntimeError::new_err("kernel: no Leptrino node"))
     }
 
     fn physics_step(&mut self, py: Python<'_>, t: f64) -> PyResult<()> {
@@ -434,14 +449,78 @@ impl LockstepKernel {
         })
     }
 
-    /// The plant (`rdm.plant.Plant`) the physics step and the bridge drive; `mujoco` is the
-    /// module whose `mj_step1`/`mj_step2`/`mj_forward` it calls.
+    /// The plant (`rdm.plant.Plant`) the physics step and the bridge drive, with its parts
+    /// (read by the caller, `rdm.nodes.lockstep_kernel`): `model`, `data`; `mj`: MuJoCo's
+    /// `mj_step1`, `mj_step2`, `mj_forward`, `mj_sensorPos`, `mj_sensorVel`; `flags`:
+    /// `(Plant._flags_address, model._address, option_flags.SEARCH_BYTES)` (None: unknown);
+    /// `opt`: `model.opt`; the rotor and contact-gate cores; the contact tracker; the qpos,
+    /// sensordata and ctrl views; the servo actuator per joint; `sleep`: None or
+    /// `(RestingSleep, trees, rotor actuators, ALLOWED, NEVER, SLEEP_ENABLE_BIT, policy,
+    /// tree_asleep, last_ctrl, model.opt)`.
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    #[pyo3(signature = (plant, model, data, mj, flags, opt, rotors, gate, tracker, qpos, sensordata, ctrl, servo_act, sleep))]
     fn attach_plant(
         &mut self,
         plant: &Bound<'_, PyAny>,
-        mujoco: &Bound<'_, PyAny>,
+        model: Py<PyAny>,
+        data: Py<PyAny>,
+        mj: [Py<PyAny>; 5],
+        flags: (Option<usize>, Option<usize>, usize),
+        opt: Py<PyAny>,
+        rotors: Py<RotorPlantCore>,
+        gate: Option<Py<ContactGateCore>>,
+        tracker: Py<PyAny>,
+        qpos: Py<numpy::PyArray1<f64>>,
+        sensordata: Py<numpy::PyArray1<f64>>,
+        ctrl: Py<numpy::PyArray1<f64>>,
+        servo_act: Vec<usize>,
+        sleep: Option<SleepTuple>,
     ) -> PyResult<()> {
-        self.plant = Some(PlantLink::new(plant.py(), plant, mujoco)?);
+        let sleep = sleep.map(
+            |(
+                obj,
+                trees,
+                rotors,
+                allowed_value,
+                never_value,
+                sleep_bit,
+                policy,
+                tree_asleep,
+                last_ctrl,
+                opt,
+            )| {
+                SleepParts {
+                    obj,
+                    trees,
+                    rotors,
+                    allowed_value,
+                    never_value,
+                    sleep_bit,
+                    policy,
+                    tree_asleep,
+                    last_ctrl,
+                    opt,
+                }
+            },
+        );
+        let parts = PlantParts {
+            model,
+            data,
+            mj,
+            flags_address: flags.0,
+            model_address: flags.1,
+            search_bytes: flags.2,
+            opt,
+            rotors,
+            gate,
+            tracker,
+            qpos,
+            sensordata,
+            ctrl,
+            servo_act,
+            sleep,
+        };
+        self.plant = Some(PlantLink::new(plant.py(), plant, parts));
         Ok(())
     }
 
@@ -459,17 +538,18 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// Node `index` is a `NeuronBankNode` with `n_boards` boards on `wire`.
+    /// Node `index` is a `NeuronBankNode` whose board views are `boards` (the core's boards,
+    /// in order) on `wire`.
     fn attach_bank(
         &mut self,
         index: usize,
         node: &Bound<'_, PyAny>,
         bank: Py<NeuronBank>,
         wire: Py<CanWire>,
-        n_boards: usize,
+        boards: Vec<Py<PyAny>>,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.bank = Some(BankFast::new(node, bank, wire, n_boards)?);
+        self.bank = Some(BankFast::new(node, bank, wire, boards)?);
         self.kinds[index] = Kind::Bank;
         self.touches[index] = BANK;
         Ok(())
