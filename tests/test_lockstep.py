@@ -383,3 +383,18 @@ def test_leptrino_node_clips_to_int16_and_refuses_nan():
     (event,) = lp.LeptrinoStreamParser().feed(sink.data)
     assert lp.parse_response(event.payload).raw[0] == 32767
     assert node.saturated_samples == 1 and node.errors["bad_wrench"] == 1
+
+
+def test_bridge_refuses_boards_outside_a_neuron_bank():
+    from types import SimpleNamespace
+
+    from rdm.nodes.plant_bridge import PlantBridge, default_layout
+    from rdm.plant import Plant
+
+    plant = Plant("rdm", fixed_base=True, ceiling_height=None)
+    boards = [
+        SimpleNamespace(slave_id=nl.slave, servos=[None] * len(nl.joints))
+        for nl in default_layout(plant.description).neurons
+    ]
+    with pytest.raises(ValueError, match="Neuron 1 is not a board of a NeuronBankNode"):
+        PlantBridge(plant, boards)

@@ -200,6 +200,10 @@ class PlantBridge:
             neuron = by_slave.get(nl.slave)
             if neuron is None:
                 raise ValueError(f"PlantBridge: no Neuron mirror with slave id {nl.slave}")
+            if not callable(getattr(getattr(neuron, "_bank", None), "bridge_tick", None)):
+                raise ValueError(
+                    f"PlantBridge: Neuron {nl.slave} is not a board of a NeuronBankNode"
+                )
             if len(neuron.servos) != len(nl.joints):
                 raise ValueError(
                     f"PlantBridge: Neuron {nl.slave} has {len(neuron.servos)} servos, layout "
