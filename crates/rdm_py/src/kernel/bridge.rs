@@ -1,4 +1,4 @@
-//! The plant bridge's millisecond (`PlantBridge.tick` with the Rust coupling) when no IMU,
+//! The plant bridge's millisecond (`PlantBridge.tick`, boards of one bank) when no IMU,
 //! mocap or ground-truth sample is due: joints -> Neurons, goals -> servo controls, ESC
 //! outputs -> rotor duties, and the foot wrench sample (lazy forward, noise, Leptrino).
 
