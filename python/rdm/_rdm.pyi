@@ -49,6 +49,7 @@ __all__ = [
     "RotorPlantCore",
     "SpinalStep",
     "SpinalStepOutput",
+    "StopFlag",
     "WrenchFilter",
     "WrenchNoiseCore",
     "__version__",
@@ -1332,6 +1333,18 @@ def spinal_servo_states_frame(
 
 # --- lockstep kernel ---
 @_final
+class StopFlag:
+    """The lockstep loop's stop request (``Lockstep.stop`` sets it, the Rust loop reads it)."""
+
+    def __new__(cls) -> _Self: ...
+    def set(self) -> None:
+        """Ask the loop to stop after the tick in progress."""
+    def clear(self) -> None:
+        """Withdraw the request."""
+    def is_set(self) -> bool:
+        """Whether a stop was asked."""
+
+@_final
 class LockstepKernel:
     """The unpaced lockstep loop in Rust with fast paths for the firmware side's steady
     milliseconds (``rdm.nodes.lockstep_kernel``, docs/sim.md)."""
@@ -1343,7 +1356,7 @@ class LockstepKernel:
         ticks: list[Any],
         physics: Any | None,
         clock: Any,
-        owner: Any,
+        stop: StopFlag,
     ) -> _Self: ...
     def attach_plant(
         self,

@@ -100,7 +100,7 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         raise ValueError("attach_kernel: the loop has no precomputed schedule")
     physics = loop.physics.step if loop.physics is not None else None
     kernel = _rdm.LockstepKernel(
-        loop.dt, schedule, [n.tick for n in nodes], physics, loop.clock, loop
+        loop.dt, schedule, [n.tick for n in nodes], physics, loop.clock, loop.stop_flag
     )
     if plant is not None and plant is loop.physics:
         _attach_plant(kernel, plant)

@@ -27,6 +27,7 @@ use crate::can_master::{CanMaster, CanWire};
 use crate::contact_gate::ContactGateCore;
 use crate::neuron_bank::NeuronBank;
 use crate::rotor_plant::RotorPlantCore;
+use crate::stop_flag::StopFlag;
 use bank::BankFast;
 use bridge::BridgeFast;
 use leptrino::LeptrinoFast;
@@ -115,7 +116,7 @@ pub struct LockstepKernel {
     touches: Vec<u8>,
     physics: Option<Py<PyAny>>,
     clock: Py<PyAny>,
-    owner: Py<PyAny>,
+    stop: Py<StopFlag>,
     k: i64,
     clock_t: Option<f64>,
     plant: Option<PlantLink>,
@@ -370,13 +371,13 @@ impl LockstepKernel {
                             self.counts.python_ns[i] += ns;
                         }
                     }
-                    stop |= self.owner.bind(py).getattr("_stop")?.is_truthy()?;
+                    stop |= self.stop.get().get();
                 } else {
                     self.python_tick(py, i, t)?;
                     if let Some(t0) = t0 {
                         self.counts.python_ns[i] += elapsed_ns(t0);
                     }
-                    stop |= self.owner.bind(py).getattr("_stop")?.is_truthy()?;
+                    stop |= self.stop.get().get();
                 }
             }
             let t0 = self.profile.then(std::time::Instant::now);
@@ -397,7 +398,7 @@ impl LockstepKernel {
 impl LockstepKernel {
     /// `schedule[r]`: indices of the nodes due at base ticks `k` with `k % len(schedule) ==
     /// r`, in tick order; `ticks[i]`: node `i`'s `tick`; `physics`: the physics `step` (or
-    /// None); `clock`: the `SimClock` the loop sets; `owner`: the `Lockstep` (its `_stop`).
+    /// None); `clock`: the `SimClock` the loop sets; `stop`: the loop's stop request.
     #[new]
     fn new(
         dt: f64,
@@ -405,7 +406,7 @@ impl LockstepKernel {
         ticks: Vec<Py<PyAny>>,
         physics: Option<Py<PyAny>>,
         clock: Py<PyAny>,
-        owner: Py<PyAny>,
+        stop: Py<StopFlag>,
     ) -> PyResult<Self> {
         if schedule.is_empty() || !(dt.is_finite() && dt > 0.0) {
             return Err(pyo3::exceptions::PyValueError::new_err(
@@ -427,7 +428,7 @@ impl LockstepKernel {
             ticks,
             physics,
             clock,
-            owner,
+            stop,
             k: 0,
             clock_t: None,
             plant: None,
@@ -591,7 +592,7 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// Advance `n` base ticks from `k0` (fewer if the owner's `_stop` is set by a node);
+    /// Advance `n` base ticks from `k0` (fewer if a node sets the stop request);
     /// returns the next `k`. `ticks[i]` is node `i`'s `tick` now and `own[i]` whether it is
     /// the class's own method (a node whose `tick` was replaced runs only the replacement).
     /// Every deferred state is written back before it returns, also when a node raises
