@@ -183,7 +183,7 @@ def test_default_layout_of_the_rdm():
     assert sorted(j for n in layout.neurons for j in n.joints) == sorted(desc.joint_order)
     # Dynamixel mapping: 2048 at 0 rad, 4096 ticks per turn
     assert layout.to_ticks("q1", math.pi / 2) == pytest.approx(3072.0)
-    assert layout.to_rad("q1", 1024) == pytest.approx(-math.pi / 2)
+    assert layout.to_ticks("q1", -math.pi / 2) == pytest.approx(1024.0)
 
 
 # --------------------------------------------------------------------- plant bridge alone
@@ -244,7 +244,7 @@ def test_bridge_couples_duties_goals_positions_and_sinks():
         assert abs(q[plant.joint_names.index("q1")] - 0.2) < 0.01
         # present positions fed back (raw ticks of the plant's angle)
         # (the bridge wrote the angle of the state before the last physics step: 1 ms old)
-        assert servo.position == pytest.approx(layout.to_ticks("q1", q[0]), abs=1.0)
+        assert servo.position == pytest.approx(2048 + q[0] * 4096 / (2 * math.pi), abs=1.0)
         assert len(imu) == 100 and len(wrench) == 500 and len(mocap) == 100
         assert imu[-1][2] == pytest.approx(9.81, abs=0.3)  # welded base, level: +g
         assert len(volts) == 500 and volts[0] == 24.0

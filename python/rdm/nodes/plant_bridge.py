@@ -95,10 +95,8 @@ class BusLayout:
                 raise ValueError(f"BusLayout: Neuron {n.slave} has {len(n.joints)} servos > 4")
 
     def to_ticks(self, joint: str, q: float) -> float:
+        """Raw ticks of ``joint`` at ``q`` rad (the servos' start positions)."""
         return self.center_ticks + q * layout_scale(self, joint)
-
-    def to_rad(self, joint: str, ticks: float) -> float:
-        return (ticks - self.center_ticks) / layout_scale(self, joint)
 
     def servo_configs(self, slave: int, q0: dict[str, float] | None = None) -> list[ServoConfig]:
         """``ServoConfig`` list of one Neuron, starting at ``q0`` (rad, default 0)."""
