@@ -1376,7 +1376,9 @@ class LockstepKernel:
         sleep: tuple[Any, ...] | None,
     ) -> None:
         """The plant and its parts (typed, read by ``rdm.nodes.lockstep_kernel``)."""
-    def attach_bridge(self, index: int, node: Any, bank: NeuronBank) -> None: ...
+    def attach_bridge(
+        self, index: int, node: Any, bank: NeuronBank, plan: Callable[[], tuple[Any, ...] | None]
+    ) -> None: ...
     def attach_bank(
         self, index: int, node: Any, bank: NeuronBank, wire: CanWire, boards: Sequence[Any]
     ) -> None: ...

@@ -13,6 +13,7 @@ kernel (tests/test_lockstep_kernel.py, tests/test_spinal_kernel_busy.py; docs/si
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import mujoco
@@ -82,6 +83,79 @@ def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
     )
 
 
+def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[], tuple | None]:
+    """The plan the kernel reads for ``bridge`` (called again after Python code ran): None
+    when its tick has no Rust form now (boards of several banks, a battery voltage that is a
+    function of time or not yet applied, ESCs outside the Rust duty map, a wrench sink other
+    than ``leptrino``'s ``set_wrench_values``), else the counters, sample periods, the foot
+    wrench path (addresses, noise core, normal stream), the targets and duties arrays, the
+    IMU path when its only sink is ``spinal``'s ``set_imu_sample`` (else None: an IMU ms is
+    Python's), the truth call and the parts it may change. Mocap samples are Python's. The
+    kernel writes ``ticks``, ``_sample_count`` and ``time_mismatches`` back itself."""
+    plant = bridge.plant
+    cls = type(plant)
+
+    def truth() -> None:
+        bridge._truth_sink(plant.ground_truth())
+
+    def plan() -> tuple | None:
+        b = bridge
+        battery = b._battery
+        if len(b.banks) != 1 or callable(battery) or battery != b._voltage:
+            return None
+        if not (plant._duties_in_core and all(e._v_factor is not None for e in plant.escs)):
+            return None
+        adr, core, normals, wrench_n = (0, 0), None, None, 0
+        if b._wrench_on:
+            if len(b._wrench_sinks) != 1 or leptrino is None:
+                return None
+            ((key, sink),) = b._wrench_sinks.items()
+            if getattr(sink, "__self__", None) is not leptrino:
+                return None
+            if getattr(sink, "__name__", "") != "set_wrench_values":
+                return None
+            if getattr(plant.wrench_values, "__func__", None) is not cls.wrench_values:
+                return None
+            model = plant.wrench_models[key]
+            adr, core, normals = plant._wrench_adr[key], model._core, model._normals
+            wrench_n = b._wrench_n
+        imu = None
+        sink = b._imu_sink
+        if (
+            b._imu_on
+            and not b._imu_neurons
+            and spinal is not None
+            and getattr(sink, "__self__", None) is spinal
+            and getattr(sink, "__name__", "") == "set_imu_sample"
+            and getattr(plant.imu, "__func__", None) is cls.imu
+        ):
+            model = plant.imu_model
+            imu = (plant._imu_adr, model._core, model._normals, spinal)
+        touches = b.truth_sink_touches
+        return (
+            b.ticks,
+            b._sample_count,
+            b.time_mismatches,
+            0.5 * b.period,
+            b._imu_n if b._imu_on else 0,
+            wrench_n,
+            b._mocap_n if b._mocap_on else 0,
+            b._truth_n if b._truth_on else 0,
+            adr,
+            core,
+            normals,
+            b._targets,
+            b._duties,
+            imu,
+            truth if b._truth_on else None,
+            ["plant", "bridge", "bank", "spinal", "leptrino"]
+            if touches is None
+            else ["plant", *touches],
+        )
+
+    return plan
+
+
 def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKernel:
     """Attach a kernel to ``loop`` (``loop.kernel``) and give it the fast paths its nodes
     allow: ``plant`` (an :class:`rdm.plant.Plant`, the loop's physics) steps in the kernel;
@@ -123,8 +197,7 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
     for i, node in enumerate(nodes):
         bridged = type(node) is PlantBridge and len(node.banks) == 1
         if bridged and plant is node.plant and plant is loop.physics:
-            node.kernel_wrench_node = leptrino
-            node.kernel_imu_node = spinal
-            kernel.attach_bridge(i, node, node.banks[0]._core)
+            plan = _bridge_plan(node, leptrino, spinal)
+            kernel.attach_bridge(i, node, node.banks[0]._core, plan)
     loop.kernel = kernel
     return kernel

@@ -158,6 +158,8 @@ class PlantBridge:
         wrench_sinks: ``{sensor_key: f((Fx, Fy, Fz, Mx, My, Mz))}`` (N, N m, sensor frame).
         mocap_sink: ``f(now, position, quaternion_wxyz)`` of the foot frame.
         truth_sink: ``f(GroundTruth)``.
+        truth_sink_touches: what ``truth_sink`` may change of the lockstep parts besides
+            reading the plant (None: anything; ``()``: nothing, it only keeps or logs).
         *_period: seconds between calls (whole multiples of ``period``; None disables).
 
     The boards must be board views of :class:`rdm.nodes.neuron_bank.NeuronBankNode` banks
@@ -183,6 +185,7 @@ class PlantBridge:
         mocap_period: float | None = 0.01,
         truth_sink: Callable[[object], None] | None = None,
         truth_period: float | None = 0.01,
+        truth_sink_touches: Sequence[str] | None = None,
     ) -> None:
         self.plant = plant
         self.name = name
@@ -227,6 +230,10 @@ class PlantBridge:
                 raise ValueError(f"PlantBridge: plant has no wrench sensor {key!r}")
         self._mocap_sink = mocap_sink
         self._truth_sink = truth_sink
+        #: What the truth sink may change besides reading the plant, by lockstep part name
+        #: (``rdm.nodes.lockstep_kernel``: "bridge", "bank", "spinal", "leptrino"); None:
+        #: anything.
+        self.truth_sink_touches = None if truth_sink_touches is None else tuple(truth_sink_touches)
         # Ticks between samples (each reading fires on the first tick, then every n-th).
         self._imu_n = _ratio(imu_period, period, "imu_period") or 1
         self._wrench_n = _ratio(wrench_period, period, "wrench_period") or 1
@@ -343,86 +350,6 @@ class PlantBridge:
             self._mocap_sink(now, d.xpos[self._foot_body].copy(), d.xquat[self._foot_body].copy())
         if self._truth_on and n % self._truth_n == 0:
             self._truth_sink(plant.ground_truth())
-
-    # ------------------------------------------------------------ lockstep kernel
-    #: Set by ``rdm.nodes.lockstep_kernel.attach_kernel``: the Leptrino node whose
-    #: ``set_wrench_values`` and the Spinal mirror whose ``set_imu_sample`` the kernel may
-    #: feed itself when they are this bridge's sinks.
-    kernel_wrench_node: object | None = None
-    kernel_imu_node: object | None = None
-    #: What the truth sink may change of the kernel's parts (``rdm.nodes.lockstep_kernel``
-    #: part names; the ground truth itself reads the plant). None: every part.
-    kernel_truth_touches: tuple[str, ...] | None = None
-
-    def kernel_plan(self) -> tuple | None:
-        """What ``rdm._rdm.LockstepKernel`` needs to run :meth:`tick` in Rust, or None when
-        this tick has no Rust form now: boards of more than one bank, a battery voltage that is a
-        function of time or not yet applied, ESCs outside the Rust duty map, or a wrench
-        sink other than the kernel's Leptrino node (docs/sim.md). Its last item is the
-        IMU path (addresses, noise core, normal stream, the Spinal mirror) when the IMU's
-        only sink is the kernel's Spinal mirror, else None (an IMU ms is then Python's);
-        mocap samples are always Python's; a truth sample is :meth:`_kernel_truth`, called by
-        the kernel as a Python call that may change the parts of
-        :attr:`kernel_truth_touches`. The kernel writes ``ticks``, ``_sample_count`` and
-        ``time_mismatches`` back itself."""
-        plant = self.plant
-        battery = self._battery
-        if len(self.banks) != 1 or callable(battery) or battery != self._voltage:
-            return None
-        if not (plant._duties_in_core and all(e._v_factor is not None for e in plant.escs)):
-            return None
-        cls = type(plant)
-        adr, core, normals, wrench_n = (0, 0), None, None, 0
-        if self._wrench_on:
-            node = self.kernel_wrench_node
-            if len(self._wrench_sinks) != 1 or node is None:
-                return None
-            ((key, sink),) = self._wrench_sinks.items()
-            if getattr(sink, "__self__", None) is not node:
-                return None
-            if getattr(sink, "__name__", "") != "set_wrench_values":
-                return None
-            if getattr(plant.wrench_values, "__func__", None) is not cls.wrench_values:
-                return None
-            model = plant.wrench_models[key]
-            adr, core, normals = plant._wrench_adr[key], model._core, model._normals
-            wrench_n = self._wrench_n
-        imu = None
-        sink = self._imu_sink
-        if (
-            self._imu_on
-            and not self._imu_neurons
-            and self.kernel_imu_node is not None
-            and getattr(sink, "__self__", None) is self.kernel_imu_node
-            and getattr(sink, "__name__", "") == "set_imu_sample"
-            and getattr(plant.imu, "__func__", None) is cls.imu
-        ):
-            model = plant.imu_model
-            imu = (plant._imu_adr, model._core, model._normals, self.kernel_imu_node)
-        return (
-            self.ticks,
-            self._sample_count,
-            self.time_mismatches,
-            0.5 * self.period,
-            self._imu_n if self._imu_on else 0,
-            wrench_n,
-            self._mocap_n if self._mocap_on else 0,
-            self._truth_n if self._truth_on else 0,
-            adr,
-            core,
-            normals,
-            self._targets,
-            self._duties,
-            imu,
-            self._kernel_truth if self._truth_on else None,
-            ["plant", "bridge", "bank", "spinal", "leptrino"]
-            if self.kernel_truth_touches is None
-            else ["plant", *self.kernel_truth_touches],
-        )
-
-    def _kernel_truth(self) -> None:
-        """The truth sample of :meth:`_sample` (the kernel calls it when one is due)."""
-        self._truth_sink(self.plant.ground_truth())
 
     @property
     def battery_voltage(self) -> float | None:

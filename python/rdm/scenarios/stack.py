@@ -311,10 +311,12 @@ def make_bridge(
     battery_sink: Callable[[float], None],
     foot_sensor: Any,
     truth_sink: Callable[[Any], None],
+    truth_sink_touches: Sequence[str] | None = None,
 ) -> PlantBridge:
     """The plant bridge at the options' rates: IMU to ``imu_sink`` (Spinal), battery voltage
     to ``battery_sink``, the foot wrench to the Leptrino mirror ``foot_sensor``, ground truth
-    to ``truth_sink`` (shared by the lockstep stack and the ``rdm hil`` robot process)."""
+    to ``truth_sink`` (which changes ``truth_sink_touches``, see :class:`PlantBridge`; shared
+    by the lockstep stack and the ``rdm hil`` robot process)."""
     return PlantBridge(
         plant,
         neurons,
@@ -326,6 +328,7 @@ def make_bridge(
         wrench_period=1.0 / opt.leptrino_rate_hz,
         truth_sink=truth_sink,
         truth_period=opt.truth_period,
+        truth_sink_touches=truth_sink_touches,
     )
 
 
@@ -448,8 +451,8 @@ def _wire(
         battery_sink=spinal.set_battery_voltage,
         foot_sensor=sensor,
         truth_sink=truth_sink,
+        truth_sink_touches=(),  # it only keeps and logs the record
     )
-    bridge.kernel_truth_touches = ()  # truth_sink only keeps and logs the record
     mocap = MocapNode(plant, onboard, opt.mocap_period, opt.mocap, seed=opt.seed)
     status_log: list = []
     nodes: list = [bridge, *neuron_nodes, spinal, mocap, *([] if external else [onboard]), sensor]

@@ -5,7 +5,7 @@
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PyTuple};
 
-use super::attr::{read_plan, Name};
+use super::attr::Name;
 use super::leptrino::LeptrinoFast;
 use super::plant::PlantLink;
 use crate::neuron_bank::NeuronBank;
@@ -61,7 +61,7 @@ struct ImuPath {
     sink: Py<PyAny>,
 }
 
-/// Plan of `PlantBridge.kernel_plan()`.
+/// The bridge's plan (`rdm.nodes.lockstep_kernel`).
 struct Plan {
     ticks: i64,
     sample_count: i64,
@@ -102,6 +102,9 @@ pub(crate) struct BridgeOut {
 
 pub(crate) struct BridgeFast {
     node: Py<PyAny>,
+    /// Returns the plan tuple, or None when the tick has no Rust form now
+    /// (`rdm.nodes.lockstep_kernel`).
+    plan_of: Py<PyAny>,
     names: Names,
     bank: Py<NeuronBank>,
     plan: Option<Plan>,
@@ -115,10 +118,11 @@ fn due(n: i64, every: i64) -> bool {
 }
 
 impl BridgeFast {
-    pub(crate) fn new(node: &Bound<'_, PyAny>, bank: Py<NeuronBank>) -> Self {
+    pub(crate) fn new(node: &Bound<'_, PyAny>, bank: Py<NeuronBank>, plan_of: Py<PyAny>) -> Self {
         let py = node.py();
         BridgeFast {
             node: node.clone().unbind(),
+            plan_of,
             names: Names {
                 ticks: Name::new(py, "ticks"),
                 sample_count: Name::new(py, "_sample_count"),
@@ -143,7 +147,9 @@ impl BridgeFast {
         if self.loaded {
             return Ok(());
         }
-        self.plan = if let Some(t) = read_plan(self.node.bind(py))? {
+        let plan = self.plan_of.bind(py).call0()?;
+        self.plan = if !plan.is_none() {
+            let t = plan.cast_into::<PyTuple>()?;
             let normals = t.get_item(10)?;
             let wrench_normals = if normals.is_none() {
                 None

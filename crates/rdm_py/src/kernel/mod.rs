@@ -525,15 +525,17 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// Node `index` is a `PlantBridge` coupled through `bank` (needs `attach_plant`).
+    /// Node `index` is a `PlantBridge` coupled through `bank` (needs `attach_plant`);
+    /// `plan()` returns its plan tuple, or None when its tick has no Rust form now.
     fn attach_bridge(
         &mut self,
         index: usize,
         node: &Bound<'_, PyAny>,
         bank: Py<NeuronBank>,
+        plan: Py<PyAny>,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.bridge = Some(BridgeFast::new(node, bank));
+        self.bridge = Some(BridgeFast::new(node, bank, plan));
         self.kinds[index] = Kind::Bridge;
         self.touches[index] = BRIDGE | PLANT | LEPTRINO;
         Ok(())
