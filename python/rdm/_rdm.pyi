@@ -1380,7 +1380,13 @@ class LockstepKernel:
         self, index: int, node: Any, bank: NeuronBank, plan: Callable[[], tuple[Any, ...] | None]
     ) -> None: ...
     def attach_bank(
-        self, index: int, node: Any, bank: NeuronBank, wire: CanWire, boards: Sequence[Any]
+        self,
+        index: int,
+        node: Any,
+        bank: NeuronBank,
+        wire: CanWire,
+        boards: Sequence[Any],
+        plan: Callable[[], tuple[Any, ...] | None],
     ) -> None: ...
     def attach_spinal(
         self, index: int, node: Any, master: CanMaster, wire: CanWire, drain_at: int

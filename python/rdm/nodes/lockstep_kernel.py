@@ -83,6 +83,18 @@ def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
     )
 
 
+def _bank_plan(bank: NeuronBankNode) -> Callable[[], tuple | None]:
+    """The plan the kernel reads for ``bank`` on a CAN wire: None until the plant bridge's
+    coupling is attached (a position push is then the core's own), else the change counters
+    the node last saw. The kernel writes the boards' ``tx_count`` and change counters back
+    itself."""
+
+    def plan() -> tuple | None:
+        return (bank._last_changes,) if bank._bridged else None
+
+    return plan
+
+
 def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[], tuple | None]:
     """The plan the kernel reads for ``bridge`` (called again after Python code ran): None
     when its tick has no Rust form now (boards of several banks, a battery voltage that is a
@@ -186,7 +198,9 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
                 kernel.attach_leptrino(i, node)
                 leptrino = node
         elif cls is NeuronBankNode and isinstance(node._wire, CanWireLink):
-            kernel.attach_bank(i, node, node._core, node._wire.wire, list(node.boards))
+            kernel.attach_bank(
+                i, node, node._core, node._wire.wire, list(node.boards), _bank_plan(node)
+            )
         elif cls is SpinalMirror and node._wire_link is not None and spinal is None:
             kernel.attach_spinal(i, node, node.master.core, node._wire_link.wire, DRAIN_AT)
             spinal = node

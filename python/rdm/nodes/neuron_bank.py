@@ -417,16 +417,6 @@ class NeuronBankNode:
                     boards[k].tx_errors += 1
         self._refresh_changes()
 
-    # ------------------------------------------------------------ lockstep kernel
-    def kernel_plan(self) -> tuple | None:
-        """What ``rdm._rdm.LockstepKernel`` needs to run :meth:`tick` in Rust: the wire
-        path with the bridge attached (a position push is the core's own), or None
-        (docs/sim.md). The kernel writes the boards'
-        ``tx_count`` and change counters back itself."""
-        if self._wire is None or not self._bridged:
-            return None
-        return (self._last_changes,)
-
     def close(self) -> None:
         """Shut the bus down (the node owns it)."""
         self.bus.shutdown()

@@ -542,7 +542,8 @@ impl LockstepKernel {
     }
 
     /// Node `index` is a `NeuronBankNode` whose board views are `boards` (the core's boards,
-    /// in order) on `wire`.
+    /// in order) on `wire`; `plan()` returns its plan tuple, or None while it has no Rust
+    /// tick.
     fn attach_bank(
         &mut self,
         index: usize,
@@ -550,9 +551,10 @@ impl LockstepKernel {
         bank: Py<NeuronBank>,
         wire: Py<CanWire>,
         boards: Vec<Py<PyAny>>,
+        plan: Py<PyAny>,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.bank = Some(BankFast::new(node, bank, wire, boards)?);
+        self.bank = Some(BankFast::new(node, bank, wire, boards, plan)?);
         self.kinds[index] = Kind::Bank;
         self.touches[index] = BANK;
         Ok(())
