@@ -1377,7 +1377,11 @@ class LockstepKernel:
     ) -> None:
         """The plant and its parts (typed, read by ``rdm.nodes.lockstep_kernel``)."""
     def attach_bridge(
-        self, index: int, node: Any, bank: NeuronBank, plan: Callable[[], tuple[Any, ...] | None]
+        self,
+        index: int,
+        bank: NeuronBank,
+        plan: Callable[[], tuple[Any, ...] | None],
+        store: Callable[[int, int, int], None],
     ) -> None: ...
     def attach_bank(
         self,

@@ -103,7 +103,7 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
     wrench path (addresses, noise core, normal stream), the targets and duties arrays, the
     IMU path when its only sink is ``spinal``'s ``set_imu_sample`` (else None: an IMU ms is
     Python's), the truth call and the parts it may change. Mocap samples are Python's. The
-    kernel writes ``ticks``, ``_sample_count`` and ``time_mismatches`` back itself."""
+    kernel writes the counters back through :func:`_bridge_store`."""
     plant = bridge.plant
     cls = type(plant)
 
@@ -168,6 +168,17 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
     return plan
 
 
+def _bridge_store(bridge: PlantBridge) -> Callable[[int, int, int], None]:
+    """Where the kernel writes the bridge's counters back (its ticks, samples, mismatches)."""
+
+    def store(ticks: int, sample_count: int, time_mismatches: int) -> None:
+        bridge.ticks = ticks
+        bridge._sample_count = sample_count
+        bridge.time_mismatches = time_mismatches
+
+    return store
+
+
 def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKernel:
     """Attach a kernel to ``loop`` (``loop.kernel``) and give it the fast paths its nodes
     allow: ``plant`` (an :class:`rdm.plant.Plant`, the loop's physics) steps in the kernel;
@@ -212,6 +223,6 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         bridged = type(node) is PlantBridge and len(node.banks) == 1
         if bridged and plant is node.plant and plant is loop.physics:
             plan = _bridge_plan(node, leptrino, spinal)
-            kernel.attach_bridge(i, node, node.banks[0]._core, plan)
+            kernel.attach_bridge(i, node.banks[0]._core, plan, _bridge_store(node))
     loop.kernel = kernel
     return kernel

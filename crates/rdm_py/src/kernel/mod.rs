@@ -526,16 +526,18 @@ impl LockstepKernel {
     }
 
     /// Node `index` is a `PlantBridge` coupled through `bank` (needs `attach_plant`);
-    /// `plan()` returns its plan tuple, or None when its tick has no Rust form now.
+    /// `plan()` returns its plan tuple, or None when its tick has no Rust form now;
+    /// `store(ticks, sample_count, time_mismatches)` writes the counters back.
     fn attach_bridge(
         &mut self,
+        py: Python<'_>,
         index: usize,
-        node: &Bound<'_, PyAny>,
         bank: Py<NeuronBank>,
         plan: Py<PyAny>,
+        store: Py<PyAny>,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.bridge = Some(BridgeFast::new(node, bank, plan));
+        self.bridge = Some(BridgeFast::new(py, bank, plan, store));
         self.kinds[index] = Kind::Bridge;
         self.touches[index] = BRIDGE | PLANT | LEPTRINO;
         Ok(())
