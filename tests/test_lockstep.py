@@ -183,7 +183,7 @@ def test_default_layout_of_the_rdm():
     assert sorted(j for n in layout.neurons for j in n.joints) == sorted(desc.joint_order)
     # Dynamixel mapping: 2048 at 0 rad, 4096 ticks per turn
     assert layout.to_ticks("q1", math.pi / 2) == pytest.approx(3072.0)
-    assert layout.to_rad("q1", 1024) == pytest.approx(-math.pi / 2)
+    assert layout.to_ticks("q1", -math.pi / 2) == pytest.approx(1024.0)
 
 
 # --------------------------------------------------------------------- plant bridge alone
@@ -222,7 +222,7 @@ def test_bridge_couples_duties_goals_positions_and_sinks():
         battery_voltage=lambda t: 24.0 - t,
         battery_sinks=[volts.append],
         imu_sink=lambda g, a, m: imu.append(a.copy()),
-        wrench_sinks={"foot_wrench": lambda f, t: wrench.append(f)},
+        wrench_sinks={"foot_wrench": lambda w: wrench.append(w[:3])},
         mocap_sink=lambda t, p, q: mocap.append((t, p, q)),
         mocap_period=0.005,
     )
@@ -244,7 +244,7 @@ def test_bridge_couples_duties_goals_positions_and_sinks():
         assert abs(q[plant.joint_names.index("q1")] - 0.2) < 0.01
         # present positions fed back (raw ticks of the plant's angle)
         # (the bridge wrote the angle of the state before the last physics step: 1 ms old)
-        assert servo.position == pytest.approx(layout.to_ticks("q1", q[0]), abs=1.0)
+        assert servo.position == pytest.approx(2048 + q[0] * 4096 / (2 * math.pi), abs=1.0)
         assert len(imu) == 100 and len(wrench) == 500 and len(mocap) == 100
         assert imu[-1][2] == pytest.approx(9.81, abs=0.3)  # welded base, level: +g
         assert len(volts) == 500 and volts[0] == 24.0
@@ -383,3 +383,18 @@ def test_leptrino_node_clips_to_int16_and_refuses_nan():
     (event,) = lp.LeptrinoStreamParser().feed(sink.data)
     assert lp.parse_response(event.payload).raw[0] == 32767
     assert node.saturated_samples == 1 and node.errors["bad_wrench"] == 1
+
+
+def test_bridge_refuses_boards_outside_a_neuron_bank():
+    from types import SimpleNamespace
+
+    from rdm.nodes.plant_bridge import PlantBridge, default_layout
+    from rdm.plant import Plant
+
+    plant = Plant("rdm", fixed_base=True, ceiling_height=None)
+    boards = [
+        SimpleNamespace(slave_id=nl.slave, servos=[None] * len(nl.joints))
+        for nl in default_layout(plant.description).neurons
+    ]
+    with pytest.raises(ValueError, match="Neuron 1 is not a board of a NeuronBankNode"):
+        PlantBridge(plant, boards)

@@ -275,7 +275,7 @@ def build_chain(
         layout,
         imu_sink=spinal.set_imu_sample,
         battery_sinks=[spinal.set_battery_voltage],
-        wrench_sinks={"foot_wrench": sensor.set_wrench},
+        wrench_sinks={"foot_wrench": sensor.set_wrench_values},
         wrench_period=0.002,
         truth_sink=truth_sink,
         truth_period=0.01,

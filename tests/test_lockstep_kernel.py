@@ -285,7 +285,7 @@ def test_a_truth_sink_that_changes_a_node_has_its_plans_re_read(tmp_path: Path) 
             stack.sensor.temperature += 1  # in every later Leptrino frame
 
         stack.bridge._truth_sink = sink
-        stack.bridge.kernel_truth_touches = None  # unknown sink: every plan re-read
+        stack.bridge.truth_sink_touches = None  # unknown sink: every plan re-read
         stack.loop.run(0.6)
 
     stats = _same(tmp_path, steps, log=True)

@@ -318,7 +318,8 @@ def test_servos_see_the_plant_angle_of_the_bridge_tick():
         name, period = "probe", 0.001
 
         def tick(self, now):
-            seen.append((servo.position, layout.to_ticks("q1", float(plant.servo_positions()[j]))))
+            q = float(plant.servo_positions()[j])
+            seen.append((servo.position, 2048 + q * (4096 / (2 * math.pi))))
 
     try:
         Lockstep([bridge, *neurons, spinal, Probe()], physics=plant).run(0.2)

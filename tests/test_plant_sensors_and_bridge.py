@@ -15,7 +15,6 @@ import math
 import mujoco
 import numpy as np
 
-from rdm.nodes.plant_bridge import _JointFeed
 from rdm.plant import Plant
 from rdm.plant.mjcf import rotor_site
 from rdm.plant.sensors import (
@@ -96,22 +95,33 @@ def test_plant_imu_and_wrench_equal_the_array_form_of_the_ideal_values():
         raise AssertionError("unknown wrench sensor accepted")
 
 
-def test_joint_feed_ticks_equal_the_array_expression():
-    plant = Plant("rdm", seed=0, fixed_base=True, ceiling_height=None)
-    n = len(plant.joint_names)
+def test_bridge_present_positions_equal_the_array_expression():
+    """The bank coupling's present positions (raw ticks) are ``center + q * ticks_per_rad``
+    of the snapshot's joint angles, read at the joints' qpos addresses."""
+    from rdm.link.inproc_can import InProcessBus
+    from rdm.nodes.neuron_bank import NeuronBankNode, NeuronSpec
+    from rdm.nodes.servo_model import ServoConfig
+
+    n = 4
+    servos = tuple(ServoConfig(dynamixel_id=i + 1) for i in range(n))
+    bank = NeuronBankNode(InProcessBus("bridge_ticks"), [NeuronSpec(1, servos, plant_driven=True)])
     scale = np.random.default_rng(2).uniform(-900.0, 900.0, n)
-    feed = _JointFeed(plant, 2048, scale)
-    qadr = plant._qadr
+    qadr = [3, 0, 5, 1]
+    bank.attach_bridge(2048, qadr, scale.tolist(), [(0, i, i) for i in range(n)], [], [0])
+    qpos, targets, duties = np.zeros(7), np.zeros(n), np.zeros(0)
     gen = np.random.default_rng(4)
-    specials = [0.0, -0.0, np.nan, np.inf, -np.inf, 1e-300, -1e300]
-    for k in range(300):
-        q = gen.normal(size=n) * 10.0 ** gen.uniform(-8, 2)
-        q[k % n] = specials[k % len(specials)]
-        plant._v_qpos[qadr] = q
-        feed.snapshot()
-        want = (2048 + plant._v_qpos[qadr] * scale).tolist()
-        assert _same(feed.ticks(), want), k
-        assert feed.ticks() is feed.ticks()  # converted once per snapshot
+    specials = [0.0, -0.0, 1e-300, -1e-300, 5e-324]
+    try:
+        for k in range(300):
+            q = gen.normal(size=n) * 10.0 ** gen.uniform(-8, 2)
+            q[k % n] = specials[k % len(specials)]
+            qpos[qadr] = q
+            bank.bridge_tick(qpos, targets, duties)
+            bank._push_positions()
+            want = (2048 + qpos[qadr] * scale).tolist()
+            assert _same([s.position for s in bank.boards[0].servos], want), k
+    finally:
+        bank.close()
 
 
 def test_bridge_samples_on_the_first_tick_then_every_nth():
@@ -134,7 +144,7 @@ def test_bridge_samples_on_the_first_tick_then_every_nth():
             neurons,
             imu_sink=lambda g, a, m: calls["imu"].append(tick[0]),
             imu_period=0.005,
-            wrench_sinks={"foot_wrench": lambda f, t: calls["wrench"].append(tick[0])},
+            wrench_sinks={"foot_wrench": lambda w: calls["wrench"].append(tick[0])},
             wrench_period=0.002,
             truth_sink=lambda gt: calls["truth"].append(tick[0]),
             truth_period=0.01,

@@ -49,6 +49,7 @@ __all__ = [
     "RotorPlantCore",
     "SpinalStep",
     "SpinalStepOutput",
+    "StopFlag",
     "WrenchFilter",
     "WrenchNoiseCore",
     "__version__",
@@ -1332,6 +1333,18 @@ def spinal_servo_states_frame(
 
 # --- lockstep kernel ---
 @_final
+class StopFlag:
+    """The lockstep loop's stop request (``Lockstep.stop`` sets it, the Rust loop reads it)."""
+
+    def __new__(cls) -> _Self: ...
+    def set(self) -> None:
+        """Ask the loop to stop after the tick in progress."""
+    def clear(self) -> None:
+        """Withdraw the request."""
+    def is_set(self) -> bool:
+        """Whether a stop was asked."""
+
+@_final
 class LockstepKernel:
     """The unpaced lockstep loop in Rust with fast paths for the firmware side's steady
     milliseconds (``rdm.nodes.lockstep_kernel``, docs/sim.md)."""
@@ -1343,12 +1356,41 @@ class LockstepKernel:
         ticks: list[Any],
         physics: Any | None,
         clock: Any,
-        owner: Any,
+        stop: StopFlag,
     ) -> _Self: ...
-    def attach_plant(self, plant: Any, mujoco: Any) -> None: ...
-    def attach_bridge(self, index: int, node: Any, bank: NeuronBank) -> None: ...
+    def attach_plant(
+        self,
+        plant: Any,
+        model: Any,
+        data: Any,
+        mj: Sequence[Any],
+        flags: tuple[int | None, int | None, int],
+        opt: Any,
+        rotors: RotorPlantCore,
+        gate: ContactGateCore | None,
+        tracker: Any,
+        qpos: _F,
+        sensordata: _F,
+        ctrl: _F,
+        servo_act: Sequence[int],
+        sleep: tuple[Any, ...] | None,
+    ) -> None:
+        """The plant and its parts (typed, read by ``rdm.nodes.lockstep_kernel``)."""
+    def attach_bridge(
+        self,
+        index: int,
+        bank: NeuronBank,
+        plan: Callable[[], tuple[Any, ...] | None],
+        store: Callable[[int, int, int], None],
+    ) -> None: ...
     def attach_bank(
-        self, index: int, node: Any, bank: NeuronBank, wire: CanWire, n_boards: int
+        self,
+        index: int,
+        node: Any,
+        bank: NeuronBank,
+        wire: CanWire,
+        boards: Sequence[Any],
+        plan: Callable[[], tuple[Any, ...] | None],
     ) -> None: ...
     def attach_spinal(
         self, index: int, node: Any, master: CanMaster, wire: CanWire, drain_at: int

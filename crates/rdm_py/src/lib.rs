@@ -32,6 +32,7 @@ mod sensor_sim;
 mod servo_goals;
 mod spinal_commands;
 mod spinal_mirror;
+mod stop_flag;
 mod untracked;
 
 #[pymodule]
@@ -60,6 +61,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     capture_index::register(m)?;
     rosserial::register(m)?;
     kernel::register(m)?;
+    stop_flag::register(m)?;
     spinal_mirror::register(m)?;
     spinal_commands::register(m)?;
     servo_goals::register(m)?;

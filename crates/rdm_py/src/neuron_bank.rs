@@ -501,6 +501,11 @@ impl NeuronBank {
 /// Accessors of the lockstep kernel (`crate::kernel`): the same work as the Python-facing
 /// methods above, on slices and the core wire, without Python objects in between.
 impl NeuronBank {
+    /// How many boards the bank has.
+    pub(crate) fn board_count(&self) -> usize {
+        self.core.boards().len()
+    }
+
     /// [`NeuronBank::bridge_tick`] on slices.
     pub(crate) fn kernel_bridge_tick(
         &mut self,

@@ -30,6 +30,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from rdm import _rdm
 from rdm.link.inproc_can import SimClock, set_channel_clock
 
 from .base import Node
@@ -142,6 +143,8 @@ class Lockstep:
         self._entries: list[_Entry] = []
         self.stats = LockstepStats()
         self._stop = False
+        #: The stop request as the Rust loop reads it (set and cleared with ``_stop``).
+        self.stop_flag = _rdm.StopFlag()
         #: A :class:`rdm._rdm.LockstepKernel` running the unpaced loop in Rust
         #: (``rdm.nodes.lockstep_kernel.attach_kernel``); None: the Python loop.
         self.kernel = None
@@ -199,6 +202,7 @@ class Lockstep:
     def stop(self) -> None:
         """Stop the current :meth:`run` after the tick in progress (callable from a node)."""
         self._stop = True
+        self.stop_flag.set()
 
     def step(self) -> None:
         """One base tick: due nodes in order, barriers, one physics step."""
@@ -253,6 +257,7 @@ class Lockstep:
     def run_ticks(self, n: int) -> LockstepStats:
         """Advance ``n`` base ticks (fewer if :meth:`stop` is called)."""
         self._stop = False
+        self.stop_flag.clear()
         wall0 = self._wall()
         sim0 = self.time
         next_report = sim0 + self.progress_every

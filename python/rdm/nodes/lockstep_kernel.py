@@ -13,12 +13,15 @@ kernel (tests/test_lockstep_kernel.py, tests/test_spinal_kernel_busy.py; docs/si
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import mujoco
 
 from rdm import _rdm
 from rdm.link.can_wire import DRAIN_AT, CanWireLink
+from rdm.plant import option_flags
+from rdm.plant import sleep as plant_sleep
 
 from .leptrino_sensor import LeptrinoSensorNode
 from .lockstep import Lockstep
@@ -37,10 +40,149 @@ def kind_of(node: Any) -> str | None:
     }.get(type(node))
 
 
+def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
+    """Hand the kernel the plant's parts it holds for the plant's lifetime (typed values:
+    MuJoCo's model, data and step functions, the option-flags address, the Rust cores, the
+    MjData views, the servo actuators and the resting-sleep arrays)."""
+    model = plant.model
+    sleep = plant.sleep
+    kernel.attach_plant(
+        plant,
+        model,
+        plant._data,
+        [
+            mujoco.mj_step1,
+            mujoco.mj_step2,
+            mujoco.mj_forward,
+            mujoco.mj_sensorPos,
+            mujoco.mj_sensorVel,
+        ],
+        (plant._flags_address, getattr(model, "_address", None), option_flags.SEARCH_BYTES),
+        model.opt,
+        plant._rotors,
+        plant._contact_gate,
+        plant._tracker,
+        plant._v_qpos,
+        plant._v_sensordata,
+        plant._v_ctrl,
+        [int(a) for a in plant._servo_act],
+        None
+        if sleep is None
+        else (
+            sleep,
+            list(sleep.trees),
+            list(sleep.rotors),
+            plant_sleep.ALLOWED,
+            plant_sleep.NEVER,
+            plant_sleep.SLEEP_ENABLE_BIT,
+            sleep._v_policy,
+            sleep._v_tree_asleep,
+            sleep._v_last_ctrl,
+            sleep._opt,
+        ),
+    )
+
+
+def _bank_plan(bank: NeuronBankNode) -> Callable[[], tuple | None]:
+    """The plan the kernel reads for ``bank`` on a CAN wire: None until the plant bridge's
+    coupling is attached (a position push is then the core's own), else the change counters
+    the node last saw. The kernel writes the boards' ``tx_count`` and change counters back
+    itself."""
+
+    def plan() -> tuple | None:
+        return (bank._last_changes,) if bank._bridged else None
+
+    return plan
+
+
+def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[], tuple | None]:
+    """The plan the kernel reads for ``bridge`` (called again after Python code ran): None
+    when its tick has no Rust form now (boards of several banks, a battery voltage that is a
+    function of time or not yet applied, ESCs outside the Rust duty map, a wrench sink other
+    than ``leptrino``'s ``set_wrench_values``), else the counters, sample periods, the foot
+    wrench path (addresses, noise core, normal stream), the targets and duties arrays, the
+    IMU path when its only sink is ``spinal``'s ``set_imu_sample`` (else None: an IMU ms is
+    Python's), the truth call and the parts it may change. Mocap samples are Python's. The
+    kernel writes the counters back through :func:`_bridge_store`."""
+    plant = bridge.plant
+    cls = type(plant)
+
+    def truth() -> None:
+        bridge._truth_sink(plant.ground_truth())
+
+    def plan() -> tuple | None:
+        b = bridge
+        battery = b._battery
+        if len(b.banks) != 1 or callable(battery) or battery != b._voltage:
+            return None
+        if not (plant._duties_in_core and all(e._v_factor is not None for e in plant.escs)):
+            return None
+        adr, core, normals, wrench_n = (0, 0), None, None, 0
+        if b._wrench_on:
+            if len(b._wrench_sinks) != 1 or leptrino is None:
+                return None
+            ((key, sink),) = b._wrench_sinks.items()
+            if getattr(sink, "__self__", None) is not leptrino:
+                return None
+            if getattr(sink, "__name__", "") != "set_wrench_values":
+                return None
+            if getattr(plant.wrench_values, "__func__", None) is not cls.wrench_values:
+                return None
+            model = plant.wrench_models[key]
+            adr, core, normals = plant._wrench_adr[key], model._core, model._normals
+            wrench_n = b._wrench_n
+        imu = None
+        sink = b._imu_sink
+        if (
+            b._imu_on
+            and not b._imu_neurons
+            and spinal is not None
+            and getattr(sink, "__self__", None) is spinal
+            and getattr(sink, "__name__", "") == "set_imu_sample"
+            and getattr(plant.imu, "__func__", None) is cls.imu
+        ):
+            model = plant.imu_model
+            imu = (plant._imu_adr, model._core, model._normals, spinal)
+        touches = b.truth_sink_touches
+        return (
+            b.ticks,
+            b._sample_count,
+            b.time_mismatches,
+            0.5 * b.period,
+            b._imu_n if b._imu_on else 0,
+            wrench_n,
+            b._mocap_n if b._mocap_on else 0,
+            b._truth_n if b._truth_on else 0,
+            adr,
+            core,
+            normals,
+            b._targets,
+            b._duties,
+            imu,
+            truth if b._truth_on else None,
+            ["plant", "bridge", "bank", "spinal", "leptrino"]
+            if touches is None
+            else ["plant", *touches],
+        )
+
+    return plan
+
+
+def _bridge_store(bridge: PlantBridge) -> Callable[[int, int, int], None]:
+    """Where the kernel writes the bridge's counters back (its ticks, samples, mismatches)."""
+
+    def store(ticks: int, sample_count: int, time_mismatches: int) -> None:
+        bridge.ticks = ticks
+        bridge._sample_count = sample_count
+        bridge.time_mismatches = time_mismatches
+
+    return store
+
+
 def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKernel:
     """Attach a kernel to ``loop`` (``loop.kernel``) and give it the fast paths its nodes
     allow: ``plant`` (an :class:`rdm.plant.Plant`, the loop's physics) steps in the kernel;
-    a :class:`PlantBridge` with the Rust coupling, a :class:`NeuronBankNode` on a
+    a :class:`PlantBridge` whose boards are one bank's, a :class:`NeuronBankNode` on a
     :class:`CanWireLink`, a :class:`SpinalMirror` whose Rust master ticks on that wire and a
     :class:`LeptrinoSensorNode` get their steady ticks run there. After any other node's
     Python tick every part is flushed and every plan re-read, unless the node (its class or
@@ -55,10 +197,10 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         raise ValueError("attach_kernel: the loop has no precomputed schedule")
     physics = loop.physics.step if loop.physics is not None else None
     kernel = _rdm.LockstepKernel(
-        loop.dt, schedule, [n.tick for n in nodes], physics, loop.clock, loop
+        loop.dt, schedule, [n.tick for n in nodes], physics, loop.clock, loop.stop_flag
     )
     if plant is not None and plant is loop.physics:
-        kernel.attach_plant(plant, mujoco)
+        _attach_plant(kernel, plant)
     leptrino = spinal = None
     for i, node in enumerate(nodes):
         cls = type(node)
@@ -67,7 +209,9 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
                 kernel.attach_leptrino(i, node)
                 leptrino = node
         elif cls is NeuronBankNode and isinstance(node._wire, CanWireLink):
-            kernel.attach_bank(i, node, node._core, node._wire.wire, len(node.boards))
+            kernel.attach_bank(
+                i, node, node._core, node._wire.wire, list(node.boards), _bank_plan(node)
+            )
         elif cls is SpinalMirror and node._wire_link is not None and spinal is None:
             kernel.attach_spinal(i, node, node.master.core, node._wire_link.wire, DRAIN_AT)
             spinal = node
@@ -76,10 +220,9 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         if touches is not None and kind_of(node) is None:
             kernel.set_touches(i, list(touches))
     for i, node in enumerate(nodes):
-        bridged = type(node) is PlantBridge and node.rust_coupling
+        bridged = type(node) is PlantBridge and len(node.banks) == 1
         if bridged and plant is node.plant and plant is loop.physics:
-            node.kernel_wrench_node = leptrino
-            node.kernel_imu_node = spinal
-            kernel.attach_bridge(i, node, node._bank._core)
+            plan = _bridge_plan(node, leptrino, spinal)
+            kernel.attach_bridge(i, node.banks[0]._core, plan, _bridge_store(node))
     loop.kernel = kernel
     return kernel

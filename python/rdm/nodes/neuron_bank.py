@@ -18,7 +18,7 @@ each other's frames as boards on one bus do (colliding slave ids).
 
 :attr:`NeuronBankNode.boards` holds one :class:`NeuronBoardView` per board with the part of
 the mirror interface the plant bridge, the stack and the tools use (``slave_id``,
-``servos[i].goal / torque_enable / feed``, ``changes``, ``esc.duty``, ``set_imu`` ...).
+``servos[i].goal / torque_enable``, ``changes``, ``esc.duty``, ``set_imu`` ...).
 """
 
 from __future__ import annotations
@@ -123,23 +123,13 @@ class EscView(EscOutputs):
 
 
 class ServoView:
-    """One servo of a board (read from the core); ``feed`` is the plant position feed."""
+    """One servo of a board (read from the core)."""
 
-    __slots__ = ("_board", "_feed", "_i")
+    __slots__ = ("_board", "_i")
 
     def __init__(self, board: NeuronBoardView, index: int) -> None:
         self._board = board
         self._i = index
-        self._feed: tuple[Any, int] | None = None
-
-    @property
-    def feed(self) -> tuple[Any, int] | None:
-        return self._feed
-
-    @feed.setter
-    def feed(self, value: tuple[Any, int] | None) -> None:
-        self._feed = value
-        self._board._bank._feeds_changed()
 
     def _state(self) -> dict[str, Any]:
         return self._board.state()["servos"][self._i]
@@ -204,7 +194,7 @@ class ServoView:
 
 class NeuronBoardView:
     """One board of a :class:`NeuronBankNode`: what a plant, the stack and the tools read and
-    set (``slave_id``, ``servos[i].goal / torque_enable / feed``, ``changes``, ``esc.duty``,
+    set (``slave_id``, ``servos[i].goal / torque_enable``, ``changes``, ``esc.duty``,
     ``set_imu`` ...)."""
 
     def __init__(self, bank: NeuronBankNode, k: int, spec: NeuronSpec) -> None:
@@ -349,8 +339,6 @@ class NeuronBankNode:
         self.period = period
         self._core = _rdm.NeuronBank([s.core_dict() for s in specs])
         self.boards = [NeuronBoardView(self, k, s) for k, s in enumerate(specs)]
-        self._fed: list[tuple[Any, list[int], list[int], list[int]]] | None = []
-        self._feed_epochs: dict[int, int] = {}
         #: The plant bridge's coupling runs in the core (:meth:`attach_bridge`).
         self._bridged = False
         #: The core's counters as last copied into the boards (None: copy at the next tick).
@@ -383,38 +371,12 @@ class NeuronBankNode:
         bridge_tick``); returns ``(targets_changed, duties_changed)``."""
         return self._core.bridge_tick(qpos, targets, duties)
 
-    def _feeds_changed(self) -> None:
-        self._fed = None  # rebuilt at the next tick
-
-    def _build_feeds(self) -> list[tuple[Any, list[int], list[int], list[int]]]:
-        groups: dict[int, tuple[Any, list[int], list[int], list[int]]] = {}
-        for k, board in enumerate(self.boards):
-            for i, servo in enumerate(board.servos):
-                if servo.feed is not None:
-                    feed, joint = servo.feed
-                    g = groups.setdefault(id(feed), (feed, [], [], []))
-                    g[1].append(k)
-                    g[2].append(i)
-                    g[3].append(joint)
-        self._feed_epochs = {}
-        return list(groups.values())
-
     def _push_positions(self) -> None:
-        # A servo reads its plant feed when it first needs the position in a new feed epoch;
-        # the feed's values are fixed within an epoch, so pushing them before the frames are
-        # handled gives the same positions.
+        # A servo reads the bridge's snapshot when it first needs the position after a
+        # snapshot; the snapshot is fixed until the next one, so pushing it before the frames
+        # are handled gives the same positions.
         if self._bridged:
             self._core.bridge_push_positions()
-        fed = self._fed
-        if fed is None:
-            fed = self._fed = self._build_feeds()
-        for feed, boards, servos, joints in fed:
-            epoch = feed.epoch
-            if self._feed_epochs.get(id(feed)) == epoch:
-                continue
-            self._feed_epochs[id(feed)] = epoch
-            ticks = feed.ticks()
-            self._core.set_positions(boards, servos, [ticks[j] for j in joints])
 
     def _refresh_changes(self) -> None:
         # Most milliseconds no board's counter moves: one list comparison instead of a
@@ -429,9 +391,7 @@ class NeuronBankNode:
         """Positions are only read while handling a frame other than a PWM broadcast (MOTOR
         device, id < 0x100): servo words, requests, board configs, or a frame a board sent
         last tick that another board accepts (colliding slave ids)."""
-        if (self._fed != [] or self._bridged) and (
-            non_pwm_pending or self._core.sent_frames_heard()
-        ):
+        if self._bridged and (non_pwm_pending or self._core.sent_frames_heard()):
             self._push_positions()
 
     def tick(self, now: float) -> None:
@@ -456,16 +416,6 @@ class NeuronBankNode:
                 else:
                     boards[k].tx_errors += 1
         self._refresh_changes()
-
-    # ------------------------------------------------------------ lockstep kernel
-    def kernel_plan(self) -> tuple | None:
-        """What ``rdm._rdm.LockstepKernel`` needs to run :meth:`tick` in Rust: the wire
-        path with the bridge attached and no Python servo feeds (then a position push is
-        the core's own), or None (docs/sim.md). The kernel writes the boards'
-        ``tx_count`` and change counters back itself."""
-        if self._wire is None or not self._bridged or self._fed is None or self._fed:
-            return None
-        return (self._last_changes,)
 
     def close(self) -> None:
         """Shut the bus down (the node owns it)."""

@@ -4,20 +4,24 @@ Each ``tick(now)`` (the plant must be at ``now``; the lockstep scheduler steps i
 nodes), in this order:
 
 1. plant joint positions -> every Neuron's present positions (raw Dynamixel ticks): a snapshot
-   of the joints at ``now`` that each servo converts when its Neuron first reads it (a state
+   of the joints at ``now`` that the bank converts when a board first reads it (a state
    report, torque-on, a config reply), so boards that report nothing cost nothing;
 2. Neuron servo goals (servos with torque on) -> plant servo targets (rad), read only from
-   Neurons whose change counter (``NeuronMirror.changes``: goals, torque, ESC output) moved;
+   Neurons whose change counter (goals, torque, ESC output) moved;
 3. battery voltage -> plant ESCs and the battery sinks (the Spinal mirror's
    ``set_battery_voltage``); a change re-commands the duties (the plant converts a duty at the
    voltage of the moment it is commanded);
 4. Neuron ESC outputs (duty 0.5..1, 0.5 while the watchdog stops the motor) -> plant rotor duties;
 5. every ``imu_period``: one noisy plant IMU sample -> ``imu_sink(gyro, acc, mag)`` (the Spinal
    mirror's ``set_imu_sample``) and to Neurons that have an IMU;
-6. every ``wrench_period``: one noisy sample per wrench sensor -> ``wrench_sinks[key](force,
-   torque)`` (the Leptrino sensor node's ``set_wrench``);
+6. every ``wrench_period``: one noisy sample per wrench sensor -> ``wrench_sinks[key](values)``,
+   values = (Fx, Fy, Fz, Mx, My, Mz) (the Leptrino sensor node's ``set_wrench_values``);
 7. every ``mocap_period``: foot pose -> ``mocap_sink(now, position, quaternion_wxyz)``;
    every ``truth_period``: ``truth_sink(GroundTruth)`` (the logger).
+
+Steps 1, 2 and 4 are the Rust coupling of each Neuron bank the boards belong to
+(``rdm_core::firmware::bank_bridge``, ``NeuronBankNode.bridge_tick``): this node converts and
+forwards.
 
 Commands flow mirror -> plant with one tick of delay (the mirrors tick after the bridge), as a
 real PWM/servo update lands on the next control period.
@@ -91,10 +95,8 @@ class BusLayout:
                 raise ValueError(f"BusLayout: Neuron {n.slave} has {len(n.joints)} servos > 4")
 
     def to_ticks(self, joint: str, q: float) -> float:
+        """Raw ticks of ``joint`` at ``q`` rad (the servos' start positions)."""
         return self.center_ticks + q * layout_scale(self, joint)
-
-    def to_rad(self, joint: str, ticks: float) -> float:
-        return (ticks - self.center_ticks) / layout_scale(self, joint)
 
     def servo_configs(self, slave: int, q0: dict[str, float] | None = None) -> list[ServoConfig]:
         """``ServoConfig`` list of one Neuron, starting at ``q0`` (rad, default 0)."""
@@ -143,36 +145,6 @@ def _ratio(period: float | None, base: float, what: str) -> int:
     return n
 
 
-class _JointFeed:
-    """The plant's joint angles in raw ticks, snapshot at each bridge tick and converted once,
-    on the first read (``center + q * ticks_per_rad`` per joint in Python floats, joint_order);
-    shared by every servo."""
-
-    __slots__ = ("_center", "_pairs", "_q", "_qpos", "_ticks", "_ticks_epoch", "epoch")
-
-    def __init__(self, plant, center: int, scale: np.ndarray) -> None:
-        self._center = float(center)
-        self.epoch = 0
-        self._qpos = plant._v_qpos  # the plant's qpos view (stable for its data's lifetime)
-        self._q = self._qpos.copy()
-        #: (qpos address, ticks per rad) per joint
-        self._pairs = list(zip(np.asarray(plant._qadr).tolist(), scale.tolist(), strict=True))
-        self._ticks: list[float] = []
-        self._ticks_epoch = -1
-
-    def snapshot(self) -> None:
-        self.epoch += 1
-        self._q = self._qpos.copy()  # later physics steps do not move it (one memcpy)
-
-    def ticks(self) -> list[float]:
-        if self._ticks_epoch != self.epoch:
-            self._ticks_epoch = self.epoch
-            q = self._q.tolist()
-            c = self._center
-            self._ticks = [c + q[a] * s for a, s in self._pairs]
-        return self._ticks
-
-
 class PlantBridge:
     """The 1 kHz coupling node between a :class:`rdm.plant.Plant` and the mirrors.
 
@@ -183,18 +155,16 @@ class PlantBridge:
         battery_voltage: volts, constant or a function of simulated time.
         battery_sinks: called with the voltage when it changes.
         imu_sink: ``f(gyro, acc, mag)`` (rad/s, m/s^2, uT; IMU frame = Spinal's body frame).
-        wrench_sinks: ``{sensor_key: f(force, torque)}``.
+        wrench_sinks: ``{sensor_key: f((Fx, Fy, Fz, Mx, My, Mz))}`` (N, N m, sensor frame).
         mocap_sink: ``f(now, position, quaternion_wxyz)`` of the foot frame.
         truth_sink: ``f(GroundTruth)``.
+        truth_sink_touches: what ``truth_sink`` may change of the lockstep parts besides
+            reading the plant (None: anything; ``()``: nothing, it only keeps or logs).
         *_period: seconds between calls (whole multiples of ``period``; None disables).
-        rust_coupling: when every mapped Neuron is a board of one Rust
-            :class:`rdm.nodes.neuron_bank.NeuronBankNode`, run steps 1, 2 and 4 inside that
-            bank (``NeuronBank.bridge_tick``: its boards' goals, ESC outputs and present
-            positions are the bank's own state, read and written in place;
-            :attr:`rust_coupling` says whether it is on). Otherwise the coupling reads the
-            boards through their Python views (:meth:`_couple`): the path for Neurons spread
-            over several banks, e.g. the process-level robot's one
-            :class:`rdm.nodes.neuron_mirror.NeuronMirror` per CAN bus.
+
+    The boards must be board views of :class:`rdm.nodes.neuron_bank.NeuronBankNode` banks
+    (a :class:`rdm.nodes.neuron_mirror.NeuronMirror` is a bank of one board): the bridge
+    attaches the coupling to each bank its boards belong to (:attr:`banks`, layout order).
     """
 
     def __init__(
@@ -209,13 +179,13 @@ class PlantBridge:
         battery_sinks: Sequence[Callable[[float], None]] = (),
         imu_sink: Callable[[np.ndarray, np.ndarray, np.ndarray], None] | None = None,
         imu_period: float | None = 0.005,
-        wrench_sinks: dict[str, Callable[[np.ndarray, np.ndarray], None]] | None = None,
+        wrench_sinks: dict[str, Callable[[tuple[float, ...]], None]] | None = None,
         wrench_period: float | None = 0.001,
         mocap_sink: Callable[[float, np.ndarray, np.ndarray], None] | None = None,
         mocap_period: float | None = 0.01,
         truth_sink: Callable[[object], None] | None = None,
         truth_period: float | None = 0.01,
-        rust_coupling: bool = False,
+        truth_sink_touches: Sequence[str] | None = None,
     ) -> None:
         self.plant = plant
         self.name = name
@@ -231,6 +201,10 @@ class PlantBridge:
             neuron = by_slave.get(nl.slave)
             if neuron is None:
                 raise ValueError(f"PlantBridge: no Neuron mirror with slave id {nl.slave}")
+            if not callable(getattr(getattr(neuron, "_bank", None), "bridge_tick", None)):
+                raise ValueError(
+                    f"PlantBridge: Neuron {nl.slave} is not a board of a NeuronBankNode"
+                )
             if len(neuron.servos) != len(nl.joints):
                 raise ValueError(
                     f"PlantBridge: Neuron {nl.slave} has {len(neuron.servos)} servos, layout "
@@ -256,16 +230,10 @@ class PlantBridge:
                 raise ValueError(f"PlantBridge: plant has no wrench sensor {key!r}")
         self._mocap_sink = mocap_sink
         self._truth_sink = truth_sink
-        #: Per sensor, the sink's tuple form when every sink is a Leptrino mirror's
-        #: ``set_wrench``: one 6-tuple of floats (``Plant.wrench_values``), no arrays at 1 kHz.
-        self._wrench_values = plant.wrench_values
-        self._wrench_tuple_sinks = {
-            key: getattr(getattr(sink, "__self__", None), "set_wrench_values", None)
-            for key, sink in self._wrench_sinks.items()
-            if getattr(sink, "__name__", "") == "set_wrench"
-        }
-        if any(self._wrench_tuple_sinks.get(key) is None for key in self._wrench_sinks):
-            self._wrench_tuple_sinks = {}
+        #: What the truth sink may change besides reading the plant, by lockstep part name
+        #: (``rdm.nodes.lockstep_kernel``: "bridge", "bank", "spinal", "leptrino"); None:
+        #: anything.
+        self.truth_sink_touches = None if truth_sink_touches is None else tuple(truth_sink_touches)
         # Ticks between samples (each reading fires on the first tick, then every n-th).
         self._imu_n = _ratio(imu_period, period, "imu_period") or 1
         self._wrench_n = _ratio(wrench_period, period, "wrench_period") or 1
@@ -277,51 +245,37 @@ class PlantBridge:
         self._mocap_on = mocap_period is not None and mocap_sink is not None
         self._truth_on = truth_period is not None and truth_sink is not None
         self._targets = plant.servo_positions()
-        # Vectorised tick <-> rad map over joint_order (one numpy expression per tick).
-        scale = np.array([layout_scale(self.layout, j) for j in plant.joint_names], dtype=float)
-        self._tick_scale = scale
-        self._last_goal: dict[tuple[int, int], int] = {}
-        self._targets_changed = False
-        self._seen_changes = [-1] * len(self._servo_map)  # every board is read at first
-        self._feed = _JointFeed(plant, self.layout.center_ticks, scale)
-        self._bank = self._rust_bank() if rust_coupling else None
-        #: True when the per-millisecond coupling runs in the Rust Neuron bank.
-        self.rust_coupling = self._bank is not None
-        if self._bank is not None:
-            self._attach_bank(self._bank, scale)
-        else:
-            for neuron, servos in self._servo_map:
-                for i, k, _ in servos:
-                    neuron.servos[i].feed = (self._feed, k)
         self._duties = np.full(len(plant.rotor_names), 0.5)
+        #: The Neuron banks the coupling runs in (each holds its boards' part), layout order.
+        self.banks: list = []
+        self._attach_banks()
         self._voltage: float | None = None
         self._foot_body = plant.model.body(plant.description.foot_frame).id
         self.time_mismatches = 0
         self.ticks = 0
 
-    def _rust_bank(self):
-        """The one Rust bank every mapped Neuron belongs to (None: boards of several banks)."""
-        banks = {
-            id(getattr(n, "_bank", None)): getattr(n, "_bank", None) for n, _ in self._servo_map
+    def _attach_banks(self) -> None:
+        """Attach each bank's part of the coupling (``NeuronBankNode.attach_bridge``): its
+        servos ``(board, servo, joint)``, rotors ``(rotor, board)`` and boards in layout order,
+        with the plant's qpos addresses and the layout's ticks per radian per joint."""
+        names = self.plant.joint_names
+        scale = [layout_scale(self.layout, j) for j in names]
+        qadr = np.asarray(self.plant._qadr).tolist()
+        parts: dict[int, tuple[object, list, list, list]] = {}
+        for neuron, entries in self._servo_map:
+            bank, servos, _, boards = parts.setdefault(id(neuron._bank), (neuron._bank, [], [], []))
+            servos.extend((neuron._k, i, k) for i, k, _ in entries)
+            boards.append(neuron._k)
+        for r, neuron in self._rotor_map:
+            bank = neuron._bank
+            parts.setdefault(id(bank), (bank, [], [], []))[2].append((r, neuron._k))
+        for bank, servos, rotors, boards in parts.values():
+            bank.attach_bridge(self.layout.center_ticks, qadr, scale, servos, rotors, boards)
+            self.banks.append(bank)
+        #: joint index -> the bank whose board drives its servo
+        self._joint_bank = {
+            k: neuron._bank for neuron, entries in self._servo_map for _, k, _ in entries
         }
-        banks.update(
-            {id(getattr(n, "_bank", None)): getattr(n, "_bank", None) for _, n in self._rotor_map}
-        )
-        if len(banks) != 1:
-            return None
-        bank = next(iter(banks.values()))
-        return bank if callable(getattr(bank, "bridge_tick", None)) else None
-
-    def _attach_bank(self, bank, scale: np.ndarray) -> None:
-        servos = [(n._k, i, k) for n, entries in self._servo_map for i, k, _ in entries]
-        bank.attach_bridge(
-            self.layout.center_ticks,
-            np.asarray(self.plant._qadr).tolist(),
-            scale.tolist(),
-            servos,
-            [(r, n._k) for r, n in self._rotor_map],
-            [n._k for n, _ in self._servo_map],
-        )
 
     def tick(self, now: float) -> None:
         """Couple plant and mirrors at ``now`` (see the module doc)."""
@@ -329,34 +283,35 @@ class PlantBridge:
         self.ticks += 1
         if abs(plant.time - now) > 0.5 * self.period:
             self.time_mismatches += 1
-        if self._bank is not None:
-            self._tick_rust(now)
-        else:
-            self._couple(now)
+        self._couple(now)
         self._sample(now)
 
-    def _tick_rust(self, now: float) -> None:
-        """Steps 1-4 inside the one Rust bank that holds every mapped board: present
-        positions from the qpos view, changed goals into ``_targets`` and changed ESC outputs
-        into ``_duties``; the plant is commanded when they moved (or the battery changed)."""
+    def _couple(self, now: float) -> None:
+        """Steps 1-4: each bank snapshots the joints, writes its changed goals into
+        ``_targets`` and its changed ESC outputs into ``_duties``; the plant is commanded
+        when they moved, the targets before the battery voltage and the voltage before the
+        duties (the plant converts a duty at the voltage it holds when commanded)."""
         plant = self.plant
-        duties = self._duties
-        targets_changed, changed = self._bank.bridge_tick(plant._v_qpos, self._targets, duties)
+        qpos, targets, duties = plant._v_qpos, self._targets, self._duties
+        targets_changed = duties_changed = False
+        for bank in self.banks:
+            t, d = bank.bridge_tick(qpos, targets, duties)
+            targets_changed |= t
+            duties_changed |= d
         if targets_changed:
-            plant.set_servo_targets(self._targets)
-        if self._apply_battery(now) or changed:
+            plant.set_servo_targets(targets)
+        if self._apply_battery(now) or duties_changed:
             plant.set_rotor_duties(duties)
 
     def stick_servo(self, joint: str) -> None:
         """Fault hook (``rdm sim mission --fault stuck-servo``): the servo of ``joint`` stops
-        following its goal, its shaft held where it is (the Rust coupling's
-        ``NeuronBank.stick_joint``); its Neuron still reports the true (stuck) position."""
-        if self._bank is None:
-            raise ValueError("stick_servo: needs the Rust coupling (StackOptions.rust_bridge)")
+        following its goal, its shaft held where it is (``NeuronBankNode.stick_joint`` of the
+        bank that drives it); its Neuron still reports the true (stuck) position."""
         names = list(self.plant.joint_names)
-        if joint not in names:
+        k = names.index(joint) if joint in names else -1
+        if k not in self._joint_bank:
             raise ValueError(f"stick_servo: joint {joint!r} not one of {', '.join(names)}")
-        self._bank.stick_joint(names.index(joint))
+        self._joint_bank[k].stick_joint(k)
 
     def set_battery(self, volts: float | Callable[[float], float]) -> None:
         """The battery voltage from now on (volts, or a function of simulated time): the
@@ -375,49 +330,6 @@ class PlantBridge:
             sink(volts)
         return True
 
-    def _couple(self, now: float) -> None:
-        """Steps 1-4 through the boards' Python views: any Neuron mirrors, in any number of
-        banks (a single bank's boards take :meth:`_tick_rust` with ``rust_coupling``)."""
-        plant = self.plant
-        # 1. Present positions: a snapshot of the plant's joints at ``now``; each servo reads
-        # (and converts) it only when its Neuron needs it (state report, torque-on, config).
-        self._feed.snapshot()
-        # 2. Goals of servos with torque on, only for Neurons whose outputs changed.
-        center = self.layout.center_ticks
-        targets = self._targets
-        seen = self._seen_changes
-        changed_neurons = []
-        for j, (neuron, servos) in enumerate(self._servo_map):
-            c = neuron.changes[0]
-            if c == seen[j]:
-                continue
-            seen[j] = c
-            changed_neurons.append(neuron)
-            models = neuron.servos
-            for i, k, _ in servos:
-                servo = models[i]
-                if servo.torque_enable and servo.goal != self._last_goal.get((k, i)):
-                    self._last_goal[(k, i)] = servo.goal
-                    goal = (servo.goal - center) / self._tick_scale[k]
-                    if goal != targets[k]:
-                        targets[k] = goal
-                        self._targets_changed = True
-        if self._targets_changed:
-            self._targets_changed = False
-            plant.set_servo_targets(targets)
-        # The plant's ESCs convert a duty at the voltage they hold when commanded: a new
-        # voltage is applied first and re-commands the duties.
-        changed = self._apply_battery(now)
-        duties = self._duties
-        if changed_neurons:
-            for r, neuron in self._rotor_map:
-                d = neuron.esc.duty
-                if d != duties[r]:
-                    duties[r] = d
-                    changed = True
-        if changed:
-            plant.set_rotor_duties(duties)
-
     def _sample(self, now: float) -> None:
         """Steps 5-7: the readings due at ``now``."""
         plant = self.plant
@@ -431,98 +343,13 @@ class PlantBridge:
             for neuron in self._imu_neurons:
                 neuron.set_imu(r.gyro, r.accel, r.mag)
         if self._wrench_on and n % self._wrench_n == 0:
-            if self._wrench_tuple_sinks:  # Plant -> Leptrino mirror: one tuple of floats
-                values = self._wrench_values
-                for key, sink in self._wrench_tuple_sinks.items():
-                    sink(values(key))
-            else:
-                for key, sink in self._wrench_sinks.items():
-                    w = plant.wrench(key)
-                    sink(w.force, w.torque)
+            for key, sink in self._wrench_sinks.items():
+                sink(plant.wrench_values(key))
         if self._mocap_on and n % self._mocap_n == 0:
             d = plant.data
             self._mocap_sink(now, d.xpos[self._foot_body].copy(), d.xquat[self._foot_body].copy())
         if self._truth_on and n % self._truth_n == 0:
             self._truth_sink(plant.ground_truth())
-
-    # ------------------------------------------------------------ lockstep kernel
-    #: Set by ``rdm.nodes.lockstep_kernel.attach_kernel``: the Leptrino node whose
-    #: ``set_wrench_values`` and the Spinal mirror whose ``set_imu_sample`` the kernel may
-    #: feed itself when they are this bridge's sinks.
-    kernel_wrench_node: object | None = None
-    kernel_imu_node: object | None = None
-    #: What the truth sink may change of the kernel's parts (``rdm.nodes.lockstep_kernel``
-    #: part names; the ground truth itself reads the plant). None: every part.
-    kernel_truth_touches: tuple[str, ...] | None = None
-
-    def kernel_plan(self) -> tuple | None:
-        """What ``rdm._rdm.LockstepKernel`` needs to run :meth:`tick` in Rust, or None when
-        this tick has no Rust form now: the Python coupling, a battery voltage that is a
-        function of time or not yet applied, ESCs outside the Rust duty map, or a wrench
-        sink other than the kernel's Leptrino node (docs/sim.md). Its last item is the
-        IMU path (addresses, noise core, normal stream, the Spinal mirror) when the IMU's
-        only sink is the kernel's Spinal mirror, else None (an IMU ms is then Python's);
-        mocap samples are always Python's; a truth sample is :meth:`_kernel_truth`, called by
-        the kernel as a Python call that may change the parts of
-        :attr:`kernel_truth_touches`. The kernel writes ``ticks``, ``_sample_count`` and
-        ``time_mismatches`` back itself."""
-        plant = self.plant
-        battery = self._battery
-        if self._bank is None or callable(battery) or battery != self._voltage:
-            return None
-        if not (plant._duties_in_core and all(e._v_factor is not None for e in plant.escs)):
-            return None
-        cls = type(plant)
-        adr, core, normals, wrench_n = (0, 0), None, None, 0
-        if self._wrench_on:
-            sinks = self._wrench_tuple_sinks
-            node = self.kernel_wrench_node
-            if len(sinks) != 1 or len(self._wrench_sinks) != 1 or node is None:
-                return None
-            ((key, sink),) = sinks.items()
-            if getattr(sink, "__self__", None) is not node:
-                return None
-            if getattr(self._wrench_values, "__func__", None) is not cls.wrench_values:
-                return None
-            model = plant.wrench_models[key]
-            adr, core, normals = plant._wrench_adr[key], model._core, model._normals
-            wrench_n = self._wrench_n
-        imu = None
-        sink = self._imu_sink
-        if (
-            self._imu_on
-            and not self._imu_neurons
-            and self.kernel_imu_node is not None
-            and getattr(sink, "__self__", None) is self.kernel_imu_node
-            and getattr(sink, "__name__", "") == "set_imu_sample"
-            and getattr(plant.imu, "__func__", None) is cls.imu
-        ):
-            model = plant.imu_model
-            imu = (plant._imu_adr, model._core, model._normals, self.kernel_imu_node)
-        return (
-            self.ticks,
-            self._sample_count,
-            self.time_mismatches,
-            0.5 * self.period,
-            self._imu_n if self._imu_on else 0,
-            wrench_n,
-            self._mocap_n if self._mocap_on else 0,
-            self._truth_n if self._truth_on else 0,
-            adr,
-            core,
-            normals,
-            self._targets,
-            self._duties,
-            imu,
-            self._kernel_truth if self._truth_on else None,
-            ["plant", "bridge", "bank", "spinal", "leptrino"]
-            if self.kernel_truth_touches is None
-            else ["plant", *self.kernel_truth_touches],
-        )
-
-    def _kernel_truth(self) -> None:
-        """The truth sample of :meth:`_sample` (the kernel calls it when one is due)."""
-        self._truth_sink(self.plant.ground_truth())
 
     @property
     def battery_voltage(self) -> float | None:

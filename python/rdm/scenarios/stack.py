@@ -153,10 +153,6 @@ class StackOptions:
     #: bytes, docs/canbus.md). The channel then admits no other python-can endpoint
     #: (CanWireError); False puts them on an in-process python-can channel.
     can_wire: bool = True
-    #: The plant bridge's per-millisecond coupling (joint snapshot,
-    #: goals -> servo targets, ESC outputs -> rotor duties) runs in the Rust bank in one call
-    #: (byte-identical files, tests/test_bridge_rust.py); False keeps the Python path.
-    rust_bridge: bool = True
     #: Rotor (ESC + motor) first-order lag [s]; None = the plant's default (0.05 s).
     #: ASSUMPTION 0.01 s: with 0.05 s the LQI roll loop (I_xx = 0.004 kg m^2) is unstable.
     esc_tau: float | None = 0.01
@@ -315,10 +311,12 @@ def make_bridge(
     battery_sink: Callable[[float], None],
     foot_sensor: Any,
     truth_sink: Callable[[Any], None],
+    truth_sink_touches: Sequence[str] | None = None,
 ) -> PlantBridge:
     """The plant bridge at the options' rates: IMU to ``imu_sink`` (Spinal), battery voltage
     to ``battery_sink``, the foot wrench to the Leptrino mirror ``foot_sensor``, ground truth
-    to ``truth_sink`` (shared by the lockstep stack and the ``rdm hil`` robot process)."""
+    to ``truth_sink`` (which changes ``truth_sink_touches``, see :class:`PlantBridge`; shared
+    by the lockstep stack and the ``rdm hil`` robot process)."""
     return PlantBridge(
         plant,
         neurons,
@@ -326,11 +324,11 @@ def make_bridge(
         imu_sink=imu_sink,
         battery_voltage=opt.battery_voltage,
         battery_sinks=[battery_sink],
-        wrench_sinks={"foot_wrench": foot_sensor.set_wrench},
+        wrench_sinks={"foot_wrench": foot_sensor.set_wrench_values},
         wrench_period=1.0 / opt.leptrino_rate_hz,
         truth_sink=truth_sink,
         truth_period=opt.truth_period,
-        rust_coupling=opt.rust_bridge,
+        truth_sink_touches=truth_sink_touches,
     )
 
 
@@ -453,8 +451,8 @@ def _wire(
         battery_sink=spinal.set_battery_voltage,
         foot_sensor=sensor,
         truth_sink=truth_sink,
+        truth_sink_touches=(),  # it only keeps and logs the record
     )
-    bridge.kernel_truth_touches = ()  # truth_sink only keeps and logs the record
     mocap = MocapNode(plant, onboard, opt.mocap_period, opt.mocap, seed=opt.seed)
     status_log: list = []
     nodes: list = [bridge, *neuron_nodes, spinal, mocap, *([] if external else [onboard]), sensor]

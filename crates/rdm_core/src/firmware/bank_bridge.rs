@@ -1,19 +1,15 @@
 //! The per-millisecond plant <-> Neuron-bank coupling of the plant bridge
-//! (`rdm.nodes.plant_bridge.PlantBridge.tick`, steps 1, 2 and 4) in one call.
-//!
-//! Same arithmetic, in the same order, as the Python reference, so a run with either path
-//! writes the same files:
+//! (`rdm.nodes.plant_bridge.PlantBridge.tick`, steps 1, 2 and 4) in one call per bank:
 //! - snapshot: the joint angles at the bridge tick (`qpos[qadr[j]]`); the present positions
 //!   `center + q * ticks_per_rad` are pushed to the boards only when the bank needs them
-//!   (once per snapshot), as the reference's lazily read joint feed;
+//!   (once per snapshot);
 //! - goals of servos with torque on -> servo targets `(goal - center) / ticks_per_rad` (rad),
 //!   read only from boards whose change counter moved;
 //! - ESC outputs -> rotor duties `pulse_us / 2000` of those boards.
 //!
 //! Fault hook (the fault campaign's `stuck-servo`): [`BankBridge::stick_joint`] makes a
 //! joint's servo stop following its goal: its target is frozen at the joint angle of the
-//! next snapshot and no later goal reaches it. Off (no joint stuck), the coupling is the
-//! reference's, unchanged.
+//! next snapshot and no later goal reaches it. Off (no joint stuck), nothing of it runs.
 
 use super::neuron_bank::NeuronBank;
 
@@ -82,7 +78,7 @@ pub struct BankBridge {
 }
 
 impl BankBridge {
-    /// `servos` grouped by board in layout order (the reference reads boards in that order);
+    /// `servos` grouped by board in layout order (boards are read in that order);
     /// `qadr[j]` / `scale[j]`: qpos address and ticks per radian of joint `j`.
     pub fn new(
         bank: &NeuronBank,
@@ -194,7 +190,7 @@ impl BankBridge {
         for (n, e) in self.servos.iter().enumerate() {
             let q = self.q.get(e.joint).copied().unwrap_or(f64::NAN);
             let s = self.scale.get(e.joint).copied().unwrap_or(f64::NAN);
-            // Two IEEE operations, as the reference's `center + q * scale`.
+            // Two IEEE operations: `center + q * scale`.
             let ticks = self.center as f64 + q * s;
             bank.set_position(e.board, e.servo, ticks).map_err(|_| {
                 if ticks.is_finite() {
@@ -260,7 +256,7 @@ impl BankBridge {
                 if servo.torque_enable() && *last != Some(goal) {
                     *last = Some(goal);
                     let s = self.scale.get(e.joint).copied().unwrap_or(f64::NAN);
-                    // The reference: Python int (goal - center) / float64 scale.
+                    // Integer (goal - center), then one float64 division by the scale.
                     let rad = (goal - self.center) as f64 / s;
                     if let Some(t) = targets.get_mut(e.joint) {
                         if rad != *t {

@@ -5,12 +5,15 @@
 use pyo3::prelude::*;
 use pyo3::types::PyList;
 
-use super::attr::{read_plan, Name};
+use super::attr::Name;
 use crate::can_master::CanWire;
 use crate::neuron_bank::NeuronBank;
 
 pub(crate) struct BankFast {
     node: Py<PyAny>,
+    /// Returns the plan tuple, or None while the bank has no Rust tick
+    /// (`rdm.nodes.lockstep_kernel`).
+    plan_of: Py<PyAny>,
     /// The node's board views (`NeuronBankNode.boards`).
     boards_py: Vec<Py<PyAny>>,
     tx_count: Name,
@@ -34,17 +37,19 @@ impl BankFast {
         node: &Bound<'_, PyAny>,
         bank: Py<NeuronBank>,
         wire: Py<CanWire>,
-        n_boards: usize,
+        boards_py: Vec<Py<PyAny>>,
+        plan_of: Py<PyAny>,
     ) -> PyResult<Self> {
         let py = node.py();
-        let boards_py: Vec<Py<PyAny>> = node.getattr("boards")?.extract()?;
-        if boards_py.len() != n_boards {
+        let n_boards = boards_py.len();
+        if bank.bind(py).borrow().board_count() != n_boards {
             return Err(pyo3::exceptions::PyValueError::new_err(
-                "attach_bank: n_boards differs from the node's boards",
+                "attach_bank: boards differs from the bank's board count",
             ));
         }
         Ok(BankFast {
             node: node.clone().unbind(),
+            plan_of,
             boards_py,
             tx_count: Name::new(py, "tx_count"),
             changes: Name::new(py, "changes"),
@@ -69,9 +74,10 @@ impl BankFast {
         if self.loaded {
             return Ok(());
         }
-        let plan = read_plan(self.node.bind(py))?;
-        self.ok = plan.is_some();
-        if let Some(t) = plan {
+        let plan = self.plan_of.bind(py).call0()?;
+        self.ok = !plan.is_none();
+        if self.ok {
+            let t = plan.cast_into::<pyo3::types::PyTuple>()?;
             let last = t.get_item(0)?;
             self.last_changes.clear();
             if !last.is_none() {

@@ -1,11 +1,11 @@
-//! The plant bridge's millisecond (`PlantBridge.tick` with the Rust coupling) when no IMU,
+//! The plant bridge's millisecond (`PlantBridge.tick`, boards of one bank) when no IMU,
 //! mocap or ground-truth sample is due: joints -> Neurons, goals -> servo controls, ESC
 //! outputs -> rotor duties, and the foot wrench sample (lazy forward, noise, Leptrino).
 
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PyTuple};
 
-use super::attr::{read_plan, Name};
+use super::attr::Name;
 use super::leptrino::LeptrinoFast;
 use super::plant::PlantLink;
 use crate::neuron_bank::NeuronBank;
@@ -61,7 +61,7 @@ struct ImuPath {
     sink: Py<PyAny>,
 }
 
-/// Plan of `PlantBridge.kernel_plan()`.
+/// The bridge's plan (`rdm.nodes.lockstep_kernel`).
 struct Plan {
     ticks: i64,
     sample_count: i64,
@@ -85,9 +85,6 @@ struct Plan {
 }
 
 struct Names {
-    ticks: Name,
-    sample_count: Name,
-    time_mismatches: Name,
     gyro: Name,
     acc: Name,
     mag: Name,
@@ -101,7 +98,11 @@ pub(crate) struct BridgeOut {
 }
 
 pub(crate) struct BridgeFast {
-    node: Py<PyAny>,
+    /// Returns the plan tuple, or None when the tick has no Rust form now
+    /// (`rdm.nodes.lockstep_kernel`).
+    plan_of: Py<PyAny>,
+    /// `store(ticks, sample_count, time_mismatches)`: the counters back into the node.
+    store: Py<PyAny>,
     names: Names,
     bank: Py<NeuronBank>,
     plan: Option<Plan>,
@@ -115,14 +116,16 @@ fn due(n: i64, every: i64) -> bool {
 }
 
 impl BridgeFast {
-    pub(crate) fn new(node: &Bound<'_, PyAny>, bank: Py<NeuronBank>) -> Self {
-        let py = node.py();
+    pub(crate) fn new(
+        py: Python<'_>,
+        bank: Py<NeuronBank>,
+        plan_of: Py<PyAny>,
+        store: Py<PyAny>,
+    ) -> Self {
         BridgeFast {
-            node: node.clone().unbind(),
+            plan_of,
+            store,
             names: Names {
-                ticks: Name::new(py, "ticks"),
-                sample_count: Name::new(py, "_sample_count"),
-                time_mismatches: Name::new(py, "time_mismatches"),
                 gyro: Name::new(py, "gyro"),
                 acc: Name::new(py, "acc"),
                 mag: Name::new(py, "mag"),
@@ -143,7 +146,9 @@ impl BridgeFast {
         if self.loaded {
             return Ok(());
         }
-        self.plan = if let Some(t) = read_plan(self.node.bind(py))? {
+        let plan = self.plan_of.bind(py).call0()?;
+        self.plan = if !plan.is_none() {
+            let t = plan.cast_into::<PyTuple>()?;
             let normals = t.get_item(10)?;
             let wrench_normals = if normals.is_none() {
                 None
@@ -356,7 +361,7 @@ impl BridgeFast {
         })
     }
 
-    /// Write the counters and the normal stream's position back.
+    /// Write the counters (`store`) and the normal stream's position back.
     pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
         if !self.dirty {
             return Ok(());
@@ -368,10 +373,9 @@ impl BridgeFast {
             if let Some(imu) = &p.imu {
                 imu.normals.flush(py)?;
             }
-            let node = self.node.bind(py);
-            self.names.ticks.set(node, p.ticks)?;
-            self.names.sample_count.set(node, p.sample_count)?;
-            self.names.time_mismatches.set(node, p.time_mismatches)?;
+            self.store
+                .bind(py)
+                .call1((p.ticks, p.sample_count, p.time_mismatches))?;
         }
         self.dirty = false;
         Ok(())

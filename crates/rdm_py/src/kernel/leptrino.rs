@@ -35,6 +35,11 @@ pub(crate) struct LeptrinoFast {
 }
 
 impl LeptrinoFast {
+    /// The Leptrino sensor node.
+    pub(crate) fn node<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        self.node.bind(py).clone()
+    }
+
     pub(crate) fn new(node: &Bound<'_, PyAny>) -> Self {
         LeptrinoFast {
             node: node.clone().unbind(),

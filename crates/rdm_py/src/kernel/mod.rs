@@ -24,11 +24,29 @@ mod spinal;
 use pyo3::prelude::*;
 
 use crate::can_master::{CanMaster, CanWire};
+use crate::contact_gate::ContactGateCore;
 use crate::neuron_bank::NeuronBank;
+use crate::rotor_plant::RotorPlantCore;
+use crate::stop_flag::StopFlag;
 use bank::BankFast;
 use bridge::BridgeFast;
 use leptrino::LeptrinoFast;
-use plant::PlantLink;
+use plant::{PlantLink, PlantParts};
+use sleep::SleepParts;
+
+/// `attach_plant`'s `sleep` tuple (see there).
+type SleepTuple = (
+    Py<PyAny>,
+    Vec<usize>,
+    Vec<usize>,
+    i32,
+    i32,
+    i64,
+    Py<numpy::PyArray1<i32>>,
+    Py<numpy::PyArray1<i32>>,
+    Py<numpy::PyArray1<f64>>,
+    Py<PyAny>,
+);
 use spinal::{SpinalFast, SpinalTick};
 
 /// What a Python call may change, as a mask of the fast parts it invalidates.
@@ -98,7 +116,7 @@ pub struct LockstepKernel {
     touches: Vec<u8>,
     physics: Option<Py<PyAny>>,
     clock: Py<PyAny>,
-    owner: Py<PyAny>,
+    stop: Py<StopFlag>,
     k: i64,
     clock_t: Option<f64>,
     plant: Option<PlantLink>,
@@ -296,12 +314,10 @@ impl LockstepKernel {
     }
 
     fn leptrino_node<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let i = self
-            .kinds
-            .iter()
-            .position(|k| *k == Kind::Leptrino)
-            .ok_or_else(|| pyo3::exceptions::PyRuntimeError::new_err("kernel: no Leptrino node"))?;
-        self.ticks[i].bind(py).getattr("__self__")
+        self.leptrino
+            .as_ref()
+            .map(|l| l.node(py))
+            .ok_or_else(|| pyo3::exceptions::PyRuntimeError::new_err("kernel: no Leptrino node"))
     }
 
     fn physics_step(&mut self, py: Python<'_>, t: f64) -> PyResult<()> {
@@ -355,13 +371,13 @@ impl LockstepKernel {
                             self.counts.python_ns[i] += ns;
                         }
                     }
-                    stop |= self.owner.bind(py).getattr("_stop")?.is_truthy()?;
+                    stop |= self.stop.get().get();
                 } else {
                     self.python_tick(py, i, t)?;
                     if let Some(t0) = t0 {
                         self.counts.python_ns[i] += elapsed_ns(t0);
                     }
-                    stop |= self.owner.bind(py).getattr("_stop")?.is_truthy()?;
+                    stop |= self.stop.get().get();
                 }
             }
             let t0 = self.profile.then(std::time::Instant::now);
@@ -382,7 +398,7 @@ impl LockstepKernel {
 impl LockstepKernel {
     /// `schedule[r]`: indices of the nodes due at base ticks `k` with `k % len(schedule) ==
     /// r`, in tick order; `ticks[i]`: node `i`'s `tick`; `physics`: the physics `step` (or
-    /// None); `clock`: the `SimClock` the loop sets; `owner`: the `Lockstep` (its `_stop`).
+    /// None); `clock`: the `SimClock` the loop sets; `stop`: the loop's stop request.
     #[new]
     fn new(
         dt: f64,
@@ -390,7 +406,7 @@ impl LockstepKernel {
         ticks: Vec<Py<PyAny>>,
         physics: Option<Py<PyAny>>,
         clock: Py<PyAny>,
-        owner: Py<PyAny>,
+        stop: Py<StopFlag>,
     ) -> PyResult<Self> {
         if schedule.is_empty() || !(dt.is_finite() && dt > 0.0) {
             return Err(pyo3::exceptions::PyValueError::new_err(
@@ -412,7 +428,7 @@ impl LockstepKernel {
             ticks,
             physics,
             clock,
-            owner,
+            stop,
             k: 0,
             clock_t: None,
             plant: None,
@@ -434,42 +450,113 @@ impl LockstepKernel {
         })
     }
 
-    /// The plant (`rdm.plant.Plant`) the physics step and the bridge drive; `mujoco` is the
-    /// module whose `mj_step1`/`mj_step2`/`mj_forward` it calls.
+    /// The plant (`rdm.plant.Plant`) the physics step and the bridge drive, with its parts
+    /// (read by the caller, `rdm.nodes.lockstep_kernel`): `model`, `data`; `mj`: MuJoCo's
+    /// `mj_step1`, `mj_step2`, `mj_forward`, `mj_sensorPos`, `mj_sensorVel`; `flags`:
+    /// `(Plant._flags_address, model._address, option_flags.SEARCH_BYTES)` (None: unknown);
+    /// `opt`: `model.opt`; the rotor and contact-gate cores; the contact tracker; the qpos,
+    /// sensordata and ctrl views; the servo actuator per joint; `sleep`: None or
+    /// `(RestingSleep, trees, rotor actuators, ALLOWED, NEVER, SLEEP_ENABLE_BIT, policy,
+    /// tree_asleep, last_ctrl, model.opt)`.
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    #[pyo3(signature = (plant, model, data, mj, flags, opt, rotors, gate, tracker, qpos, sensordata, ctrl, servo_act, sleep))]
     fn attach_plant(
         &mut self,
         plant: &Bound<'_, PyAny>,
-        mujoco: &Bound<'_, PyAny>,
+        model: Py<PyAny>,
+        data: Py<PyAny>,
+        mj: [Py<PyAny>; 5],
+        flags: (Option<usize>, Option<usize>, usize),
+        opt: Py<PyAny>,
+        rotors: Py<RotorPlantCore>,
+        gate: Option<Py<ContactGateCore>>,
+        tracker: Py<PyAny>,
+        qpos: Py<numpy::PyArray1<f64>>,
+        sensordata: Py<numpy::PyArray1<f64>>,
+        ctrl: Py<numpy::PyArray1<f64>>,
+        servo_act: Vec<usize>,
+        sleep: Option<SleepTuple>,
     ) -> PyResult<()> {
-        self.plant = Some(PlantLink::new(plant.py(), plant, mujoco)?);
+        let sleep = sleep.map(
+            |(
+                obj,
+                trees,
+                rotors,
+                allowed_value,
+                never_value,
+                sleep_bit,
+                policy,
+                tree_asleep,
+                last_ctrl,
+                opt,
+            )| {
+                SleepParts {
+                    obj,
+                    trees,
+                    rotors,
+                    allowed_value,
+                    never_value,
+                    sleep_bit,
+                    policy,
+                    tree_asleep,
+                    last_ctrl,
+                    opt,
+                }
+            },
+        );
+        let parts = PlantParts {
+            model,
+            data,
+            mj,
+            flags_address: flags.0,
+            model_address: flags.1,
+            search_bytes: flags.2,
+            opt,
+            rotors,
+            gate,
+            tracker,
+            qpos,
+            sensordata,
+            ctrl,
+            servo_act,
+            sleep,
+        };
+        self.plant = Some(PlantLink::new(plant.py(), plant, parts));
         Ok(())
     }
 
-    /// Node `index` is a `PlantBridge` coupled through `bank` (needs `attach_plant`).
+    /// Node `index` is a `PlantBridge` coupled through `bank` (needs `attach_plant`);
+    /// `plan()` returns its plan tuple, or None when its tick has no Rust form now;
+    /// `store(ticks, sample_count, time_mismatches)` writes the counters back.
     fn attach_bridge(
         &mut self,
+        py: Python<'_>,
         index: usize,
-        node: &Bound<'_, PyAny>,
         bank: Py<NeuronBank>,
+        plan: Py<PyAny>,
+        store: Py<PyAny>,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.bridge = Some(BridgeFast::new(node, bank));
+        self.bridge = Some(BridgeFast::new(py, bank, plan, store));
         self.kinds[index] = Kind::Bridge;
         self.touches[index] = BRIDGE | PLANT | LEPTRINO;
         Ok(())
     }
 
-    /// Node `index` is a `NeuronBankNode` with `n_boards` boards on `wire`.
+    /// Node `index` is a `NeuronBankNode` whose board views are `boards` (the core's boards,
+    /// in order) on `wire`; `plan()` returns its plan tuple, or None while it has no Rust
+    /// tick.
     fn attach_bank(
         &mut self,
         index: usize,
         node: &Bound<'_, PyAny>,
         bank: Py<NeuronBank>,
         wire: Py<CanWire>,
-        n_boards: usize,
+        boards: Vec<Py<PyAny>>,
+        plan: Py<PyAny>,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.bank = Some(BankFast::new(node, bank, wire, n_boards)?);
+        self.bank = Some(BankFast::new(node, bank, wire, boards, plan)?);
         self.kinds[index] = Kind::Bank;
         self.touches[index] = BANK;
         Ok(())
@@ -511,7 +598,7 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// Advance `n` base ticks from `k0` (fewer if the owner's `_stop` is set by a node);
+    /// Advance `n` base ticks from `k0` (fewer if a node sets the stop request);
     /// returns the next `k`. `ticks[i]` is node `i`'s `tick` now and `own[i]` whether it is
     /// the class's own method (a node whose `tick` was replaced runs only the replacement).
     /// Every deferred state is written back before it returns, also when a node raises

@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 
 use super::attr::Name;
 use super::option_flags::OptionFlags;
-use super::sleep::SleepLink;
+use super::sleep::{SleepLink, SleepParts};
 use crate::contact_gate::ContactGateCore;
 use crate::rotor_plant::RotorPlantCore;
 use crate::untracked;
@@ -25,6 +25,32 @@ struct Names {
     time: Name,
     rejected_commands: Name,
     sensor_bit: Name,
+}
+
+/// What `LockstepKernel.attach_plant` is given of an `rdm.plant.Plant` at construction
+/// (typed; the caller reads them, the kernel holds them for the plant's lifetime).
+pub(crate) struct PlantParts {
+    /// `MjModel`, `MjData`.
+    pub(crate) model: Py<PyAny>,
+    pub(crate) data: Py<PyAny>,
+    /// `mujoco.mj_step1`, `mj_step2`, `mj_forward`, `mj_sensorPos`, `mj_sensorVel`.
+    pub(crate) mj: [Py<PyAny>; 5],
+    /// `Plant._flags_address`, `model._address` (None: unknown) and
+    /// `rdm.plant.option_flags.SEARCH_BYTES`.
+    pub(crate) flags_address: Option<usize>,
+    pub(crate) model_address: Option<usize>,
+    pub(crate) search_bytes: usize,
+    /// `model.opt`.
+    pub(crate) opt: Py<PyAny>,
+    pub(crate) rotors: Py<RotorPlantCore>,
+    pub(crate) gate: Option<Py<ContactGateCore>>,
+    /// `Plant._tracker` (the foot contact tracker).
+    pub(crate) tracker: Py<PyAny>,
+    pub(crate) qpos: Py<numpy::PyArray1<f64>>,
+    pub(crate) sensordata: Py<numpy::PyArray1<f64>>,
+    pub(crate) ctrl: Py<numpy::PyArray1<f64>>,
+    pub(crate) servo_act: Vec<usize>,
+    pub(crate) sleep: Option<SleepParts>,
 }
 
 /// One MuJoCo plant as the kernel drives it.
@@ -76,64 +102,32 @@ pub(crate) struct PlantLink {
 }
 
 impl PlantLink {
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn new(
-        py: Python<'_>,
-        plant: &Bound<'_, PyAny>,
-        mujoco: &Bound<'_, PyAny>,
-    ) -> PyResult<Self> {
-        let data = plant.getattr("_data")?;
-        let model = plant.getattr("model")?;
-        let servo_act: Vec<usize> = plant
-            .getattr("_servo_act")?
-            .call_method0("tolist")?
-            .extract()?;
-        Ok(PlantLink {
+    pub(crate) fn new(py: Python<'_>, plant: &Bound<'_, PyAny>, parts: PlantParts) -> Self {
+        let [step1, step2, forward, sensor_pos, sensor_vel] = parts.mj;
+        PlantLink {
             plant: plant.clone().unbind(),
-            model: model.clone().unbind(),
-            data: data.unbind(),
-            step1: mujoco.getattr("mj_step1")?.unbind(),
-            step2: mujoco.getattr("mj_step2")?.unbind(),
-            forward: mujoco.getattr("mj_forward")?.unbind(),
-            sensor_pos: mujoco.getattr("mj_sensorPos")?.unbind(),
-            sensor_vel: mujoco.getattr("mj_sensorVel")?.unbind(),
+            model: parts.model,
+            data: parts.data,
+            step1,
+            step2,
+            forward,
+            sensor_pos,
+            sensor_vel,
             flags: OptionFlags::new(
                 py,
-                plant.getattr("_flags_address")?.extract()?,
-                model
-                    .getattr("_address")
-                    .ok()
-                    .and_then(|a| a.extract().ok()),
-                py.import("rdm.plant.option_flags")?
-                    .getattr("SEARCH_BYTES")?
-                    .extract()?,
-                model.getattr("opt")?.unbind(),
+                parts.flags_address,
+                parts.model_address,
+                parts.search_bytes,
+                parts.opt,
             ),
-            rotors: plant
-                .getattr("_rotors")?
-                .cast_into::<RotorPlantCore>()?
-                .unbind(),
-            gate: {
-                let g = plant.getattr("_contact_gate")?;
-                if g.is_none() {
-                    None
-                } else {
-                    Some(g.cast_into::<ContactGateCore>()?.unbind())
-                }
-            },
-            tracker: plant.getattr("_tracker")?.unbind(),
-            qpos: plant.getattr("_v_qpos")?.extract()?,
-            sensordata: plant.getattr("_v_sensordata")?.extract()?,
-            ctrl: plant.getattr("_v_ctrl")?.extract()?,
-            servo_act,
-            sleep: {
-                let s = plant.getattr("sleep")?;
-                if s.is_none() {
-                    None
-                } else {
-                    Some(SleepLink::new(py, &s)?)
-                }
-            },
+            rotors: parts.rotors,
+            gate: parts.gate,
+            tracker: parts.tracker,
+            qpos: parts.qpos,
+            sensordata: parts.sensordata,
+            ctrl: parts.ctrl,
+            servo_act: parts.servo_act,
+            sleep: parts.sleep.map(|s| SleepLink::new(py, s)),
             names: Names {
                 stale: Name::new(py, "_stale"),
                 needs_step1: Name::new(py, "_needs_step1"),
@@ -161,7 +155,7 @@ impl PlantLink {
             anchored: false,
             tracker_fast: 0,
             tracker_python: 0,
-        })
+        }
     }
 
     /// Forget the plan: Python code may have run.

@@ -19,6 +19,23 @@ struct Names {
     enableflags: Name,
 }
 
+/// What `LockstepKernel.attach_plant` is given of `Plant.sleep` (a `RestingSleep`): the
+/// object (its flags are the plan), its trees and rotor actuators, the policy values
+/// `ALLOWED` / `NEVER` and `SLEEP_ENABLE_BIT` of `rdm.plant.sleep`, its policy, tree-asleep
+/// and last-control arrays and `model.opt`.
+pub(crate) struct SleepParts {
+    pub(crate) obj: Py<PyAny>,
+    pub(crate) trees: Vec<usize>,
+    pub(crate) rotors: Vec<usize>,
+    pub(crate) allowed_value: i32,
+    pub(crate) never_value: i32,
+    pub(crate) sleep_bit: i64,
+    pub(crate) policy: Py<PyArray1<i32>>,
+    pub(crate) tree_asleep: Py<PyArray1<i32>>,
+    pub(crate) last_ctrl: Py<PyArray1<f64>>,
+    pub(crate) opt: Py<PyAny>,
+}
+
 /// The Python object's arrays and flags as the kernel drives them.
 pub(crate) struct SleepLink {
     obj: Py<PyAny>,
@@ -47,9 +64,8 @@ impl SleepLink {
         self.allowed
     }
 
-    /// `RestingSleep` `obj` (its `trees`, views and the policy values of `rdm.plant.sleep`).
-    pub(crate) fn new(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Self> {
-        let module = py.import("rdm.plant.sleep")?;
+    /// `RestingSleep` `obj` with its construction-time parts (typed, read by the caller).
+    pub(crate) fn new(py: Python<'_>, parts: SleepParts) -> Self {
         let names = Names {
             pending: Name::new(py, "pending"),
             allowed: Name::new(py, "allowed"),
@@ -59,17 +75,17 @@ impl SleepLink {
             enableflags: Name::new(py, "enableflags"),
         };
         // the flags come with the plan (`load`, before any step)
-        Ok(SleepLink {
-            obj: obj.clone().unbind(),
-            trees: obj.getattr("trees")?.extract()?,
-            rotors: obj.getattr("rotors")?.extract()?,
-            allowed_value: module.getattr("ALLOWED")?.extract()?,
-            never_value: module.getattr("NEVER")?.extract()?,
-            policy: obj.getattr("_v_policy")?.extract()?,
-            tree_asleep: obj.getattr("_v_tree_asleep")?.extract()?,
-            last_ctrl: obj.getattr("_v_last_ctrl")?.extract()?,
-            opt: obj.getattr("_opt")?.unbind(),
-            sleep_bit: module.getattr("SLEEP_ENABLE_BIT")?.extract()?,
+        SleepLink {
+            obj: parts.obj,
+            trees: parts.trees,
+            rotors: parts.rotors,
+            allowed_value: parts.allowed_value,
+            never_value: parts.never_value,
+            policy: parts.policy,
+            tree_asleep: parts.tree_asleep,
+            last_ctrl: parts.last_ctrl,
+            opt: parts.opt,
+            sleep_bit: parts.sleep_bit,
             names,
             pending: true,
             allowed: false,
@@ -77,7 +93,7 @@ impl SleepLink {
             sleep_on: true,
             settled: false,
             dirty: false,
-        })
+        }
     }
 
     /// Re-read the flags (Python code may have run).
