@@ -6,6 +6,7 @@
 // Index loops over parallel per-rotor arrays read clearer than zipped iterators here.
 #![allow(clippy::needless_range_loop)]
 
+#[allow(dead_code)] // the random instances serve the other perch tests
 mod perch_common;
 
 use nalgebra::{Matrix4, Vector3, Vector4};
@@ -246,11 +247,14 @@ fn a_rate_limited_tick_opens_the_rate_rows_and_reports_the_commanded_wrench() {
     assert_eq!(solution.foot_wrench[1..], measured[1..]);
 }
 
+/// A field's name and how to make it non-finite.
+type Spoil = (&'static str, fn(&mut PerchInput));
+
 #[test]
 fn a_non_finite_value_in_any_input_field_is_refused() {
     let params = base_params();
     let mut qp = PerchQp::new(params).unwrap();
-    let cases: [(&str, fn(&mut PerchInput)); 7] = [
+    let cases: [Spoil; 7] = [
         ("foot_allocation", |i| i.foot_allocation[(2, 1)] = f64::NAN),
         ("allocation", |i| i.allocation[(3, 0)] = f64::INFINITY),
         ("mass", |i| i.mass = f64::NAN),
