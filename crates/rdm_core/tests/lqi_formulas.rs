@@ -214,3 +214,19 @@ fn every_error_message_names_its_cause() {
     assert!(message.contains(&care.to_string()), "{message}");
     assert!(message.starts_with("LQI synthesis"), "{message}");
 }
+
+#[test]
+fn for_rotors_sets_the_count_and_keeps_the_defaults() {
+    for rotors in 1..=8 {
+        let config = LqiConfig::for_rotors(rotors);
+        assert_eq!(config.rotors, rotors);
+        assert_eq!(
+            LqiConfig {
+                rotors: 4,
+                ..config
+            },
+            LqiConfig::default(),
+            "{rotors} rotors: the other fields are Table V's defaults"
+        );
+    }
+}
