@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Mutation campaign (docs/fuzzing.md, "Mutation testing"): mutmut over the Python modules of the robot path,
-# cargo-mutants over the Rust wire codecs, position controller and estimator.
+# cargo-mutants over the Rust wire codecs, the model's allocation, statics and aerial ZMP,
+# the position, LQI and perching-QP controllers and the estimator.
 #
 #   bash scripts/mutation.sh python [OUT]   # mutmut; survivors listed in OUT/mutmut.txt
-#   bash scripts/mutation.sh rust [OUT]     # cargo-mutants; OUT/cargo-mutants/{caught,missed}.txt
+#   bash scripts/mutation.sh rust [OUT]     # cargo-mutants; OUT/mutants.out/{caught,missed}.txt
 #
 # Each runs in a copy of the committed tree (git archive HEAD) under OUT (default
 # ./mutation-out), never in the working tree. The Python form needs the test extra and the
@@ -46,6 +47,13 @@ RUST_FILES=(
   crates/rdm_core/src/firmware/neuron_frame.rs
   crates/rdm_core/src/control/position.rs
   crates/rdm_core/src/estimate/mod.rs
+  crates/rdm_core/src/model/allocation.rs
+  crates/rdm_core/src/model/aerial_zmp.rs
+  crates/rdm_core/src/model/statics.rs
+  crates/rdm_core/src/control/lqi/gain_map.rs
+  crates/rdm_core/src/control/lqi/system.rs
+  crates/rdm_core/src/control/lqi/mod.rs
+  crates/rdm_core/src/control/perch/qp/rows.rs
 )
 
 case "$what" in
