@@ -200,6 +200,10 @@ pub(super) fn input_is_finite(input: &PerchInput) -> bool {
             .is_none_or(|f| f.iter().all(|v| v.is_finite()))
 }
 
+/// Smallest Cholesky pivot of the controlled rows' Gram matrix, relative to the largest row
+/// norm, that [`controlled_rows_independent`] accepts.
+const INDEPENDENT_PIVOT: f64 = 1e-6;
+
 /// The controlled rows of `Q̄_perch` must be linearly independent for the merged eq. (38) to
 /// equal the paper's split form (a zero row would let `W_t` absorb the feedback term).
 pub(super) fn controlled_rows_independent(
@@ -230,8 +234,45 @@ pub(super) fn controlled_rows_independent(
         Some(chol) => {
             let l = chol.l();
             let min_pivot = (0..4).fold(f64::INFINITY, |m, i| m.min(l[(i, i)].abs()));
-            min_pivot > 1e-9 * largest
+            // The Gram matrix squares the rows' condition: exactly dependent rows leave a
+            // pivot of rounding size, about sqrt(eps) = 1.5e-8 of the largest row. Rows whose
+            // pivot is below 1e-6 of it (a condition number above 1e6) are taken as dependent.
+            min_pivot > INDEPENDENT_PIVOT * largest
         }
         None => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exactly_dependent_controlled_rows_are_refused_at_any_scale() {
+        // F_z, M_x and M_y by two perch rotors on one line: the M_y row is -0.1 x the F_z row
+        // (its Gram pivot is of rounding size, 1.9e-9 of the largest row).
+        let q = Matrix4::new(
+            1.0, 1.0, 0.0, 0.0, //
+            0.2, -0.2, 0.0, 0.0, //
+            -0.1, -0.1, 0.0, 0.0, //
+            0.0, 0.0, 0.0, 0.0,
+        );
+        for scale in [1e-3, 1.0, 1e3] {
+            let q = q * scale;
+            assert!(
+                !controlled_rows_independent(&q, &[true, true, true, false]),
+                "{scale}"
+            );
+            // F_z and M_x alone: orthogonal rows
+            assert!(
+                controlled_rows_independent(&q, &[true, true, false, false]),
+                "{scale}"
+            );
+            // a zero row controlled
+            assert!(
+                !controlled_rows_independent(&q, &[true, false, false, true]),
+                "{scale}"
+            );
+        }
     }
 }
