@@ -360,17 +360,6 @@ impl CanMaster {
         servo_tuple(py, n.slave, s)
     }
 
-    /// Every servo tuple (see `servo`), Neurons in slave order, servos in index order.
-    fn servo_table<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        let list = PyList::empty(py);
-        for n in self.core.neurons() {
-            for s in n.servos() {
-                list.append(servo_tuple(py, n.slave, s)?)?;
-            }
-        }
-        Ok(list)
-    }
-
     /// The servo report fields of every servo, in `servo_table` order: `[(send_data_flag,
     /// angle, temperature, current, error, torque_enable), ...]` (what `servo/states` and
     /// `servo/torque_states` carry; one call instead of a 24-field tuple per servo).

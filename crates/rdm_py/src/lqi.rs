@@ -586,7 +586,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add("CareSolveError", py.get_type::<CareSolveError>())?;
     m.add("LqiSynthesisError", py.get_type::<LqiSynthesisError>())?;
-    m.add("LQI_STATE_NAMES", core_lqi_state_names())?;
     m.add("JSK_TO_PAPER", core_lqi::JSK_TO_PAPER.to_vec())?;
     m.add("MAX_WIRE_GAIN", core_lqi::MAX_WIRE_GAIN)?;
     m.add_function(wrap_pyfunction!(solve_care, m)?)?;
@@ -597,21 +596,4 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<LqiSynthesizer>()?;
     m.add_class::<PcAxisController>()?;
     Ok(())
-}
-
-fn core_lqi_state_names() -> Vec<&'static str> {
-    vec![
-        "z",
-        "z_dot",
-        "roll",
-        "roll_dot",
-        "pitch",
-        "pitch_dot",
-        "yaw",
-        "yaw_dot",
-        "int_z",
-        "int_roll",
-        "int_pitch",
-        "int_yaw",
-    ]
 }

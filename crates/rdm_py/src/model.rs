@@ -486,20 +486,6 @@ impl Robot {
             .into_any())
     }
 
-    /// Gradient of rho (eq. 65) w.r.t. zeta (6 + n_q): base entries exactly zero, joint
-    /// entries by central finite differences.
-    fn stability_gradient<'py>(
-        &mut self,
-        py: Python<'py>,
-        q: Vec<f64>,
-    ) -> PyResult<Bound<'py, PyAny>> {
-        let mut grad = vec![0.0; 6 + self.robot.n_q()];
-        self.robot
-            .stability_gradient(&q, &Isometry3::identity(), &mut self.ws, &mut grad)
-            .map_err(model_err)?;
-        Ok(Array1::from_vec(grad).into_pyarray(py).into_any())
-    }
-
     fn __repr__(&self) -> String {
         format!(
             "Robot(name='{}', n_q={}, n_rotors={}, mass={:.3} kg)",

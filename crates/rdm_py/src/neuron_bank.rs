@@ -259,13 +259,6 @@ impl NeuronBank {
         }
     }
 
-    /// The joints whose servo is stuck (fault hook), in joint order.
-    fn stuck_joints(&self) -> Vec<usize> {
-        self.bridge
-            .as_ref()
-            .map_or_else(Vec::new, |b| b.stuck_joints().collect())
-    }
-
     /// Push the last bridge snapshot's present positions to the servos (once per snapshot).
     fn bridge_push_positions(&mut self) -> PyResult<()> {
         if let Some(b) = self.bridge.as_mut() {

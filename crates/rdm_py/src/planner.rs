@@ -213,23 +213,6 @@ impl CorePlanner {
             .into_any())
     }
 
-    /// Constraint names and row counts in QP order.
-    #[getter]
-    fn constraint_rows(&self) -> Vec<(&'static str, usize)> {
-        self.inner.constraint_rows()
-    }
-
-    /// (G, h) of the last QP.
-    fn last_rows<'py>(&self, py: Python<'py>) -> (Bound<'py, PyAny>, Bound<'py, PyAny>) {
-        let (g, h) = self.inner.last_rows();
-        let nf = self.inner.free().len();
-        let gm = Array2::from_shape_fn((h.len(), nf), |(r, c)| g[r * nf + c]);
-        (
-            gm.into_pyarray(py).into_any(),
-            h.to_vec().into_pyarray(py).into_any(),
-        )
-    }
-
     /// End-effector pose: (position[3], quaternion [x, y, z, w]).
     fn end_effector_pose(&self) -> ([f64; 3], [f64; 4]) {
         let p = self.inner.end_effector_pose();

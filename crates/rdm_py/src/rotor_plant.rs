@@ -257,13 +257,6 @@ impl RotorPlantCore {
         Ok(())
     }
 
-    /// Set rotor ``i``'s voltage factor ``(v_ref / voltage) ** 2``.
-    fn set_esc_v_factor(&mut self, i: usize, v_factor: f64) -> PyResult<()> {
-        let e = self.escs.get_mut(i).ok_or_else(|| index_error("i", i))?;
-        e.v_factor = v_factor;
-        Ok(())
-    }
-
     /// Last commanded (clamped) duty of rotor ``i``.
     fn duty(&self, i: usize) -> PyResult<f64> {
         self.escs

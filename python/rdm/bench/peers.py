@@ -21,9 +21,6 @@ from typing import Any
 
 import numpy as np
 
-#: Peer module -> the package to install.
-PEER_MODULES = {"scipy": "scipy", "osqp": "osqp", "clarabel": "clarabel"}
-
 
 def availability(module: str) -> tuple[bool, str]:
     """``(True, version)`` if ``module`` imports, else ``(False, reason)``."""

@@ -135,7 +135,6 @@ class SignalLog:
         self.node, self.recorder, self.timing = node, recorder, timing
         self.period = SIGNAL_PERIOD_S
         self._logger: Any = None
-        self._segment = -1
         self._size = 0
         self._now = 0.0
         self._timing_due = 0.0
@@ -147,7 +146,7 @@ class SignalLog:
             from rdm.sim.mcap_log import McapLogger
 
             self._logger = McapLogger(seg.folder / "signals.mcap")
-            self._segment, self._size = seg.index, 0
+            self._size = 0
         self._now = now
         self._logger.log_json("/onboard/status", now, self.node.status())
         if self.timing is not None and now >= self._timing_due:

@@ -17,7 +17,6 @@ import numpy as np
 
 from rdm import _rdm
 
-STATE_NAMES: tuple[str, ...] = tuple(_rdm.LQI_STATE_NAMES)
 #: Paper index (x = [xi_bar; xi_bar_dot; v], eq. 26) of each JSK-order state.
 JSK_TO_PAPER: tuple[int, ...] = tuple(_rdm.JSK_TO_PAPER)
 #: Largest |gain| that fits the int16 x 0.001 ``rpy/gain`` wire format.

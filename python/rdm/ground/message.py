@@ -45,8 +45,6 @@ MAX_DATAGRAM = 8192
 #: Deepest nesting of objects and arrays accepted (a command is at most 3 deep:
 #: message -> args -> a vector).
 MAX_DEPTH = 8
-#: Longest ``src`` and ``cmd`` names.
-MAX_NAME = 64
 #: ``seq`` is below this (an int64 on every other implementation).
 SEQ_LIMIT = 2**63
 

@@ -24,8 +24,6 @@ from typing import Any
 import can
 
 INTERFACES = ("socketcan", "virtual", "inproc")
-#: Neuron link: classic CAN, 1 Mbit/s, 11-bit ids (fact sheet sec. 2.1).
-NEURON_BITRATE = 1_000_000
 _CHANNEL = {
     "socketcan": re.compile(r"^[A-Za-z0-9_.\-]{1,15}$"),  # a kernel name: IFNAMSIZ - 1 chars
     "virtual": re.compile(r"^[A-Za-z0-9_.\-]{1,64}$"),

@@ -79,7 +79,6 @@ class WireCandump:
         self.path = path
         self._link = link
         self._file = open_output(path, "w")  # closed in close()
-        self._written = 0
         link.capture = self
 
     @property

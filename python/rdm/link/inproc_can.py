@@ -83,11 +83,6 @@ def set_channel_clock(name: str, clock: Callable[[], float]) -> None:
     _channel(name).clock = clock
 
 
-def channel_clock(name: str) -> Callable[[], float]:
-    """The clock currently stamping frames on channel ``name``."""
-    return _channel(name).clock
-
-
 def add_tap(name: str, tap: Callable[[Message], None]) -> None:
     """Call ``tap(msg)`` for every frame sent on channel ``name`` (msg is the delivered copy,
     stamped, ``is_rx`` True). Remove with :func:`remove_tap`."""

@@ -83,11 +83,6 @@ class TappedLink:
     def fileno(self) -> int:
         return self.link.port.fileno()
 
-    def flush_captures(self) -> None:
-        for f in (self._tx, self._rx):
-            if f is not None:
-                f.flush()
-
     def close(self) -> None:
         for f in (self._tx, self._rx):
             if f is not None and not f.closed:

@@ -136,11 +136,6 @@ class ServoEntryView:
     def as_dict(self) -> dict:
         return dict(zip(_SERVO_FIELDS, self.as_tuple(), strict=True))
 
-    @property
-    def is_gimbal(self) -> bool:
-        """Spinal's "gimbal servo": one without send_data_flag (sec. 2.7)."""
-        return not self.send_data_flag
-
     def __repr__(self) -> str:
         return f"ServoEntryView({self.as_dict()})"
 

@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from rdm.link.capture_index import INDEX_SUFFIX, TimedCaptureFile
+from rdm.link.capture_index import TimedCaptureFile
 from rdm.model import RobotSource, robot_source
 from rdm.output_files import OutputFolderError, open_output, prepare_empty_folder, write_atomic
 
@@ -439,16 +439,6 @@ def attach_recorder(node: Any, recorder: FlightRecorder) -> None:
     node.tick, node.close = recorded_tick, recorded_close
     for name in INPUT_METHODS:
         setattr(node, name, _journaled(recorder, name, getattr(node, name)))
-
-
-def capture_paths(segment: Path, link: str) -> dict[str, Path]:
-    """The capture files of ``link`` in a segment folder (and their indexes)."""
-    out: dict[str, Path] = {}
-    for direction in ("device_tx", "host_tx"):
-        p = segment / capture_name(link, direction)
-        out[direction] = p
-        out[f"{direction}_idx"] = p.with_name(p.name + INDEX_SUFFIX)
-    return out
 
 
 def record_node(

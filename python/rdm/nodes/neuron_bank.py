@@ -187,10 +187,6 @@ class ServoView:
         """When set, the reported current (else the position-error model)."""
         self._board._bank._core.set_servo_field(self._board._k, self._i, "external_current", value)
 
-    def set_present_position(self, position: float) -> None:
-        """Plant feedback of this servo's position (raw ticks)."""
-        self._board._bank._core.set_positions([self._board._k], [self._i], [float(position)])
-
 
 class NeuronBoardView:
     """One board of a :class:`NeuronBankNode`: what a plant, the stack and the tools read and

@@ -62,10 +62,6 @@ class FlightMode(enum.Enum):
     LAND = "land"
 
 
-#: The modes in which the robot is on or near its perch (the perch sequence).
-PERCH_MODES = (FlightMode.APPROACH, FlightMode.PERCHED, FlightMode.UNPERCH)
-
-
 @dataclass(frozen=True)
 class FlightLimits:
     """Limits and thresholds of the operator layer. JSK's values where it has them

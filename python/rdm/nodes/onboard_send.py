@@ -29,18 +29,6 @@ from rdm.protocol.rosserial.server import PayloadTooLarge, TopicNotNegotiated
 INTEGRATION_CONTROL_ON = 160
 
 
-#: Topics the node publishes (Spinal subscribes).
-PUBLISHED_TOPICS = (
-    "uav_info",
-    "motor_info",
-    "flight_config_cmd",
-    "four_axes/command",
-    "rpy/gain",
-    "p_matrix_pseudo_inverse_inertia",
-    "servo/target_states",
-)
-
-
 def _floats(values: Any) -> list[float]:
     """``[float(v) for v in values]``; a float64 array's ``tolist`` gives the same floats."""
     if type(values) is np.ndarray and values.dtype == np.float64 and values.ndim == 1:

@@ -10,13 +10,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
 
 #: Dynamixel X "Profile Velocity" unit: 0.229 rpm; 4096 ticks per revolution.
 TICKS_PER_S_PER_PROFILE_UNIT = 0.229 * 4096.0 / 60.0
 #: Dynamixel X default "Moving Threshold" 10 x 0.229 rpm, in ticks/s.
 MOVING_THRESHOLD_TICKS_PER_S = 10 * TICKS_PER_S_PER_PROFILE_UNIT
-INT16 = (-0x8000, 0x7FFF)
 
 
 @dataclass(frozen=True)
@@ -60,12 +58,3 @@ class ServoConfig:
             raise ValueError(f"ServoConfig: time_constant {self.time_constant!r} must be > 0")
         if not 0 <= self.dynamixel_id <= 252:
             raise ValueError(f"ServoConfig: dynamixel_id {self.dynamixel_id} not in 0..252")
-
-
-class PositionFeed(Protocol):
-    """Plant feedback shared by many servos: ``epoch`` changes when the plant moved;
-    ``ticks()`` gives every joint's present position in raw ticks at that epoch."""
-
-    epoch: int
-
-    def ticks(self) -> list[float]: ...

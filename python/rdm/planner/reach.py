@@ -42,20 +42,6 @@ class _Occupancy:
         return np.argwhere(self.grid).astype(np.int64) + self.lo
 
 
-def segment_voxels(p0: np.ndarray, p1: np.ndarray, resolution: float) -> np.ndarray:
-    """Unique voxels crossed by the segments ``p0[i] -> p1[i]`` (both (N, 3)), sampled at
-    ``SAMPLES_PER_VOXEL`` points per voxel side of the longest segment."""
-    p0 = np.asarray(p0, dtype=float)
-    p1 = np.asarray(p1, dtype=float)
-    if len(p0) == 0:
-        return np.zeros((0, 3), dtype=np.int64)
-    both = np.concatenate([p0, p1])
-    occ = _Occupancy(voxel_keys(both.min(axis=0), resolution),
-                     voxel_keys(both.max(axis=0), resolution))  # fmt: skip
-    _mark_segments(occ, p0, p1, resolution)
-    return occ.keys()
-
-
 def _mark_segments(occ: _Occupancy, p0: np.ndarray, p1: np.ndarray, resolution: float) -> None:
     longest = float(np.max(np.linalg.norm(p1 - p0, axis=1)))
     n = max(2, int(np.ceil(longest / resolution * SAMPLES_PER_VOXEL)) + 1)

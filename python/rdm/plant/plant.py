@@ -196,7 +196,6 @@ class Plant(PlantReadings, PlantTruthReadout):
         self._v_xmat = d.xmat
         self._v_subtree_com = d.subtree_com
         self._rotor_site_list = self._rotor_site.tolist()
-        self._qadr_list = self._qadr.tolist()
         acts = self._rotor_act.tolist()
         contiguous = acts == list(range(acts[0], acts[0] + len(acts))) if acts else False
         self._rotor_act_slice = slice(acts[0], acts[0] + len(acts)) if contiguous else None

@@ -20,11 +20,6 @@ class PlantReadings:
         adr = self._sensor_adr[name]
         return self._fresh().sensordata[adr : adr + size].copy()
 
-    def joint_positions_list(self) -> list[float]:
-        """Present joint positions (joint_order) as floats (no forward pass needed)."""
-        q = self._v_qpos.tolist()
-        return [q[i] for i in self._qadr_list]
-
     def imu(self) -> ImuReading:
         """One noisy IMU sample in the IMU frame (root link, at the processor)."""
         if self._stale:

@@ -227,7 +227,6 @@ class WrenchSensorModel:
         self.spec = spec
         self.rated = _frozen(np.array([*spec.force_range, *spec.torque_range], dtype=float))
         self._rated_list = self.rated.tolist()
-        self._lsb_list = [r / LEPTRINO_FULL_SCALE_COUNTS for r in self._rated_list]
         self._rng = rng
         self._normals = NormalStream(rng)
         self.noise = noise

@@ -31,7 +31,6 @@ _WHOLE_FRAME = re.compile(rb"\x10\x02((?:[^\x10]|\x10\x10)*)\x10\x03(.)", re.S)
 MAX_PAYLOAD = 255
 HEADER_LEN = 4
 BROADCAST_SENSOR_NO = 0xFF
-BAUD_RATE = 460800
 RAW_AT_RATED = 10000
 # Fixed-width ASCII fields of the GET_INF response (Leptrino ``pCommon.h``; see docs/canbus.md).
 PRODUCT_NAME_SIZE, SERIAL_SIZE, FIRMWARE_VERSION_SIZE, OUTPUT_RATE_SIZE = 16, 8, 4, 6
@@ -509,7 +508,6 @@ MODELS: dict[str, SensorModel] = {
         SensorModel("PFS080YS102U6", (500.0, 500.0, 1000.0, 40.0, 40.0, 30.0)),
     )
 }
-FOOT_SENSOR = MODELS["CFS034CA301U"]
 END_EFFECTOR_SENSOR = MODELS["CFS018CA201U"]
 
 

@@ -177,8 +177,6 @@ class PerchTiming:
 QUICK_TIMING = PerchTiming(
     reconfigure_s=4.0, reconfigure_z=1.05, reconfigure_wait_s=0.5, fold_gains=None
 )
-#: The timing before docs/scenarios.md: the configured gains through the fold and approach.
-CONFIGURED_GAINS_TIMING = PerchTiming(fold_gains=None)
 
 
 def truth_cog(stack: Any) -> np.ndarray:

@@ -16,7 +16,6 @@ which drop the oldest message of a client whose queue is full
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 from collections.abc import Iterator, Mapping
@@ -37,11 +36,6 @@ BACKLOG = 1024
 
 class LiveError(RuntimeError):
     """The server could not start (the port is taken, the host cannot be bound)."""
-
-
-def live_available() -> bool:
-    """Whether ``foxglove`` (``foxglove-sdk``) and ``mcap`` (the ``sim`` extra) are installed."""
-    return all(importlib.util.find_spec(m) is not None for m in ("foxglove", "mcap"))
 
 
 def layout_path() -> Path:

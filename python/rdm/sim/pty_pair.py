@@ -31,7 +31,6 @@ class PtyPair:
         self.b = b
         self.timeout = timeout
         self.waits = 0  # settles that had to wait for the kernel
-        self.wait_s = 0.0
 
     @staticmethod
     def _missing(writer: TappedLink, reader: TappedLink) -> int:
@@ -59,7 +58,6 @@ class PtyPair:
                 )
             # Wakes when the reader has data; partial arrivals loop again.
             select.select([r.fileno() for r in pending], [], [], min(left, 0.001))
-        self.wait_s += time.perf_counter() - t0
 
 
 def open_tapped_pty(

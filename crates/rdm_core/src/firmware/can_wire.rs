@@ -226,21 +226,6 @@ impl CanWire {
         &self.to_neurons
     }
 
-    /// Frames waiting for the master's next tick, in send order.
-    pub fn for_master(&self) -> &[RxFrame] {
-        &self.to_master
-    }
-
-    /// The Neurons read their queue (after a tick).
-    pub fn clear_for_neurons(&mut self) {
-        self.to_neurons.clear();
-    }
-
-    /// The master read its queue (after a tick).
-    pub fn clear_for_master(&mut self) {
-        self.to_master.clear();
-    }
-
     /// Move the pending frames for the Neurons into `out` (which keeps its capacity).
     pub fn take_for_neurons(&mut self, out: &mut Vec<RxFrame>) {
         out.clear();

@@ -78,11 +78,6 @@ impl ModelWorkspace {
             && self.rotor_position.len() == robot.n_rotors()
     }
 
-    /// Whether the last `evaluate` succeeded.
-    pub fn is_evaluated(&self) -> bool {
-        self.evaluated
-    }
-
     /// The CoG frame C's pose in the world.
     pub fn cog_pose(&self) -> Isometry3<f64> {
         Isometry3::from_parts(self.cog.into(), self.cog_rotation)

@@ -218,18 +218,6 @@ impl Planner {
     pub fn robot(&self) -> &RobotDescription {
         &self.robot
     }
-    /// Constraint names and their row counts, in QP order.
-    pub fn constraint_rows(&self) -> Vec<(&'static str, usize)> {
-        self.constraints
-            .iter()
-            .map(|c| c.name())
-            .zip(self.rows.iter().copied())
-            .collect()
-    }
-    /// Rows G, h of the last QP (row-major).
-    pub fn last_rows(&self) -> (&[f64], &[f64]) {
-        (&self.g, &self.h)
-    }
 
     /// World pose of the end effector at the current state.
     pub fn end_effector_pose(&self) -> Isometry3<f64> {

@@ -103,14 +103,6 @@ impl PyPwmConverter {
         Ok(Self { inner })
     }
 
-    /// The Hydrus quad example (SQRT, one 25.2 V curve) of the fact sheet.
-    #[staticmethod]
-    fn hydrus_example() -> Self {
-        Self {
-            inner: PwmConverter::new(PwmInfo::hydrus_example()).expect("valid example"),
-        }
-    }
-
     /// Re-selects the reference if more than 0.5 s passed since the last selection.
     fn update_voltage(&mut self, voltage: f64, now_s: f64) -> bool {
         self.inner.update_voltage(voltage, now_s)
@@ -201,13 +193,6 @@ impl PyPwmConverter {
     #[getter]
     fn last_good_voltage(&self) -> f64 {
         self.inner.last_good_voltage()
-    }
-
-    /// Largest base thrust a command may ask of one motor, N (largest reference max_thrust
-    /// times the rotor divider).
-    #[getter]
-    fn command_thrust_max(&self) -> f64 {
-        self.inner.command_thrust_max()
     }
 }
 

@@ -84,10 +84,6 @@ class ServoTargetCurrents(_ServoWords):
 STATUS_FORCE_SERVO_OFF = 1 << 0
 STATUS_MOVING = 1 << 1
 STATUS_GOAL_REPORTED = 1 << 2
-#: JSK error bits added to the Dynamixel hardware-error byte.
-ERROR_PULLEY_SKIP = 1 << 1
-ERROR_RESOLUTION_RATIO = 1 << 6
-ERROR_ENCODER_CONNECT = 1 << 7
 
 
 @dataclass(frozen=True)

@@ -147,23 +147,6 @@ class ClientSession:
         )
         return slot.topic_id
 
-    def advertise_service(
-        self, name: str, srv_type: str, handler: ServiceHandler
-    ) -> tuple[int, int]:
-        """Add a service server: a response publisher then a request subscriber slot.
-
-        Returns ``(request_id, response_id)``.
-        """
-        srv = self.registry.srv(srv_type)
-        pub = self._new_pub(
-            name, srv_type, srv.response_md5, srv.response, C.Endpoint.SERVICE_RESPONSE
-        )
-        sub = self._new_sub(
-            name, srv_type, srv.request_md5, srv.request, C.Endpoint.SERVICE_REQUEST
-        )
-        self._bind_service(pub, sub, handler)
-        return sub.topic_id, pub.topic_id
-
     def _bind_service(
         self, pub: ClientEndpoint, sub: ClientEndpoint, handler: ServiceHandler
     ) -> None:

@@ -51,10 +51,6 @@ class Field:
     type_text: str  # the type as written in the file (genmsg md5 text uses it verbatim)
 
     @property
-    def is_array(self) -> bool:
-        return self.array_len is not None
-
-    @property
     def is_primitive(self) -> bool:
         return self.base_type in PRIMITIVES
 

@@ -18,11 +18,6 @@ def tick_diff(now_ms: int, then_ms: int) -> int:
     return (now_ms - then_ms) & _MASK
 
 
-def signed_tick_diff(now_ms: int, then_ms: int) -> int:
-    """``now - then`` as a signed 32-bit value (ticks up to 24.8 days apart either way)."""
-    return ((now_ms - then_ms + 2**31) & _MASK) - 2**31
-
-
 class ClientClock:
     """ROS time kept by the client; unsynchronised it counts from zero like the firmware."""
 
@@ -49,7 +44,7 @@ class ClientClock:
         difference (the firmware's uint32 arithmetic would jump back 49.7 days at a wrap)."""
         if not self.synced:
             return RosTime.from_ns((now_ms & _MASK) * 1_000_000)
-        # signed_tick_diff and RosTime.from_ns inlined: the mirror stamps 200+ messages a second
+        # signed 32-bit tick difference and RosTime.from_ns inlined: 200+ stamps a second
         elapsed = ((now_ms - self._sync_tick + 2**31) & _MASK) - 2**31
         ns = self._sync_ns + elapsed * 1_000_000
         return RosTime(*divmod(ns, 1_000_000_000)) if ns > 0 else RosTime(0, 0)

@@ -9,11 +9,6 @@ use super::qp::{PerchInput, PerchQp, PerchSolution};
 use super::status::PerchCounters;
 use crate::PERCH_ROTORS;
 
-/// Cutoff of the foot-wrench filter (Sec. VII-B) [Hz].
-pub const FOOT_WRENCH_CUTOFF_HZ: f64 = 1.0;
-/// Rate of the perching controller (Sec. VII-B) [Hz].
-pub const PERCH_RATE_HZ: f64 = 40.0;
-
 /// Filter + QP + the state carried between ticks. Allocation-free after [`PerchController::new`].
 pub struct PerchController {
     qp: PerchQp,
@@ -105,11 +100,6 @@ impl PerchController {
     /// The QP (problem data, parameters, weight updates).
     pub fn qp(&self) -> &PerchQp {
         &self.qp
-    }
-
-    /// Mutable access to the QP (e.g. [`PerchQp::set_weight`]).
-    pub fn qp_mut(&mut self) -> &mut PerchQp {
-        &mut self.qp
     }
 
     /// The foot-wrench filter.

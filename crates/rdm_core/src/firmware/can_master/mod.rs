@@ -26,10 +26,7 @@ pub use records::{Event, EventKind, ImuSlot, NeuronEntry, OrderedCounts, ServoEn
 
 use super::neuron_frame::CanFrame;
 use super::neuron_tx::{RxFrame, TxQueue};
-use super::spinal_frame::REPLY_KINDS;
 
-/// Default power-on wait before ENUM_REQUEST.
-pub const BOOT_DELAY_MS: i64 = 5000;
 /// ENUM_RESPONSE collection time.
 pub const ENUM_WAIT_MS: i64 = 200;
 /// Wait after each INITIAL_CONFIG_REQUEST.
@@ -290,9 +287,4 @@ impl CanMaster {
             None => self.events_dropped += 1,
         }
     }
-}
-
-/// The reply kind names (re-exported for bindings).
-pub fn reply_kind_name(k: usize) -> &'static str {
-    REPLY_KINDS.get(k).copied().unwrap_or("?")
 }

@@ -347,26 +347,4 @@ impl PerchQp {
     pub fn b(&self) -> &[f64] {
         &self.b
     }
-
-    /// Change the weight `N` of eq. (37) in place (`update_P`, same pattern).
-    pub fn set_weight(&mut self, weight: [f64; PERCH_ROTORS]) -> Result<(), ParamError> {
-        if weight.iter().any(|w| !(w.is_finite() && *w > 0.0)) {
-            return Err(ParamError {
-                field: "weight",
-                reason: "must be finite and > 0",
-            });
-        }
-        let max_weight = weight.iter().fold(0.0_f64, |a, b| a.max(*b));
-        for (nz, w) in self.p_nzval.iter_mut().zip(weight.iter()) {
-            *nz = w / max_weight;
-        }
-        self.solver
-            .update_P(&self.p_nzval)
-            .map_err(|_| ParamError {
-                field: "weight",
-                reason: "Clarabel refused update_P",
-            })?;
-        self.params.weight = weight;
-        Ok(())
-    }
 }
