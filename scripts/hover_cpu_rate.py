@@ -4,7 +4,7 @@ usage: python scripts/hover_cpu_rate.py [SECONDS=6] [START=1]
 Builds the ``rdm sim hover`` stack (seed 0, in-process wires, logs written to a temporary
 folder), runs ``START`` simulated s (1: power-on, enumeration), then measures ``SECONDS``
 more with ``time.process_time`` (``1.5 0``: the CAN boot on the floor, from power-on).
-For an A/B against an older tree, run that tree's copy with its
+For an A/B against another tree, run that tree's copy with its
 ``python/`` on PYTHONPATH, alternating with this one (single runs spread +-20 % on a shared
 machine: compare medians of several pairs).
 """
