@@ -38,11 +38,6 @@ class Direction(enum.Enum):
     NEURON_TO_SPINAL = "neuron_to_spinal"
 
 
-class MotorMessage(enum.IntEnum):
-    PWM_SLAVES_1_TO_6 = 0
-    PWM_SLAVES_7_TO_12 = 1
-
-
 class ImuMessage(enum.IntEnum):
     GYRO = 0
     ACC = 1
