@@ -89,8 +89,8 @@ class RotorProbe:
         self.phase.append(self.script.phase)
         self.applied.append(np.asarray(plant.rotor_thrusts(), dtype=float).copy())
         self.distance.append(dist)
-        effects = plant.ceiling_effects
-        self.gain.append(np.array([e.thrust_ratio(float(d)) for e, d in zip(effects, dist)]))
+        pairs = zip(plant.ceiling_effects, dist, strict=True)
+        self.gain.append(np.array([e.thrust_ratio(float(d)) for e, d in pairs]))
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The records as arrays (rows = ticks)."""
