@@ -178,17 +178,19 @@ def run(
     uart: str = "inproc",
     speed: float | None = None,
     log: bool = True,
+    motion=PERCHED_MOTION,
     timing: PerchTiming | None = None,
     observer: Callable[[Stack, float], None] | None = None,
     **stack_overrides: Any,
 ) -> ScenarioResult:
-    """Run the variant; ``observer(stack, now)`` as in :func:`rdm.scenarios.perching.run`.
+    """Run the variant; ``motion`` (the perched joint segments, ``()``: none) and
+    ``observer(stack, now)`` as in :func:`rdm.scenarios.perching.run`.
     The result's ``script`` is the :class:`RotorProbe` (its raw per-tick records)."""
     stack_overrides.setdefault("robot", ROBOT)
     if "onboard" not in stack_overrides:
         stack_overrides["onboard"] = onboard_config(perch_params=dict(TABLE_VII_PARAMS))
     opts = sim_stack_options(seed, uart, speed=speed, log=log, **stack_overrides)
-    script = PerchingScript(PERCHED_MOTION, timing)
+    script = PerchingScript(motion, timing)
     probe = RotorProbe(script)
 
     def watch(stack: Stack, now: float) -> None:
