@@ -13,10 +13,11 @@ from rdm.model import DescriptionError, Robot, shipped_robot_files
 from rdm.protocol import leptrino as lp
 
 
-@pytest.mark.parametrize("name", ["rdm", "rcm"])
-def test_shipped_files_equal_generator_output(name: str) -> None:
-    desc = descriptions.build_description(name)
-    with shipped_robot_files(name) as (urdf, toml):
+@pytest.mark.parametrize(
+    "desc", descriptions.shipped_descriptions(), ids=lambda d: d.name
+)  # rdm, rcm, rdm_foot10 (the foot unit at the plate: perching-foot-at-plate)
+def test_shipped_files_equal_generator_output(desc: descriptions.Description) -> None:
+    with shipped_robot_files(desc.name) as (urdf, toml):
         assert urdf.read_text() == desc.urdf, "run `python -m rdm.descriptions`"
         assert toml.read_text() == desc.toml, "run `python -m rdm.descriptions`"
 

@@ -435,10 +435,28 @@ def shipped_directory() -> Path:
     return Path(__file__).resolve().parent / "data" / "robots"
 
 
+#: Where the foot unit sits along the root link (fraction from the plate) in the shipped
+#: ``rdm_foot10`` description: 0.04 m from the q1 axis, its rotor plane 0.06 m under the
+#: ceiling when the root link hangs from it (the "foot at plate" perching candidate of
+#: :mod:`rdm.scenarios.perch_envelope`; docs/scenarios.md "perching-foot-at-plate").
+#: ASSUMPTION: the paper's "tip of the root link" read as its root end (at the foot plate).
+FOOT_AT_PLATE = 0.1
+
+
+def shipped_descriptions() -> tuple[Description, ...]:
+    """Every description shipped under ``rdm/data/robots``: the RDM, the RCM and the RDM
+    with its foot unit at the plate (:data:`FOOT_AT_PLATE`)."""
+    return (
+        build_description("rdm"),
+        build_description("rcm"),
+        build_description("rdm", foot_unit_position=FOOT_AT_PLATE),
+    )
+
+
 def main() -> None:
-    """Regenerate the shipped RDM and RCM descriptions."""
-    for layout in ("rdm", "rcm"):
-        path = build_description(layout).write(shipped_directory() / layout)
+    """Regenerate the shipped descriptions (:func:`shipped_descriptions`)."""
+    for desc in shipped_descriptions():
+        path = desc.write(shipped_directory() / desc.name)
         print(f"wrote {path[0]} and {path[1]}")
 
 

@@ -309,10 +309,13 @@ def run(
     script = PerchingScript(motion, timing)
     stack = build_stack("perching", base, opts, observed(script, observer))
     wall = run_stack(stack, duration)
-    return finish(_evaluate(stack, script), duration, wall)
+    return finish(evaluate(stack, script), duration, wall)
 
 
-def _evaluate(stack: Stack, script: PerchingScript) -> ScenarioResult:
+def evaluate(stack: Stack, script: PerchingScript, name: str = "perching") -> ScenarioResult:
+    """The perching metrics (module docstring) from MuJoCo's ground truth and the onboard
+    status records, the figure ``<name>.png``; a :class:`ScenarioResult` named ``name``
+    (perching variants, :mod:`rdm.scenarios.perching_foot_at_plate`, add rows to it)."""
     a = truth_arrays(stack)
     t = a["t"]
     perched = t >= (script.t_perch + 0.5) if script.t_perch is not None else np.zeros_like(t, bool)
@@ -400,18 +403,18 @@ def _evaluate(stack: Stack, script: PerchingScript) -> ScenarioResult:
         "perch_status_counts": statuses,
         "fold_gains_window": script.fold_gains_window,
     }
-    _plots(stack, a, rp, script)
-    return ScenarioResult("perching", stack, metrics, facts)
+    _plots(stack, a, rp, name)
+    return ScenarioResult(name, stack, metrics, facts)
 
 
-def _plots(stack: Stack, a: dict, rp: np.ndarray, script: PerchingScript) -> None:
+def _plots(stack: Stack, a: dict, rp: np.ndarray, name: str) -> None:
     t = a["t"]
     fz = a["force"][:, 2]
     with np.errstate(invalid="ignore", divide="ignore"):
         cone = np.abs(a["force"][:, 0:2]).max(axis=1) / (MU[0] * fz)
         yaw = np.abs(a["torque"][:, 2]) / (MU[2] * fz)
     plot_panels(
-        stack.folder.plot("perching"),
+        stack.folder.plot(name),
         t,
         [
             ("CoG position", {"x": a["cog"][:, 0], "y": a["cog"][:, 1], "z": a["cog"][:, 2]}, "m"),
@@ -427,5 +430,5 @@ def _plots(stack: Stack, a: dict, rp: np.ndarray, script: PerchingScript) -> Non
             ("joints q1-q6", {f"q{i + 1}": a["q"][:, i] for i in range(6)}, "rad"),
             ("attitude", {"roll": np.degrees(rp[:, 0]), "pitch": np.degrees(rp[:, 1])}, "deg"),
         ],
-        title="perching: approach, transition, joint motion (Fig. 10)",
+        title=f"{name}: approach, transition, joint motion (Fig. 10)",
     )

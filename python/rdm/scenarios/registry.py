@@ -59,6 +59,13 @@ SCENARIOS: dict[str, Scenario] = {
             "climb, fold to the hanging posture, perch on the ceiling, move the arm (Fig. 10)",
         ),
         Scenario(
+            "perching-foot-at-plate",
+            "perching_foot_at_plate",
+            "run",
+            "perching with the foot unit at the plate end of the root link (rotors 6 cm under "
+            "the ceiling) and Table VII's eps_z = 1 N (Fig. 10 B's thrust return)",
+        ),
+        Scenario(
             "push",
             "push",
             "run",

@@ -1,0 +1,209 @@
+"""``perching-foot-at-plate``: the perching experiment (paper Sec. VII-B, Fig. 10) flown by the
+RDM whose foot vectoring apparatus sits at the plate end of the root link, with Table VII's
+perching parameters.
+
+Same phases as :mod:`rdm.scenarios.perching` (climb, fold to the hanging posture, approach,
+perch, arm motion, hold) and the same metric rows, with two differences:
+
+* the robot is the shipped ``rdm_foot10`` description
+  (``rdm.descriptions.build_description("rdm", foot_unit_position=FOOT_AT_PLATE)``, the
+  builder :func:`rdm.scenarios.perch_envelope.candidate_robot` uses): the foot unit 0.04 m
+  from the q1 axis, its rotor plane 0.06 m under the ceiling when perched (ceiling gain 1.08
+  in the plant's model), instead of 0.42 m (gain 1.00);
+* the perching QP runs with Table VII's parameters as printed (eps_z = 1 N, mu 0.9 / 0.9 /
+  0.5, H 0.04 / 0.07 m), not with ``perching.PERCH_PARAMS``' eps_z = 8 N.
+
+Extra rows (MuJoCo truth, recorded by :class:`RotorProbe` on every script tick): the foot
+rotors' own thrust (the applied thrust divided by the plant's ceiling gain at the rotor's
+distance to the ceiling: what the rotor is driven to produce, the paper's "rotor input" of
+Fig. 10 B) after contact over its flight level, the peak at the transition over the flight
+level, the ceiling gain and distance of the foot rotors while perched.
+
+docs/scenarios.md "perching-foot-at-plate" has the figures and what the paper fixes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rdm.sim import Metric
+
+from .common import ScenarioResult, finish, observed, run_stack, sim_stack_options
+from .perching import (
+    DEFAULT_DURATION,
+    PERCHED_MOTION,
+    SETTLE_S,
+    PerchingScript,
+    PerchTiming,
+    evaluate,
+    onboard_config,
+)
+from .stack import Stack, build_stack
+
+NAME = "perching-foot-at-plate"
+#: The shipped description with the foot unit at the plate (``rdm.descriptions.FOOT_AT_PLATE``).
+ROBOT = "rdm_foot10"
+#: Table VII as printed: eps_z (eq. 39), mu_x, mu_y (eq. 40), mu_z (eq. 41), H_x, H_y (eq. 42).
+TABLE_VII_PARAMS: dict = {
+    "epsilon_z": 1.0,
+    "mu_x": 0.9,
+    "mu_y": 0.9,
+    "mu_z": 0.5,
+    "half_size_x": 0.04,
+    "half_size_y": 0.07,
+}
+#: Rotors of the foot vectoring apparatus (Table VII's Q_perch = Q(q) diag[1, 1, 0, 0]).
+FOOT_ROTORS = (0, 1)
+#: Seconds of the hover in the perching posture, before the approach, that set the flight level.
+FLIGHT_WINDOW_S = 1.0
+#: Seconds after the perch switch in which the transition peak is taken.
+PEAK_WINDOW_S = 1.0
+#: Fig. 10 B: the foot rotors' thrust peaks at about 1.4 times the flight level, then returns
+#: to it ("as large as that of the flight"); ours must be within this fraction of it.
+PAPER_PEAK_RATIO = 1.4
+THRUST_RATIO_TOL = 0.10
+
+
+@dataclass
+class RotorProbe:
+    """Per script tick (10 ms): the time, the script's phase, every rotor's applied thrust
+    (MuJoCo actuator input, ceiling gain included) and its distance to the ceiling along its
+    axis (from MuJoCo's rotor sites), and the plant's ceiling gain at that distance."""
+
+    script: PerchingScript
+    t: list[float] = field(default_factory=list)
+    phase: list[str] = field(default_factory=list)
+    applied: list[np.ndarray] = field(default_factory=list)
+    distance: list[np.ndarray] = field(default_factory=list)
+    gain: list[np.ndarray] = field(default_factory=list)
+
+    def __call__(self, stack: Stack, now: float) -> None:
+        plant = stack.plant
+        dist = np.asarray(plant.rotor_distances_to_ceiling(), dtype=float)
+        self.t.append(now)
+        self.phase.append(self.script.phase)
+        self.applied.append(np.asarray(plant.rotor_thrusts(), dtype=float).copy())
+        self.distance.append(dist)
+        pairs = zip(plant.ceiling_effects, dist, strict=True)
+        self.gain.append(np.array([e.thrust_ratio(float(d)) for e, d in pairs]))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The records as arrays (rows = ticks)."""
+        return {
+            "t": np.asarray(self.t, dtype=float),
+            "phase": np.asarray(self.phase),
+            "applied": np.asarray(self.applied, dtype=float),
+            "distance": np.asarray(self.distance, dtype=float),
+            "gain": np.asarray(self.gain, dtype=float),
+        }
+
+
+def thrust_windows(p: dict[str, np.ndarray], t_perch: float | None) -> dict[str, np.ndarray]:
+    """Boolean tick selections of the probe's records: ``flight`` (the last
+    :data:`FLIGHT_WINDOW_S` of the hover in the perching posture, phase "reconfigure", before
+    the approach), ``peak`` (the first :data:`PEAK_WINDOW_S` after the perch switch),
+    ``settled`` (0.5 s after the switch until the arm motion starts, ``SETTLE_S``), ``hold``
+    (the hold phase after the arm motion)."""
+    t, phase = p["t"], p["phase"]
+    recon = phase == "reconfigure"
+    none = np.zeros_like(t, dtype=bool)
+    flight = recon & (t > t[recon].max() - FLIGHT_WINDOW_S) if recon.any() else none
+    if t_perch is None:
+        return {"flight": flight, "peak": none, "settled": none, "hold": none}
+    return {
+        "flight": flight,
+        "peak": (t >= t_perch) & (t < t_perch + PEAK_WINDOW_S),
+        "settled": (t >= t_perch + 0.5) & (t < t_perch + SETTLE_S) & (phase == "settle"),
+        "hold": phase == "hold",
+    }
+
+
+def _thrust_metrics(probe: RotorProbe, t_perch: float | None) -> tuple[list[Metric], dict]:
+    p = probe.arrays()
+    nan = float("nan")
+    w = thrust_windows(p, t_perch)
+    foot = list(FOOT_ROTORS)
+    own = p["applied"][:, foot] / p["gain"][:, foot]  # the rotor's own thrust (no ceiling gain)
+
+    def mean(sel: np.ndarray) -> float:
+        return float(own[sel].mean()) if sel.any() else nan
+
+    flight = mean(w["flight"])
+    settled, hold = mean(w["settled"]), mean(w["hold"])
+    peak = float(own[w["peak"]].mean(axis=1).max()) if w["peak"].any() else nan
+    perched = w["settled"] | w["hold"]
+    dist = float(p["distance"][perched][:, foot].mean()) if perched.any() else nan
+    gain = float(p["gain"][perched][:, foot].mean()) if perched.any() else nan
+    tol = THRUST_RATIO_TOL
+    metrics = [
+        Metric(
+            "foot rotor thrust settled after contact / flight",
+            settled / flight,
+            1.0,
+            "ratio",
+            "near",
+            tol=tol,
+        ),
+        Metric(
+            "foot rotor thrust in the hold after the arm motion / flight",
+            hold / flight,
+            1.0,
+            "ratio",
+            "near",
+            tol=tol,
+        ),
+        Metric(
+            "foot rotor thrust peak at the transition / flight",
+            peak / flight,
+            PAPER_PEAK_RATIO,
+            "ratio",
+            "info",
+        ),
+        Metric("foot rotors' distance to the ceiling while perched", dist, None, "m", "info"),
+        Metric("foot rotors' ceiling gain while perched", gain, None, "ratio", "info"),
+    ]
+    facts = {"foot_thrust_flight_n": flight, "foot_thrust_settled_n": settled}
+    return metrics, facts
+
+
+def run(
+    base: str | Path,
+    duration: float = DEFAULT_DURATION,
+    seed: int = 0,
+    uart: str = "inproc",
+    speed: float | None = None,
+    log: bool = True,
+    motion=PERCHED_MOTION,
+    timing: PerchTiming | None = None,
+    observer: Callable[[Stack, float], None] | None = None,
+    **stack_overrides: Any,
+) -> ScenarioResult:
+    """Run the variant; ``motion`` (the perched joint segments, ``()``: none) and
+    ``observer(stack, now)`` as in :func:`rdm.scenarios.perching.run`.
+    The result's ``script`` is the :class:`RotorProbe` (its raw per-tick records)."""
+    stack_overrides.setdefault("robot", ROBOT)
+    if "onboard" not in stack_overrides:
+        stack_overrides["onboard"] = onboard_config(perch_params=dict(TABLE_VII_PARAMS))
+    opts = sim_stack_options(seed, uart, speed=speed, log=log, **stack_overrides)
+    script = PerchingScript(motion, timing)
+    probe = RotorProbe(script)
+
+    def watch(stack: Stack, now: float) -> None:
+        probe(stack, now)
+        if observer is not None:
+            observer(stack, now)
+
+    stack = build_stack(NAME, base, opts, observed(script, watch))
+    wall = run_stack(stack, duration)
+    result = evaluate(stack, script, NAME)
+    rows, facts = _thrust_metrics(probe, script.t_perch)
+    result.metrics.extend(rows)
+    result.facts.update(facts)
+    result.facts["robot"] = opts.robot
+    result.script = probe
+    return finish(result, duration, wall)

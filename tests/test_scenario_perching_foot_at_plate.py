@@ -1,0 +1,155 @@
+"""``perching-foot-at-plate`` end to end: the robot flown is the foot-at-plate description, the
+perching QP runs with Table VII's parameters, and every metric row is recomputed here from the
+raw per-tick records (MuJoCo ground truth and the scenario's rotor probe) with numpy written
+apart from the scenario's code. One default run (30 s simulated, ``log=False``)."""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from rdm.descriptions import FOOT_AT_PLATE, ROOT_LINK_LENGTH, ROTOR_DIAMETER
+from rdm.model import shipped_robot_files
+from rdm.scenarios import SCENARIOS, perching
+from rdm.scenarios import perching_foot_at_plate as fp
+from rdm.scenarios.common import truth_arrays
+
+pytestmark = pytest.mark.timeout(600)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    res = fp.run(tmp_path_factory.mktemp("foot_at_plate"), log=False)
+    rows = {m.name: m for m in res.metrics}
+    return res, rows, res.script.arrays(), truth_arrays(res.stack)
+
+
+def test_registered_next_to_perching():
+    """Bug caught: the registry pointing at the hanging scenario's run (same name prefix)."""
+    sc = SCENARIOS["perching-foot-at-plate"]
+    assert sc.run is fp.run
+    assert sc.default_duration == perching.DEFAULT_DURATION
+
+
+def test_the_shipped_description_puts_the_foot_unit_at_the_plate():
+    """From the URDF text (xml parser, not the generator): the joint carrying the foot unit's
+    roll stage sits 0.04 m along the root link. Bug caught: the data file generated with the
+    far-tip foot unit (0.40 m) or a stale copy."""
+    with shipped_robot_files(fp.ROBOT) as (urdf, _):
+        root = ET.parse(urdf).getroot()
+    joint = next(j for j in root.iter("joint") if j.get("name") == "alpha1")
+    xyz = [float(v) for v in joint.find("origin").get("xyz").split()]
+    assert xyz[0] == pytest.approx(FOOT_AT_PLATE * ROOT_LINK_LENGTH, abs=1e-9)
+    assert xyz[0] == pytest.approx(0.04, abs=1e-9)
+
+
+def test_flies_the_foot_at_plate_robot_with_table_vii(run):
+    """MuJoCo's rotor sites put the foot rotors ~6 cm under the ceiling while perched (the
+    shipped far-tip robot: 0.42 m), the arm rotors far below; the onboard perching QP holds
+    Table VII's numbers. Bugs caught: the variant flying the default robot (``robot`` not
+    passed to the stack), or the hanging scenario's eps_z = 8 N left in."""
+    res, _, p, _ = run
+    w = fp.thrust_windows(p, res.facts["t_perch"])
+    foot = p["distance"][w["settled"]][:, list(fp.FOOT_ROTORS)]
+    assert foot.size and np.all(np.abs(foot - 0.06) < 0.01), foot.min()
+    assert np.all(p["distance"][w["settled"]][:, 2:] > 0.3)
+    params = res.stack.onboard.control.perch.params()
+    assert params["epsilon_z"] == 1.0
+    assert (params["mu_x"], params["mu_y"], params["mu_z"]) == (0.9, 0.9, 0.5)
+    assert (params["half_size_x"], params["half_size_y"]) == (0.04, 0.07)
+    assert params["perch_rotors"] == [1.0, 1.0, 0.0, 0.0]
+    assert res.facts["robot"] == fp.ROBOT
+
+
+def test_ceiling_gain_is_the_plants_model_at_the_site_distance(run):
+    """The gain that turns applied thrust into the rotor's own thrust, recomputed from the
+    Sanchez-Cuevas form written out here (k1 = 4.7, k2 = 0.8 R, cap 1.5, docs/plant.md) at the
+    probe's MuJoCo distances; and the probe's applied thrusts are MuJoCo's (equal to the
+    ground-truth record at the same instants). Bugs caught: the ratio taken as 1 (applied
+    thrust reported as the rotor's own), a gain from another rotor's distance."""
+    _, _, p, a = run
+    r = ROTOR_DIAMETER / 2
+    z = np.where(np.isfinite(p["distance"]), np.maximum(p["distance"], 0.0), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        raw = 1.0 / (1.0 - (r / (z + 0.8 * r)) ** 2 / 4.7)
+    expected = np.where(np.isfinite(z), np.minimum(raw, 1.5), 1.0)
+    np.testing.assert_allclose(p["gain"], expected, rtol=1e-12)
+    # applied thrusts: the truth record at the same simulated times
+    k = np.clip(np.searchsorted(a["t"], p["t"] - 1e-6), 0, len(a["t"]) - 1)
+    same = np.abs(a["t"][k] - p["t"]) < 1e-6
+    assert same.sum() > 0.9 * len(p["t"])
+    np.testing.assert_allclose(p["applied"][same], a["thrust"][k[same]], rtol=1e-12)
+
+
+def test_thrust_rows_recomputed_from_the_probe(run):
+    """The foot-thrust rows from the raw records: the flight level is the mean own thrust of
+    rotors 1-2 over the last second before the approach (the phase after "reconfigure"
+    starts), settled = 0.5 s after the switch to the start of the arm motion. Bugs caught: the
+    flight window taken during the climb (straight arm, other thrust split), the peak row
+    over both foot rotors' sum, the ratios inverted."""
+    res, rows, p, _ = run
+    t, phase = p["t"], p["phase"]
+    own = (p["applied"] / p["gain"])[:, :2].mean(axis=1)
+    first_approach = t[np.flatnonzero(phase == "approach")[0]]
+    flight_sel = (t > first_approach - 1.0 - 1e-9) & (t < first_approach) & (phase != "approach")
+    flight = own[flight_sel].mean()
+    assert 9.0 < flight < 13.0  # hover share of 3.7 kg on the foot pair
+    tp = res.facts["t_perch"]
+    motion_start = t[np.flatnonzero(phase == "motion")[0]]
+    settled = own[(t >= tp + 0.5) & (t < motion_start)].mean()
+    hold = own[phase == "hold"].mean()
+    peak = own[(t >= tp) & (t < tp + 1.0)].max()
+    assert rows["foot rotor thrust settled after contact / flight"].ours == pytest.approx(
+        settled / flight, rel=2e-3
+    )
+    assert rows["foot rotor thrust in the hold after the arm motion / flight"].ours == (
+        pytest.approx(hold / flight, rel=2e-3)
+    )
+    assert rows["foot rotor thrust peak at the transition / flight"].ours == pytest.approx(
+        peak / flight, rel=2e-3
+    )
+    assert rows["foot rotor thrust peak at the transition / flight"].paper == fp.PAPER_PEAK_RATIO
+    assert rows["foot rotor thrust settled after contact / flight"].paper == 1.0
+    assert rows["foot rotor thrust settled after contact / flight"].tol == fp.THRUST_RATIO_TOL
+
+
+def test_contact_rows_recomputed_from_truth(run):
+    """Contact kept, slip, min F_z, friction usage and the ZMP-on-edge time, per sample from
+    MuJoCo's foot contact record. Bugs caught: H_x and H_y swapped (plate 0.10 x 0.15), the
+    window starting at first contact instead of 0.5 s after the switch, mu_z used for the
+    lateral cone."""
+    res, rows, _, a = run
+    tp = res.facts["t_perch"]
+    assert tp is not None, "never perched"
+    sel = a["t"] >= tp + 0.5
+    f, m, zmp, slip = a["force"][sel], a["torque"][sel], a["zmp"][sel], a["slip"][sel]
+    assert rows["foot contact kept while perched"].ours == pytest.approx(a["contact"][sel].mean())
+    drift = max(math.dist(s, slip[0]) for s in slip) * 1e3
+    assert rows["foot slip while perched"].ours == pytest.approx(drift, rel=1e-9)
+    assert rows["min normal force while perched"].ours == pytest.approx(f[:, 2].min(), abs=1e-12)
+    assert rows["min normal force while perched"].paper == 1.0  # Table VII's eps_z
+    on = f[:, 2] > 0
+    cone = np.max(np.abs(f[on, :2]) / (0.9 * f[on, 2:3]))
+    assert rows["max friction-cone usage |F_t|/(mu F_z)"].ours == pytest.approx(cone, rel=1e-9)
+    yaw = np.max(np.abs(m[on, 2]) / (0.5 * f[on, 2]))
+    assert rows["max yaw-friction usage |M_z|/(mu_z F_z)"].ours == pytest.approx(yaw, rel=1e-9)
+    late = a["t"][sel] >= tp + perching.SETTLE_S
+    zl = zmp[late]
+    off = (0.05 - np.abs(zl[:, 0]) > 1e-3) & (0.075 - np.abs(zl[:, 1]) > 1e-3)  # nan: on edge
+    edge_row = rows[f"time with the ZMP on the plate edge (< {perching.EDGE_MM:g} mm)"]
+    assert edge_row.ours == pytest.approx(1.0 - off.mean(), abs=1e-3)
+
+
+def test_perches_and_finishes_the_arm_motion(run):
+    """Outcomes that hold on this geometry: contact reached, every perching QP tick solved
+    or rate-limited, the arm at its goal. Bug caught: the variant's script stopping before
+    the motion (the hold row would then be empty: nan)."""
+    res, rows, _, _ = run
+    assert rows["perched (foot contact reached)"].ours == 1.0
+    assert res.facts["final_phase"] == "hold"
+    assert rows["perching QP solved ticks"].ours >= 0.99
+    assert rows["joint goal reached after the motion"].ours < 5.0
+    assert math.isfinite(rows["foot rotor thrust in the hold after the arm motion / flight"].ours)
