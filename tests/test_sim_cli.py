@@ -95,6 +95,7 @@ def test_every_registered_scenario_resolves_to_its_module():
         mission,
         perching,
         push,
+        push_paper,
         tasks,
         tracking,
     )
@@ -106,6 +107,7 @@ def test_every_registered_scenario_resolves_to_its_module():
         "mission": (mission.run, mission.DEFAULT_DURATION),
         "perching": (perching.run, perching.DEFAULT_DURATION),
         "push": (push.run, push.DEFAULT_DURATION),
+        "push-paper-forces": (push_paper.run, push_paper.DEFAULT_DURATION),
         "tracking": (tracking.run, tracking.DEFAULT_DURATION),
         "drilling": (tasks.run_drilling, tasks.duration_of("drilling")),
         "painting": (tasks.run_painting, tasks.duration_of("painting")),
