@@ -75,11 +75,12 @@ FOOT_UNIT_POSITION = 0.1
 #: Perched push posture q1..q6: the root link hanging from the plate, the arm straight below
 #: it (end effector 1.1 m under the plate, its x axis along the plate's normal, away from it).
 PERCHED_POSTURE = (math.pi / 2, 0.0, 0.0, 0.0, 0.0, 0.0)
-#: eps_z of eq. (39) [N] and the foot-wrench filter's cutoff [Hz] of the perched stage. With
-#: Table VII's 1 N the QP keeps F_z one newton above zero and a rising pull (~30 N/s) peels
-#: the plate before the filtered foot force shows it (a 4 N mean symmetric push lost contact,
-#: 1 N and 5 Hz, seed 0); 8 N (the perching scenario's) at 10 Hz held a 16.3 N pull peak
-#: (static bound 16.9 N at 8 N). ASSUMPTION (docs/scenarios.md "push-paper-forces").
+#: eps_z of eq. (39) [N] and the foot-wrench filter's cutoff [Hz], for the whole run (perch
+#: and perched stage). With Table VII's 1 N the QP keeps F_z one newton above zero and a
+#: rising pull peels the plate before the filtered foot force shows it (a 4 N mean symmetric
+#: push lost contact at 1 N, 5 or 10 Hz, seed 0); 8 N (the perching scenario's) at 10 Hz held
+#: a 16.3 N pull peak (static bound 16.9 N at 8 N). ASSUMPTION (docs/scenarios.md
+#: "push-paper-forces").
 PERCHED_EPSILON_Z = 8.0
 PERCHED_CUTOFF_HZ = 10.0
 #: Fractions of Table VIII's averages pushed: flight (arm straight, q = 0, the push
