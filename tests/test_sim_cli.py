@@ -96,6 +96,7 @@ def test_every_registered_scenario_resolves_to_its_module():
         perching,
         perching_foot_at_plate,
         push,
+        push_paper,
         tasks,
         tracking,
     )
@@ -108,6 +109,7 @@ def test_every_registered_scenario_resolves_to_its_module():
         "perching": (perching.run, perching.DEFAULT_DURATION),
         "perching-foot-at-plate": (perching_foot_at_plate.run, perching.DEFAULT_DURATION),
         "push": (push.run, push.DEFAULT_DURATION),
+        "push-paper-forces": (push_paper.run, push_paper.DEFAULT_DURATION),
         "tracking": (tracking.run, tracking.DEFAULT_DURATION),
         "drilling": (tasks.run_drilling, tasks.duration_of("drilling")),
         "painting": (tasks.run_painting, tasks.duration_of("painting")),

@@ -233,8 +233,7 @@ class PushScript(StagedPerchingScript):
         self._hover_z: float | None = None
 
     def _push(self, stack: Stack, now: float, s: float, stage: str) -> None:
-        means = self.plan.flight_force if stage == "flight" else self.plan.perched_force
-        f_ee = self.plan.force(s, means)
+        f_ee = self.plan.stage_force(s, stage)
         plant = stack.plant
         rot = plant.data.xmat[plant.model.body(EE_BODY).id].reshape(3, 3)
         plant.apply_body_wrench(EE_BODY, force=rot @ f_ee)
@@ -569,23 +568,30 @@ def run(
     log: bool = True,
     plots: bool = True,
     observer: Callable[[Stack, float], None] | None = None,
+    robot: str = "rdm",
+    name: str = "push",
+    metrics: Callable[[dict[str, Any], PushPlan], list[Metric]] = metrics_of,
+    facts: dict[str, Any] | None = None,
 ) -> ScenarioResult:
     """Run the scenario: it stops 0.5 s after the perched stage, or at ``duration``;
-    ``observer(stack, now)``, if given, is called after the script on each of its ticks."""
+    ``observer(stack, now)``, if given, is called after the script on each of its ticks.
+    A variant (``push-paper-forces``) gives its ``robot`` (a shipped name or the path of a
+    robot TOML), its ``name``, its ``metrics`` rows and extra ``facts``."""
     plan = plan or DEFAULT_PLAN
     onboard = onboard_config(
         perch_params={**PERCH_PARAMS, **plan.perch_params},
         perch_cutoff_hz=plan.perch_cutoff_hz,
     )
-    opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard)
+    opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard, robot=robot)
     script = PushScript(plan)
-    stack = build_stack("push", base, opts, observed(script, observer))
+    stack = build_stack(name, base, opts, observed(script, observer))
     wall = run_stack(stack, DEFAULT_DURATION if duration is None else duration)
     seconds = stack.plant.time
     res = analyse(stack, script)
     if plots:
         plot(stack, res)
     facts = {
+        **(facts or {}),
         "plan": asdict(plan),
         "t_flight_stage": script.t_flight_stage,
         "t_perch": script.t_perch,
@@ -601,7 +607,7 @@ def run(
                 for k, v in r.items()
                 if k not in ("log", "windows")
             }
-    result = ScenarioResult("push", stack, metrics_of(res, plan), facts)
+    result = ScenarioResult(name, stack, metrics(res, plan), facts)
     result.analysis = res  # type: ignore[attr-defined]
     result.script = script  # type: ignore[attr-defined]
     return finish(result, seconds, wall)

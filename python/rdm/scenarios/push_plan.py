@@ -144,6 +144,11 @@ class PushPlan:
             f[ax] += amp * float(profile((s - t0) / self.push_s))
         return f
 
+    def stage_force(self, s: float, stage: str) -> np.ndarray:
+        """End-effector-frame force [N] at ``s`` seconds into ``stage`` ("flight" or
+        "perched"): :meth:`force` with the stage's means."""
+        return self.force(s, self.flight_force if stage == "flight" else self.perched_force)
+
 
 DEFAULT_PLAN = PushPlan()
 

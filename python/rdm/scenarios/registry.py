@@ -72,6 +72,12 @@ SCENARIOS: dict[str, Scenario] = {
             "end-effector pushed and pulled in x, y, z in flight and perched (Figs. 11-12)",
         ),
         Scenario(
+            "push-paper-forces",
+            "push_paper",
+            "run",
+            "push at Table VIII's forces where held: foot unit at the plate, arm straight below it",
+        ),
+        Scenario(
             "tracking",
             "tracking",
             "run",
