@@ -32,7 +32,7 @@ from fuzz_targets.base import (
     leptrino_frame,
 )
 from rdm.protocol.leptrino import (
-    FOOT_SENSOR,
+    MODELS,
     ForceData,
     LeptrinoError,
     LeptrinoStreamParser,
@@ -96,7 +96,7 @@ def _check_payload(payload: bytes) -> None:
         if not isinstance(resp, RatedValues):
             all_finite(resp, type(resp).__name__)
         if isinstance(resp, ForceData):
-            all_finite(resp.wrench(FOOT_SENSOR), "wrench")
+            all_finite(resp.wrench(MODELS["CFS034CA301U"]), "wrench")
         finite_limits = not isinstance(resp, RatedValues) or all(
             v == v and abs(v) != float("inf") for v in resp.limits
         )
