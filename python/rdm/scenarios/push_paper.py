@@ -1,4 +1,4 @@
-"""``push-paper-forces``: the push experiment at Table VIII's forces where the robot holds them
+"""``push-paper-forces``: the push experiment within Table VIII's peaks on the foot-at-plate robot
 (paper Sec. VII-C-1, Tables VIII-IX; the perched-wrench claim).
 
 The ``push`` scenario's run (:mod:`rdm.scenarios.push`: flight stage at q = 0, fold, perch,
