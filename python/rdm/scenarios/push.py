@@ -24,7 +24,7 @@ Table VIII; perched: contact kept, slip, ZMP inside the plate, friction usage.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -70,6 +70,7 @@ from .push_plan import (
     PROFILE_MEAN_ABS,
     PROFILE_PEAK,
     PushPlan,
+    StageLog,
     profile,
     stage_windows,
 )
@@ -110,30 +111,6 @@ __all__ = [
     "run",
     "stage_windows",
 ]
-
-
-@dataclass
-class StageLog:
-    """What the script records at each tick of a stage (10 ms)."""
-
-    t: list[float] = field(default_factory=list)
-    applied: list[np.ndarray] = field(default_factory=list)  # end-effector frame [N]
-    sensor_force: list[np.ndarray] = field(default_factory=list)  # MuJoCo EE sensor [N]
-    sensor_torque: list[np.ndarray] = field(default_factory=list)
-    perch_thrust: list[np.ndarray] = field(default_factory=list)  # λ_perch commanded [N]
-    #: the onboard node's cumulative perching-QP status counts (``perch_<status>``) per tick
-    perch_counts: list[dict] = field(default_factory=list)
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {
-            "t": np.array(self.t),
-            "applied": np.array(self.applied).reshape(-1, 3),
-            "force": np.array(self.sensor_force).reshape(-1, 3),
-            "torque": np.array(self.sensor_torque).reshape(-1, 3),
-            "perch_thrust": np.array(self.perch_thrust).reshape(len(self.t), -1)
-            if self.t
-            else np.zeros((0, 4)),
-        }
 
 
 class StagedPerchingScript(PerchingScript):

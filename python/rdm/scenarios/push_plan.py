@@ -3,8 +3,9 @@ VIII-IX).
 
 Table VIII's and IX's values, the fractions of them the simulated robot is pushed with, the
 perched push posture and filter, the flight stage's gains, the push-then-pull profile and
-:class:`PushPlan` (timing, forces, options) with the stage windows the analysis reads. The run
-itself (scripts, analysis, metrics, plots) is :mod:`rdm.scenarios.push`.
+:class:`PushPlan` (timing, forces, options) with the stage windows and the per-tick stage
+record (:class:`StageLog`) the analysis reads. The run itself (scripts, analysis, metrics,
+plots) is :mod:`rdm.scenarios.push`.
 
 The force is applied to MuJoCo's end-effector body (``Plant.apply_body_wrench``) at the
 end-effector frame origin, i.e. at the end-effector wrench sensor, along the end-effector
@@ -151,6 +152,31 @@ class PushPlan:
 
 
 DEFAULT_PLAN = PushPlan()
+
+
+@dataclass
+class StageLog:
+    """What the script records at each tick of a stage (10 ms)."""
+
+    t: list[float] = field(default_factory=list)
+    applied: list[np.ndarray] = field(default_factory=list)  # end-effector frame [N]
+    sensor_force: list[np.ndarray] = field(default_factory=list)  # MuJoCo EE sensor [N]
+    sensor_torque: list[np.ndarray] = field(default_factory=list)
+    perch_thrust: list[np.ndarray] = field(default_factory=list)  # λ_perch commanded [N]
+    #: the onboard node's cumulative perching-QP status counts (``perch_<status>``) per tick
+    perch_counts: list[dict] = field(default_factory=list)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The record as arrays: t, applied, force, torque (N x 3), perch_thrust."""
+        return {
+            "t": np.array(self.t),
+            "applied": np.array(self.applied).reshape(-1, 3),
+            "force": np.array(self.sensor_force).reshape(-1, 3),
+            "torque": np.array(self.sensor_torque).reshape(-1, 3),
+            "perch_thrust": np.array(self.perch_thrust).reshape(len(self.t), -1)
+            if self.t
+            else np.zeros((0, 4)),
+        }
 
 
 def stage_windows(plan: PushPlan, t_stage: float | None) -> dict[str, Any] | None:

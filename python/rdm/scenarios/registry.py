@@ -75,7 +75,7 @@ SCENARIOS: dict[str, Scenario] = {
             "push-paper-forces",
             "push_paper",
             "run",
-            "push at Table VIII's forces where held: foot unit at the plate, arm straight below it",
+            "push within Table VIII's peaks: foot unit at the plate, arm straight below it",
         ),
         Scenario(
             "tracking",
