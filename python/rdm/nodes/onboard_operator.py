@@ -144,7 +144,7 @@ class OnboardOperator:
             self._joint_limits_cache = (lo.copy(), hi.copy())
         return self._joint_limits_cache
 
-    def hold_joints(self, q: np.ndarray) -> bool:
+    def _hold_joints(self, q: np.ndarray) -> bool:
         """Hold the joints at ``q`` (the present angles): clamped to the model's joint limits
         (a reading outside them, inside the wire's range, counted ``joint_hold_clamped``),
         then through :meth:`set_joint_targets`' checks. False (nothing held) when refused."""

@@ -36,9 +36,11 @@ SERVO_JUMP_MAX_RAD = 0.35
 #: Implausible readings in a row after which the next one is taken (the joint did move).
 SERVO_REJECTS_MAX = 3
 #: Spinal's only report of its Neuron bus (``Spine::update``, jsk-wire-protocols.md sec. 2.6):
-#: a ``logerror`` once no CAN frame arrived for 100 ms, repeated at most once a second. It
-#: publishes no CAN error counter or bus state, and ``servo/states`` goes on every 20 ms
-#: from the values last received, so frame loss and a shorter bus-off show the node nothing.
+#: a ``logerror`` once no CAN frame arrived for 100 ms, repeated at most once a second (the
+#: Spinal mirror's timing; another revision of ``Spine::update`` logs it 1 s after the bus is
+#: declared disconnected). It publishes no CAN error counter or bus state, and
+#: ``servo/states`` goes on every 20 ms from the values last received, so frame loss and a
+#: shorter bus-off show the node nothing.
 CAN_DISCONNECTED_LOG = "CAN disconnected!!"
 #: ``spinal/Imu`` payload from byte 20: gyro (3 float32), mag skipped, quaternion (4 float32).
 _IMU_GYRO_QUAT = struct.Struct("<3f12x4f")
@@ -306,6 +308,6 @@ class OnboardReceive:
 
     def _hold_present_q(self) -> None:
         """Once every joint has a reading and no target is known: hold where the arm is
-        (:meth:`~rdm.nodes.onboard_operator.OnboardOperator.hold_joints`)."""
+        (:meth:`~rdm.nodes.onboard_operator.OnboardOperator._hold_joints`)."""
         if self.joint_targets is None and self._trajectory is None and self._seen.all():
-            self.hold_joints(self.present_q)
+            self._hold_joints(self.present_q)

@@ -237,7 +237,7 @@ class OnboardStep:
         reason = f"joint {worst} {float(err[worst]) if n else 0.0:.3f} rad from its goal"
         if self.monitors.sustained("joint_tracking", off, lim.joint_tracking_s, now, reason):
             self._trajectory = None
-            if self.hold_joints(self.present_q):
+            if self._hold_joints(self.present_q):
                 self.counts["joints_held"] += 1
             self._react("joint_tracking", now)
 
