@@ -8,7 +8,8 @@
   The UART-noise and battery-sag faults must end safe and be detected in every run.
 * The plant-side faults (``rdm.scenarios.mission_faults``): IMU outliers at their rate and
   beyond Spinal's ranges, each one dropped by Spinal's estimator (its ``out_of_range``
-  counter equals the injected count) and the flight ending safe; a dead rotor gives no
+  counter equals the injected count) and refused by the node (``imu_implausible``, the same
+  count), the flight ending safe; a dead rotor gives no
   thrust, Spinal's tilt fail-safe notices, and the record says "crashed", not safe.
 """
 
@@ -143,6 +144,11 @@ def test_imu_spikes_mission_ends_safe_and_each_spike_is_dropped(tmp_path):
     assert spikes > 10  # the injection ran: about 3 a second after the fault
     # every outlier reached Spinal's estimator and was dropped there, no other sample was
     assert stack.spinal.core.estimator_counters["out_of_range"] == spikes
+    # and its accelerometer value, published on ``imu``, was refused by the node: each one,
+    # no other reading (the first of each run of refusals logged)
+    assert stack.onboard.monitors.counts["imu_implausible"] == spikes
+    assert record["monitors"]["imu_implausible"] == spikes
+    assert record["fault_at_s"] < record["detected_at_s"] < record["fault_at_s"] + 2.0
     assert record["safe"] and record["fault_detected"] and record["outcome"] == "landed"
 
 
@@ -266,6 +272,21 @@ def test_can_bus_off_silences_the_bus_for_the_disturbance_and_the_recovery_bits(
     # 21.4 ms of Spinal's schedule lost: 10 PWM broadcasts, 10 angle + current pairs, replies
     assert counters["bus_off"] == 1 and counters["bus_off_lost"] >= 30
     assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
+
+
+def test_a_bus_off_past_the_watchdog_reaches_the_node_as_spinals_log(tmp_path, monkeypatch):
+    """150 ms of bus-off: Spinal's "CAN disconnected!!" logerror (no frame for 100 ms) reaches
+    the node, which trips ``can_disconnected`` and lands; the Neurons' own 100 ms watchdog
+    stopped every motor meanwhile, so the record says crashed, not safe."""
+    monkeypatch.setattr(mission, "BUS_OFF_S", 0.15)
+    record, stack = _quick(tmp_path, "can-bus-off")
+    at = record["fault_at_s"]
+    trips = [e for e in stack.onboard.monitors.events if e["monitor"] == "can_disconnected"]
+    assert len(trips) == 1
+    # 100 ms without a frame, then Spinal's next ms, the UART and the node's 25 ms tick
+    assert 0.1 < trips[0]["t"] - at < 0.1 + 0.035
+    assert stack.onboard.counts["can_disconnected_land"] == 1
+    assert not record["safe"] and record["outcome"] == "crashed"
 
 
 def test_can_loss_drops_its_share_of_the_pwm_broadcasts(tmp_path):

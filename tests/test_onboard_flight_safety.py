@@ -16,6 +16,7 @@ from rdm.nodes.onboard import OnboardNode
 from rdm.nodes.onboard_config import OnboardConfig
 from rdm.nodes.onboard_flight import FlightLimits
 from rdm.protocol.rosserial.client import ClientSession
+from rdm.protocol.rosserial.constants import LogLevel
 
 pytestmark = pytest.mark.timeout(300)
 ROBOT = Robot.default()
@@ -158,6 +159,39 @@ def test_spinal_silence_while_perched_holds() -> None:
         assert f.node.monitors.counts["spinal_silent"] == 1
         assert f.node.counts["spinal_silent_hold"] == 1
         assert f.node.flight.mode.value == "manual"
+    finally:
+        f.close()
+
+
+@pytest.mark.parametrize("perched", [False, True])
+def test_spinals_can_disconnected_log_lands_in_flight_and_holds_perched(perched) -> None:
+    """Spinal's only report of its Neuron bus, a ``logerror`` "CAN disconnected!!"
+    (jsk-wire-protocols.md sec. 2.6): counted ``can_disconnected``, logged, in flight land,
+    perched hold. The same text at warn level, and another error line, change nothing."""
+    f = Flight()
+    try:
+        f.hover_at(1.0)
+        if perched:
+            f.node.request_perch(True)
+            f.run(0.1)
+        f.rig.spinal.log(LogLevel.WARN, "CAN disconnected!!")
+        f.rig.spinal.log(LogLevel.ERROR, "CAN: 4 Neurons [1, 2, 3, 4], uav_model 16")
+        f.run(0.1)
+        assert f.node.monitors.counts["can_disconnected"] == 0
+        assert f.node.flight.mode.value != "land"
+        f.rig.spinal.log(LogLevel.ERROR, "CAN disconnected!!")
+        f.run(0.05)
+        assert f.node.monitors.counts["can_disconnected"] == 1
+        event = f.node.monitors.events[-1]
+        assert event["monitor"] == "can_disconnected" and "CAN disconnected!!" in event["reason"]
+        if perched:
+            assert f.node.counts["can_disconnected_hold"] == 1
+            assert f.node.flight.mode.value == "manual" and f.node.control.perching
+        else:
+            assert f.node.counts["can_disconnected_land"] == 1
+            assert f.node.flight.mode.value == "land"
+            f.run_until(lambda: not f.spinal.core.armed, 20.0)
+            assert f.plant.z < 0.01
     finally:
         f.close()
 

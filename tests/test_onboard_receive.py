@@ -247,11 +247,16 @@ def test_imu_converted_when_read_matches_every_message():
     as converting every message (independent: quaternion_to_euler / np.array of the last
     valid one), invalid ones counted and skipped, non-tuple gyro through ``_vector``."""
 
+    from rdm.nodes.onboard_config import OnboardConfig
+    from rdm.nodes.onboard_monitors import MonitorLimits
     from rdm.protocol.rosserial.events import MessageReceived
     from rdm.protocol.rosserial.registry import spinal_registry
 
     imu = spinal_registry().msg("spinal/Imu")
-    node = OnboardNode(FedByteLink())
+    # every random reading a jump: the plausibility limits on jumps out of the way here
+    # (tests/test_onboard_imu_plausibility.py checks them)
+    loose = MonitorLimits(imu_gyro_rate_max=1e9, imu_attitude_rate_max=1e9)
+    node = OnboardNode(FedByteLink(), config=OnboardConfig(monitors=loose))
     assert node.imu_euler is None and node.imu_gyro is None
     rng = random.Random(9)
     want_euler = want_gyro = None

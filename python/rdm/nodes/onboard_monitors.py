@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter, deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -60,10 +61,40 @@ class MonitorLimits:
     #: ``perch_qp_failed``. ASSUMPTION: 2 s (80 ticks at 40 Hz): the contact transient of a
     #: normal perch gives up to 28 infeasible ticks in a row (whole mission, seeds 0-7).
     perch_qp_fail_s: float = 2.0
+    #: IMU plausibility (``imu`` from Spinal, :meth:`Monitors.imu_plausible`): a reading
+    #: outside these is refused and counted ``imu_implausible``; with no plausible one for
+    #: ``imu_timeout_s`` the stale-IMU monitor (``spinal_silent``) trips. Largest
+    #: accelerometer component, m/s^2: the ICM-20948's +-8 g full scale (78.45 m/s^2,
+    #: jsk-wire-protocols.md sec. 3.2) and 10 % for Spinal's bias and temperature-scale
+    #: corrections (ASSUMPTION). No jump limit on the accelerometer: an impact (touchdown,
+    #: the perch contact) takes it across its whole range within one sample (the mission's
+    #: perch contact: 41 m/s^2 between two samples).
+    imu_acc_max: float = 86.3
+    #: Largest gyro component, rad/s: the +-2000 deg/s full scale (34.9 rad/s) and 10 %.
+    imu_gyro_max: float = 38.4
+    #: Largest change of the gyro reading per second between two readings, rad/s^2 (the
+    #: time between them: the node's receive times, at least Spinal's 5 ms publishing
+    #: interval). ASSUMPTION: 2000 rad/s^2, ten times the mission's largest (about 210
+    #: rad/s^2, seeds 0-2, the perch contact included) and below the 5800 rad/s^2 Spinal's
+    #: gyro filter can give at all (a full-scale step through its factor-12 IIR at 1 kHz).
+    imu_gyro_rate_max: float = 2000.0
+    #: Largest rotation of the attitude quaternion per second between two readings, rad/s:
+    #: Spinal's estimator turns its attitude with the gyro, so no faster than the gyro's full
+    #: scale on every axis (sqrt(3) x 34.9 rad/s); the acceleration correction adds 1/601 of
+    #: an angle every third sample. ASSUMPTION: 61 rad/s (the mission's largest: 9 rad/s).
+    imu_attitude_rate_max: float = 61.0
+    #: Largest | |q| - 1 | of the attitude quaternion. ASSUMPTION: 1e-3; Spinal builds it from
+    #: an orthonormal rotation matrix in float32 (the mission's largest: 4e-8).
+    imu_quat_norm_tol: float = 1e-3
 
     def __post_init__(self) -> None:
         for name in (
             "imu_timeout_s",
+            "imu_acc_max",
+            "imu_gyro_max",
+            "imu_gyro_rate_max",
+            "imu_attitude_rate_max",
+            "imu_quat_norm_tol",
             "servo_timeout_s",
             "low_battery_s",
             "joint_tracking_rad",
@@ -95,6 +126,9 @@ def battery_cells(voltages: list[float]) -> int:
 
 #: How many of the latest monitor events the status carries.
 EVENTS_KEPT = 32
+#: Spinal publishes ``imu`` no faster than every 5 ms (``IMU_PUB_INTERVAL``,
+#: jsk-wire-protocols.md sec. 1.6): the least time between two readings, s.
+IMU_PUB_INTERVAL_S = 0.005
 
 
 class Monitors:
@@ -108,14 +142,21 @@ class Monitors:
         #: each is logged). ASSUMPTION: 32 is enough to see how a flight ended while keeping
         #: a status line short.
         self.events: deque[dict[str, Any]] = deque(maxlen=EVENTS_KEPT)
+        #: the time of each monitor's first trip (the event list keeps only the latest)
+        self.first_trip: dict[str, float] = {}
         self.voltage: float | None = None
         self._low_since: float | None = None
         self._stale: set[str] = set()
         self._since: dict[str, float] = {}
+        #: the last plausible ``imu`` reading: receive time, gyro, quaternion
+        self._imu_ok: tuple[float, tuple[float, ...] | None, tuple[float, ...]] | None = None
+        #: whether the latest ``imu`` reading was refused (a run of refusals logs once)
+        self.imu_refusing = False
 
     def trip(self, name: str, reason: str, now: float) -> None:
         """Count, log and remember one trip."""
         self.counts[name] += 1
+        self.first_trip.setdefault(name, round(now, 4))
         self.events.append({"t": round(now, 4), "monitor": name, "reason": reason})
         LOG.warning("t=%.3f %s: %s", now, name, reason)
 
@@ -165,6 +206,52 @@ class Monitors:
                 f"battery {self.voltage:.2f} V below {self.limits.cell_arm_min * self.cells:.2f} V"
             )
         return None
+
+    # -- IMU plausibility ----------------------------------------------------------------
+    def imu_plausible(
+        self,
+        now: float,
+        acc: Sequence[float],
+        gyro: Sequence[float] | None,
+        quat: Sequence[float],
+    ) -> bool:
+        """Whether an ``imu`` reading (accelerometer, gyro or None when not finite, the
+        finite quaternion x, y, z, w) is physically possible: every accelerometer and gyro
+        component inside the sensor's range, a unit quaternion, and against the last
+        plausible reading no larger gyro change or attitude rotation than the limits allow
+        in the time between them (:class:`MonitorLimits`). A refused reading is counted
+        ``imu_implausible``; the first of a run of them is logged and kept as an event."""
+        lim = self.limits
+        reason = None
+        if not all(math.isfinite(a) and abs(a) <= lim.imu_acc_max for a in acc):
+            reason = f"acc {acc} beyond {lim.imu_acc_max} m/s^2"
+        elif gyro is not None and not all(abs(g) <= lim.imu_gyro_max for g in gyro):
+            reason = f"gyro {gyro} beyond {lim.imu_gyro_max} rad/s"
+        elif abs(math.sqrt(math.fsum([v * v for v in quat])) - 1.0) > lim.imu_quat_norm_tol:
+            reason = f"quaternion norm off 1 by more than {lim.imu_quat_norm_tol}"
+        elif self._imu_ok is not None:
+            at, gyro0, quat0 = self._imu_ok
+            dt = max(IMU_PUB_INTERVAL_S, now - at)
+            if gyro is not None and gyro0 is not None:
+                jump = max(abs(a - b) for a, b in zip(gyro, gyro0, strict=True))
+                if jump > lim.imu_gyro_rate_max * dt:
+                    reason = f"gyro jumped {jump:.3g} rad/s in {dt:.3f} s"
+            if reason is None:
+                dot = abs(math.fsum([a * b for a, b in zip(quat, quat0, strict=True)]))
+                turn = 2.0 * math.acos(min(1.0, dot / math.sqrt(math.fsum([v * v for v in quat]))))
+                if turn > lim.imu_attitude_rate_max * dt:
+                    reason = f"attitude turned {turn:.3g} rad in {dt:.3f} s"
+        if reason is None:
+            kept = self._imu_ok[1] if gyro is None and self._imu_ok is not None else gyro
+            self._imu_ok = (now, None if kept is None else tuple(kept), tuple(quat))
+            self.imu_refusing = False
+            return True
+        if self.imu_refusing:
+            self.counts["imu_implausible"] += 1
+        else:
+            self.imu_refusing = True
+            self.trip("imu_implausible", reason, now)
+        return False
 
     # -- freshness and limits ------------------------------------------------------------
     def stale(self, name: str, condition: bool, now: float, reason: str) -> bool:

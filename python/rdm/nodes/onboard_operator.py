@@ -55,6 +55,9 @@ def _scalar(value: Any) -> float | None:
 class OnboardOperator:
     """The inputs and operator commands of :class:`rdm.nodes.onboard.OnboardNode` (a part of it)."""
 
+    #: the model's joint limits, read on first use (:meth:`_joint_limits`)
+    _joint_limits_cache: tuple[np.ndarray, np.ndarray] | None = None
+
     def set_mocap(
         self, position: Sequence[float], velocity: Sequence[float], yaw: float | None = None
     ) -> bool:
@@ -115,9 +118,15 @@ class OnboardOperator:
         return True
 
     def set_joint_targets(self, q: Sequence[float]) -> bool:
-        """Joint targets: q1..q6 (vectoring targets kept) or the full joint_order vector."""
+        """Joint targets: q1..q6 (vectoring targets kept) or the full joint_order vector,
+        finite and inside the model's joint limits (else counted ``joint_targets_invalid``
+        and ignored)."""
         n_q = self.robot.n_q
         arr = _vector(q, 6 if np.size(q) == 6 else n_q)
+        if arr is not None:
+            lo, hi = self._joint_limits()
+            if not (np.all(arr >= lo[: arr.size]) and np.all(arr <= hi[: arr.size])):
+                arr = None
         if arr is None:
             self.counts["joint_targets_invalid"] += 1
             return False
@@ -127,6 +136,25 @@ class OnboardOperator:
         self.joint_targets = base
         self._trajectory = None
         return True
+
+    def _joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """The model's joint limits (lower, upper) [rad], in joint order (read once)."""
+        if self._joint_limits_cache is None:
+            lo, hi = np.asarray(self.robot.joint_limits, dtype=float).T
+            self._joint_limits_cache = (lo.copy(), hi.copy())
+        return self._joint_limits_cache
+
+    def _hold_joints(self, q: np.ndarray) -> bool:
+        """Hold the joints at ``q`` (the present angles): clamped to the model's joint limits
+        (a reading outside them, inside the wire's range, counted ``joint_hold_clamped``),
+        then through :meth:`set_joint_targets`' checks. False (nothing held) when refused."""
+        lo, hi = self._joint_limits()
+        q = np.asarray(q, dtype=float)
+        n = min(q.size, lo.size)
+        held = np.clip(q[:n], lo[:n], hi[:n])
+        if not np.array_equal(held, q[:n]):
+            self.counts["joint_hold_clamped"] += 1
+        return self.set_joint_targets(held)
 
     def set_trajectory(self, points: Sequence[tuple[float, Sequence[float]]]) -> bool:
         """Planner output: (node time [s], full joint_order q) pairs, strictly increasing

@@ -1,7 +1,7 @@
 """The onboard node's receive side: the rosserial events from Spinal (``imu``, ``servo/states``,
 ``servo/torque_states``, ``flight_config_ack``, ``battery_voltage_status``, the ``imu_calib``
-answer, a lost sync), the ``imu`` and ``servo/states`` payloads read without the codec, and the
-cache of servo readings seen before.
+answer, a lost sync, the ``"CAN disconnected!!"`` log), the ``imu`` and ``servo/states``
+payloads read without the codec, and the cache of servo readings seen before.
 
 :class:`OnboardReceive` is a part of :class:`rdm.nodes.onboard.OnboardNode`: its methods read
 and write the node's state (``present_q``, ``counts``, ``arming``, ``config`` ...).
@@ -18,7 +18,13 @@ import numpy as np
 from rdm.nodes.onboard_arming import FlightState
 from rdm.nodes.onboard_calibration import GET_CALIB_DATA
 from rdm.nodes.onboard_operator import _vector
-from rdm.protocol.rosserial.events import MessageReceived, ServiceResponse, SyncLost
+from rdm.protocol.rosserial.constants import LogLevel
+from rdm.protocol.rosserial.events import (
+    LogReceived,
+    MessageReceived,
+    ServiceResponse,
+    SyncLost,
+)
 from rdm.protocol.rosserial.services import ServiceError
 
 #: How many distinct ``servo/states`` readings the node keeps the joint writes of.
@@ -29,6 +35,13 @@ SERVO_CACHE_SIZE = 8
 SERVO_JUMP_MAX_RAD = 0.35
 #: Implausible readings in a row after which the next one is taken (the joint did move).
 SERVO_REJECTS_MAX = 3
+#: Spinal's only report of its Neuron bus (``Spine::update``, jsk-wire-protocols.md sec. 2.6):
+#: a ``logerror`` once no CAN frame arrived for 100 ms, repeated at most once a second (the
+#: Spinal mirror's timing; another revision of ``Spine::update`` logs it 1 s after the bus is
+#: declared disconnected). It publishes no CAN error counter or bus state, and
+#: ``servo/states`` goes on every 20 ms from the values last received, so frame loss and a
+#: shorter bus-off show the node nothing.
+CAN_DISCONNECTED_LOG = "CAN disconnected!!"
 #: ``spinal/Imu`` payload from byte 20: gyro (3 float32), mag skipped, quaternion (4 float32).
 _IMU_GYRO_QUAT = struct.Struct("<3f12x4f")
 #: ``spinal/Imu`` payload from byte 8: the accelerometer (3 float32, m/s^2).
@@ -120,6 +133,11 @@ class OnboardReceive:
             self._announced = False
             self.imu_calibration.reset()
             return
+        if isinstance(event, LogReceived):
+            if event.level >= LogLevel.ERROR and event.text == CAN_DISCONNECTED_LOG:
+                self.monitors.trip("can_disconnected", f"Spinal: {event.text}", self._now)
+                self._react("can_disconnected", self._now)
+            return
         if isinstance(event, ServiceResponse):
             if event.service == "imu_calib":
                 r = event.response
@@ -134,16 +152,21 @@ class OnboardReceive:
             if not all(map(math.isfinite, q)) or abs(math.fsum([v * v for v in q]) - 1) > 0.1:
                 self.counts["imu_invalid"] += 1
                 return
-            self._imu_quat, self._imu_euler = q, None
-            self._imu_at, self._imu_acc = self._now, [float(v) for v in msg.acc]
+            acc = [float(v) for v in msg.acc]
             g = msg.gyro
-            if type(g) in (tuple, list) and len(g) == 3 and all(type(v) is float for v in g):
-                if all(map(math.isfinite, g)):  # what _vector accepts; converted when read
-                    self._gyro_src = g
-            else:
-                arr = _vector(g, 3)
-                if arr is not None:
-                    self._gyro_src, self._imu_gyro = None, arr
+            exact = type(g) in (tuple, list) and len(g) == 3 and all(type(v) is float for v in g)
+            # what _vector accepts; an exact float list converted when read
+            arr = None if exact else _vector(g, 3)
+            finite = all(map(math.isfinite, g)) if exact else arr is not None
+            gyro = (list(g) if exact else arr.tolist()) if finite else None  # type: ignore[union-attr]
+            if not self.monitors.imu_plausible(self._now, acc, gyro, q):
+                return
+            self._imu_quat, self._imu_euler = q, None
+            self._imu_at, self._imu_acc = self._now, acc
+            if exact and finite:
+                self._gyro_src = g
+            elif arr is not None:
+                self._gyro_src, self._imu_gyro = None, arr
         elif event.topic == "servo/states":
             self._on_servo_states(msg)
         elif event.topic == "servo/torque_states":
@@ -164,17 +187,22 @@ class OnboardReceive:
 
     def _on_imu_payload(self, payload: bytes) -> None:
         """An ``imu`` message from its payload (one the codec decodes): what ``_on_event`` does
-        with the decoded message, reading only the gyro and the quaternion."""
+        with the decoded message, reading only the accelerometer, the gyro and the quaternion;
+        a reading :meth:`Monitors.imu_plausible` refuses is not taken."""
         self.counts["rx:imu"] += 1
         gx, gy, gz, x, y, z, w = _IMU_GYRO_QUAT.unpack_from(payload, 20)
         q = [x, y, z, w]
         if not all(map(math.isfinite, q)) or abs(math.fsum((x * x, y * y, z * z, w * w)) - 1) > 0.1:
             self.counts["imu_invalid"] += 1
             return
-        self._imu_quat, self._imu_euler = q, None
-        self._imu_at, self._imu_acc = self._now, list(_IMU_ACC.unpack_from(payload, 8))
+        acc = list(_IMU_ACC.unpack_from(payload, 8))
         g = [gx, gy, gz]
-        if all(map(math.isfinite, g)):
+        finite = all(map(math.isfinite, g))
+        if not self.monitors.imu_plausible(self._now, acc, g if finite else None, q):
+            return
+        self._imu_quat, self._imu_euler = q, None
+        self._imu_at, self._imu_acc = self._now, acc
+        if finite:
             self._gyro_src = g
 
     def _on_servo_payload(self, payload: bytes) -> None:
@@ -279,5 +307,7 @@ class OnboardReceive:
         return entry if cacheable else None
 
     def _hold_present_q(self) -> None:
+        """Once every joint has a reading and no target is known: hold where the arm is
+        (:meth:`~rdm.nodes.onboard_operator.OnboardOperator._hold_joints`)."""
         if self.joint_targets is None and self._trajectory is None and self._seen.all():
-            self.joint_targets = self.present_q.copy()  # hold where the arm is
+            self._hold_joints(self.present_q)

@@ -202,7 +202,8 @@ class OnboardStep:
         if self._link_up_at is not None:
             last = self._imu_at if self._imu_at is not None else self._link_up_at
             silent = now - last > lim.imu_timeout_s + 1e-9
-            if m.stale("spinal_silent", silent, now, f"no imu for {now - last:.3f} s"):
+            why = f"no {'plausible ' if m.imu_refusing else ''}imu for {now - last:.3f} s"
+            if m.stale("spinal_silent", silent, now, why):
                 self._react("spinal_silent", now)
         if flying:
             last = self._servo_at if self._servo_at is not None else self._link_up_at
@@ -236,8 +237,8 @@ class OnboardStep:
         reason = f"joint {worst} {float(err[worst]) if n else 0.0:.3f} rad from its goal"
         if self.monitors.sustained("joint_tracking", off, lim.joint_tracking_s, now, reason):
             self._trajectory = None
-            self.joint_targets = self.present_q.copy()
-            self.counts["joints_held"] += 1
+            if self._hold_joints(self.present_q):
+                self.counts["joints_held"] += 1
             self._react("joint_tracking", now)
 
     def _monitor_perch_qp(self, now: float) -> None:

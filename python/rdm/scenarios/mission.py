@@ -67,7 +67,7 @@ FAULTS = (
     "uart-noise-1e-3",  # ... at p = 1e-3 (about one damaged frame in 30)
     "battery-sag",  # the battery sags 1 V/s from where it is (the node lands by itself)
     "foot-sensor-loss",  # the foot sensor's cable is cut once perched (the node holds)
-    "imu-spikes",  # IMU samples beyond the sensor's range, about 3 a second (Spinal drops them)
+    "imu-spikes",  # IMU samples beyond the sensor's range, about 3 a second (both drop them)
     "dead-esc",  # rotor 0 gives no thrust from the fault on (a quadrotor cannot hover)
     "stuck-servo",  # perched, q4's servo stops following its goal as the arm moves (held)
     "infeasible-qp",  # perched, the QP's friction limit set below what the contact needs
@@ -268,7 +268,9 @@ _DETECTED_BY = {
     "uart-noise-1e-3": ("parser", "bad_frames"),
     "battery-sag": ("monitors", "battery_low"),
     "foot-sensor-loss": ("monitors", "foot_stale"),
-    "imu-spikes": ("estimator", "out_of_range"),
+    # each outlier dropped by Spinal's estimator (``out_of_range``); its accelerometer value
+    # reaches the node on ``imu``, which refuses it
+    "imu-spikes": ("monitors", "imu_implausible"),
     "dead-esc": ("failsafes", "failsafe_tilt"),
     "stuck-servo": ("monitors", "joint_tracking"),
     "infeasible-qp": ("monitors", "perch_qp_failed"),
@@ -339,11 +341,15 @@ def outcome(stack: Stack, script: MissionScript, a: dict[str, np.ndarray]) -> di
         "monitors": dict(node.monitors.counts),
     }
     if script.fault != "none":  # when the node's monitor first tripped (None: another counter)
+        after = script.fault_at or 0
+        first = node.monitors.first_trip.get(key) if where == "monitors" else None
         trips = [
             e["t"]
             for e in node.monitors.events
-            if where == "monitors" and e["monitor"] == key and e["t"] >= (script.fault_at or 0)
+            if where == "monitors" and e["monitor"] == key and e["t"] >= after
         ]
+        if first is not None and first >= after:  # the event list keeps only the latest
+            trips.insert(0, first)
         record["detected_at_s"] = trips[0] if trips else None
     return record
 
