@@ -1,7 +1,7 @@
 """``perching-foot-at-plate`` end to end: the robot flown is the foot-at-plate description, the
 perching QP runs with Table VII's parameters, and every metric row is recomputed here from the
 raw per-tick records (MuJoCo ground truth and the scenario's rotor probe) with numpy written
-apart from the scenario's code. One default run (30 s simulated, ``log=False``)."""
+apart from the scenario's code. One default run (55 s simulated, ``log=False``)."""
 
 from __future__ import annotations
 
@@ -31,7 +31,17 @@ def test_registered_next_to_perching():
     """Bug caught: the registry pointing at the hanging scenario's run (same name prefix)."""
     sc = SCENARIOS["perching-foot-at-plate"]
     assert sc.run is fp.run
-    assert sc.default_duration == perching.DEFAULT_DURATION
+    assert sc.default_duration == fp.DEFAULT_DURATION
+
+
+def test_arm_motion_has_the_hanging_goals_at_fig10_timing():
+    """The variant's arm motion: the hanging scenario's goals, 10 s per segment (Fig. 10's
+    52-62 s episode), and the default run long enough for a hold after it (contact near 15 s
+    + settle + motion). Bugs caught: the 3 s segments of ``perching.PERCHED_MOTION`` kept,
+    a goal dropped or reordered, a duration that ends inside the motion."""
+    assert [d for d, _ in fp.FOOT_PLATE_MOTION] == [10.0, 10.0, 10.0]
+    assert [g for _, g in fp.FOOT_PLATE_MOTION] == [g for _, g in perching.PERCHED_MOTION]
+    assert fp.DEFAULT_DURATION > 15.0 + perching.SETTLE_S + 30.0 + 5.0
 
 
 def test_the_shipped_description_puts_the_foot_unit_at_the_plate():

@@ -107,7 +107,10 @@ def test_every_registered_scenario_resolves_to_its_module():
         "flight": (flight.run, flight.DEFAULT_DURATION),
         "mission": (mission.run, mission.DEFAULT_DURATION),
         "perching": (perching.run, perching.DEFAULT_DURATION),
-        "perching-foot-at-plate": (perching_foot_at_plate.run, perching.DEFAULT_DURATION),
+        "perching-foot-at-plate": (
+            perching_foot_at_plate.run,
+            perching_foot_at_plate.DEFAULT_DURATION,
+        ),
         "push": (push.run, push.DEFAULT_DURATION),
         "push-paper-forces": (push_paper.run, push_paper.DEFAULT_DURATION),
         "tracking": (tracking.run, tracking.DEFAULT_DURATION),
