@@ -32,6 +32,7 @@ import rdm
 from rdm.nodes.onboard import OnboardNode
 from rdm.nodes.onboard_config import OnboardConfig
 from rdm.nodes.onboard_monitors import MonitorLimits, Monitors
+from rdm.nodes.onboard_operator import JOINT_LIMIT_SLACK
 from rdm.protocol.rosserial.events import MessageReceived
 
 IMU = REG.msg("spinal/Imu")
@@ -272,7 +273,7 @@ def test_set_joint_targets_refuses_targets_outside_the_joint_limits() -> None:
     q = np.zeros(6)
     q[2] = hi
     assert node.set_joint_targets(q)
-    q[2] = math.nextafter(hi, math.inf)
+    q[2] = math.nextafter(hi + JOINT_LIMIT_SLACK, math.inf)
     assert not node.set_joint_targets(q)
     q[2] = lo - 0.01
     assert not node.set_joint_targets(q)

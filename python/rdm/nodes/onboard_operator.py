@@ -20,8 +20,15 @@ from rdm.nodes.joint_motion import plan_joint_motion
 from rdm.nodes.onboard_arming import FlightState
 from rdm.nodes.onboard_control import Setpoint
 from rdm.nodes.onboard_flight import FlightMode
+from rdm.nodes.onboard_monitors import LOG
 
 _F64 = np.dtype(np.float64)
+
+#: A joint goal this far past a limit [rad] is still taken (:meth:`OnboardOperator.
+#: _joint_limit_refusal`). ASSUMPTION: 1e-5 rad, far below a servo tick (~1e-3 rad): the
+#: shipped URDF writes the arm's limits as pi/2 to 11 decimals (1.57079632679) and the
+#: scenarios' postures as pi/2 to 5 decimals (1.5708, 3.7e-6 rad further), the same servo goal.
+JOINT_LIMIT_SLACK = 1e-5
 
 
 def _vector(value: Any, n: int) -> np.ndarray | None:
@@ -119,16 +126,14 @@ class OnboardOperator:
 
     def set_joint_targets(self, q: Sequence[float]) -> bool:
         """Joint targets: q1..q6 (vectoring targets kept) or the full joint_order vector,
-        finite and inside the model's joint limits (else counted ``joint_targets_invalid``
-        and ignored)."""
+        finite (else counted ``joint_targets_invalid`` and ignored) and inside the model's
+        joint limits (:meth:`_joint_limit_refusal`)."""
         n_q = self.robot.n_q
         arr = _vector(q, 6 if np.size(q) == 6 else n_q)
-        if arr is not None:
-            lo, hi = self._joint_limits()
-            if not (np.all(arr >= lo[: arr.size]) and np.all(arr <= hi[: arr.size])):
-                arr = None
         if arr is None:
             self.counts["joint_targets_invalid"] += 1
+            return False
+        if self._joint_limit_refusal(arr, "set_joint_targets") is not None:
             return False
         base = self.joint_targets if self.joint_targets is not None else self.present_q.copy()
         base = base.copy()
@@ -136,6 +141,32 @@ class OnboardOperator:
         self.joint_targets = base
         self._trajectory = None
         return True
+
+    def _joint_limit_refusal(self, q: np.ndarray, path: str) -> str | None:
+        """The joint-limit check of every joint command path (:meth:`set_joint_targets`,
+        :meth:`set_trajectory`, :meth:`move_joints`, the joint hold): ``q`` (one vector or one
+        row per point; the first columns of joint_order) inside the model's joint limits (the
+        limits and :data:`JOINT_LIMIT_SLACK` past them included). Else the refusal naming the
+        first joint outside, its value and the limit, logged as one line and counted
+        ``joint_targets_invalid``; None when inside. A value that is not finite is outside."""
+        lo, hi = self._joint_limits()
+        rows = np.atleast_2d(np.asarray(q, dtype=float))
+        n = rows.shape[1]
+        outside = ~((rows >= lo[:n] - JOINT_LIMIT_SLACK) & (rows <= hi[:n] + JOINT_LIMIT_SLACK))
+        if not outside.any():
+            return None
+        k, j = (int(i) for i in np.argwhere(outside)[0])
+        v = float(rows[k, j])
+        if v < lo[j]:
+            rule = f"below its lower limit {float(lo[j])!r}"
+        elif v > hi[j]:
+            rule = f"above its upper limit {float(hi[j])!r}"
+        else:
+            rule = "not finite"
+        reason = f"joint {self.robot.joint_names[j]} = {v!r} rad {rule} rad"
+        self.counts["joint_targets_invalid"] += 1
+        LOG.warning("%s refused: %s", path, reason)
+        return reason
 
     def _joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
         """The model's joint limits (lower, upper) [rad], in joint order (read once)."""
@@ -158,7 +189,9 @@ class OnboardOperator:
 
     def set_trajectory(self, points: Sequence[tuple[float, Sequence[float]]]) -> bool:
         """Planner output: (node time [s], full joint_order q) pairs, strictly increasing
-        times; targets are interpolated linearly and held after the last point."""
+        times, every point inside the model's joint limits (:meth:`_joint_limit_refusal`;
+        the linear interpolation between them stays inside); targets are interpolated
+        linearly and held after the last point. False (the trajectory kept) when refused."""
         try:
             times = np.array([float(t) for t, _ in points])
             qs = np.array([np.asarray(q, dtype=float).reshape(-1) for _, q in points])
@@ -173,13 +206,16 @@ class OnboardOperator:
         ):
             self.counts["trajectory_invalid"] += 1
             return False
+        if self._joint_limit_refusal(qs, "set_trajectory") is not None:
+            return False
         self._trajectory = (times, qs)
         return True
 
     def move_joints(self, q: Sequence[float]) -> str | None:
         """Move the joints to ``q`` (q1..q6, vectoring targets kept, or the full joint_order
         vector) along a jerk-limited path (:mod:`rdm.nodes.joint_motion`, limits
-        ``FlightLimits.joint_max_*``) from the present targets; the refusal reason or None."""
+        ``FlightLimits.joint_max_*``) from the present targets; the goal inside the model's
+        joint limits (:meth:`_joint_limit_refusal`). The refusal reason or None."""
         n_q = self.robot.n_q
         arr = _vector(q, 6 if np.size(q) == 6 else n_q)
         if arr is None:
@@ -189,6 +225,9 @@ class OnboardOperator:
         start = (self.present_q if start is None else start).copy()
         goal = start.copy()
         goal[: arr.size] = arr
+        refusal = self._joint_limit_refusal(goal, "move_joints")
+        if refusal is not None:
+            return refusal
         lim = self.config.flight
         points = plan_joint_motion(
             self._now,
