@@ -43,7 +43,6 @@ from rdm.nodes.spinal_mirror_commands import (
     _COMMAND_KINDS,
     _COMMAND_TYPES,
     SpinalCommands,
-    _wire_layout,
     rejection_reason,
 )
 from rdm.nodes.spinal_mirror_control import SpinalControl
@@ -192,7 +191,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
                 type_ is not None
                 and slot.service is None
                 and slot.codec.full_name == type_
-                and _wire_layout(slot.codec) == _wire_layout(builtin.msg(type_))
+                and slot.codec.field_tree() == builtin.msg(type_).field_tree()
                 and self._routes.get(slot.name) is not None
             ):
                 applied.add(slot.name)
