@@ -30,7 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from math import floor as _floor
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, ClassVar
 
 import can
 import numpy as np
@@ -109,6 +109,10 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
     ``spinal_options`` go to :class:`SpinalStep` (``time_matched``, ``anti_windup``,
     ``command_timeout_s``, estimator overrides such as ``gyro_calib_duration_s`` ...).
     """
+
+    #: Its part of the lockstep kernel (``rdm.nodes.lockstep_kernel.kind_of``); read from
+    #: this class itself, so a subclass has only its Python tick unless it sets its own.
+    lockstep_part: ClassVar[str] = "spinal"
 
     def __init__(
         self,
