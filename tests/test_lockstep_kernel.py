@@ -18,8 +18,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
 from rdm.nodes.lockstep import Lockstep
-from rdm.nodes.lockstep_kernel import attach_kernel
+from rdm.nodes.lockstep_kernel import attach_kernel, kind_of
+from rdm.nodes.neuron_bank import NeuronBankNode
+from rdm.nodes.plant_bridge import PlantBridge
+from rdm.nodes.spinal_mirror import SpinalMirror
 from rdm.scenarios.common import sim_stack_options
 from rdm.scenarios.hover import HOVER_Z, make_script
 from rdm.scenarios.stack import Stack, build_stack
@@ -435,3 +439,19 @@ def test_flight_scenario_script_declares_the_plant_only(tmp_path: Path) -> None:
     assert fast["plant_bridge"] > 2500 and stats["physics_fast"] > 2500
     refs = [s.flight_script(None).ref for s in scripts]  # made at arming in both runs
     assert refs[0].cog_at_rest.tobytes() == refs[1].cog_at_rest.tobytes()
+
+
+def test_kind_of_reads_the_class_own_part_only() -> None:
+    """The four node classes with a kernel part, by the part names the kernel's plans use;
+    a subclass (which may override ``tick``) has none. Catches ``getattr`` (inherited part)
+    in ``kind_of`` or a part name swapped between two classes."""
+    expected = {
+        PlantBridge: "bridge",
+        NeuronBankNode: "bank",
+        SpinalMirror: "spinal",
+        LeptrinoSensorNode: "leptrino",
+    }
+    for cls, part in expected.items():
+        assert kind_of(object.__new__(cls)) == part
+        assert kind_of(object.__new__(type("Sub", (cls,), {}))) is None
+    assert kind_of(object()) is None

@@ -83,8 +83,9 @@ def _frame(topic: int, payload: bytes) -> bytes:
 
 
 def test_the_generated_layouts_take_every_link_type():
-    """Catches a layout generator that returns None for a link type, leaving it on the
-    per-field path these tests would then check instead."""
+    """Catches a layout generator that sends a link type down the variable-size path when a
+    single struct packs it, or inlines a nested array it cannot (the Rust frame builders
+    rely on the signatures)."""
     for name in (
         "spinal/ServoStates",
         "spinal/RollPitchYawTerms",
@@ -92,10 +93,15 @@ def test_the_generated_layouts_take_every_link_type():
         "spinal/ServoControlCmd",
         "spinal/Pwms",
         "spinal/PMatrixPseudoInverseWithInertia",
+        "rosserial_msgs/TopicInfo",
     ):
-        assert REG.msg(name)._var is not None, name
+        assert REG.msg(name).fixed_size is None, name
     for name in ("spinal/Imu", "spinal/ServoState", "spinal/RollPitchYawTerm"):
-        assert REG.msg(name)._flat is not None, name
+        assert REG.msg(name).fixed_size == REG.msg(name).layout.size, name
+    assert REG.msg("spinal/ServoStates").layout.signature() == (
+        ("fixed", (("stamp", "t", None),), "II"),
+        ("nested", "servos", "BhBhB", ("index", "angle", "temp", "load", "error")),
+    )
 
 
 def test_golden_topic_frames_decode_and_re_encode_identically():
@@ -118,7 +124,7 @@ def test_golden_topic_frames_decode_and_re_encode_identically():
 def test_random_messages_equal_rosbags_both_ways():
     """Random edge values (extremes, -0.0, inf, empty and long arrays) of every type: the
     bytes are rosbags' bytes and decode back to rosbags' values, through ``encode``,
-    ``encode_into``, the generated ``_pack``, ``decode`` and ``decode_from`` at an offset.
+    ``encode_into``, the generated ``layout.pack``, ``decode`` and ``decode_from`` at an offset.
     Catches e.g. a ``<h`` written for a ``uint16`` or an array count packed as ``B``."""
     rng = random.Random(11)
     for name in TYPES:
@@ -128,8 +134,7 @@ def test_random_messages_equal_rosbags_both_ways():
             msg = _message(codec, rng)
             data = codec.encode(msg)
             assert data == _rosbags(name, msg), name
-            if codec._pack is not None:  # the generated layout itself took it
-                assert codec._pack(msg) == data, name
+            assert codec.layout.pack(msg) == data, name  # the generated layout took it as it is
             out = bytearray(b"\x01")
             codec.encode_into(msg, out)
             assert bytes(out) == b"\x01" + data
@@ -189,6 +194,54 @@ def test_encode_errors_name_the_field_and_the_rule(name, field, value, error):
     codec = REG.msg(name)
     with pytest.raises(rc.EncodeError, match=error):
         codec.encode(codec.cls(**{field: value}))
+
+
+@pytest.mark.parametrize(
+    "name, value, error",
+    [
+        ("rosserial_msgs/Log", {"level": 1, "msg": 5}, r"Log\.msg: expected str or bytes"),
+        ("rosserial_msgs/Log", {"level": 300, "msg": ""}, r"Log\.level: 300 does not fit uint8"),
+        ("spinal/GetBoardInfoResponse", {"boards": [{}]}, r"BoardInfo: missing field 'slave_id'"),
+        ("spinal/PwmInfo", {"motor_info": [{"polynominal": [0.0] * 4}]}, r"MotorInfo: missing"),
+        ("spinal/ESCTelemetryArray", {"stamp": (1, -1)}, r"ESCTelemetryArray\.stamp: bad time"),
+    ],
+)
+def test_encode_errors_of_strings_and_nested_messages(name, value, error):
+    """Dict input to the types with strings and nested messages: the refused field is named
+    (catches a nested refusal that escapes as a bare AttributeError or struct error)."""
+    codec = REG.msg(name)
+    full = {**rc.message_to_dict(codec.new()), **value}
+    with pytest.raises(rc.EncodeError, match=error):
+        codec.encode(full)
+
+
+@pytest.mark.parametrize(
+    "name, hex_payload, error",
+    [
+        # stamp 8 + acc 12 bytes: gyro starts at offset 20
+        ("spinal/Imu", "00" * 20, r"^spinal/Imu\.gyro: needs 12 bytes at offset 20, only 0 left$"),
+        # level 1 byte, then the string length 5 at offset 1, its bytes from offset 5
+        ("rosserial_msgs/Log", "0305000000616263", r"Log\.msg: needs 5 bytes at offset 5,"),
+        # stamp 8 bytes, count 2 at offset 8, elements from offset 12
+        (
+            "spinal/ServoStates",
+            "01000000020000000200000001",
+            r"ServoStates\.servos: count 2 exceeds the remaining bytes at offset 12$",
+        ),
+        # one BoardInfo (5 bytes of fields from offset 4), its servos count at offset 9
+        (
+            "spinal/GetBoardInfoResponse",
+            "01000000010203040005000000",
+            r"^spinal/BoardInfo\.servos: count 5 exceeds the remaining bytes at offset 13$",
+        ),
+        ("spinal/Pwms", "01000000010000", r"^spinal/Pwms: 1 trailing bytes at offset 6$"),
+    ],
+)
+def test_decode_errors_name_the_field_and_the_offset(name, hex_payload, error):
+    """Offsets counted from the ``.msg`` layout by hand: catches an error that names the
+    start of the message or of the segment instead of the field that does not fit."""
+    with pytest.raises(rc.DecodeError, match=error):
+        REG.msg(name).decode(bytes.fromhex(hex_payload))
 
 
 def test_corrupt_payloads_decode_as_rosbags_or_raise():

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Sequence
+from typing import ClassVar
 
 from rdm._rdm import leptrino_force_frame
 from rdm.link.tapped_link import TappedLink
@@ -34,6 +35,10 @@ class LeptrinoSensorNode:
     ``uart`` is any byte link with ``read_available() -> bytes`` and ``write(bytes) -> int``
     (a :class:`rdm.link.serial.SerialLink` pty end, or a capture wrapper around one).
     """
+
+    #: Its part of the lockstep kernel (``rdm.nodes.lockstep_kernel.kind_of``); read from
+    #: this class itself, so a subclass has only its Python tick unless it sets its own.
+    lockstep_part: ClassVar[str] = "leptrino"
 
     def __init__(
         self,

@@ -23,21 +23,15 @@ from rdm.link.can_wire import DRAIN_AT, CanWireLink
 from rdm.plant import option_flags
 from rdm.plant import sleep as plant_sleep
 
-from .leptrino_sensor import LeptrinoSensorNode
 from .lockstep import Lockstep
 from .neuron_bank import NeuronBankNode
 from .plant_bridge import PlantBridge
-from .spinal_mirror import SpinalMirror
 
 
 def kind_of(node: Any) -> str | None:
-    """The fast path a node of this class can have (None: only its Python tick)."""
-    return {
-        PlantBridge: "bridge",
-        NeuronBankNode: "bank",
-        SpinalMirror: "spinal",
-        LeptrinoSensorNode: "leptrino",
-    }.get(type(node))
+    """The fast path a node of this class can have: its class's own ``lockstep_part``
+    ("bridge", "bank", "spinal", "leptrino"; not inherited), None: only its Python tick."""
+    return type(node).__dict__.get("lockstep_part")
 
 
 def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
@@ -203,16 +197,16 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         _attach_plant(kernel, plant)
     leptrino = spinal = None
     for i, node in enumerate(nodes):
-        cls = type(node)
-        if cls is LeptrinoSensorNode:
+        kind = kind_of(node)
+        if kind == "leptrino":
             if leptrino is None:
                 kernel.attach_leptrino(i, node)
                 leptrino = node
-        elif cls is NeuronBankNode and isinstance(node._wire, CanWireLink):
+        elif kind == "bank" and isinstance(node._wire, CanWireLink):
             kernel.attach_bank(
                 i, node, node._core, node._wire.wire, list(node.boards), _bank_plan(node)
             )
-        elif cls is SpinalMirror and node._wire_link is not None and spinal is None:
+        elif kind == "spinal" and node._wire_link is not None and spinal is None:
             kernel.attach_spinal(i, node, node.master.core, node._wire_link.wire, DRAIN_AT)
             spinal = node
     for i, node in enumerate(nodes):
@@ -220,7 +214,7 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         if touches is not None and kind_of(node) is None:
             kernel.set_touches(i, list(touches))
     for i, node in enumerate(nodes):
-        bridged = type(node) is PlantBridge and len(node.banks) == 1
+        bridged = kind_of(node) == "bridge" and len(node.banks) == 1
         if bridged and plant is node.plant and plant is loop.physics:
             plan = _bridge_plan(node, leptrino, spinal)
             kernel.attach_bridge(i, node.banks[0]._core, plan, _bridge_store(node))

@@ -27,7 +27,7 @@ import dataclasses
 import math
 from collections import Counter
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import can
 
@@ -319,6 +319,10 @@ class NeuronBoardView:
 class NeuronBankNode:
     """Every Neuron of ``bus`` (the boards of ``specs``, ticked in that order) as one 1 kHz
     node; the board views are :attr:`boards`."""
+
+    #: Its part of the lockstep kernel (``rdm.nodes.lockstep_kernel.kind_of``); read from
+    #: this class itself, so a subclass has only its Python tick unless it sets its own.
+    lockstep_part: ClassVar[str] = "bank"
 
     def __init__(
         self,

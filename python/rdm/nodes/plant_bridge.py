@@ -36,6 +36,7 @@ import math
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -166,6 +167,10 @@ class PlantBridge:
     (a :class:`rdm.nodes.neuron_mirror.NeuronMirror` is a bank of one board): the bridge
     attaches the coupling to each bank its boards belong to (:attr:`banks`, layout order).
     """
+
+    #: Its part of the lockstep kernel (``rdm.nodes.lockstep_kernel.kind_of``); read from
+    #: this class itself, so a subclass has only its Python tick unless it sets its own.
+    lockstep_part: ClassVar[str] = "bridge"
 
     def __init__(
         self,

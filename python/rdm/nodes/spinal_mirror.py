@@ -30,7 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from math import floor as _floor
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, ClassVar
 
 import can
 import numpy as np
@@ -43,7 +43,6 @@ from rdm.nodes.spinal_mirror_commands import (
     _COMMAND_KINDS,
     _COMMAND_TYPES,
     SpinalCommands,
-    _wire_layout,
     rejection_reason,
 )
 from rdm.nodes.spinal_mirror_control import SpinalControl
@@ -110,6 +109,10 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
     ``spinal_options`` go to :class:`SpinalStep` (``time_matched``, ``anti_windup``,
     ``command_timeout_s``, estimator overrides such as ``gyro_calib_duration_s`` ...).
     """
+
+    #: Its part of the lockstep kernel (``rdm.nodes.lockstep_kernel.kind_of``); read from
+    #: this class itself, so a subclass has only its Python tick unless it sets its own.
+    lockstep_part: ClassVar[str] = "spinal"
 
     def __init__(
         self,
@@ -192,7 +195,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
                 type_ is not None
                 and slot.service is None
                 and slot.codec.full_name == type_
-                and _wire_layout(slot.codec) == _wire_layout(builtin.msg(type_))
+                and slot.codec.field_tree() == builtin.msg(type_).field_tree()
                 and self._routes.get(slot.name) is not None
             ):
                 applied.add(slot.name)

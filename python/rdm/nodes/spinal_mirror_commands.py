@@ -54,17 +54,6 @@ _IMU_CALIB_GYRO = 2  # spinal/ImuCalib CALIB_GYRO
 _MAG_SET = 1  # spinal/MagDeclination SET
 
 
-def _wire_layout(codec: Any) -> tuple[Any, ...]:
-    """``(name, base type, array length, nested layout)`` of every field of ``codec``,
-    nested types expanded: two codecs with equal layouts decode a payload to the same
-    values."""
-    out = []
-    for f in codec.spec.fields:
-        nested = None if f.is_primitive else _wire_layout(codec._resolve(f.base_type))
-        out.append((f.name, f.base_type, f.array_len, nested))
-    return tuple(out)
-
-
 def rejection_reason(text: str) -> str:
     """Counter key for a :class:`CommandRejectedError` message of the core."""
     lowered = text.lower()

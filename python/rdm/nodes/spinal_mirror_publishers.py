@@ -26,15 +26,20 @@ SERVO_TORQUE_PUB_MS = 1000  # >= 1000 ms
 _NEVER = -(2**62)
 
 
-#: The ``spinal/Imu`` layout ``rdm._rdm.spinal_imu_frame`` writes (``codec._FlatLayout``).
-_IMU_PARTS = [
-    ("stamp", "t", None),
-    ("acc", "a", 3),
-    ("gyro", "a", 3),
-    ("mag", "a", 3),
-    ("quaternion", "a", 4),
-]
-_IMU_FORMAT = "<II3f3f3f4f"
+#: The generated layout of ``spinal/Imu`` that ``rdm._rdm.spinal_imu_frame`` packs.
+_IMU_SIGNATURE = (
+    (
+        "fixed",
+        (
+            ("stamp", "t", None),
+            ("acc", "a", 3),
+            ("gyro", "a", 3),
+            ("mag", "a", 3),
+            ("quaternion", "a", 4),
+        ),
+        "II3f3f3f4f",
+    ),
+)
 
 
 class SpinalPublishers:
@@ -109,8 +114,7 @@ class SpinalPublishers:
             return False  # the message path raises it
         codec = slot.codec
         if codec is not self._imu_codec:
-            flat = codec._flat
-            if flat is None or flat.parts != _IMU_PARTS or flat.struct.format != _IMU_FORMAT:
+            if codec.layout.signature() != _IMU_SIGNATURE:
                 return False
             self._imu_codec = codec
         topic_id = slot.topic_id

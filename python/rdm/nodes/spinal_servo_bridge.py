@@ -30,28 +30,18 @@ class MirrorRejection(ValueError):
         self.reason = reason
 
 
-#: One ``spinal/ServoState`` (index, angle, temp, load, error) as the codec packs it.
-_SERVO_STATE_FORMAT = "BhBhB"
-_SERVO_STATE_FIELDS = ["index", "angle", "temp", "load", "error"]
+#: The generated layout of ``spinal/ServoStates`` that ``rdm._rdm.spinal_servo_states_frame``
+#: packs: ``time stamp`` then ``ServoState[] servos`` (index, angle, temp, load, error) inline.
+_SERVO_STATES_SIGNATURE = (
+    ("fixed", (("stamp", "t", None),), "II"),
+    ("nested", "servos", "BhBhB", ("index", "angle", "temp", "load", "error")),
+)
 
 
 def _is_servo_states_layout(codec: Any) -> bool:
     """Whether ``codec`` packs ``spinal/ServoStates`` as ``rdm._rdm.spinal_servo_states_frame``
-    does: ``time stamp`` then ``ServoState[] servos`` of the five fields above, through the
-    codec's whole-message layout (``codec._VarLayout``)."""
-    var = getattr(codec, "_var", None)
-    if var is None or getattr(codec, "_flat", None) is not None:
-        return False
-    segments = var._segments
-    if len(segments) != 2 or segments[0] != ("fixed", [("stamp", "t", None)], "II"):
-        return False
-    kind, name, nested, _size, body = segments[1]
-    return (
-        kind == "nested"
-        and name == "servos"
-        and body == _SERVO_STATE_FORMAT
-        and [f.name for f in nested.spec.fields] == _SERVO_STATE_FIELDS
-    )
+    does (its generated layout's signature)."""
+    return codec.layout.signature() == _SERVO_STATES_SIGNATURE
 
 
 def target_rejection(exc: ValueError) -> MirrorRejection:

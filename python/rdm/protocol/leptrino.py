@@ -508,6 +508,8 @@ MODELS: dict[str, SensorModel] = {
         SensorModel("PFS080YS102U6", (500.0, 500.0, 1000.0, 40.0, 40.0, 30.0)),
     )
 }
+#: the foot sensor of the robot (the fuzz harness scales its wrenches with it)
+FOOT_SENSOR = MODELS["CFS034CA301U"]
 END_EFFECTOR_SENSOR = MODELS["CFS018CA201U"]
 
 
