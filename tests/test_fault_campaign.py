@@ -289,6 +289,57 @@ def test_a_bus_off_past_the_watchdog_reaches_the_node_as_spinals_log(tmp_path, m
     assert not record["safe"] and record["outcome"] == "crashed"
 
 
+def _pwm_values(data: bytes) -> list[int]:
+    """The six 10-bit values of a Neuron PWM frame, unpacked here from the fact sheet's layout
+    (sec. 2.4: LSB first, 3 values per 4 bytes), not by the package."""
+    bits = int.from_bytes(data[:4], "little") | int.from_bytes(data[4:8], "little") << 32
+    return [(bits >> (10 * i + 2 * (i // 3))) & 0x3FF for i in range(6)]
+
+
+def test_pwm_unpacking_matches_the_fact_sheet_layout():
+    # d0 = v0[7:0], d1 = v1[5:0]<<2 | v0[9:8], d2 = v2[3:0]<<4 | v1[9:6], d3 = v2[9:4]
+    v = [788, 658, 199, 461, 1, 1000]
+    frame = bytearray()
+    for a, b, c in (v[:3], v[3:]):
+        frame += bytes([a & 0xFF, (b & 0x3F) << 2 | a >> 8, (c & 0xF) << 4 | b >> 6, c >> 4])
+    assert _pwm_values(bytes(frame)) == v
+
+
+def test_a_50_ms_bus_off_leaves_the_escs_on_one_held_pulse_while_spinal_computes_on(
+    tmp_path, monkeypatch
+):
+    """50 ms of bus-off, seed 1 (one of the seeds that flip): the Neurons hold the last PWM
+    frame's pulse (below their 100 ms watchdog, fact sheet sec. 2.6), so the truth's rotor
+    thrusts settle on it, none stopped, ranked as the held pulses; Spinal's attitude loop runs
+    on through the gap (no motor action there, sec. 2.6), so the first frame after it carries
+    the correction of the tilt that grew meanwhile, a step of over 100 us."""
+    monkeypatch.setattr(mission, "BUS_OFF_S", 0.05)
+    result = mission.run(
+        tmp_path, duration=mission.QUICK_DURATION, seed=1, fault="can-bus-off", quick=True
+    )
+    record, stack = result.facts["mission"], result.stack
+    at = record["fault_at_s"]
+    frames = []
+    for line in stack.folder.candump.read_text().splitlines():
+        stamp, _, frame = line.split()[:3]
+        can_id, data = frame.split("#")
+        if int(can_id, 16) == 0x00F:  # MOTOR device, msg 0, broadcast: slaves 1-6
+            frames.append((float(stamp.strip("()")), _pwm_values(bytes.fromhex(data))[:4]))
+    stamps = np.array([f[0] for f in frames])
+    k = int(np.searchsorted(stamps, at + 1e-3, side="right")) - 1  # the last before the gap
+    held, after = np.array(frames[k][1]), np.array(frames[k + 1][1])
+    assert stamps[k + 1] - at >= mission.BUS_OFF_S + 128 * 11 / 1e6
+    a = truth_arrays(stack)
+    t = a["t"]
+    late = a["thrust"][np.searchsorted(t, at + 0.04) : np.searchsorted(t, at + 0.05) + 1]
+    assert len(late) == 2  # 10 ms truth samples inside the gap, the rotors settled on it
+    assert np.abs(late[1] - late[0]).max() < 0.1
+    assert late[1].min() > 0.5  # no motor stopped (the watchdog is 100 ms)
+    assert list(np.argsort(late[1])) == list(np.argsort(held))
+    assert np.abs(after - held).max() > 100
+    assert not record["safe"] and record["outcome"] == "crashed"
+
+
 def test_can_loss_drops_its_share_of_the_pwm_broadcasts(tmp_path):
     record, stack = _quick(tmp_path, "can-loss-1e-1")
     stamps, ids = _candump(stack.folder.candump)

@@ -82,8 +82,9 @@ UART_NOISE = {"uart-noise-1e-4": 1e-4, "uart-noise-1e-3": 1e-3}
 CAN_LOSS = {"can-loss-1e-2": 1e-2, "can-loss-1e-1": 1e-1}
 #: How long ``can-bus-off`` disturbs the bus, s; the controllers rejoin 128 x 11 recessive
 #: bits (1.408 ms) after it. ASSUMPTION: a connector glitch of 20 ms. The ESCs hold their
-#: last pulse meanwhile; with 50 ms the held pulses tip the attitude loop over in 9 of 20
-#: seeds (docs/flying.md); beyond the Neurons' 100 ms watchdog every motor stops.
+#: last pulse meanwhile; with 50 ms 9 of 20 seeds flip: the held pulse is one phase of the
+#: hover's 12 Hz attitude limit cycle (excited by motion capture's noise), rotors 2/3 near
+#: the thrust floor (docs/flying.md); beyond the Neurons' 100 ms watchdog every motor stops.
 BUS_OFF_S = 0.02
 #: The board ``neuron-reset`` resets (bank index 0: slave 1, rotor 0's ESC and its servos).
 RESET_BOARD = 0
