@@ -190,6 +190,9 @@ class OnboardNode(OnboardOperator, OnboardReceive, OnboardStep, OnboardSend):
         self._arm_z: float | None = None
         self._announced = False
         self.integration_on_sent = False
+        #: Spinal's roll/pitch integration stopped (161) for ``rp_integration_hold_rate``
+        self.rp_integration_held = False
+        self._imu_cog_ref: tuple[float, np.ndarray] | None = None
         self.servos_torque_on = False
         self._torque_sent_at: float | None = None
         # messages rebuilt only when their content changed (same object -> same bytes)
@@ -256,6 +259,7 @@ class OnboardNode(OnboardOperator, OnboardReceive, OnboardStep, OnboardSend):
             if req == "arm":
                 self.control.reset_integrators()
                 self._arm_z, self.integration_on_sent = None, False
+                self.rp_integration_held, self._imu_cog_ref = False, None
         self._requests.clear()
         if self.counts["rx:servo/states"] != self._servo_rx:
             self._servo_rx, self._servo_at = self.counts["rx:servo/states"], now

@@ -20,6 +20,9 @@ from rdm.pwm import HYDRUS_MOTOR_INFO, SQRT_MODE
 
 #: Dynamixel X: 4096 ticks per turn, centre 2048 (``JointProfile.angle_scale`` /
 #: ``zero_point_offset`` of JSK's servo_bridge).
+#: Window [s] over which ``rp_integration_hold_rate`` measures the IMU link's turn against the
+#: CoG frame (the model terms change only with the reported joint angles, 40-100 Hz).
+RP_HOLD_WINDOW_S = 0.1
 DYNAMIXEL_RAD_PER_TICK = 2.0 * math.pi / 4096.0
 DYNAMIXEL_ZERO = 2048
 
@@ -121,6 +124,13 @@ class OnboardConfig:
     #: INTEGRATION_CONTROL_ON (160) once the mocap z is this far above the z at arming
     #: (JSK ``start_rp_integration_height``; value an ASSUMPTION).
     rp_integration_height: float = 0.05
+    #: Stop Spinal's roll/pitch integration (INTEGRATION_CONTROL_OFF, 161) while the IMU link
+    #: turns against the CoG frame faster than this [rad/s] (the change of
+    #: ``desire_coordinate`` over :data:`RP_HOLD_WINDOW_S`), and restart it (160) once slower.
+    #: Spinal's D term takes the IMU link's rate, so a joint turning that link (q1 for the
+    #: root-link IMU) reads as attitude motion and winds the integral up (docs/scenarios.md,
+    #: "Where the integral comes from"). None: never stopped (JSK behaviour).
+    rp_integration_hold_rate: float | None = None
     #: Mocap older than this is not used. ASSUMPTION.
     mocap_timeout_s: float = 0.2
     #: Ask Spinal for its IMU calibration after each handshake (``imu_calib``
@@ -211,6 +221,9 @@ class OnboardConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}={v!r} must be finite and > 0")
+        hold = self.rp_integration_hold_rate
+        if hold is not None and not (math.isfinite(hold) and hold > 0):
+            raise ValueError(f"rp_integration_hold_rate={hold!r} must be None or finite and > 0")
         check_servo_lead(self.servo_lead_s)
         check_late_tolerance(self.late_tolerance_s)
         if len(self.foot_sensor_offset) != 6:

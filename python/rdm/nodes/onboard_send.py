@@ -11,6 +11,7 @@ the node's state (``session``, ``config``, ``control``, ``arming`` ...) and coun
 
 from __future__ import annotations
 
+import math
 import struct
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -20,13 +21,15 @@ import numpy as np
 
 from rdm._rdm import servo_target_payload as _servo_target_payload
 from rdm.nodes.onboard_arming import FlightState
-from rdm.nodes.onboard_config import ServoMap
+from rdm.nodes.onboard_config import RP_HOLD_WINDOW_S, ServoMap
 from rdm.nodes.onboard_control import ControlCommand
 from rdm.nodes.onboard_receive import _U32
 from rdm.protocol.rosserial.server import PayloadTooLarge, TopicNotNegotiated
 
 #: ``spinal/FlightConfigCmd`` INTEGRATION_CONTROL_ON_CMD.
 INTEGRATION_CONTROL_ON = 160
+#: ``spinal/FlightConfigCmd`` INTEGRATION_CONTROL_OFF_CMD.
+INTEGRATION_CONTROL_OFF = 161
 
 
 def _floats(values: Any) -> list[float]:
@@ -141,14 +144,46 @@ class OnboardSend:
 
     def _rp_integration(self, z: float) -> None:
         """Spinal integrates roll/pitch only after INTEGRATION_CONTROL_ON (160), which JSK
-        sends once the robot is ``start_rp_integration_height`` above its take-off height."""
-        if self.arming.state is not FlightState.ARMED or self.integration_on_sent:
+        sends once the robot is ``start_rp_integration_height`` above its take-off height.
+        Then, with ``rp_integration_hold_rate``, :meth:`_rp_integration_hold`."""
+        if self.arming.state is not FlightState.ARMED:
+            return
+        if self.integration_on_sent:
+            self._rp_integration_hold()
             return
         if self._arm_z is None:
             self._arm_z = z
         elif z - self._arm_z >= self.config.rp_integration_height:
             msg = self._msg["flight_config_cmd"].new(cmd=INTEGRATION_CONTROL_ON)
             self.integration_on_sent = self._publish("flight_config_cmd", msg)
+
+    def _rp_integration_hold(self) -> None:
+        """INTEGRATION_CONTROL_OFF (161) while the IMU link turns against the CoG frame
+        (the angle between the model's C<-IMU rotations :data:`RP_HOLD_WINDOW_S` apart, over
+        that time) faster than ``rp_integration_hold_rate``, INTEGRATION_CONTROL_ON (160)
+        once slower; counted ``rp_integration_held`` / ``rp_integration_resumed``."""
+        limit = self.config.rp_integration_hold_rate
+        terms = self.control.terms
+        if limit is None or terms is None:
+            return
+        now, rot = self._now, terms.imu_to_cog
+        ref = self._imu_cog_ref
+        if ref is None:
+            self._imu_cog_ref = (now, rot)
+            return
+        span = now - ref[0]
+        if span < RP_HOLD_WINDOW_S - 1e-9:
+            return
+        self._imu_cog_ref = (now, rot)
+        cos = (float(np.trace(rot @ ref[1].T)) - 1.0) / 2.0
+        rate = math.acos(max(-1.0, min(1.0, cos))) / span
+        hold = rate > limit
+        if hold == self.rp_integration_held:
+            return
+        cmd = INTEGRATION_CONTROL_OFF if hold else INTEGRATION_CONTROL_ON
+        if self._publish("flight_config_cmd", self._msg["flight_config_cmd"].new(cmd=cmd)):
+            self.rp_integration_held = hold
+            self.counts["rp_integration_held" if hold else "rp_integration_resumed"] += 1
 
     def _send_command(self, c: ControlCommand) -> None:
         limit = self.config.flight.max_tilt_cmd
