@@ -14,15 +14,13 @@ the node's 1e-5 rad slack) are taken.
 from __future__ import annotations
 
 import logging
-import xml.etree.ElementTree as ET
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 import pytest
 from fed_byte_link import FedByteLink
+from urdf_limits import urdf_limits
 
-import rdm
 from rdm.ground import commands
 from rdm.ground.message import Reason, Rejected
 from rdm.nodes.onboard import OnboardNode
@@ -30,17 +28,6 @@ from rdm.scenarios.perching import PERCH_POSTURE, PERCHED_MOTION
 from rdm.scenarios.push_plan import PERCHED_POSTURE
 
 STEP = 1e-3  # rad either side of a limit
-
-
-def urdf_limits() -> dict[str, tuple[float, float]]:
-    """(lower, upper) of every limited joint of the shipped rdm URDF."""
-    urdf = Path(rdm.__file__).parent / "data" / "robots" / "rdm" / "rdm.urdf"
-    out = {}
-    for j in ET.parse(urdf).getroot().iter("joint"):
-        limit = j.find("limit")
-        if limit is not None:
-            out[j.get("name")] = (float(limit.get("lower")), float(limit.get("upper")))
-    return out
 
 
 def _goal(node: OnboardNode, joint: str, value: float) -> np.ndarray:

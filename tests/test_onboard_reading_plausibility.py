@@ -19,16 +19,14 @@ from __future__ import annotations
 
 import logging
 import math
-import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import numpy as np
 import pytest
 from fed_byte_link import FedByteLink
 from onboard_rig import REG
 from scipy.spatial.transform import Rotation
+from urdf_limits import urdf_limits
 
-import rdm
 from rdm.nodes.onboard import OnboardNode
 from rdm.nodes.onboard_config import OnboardConfig
 from rdm.nodes.onboard_monitors import MonitorLimits, Monitors
@@ -39,17 +37,6 @@ IMU = REG.msg("spinal/Imu")
 LEVEL = [0.0, 0.0, 0.0, 1.0]
 G = [0.0, 0.0, 9.8]
 ZERO = [0.0, 0.0, 0.0]
-
-
-def urdf_limits() -> dict[str, tuple[float, float]]:
-    """(lower, upper) of every limited joint of the shipped rdm URDF."""
-    urdf = Path(rdm.__file__).parent / "data" / "robots" / "rdm" / "rdm.urdf"
-    out = {}
-    for j in ET.parse(urdf).getroot().iter("joint"):
-        limit = j.find("limit")
-        if limit is not None:
-            out[j.get("name")] = (float(limit.get("lower")), float(limit.get("upper")))
-    return out
 
 
 def fresh() -> Monitors:
