@@ -10,7 +10,8 @@
   beyond Spinal's ranges, each one dropped by Spinal's estimator (its ``out_of_range``
   counter equals the injected count) and refused by the node (``imu_implausible``, the same
   count), the flight ending safe; a dead rotor gives no
-  thrust, Spinal's tilt fail-safe notices, and the record says "crashed", not safe.
+  thrust, the node's ``rotor_lost`` trips within 0.1 s, stops the turn and cuts the motors,
+  and the ground truth's tilt stays under 30 deg down to the floor.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ import rdm
 from rdm.plant.ceiling import NoCeilingEffect
 from rdm.plant.sensors import ImuReading
 from rdm.scenarios import mission
-from rdm.scenarios.common import truth_arrays
+from rdm.scenarios.common import roll_pitch, truth_arrays
 from rdm.scenarios.mission_faults import (
     SPIKE_ACC,
     SPIKE_GYRO,
@@ -152,16 +153,31 @@ def test_imu_spikes_mission_ends_safe_and_each_spike_is_dropped(tmp_path):
     assert record["safe"] and record["fault_detected"] and record["outcome"] == "landed"
 
 
-def test_dead_esc_mission_is_detected_and_reported_as_a_crash(tmp_path):
+def test_dead_esc_is_detected_cut_and_falls_upright(tmp_path):
     result = mission.run(
         tmp_path, duration=mission.QUICK_DURATION, seed=0, fault="dead-esc", quick=True
     )
     record, stack = result.facts["mission"], result.stack
     assert isinstance(stack.plant.ceiling_effects[0], DeadRotor)
-    assert stack.spinal.counters.failsafes["failsafe_tilt"] >= 1
-    # a quadrotor without one rotor cannot stay level: the record must not claim a safe end
-    assert record["fault_detected"] and not record["safe"]
-    assert record["outcome"] == "crashed" and record["max_tilt_deg"] > mission.MAX_TILT_DEG
+    node = stack.onboard
+    at = record["fault_at_s"]
+    # detected by the node within 0.1 s (without the reaction the robot rolls past 30 deg
+    # 0.14 s after the fault and lands upside down), then the motors cut
+    assert at < record["detected_at_s"] <= at + 0.1
+    assert node.monitors.counts["rotor_lost"] == 1
+    assert node.monitors.counts["rotor_lost_cut"] == 1
+    assert node.monitors.first_trip["rotor_lost_cut"] <= record["detected_at_s"] + 0.1
+    # the ground truth, not the record: tilt while airborne and the resting height
+    a = truth_arrays(stack)
+    floor = a["cog"][np.searchsorted(a["t"], mission.ARM_AT) - 1, 2]
+    airborne = a["cog"][:, 2] > floor + 0.05
+    tilt = np.degrees(np.abs(roll_pitch(a["quat"][airborne]))).max()
+    assert tilt <= mission.MAX_TILT_DEG
+    assert abs(a["cog"][-1, 2] - floor) < 0.05
+    assert not stack.spinal.core.armed and node.state.value == "idle"
+    # Spinal's own tilt fail-safe (57 deg) never had to act
+    assert not stack.spinal.counters.failsafes["failsafe_tilt"]
+    assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
 
 
 def test_the_help_names_every_fault() -> None:
@@ -274,10 +290,25 @@ def test_can_bus_off_silences_the_bus_for_the_disturbance_and_the_recovery_bits(
     assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
 
 
+def test_a_tilt_with_working_rotors_is_not_taken_for_a_lost_rotor(tmp_path, monkeypatch):
+    """50 ms of bus-off, seed 4: the ESCs hold their pulses and the robot rolls (roll and rate
+    beyond the lost-rotor attitude rule) but keeps its thrust; the node must not cut (the
+    thrust condition, ``rotor_loss_specific_force``): the robot recovers and lands."""
+    monkeypatch.setattr(mission, "BUS_OFF_S", 0.05)
+    result = mission.run(
+        tmp_path, duration=mission.QUICK_DURATION, seed=4, fault="can-bus-off", quick=True
+    )
+    record, stack = result.facts["mission"], result.stack
+    monitors = stack.onboard.monitors
+    assert "rotor_lost" not in monitors.counts and "rotor_lost_cut" not in monitors.counts
+    assert record["safe"] and record["outcome"] == "landed"
+
+
 def test_a_bus_off_past_the_watchdog_reaches_the_node_as_spinals_log(tmp_path, monkeypatch):
     """150 ms of bus-off: Spinal's "CAN disconnected!!" logerror (no frame for 100 ms) reaches
     the node, which trips ``can_disconnected`` and lands; the Neurons' own 100 ms watchdog
-    stopped every motor meanwhile, so the record says crashed, not safe."""
+    stopped every motor meanwhile (``rotor_lost`` trips on the lost thrust), so the record
+    says crashed, not safe."""
     monkeypatch.setattr(mission, "BUS_OFF_S", 0.15)
     record, stack = _quick(tmp_path, "can-bus-off")
     at = record["fault_at_s"]
@@ -286,6 +317,10 @@ def test_a_bus_off_past_the_watchdog_reaches_the_node_as_spinals_log(tmp_path, m
     # 100 ms without a frame, then Spinal's next ms, the UART and the node's 25 ms tick
     assert 0.1 < trips[0]["t"] - at < 0.1 + 0.035
     assert stack.onboard.counts["can_disconnected_land"] == 1
+    # every motor stopped with the robot rolling: the thrust is gone, so the lost-rotor
+    # detection trips too, no earlier than the log, and cuts (docs/flying.md "A lost rotor")
+    assert stack.onboard.monitors.counts["rotor_lost"] == 1
+    assert stack.onboard.monitors.first_trip["rotor_lost"] >= trips[0]["t"]
     assert not record["safe"] and record["outcome"] == "crashed"
 
 
@@ -389,8 +424,12 @@ def test_neuron_reset_is_detected_the_board_comes_back_and_the_crash_is_reported
     a = truth_arrays(stack)
     window = (a["t"] > at + 0.04) & (a["t"] < at + 0.09)
     assert a["thrust"][window, 0].max() < 0.5
-    # a quadrotor without one rotor for 0.1 s flips: detected, and not claimed safe
-    assert record["fault_detected"] and not record["safe"] and record["outcome"] == "crashed"
+    # rotor 0 without thrust rolls the robot: the node's lost-rotor detection trips and cuts
+    # (docs/flying.md "A lost rotor"); the record follows the ground truth's tilt
+    assert stack.onboard.monitors.counts["rotor_lost"] == 1
+    assert stack.onboard.monitors.counts["rotor_lost_cut"] == 1
+    assert record["fault_detected"] and record["outcome"] in ("landed", "crashed")
+    assert record["safe"] == (record["max_tilt_deg"] <= mission.MAX_TILT_DEG)
 
 
 def test_no_goal_resync_without_a_fault(tmp_path):

@@ -176,6 +176,8 @@ class OnboardNode(OnboardOperator, OnboardReceive, OnboardStep, OnboardSend):
         self._imu_gyro: np.ndarray | None = None
         self.battery_voltage: float | None = None
         self.last_command: ControlCommand | None = None
+        #: when a lost rotor was detected (None: not lost, or disarmed since)
+        self.rotor_lost_at: float | None = None
         #: The joint goals [rad] of the last ``servo/target_states`` sent (the vectoring
         #: joints' angles written over the plan in flight), in joint order.
         self.last_servo_goals: list[float] | None = None

@@ -86,6 +86,29 @@ class MonitorLimits:
     #: Largest | |q| - 1 | of the attitude quaternion. ASSUMPTION: 1e-3; Spinal builds it from
     #: an orthonormal rotation matrix in float32 (the mission's largest: 4e-8).
     imu_quat_norm_tol: float = 1e-3
+    #: A lost rotor (``rotor_lost``, :mod:`rdm.nodes.onboard_rotor_loss`): in flight (take-off,
+    #: hover, manual, landing; no joint motion), roll or pitch off its target by more than
+    #: ``rotor_loss_tilt_rad`` while the gyro turns it further faster than
+    #: ``rotor_loss_rate_rad_s``. ASSUMPTION: 4 deg and 2.5 rad/s; in the fault-free mission
+    #: (seeds 0 and 1) min(|error| / 4 deg, |rate| / 2.5 rad/s) of a diverging axis (a trip
+    #: at 1) reaches 0.7 at most (the 12 Hz attitude limit cycle, the touchdown); a
+    #: dead rotor 0 trips 25-50 ms after the fault (at 6 deg / 3.5 rad/s about a tick later).
+    rotor_loss_tilt_rad: float = 0.07
+    rotor_loss_rate_rad_s: float = 2.5
+    #: ... **and** the accelerometer's specific force (its norm: thrust over mass) below this,
+    #: m/s^2: the thrust has dropped. ASSUMPTION: 7.35 (0.75 g); the hover's readings stay at
+    #: 9.0 or above, a dead rotor 0 (14.4 of 36.4 N) reads 3.2-5.9 within 25 ms, while a
+    #: tilt from a transient (the ESCs holding their pulse through a CAN bus-off) keeps it
+    #: near g. A lost rotor carrying less than a quarter of the weight is not detected.
+    rotor_loss_specific_force: float = 7.35
+    #: The reaction: for ``rotor_loss_arrest_s`` the base thrust of every rotor at
+    #: ``rotor_loss_fall_thrust``, N, roll and pitch targets 0 (Spinal's 1 kHz attitude loop
+    #: stops the turn), then ARM_OFF (the motors stop) and the robot falls keeping its
+    #: attitude. ASSUMPTION: ``motor_info``'s ``min_thrust`` (1 N) and one control tick
+    #: (25 ms at 40 Hz): a cut at the detection keeps the turn (about 5 rad/s), a longer wait
+    #: lets the pitch the thrust floor gives build up (docs/flying.md "A lost rotor").
+    rotor_loss_fall_thrust: float = 1.0
+    rotor_loss_arrest_s: float = 0.025
 
     def __post_init__(self) -> None:
         for name in (
@@ -100,6 +123,11 @@ class MonitorLimits:
             "joint_tracking_rad",
             "joint_tracking_s",
             "perch_qp_fail_s",
+            "rotor_loss_tilt_rad",
+            "rotor_loss_rate_rad_s",
+            "rotor_loss_specific_force",
+            "rotor_loss_fall_thrust",
+            "rotor_loss_arrest_s",
         ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):

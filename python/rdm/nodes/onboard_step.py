@@ -10,12 +10,17 @@ write the node's state (``control``, ``flight``, ``monitors``, ``arming`` ...).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from rdm.nodes.onboard_arming import FlightState
 from rdm.nodes.onboard_control import ControlCommand, Setpoint, State
 from rdm.nodes.onboard_flight import FlightMode
+from rdm.nodes.onboard_rotor_loss import diverging_axis
+
+#: The operator modes in which a lost rotor is watched for (no contact, a flat posture held).
+ROTOR_LOSS_MODES = (FlightMode.MANUAL, FlightMode.TAKEOFF, FlightMode.HOVER, FlightMode.LAND)
 
 try:  # the C function np.interp ends in for float data (without its Python layers)
     from numpy._core.multiarray import interp as _interp
@@ -73,6 +78,8 @@ class OnboardStep:
         command = None
         if self.arming.flying:
             command = self._flight_step(now, targets, dt)
+            if self.rotor_lost_at is not None:
+                command = self._fall_command()
         if command is not None:
             self.last_command = command
             self.last_alpha_beta = (command.alpha, command.beta)
@@ -164,6 +171,7 @@ class OnboardStep:
             euler = self.imu_euler
             yaw = y if y is not None else (euler[2] if euler is not None else 0.0)
         self._monitor(now, flying, p)
+        self._rotor_loss(now, flying)
         if self.flight.mode is FlightMode.APPROACH and p is not None:
             self._contact_check(now, float(p[2]))
         landing = self.arming.state is FlightState.LANDING
@@ -179,6 +187,80 @@ class OnboardStep:
         if self.flight.take_touchdown():
             self.monitors.trip("touchdown", "landed: ARM_OFF", now)
             self.arming.disarm(now)
+
+    def _rotor_loss(self, now: float, flying: bool) -> None:
+        """A lost rotor (:mod:`rdm.nodes.onboard_rotor_loss`): detected in flight, Spinal's
+        attitude loop stops the turn on the thrust floor (:meth:`_fall_command`), then the node
+        disarms (the motors stop) and the robot falls."""
+        lim = self.config.monitors
+        if not flying:
+            self.rotor_lost_at = None
+            return
+        if self.rotor_lost_at is not None:
+            # Spinal's 1 kHz attitude loop on the thrust floor stops the turn for
+            # ``rotor_loss_arrest_s``; then the motors stop (ARM_OFF) and the robot falls
+            # keeping its attitude
+            due = now - self.rotor_lost_at >= lim.rotor_loss_arrest_s - 1e-9
+            if due and self.arming.state is not FlightState.DISARMING:
+                why = f"{now - self.rotor_lost_at:.3f} s after the detection"
+                self.monitors.trip("rotor_lost_cut", f"{why}: ARM_OFF, falling", now)
+                self.arming.disarm(now)
+                self._arming_messages(now)  # this tick, not the next one's arming step
+            return
+        euler, gyro, acc = self.imu_euler, self.imu_gyro, self._imu_acc
+        if (
+            euler is None
+            or gyro is None
+            or acc is None
+            or math.sqrt(math.fsum(v * v for v in acc)) >= lim.rotor_loss_specific_force
+            or self.flight.mode not in ROTOR_LOSS_MODES
+            or self._trajectory is not None
+            or self.control.perching
+        ):
+            return
+        c = self.last_command
+        target = (0.0, 0.0) if c is None else (float(c.angles[0]), float(c.angles[1]))
+        axis = diverging_axis(
+            lim.rotor_loss_tilt_rad,
+            lim.rotor_loss_rate_rad_s,
+            (float(euler[0]), float(euler[1])),
+            target,
+            (float(gyro[0]), float(gyro[1])),
+        )
+        if axis is None:
+            return
+        self.rotor_lost_at = now
+        i = 0 if axis == "roll" else 1
+        self.monitors.trip(
+            "rotor_lost",
+            f"{axis} {math.degrees(float(euler[i]) - target[i]):.1f} deg off its target, "
+            f"turning away at {float(gyro[i]):.2f} rad/s, specific force "
+            f"{math.sqrt(math.fsum(v * v for v in acc)):.2f} m/s^2: base thrust to "
+            f"{lim.rotor_loss_fall_thrust} N, then ARM_OFF",
+            now,
+        )
+        self.counts["rotor_lost_fall"] += 1
+        if self.flight.mode is not FlightMode.LAND:
+            self.flight.request_land(now)
+
+    def _fall_command(self) -> ControlCommand | None:
+        """The command while a lost rotor's turn is stopped: roll and pitch targets 0, no yaw
+        term, every rotor's base thrust at ``rotor_loss_fall_thrust`` (Spinal's attitude terms
+        on top), the vectoring angles of the last command."""
+        c = self.last_command
+        if c is None:
+            return None
+        floor = self.config.monitors.rotor_loss_fall_thrust
+        thrust = np.full(np.asarray(c.base_thrust).shape, floor)
+        return replace(
+            c,
+            angles=(0.0, 0.0, 0.0),
+            base_thrust=thrust,
+            flight_thrust=thrust,
+            perch_thrust=np.zeros_like(thrust),
+            perch=None,
+            yaw_rotor=None,
+        )
 
     def _contact_check(self, now: float, z: float) -> None:
         """The approach's contact: the foot sensor's fresh normal force above

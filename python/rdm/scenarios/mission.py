@@ -68,7 +68,7 @@ FAULTS = (
     "battery-sag",  # the battery sags 1 V/s from where it is (the node lands by itself)
     "foot-sensor-loss",  # the foot sensor's cable is cut once perched (the node holds)
     "imu-spikes",  # IMU samples beyond the sensor's range, about 3 a second (both drop them)
-    "dead-esc",  # rotor 0 gives no thrust from the fault on (a quadrotor cannot hover)
+    "dead-esc",  # rotor 0 gives no thrust from the fault on (the node cuts and it falls)
     "stuck-servo",  # perched, q4's servo stops following its goal as the arm moves (held)
     "infeasible-qp",  # perched, the QP's friction limit set below what the contact needs
     "can-loss-1e-2",  # each frame on the Neuron CAN bus lost with p = 1e-2
@@ -102,11 +102,10 @@ STUCK_JOINT = "q4"
 #: the perched contact's tangential force needs, so eq. (49)'s friction rows cannot hold.
 #: ASSUMPTION: a corrupted parameter (the configured values are 0.9).
 INFEASIBLE_MU = 1e-4
-#: Faults the airframe cannot survive: detected, but a four-rotor robot cannot fly on three
-#: rotors, so the run ends crashed (docs/flying.md): a dead ESC, and a Neuron reset (its ESC
-#: stopped for the 100 ms the board reboots flips the robot within 0.5 s). Every other fault
-#: must end safe.
-BEYOND_AIRFRAME = ("dead-esc", "neuron-reset")
+#: Faults the tests do not require to end safe (docs/flying.md): a Neuron reset (its ESC
+#: stopped for the 100 ms the board reboots rolls the robot; the lost-rotor cut lands 20 of
+#: 20 seeds, but 0.8 deg under the 30 deg bound at most). Every other fault must end safe.
+BEYOND_AIRFRAME = ("neuron-reset",)
 #: The safety bounds of a run.
 MAX_TILT_DEG = 30.0
 
@@ -272,7 +271,7 @@ _DETECTED_BY = {
     # each outlier dropped by Spinal's estimator (``out_of_range``); its accelerometer value
     # reaches the node on ``imu``, which refuses it
     "imu-spikes": ("monitors", "imu_implausible"),
-    "dead-esc": ("failsafes", "failsafe_tilt"),
+    "dead-esc": ("monitors", "rotor_lost"),
     "stuck-servo": ("monitors", "joint_tracking"),
     "infeasible-qp": ("monitors", "perch_qp_failed"),
     # Spinal's CAN peripheral: the error frames of damaged frames, the bus-off episode
