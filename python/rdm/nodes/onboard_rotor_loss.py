@@ -3,14 +3,16 @@ gyro, and the feasibility figure behind the node's reaction (a cut: the motors s
 control tick of Spinal's attitude loop on the thrust floor, ``OnboardStep._rotor_loss``).
 
 Why no flight on three rotors (``docs/flying.md`` "A lost rotor"): in the flat posture the
-CoG (x 0.483 m) lies 3.9 cm outside the triangle of rotors 2-4 (and of rotors 1, 3, 4), and
-the rotors sit only 2.5 cm above it. Parallel thrusts balance roll and pitch about the CoG
-only along the line from the CoG to their centroid, so a hover on them needs the body tilted
-about 57 deg (:func:`three_rotor_hover_tilt`); the vectoring units shift a thrust line by
-2.5 cm x tan(tilt) and, with no net sideways force, add no roll or pitch moment at all. The
+CoG (x 0.483 m) lies 3.9 cm outside the triangle of rotors 1-3 (rotor 0 lost; likewise
+rotor 1), and the rotors sit only 2.5 cm above it. Parallel thrusts balance roll and pitch
+about the CoG only along the line from the CoG to their centroid, so a hover on them needs
+the body tilted about 57 deg (:func:`three_rotor_hover_tilt`); the vectoring units shift a
+thrust line by 2.5 cm x tan(tilt) and, with no net sideways force, add no roll or pitch
+moment at all. The
 reduced-attitude "relaxed hover" on the two diagonal rotors needs the CoG on their diagonal
-(3.9 cm off). Losing rotor 3 or 4 (3.8 N in hover, behind the CoG) leaves the CoG inside the
-triangle of the other three (yaw then unbalanced); that case is not handled separately.
+(3.9 cm off). Losing rotor 2 or 3 (3.8 N in hover, behind the CoG) leaves the CoG inside the
+triangle of the other three (yaw then unbalanced); that case is not handled separately (and
+its thrust drop is too small for the detection).
 
 Detection (:func:`diverging_axis`, thresholds ``MonitorLimits.rotor_loss_*``): on roll or
 pitch, the attitude error against the target last sent beyond ``rotor_loss_tilt_rad`` **and**
