@@ -314,13 +314,14 @@ def evaluate(stack: Stack, script: WallPerchingScript) -> ScenarioResult:
     else:
         kept = slip_mm = margin_mm = cone_max = share_mean = share_min = nan
         fn_min = fn_mean = thrust_max = tilt = nan
-    statuses: dict[str, int] = {}
+    statuses: dict[str, int] = {}  # from SETTLE_S after the switch
+    transition: dict[str, int] = {}  # the first SETTLE_S
     for rec in stack.status:
-        if script.t_perch is None or rec.get("t", 0.0) < script.t_perch + SETTLE_S:
-            continue
         s = rec.get("perch_status")
-        if s is not None:
-            statuses[s] = statuses.get(s, 0) + 1
+        if script.t_perch is None or s is None:
+            continue
+        counts = statuses if rec.get("t", 0.0) >= script.t_perch + SETTLE_S else transition
+        counts[s] = counts.get(s, 0) + 1
     solved = statuses.get("solved", 0) + statuses.get("almost_solved", 0)
     total = sum(statuses.values())
     off_wall = height_err = nan
@@ -357,6 +358,7 @@ def evaluate(stack: Stack, script: WallPerchingScript) -> ScenarioResult:
         "t_release": script.t_release,
         "final_phase": script.phase,
         "perch_status_counts": statuses,
+        "perch_status_counts_first_s": transition,
         "mass_kg": mass,
     }
     _plots(stack, a, pq, rp)
