@@ -858,6 +858,11 @@ class CorePlanner:
 # (count of such ticks) next to the per-status counts. "relax_rate_limit" (bool, default
 # True): an eq. (49) infeasible only through eq. (48) is solved without it and the thrust
 # steps toward that solution (status "rate_limited"; False: "infeasible", thrust held).
+# "contact_normal" (3 floats, outward unit normal of the contact surface in foot axes,
+# default the ceiling's (0, 0, -1)) and "contact_center" (3 floats, the contact face's centre
+# in the foot frame, default (0, 0, 0)) place eqs. (39)-(44) on any plane. solve()/tick()
+# take a 4x4 foot_allocation (rows F_n, M_t1, M_t2, M_n; wrench in plane coordinates) or a
+# 6x4 one (rows F_x..M_z about the foot origin; wrench in foot axes).
 from typing import Literal as _Literal
 
 _PerchSolverName = _Literal["active_set", "clarabel"]

@@ -91,6 +91,16 @@ def wrap_angle(a: float) -> float:
     return math.atan2(math.sin(a), math.cos(a))
 
 
+def foot_wrench_rows(allocation: np.ndarray, foot_in_cog: np.ndarray) -> np.ndarray:
+    """The six rows f_x, f_y, f_z, m_x, m_y, m_z (6 x N) of the wrench unit thrusts produce
+    about the foot origin, foot axes: the perching QP's input on a contact plane other than
+    the ceiling (``perch_params["contact_normal"]``, docs/perch.md "Contact plane")."""
+    full = np.asarray(allocation, dtype=float)
+    p = np.asarray(foot_in_cog, dtype=float)[:3, 3]
+    forces = full[:3]
+    return np.vstack([forces, full[3:] - np.cross(p, forces.T).T])
+
+
 def foot_allocation(allocation: np.ndarray, foot_in_cog: np.ndarray) -> np.ndarray:
     """Q̄_foot (4 x N): rows f_z, m_x, m_y, m_z of the wrench unit thrusts produce about the
     foot origin, foot axes (= CoG axes, Sec. III). ``allocation`` is the full 6 x N Q(q);
@@ -116,7 +126,9 @@ class ModelTerms:
     inertia: np.ndarray
     allocation: np.ndarray  # 6 x N, CoG frame
     allocation_bar: np.ndarray  # 4 x N
-    foot_allocation: np.ndarray  # 4 x N about the foot origin
+    #: 4 x N about the foot origin (f_z, m_x, m_y, m_z); 6 x N (f_x .. m_z) when the perching
+    #: QP's contact plane is not the ceiling (:func:`foot_wrench_rows`)
+    foot_allocation: np.ndarray
     link_rotations: np.ndarray  # (N_VECTORING, 3, 3): eq. (36)'s R_i = (C<-L_i)^T
     hover_thrust: np.ndarray
     #: C<-IMU link: Spinal's ``desire_coordinate`` (its attitude is the IMU link's, the
@@ -234,11 +246,16 @@ class ControlPipeline:
         #: The perching QP is built for PERCH_ROTORS rotors (ASSUMPTION, docs/onboard.md): a
         #: robot with another count flies without it and its perch requests are refused.
         self.perch: PerchController | None = None
+        self._foot_rows_6 = False  # the perch QP's plane is not the ceiling: 6 foot rows
         if robot.n_rotors == PERCH_ROTORS:
             # λ_rotor_max of eq. (47) defaults to the robot's rotor limit (assumption)
             perch_params = {"rotor_thrust_max": list(self.thrust_max), **config.perch_params}
             self.perch = PerchController(config.rate_hz, config.perch_cutoff_hz, **perch_params)
             self._delta_perch = np.asarray(self.perch.params()["thrust_rate_limit"], dtype=float)
+            plane = self.perch.params()
+            self._foot_rows_6 = plane["contact_normal"] != [0.0, 0.0, -1.0] or any(
+                v != 0.0 for v in plane["contact_center"]
+            )
         else:
             self._delta_perch = np.ones(robot.n_rotors)
         # with every rate limit > 0, max(x - limit, 0) of an all-(+0.0) array is all +0.0 again
@@ -302,7 +319,8 @@ class ControlPipeline:
             return False
         qbar = np.asarray(o["allocation_bar"], dtype=float)
         full = np.asarray(o["allocation"], dtype=float)
-        qfoot = foot_allocation(full, np.asarray(o["foot_in_cog"], dtype=float))
+        foot_rows = foot_wrench_rows if self._foot_rows_6 else foot_allocation
+        qfoot = foot_rows(full, np.asarray(o["foot_in_cog"], dtype=float))
         rotations = np.array([np.asarray(r).T for r in o["unit_parent_rotations"]])
         if lean:
             cog_pose, imu_pose = o["cog_pose"], o["imu_pose"]

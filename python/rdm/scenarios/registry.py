@@ -67,6 +67,13 @@ SCENARIOS: dict[str, Scenario] = {
             "plate are not reached (rows marked NO, docs/scenarios.md)",
         ),
         Scenario(
+            "wall-perching",
+            "wall_perching",
+            "run",
+            "fold, approach a vertical plate, press the foot's side face on it with the foot "
+            "rotors turned horizontal (beta1 = -180 deg), hold perched, leave",
+        ),
+        Scenario(
             "push",
             "push",
             "run",
