@@ -277,7 +277,8 @@ def test_can_bus_off_silences_the_bus_for_the_disturbance_and_the_recovery_bits(
 def test_a_bus_off_past_the_watchdog_reaches_the_node_as_spinals_log(tmp_path, monkeypatch):
     """150 ms of bus-off: Spinal's "CAN disconnected!!" logerror (no frame for 100 ms) reaches
     the node, which trips ``can_disconnected`` and lands; the Neurons' own 100 ms watchdog
-    stopped every motor meanwhile, so the record says crashed, not safe."""
+    stops every motor at once for the rest of the gap (no moment from it), and from the
+    mission's quiet hover the robot falls, recovers and lands safe."""
     monkeypatch.setattr(mission, "BUS_OFF_S", 0.15)
     record, stack = _quick(tmp_path, "can-bus-off")
     at = record["fault_at_s"]
@@ -286,7 +287,7 @@ def test_a_bus_off_past_the_watchdog_reaches_the_node_as_spinals_log(tmp_path, m
     # 100 ms without a frame, then Spinal's next ms, the UART and the node's 25 ms tick
     assert 0.1 < trips[0]["t"] - at < 0.1 + 0.035
     assert stack.onboard.counts["can_disconnected_land"] == 1
-    assert not record["safe"] and record["outcome"] == "crashed"
+    assert record["safe"] and record["outcome"] == "landed"
 
 
 def _pwm_values(data: bytes) -> list[int]:
@@ -305,14 +306,15 @@ def test_pwm_unpacking_matches_the_fact_sheet_layout():
     assert _pwm_values(bytes(frame)) == v
 
 
-def test_a_50_ms_bus_off_leaves_the_escs_on_one_held_pulse_while_spinal_computes_on(
+def test_a_50_ms_bus_off_leaves_the_escs_on_one_held_pulse_and_the_quiet_hover_survives(
     tmp_path, monkeypatch
 ):
-    """50 ms of bus-off, seed 1 (one of the seeds that flip): the Neurons hold the last PWM
-    frame's pulse (below their 100 ms watchdog, fact sheet sec. 2.6), so the truth's rotor
-    thrusts settle on it, none stopped, ranked as the held pulses; Spinal's attitude loop runs
-    on through the gap (no motor action there, sec. 2.6), so the first frame after it carries
-    the correction of the tilt that grew meanwhile, a step of over 100 us."""
+    """50 ms of bus-off, seed 1: the Neurons hold the last PWM frame's pulse (below their
+    100 ms watchdog, fact sheet sec. 2.6), so the truth's rotor thrusts settle on it, none
+    stopped, ranked as the held pulses. The hover it interrupts is quiet (the mission's LQI
+    roll weights, ``lqi.ROLL_DAMPED_Q``): the PWM broadcast of the 3 s before the fault,
+    read from the candump, moves by less than 20 us (std) per rotor (Table V's weights: a
+    12 Hz swing of 49-87 us), so the held pulse is near the hover's and the run lands."""
     monkeypatch.setattr(mission, "BUS_OFF_S", 0.05)
     result = mission.run(
         tmp_path, duration=mission.QUICK_DURATION, seed=1, fault="can-bus-off", quick=True
@@ -329,15 +331,22 @@ def test_a_50_ms_bus_off_leaves_the_escs_on_one_held_pulse_while_spinal_computes
     k = int(np.searchsorted(stamps, at + 1e-3, side="right")) - 1  # the last before the gap
     held, after = np.array(frames[k][1]), np.array(frames[k + 1][1])
     assert stamps[k + 1] - at >= mission.BUS_OFF_S + 128 * 11 / 1e6
+    before = np.array([f[1] for f in frames if at - 3.0 <= f[0] < at])
+    assert len(before) > 1400  # every 2 ms
+    assert before.std(axis=0).max() < 20.0
+    assert np.abs(held - before.mean(axis=0)).max() < 60.0
     a = truth_arrays(stack)
     t = a["t"]
+    # MuJoCo's rotor thrusts over the 0.5 s before the fault: each below 0.3 N (std)
+    hover = a["thrust"][(t > at - 0.5) & (t < at)]
+    assert len(hover) >= 49 and hover.std(axis=0).max() < 0.3
     late = a["thrust"][np.searchsorted(t, at + 0.04) : np.searchsorted(t, at + 0.05) + 1]
     assert len(late) == 2  # 10 ms truth samples inside the gap, the rotors settled on it
     assert np.abs(late[1] - late[0]).max() < 0.1
     assert late[1].min() > 0.5  # no motor stopped (the watchdog is 100 ms)
     assert list(np.argsort(late[1])) == list(np.argsort(held))
-    assert np.abs(after - held).max() > 100
-    assert not record["safe"] and record["outcome"] == "crashed"
+    assert np.abs(after - held).max() < 100
+    assert record["safe"] and record["outcome"] == "landed"
 
 
 def test_can_loss_drops_its_share_of_the_pwm_broadcasts(tmp_path):
