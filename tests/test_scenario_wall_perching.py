@@ -55,6 +55,9 @@ def test_touches_perches_and_leaves(run):
     assert a["contact"][held].all(), "the foot left the wall"
     slip = a["slip"][held]
     assert np.max(np.linalg.norm(slip - slip[0], axis=1)) < 1e-3
+    # the truth's slip is (x, y): down the wall (z) is read from the foot origin
+    down = a["foot"][held, 2]
+    assert np.max(np.abs(down - down[0])) < 1e-3
     # left: no contact in the last second, the foot face well off the wall, at hover height
     last = a["t"] >= a["t"][-1] - 1.0
     assert not a["contact"][last].any()
