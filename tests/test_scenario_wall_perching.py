@@ -1,5 +1,6 @@
 """The wall-perching scenario end to end through every wire: the foot's side face pressed on
-a vertical plate by the tilted foot rotors, the perching QP on the wall's plane; outcomes from
+a vertical plate by the tilted foot rotors, the perching QP on the wall's plane, the wall's
+friction carrying the weight share the rotors shed; outcomes from
 MuJoCo's ground truth, the contact's centre of pressure computed here without the plane's
 tangent convention (r = n x M_c / (n . F))."""
 
@@ -54,6 +55,9 @@ def test_touches_perches_and_leaves(run):
     assert a["contact"][held].all(), "the foot left the wall"
     slip = a["slip"][held]
     assert np.max(np.linalg.norm(slip - slip[0], axis=1)) < 1e-3
+    # the truth's slip is (x, y): down the wall (z) is read from the foot origin
+    down = a["foot"][held, 2]
+    assert np.max(np.abs(down - down[0])) < 1e-3
     # left: no contact in the last second, the foot face well off the wall, at hover height
     last = a["t"] >= a["t"][-1] - 1.0
     assert not a["contact"][last].any()
@@ -72,7 +76,7 @@ def test_contact_wrench_inside_the_side_face_limits(run):
     n = np.array(wp.FACE_NORMAL)  # outward normal of the wall (towards the robot)
     c = np.array(wp.FACE_CENTER)
     fn = -(f @ n)  # presses along -n
-    assert np.all(fn > 10.0)  # the tilted foot rotors press ~16 N
+    assert np.all(fn > 10.0)  # the tilted foot rotors press ~16 N, ~12.5 N with the share
     tangential = np.linalg.norm(f - np.outer(f @ n, n), axis=1)
     assert np.all(tangential < wp.MU[0] * fn)  # friction cone
     m_c = m - np.cross(c, f)
@@ -80,10 +84,31 @@ def test_contact_wrench_inside_the_side_face_limits(run):
     assert np.all(np.abs(cop @ n) < 1e-12)
     assert np.all(np.abs(cop[:, 2]) < wp.FACE_HALF[0])  # up-down on the 6 cm face
     assert np.all(np.abs(cop[:, 1]) < wp.FACE_HALF[1])  # across the 15 cm face
-    # friction carries none of the weight: the held altitude loop keeps the flight thrust
-    # carrying it (docs/scenarios.md); the foot's vertical force on the wall is small
-    weight = res.facts["mass_kg"] * 9.80665
-    assert np.all(np.abs(f[:, 2]) < 0.1 * weight)
+
+
+def _full_share(res, a) -> np.ndarray:
+    return _window(res, a) & (a["t"] <= res.facts["t_release"] - wp.SHARE_RAMP_S)
+
+
+def test_friction_carries_the_handed_share_of_the_weight(run):
+    """Friction (the foot pushing the wall down, -F_z) carries the share the feed-forward
+    sheds, and the rotors' total thrust drops by at least that much against the flight
+    before the switch (measured in the truth's thrusts, not the controller's command)."""
+    res, a = run
+    full = _full_share(res, a)
+    assert full.sum() > 300
+    weight = float(res.stack.plant.model.body_subtreemass[1]) * 9.80665
+    carried = -a["force"][full, 2]  # the foot's force on the wall, down
+    share = carried / weight
+    assert np.all(share > 0.6 * wp.WEIGHT_SHARE) and np.all(share < 1.2 * wp.WEIGHT_SHARE)
+    before = (a["t"] >= res.facts["t_perch"] - 0.5) & (a["t"] < res.facts["t_perch"])
+    saved = a["thrust"][before].sum(axis=1).mean() - a["thrust"][full].sum(axis=1).mean()
+    assert saved > carried.mean()
+    # without the share (perching off, still pressed by the tilted rotors) friction carries
+    # about nothing: the share, not the press, hands it the weight
+    back = (a["t"] > res.facts["t_release"] + 0.2) & (a["t"] <= res.facts["t_release"] + 0.8)
+    assert a["contact"][back].all()
+    assert np.all(np.abs(a["force"][back, 2]) < 0.03 * weight)
 
 
 def test_wall_push_posture_is_level_with_the_foot_rotors_tilted(run):

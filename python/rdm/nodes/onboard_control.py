@@ -31,6 +31,9 @@ from rdm.nodes.onboard_config import OnboardConfig
 INT16_MIN, INT16_MAX = -32768, 32767
 #: How many recent q's model terms :meth:`ControlPipeline.update_model` keeps.
 MODEL_CACHE_SIZE = 4
+#: Largest share of the weight :meth:`ControlPipeline.set_perch_weight_share` hands to the
+#: contact: the rest stays on the hover feed-forward. ASSUMPTION (a bound, not a tuning).
+PERCH_WEIGHT_SHARE_MAX = 0.5
 
 try:  # the ufunc np.clip ends in for float arrays, without its Python dispatch layers
     from numpy._core.umath import clip as _clip
@@ -134,6 +137,11 @@ class ModelTerms:
     #: C<-IMU link: Spinal's ``desire_coordinate`` (its attitude is the IMU link's, the
     #: controlled frame is the CoG frame; firmware ``rot = R_est offset_rot^T``)
     imu_to_cog: np.ndarray
+    #: Thrust change per unit weight share handed to the perch contact: Q̄(q)⁻¹ of
+    #: [-m g, -m g p_y, m g p_x, 0] with p the contact centre in the CoG frame (the rotors
+    #: shed that share of the weight and cancel the moment friction puts about the CoG);
+    #: zeros without a perching controller.
+    perch_unload: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -256,6 +264,7 @@ class ControlPipeline:
             self._foot_rows_6 = plane["contact_normal"] != [0.0, 0.0, -1.0] or any(
                 v != 0.0 for v in plane["contact_center"]
             )
+            self._contact_center = np.asarray(plane["contact_center"], dtype=float)
         else:
             self._delta_perch = np.ones(robot.n_rotors)
         # with every rate limit > 0, max(x - limit, 0) of an all-(+0.0) array is all +0.0 again
@@ -273,6 +282,9 @@ class ControlPipeline:
         self._lqi_result_kept = None
         self.perching = False
         self.perch_thrust = np.zeros(robot.n_rotors)
+        #: share of the weight taken off the hover feed-forward while perched (the contact's
+        #: friction carries it; :meth:`set_perch_weight_share`)
+        self.perch_weight_share = 0.0
         self._ticks = 0
         #: the model terms and the pinv wire message depend on q alone: both are reused while
         #: the present q is bit-for-bit the one they were computed at
@@ -332,7 +344,8 @@ class ControlPipeline:
         g = self.config.gravity
         rhs = [o["mass"] * g, 0.0, 0.0, 0.0]
         hover = _lstsq_solution(qbar, rhs)
-        if not (_all_finite(qbar) and _all_finite(hover)):
+        unload = self._perch_unload(qbar, o["foot_in_cog"], rhs[0])
+        if not (_all_finite(qbar) and _all_finite(hover) and _all_finite(unload)):
             self.counts["model_non_finite"] += 1
             return False
         values = (
@@ -345,11 +358,22 @@ class ControlPipeline:
             rotations,
             hover,
             imu,
+            unload,
         )
         self.terms = _model_terms(*values)
         self._model_key = self.terms.q.tobytes()
         self._remember_model()
         return True
+
+    def _perch_unload(self, qbar: np.ndarray, foot_in_cog: object, weight: float) -> np.ndarray:
+        """:attr:`ModelTerms.perch_unload` at this q: the friction of a contact carrying the
+        weight share s acts up (+z of the CoG frame, level when perched) at the contact centre
+        p, so the rotors give (1 - s) m g and the moment -p x (0, 0, s m g)."""
+        if self.perch is None:
+            return np.zeros(qbar.shape[1])
+        pose = np.asarray(foot_in_cog, dtype=float)
+        p = pose[:3, :3] @ self._contact_center + pose[:3, 3]
+        return _lstsq_solution(qbar, [-weight, -weight * p[1], weight * p[0], 0.0])
 
     def _remember_model(self) -> None:
         """Keep the present terms (and pinv message, if built) under the present q."""
@@ -458,6 +482,21 @@ class ControlPipeline:
             self.counts["perch_entered"] += 1
         self.perching = on
 
+    def set_perch_weight_share(self, share: float) -> None:
+        """While perched, add ``share`` x :attr:`ModelTerms.perch_unload` to the hover
+        feed-forward: the rotors' thrust drops by that share of the weight, the contact's
+        friction carries it, and the rotors cancel the moment it puts about the CoG (a wall
+        perch, docs/scenarios.md "wall-perching"). Bounded to [0, ``PERCH_WEIGHT_SHARE_MAX``];
+        a non-finite value is refused (share kept) and an out-of-range one clipped, both
+        counted. Off the contact (not perching) the feed-forward is the full hover thrust."""
+        if not math.isfinite(share):
+            self.counts["perch_weight_share_refused"] += 1
+            return
+        bounded = min(max(float(share), 0.0), PERCH_WEIGHT_SHARE_MAX)
+        if bounded != share:
+            self.counts["perch_weight_share_clipped"] += 1
+        self.perch_weight_share = bounded
+
     def set_position_gains(self, gains: dict, bumpless: bool = False) -> None:
         """Replace the position controller's gains (keyword overrides of
         :class:`PositionController`, as ``OnboardConfig.position_gains``): a gain schedule per
@@ -490,6 +529,8 @@ class ControlPipeline:
             return None
         n_rot = self.robot.n_rotors
         ff = t.hover_thrust if self.config.feed_forward == "hover" else np.zeros(n_rot)
+        if self.perching and self.perch_weight_share > 0.0:
+            ff = ff + self.perch_weight_share * t.perch_unload
         axes = self._flight_axes(state, setpoint, joint_targets, ff, dt)
         if axes[6]:
             self.counts["vectoring_singular"] += axes[6]

@@ -70,8 +70,9 @@ SCENARIOS: dict[str, Scenario] = {
             "wall-perching",
             "wall_perching",
             "run",
-            "fold, approach a vertical plate, press the foot's side face on it with the foot "
-            "rotors turned horizontal (beta1 = -180 deg), hold perched, leave",
+            "approach a vertical plate in the flat posture, press the foot's side face on it "
+            "with the foot rotors tilted 30 deg (beta1 = -30 deg), hold perched with the "
+            "plate's friction carrying 10 % of the weight, leave",
         ),
         Scenario(
             "push",
