@@ -200,8 +200,11 @@ def test_stuck_servo_is_held_perched_where_it_stuck(tmp_path):
     node = stack.onboard
     trip = [e for e in node.monitors.events if e["monitor"] == "joint_tracking"]
     assert len(trip) == 1 and at < trip[0]["t"] < at + 2.0
-    # held where they are: the goals sent equal the present angles again
-    np.testing.assert_allclose(node.joint_targets[:6], node.present_q[:6], atol=1e-9)
+    # held where they are: the goals sent equal the present angles again, to the one
+    # encoder count (2 pi / 4096) a loaded joint's reading may flicker by after the hold
+    # (a goal left moving is off by the > 0.05 rad q2 moved above)
+    count = 2.0 * np.pi / 4096
+    np.testing.assert_allclose(node.joint_targets[:6], node.present_q[:6], atol=1.01 * count)
     assert node.counts["joint_tracking_hold"] == 1
     assert record["outcome"] == "perched" and record["safe"] and record["fault_detected"]
     assert a["contact"][t > at].all()

@@ -218,7 +218,7 @@ def test_perching_contacts_same_bytes_and_state(tmp_path: Path) -> None:
     from rdm.scenarios import perching
 
     def steps(stack: Stack) -> None:
-        stack.loop.run(16.0)  # flight, the approach, contact at 14.83 s, 1.2 s perched
+        stack.loop.run(16.0)  # flight, the approach, contact at 14.80 s, 1.2 s perched
 
     stats = _same(
         tmp_path,
