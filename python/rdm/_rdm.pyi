@@ -435,6 +435,7 @@ class AttitudeController(_SpinalControllerMessages):
         battery_cells: int = 0,
         cell_voltage_range: tuple[float, float] = ...,  # default (3.0, 4.45) V per cell
         saturate_commands: bool | None = None,
+        bound_alpha: bool | None = None,
         motor_outputs: int = 4,
     ) -> _Self: ...
     def step(
@@ -460,6 +461,7 @@ class SpinalStep(_SpinalControllerMessages):
         battery_cells: int = 0,
         cell_voltage_range: tuple[float, float] = ...,  # default (3.0, 4.45) V per cell
         saturate_commands: bool | None = None,
+        bound_alpha: bool | None = None,
         motor_outputs: int = 4,
         **estimator_overrides: Any,
     ) -> _Self: ...
