@@ -10,8 +10,9 @@
   beyond Spinal's ranges, each one dropped by Spinal's estimator (its ``out_of_range``
   counter equals the injected count) and refused by the node (``imu_implausible``, the same
   count), the flight ending safe; a dead rotor gives no
-  thrust, the node's ``rotor_lost`` trips within 0.1 s, stops the turn and cuts the motors,
-  and the ground truth's tilt stays under 30 deg down to the floor.
+  thrust, the node's ``rotor_lost`` trips within 0.1 s, stops the turn (Table V's LQI gains
+  for ``rotor_loss_arrest_s``) and cuts the motors, and the ground truth's tilt stays under
+  30 deg down to the floor.
 """
 
 from __future__ import annotations
@@ -166,7 +167,11 @@ def test_dead_esc_is_detected_cut_and_falls_upright(tmp_path):
     assert at < record["detected_at_s"] <= at + 0.1
     assert node.monitors.counts["rotor_lost"] == 1
     assert node.monitors.counts["rotor_lost_cut"] == 1
-    assert node.monitors.first_trip["rotor_lost_cut"] <= record["detected_at_s"] + 0.1
+    # Table V's LQI gains go to Spinal at the detection (the arrest), the cut after it
+    arrest = node.config.monitors.rotor_loss_arrest_s
+    assert node.counts["rotor_lost_fall"] == 1
+    cut_after = node.monitors.first_trip["rotor_lost_cut"] - record["detected_at_s"]
+    assert arrest - 1e-6 <= cut_after <= arrest + 1e-6
     # the ground truth, not the record: tilt while airborne and the resting height
     a = truth_arrays(stack)
     floor = a["cog"][np.searchsorted(a["t"], mission.ARM_AT) - 1, 2]
@@ -216,8 +221,11 @@ def test_stuck_servo_is_held_perched_where_it_stuck(tmp_path):
     node = stack.onboard
     trip = [e for e in node.monitors.events if e["monitor"] == "joint_tracking"]
     assert len(trip) == 1 and at < trip[0]["t"] < at + 2.0
-    # held where they are: the goals sent equal the present angles again
-    np.testing.assert_allclose(node.joint_targets[:6], node.present_q[:6], atol=1e-9)
+    # held where they are: the goals sent equal the present angles again, to the one
+    # encoder count (2 pi / 4096) a loaded joint's reading may flicker by after the hold
+    # (a goal left moving is off by the > 0.05 rad q2 moved above)
+    count = 2.0 * np.pi / 4096
+    np.testing.assert_allclose(node.joint_targets[:6], node.present_q[:6], atol=1.01 * count)
     assert node.counts["joint_tracking_hold"] == 1
     assert record["outcome"] == "perched" and record["safe"] and record["fault_detected"]
     assert a["contact"][t > at].all()
@@ -290,25 +298,13 @@ def test_can_bus_off_silences_the_bus_for_the_disturbance_and_the_recovery_bits(
     assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
 
 
-def test_a_tilt_with_working_rotors_is_not_taken_for_a_lost_rotor(tmp_path, monkeypatch):
-    """50 ms of bus-off, seed 4: the ESCs hold their pulses and the robot rolls (roll and rate
-    beyond the lost-rotor attitude rule) but keeps its thrust; the node must not cut (the
-    thrust condition, ``rotor_loss_specific_force``): the robot recovers and lands."""
-    monkeypatch.setattr(mission, "BUS_OFF_S", 0.05)
-    result = mission.run(
-        tmp_path, duration=mission.QUICK_DURATION, seed=4, fault="can-bus-off", quick=True
-    )
-    record, stack = result.facts["mission"], result.stack
-    monitors = stack.onboard.monitors
-    assert "rotor_lost" not in monitors.counts and "rotor_lost_cut" not in monitors.counts
-    assert record["safe"] and record["outcome"] == "landed"
-
-
 def test_a_bus_off_past_the_watchdog_reaches_the_node_as_spinals_log(tmp_path, monkeypatch):
     """150 ms of bus-off: Spinal's "CAN disconnected!!" logerror (no frame for 100 ms) reaches
     the node, which trips ``can_disconnected`` and lands; the Neurons' own 100 ms watchdog
-    stopped every motor meanwhile (``rotor_lost`` trips on the lost thrust), so the record
-    says crashed, not safe."""
+    stops every motor at once for the rest of the gap (no moment from it), and from the
+    mission's quiet hover the robot falls, recovers and lands safe. The fall drops the
+    specific force (the lost-rotor thrust condition) but turns the robot too slowly for the
+    rate condition: no ``rotor_lost``, no cut (docs/flying.md "A lost rotor")."""
     monkeypatch.setattr(mission, "BUS_OFF_S", 0.15)
     record, stack = _quick(tmp_path, "can-bus-off")
     at = record["fault_at_s"]
@@ -317,11 +313,8 @@ def test_a_bus_off_past_the_watchdog_reaches_the_node_as_spinals_log(tmp_path, m
     # 100 ms without a frame, then Spinal's next ms, the UART and the node's 25 ms tick
     assert 0.1 < trips[0]["t"] - at < 0.1 + 0.035
     assert stack.onboard.counts["can_disconnected_land"] == 1
-    # every motor stopped with the robot rolling: the thrust is gone, so the lost-rotor
-    # detection trips too, no earlier than the log, and cuts (docs/flying.md "A lost rotor")
-    assert stack.onboard.monitors.counts["rotor_lost"] == 1
-    assert stack.onboard.monitors.first_trip["rotor_lost"] >= trips[0]["t"]
-    assert not record["safe"] and record["outcome"] == "crashed"
+    assert "rotor_lost" not in stack.onboard.monitors.counts
+    assert record["safe"] and record["outcome"] == "landed"
 
 
 def _pwm_values(data: bytes) -> list[int]:
@@ -340,14 +333,15 @@ def test_pwm_unpacking_matches_the_fact_sheet_layout():
     assert _pwm_values(bytes(frame)) == v
 
 
-def test_a_50_ms_bus_off_leaves_the_escs_on_one_held_pulse_while_spinal_computes_on(
+def test_a_50_ms_bus_off_leaves_the_escs_on_one_held_pulse_and_the_quiet_hover_survives(
     tmp_path, monkeypatch
 ):
-    """50 ms of bus-off, seed 1 (one of the seeds that flip): the Neurons hold the last PWM
-    frame's pulse (below their 100 ms watchdog, fact sheet sec. 2.6), so the truth's rotor
-    thrusts settle on it, none stopped, ranked as the held pulses; Spinal's attitude loop runs
-    on through the gap (no motor action there, sec. 2.6), so the first frame after it carries
-    the correction of the tilt that grew meanwhile, a step of over 100 us."""
+    """50 ms of bus-off, seed 1: the Neurons hold the last PWM frame's pulse (below their
+    100 ms watchdog, fact sheet sec. 2.6), so the truth's rotor thrusts settle on it, none
+    stopped, ranked as the held pulses. The hover it interrupts is quiet (the mission's LQI
+    roll weights, ``lqi.ROLL_DAMPED_Q``): the PWM broadcast of the 3 s before the fault,
+    read from the candump, moves by less than 20 us (std) per rotor (Table V's weights: a
+    12 Hz swing of 49-87 us), so the held pulse is near the hover's and the run lands."""
     monkeypatch.setattr(mission, "BUS_OFF_S", 0.05)
     result = mission.run(
         tmp_path, duration=mission.QUICK_DURATION, seed=1, fault="can-bus-off", quick=True
@@ -364,15 +358,22 @@ def test_a_50_ms_bus_off_leaves_the_escs_on_one_held_pulse_while_spinal_computes
     k = int(np.searchsorted(stamps, at + 1e-3, side="right")) - 1  # the last before the gap
     held, after = np.array(frames[k][1]), np.array(frames[k + 1][1])
     assert stamps[k + 1] - at >= mission.BUS_OFF_S + 128 * 11 / 1e6
+    before = np.array([f[1] for f in frames if at - 3.0 <= f[0] < at])
+    assert len(before) > 1400  # every 2 ms
+    assert before.std(axis=0).max() < 20.0
+    assert np.abs(held - before.mean(axis=0)).max() < 60.0
     a = truth_arrays(stack)
     t = a["t"]
+    # MuJoCo's rotor thrusts over the 0.5 s before the fault: each below 0.3 N (std)
+    hover = a["thrust"][(t > at - 0.5) & (t < at)]
+    assert len(hover) >= 49 and hover.std(axis=0).max() < 0.3
     late = a["thrust"][np.searchsorted(t, at + 0.04) : np.searchsorted(t, at + 0.05) + 1]
     assert len(late) == 2  # 10 ms truth samples inside the gap, the rotors settled on it
     assert np.abs(late[1] - late[0]).max() < 0.1
     assert late[1].min() > 0.5  # no motor stopped (the watchdog is 100 ms)
     assert list(np.argsort(late[1])) == list(np.argsort(held))
-    assert np.abs(after - held).max() > 100
-    assert not record["safe"] and record["outcome"] == "crashed"
+    assert np.abs(after - held).max() < 100
+    assert record["safe"] and record["outcome"] == "landed"
 
 
 def test_can_loss_drops_its_share_of_the_pwm_broadcasts(tmp_path):

@@ -90,7 +90,7 @@ def _state(stack: Stack) -> dict:
         "master": (stack.spinal.master.tx_count, stack.spinal.master._pending_events),
         "boards": [(b.tx_count, b.changes[0], b.rx_count) for b in bank.boards],
         "bank_changes": bank._last_changes,
-        "bridge": (bridge.ticks, bridge._sample_count, bridge.time_mismatches),
+        "bridge": (bridge.ticks, bridge.schedule.count, bridge.time_mismatches),
         "leptrino": (
             sensor.frames_sent,
             sensor.bytes_dropped,
@@ -218,7 +218,7 @@ def test_perching_contacts_same_bytes_and_state(tmp_path: Path) -> None:
     from rdm.scenarios import perching
 
     def steps(stack: Stack) -> None:
-        stack.loop.run(16.0)  # flight, the approach, contact at 14.83 s, 1.2 s perched
+        stack.loop.run(16.0)  # flight, the approach, contact at 14.80 s, 1.2 s perched
 
     stats = _same(
         tmp_path,

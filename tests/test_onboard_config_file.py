@@ -45,9 +45,12 @@ def write(tmp_path: Path, text: str, name: str = "robot.toml") -> Path:
 
 def test_example_resolves_to_the_defaults() -> None:
     """Field by field: a default changed in OnboardConfig (or a typo in the file) fails and
-    names the field."""
+    names the field. The one deliberate difference: the LQI weights the robot flies
+    (tests/test_onboard_roll_damping.py checks what they do)."""
     loaded = load_onboard_file(EXAMPLE_FILE)
-    default = OnboardConfig()
+    default = OnboardConfig(
+        lqi_q_weights=(20.0, 30.0, 30.0, 1.0, 600.0, 80.0, 100.0, 50.0, 20.0, 0.15, 1.0, 0.5)
+    )
     for f in dataclasses.fields(OnboardConfig):
         assert getattr(loaded.config, f.name) == getattr(default, f.name), f.name
     assert loaded.ports == OnboardPorts()

@@ -14,6 +14,7 @@ import math
 
 import mujoco
 import numpy as np
+import pytest
 
 from rdm.plant import Plant
 from rdm.plant.mjcf import rotor_site
@@ -132,7 +133,7 @@ def test_bridge_samples_on_the_first_tick_then_every_nth():
     plant = Plant("rdm", seed=1, fixed_base=True, ceiling_height=None)
     layout = default_layout(plant.description)
     buses = [InProcessBus("bridge_sched") for _ in layout.neurons]
-    calls: dict[str, list[int]] = {"imu": [], "wrench": [], "truth": []}
+    calls: dict[str, list[int]] = {"imu": [], "wrench": [], "mocap": [], "truth": []}
     tick = [0]
     try:
         neurons = [
@@ -146,6 +147,8 @@ def test_bridge_samples_on_the_first_tick_then_every_nth():
             imu_period=0.005,
             wrench_sinks={"foot_wrench": lambda w: calls["wrench"].append(tick[0])},
             wrench_period=0.002,
+            mocap_sink=lambda t, pos, quat: calls["mocap"].append(tick[0]),
+            mocap_period=0.003,
             truth_sink=lambda gt: calls["truth"].append(tick[0]),
             truth_period=0.01,
         )
@@ -158,7 +161,32 @@ def test_bridge_samples_on_the_first_tick_then_every_nth():
             b.shutdown()
     assert calls["imu"] == list(range(0, 103, 5))
     assert calls["wrench"] == list(range(0, 103, 2))
+    assert calls["mocap"] == list(range(0, 103, 3))
     assert calls["truth"] == list(range(0, 103, 10))
+    assert bridge.schedule.count == 103
+
+
+def test_sample_schedule_equals_the_multiples_of_each_period():
+    """``_rdm.SampleSchedule`` (the bridge's and the lockstep kernel's one schedule) against
+    numpy's ``arange % every == 0``: each reading in its own place of the tuple, 0 = off,
+    ``peek`` without taking the tick; a negative period is refused by name."""
+    from rdm._rdm import SampleSchedule
+
+    n = 211
+    for every in [(5, 1, 10, 10), (0, 2, 3, 7), (1, 0, 0, 0), (13, 4, 1, 0)]:
+        schedule = SampleSchedule(*every)
+        assert schedule.every == every
+        got = []
+        for _ in range(n):
+            ahead = schedule.peek()
+            got.append(schedule.advance())
+            assert ahead == got[-1]
+        k = np.arange(n)
+        want = np.stack([(k % e == 0) if e else np.zeros(n, bool) for e in every], axis=1)
+        assert np.array_equal(np.array(got), want), every
+        assert schedule.count == n
+    with pytest.raises(ValueError, match="mocap_every -1 is below 0"):
+        SampleSchedule(1, 1, -1, 1)
 
 
 # --------------------------------------------------------------------------- ceiling effect

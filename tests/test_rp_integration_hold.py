@@ -96,3 +96,31 @@ def test_rate_must_be_positive():
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="rp_integration_hold_rate"):
             OnboardConfig(rp_integration_hold_rate=bad)
+
+
+def test_scenario_threshold_is_above_one_encoder_count_per_window():
+    """The hanging scenarios' threshold (``perching.RP_INTEGRATION_HOLD_RATE``) lies above
+    the rate one Dynamixel count (2 pi / 4096) over the node's window reads as, and below the
+    fold's mean q1 rate (PERCH_POSTURE's q1 over RECONFIGURE_S). Bugs caught: a threshold a
+    still servo's count flicker crosses; one the fold never crosses."""
+    from rdm.nodes.onboard_config import RP_HOLD_WINDOW_S
+
+    one_count = 2.0 * np.pi / 4096 / RP_HOLD_WINDOW_S
+    fold_mean = perching.PERCH_POSTURE[0] / perching.RECONFIGURE_S
+    rate = perching.RP_INTEGRATION_HOLD_RATE
+    assert one_count < rate < 0.2 * fold_mean
+    assert perching.onboard_config().rp_integration_hold_rate == rate
+
+
+def test_hold_is_off_where_it_made_the_run_worse():
+    """Drilling flies with the hold; the valve and the two paintings and the foot-at-plate
+    robot do not (docs/scenarios.md, "Where the integral comes from"). Bug caught: a task or
+    the foot-at-plate variant flown with the perching default."""
+    from rdm.scenarios import tasks
+
+    assert tasks.task_onboard_config("drilling").rp_integration_hold_rate == HOLD_RATE
+    for task in ("valve", "painting", "painting-panel"):
+        assert tasks.task_onboard_config(task).rp_integration_hold_rate is None
+    assert fp.RP_INTEGRATION_HOLD_RATE is None
+    with pytest.raises(ValueError, match="task"):
+        tasks.task_onboard_config("sawing")

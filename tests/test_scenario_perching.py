@@ -50,6 +50,19 @@ def test_perches_and_holds_without_slip(run):
     assert abs(a["foot"][held, 2].mean() - 1.6) < 0.01
 
 
+def test_fold_holds_spinal_integration_and_perches_with_a_small_integral(run):
+    """The hanging configuration stops Spinal's roll/pitch integration while the fold turns
+    the root link (161, then 160) and perches with a small pitch integral (without the hold
+    the fold leaves about 0.5 rad s, docs/scenarios.md). Bugs caught: the scenario flown
+    without the hold; a hold never resumed."""
+    res, _ = run
+    node, core = res.stack.onboard, res.stack.spinal.core
+    assert node.counts["rp_integration_held"] >= 1
+    assert node.counts["rp_integration_resumed"] == node.counts["rp_integration_held"]
+    assert core.integrating
+    assert abs(core.error_integral[1]) < 0.1
+
+
 def test_contact_wrench_inside_friction_and_zmp_limits(run):
     res, a = run
     held = a["t"] >= res.facts["t_perch"] + perching.SETTLE_S

@@ -99,6 +99,7 @@ def test_every_registered_scenario_resolves_to_its_module():
         push_paper,
         tasks,
         tracking,
+        wall_perching,
     )
 
     assert DEFAULT_SCENARIO in SCENARIOS
@@ -111,6 +112,7 @@ def test_every_registered_scenario_resolves_to_its_module():
             perching_foot_at_plate.run,
             perching_foot_at_plate.DEFAULT_DURATION,
         ),
+        "wall-perching": (wall_perching.run, wall_perching.DEFAULT_DURATION),
         "push": (push.run, push.DEFAULT_DURATION),
         "push-paper-forces": (push_paper.run, push_paper.DEFAULT_DURATION),
         "tracking": (tracking.run, tracking.DEFAULT_DURATION),

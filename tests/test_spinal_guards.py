@@ -221,3 +221,56 @@ def test_bad_adc_scale_never_drives_a_duty_above_max_on_the_can_bus() -> None:
         assert any("implausible battery voltage" in text for text in texts)
     finally:
         rig.close()
+
+
+# ------------------------------------------------------------------------ alpha bound
+ROLL_P = np.array([30.0, 15.0, -15.0, -30.0])
+BASE = 5.0
+
+
+def _roll_saturated(**kw) -> tuple[AttitudeController, object]:
+    """Roll -0.9 rad with per-rotor roll P gains (30, 15, -15, -30) and 5 N base thrust:
+    rotor 0's roll term alone (27 N) exceeds the 20 N thrust limit, so alpha < -1."""
+    c = armed(**kw)
+    gains = np.zeros((4, 4, 3))
+    gains[:, 0, 0] = ROLL_P
+    c.set_gains(gains)
+    c.four_axis_command([0.0, 0.0, 0.0], np.full(4, BASE), 0.0)
+    roll = -0.9
+    rot = np.array(
+        [[1.0, 0.0, 0.0], [0.0, np.cos(roll), -np.sin(roll)], [0.0, np.sin(roll), np.cos(roll)]]
+    )
+    return c, c.step(0.0, rot, STILL, VREF)
+
+
+def _expected(bound: bool) -> tuple[float, np.ndarray, np.ndarray]:
+    """The allocation of docs/spinal.md "Attitude allocation" in numpy: alpha, thrust, duty."""
+    rp = ROLL_P * 0.9  # error = 0 - (-0.9)
+    alpha = (MAX_THRUST - np.max(BASE + rp)) / BASE  # rotor divider 1 (HYDRUS)
+    if bound:
+        alpha = max(alpha, -1.0)
+    thrust = rp + (1.0 + alpha) * BASE  # beta = -1 removes the yaw term
+    lo = curve_duty(MIN_THRUST)
+    duty = np.array([min(max(curve_duty(f), lo), MAX_PWM) for f in thrust])
+    return alpha, thrust, duty
+
+
+def test_alpha_below_minus_one_is_bounded_keeping_each_base_thrust_sign() -> None:
+    c, out = _roll_saturated()
+    alpha, thrust, duty = _expected(bound=True)
+    assert alpha == -1.0 and out.alpha == -1.0
+    np.testing.assert_allclose(out.thrust, thrust, atol=1e-12)  # the roll terms alone
+    np.testing.assert_allclose(out.duty, duty, atol=1e-12)
+    assert c.counters["bounded_alphas"] == 1
+    # Rotor 1 keeps its 13.5 N roll term; the firmware's alpha = -2.4 takes 7 N off it.
+    assert out.thrust[1] == pytest.approx(13.5, abs=1e-12)
+
+
+def test_firmware_exact_alpha_reverses_every_base_thrust() -> None:
+    for kw in ({"firmware_exact": True}, {"bound_alpha": False}):
+        c, out = _roll_saturated(**kw)
+        alpha, thrust, duty = _expected(bound=False)
+        assert alpha == pytest.approx(-2.4) and out.alpha == pytest.approx(alpha, abs=1e-12)
+        np.testing.assert_allclose(out.thrust, thrust, atol=1e-12)  # rp - 7 N on every rotor
+        np.testing.assert_allclose(out.duty, duty, atol=1e-12)
+        assert c.counters["bounded_alphas"] == 0

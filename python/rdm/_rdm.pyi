@@ -46,6 +46,7 @@ __all__ = [
     "Robot",
     "RosserialFrameError",
     "RotorPlantCore",
+    "SampleSchedule",
     "SpinalStep",
     "SpinalStepOutput",
     "StopFlag",
@@ -434,6 +435,7 @@ class AttitudeController(_SpinalControllerMessages):
         battery_cells: int = 0,
         cell_voltage_range: tuple[float, float] = ...,  # default (3.0, 4.45) V per cell
         saturate_commands: bool | None = None,
+        bound_alpha: bool | None = None,
         motor_outputs: int = 4,
     ) -> _Self: ...
     def step(
@@ -459,6 +461,7 @@ class SpinalStep(_SpinalControllerMessages):
         battery_cells: int = 0,
         cell_voltage_range: tuple[float, float] = ...,  # default (3.0, 4.45) V per cell
         saturate_commands: bool | None = None,
+        bound_alpha: bool | None = None,
         motor_outputs: int = 4,
         **estimator_overrides: Any,
     ) -> _Self: ...
@@ -857,11 +860,16 @@ class CorePlanner:
 # (count of such ticks) next to the per-status counts. "relax_rate_limit" (bool, default
 # True): an eq. (49) infeasible only through eq. (48) is solved without it and the thrust
 # steps toward that solution (status "rate_limited"; False: "infeasible", thrust held).
+# "contact_normal" (3 floats, outward unit normal of the contact surface in foot axes,
+# default the ceiling's (0, 0, -1)) and "contact_center" (3 floats, the contact face's centre
+# in the foot frame, default (0, 0, 0)) place eqs. (39)-(44) on any plane. solve()/tick()
+# take a 4x4 foot_allocation (rows F_n, M_t1, M_t2, M_n; wrench in plane coordinates) or a
+# 6x4 one (rows F_x..M_z about the foot origin; wrench in foot axes).
 from typing import Literal as _Literal
 
 _PerchSolverName = _Literal["active_set", "clarabel"]
 
-# --- fastneuron ---
+# --- Neuron bank ---
 class NeuronBankError(RdmError): ...
 
 @_final
@@ -904,7 +912,7 @@ class NeuronBank:
     def set_servo_field(self, k: int, index: int, field: str, value: int | None) -> None: ...
     def board_state(self, k: int) -> dict[str, object]: ...
 
-# --- fastsensor ---
+# --- sensor noise ---
 from collections.abc import Sequence as _Seq
 
 @_final
@@ -971,7 +979,7 @@ def json_float_list(values: npt.NDArray[np.float64]) -> str:
     """``"v0,v1,..."``: each value as Python's ``repr(float)``, NaN and infinities as
     ``null`` (the run logger's JSON convention); any stride."""
 
-# --- fastplant ---
+# --- rotor plant ---
 @_final
 class RotorPlantCore:
     """ESC state, ceiling models and rotor controls of one plant: the per-physics-step rotor
@@ -1127,7 +1135,7 @@ class PlateContactCore:
         """The turn from ``r0`` to ``r1`` (row-major, 9 values) about ``r0``'s z axis; None
         when a value on the way is NaN."""
 
-# --- canwire ---
+# --- CAN master and wire ---
 class CanMasterError(RdmError): ...
 
 @_final
@@ -1207,15 +1215,15 @@ class CanWire:
     def bus_off(self, start: float, disturbed_s: float) -> None: ...
     def fault_counters(self) -> dict[str, float]: ...
 
-# NeuronBank.tick_wire(now, stamp, wire) -> list[int] (board index of each reply), added by
-# canwire in crates/rdm_py/src/neuron_bank.rs.
+# NeuronBank.tick_wire(now, stamp, wire) -> list[int] (board index of each reply) is stubbed
+# in NeuronBank above (crates/rdm_py/src/neuron_bank.rs).
 
-# --- samplers ---
+# --- JSON record ---
 def json_record(values: object) -> str | None:
     """A flat dict record (plain str keys; None, bool, float, int, str, 1-D float64 arrays,
     lists of floats) as compact ``json.dumps`` text, NaN/inf as ``null``; None otherwise."""
 
-# --- truthlog ---
+# --- MCAP chunks ---
 @_final
 class McapChunkBatch:
     """Message records of one MCAP chunk in the making (rdm.sim.mcap_writer.McapWriter):
@@ -1245,7 +1253,7 @@ class McapChunkBatch:
         pending messages (channels in first-message order), emptying the batch; None when
         empty."""
 
-# --- onboardtick ---
+# --- capture index, Leptrino scan ---
 def capture_index_records(
     start: int,
     n: int,
@@ -1283,7 +1291,7 @@ def rosserial_frame(topic_id: int, payload: bytes | bytearray | memoryview) -> b
     Raises :class:`RosserialFrameError` naming the rule for a topic id that is not an int in
     0..65535, a payload of another type, or one longer than the uint16 length field."""
 
-# --- spinalbusy ---
+# --- Spinal frames ---
 def spinal_imu_frame(
     topic_id: int,
     now_ms: int,
@@ -1314,11 +1322,31 @@ def spinal_servo_states_frame(
     has send_data_flag; False when an argument is not an exact int in range, ``master`` is
     not a ``CanMaster`` or a reporting servo's index passes 255 (the Python path decides)."""
 
-# --- mstruth ---
+# --- ground truth ---
 # WrenchNoiseCore.sample_values_at and RotorPlantCore.{set_truth_layout, truth_arrays} are
 # stubbed in their classes above (crates/rdm_py/src/{sensor_sim,rotor_plant}.rs).
 
 # --- lockstep kernel ---
+@_final
+class SampleSchedule:
+    """The plant bridge's sampling schedule (``PlantBridge.schedule``; the lockstep kernel
+    advances the same object): tick ``n`` (from 0) takes a reading when ``n % every == 0``;
+    ``every`` 0 is off. Each argument >= 0 (ValueError naming it otherwise)."""
+
+    def __new__(
+        cls, imu_every: int, wrench_every: int, mocap_every: int, truth_every: int
+    ) -> _Self: ...
+    def advance(self) -> tuple[bool, bool, bool, bool]:
+        """Take the next tick: (imu, wrench, mocap, truth) due at it."""
+    def peek(self) -> tuple[bool, bool, bool, bool]:
+        """(imu, wrench, mocap, truth) due at the next tick, without taking it."""
+    @property
+    def every(self) -> tuple[int, int, int, int]:
+        """Ticks between the samples of (imu, wrench, mocap, truth); 0: off."""
+    @property
+    def count(self) -> int:
+        """Ticks taken so far."""
+
 @_final
 class StopFlag:
     """The lockstep loop's stop request (``Lockstep.stop`` sets it, the Rust loop reads it)."""
@@ -1368,7 +1396,7 @@ class LockstepKernel:
         index: int,
         bank: NeuronBank,
         plan: Callable[[], tuple[Any, ...] | None],
-        store: Callable[[int, int, int], None],
+        store: Callable[[int], None],
     ) -> None: ...
     def attach_bank(
         self,

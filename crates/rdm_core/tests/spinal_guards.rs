@@ -30,6 +30,7 @@ fn firmware_configs_select_every_firmware_exact_option() {
     assert_eq!(control.anti_windup, AntiWindup::Off);
     assert_eq!(control.voltage_guard, VoltageGuard::Off);
     assert!(!control.saturate_commands);
+    assert!(!control.bound_alpha);
     assert!(EstimatorConfig::firmware(1000.0).guards.is_none());
     let spinal = SpinalConfig::firmware(200.0);
     assert!(spinal.estimator.guards.is_none());
@@ -38,6 +39,7 @@ fn firmware_configs_select_every_firmware_exact_option() {
     let default = SpinalConfig::default();
     assert!(default.estimator.guards.is_some());
     assert!(default.control.saturate_commands);
+    assert!(default.control.bound_alpha);
     assert_ne!(default.control.voltage_guard, VoltageGuard::Off);
 }
 
@@ -75,4 +77,42 @@ fn voltage_guard_rejects_and_duty_never_exceeds_max() {
     let out = exact.step(0.6, &Matrix3::identity(), &Vector3::zeros(), 1.75);
     assert_eq!(out.duty[..4], [0.9375; 4]); // min_duty capped at max_pwm
     assert_eq!(out.pwm_report[..4], [1875; 4]);
+}
+
+/// Roll -0.9 rad, roll P gains (30, 15, -15, -30), 5 N base thrust, 20 N limit: roll terms
+/// (27, 13.5, -13.5, -27) N; the firmware's alpha = (20 - 32) / 5 = -2.4 gives thrusts
+/// rp - 7 N = (20, 6.5, -20.5, -34); the bound alpha = -1 gives the roll terms alone.
+#[test]
+fn alpha_is_bounded_to_minus_one_by_default() {
+    use rdm_core::control::gains::GainSet;
+    let roll_p = [30.0, 15.0, -15.0, -30.0];
+    let rot = nalgebra::Rotation3::from_euler_angles(-0.9, 0.0, 0.0).into_inner();
+    for (config, alpha, expected, bounded) in [
+        (
+            AttitudeControlConfig::default(),
+            -1.0,
+            [27.0, 13.5, -13.5, -27.0],
+            1,
+        ),
+        (
+            AttitudeControlConfig::firmware(200.0),
+            -2.4,
+            [20.0, 6.5, -20.5, -34.0],
+            0,
+        ),
+    ] {
+        let mut c = armed(config);
+        let mut gains = GainSet::default();
+        for (g, p) in gains.iter_mut().zip(roll_p) {
+            g.roll.p = p;
+        }
+        c.set_gains(&gains).unwrap();
+        c.four_axis_command([0.0; 3], &[5.0; 4], 0.0).unwrap();
+        let out = c.step(0.0, &rot, &Vector3::zeros(), 25.2);
+        assert!((out.alpha - alpha).abs() < 1e-12, "alpha {}", out.alpha);
+        for (got, want) in out.thrust[..4].iter().zip(expected) {
+            assert!((got - want).abs() < 1e-12, "thrust {got} != {want}");
+        }
+        assert_eq!(c.counters().bounded_alphas, bounded);
+    }
 }

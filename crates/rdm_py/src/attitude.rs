@@ -338,7 +338,7 @@ macro_rules! controller_pymethods {
                 self.ctrl_ref().pwm().map(|p| p.last_good_voltage())
             }
             /// Counters: wrong_length, non_finite, ignored, invalid_steps, failsafes,
-            /// rejected_voltages, saturated_commands, non_finite_outputs.
+            /// rejected_voltages, saturated_commands, non_finite_outputs, bounded_alphas.
             #[getter]
             fn counters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
                 let c = self.ctrl_ref().counters();
@@ -351,6 +351,7 @@ macro_rules! controller_pymethods {
                 d.set_item("rejected_voltages", c.rejected_voltages)?;
                 d.set_item("saturated_commands", c.saturated_commands)?;
                 d.set_item("non_finite_outputs", c.non_finite_outputs)?;
+                d.set_item("bounded_alphas", c.bounded_alphas)?;
                 Ok(d)
             }
         }
@@ -378,7 +379,7 @@ controller_pymethods!(PyAttitudeController, {
                         integral_limit = 1.0, command_timeout_s = 0.5, max_tilt_rad = 1.0,
                         force_landing_rate = 2.5, voltage_guard = None, battery_cells = 0,
                         cell_voltage_range = (rdm_core::pwm::CELL_MIN_V, rdm_core::pwm::CELL_MAX_V),
-                        saturate_commands = None, motor_outputs = 4))]
+                        saturate_commands = None, bound_alpha = None, motor_outputs = 4))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         rate_hz: f64,
@@ -392,6 +393,7 @@ controller_pymethods!(PyAttitudeController, {
         battery_cells: u32,
         cell_voltage_range: (f64, f64),
         saturate_commands: Option<bool>,
+        bound_alpha: Option<bool>,
         motor_outputs: usize,
     ) -> PyResult<Self> {
         let config = control_config(&ControlOptions {
@@ -406,6 +408,7 @@ controller_pymethods!(PyAttitudeController, {
             battery_cells,
             cell_voltage_range,
             saturate_commands,
+            bound_alpha,
             motor_outputs,
         })?;
         let inner = AttitudeController::new(config)
@@ -487,7 +490,7 @@ controller_pymethods!(PySpinalStep, {
                         max_tilt_rad = 1.0, force_landing_rate = 2.5, voltage_guard = None,
                         battery_cells = 0,
                         cell_voltage_range = (rdm_core::pwm::CELL_MIN_V, rdm_core::pwm::CELL_MAX_V),
-                        saturate_commands = None, motor_outputs = 4, **estimator_overrides))]
+                        saturate_commands = None, bound_alpha = None, motor_outputs = 4, **estimator_overrides))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         rate_hz: f64,
@@ -502,6 +505,7 @@ controller_pymethods!(PySpinalStep, {
         battery_cells: u32,
         cell_voltage_range: (f64, f64),
         saturate_commands: Option<bool>,
+        bound_alpha: Option<bool>,
         motor_outputs: usize,
         estimator_overrides: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
@@ -524,6 +528,7 @@ controller_pymethods!(PySpinalStep, {
                 battery_cells,
                 cell_voltage_range,
                 saturate_commands,
+                bound_alpha,
                 motor_outputs,
             })?,
         };

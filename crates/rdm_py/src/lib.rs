@@ -28,6 +28,7 @@ mod qp;
 mod rosserial;
 mod rotor_arrays;
 mod rotor_plant;
+mod sample_schedule;
 mod sensor_sim;
 mod servo_goals;
 mod spinal_commands;
@@ -65,5 +66,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     spinal_mirror::register(m)?;
     spinal_commands::register(m)?;
     servo_goals::register(m)?;
+    sample_schedule::register(m)?;
     Ok(())
 }

@@ -1,6 +1,6 @@
 //! Bindings of `rdm_core::control::perch`: the perching QP, its controller and the filter.
 
-use nalgebra::Matrix4;
+use nalgebra::{Matrix4, Matrix6x4};
 use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::create_exception;
 use pyo3::prelude::*;
@@ -47,6 +47,23 @@ fn matrix4(name: &str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<Matrix4<f64>> 
     Ok(Matrix4::from_fn(|r, c| view[[r, c]]))
 }
 
+/// `foot_allocation` as 4 rows (contact-plane coordinates) or 6 rows (foot axes).
+enum FootRows {
+    Plane(Matrix4<f64>),
+    Foot(Matrix6x4<f64>),
+}
+
+fn foot_rows(name: &str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<FootRows> {
+    let view = a.as_array();
+    match view.shape() {
+        [4, 4] => Ok(FootRows::Plane(Matrix4::from_fn(|r, c| view[[r, c]]))),
+        [6, 4] => Ok(FootRows::Foot(Matrix6x4::from_fn(|r, c| view[[r, c]]))),
+        s => Err(err(format!(
+            "`{name}` must be 4x4 (plane rows) or 6x4 (foot axes), got {s:?}"
+        ))),
+    }
+}
+
 fn bools<const N: usize>(name: &str, v: Vec<f64>) -> PyResult<[bool; N]> {
     if v.len() != N {
         return Err(err(format!(
@@ -90,6 +107,12 @@ fn parse_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<PerchParams> {
             "half_size_x" => p.half_size_x = value.extract().map_err(bad)?,
             "half_size_y" => p.half_size_y = value.extract().map_err(bad)?,
             "zmp_z" => p.zmp_z = value.extract().map_err(bad)?,
+            "contact_normal" => {
+                p.contact_normal = floats("contact_normal", value.extract().map_err(bad)?)?
+            }
+            "contact_center" => {
+                p.contact_center = floats("contact_center", value.extract().map_err(bad)?)?
+            }
             "thrust_rate_limit" => {
                 p.thrust_rate_limit = floats("thrust_rate_limit", value.extract().map_err(bad)?)?
             }
@@ -134,6 +157,8 @@ fn params_dict<'py>(py: Python<'py>, p: &PerchParams) -> PyResult<Bound<'py, PyD
     d.set_item("half_size_x", p.half_size_x)?;
     d.set_item("half_size_y", p.half_size_y)?;
     d.set_item("zmp_z", p.zmp_z)?;
+    d.set_item("contact_normal", p.contact_normal.to_vec())?;
+    d.set_item("contact_center", p.contact_center.to_vec())?;
     d.set_item("thrust_rate_limit", p.thrust_rate_limit.to_vec())?;
     d.set_item("rotor_thrust_max", p.rotor_thrust_max.to_vec())?;
     d.set_item("feedback_gain", p.feedback_gain)?;
@@ -219,7 +244,8 @@ impl PyPerchQp {
         Ok(Self { inner })
     }
 
-    /// Solve one instance; returns the solution dict (thrust, status, diagnostics).
+    /// Solve one instance; returns the solution dict (thrust, status, diagnostics). A 4x4
+    /// `foot_allocation`: wrench and rows in the contact plane's coordinates; 6x4: foot axes.
     #[allow(clippy::too_many_arguments)]
     #[pyo3(signature = (foot_allocation, allocation, mass, foot_wrench, previous_thrust,
                         previous_foot_wrench, flight_thrust=None))]
@@ -234,8 +260,12 @@ impl PyPerchQp {
         previous_foot_wrench: PyReadonlyArray1<'py, f64>,
         flight_thrust: Option<PyReadonlyArray1<'py, f64>>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let rows = foot_rows("foot_allocation", &foot_allocation)?;
         let input = PerchInput {
-            foot_allocation: matrix4("foot_allocation", &foot_allocation)?,
+            foot_allocation: match rows {
+                FootRows::Plane(m) => m,
+                FootRows::Foot(_) => Matrix4::zeros(),
+            },
             allocation: matrix4("allocation", &allocation)?,
             mass,
             foot_wrench: vector::<6>("foot_wrench", &foot_wrench)?,
@@ -244,7 +274,10 @@ impl PyPerchQp {
             flight_thrust: optional_thrust("flight_thrust", flight_thrust)?,
         };
         let inner = &mut self.inner;
-        let solution = py.detach(|| inner.solve(&input));
+        let solution = py.detach(|| match rows {
+            FootRows::Plane(_) => inner.solve(&input),
+            FootRows::Foot(m) => inner.solve_foot(&m, &input),
+        });
         solution_dict(py, &solution)
     }
 
@@ -281,7 +314,9 @@ impl PyPerchController {
         Ok(Self { inner })
     }
 
-    /// One tick from the raw sensor wrench `[F_x, F_y, F_z, M_x, M_y, M_z]`.
+    /// One tick from the raw sensor wrench `[F_x, F_y, F_z, M_x, M_y, M_z]`: with a 4x4
+    /// `foot_allocation` both are in the contact plane's coordinates (the ceiling: foot
+    /// frame), with a 6x4 one both are in foot axes about the foot origin.
     #[pyo3(signature = (foot_wrench, foot_allocation, allocation, mass, flight_thrust=None))]
     fn tick<'py>(
         &mut self,
@@ -293,12 +328,14 @@ impl PyPerchController {
         flight_thrust: Option<PyReadonlyArray1<'py, f64>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let wrench = vector::<6>("foot_wrench", &foot_wrench)?;
-        let foot_allocation = matrix4("foot_allocation", &foot_allocation)?;
+        let rows = foot_rows("foot_allocation", &foot_allocation)?;
         let allocation = matrix4("allocation", &allocation)?;
         let flight = optional_thrust("flight_thrust", flight_thrust)?;
         let inner = &mut self.inner;
-        let solution =
-            py.detach(|| inner.tick(&wrench, &foot_allocation, &allocation, mass, flight));
+        let solution = py.detach(|| match rows {
+            FootRows::Plane(m) => inner.tick(&wrench, &m, &allocation, mass, flight),
+            FootRows::Foot(m) => inner.tick_foot(&wrench, &m, &allocation, mass, flight),
+        });
         solution_dict(py, &solution)
     }
 

@@ -25,6 +25,15 @@ MAX_WIRE_GAIN: float = _rdm.MAX_WIRE_GAIN
 TABLE_V_Q = np.array([20.0, 30.0, 90.0, 12.8, 600.0, 80.0, 100.0, 50.0, 20.0, 0.15, 1.0, 0.5])
 #: Table V, W2.
 TABLE_V_R = np.ones(4)
+#: Table V's W1 with the roll weights lowered (roll 90 -> 30, roll rate 12.8 -> 1.0) for the
+#: straight posture, whose roll inertia is small (I_xx 0.0042 kg m^2, 70x below I_yy). With
+#: Table V's weights the roll-rate loop's gain (K_d / I_xx = 123 1/s) sits above what the
+#: rotor lag, Spinal's gyro filter and the transport delay leave: a 12 Hz roll mode with
+#: damping about 0.03 in MuJoCo, rung to +-1 deg by motion capture's noise through the
+#: position loop's roll target and vectoring angle (docs/flying.md "The hover's roll loop").
+#: ASSUMPTION (tuned in simulation: the mission's hover thrust std per rotor 1.3-2.0 N ->
+#: 0.18-0.30 N over 20 seeds); JSK tunes its LQI weights per robot (``controller/lqi`` yaml).
+ROLL_DAMPED_Q = np.array([20.0, 30.0, 30.0, 1.0, 600.0, 80.0, 100.0, 50.0, 20.0, 0.15, 1.0, 0.5])
 
 CareSolveError = _rdm.CareSolveError
 LqiSynthesisError = _rdm.LqiSynthesisError

@@ -132,7 +132,12 @@ class PerchQp:
         previous_foot_wrench: ArrayLike,
         flight_thrust: ArrayLike | None = None,
     ) -> PerchResult:
-        """Solve one instance (see docs/perch.md for each argument's frame and sign)."""
+        """Solve one instance (see docs/perch.md for each argument's frame and sign).
+
+        ``foot_allocation`` 4 x 4 (rows F_n, M_t1, M_t2, M_n): ``foot_wrench`` is in the
+        contact plane's coordinates (the ceiling: the foot frame); 6 x 4 (rows F_x .. M_z about
+        the foot origin): ``foot_wrench`` is in foot axes and both are carried into the plane
+        of the ``contact_normal``/``contact_center`` parameters."""
         d = self._inner.solve(
             _mat(foot_allocation),
             _mat(allocation),
@@ -171,7 +176,9 @@ class PerchController:
         mass: float,
         flight_thrust: ArrayLike | None = None,
     ) -> PerchResult:
-        """One tick from the raw sensor wrench ``[F_x, F_y, F_z, M_x, M_y, M_z]``."""
+        """One tick from the raw sensor wrench ``[F_x, F_y, F_z, M_x, M_y, M_z]`` (frames as
+        :meth:`PerchQp.solve`: a 4 x 4 ``foot_allocation`` is in plane coordinates, a 6 x 4 one
+        in foot axes; the filter runs in plane coordinates)."""
         d = self._inner.tick(
             _vec(foot_wrench),
             _mat(foot_allocation),

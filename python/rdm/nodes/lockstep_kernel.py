@@ -93,7 +93,7 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
     """The plan the kernel reads for ``bridge`` (called again after Python code ran): None
     when its tick has no Rust form now (boards of several banks, a battery voltage that is a
     function of time or not yet applied, ESCs outside the Rust duty map, a wrench sink other
-    than ``leptrino``'s ``set_wrench_values``), else the counters, sample periods, the foot
+    than ``leptrino``'s ``set_wrench_values``), else the counters, the sampling schedule, the foot
     wrench path (addresses, noise core, normal stream), the targets and duties arrays, the
     IMU path when its only sink is ``spinal``'s ``set_imu_sample`` (else None: an IMU ms is
     Python's), the truth call and the parts it may change. Mocap samples are Python's. The
@@ -111,8 +111,9 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
             return None
         if not (plant._duties_in_core and all(e._v_factor is not None for e in plant.escs)):
             return None
-        adr, core, normals, wrench_n = (0, 0), None, None, 0
-        if b._wrench_on:
+        imu_on, wrench_on, _, truth_on = (n > 0 for n in b.schedule.every)
+        adr, core, normals = (0, 0), None, None
+        if wrench_on:
             if len(b._wrench_sinks) != 1 or leptrino is None:
                 return None
             ((key, sink),) = b._wrench_sinks.items()
@@ -124,11 +125,10 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
                 return None
             model = plant.wrench_models[key]
             adr, core, normals = plant._wrench_adr[key], model._core, model._normals
-            wrench_n = b._wrench_n
         imu = None
         sink = b._imu_sink
         if (
-            b._imu_on
+            imu_on
             and not b._imu_neurons
             and spinal is not None
             and getattr(sink, "__self__", None) is spinal
@@ -139,21 +139,16 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
             imu = (plant._imu_adr, model._core, model._normals, spinal)
         touches = b.truth_sink_touches
         return (
-            b.ticks,
-            b._sample_count,
             b.time_mismatches,
             0.5 * b.period,
-            b._imu_n if b._imu_on else 0,
-            wrench_n,
-            b._mocap_n if b._mocap_on else 0,
-            b._truth_n if b._truth_on else 0,
+            b.schedule,
             adr,
             core,
             normals,
             b._targets,
             b._duties,
             imu,
-            truth if b._truth_on else None,
+            truth if truth_on else None,
             ["plant", "bridge", "bank", "spinal", "leptrino"]
             if touches is None
             else ["plant", *touches],
@@ -162,12 +157,11 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
     return plan
 
 
-def _bridge_store(bridge: PlantBridge) -> Callable[[int, int, int], None]:
-    """Where the kernel writes the bridge's counters back (its ticks, samples, mismatches)."""
+def _bridge_store(bridge: PlantBridge) -> Callable[[int], None]:
+    """Where the kernel writes the bridge's time-mismatch count back (its ticks are the
+    count of its sampling schedule, the object the kernel advances)."""
 
-    def store(ticks: int, sample_count: int, time_mismatches: int) -> None:
-        bridge.ticks = ticks
-        bridge._sample_count = sample_count
+    def store(time_mismatches: int) -> None:
         bridge.time_mismatches = time_mismatches
 
     return store

@@ -6,7 +6,8 @@ same names and units; its nested dataclasses are tables (``[pwm_info]``, ``[serv
 ``[flight]``, ``[monitors]``), the keyword overrides are tables of numbers and arrays
 (``[position_gains]``, ``[perch_params]``, ``[gain_profiles.NAME]``), and ``[ports]`` names the
 node's ports (``uart``, ``foot_sensor``, ``control``, ``key``). A key the file leaves out keeps
-its default; the shipped example ``rdm/data/onboard/rdm.toml`` spells out every default.
+its default; the shipped example ``rdm/data/onboard/rdm.toml`` spells out every default and
+sets ``lqi_q_weights`` to the roll weights the robot flies (``lqi.ROLL_DAMPED_Q``).
 
 Every value is checked where it is read: unknown keys, TOML types against the field's type
 hint, finite numbers, array lengths, then the dataclasses' own ``__post_init__`` rules, the

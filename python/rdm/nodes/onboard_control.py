@@ -31,6 +31,9 @@ from rdm.nodes.onboard_config import OnboardConfig
 INT16_MIN, INT16_MAX = -32768, 32767
 #: How many recent q's model terms :meth:`ControlPipeline.update_model` keeps.
 MODEL_CACHE_SIZE = 4
+#: Largest share of the weight :meth:`ControlPipeline.set_perch_weight_share` hands to the
+#: contact: the rest stays on the hover feed-forward. ASSUMPTION (a bound, not a tuning).
+PERCH_WEIGHT_SHARE_MAX = 0.5
 
 try:  # the ufunc np.clip ends in for float arrays, without its Python dispatch layers
     from numpy._core.umath import clip as _clip
@@ -91,6 +94,16 @@ def wrap_angle(a: float) -> float:
     return math.atan2(math.sin(a), math.cos(a))
 
 
+def foot_wrench_rows(allocation: np.ndarray, foot_in_cog: np.ndarray) -> np.ndarray:
+    """The six rows f_x, f_y, f_z, m_x, m_y, m_z (6 x N) of the wrench unit thrusts produce
+    about the foot origin, foot axes: the perching QP's input on a contact plane other than
+    the ceiling (``perch_params["contact_normal"]``, docs/perch.md "Contact plane")."""
+    full = np.asarray(allocation, dtype=float)
+    p = np.asarray(foot_in_cog, dtype=float)[:3, 3]
+    forces = full[:3]
+    return np.vstack([forces, full[3:] - np.cross(p, forces.T).T])
+
+
 def foot_allocation(allocation: np.ndarray, foot_in_cog: np.ndarray) -> np.ndarray:
     """Q̄_foot (4 x N): rows f_z, m_x, m_y, m_z of the wrench unit thrusts produce about the
     foot origin, foot axes (= CoG axes, Sec. III). ``allocation`` is the full 6 x N Q(q);
@@ -116,12 +129,19 @@ class ModelTerms:
     inertia: np.ndarray
     allocation: np.ndarray  # 6 x N, CoG frame
     allocation_bar: np.ndarray  # 4 x N
-    foot_allocation: np.ndarray  # 4 x N about the foot origin
+    #: 4 x N about the foot origin (f_z, m_x, m_y, m_z); 6 x N (f_x .. m_z) when the perching
+    #: QP's contact plane is not the ceiling (:func:`foot_wrench_rows`)
+    foot_allocation: np.ndarray
     link_rotations: np.ndarray  # (N_VECTORING, 3, 3): eq. (36)'s R_i = (C<-L_i)^T
     hover_thrust: np.ndarray
     #: C<-IMU link: Spinal's ``desire_coordinate`` (its attitude is the IMU link's, the
     #: controlled frame is the CoG frame; firmware ``rot = R_est offset_rot^T``)
     imu_to_cog: np.ndarray
+    #: Thrust change per unit weight share handed to the perch contact: Q̄(q)⁻¹ of
+    #: [-m g, -m g p_y, m g p_x, 0] with p the contact centre in the CoG frame (the rotors
+    #: shed that share of the weight and cancel the moment friction puts about the CoG);
+    #: zeros without a perching controller.
+    perch_unload: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -229,16 +249,32 @@ class ControlPipeline:
             clamp_gain=True,
             rotors=robot.n_rotors,
         )
+        #: the synthesizer the hover flies (``lqi_q_weights``) and the one of a lost rotor's
+        #: arrest (:meth:`use_arrest_gains`): Table V's weights, whose stiffer roll loop
+        #: stops the turn (docs/flying.md "A lost rotor")
+        self._lqi_flight = self.lqi
+        self._lqi_arrest = LqiSynthesizer(
+            None,
+            None if config.lqi_r_weights is None else np.array(config.lqi_r_weights),
+            clamp_gain=True,
+            rotors=robot.n_rotors,
+        )
         self.position = PositionController(**config.position_gains)
         self.pc_axes = PcAxisController()
         #: The perching QP is built for PERCH_ROTORS rotors (ASSUMPTION, docs/onboard.md): a
         #: robot with another count flies without it and its perch requests are refused.
         self.perch: PerchController | None = None
+        self._foot_rows_6 = False  # the perch QP's plane is not the ceiling: 6 foot rows
         if robot.n_rotors == PERCH_ROTORS:
             # λ_rotor_max of eq. (47) defaults to the robot's rotor limit (assumption)
             perch_params = {"rotor_thrust_max": list(self.thrust_max), **config.perch_params}
             self.perch = PerchController(config.rate_hz, config.perch_cutoff_hz, **perch_params)
             self._delta_perch = np.asarray(self.perch.params()["thrust_rate_limit"], dtype=float)
+            plane = self.perch.params()
+            self._foot_rows_6 = plane["contact_normal"] != [0.0, 0.0, -1.0] or any(
+                v != 0.0 for v in plane["contact_center"]
+            )
+            self._contact_center = np.asarray(plane["contact_center"], dtype=float)
         else:
             self._delta_perch = np.ones(robot.n_rotors)
         # with every rate limit > 0, max(x - limit, 0) of an all-(+0.0) array is all +0.0 again
@@ -256,6 +292,9 @@ class ControlPipeline:
         self._lqi_result_kept = None
         self.perching = False
         self.perch_thrust = np.zeros(robot.n_rotors)
+        #: share of the weight taken off the hover feed-forward while perched (the contact's
+        #: friction carries it; :meth:`set_perch_weight_share`)
+        self.perch_weight_share = 0.0
         self._ticks = 0
         #: the model terms and the pinv wire message depend on q alone: both are reused while
         #: the present q is bit-for-bit the one they were computed at
@@ -302,7 +341,8 @@ class ControlPipeline:
             return False
         qbar = np.asarray(o["allocation_bar"], dtype=float)
         full = np.asarray(o["allocation"], dtype=float)
-        qfoot = foot_allocation(full, np.asarray(o["foot_in_cog"], dtype=float))
+        foot_rows = foot_wrench_rows if self._foot_rows_6 else foot_allocation
+        qfoot = foot_rows(full, np.asarray(o["foot_in_cog"], dtype=float))
         rotations = np.array([np.asarray(r).T for r in o["unit_parent_rotations"]])
         if lean:
             cog_pose, imu_pose = o["cog_pose"], o["imu_pose"]
@@ -314,7 +354,8 @@ class ControlPipeline:
         g = self.config.gravity
         rhs = [o["mass"] * g, 0.0, 0.0, 0.0]
         hover = _lstsq_solution(qbar, rhs)
-        if not (_all_finite(qbar) and _all_finite(hover)):
+        unload = self._perch_unload(qbar, o["foot_in_cog"], rhs[0])
+        if not (_all_finite(qbar) and _all_finite(hover) and _all_finite(unload)):
             self.counts["model_non_finite"] += 1
             return False
         values = (
@@ -327,11 +368,22 @@ class ControlPipeline:
             rotations,
             hover,
             imu,
+            unload,
         )
         self.terms = _model_terms(*values)
         self._model_key = self.terms.q.tobytes()
         self._remember_model()
         return True
+
+    def _perch_unload(self, qbar: np.ndarray, foot_in_cog: object, weight: float) -> np.ndarray:
+        """:attr:`ModelTerms.perch_unload` at this q: the friction of a contact carrying the
+        weight share s acts up (+z of the CoG frame, level when perched) at the contact centre
+        p, so the rotors give (1 - s) m g and the moment -p x (0, 0, s m g)."""
+        if self.perch is None:
+            return np.zeros(qbar.shape[1])
+        pose = np.asarray(foot_in_cog, dtype=float)
+        p = pose[:3, :3] @ self._contact_center + pose[:3, 3]
+        return _lstsq_solution(qbar, [-weight, -weight * p[1], weight * p[0], 0.0])
 
     def _remember_model(self) -> None:
         """Keep the present terms (and pinv message, if built) under the present q."""
@@ -404,6 +456,18 @@ class ControlPipeline:
         self.gains_payload = (wire, payload)
         return True
 
+    def use_arrest_gains(self, arrest: bool) -> bool:
+        """Synthesize with Table V's LQI weights (``arrest``: a lost rotor's arrest) or with
+        the configured ones again; on a switch the gains are synthesized at once (True: new
+        gains to send). ASSUMPTION: Table V's lightly damped 12 Hz roll mode does not matter
+        for the arrest's 0.1 s."""
+        want = self._lqi_arrest if arrest else self._lqi_flight
+        if self.lqi is want:
+            return False
+        self.lqi = want
+        want.reset()  # a cold start: the other weights' solution is no warm start
+        return self.synthesize()
+
     def p_matrix_wire(self) -> tuple[list[tuple[int, int, int]], list[int]] | None:
         """``p_matrix_pseudo_inverse_inertia``: pinv(Q̄) columns r, p, y per rotor and the
         inertia xx, yy, zz, xy, yz, xz, all x1000 int16."""
@@ -440,6 +504,21 @@ class ControlPipeline:
             self.counts["perch_entered"] += 1
         self.perching = on
 
+    def set_perch_weight_share(self, share: float) -> None:
+        """While perched, add ``share`` x :attr:`ModelTerms.perch_unload` to the hover
+        feed-forward: the rotors' thrust drops by that share of the weight, the contact's
+        friction carries it, and the rotors cancel the moment it puts about the CoG (a wall
+        perch, docs/scenarios.md "wall-perching"). Bounded to [0, ``PERCH_WEIGHT_SHARE_MAX``];
+        a non-finite value is refused (share kept) and an out-of-range one clipped, both
+        counted. Off the contact (not perching) the feed-forward is the full hover thrust."""
+        if not math.isfinite(share):
+            self.counts["perch_weight_share_refused"] += 1
+            return
+        bounded = min(max(float(share), 0.0), PERCH_WEIGHT_SHARE_MAX)
+        if bounded != share:
+            self.counts["perch_weight_share_clipped"] += 1
+        self.perch_weight_share = bounded
+
     def set_position_gains(self, gains: dict, bumpless: bool = False) -> None:
         """Replace the position controller's gains (keyword overrides of
         :class:`PositionController`, as ``OnboardConfig.position_gains``): a gain schedule per
@@ -472,6 +551,8 @@ class ControlPipeline:
             return None
         n_rot = self.robot.n_rotors
         ff = t.hover_thrust if self.config.feed_forward == "hover" else np.zeros(n_rot)
+        if self.perching and self.perch_weight_share > 0.0:
+            ff = ff + self.perch_weight_share * t.perch_unload
         axes = self._flight_axes(state, setpoint, joint_targets, ff, dt)
         if axes[6]:
             self.counts["vectoring_singular"] += axes[6]

@@ -87,14 +87,14 @@ class MonitorLimits:
     #: an orthonormal rotation matrix in float32 (the mission's largest: 4e-8).
     imu_quat_norm_tol: float = 1e-3
     #: A lost rotor (``rotor_lost``, :mod:`rdm.nodes.onboard_rotor_loss`): in flight (take-off,
-    #: hover, manual, landing; no joint motion), roll or pitch off its target by more than
-    #: ``rotor_loss_tilt_rad`` while the gyro turns it further faster than
-    #: ``rotor_loss_rate_rad_s``. ASSUMPTION: 4 deg and 2.5 rad/s; in the fault-free mission
-    #: (seeds 0 and 1) min(|error| / 4 deg, |rate| / 2.5 rad/s) of a diverging axis (a trip
-    #: at 1) reaches 0.7 at most (the 12 Hz attitude limit cycle, the touchdown); a
-    #: dead rotor 0 trips 25-50 ms after the fault (at 6 deg / 3.5 rad/s about a tick later).
-    rotor_loss_tilt_rad: float = 0.07
-    rotor_loss_rate_rad_s: float = 2.5
+    #: hover, manual, landing; no joint motion; the node's command fresh), roll or pitch off
+    #: its target by more than ``rotor_loss_tilt_rad`` while the gyro turns it further faster than
+    #: ``rotor_loss_rate_rad_s``. ASSUMPTION: 0.005 rad (the direction of the error) and
+    #: 1.5 rad/s; the specific force below is the discriminator. The mission's hover (the
+    #: damped roll loop, ``lqi.ROLL_DAMPED_Q``) has a roll std of 0.1-0.2 deg; a dead rotor 0
+    #: trips 20-25 ms after the fault, at the first tick whose ``imu`` shows the thrust drop.
+    rotor_loss_tilt_rad: float = 0.005
+    rotor_loss_rate_rad_s: float = 1.5
     #: ... **and** the accelerometer's specific force (its norm: thrust over mass) below this,
     #: m/s^2: the thrust has dropped. ASSUMPTION: 7.35 (0.75 g); the hover's readings stay at
     #: 9.0 or above, a dead rotor 0 (14.4 of 36.4 N) reads 3.2-5.9 within 25 ms, while a
@@ -102,13 +102,14 @@ class MonitorLimits:
     #: near g. A lost rotor carrying less than a quarter of the weight is not detected.
     rotor_loss_specific_force: float = 7.35
     #: The reaction: for ``rotor_loss_arrest_s`` the base thrust of every rotor at
-    #: ``rotor_loss_fall_thrust``, N, roll and pitch targets 0 (Spinal's 1 kHz attitude loop
-    #: stops the turn), then ARM_OFF (the motors stop) and the robot falls keeping its
-    #: attitude. ASSUMPTION: ``motor_info``'s ``min_thrust`` (1 N) and one control tick
-    #: (25 ms at 40 Hz): a cut at the detection keeps the turn (about 5 rad/s), a longer wait
-    #: lets the pitch the thrust floor gives build up (docs/flying.md "A lost rotor").
+    #: ``rotor_loss_fall_thrust``, N, roll and pitch targets 0 and Table V's LQI gains
+    #: (``ControlPipeline.use_arrest_gains``: Spinal's 1 kHz attitude loop stops the turn),
+    #: then ARM_OFF (the motors stop) and the robot falls keeping its attitude. ASSUMPTION:
+    #: ``motor_info``'s ``min_thrust`` (1 N) and four control ticks (0.1 s at 40 Hz): with
+    #: one tick or the damped roll loop's gains the turn goes on through the fall
+    #: (docs/flying.md "A lost rotor").
     rotor_loss_fall_thrust: float = 1.0
-    rotor_loss_arrest_s: float = 0.025
+    rotor_loss_arrest_s: float = 0.1
 
     def __post_init__(self) -> None:
         for name in (

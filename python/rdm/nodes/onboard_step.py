@@ -190,11 +190,12 @@ class OnboardStep:
 
     def _rotor_loss(self, now: float, flying: bool) -> None:
         """A lost rotor (:mod:`rdm.nodes.onboard_rotor_loss`): detected in flight, Spinal's
-        attitude loop stops the turn on the thrust floor (:meth:`_fall_command`), then the node
-        disarms (the motors stop) and the robot falls."""
+        attitude loop, on Table V's LQI gains, stops the turn on the thrust floor
+        (:meth:`_fall_command`), then the node disarms (the motors stop) and the robot falls."""
         lim = self.config.monitors
         if not flying:
             self.rotor_lost_at = None
+            self.control.use_arrest_gains(False)  # the configured weights for the next flight
             return
         if self.rotor_lost_at is not None:
             # Spinal's 1 kHz attitude loop on the thrust floor stops the turn for
@@ -216,6 +217,11 @@ class OnboardStep:
             or self.flight.mode not in ROTOR_LOSS_MODES
             or self._trajectory is not None
             or self.control.perching
+            # the node flies the robot only while its command is fresh; when it withholds
+            # it (motion capture lost), Spinal's timeout and force landing fly it, not the
+            # target last sent
+            or self._command_at is None
+            or now - self._command_at > self.config.flight.command_hold_s + 1e-9
         ):
             return
         c = self.last_command
@@ -240,6 +246,9 @@ class OnboardStep:
             now,
         )
         self.counts["rotor_lost_fall"] += 1
+        # Table V's stiffer roll loop for the arrest, sent in this tick
+        if self.control.use_arrest_gains(True) and self.control.gains_wire is not None:
+            self._send_gains()
         if self.flight.mode is not FlightMode.LAND:
             self.flight.request_land(now)
 

@@ -40,6 +40,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from rdm import _rdm
 from rdm.plant.description import RobotDescription
 
 if sys.version_info >= (3, 11):
@@ -239,16 +240,18 @@ class PlantBridge:
         #: (``rdm.nodes.lockstep_kernel``: "bridge", "bank", "spinal", "leptrino"); None:
         #: anything.
         self.truth_sink_touches = None if truth_sink_touches is None else tuple(truth_sink_touches)
-        # Ticks between samples (each reading fires on the first tick, then every n-th).
-        self._imu_n = _ratio(imu_period, period, "imu_period") or 1
-        self._wrench_n = _ratio(wrench_period, period, "wrench_period") or 1
-        self._mocap_n = _ratio(mocap_period, period, "mocap_period") or 1
-        self._truth_n = _ratio(truth_period, period, "truth_period") or 1
-        self._sample_count = 0
-        self._imu_on = imu_period is not None and (imu_sink is not None or self._imu_neurons)
-        self._wrench_on = wrench_period is not None and bool(self._wrench_sinks)
-        self._mocap_on = mocap_period is not None and mocap_sink is not None
-        self._truth_on = truth_period is not None and truth_sink is not None
+        # Ticks between samples (0: off; each reading is taken on the first tick, then every
+        # n-th). The one schedule of both the Python tick and the lockstep kernel's.
+        imu_n = _ratio(imu_period, period, "imu_period")
+        wrench_n = _ratio(wrench_period, period, "wrench_period")
+        mocap_n = _ratio(mocap_period, period, "mocap_period")
+        truth_n = _ratio(truth_period, period, "truth_period")
+        self.schedule = _rdm.SampleSchedule(
+            imu_n if imu_sink is not None or self._imu_neurons else 0,
+            wrench_n if self._wrench_sinks else 0,
+            mocap_n if mocap_sink is not None else 0,
+            truth_n if truth_sink is not None else 0,
+        )
         self._targets = plant.servo_positions()
         self._duties = np.full(len(plant.rotor_names), 0.5)
         #: The Neuron banks the coupling runs in (each holds its boards' part), layout order.
@@ -257,7 +260,6 @@ class PlantBridge:
         self._voltage: float | None = None
         self._foot_body = plant.model.body(plant.description.foot_frame).id
         self.time_mismatches = 0
-        self.ticks = 0
 
     def _attach_banks(self) -> None:
         """Attach each bank's part of the coupling (``NeuronBankNode.attach_bridge``): its
@@ -285,7 +287,6 @@ class PlantBridge:
     def tick(self, now: float) -> None:
         """Couple plant and mirrors at ``now`` (see the module doc)."""
         plant = self.plant
-        self.ticks += 1
         if abs(plant.time - now) > 0.5 * self.period:
             self.time_mismatches += 1
         self._couple(now)
@@ -338,23 +339,26 @@ class PlantBridge:
     def _sample(self, now: float) -> None:
         """Steps 5-7: the readings due at ``now``."""
         plant = self.plant
-        # Sampling schedule: the n-th tick (from 0) samples a reading when n % ratio == 0.
-        n = self._sample_count
-        self._sample_count = n + 1
-        if self._imu_on and n % self._imu_n == 0:
+        imu, wrench, mocap, truth = self.schedule.advance()
+        if imu:
             r = plant.imu()
             if self._imu_sink is not None:
                 self._imu_sink(r.gyro, r.accel, r.mag)
             for neuron in self._imu_neurons:
                 neuron.set_imu(r.gyro, r.accel, r.mag)
-        if self._wrench_on and n % self._wrench_n == 0:
+        if wrench:
             for key, sink in self._wrench_sinks.items():
                 sink(plant.wrench_values(key))
-        if self._mocap_on and n % self._mocap_n == 0:
+        if mocap:
             d = plant.data
             self._mocap_sink(now, d.xpos[self._foot_body].copy(), d.xquat[self._foot_body].copy())
-        if self._truth_on and n % self._truth_n == 0:
+        if truth:
             self._truth_sink(plant.ground_truth())
+
+    @property
+    def ticks(self) -> int:
+        """Ticks taken so far (the sampling schedule counts them)."""
+        return self.schedule.count
 
     @property
     def battery_voltage(self) -> float | None:

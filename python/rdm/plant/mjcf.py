@@ -31,6 +31,10 @@ ENV_GROUP = 1  # conaffinity of environment geoms
 FOOT_PLATE_BODY = "foot_plate"
 CEILING_GEOM = "ceiling"
 FLOOR_GEOM = "floor"
+#: World geoms named with this prefix (added by a scene, e.g. the wall-perching plate) are
+#: contact surfaces of the foot like the ceiling: the ground truth's foot contact wrench and
+#: slip count their contacts (the ZMP there assumes the ceiling's normal).
+CONTACT_SURFACE_PREFIX = "contact_surface"
 IMU_SITE = "imu"
 CEILING_HALF_THICKNESS = 0.05
 

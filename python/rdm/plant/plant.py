@@ -31,6 +31,7 @@ from rdm.plant.description import RobotDescription, load_robot
 from rdm.plant.esc import Esc, EscParams
 from rdm.plant.mjcf import (
     CEILING_GEOM,
+    CONTACT_SURFACE_PREFIX,
     FLOOR_GEOM,
     FOOT_PLATE_BODY,
     BuildOptions,
@@ -159,6 +160,7 @@ class Plant(PlantReadings, PlantTruthReadout):
         self._plate_body = m.body(FOOT_PLATE_BODY).id
         self._ee_body = m.body(desc.end_effector_frame).id
         env = {m.geom(g).id for g in (CEILING_GEOM, FLOOR_GEOM) if _has_geom(m, g)}
+        env |= {g for g in range(m.ngeom) if m.geom(g).name.startswith(CONTACT_SURFACE_PREFIX)}
         self._tracker = FootContactTracker(m, self._plate_body, env)
         self._sensor_adr = {m.sensor(i).name: int(m.sensor_adr[i]) for i in range(m.nsensor)}
         adr = self._sensor_adr

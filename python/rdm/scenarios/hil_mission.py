@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from rdm.control import lqi
 from rdm.ground.auth import load_key, write_key
 from rdm.ground.client import GroundClient
 from rdm.json_values import nulled
@@ -77,8 +78,13 @@ UNPERCH_S = 1.6
 #: Longest wait for the contact after ``perch``, s (then the operator lands).
 APPROACH_LIMIT_S = 15.0
 #: The onboard process's configuration file: the hanging-posture experiments' gains and
-#: perching parameters (``perching.POSITION_GAINS``, ``perching.PERCH_PARAMS``).
-ONBOARD_TOML = """[position_gains]
+#: perching parameters (``perching.POSITION_GAINS``, ``perching.PERCH_PARAMS``) and the LQI
+#: weights the lockstep mission flies. ASSUMPTION: ``lqi.ROLL_DAMPED_Q`` (Table V rings the
+#: straight posture's roll loop at 12 Hz under motion capture noise; docs/flying.md "The
+#: hover's roll loop"), as the shipped ``rdm.toml``.
+ONBOARD_TOML = f"""lqi_q_weights = {lqi.ROLL_DAMPED_Q.tolist()}
+
+[position_gains]
 k_roll = 1.0
 y_pid = [3.0, 0.5, 4.0]
 

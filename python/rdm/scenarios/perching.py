@@ -101,17 +101,26 @@ FOLD_GAINS_AT = 1.0
 #: the x offset the fold leaves (seed 0: the foot perched 35 mm from the planned point, 119 mm
 #: with the configured gains, 204 mm with (1.0, 0.1, 2.0)). docs/scenarios.md.
 FOLD_GAINS: dict = {**HANGING_FLIGHT_GAINS, "x_pid": (1.5, 1.0, 2.0)}
+#: Spinal's roll/pitch integration is stopped while the IMU link (the root link) turns
+#: against the CoG frame faster than this [rad/s] (``OnboardConfig.rp_integration_hold_rate``):
+#: Spinal's D term takes the root link's rate, so the fold (q1) otherwise winds the pitch
+#: integral up and carries its moment into the perch (docs/scenarios.md, "Where the integral
+#: comes from"). ASSUMPTION: 0.02 rad/s, above one Dynamixel tick (1.5 mrad) per 0.1 s
+#: window (0.015 rad/s, the node's quantisation of a still joint) and 1/10 of the fold's
+#: mean rate (0.2 rad/s), so only planned joint motion holds it.
+RP_INTEGRATION_HOLD_RATE = 0.02
 EDGE_MM = 1.0  # ZMP within this of the plate edge counts as "on the edge" (tipping)
 
 
 def onboard_config(**overrides: Any) -> OnboardConfig:
     """The onboard configuration of the hanging-posture experiments (perching, push,
-    tracking, tasks): :data:`POSITION_GAINS` and :data:`PERCH_PARAMS` over the defaults;
-    ``overrides`` replace whole fields."""
+    tracking, tasks): :data:`POSITION_GAINS`, :data:`PERCH_PARAMS` and
+    :data:`RP_INTEGRATION_HOLD_RATE` over the defaults; ``overrides`` replace whole fields."""
     kw: dict[str, Any] = {
         "position_gains": dict(POSITION_GAINS),
         "perch_params": dict(PERCH_PARAMS),
         "servo_lead_s": scenario_servo_lead(),
+        "rp_integration_hold_rate": RP_INTEGRATION_HOLD_RATE,
     }
     kw.update(overrides)
     return OnboardConfig(**kw)

@@ -555,9 +555,15 @@ def run(
     A variant (``push-paper-forces``) gives its ``robot`` (a shipped name or the path of a
     robot TOML), its ``name``, its ``metrics`` rows and extra ``facts``."""
     plan = plan or DEFAULT_PLAN
+    hold = (
+        {}
+        if plan.rp_integration_hold_rate == "default"
+        else {"rp_integration_hold_rate": plan.rp_integration_hold_rate}
+    )
     onboard = onboard_config(
         perch_params={**PERCH_PARAMS, **plan.perch_params},
         perch_cutoff_hz=plan.perch_cutoff_hz,
+        **hold,
     )
     opts = sim_stack_options(seed, uart, speed=speed, log=log, onboard=onboard, robot=robot)
     script = PushScript(plan)

@@ -176,6 +176,9 @@ PAPER_PLAN = PaperPushPlan(
     perch_params={"epsilon_z": PERCHED_EPSILON_Z},
     perch_cutoff_hz=PERCHED_CUTOFF_HZ,
     gap_s=GAP_S,
+    # the foot-at-plate robot perches with Spinal's integral kept through the fold
+    # (perching_foot_at_plate.RP_INTEGRATION_HOLD_RATE)
+    rp_integration_hold_rate=None,
 )
 #: upper bound of a run [s]; the run stops 0.5 s after the perched stage (~71 s)
 DEFAULT_DURATION = 85.0

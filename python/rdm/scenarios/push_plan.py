@@ -124,6 +124,9 @@ class PushPlan:
     #: the perching scenario: 1 Hz)
     perch_params: dict = field(default_factory=dict)
     perch_cutoff_hz: float = PERCHED_CUTOFF_HZ
+    #: ``OnboardConfig.rp_integration_hold_rate`` of the run [rad/s] ("default": the
+    #: perching configuration's, ``perching.RP_INTEGRATION_HOLD_RATE``; None: never held)
+    rp_integration_hold_rate: float | str | None = "default"
 
     def stage_s(self) -> float:
         return self.quiet_s + len(self.axes) * (self.push_s + self.gap_s)

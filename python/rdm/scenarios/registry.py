@@ -67,6 +67,14 @@ SCENARIOS: dict[str, Scenario] = {
             "plate are not reached (rows marked NO, docs/scenarios.md)",
         ),
         Scenario(
+            "wall-perching",
+            "wall_perching",
+            "run",
+            "approach a vertical plate in the flat posture, press the foot's side face on it "
+            "with the foot rotors tilted 30 deg (beta1 = -30 deg), hold perched with the "
+            "plate's friction carrying 10 % of the weight, leave",
+        ),
+        Scenario(
             "push",
             "push",
             "run",

@@ -1,7 +1,8 @@
 //! Simulation-side models that run every simulated millisecond next to the plant: sensor
 //! error models and the sensor-side encoding of what a simulated sensor sends. They mirror
 //! the Python reference forms in `rdm.plant.sensors` / `rdm.protocol.leptrino` operation for
-//! operation, so a run gives the same bytes with either.
+//! operation, so a run gives the same bytes with either. The plant bridge's sampling
+//! schedule (`sample_schedule`) has this one form.
 
 pub mod contact_gate;
 pub mod esc_duty;
@@ -12,4 +13,5 @@ pub mod mcap_chunk;
 pub mod plate_contact;
 pub mod python_float_repr;
 pub mod rotor_plant;
+pub mod sample_schedule;
 pub mod sensor_noise;

@@ -22,6 +22,7 @@ pub(crate) struct ControlOptions {
     pub battery_cells: u32,
     pub cell_voltage_range: (f64, f64),
     pub saturate_commands: Option<bool>,
+    pub bound_alpha: Option<bool>,
     pub motor_outputs: usize,
 }
 
@@ -50,6 +51,7 @@ pub(crate) fn control_config(o: &ControlOptions) -> PyResult<AttitudeControlConf
             VoltageGuard::Off
         },
         saturate_commands: o.saturate_commands.unwrap_or(guarded),
+        bound_alpha: o.bound_alpha.unwrap_or(guarded),
         motor_outputs: o.motor_outputs,
     };
     config.validate().map_err(|field| {

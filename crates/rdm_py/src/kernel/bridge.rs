@@ -9,8 +9,10 @@ use super::attr::Name;
 use super::leptrino::LeptrinoFast;
 use super::plant::PlantLink;
 use crate::neuron_bank::NeuronBank;
+use crate::sample_schedule::SampleSchedule;
 use crate::sensor_sim::{ImuNoiseCore, WrenchNoiseCore};
 use crate::untracked;
+use rdm_core::sim::sample_schedule::Reading;
 
 /// A `NormalStream` (`rdm.plant.sensors`): its `_buf` list read here, `_pos` kept here.
 struct Normals {
@@ -63,14 +65,11 @@ struct ImuPath {
 
 /// The bridge's plan (`rdm.nodes.lockstep_kernel`).
 struct Plan {
-    ticks: i64,
-    sample_count: i64,
     time_mismatches: i64,
     half_period: f64,
-    imu_n: i64,
-    wrench_n: i64,
-    mocap_n: i64,
-    truth_n: i64,
+    /// `PlantBridge.schedule`: its Python ticks and these advance the one counter, which is
+    /// also the bridge's tick count.
+    schedule: Py<SampleSchedule>,
     /// (force, torque) addresses in sensordata of the foot wrench sensor.
     wrench_adr: (usize, usize),
     wrench_core: Option<Py<WrenchNoiseCore>>,
@@ -101,7 +100,7 @@ pub(crate) struct BridgeFast {
     /// Returns the plan tuple, or None when the tick has no Rust form now
     /// (`rdm.nodes.lockstep_kernel`).
     plan_of: Py<PyAny>,
-    /// `store(ticks, sample_count, time_mismatches)`: the counters back into the node.
+    /// `store(time_mismatches)`: the mismatch count back into the node.
     store: Py<PyAny>,
     names: Names,
     bank: Py<NeuronBank>,
@@ -109,10 +108,6 @@ pub(crate) struct BridgeFast {
     loaded: bool,
     dirty: bool,
     scratch: Vec<f64>,
-}
-
-fn due(n: i64, every: i64) -> bool {
-    every > 0 && n % every == 0
 }
 
 impl BridgeFast {
@@ -149,13 +144,13 @@ impl BridgeFast {
         let plan = self.plan_of.bind(py).call0()?;
         self.plan = if !plan.is_none() {
             let t = plan.cast_into::<PyTuple>()?;
-            let normals = t.get_item(10)?;
+            let normals = t.get_item(5)?;
             let wrench_normals = if normals.is_none() {
                 None
             } else {
                 Some(Normals::load(normals)?)
             };
-            let imu = t.get_item(13)?;
+            let imu = t.get_item(8)?;
             let imu = if imu.is_none() {
                 None
             } else {
@@ -167,24 +162,19 @@ impl BridgeFast {
                     sink: i.get_item(3)?.unbind(),
                 })
             };
-            let truth = t.get_item(14)?;
+            let truth = t.get_item(9)?;
             let truth = if truth.is_none() {
                 None
             } else {
-                let parts: Vec<String> = t.get_item(15)?.extract()?;
+                let parts: Vec<String> = t.get_item(10)?.extract()?;
                 Some((truth.unbind(), super::parts_mask(&parts)?))
             };
-            let core = t.get_item(9)?;
+            let core = t.get_item(4)?;
             Some(Plan {
-                ticks: t.get_item(0)?.extract()?,
-                sample_count: t.get_item(1)?.extract()?,
-                time_mismatches: t.get_item(2)?.extract()?,
-                half_period: t.get_item(3)?.extract()?,
-                imu_n: t.get_item(4)?.extract()?,
-                wrench_n: t.get_item(5)?.extract()?,
-                mocap_n: t.get_item(6)?.extract()?,
-                truth_n: t.get_item(7)?.extract()?,
-                wrench_adr: t.get_item(8)?.extract()?,
+                time_mismatches: t.get_item(0)?.extract()?,
+                half_period: t.get_item(1)?.extract()?,
+                schedule: t.get_item(2)?.cast_into::<SampleSchedule>()?.unbind(),
+                wrench_adr: t.get_item(3)?.extract()?,
                 wrench_core: if core.is_none() {
                     None
                 } else {
@@ -193,8 +183,8 @@ impl BridgeFast {
                 wrench_normals,
                 imu,
                 truth,
-                targets: t.get_item(11)?.extract()?,
-                duties: t.get_item(12)?.extract()?,
+                targets: t.get_item(6)?.extract()?,
+                duties: t.get_item(7)?.extract()?,
             })
         } else {
             None
@@ -209,10 +199,10 @@ impl BridgeFast {
         let Some(p) = &self.plan else {
             return Ok(false);
         };
-        let n = p.sample_count;
-        Ok((p.imu.is_some() || !due(n, p.imu_n))
-            && !due(n, p.mocap_n)
-            && (p.truth.is_some() || !due(n, p.truth_n)))
+        let due = p.schedule.bind(py).borrow().inner.peek();
+        Ok((p.imu.is_some() || !due.has(Reading::Imu))
+            && !due.has(Reading::Mocap)
+            && (p.truth.is_some() || !due.has(Reading::Truth)))
     }
 
     /// `Plant.imu()` into `SpinalMirror.set_imu_sample` (the sink of the plan).
@@ -258,7 +248,6 @@ impl BridgeFast {
             ));
         };
         self.dirty = true;
-        p.ticks += 1;
         if (plant.time(py)? - now).abs() > p.half_period {
             p.time_mismatches += 1;
         }
@@ -303,19 +292,18 @@ impl BridgeFast {
             plant.command_duties(py, &self.scratch)?;
         }
         // 5-7: the IMU, the wrench, the truth (ready() excluded mocap).
-        let n = p.sample_count;
-        p.sample_count = n + 1;
-        if due(n, p.imu_n) {
+        let due = p.schedule.bind(py).borrow_mut().inner.advance();
+        if due.has(Reading::Imu) {
             let imu = p.imu.as_mut().expect("ready() checked the IMU path");
             Self::imu_sample_of(&self.names, py, imu, plant)?;
         }
-        let truth = if due(n, p.truth_n) {
+        let truth = if due.has(Reading::Truth) {
             let (call, touches) = p.truth.as_ref().expect("ready() checked the truth path");
             Some((call.clone_ref(py), *touches))
         } else {
             None
         };
-        if !due(n, p.wrench_n) {
+        if !due.has(Reading::Wrench) {
             return Ok(BridgeOut {
                 wrench: None,
                 truth,
@@ -373,9 +361,7 @@ impl BridgeFast {
             if let Some(imu) = &p.imu {
                 imu.normals.flush(py)?;
             }
-            self.store
-                .bind(py)
-                .call1((p.ticks, p.sample_count, p.time_mismatches))?;
+            self.store.bind(py).call1((p.time_mismatches,))?;
         }
         self.dirty = false;
         Ok(())

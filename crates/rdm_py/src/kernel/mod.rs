@@ -266,7 +266,7 @@ impl LockstepKernel {
 
     /// Node `index` is a `PlantBridge` coupled through `bank` (needs `attach_plant`);
     /// `plan()` returns its plan tuple, or None when its tick has no Rust form now;
-    /// `store(ticks, sample_count, time_mismatches)` writes the counters back.
+    /// `store(time_mismatches)` writes the mismatch count back.
     fn attach_bridge(
         &mut self,
         py: Python<'_>,

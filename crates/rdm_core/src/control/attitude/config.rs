@@ -41,6 +41,13 @@ pub struct AttitudeControlConfig {
     /// term into `[-command_thrust_max, command_thrust_max]` (the largest reference
     /// `max_thrust` times the rotor divider); default true, false is firmware-exact.
     pub saturate_commands: bool,
+    /// Bound the base-thrust saturation factor alpha to `[-1, 0]` (docs/spinal.md "Attitude
+    /// allocation"): `1 + alpha >= 0` keeps every base thrust's sign, and the duty clamp keeps
+    /// every output inside `[min_duty, max_duty]`. Default true, counted
+    /// (`ControlCounters::bounded_alphas`); false is firmware-exact (alpha < -1 when one
+    /// rotor's roll/pitch term alone exceeds the thrust limit, which reverses every base
+    /// thrust).
+    pub bound_alpha: bool,
     /// ESC outputs the board drives (1..=[`crate::MAX_ROTORS`]): the length of every
     /// per-rotor output, and the largest `uav_info.motor_num` accepted. ASSUMPTION: 4 by
     /// default, the paper's RDM; a robot description with another rotor count sets its own.
@@ -57,6 +64,7 @@ impl Default for AttitudeControlConfig {
             force_landing_rate: FIRMWARE_FORCE_LANDING_STEP * 1000.0,
             voltage_guard: VoltageGuard::default(),
             saturate_commands: true,
+            bound_alpha: true,
             motor_outputs: 4,
         }
     }
@@ -64,7 +72,7 @@ impl Default for AttitudeControlConfig {
 
 impl AttitudeControlConfig {
     /// Firmware-exact behaviour at `rate_hz`: no anti-windup, no voltage guard, no command
-    /// saturation. The duty cap (`min_duty <= max_duty`, a non-finite thrust -> `min_duty`)
+    /// saturation, no alpha bound. The duty cap (`min_duty <= max_duty`, a non-finite thrust -> `min_duty`)
     /// holds in every configuration.
     pub fn firmware(rate_hz: f64) -> Self {
         Self {
@@ -72,6 +80,7 @@ impl AttitudeControlConfig {
             anti_windup: AntiWindup::Off,
             voltage_guard: VoltageGuard::Off,
             saturate_commands: false,
+            bound_alpha: false,
             ..Self::default()
         }
     }

@@ -51,7 +51,7 @@ pub struct AttitudeOutput {
     pub duty: [f64; MAX_ROTORS],
     /// `motor_pwms` values (duty x 2000, us).
     pub pwm_report: [u16; MAX_ROTORS],
-    /// Base-thrust saturation factor alpha (<= 0).
+    /// Base-thrust saturation factor alpha (in `[-1, 0]` with `bound_alpha`, else <= 0).
     pub alpha: f64,
     /// Yaw saturation factor beta in [-1, 0].
     pub beta: f64,
@@ -87,6 +87,8 @@ pub struct ControlCounters {
     pub saturated_commands: u64,
     /// Steps whose computed thrust was not finite (every rotor then got `min_duty`).
     pub non_finite_outputs: u64,
+    /// Steps whose alpha fell below -1 and was bounded to -1 (`bound_alpha`).
+    pub bounded_alphas: u64,
 }
 
 /// The Spinal attitude controller with its flight state machine.
@@ -447,6 +449,13 @@ impl AttitudeController {
             if residual < 0.0 && self.base_thrust[max_index] > 0.0 {
                 alpha = residual / (self.base_thrust[max_index] / rd);
                 beta = -1.0;
+                // Rule: alpha in [-1, 0]. Below -1, (1 + alpha) < 0 reverses every base
+                // thrust; -1 removes the base thrust and leaves the roll/pitch terms, whose
+                // duties the clamp below keeps inside [min_duty, max_duty].
+                if self.config.bound_alpha && alpha < -1.0 {
+                    alpha = -1.0;
+                    self.counters.bounded_alphas += 1;
+                }
             } else if self.max_yaw_index.is_some() && self.base_thrust[0] != 0.0 {
                 // Saturation level 1: yaw pushes a rotor past max or below min thrust.
                 let mut max_thrust = 0.0;

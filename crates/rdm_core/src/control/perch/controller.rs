@@ -1,7 +1,7 @@
 //! The 40 Hz perching step: filter the foot wrench (Sec. VII-B), solve eq. (49), remember
 //! `λ_perch,t` and `W_foot,t` for the next tick's eqs. (48) and (38).
 
-use nalgebra::Matrix4;
+use nalgebra::{Matrix4, Matrix6x4};
 
 use super::filter::WrenchFilter;
 use super::params::{ParamError, PerchParams};
@@ -43,8 +43,10 @@ impl PerchController {
         self.has_previous_wrench = false;
     }
 
-    /// One tick. `raw_foot_wrench` = `[F_x, F_y, F_z, M_x, M_y, M_z]` from the sensor in the
-    /// foot frame (see [`PerchInput`] for the sign). Never panics; non-finite input gives
+    /// One tick in the contact plane's coordinates: `raw_foot_wrench` =
+    /// `[F_t1, F_t2, F_n, M_t1, M_t2, M_n]` and `foot_allocation` rows `[F_n, M_t1, M_t2, M_n]`
+    /// (for the paper's ceiling: the sensor's `[F_x, .., M_z]` in the foot frame; see
+    /// [`PerchInput`] for the sign; [`Self::tick_foot`] for any plane from foot axes). Never panics; non-finite input gives
     /// the safe command with [`super::PerchStatus::NonFiniteInput`] and leaves the filter as is.
     pub fn tick(
         &mut self,
@@ -82,7 +84,25 @@ impl PerchController {
         solution
     }
 
-    /// The filtered foot wrench of the last finite sample.
+    /// One tick from foot-axes quantities: `raw_foot_wrench` from the sensor in the foot
+    /// frame, `foot_allocation` the six rows `[F_x, F_y, F_z, M_x, M_y, M_z]` unit thrusts
+    /// produce about the foot origin. Both are carried into the contact plane
+    /// ([`ContactPlane`](super::ContactPlane)) and [`Self::tick`] runs there (the filter too).
+    pub fn tick_foot(
+        &mut self,
+        raw_foot_wrench: &[f64; 6],
+        foot_allocation: &Matrix6x4<f64>,
+        allocation: &Matrix4<f64>,
+        mass: f64,
+        flight_thrust: Option<[f64; PERCH_ROTORS]>,
+    ) -> PerchSolution {
+        let plane = *self.qp.plane();
+        let wrench = plane.wrench(raw_foot_wrench);
+        let rows = plane.allocation(foot_allocation);
+        self.tick(&wrench, &rows, allocation, mass, flight_thrust)
+    }
+
+    /// The filtered foot wrench of the last finite sample (plane coordinates).
     pub fn filtered_foot_wrench(&self) -> [f64; 6] {
         self.filter.output()
     }

@@ -3,6 +3,7 @@
 //! - [`params`]: Table VII parameters and the ones the paper leaves out.
 //! - [`filter`]: the 1 Hz first-order IIR low-pass on the measured foot wrench.
 //! - [`dims`]: the QP's size (variables, equality rows, rows).
+//! - [`plane`]: the contact plane (normal, face centre) eqs. (39)-(44) are written in.
 //! - [`qp`]: the QP of eq. (49): row builder, solver choice, safe command.
 //! - [`reduced`]: eq. (38) eliminated, the cost made `½‖y‖²` (4 thrust variables).
 //! - [`active_set`]: the dense dual active-set solver (default, allocation-free).
@@ -18,6 +19,7 @@ pub mod controller;
 pub mod dims;
 pub mod filter;
 pub mod params;
+pub mod plane;
 pub mod qp;
 pub mod reduced;
 pub mod status;
@@ -26,5 +28,6 @@ pub use controller::PerchController;
 pub use dims::{N_ROWS, N_VARS, N_ZERO_ROWS};
 pub use filter::WrenchFilter;
 pub use params::{ParamError, PerchParams, PerchSolver};
+pub use plane::{ContactPlane, CEILING_NORMAL};
 pub use qp::{PerchInput, PerchQp, PerchSolution};
 pub use status::{PerchCounters, PerchStatus};

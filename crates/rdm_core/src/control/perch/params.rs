@@ -56,9 +56,17 @@ pub struct PerchParams {
     pub half_size_x: f64,
     /// Half-length `H_y` of the footplate, eq. (42) [m] (Table VII: 0.07).
     pub half_size_y: f64,
-    /// `p_ZMP_z` of eqs. (43)-(44): height of the contact surface in the foot frame [m].
+    /// `p_ZMP_z` of eqs. (43)-(44): height of the contact surface above the moment reference
+    /// point along the pressing direction [m] (the plane's `d`, [`super::plane`]).
     /// Not given by the paper; 0.0 because the foot frame origin is on the footplate (Sec. III).
     pub zmp_z: f64,
+    /// Outward unit normal of the contact surface in foot axes (from the surface towards the
+    /// robot). The paper's ceiling: `(0, 0, −1)` ([`super::plane::CEILING_NORMAL`]); a wall
+    /// in front of the foot's +x face: `(−1, 0, 0)`. Eqs. (39)-(44) hold in its plane.
+    pub contact_normal: [f64; 3],
+    /// Centre of the footplate's contact face in the foot frame [m]: the reference point of
+    /// the moments and the ZMP (the ceiling face: the foot origin, `(0, 0, 0)`).
+    pub contact_center: [f64; 3],
     /// `δλ_perch` of eq. (48): largest thrust change per tick [N] (Table VII: 5.0 each).
     pub thrust_rate_limit: [f64; PERCH_ROTORS],
     /// `λ_rotor_max` of eq. (47): maximum thrust of each rotor [N]. Not given by the paper;
@@ -97,6 +105,8 @@ impl Default for PerchParams {
             half_size_x: 0.04,
             half_size_y: 0.07,
             zmp_z: 0.0,
+            contact_normal: super::plane::CEILING_NORMAL,
+            contact_center: [0.0; 3],
             thrust_rate_limit: [5.0; PERCH_ROTORS],
             rotor_thrust_max: [30.0; PERCH_ROTORS],
             feedback_gain: 1.0,
@@ -164,6 +174,7 @@ impl PerchParams {
                 reason: "must be finite",
             });
         }
+        super::plane::ContactPlane::new(self.contact_normal, self.contact_center)?;
         if !(self.feedback_gain.is_finite() && self.feedback_gain >= 0.0) {
             return Err(ParamError {
                 field: "feedback_gain",

@@ -52,19 +52,22 @@ pub use safe::safe_thrust;
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSolver, NonnegativeConeT, SupportedConeT, ZeroConeT};
-use nalgebra::Matrix4;
+use nalgebra::{Matrix4, Matrix6x4};
 
 use super::active_set::DualActiveSet;
 use super::dims::{N_ROWS, N_VARS, N_ZERO_ROWS};
 use super::params::{ParamError, PerchParams};
+use super::plane::ContactPlane;
 use super::reduced::REDUCED_ROWS;
 use super::status::{PerchCounters, PerchStatus};
 use crate::PERCH_ROTORS;
 use rows::{a_pattern, controlled_rows_independent, input_is_finite};
 use solve::solver_settings;
 
-/// Inputs of one perching QP. All wrenches are in the foot frame at its origin, with the
-/// sign of the wrench the foot applies to the surface (`F_z > 0` presses, eq. 39).
+/// Inputs of one perching QP. All wrenches are in the contact plane's coordinates
+/// ([`ContactPlane`]: axes `t₁, t₂, d`, moments about the face centre; for the paper's ceiling
+/// the foot frame at its origin), with the sign of the wrench the foot applies to the surface
+/// (`F_z > 0` presses, eq. 39). [`PerchQp::solve_foot`] takes foot-axes quantities instead.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PerchInput {
     /// `Q̄_foot(q)`: rows `[F_z, M_x, M_y, M_z]` of the wrench produced at the foot origin by
@@ -117,6 +120,7 @@ pub struct PerchSolution {
 /// in place and solves. Allocation-free after [`PerchQp::new`] on the active-set path.
 pub struct PerchQp {
     params: PerchParams,
+    plane: ContactPlane,
     scale: f64,
     solver: DefaultSolver<f64>,
     active_set: DualActiveSet<REDUCED_ROWS>,
@@ -141,6 +145,7 @@ impl PerchQp {
     /// Build the solver (the only allocations). Fails if `params` does not validate.
     pub fn new(params: PerchParams) -> Result<Self, ParamError> {
         params.validate()?;
+        let plane = ContactPlane::new(params.contact_normal, params.contact_center)?;
         let scale = params.variable_scale();
 
         // P: upper-triangular CSC, diagonal on the thrust block only.
@@ -204,6 +209,7 @@ impl PerchQp {
 
         Ok(Self {
             params,
+            plane,
             scale,
             solver,
             active_set: DualActiveSet::new(),
@@ -229,6 +235,11 @@ impl PerchQp {
         &self.params
     }
 
+    /// The contact plane of `params.contact_normal` and `params.contact_center`.
+    pub fn plane(&self) -> &ContactPlane {
+        &self.plane
+    }
+
     /// Ticks per outcome since construction.
     pub fn counters(&self) -> PerchCounters {
         self.counters
@@ -250,6 +261,23 @@ impl PerchQp {
         self.last_thrust_max = solution.thrust_max;
         self.last_foot_wrench = solution.foot_wrench;
         solution
+    }
+
+    /// Solve eq. (49) from foot-axes quantities: `input.foot_wrench` in foot axes about the
+    /// foot origin, `foot_allocation` the six rows `[F_x, F_y, F_z, M_x, M_y, M_z]` unit thrusts
+    /// produce there (`input.foot_allocation` is replaced by the plane's rows of it;
+    /// `previous_foot_wrench` stays in plane coordinates, as the solutions report it).
+    pub fn solve_foot(
+        &mut self,
+        foot_allocation: &Matrix6x4<f64>,
+        input: &PerchInput,
+    ) -> PerchSolution {
+        let on_plane = PerchInput {
+            foot_allocation: self.plane.allocation(foot_allocation),
+            foot_wrench: self.plane.wrench(&input.foot_wrench),
+            ..*input
+        };
+        self.solve(&on_plane)
     }
 
     fn solve_inner(&mut self, input: &PerchInput) -> PerchSolution {
