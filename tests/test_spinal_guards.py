@@ -236,11 +236,16 @@ def _roll_saturated(**kw) -> tuple[AttitudeController, object]:
     gains[:, 0, 0] = ROLL_P
     c.set_gains(gains)
     c.four_axis_command([0.0, 0.0, 0.0], np.full(4, BASE), 0.0)
+    return c, c.step(0.0, *_roll_saturated_inputs())
+
+
+def _roll_saturated_inputs() -> tuple[np.ndarray, list[float], float]:
+    """Rotation (roll -0.9 rad), rate and voltage of a step of :func:`_roll_saturated`."""
     roll = -0.9
     rot = np.array(
         [[1.0, 0.0, 0.0], [0.0, np.cos(roll), -np.sin(roll)], [0.0, np.sin(roll), np.cos(roll)]]
     )
-    return c, c.step(0.0, rot, STILL, VREF)
+    return rot, STILL, VREF
 
 
 def _expected(bound: bool) -> tuple[float, np.ndarray, np.ndarray]:
@@ -264,6 +269,11 @@ def test_alpha_below_minus_one_is_bounded_keeping_each_base_thrust_sign() -> Non
     assert c.counters["bounded_alphas"] == 1
     # Rotor 1 keeps its 13.5 N roll term; the firmware's alpha = -2.4 takes 7 N off it.
     assert out.thrust[1] == pytest.approx(13.5, abs=1e-12)
+    # The first bounded step of a run is an event; the next one is only counted.
+    assert kinds(out).count("alpha_bounded") == 1
+    out = c.step(0.005, *_roll_saturated_inputs())
+    assert out.alpha == -1.0 and "alpha_bounded" not in kinds(out)
+    assert c.counters["bounded_alphas"] == 2
 
 
 def test_firmware_exact_alpha_reverses_every_base_thrust() -> None:
@@ -273,4 +283,37 @@ def test_firmware_exact_alpha_reverses_every_base_thrust() -> None:
         assert alpha == pytest.approx(-2.4) and out.alpha == pytest.approx(alpha, abs=1e-12)
         np.testing.assert_allclose(out.thrust, thrust, atol=1e-12)  # rp - 7 N on every rotor
         np.testing.assert_allclose(out.duty, duty, atol=1e-12)
-        assert c.counters["bounded_alphas"] == 0
+        assert c.counters["bounded_alphas"] == 0 and "alpha_bounded" not in kinds(out)
+
+
+def test_bounded_alpha_is_logged_once_per_run_by_the_mirror() -> None:
+    """The mirror logs the first bounded step of a run as a rosout warning, read here by the
+    PC-side rosserial server. Roll P gains (30, 15, -15, -30) on the wire (x 1000), level
+    IMU, target roll 0.9 rad (below the 1.0 rad command tilt limit) and 5 N base: rotor 0's
+    roll term (27 N) alone exceeds the 20 N limit. Rotor 1 keeps its 13.5 N roll term (the
+    CAN value read back through the inverse of the thrust curve); the firmware's alpha would
+    leave it 6.5 N."""
+    from test_spinal_mirror import Rig, arm, can_value_to_thrust, four_axis, msg
+
+    from rdm.protocol.rosserial import constants as C
+
+    rig = Rig()
+    try:
+        rig.mirror.set_battery_voltage(24.0)
+        rig.handshake()
+        rig.wait_can_running()
+        arm(rig)
+        terms = [msg("spinal/RollPitchYawTerm", roll_p=int(p * 1000)) for p in ROLL_P]
+        rig.publish("rpy/gain", msg("spinal/RollPitchYawTerms", motors=terms))
+        t_cmd = rig.t
+        for _ in range(6):  # 300 ms of commands at 20 Hz: about 60 bounded steps
+            rig.publish("four_axes/command", four_axis([0.9, 0.0, 0.0], [BASE] * 4))
+            rig.run_for(50)
+        assert rig.mirror.core.counters["bounded_alphas"] >= 50
+        lines = [(e.level, e.text) for _t, e in rig.logs(since=t_cmd) if "alpha" in e.text]
+        text = "guard: saturation factor alpha below -1, bounded to -1"
+        assert lines == [(C.LogLevel.WARN, text)]
+        frames = rig.pwm_frames(since=rig.t - 20)
+        assert can_value_to_thrust(frames[-1][1][1], 24.0) == pytest.approx(13.5, abs=0.1)
+    finally:
+        rig.close()

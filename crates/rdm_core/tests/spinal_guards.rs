@@ -82,6 +82,8 @@ fn voltage_guard_rejects_and_duty_never_exceeds_max() {
 /// Roll -0.9 rad, roll P gains (30, 15, -15, -30), 5 N base thrust, 20 N limit: roll terms
 /// (27, 13.5, -13.5, -27) N; the firmware's alpha = (20 - 32) / 5 = -2.4 gives thrusts
 /// rp - 7 N = (20, 6.5, -20.5, -34); the bound alpha = -1 gives the roll terms alone.
+/// Two bounded steps in a row count twice and report one `AlphaBounded` event; a level step
+/// ends the run.
 #[test]
 fn alpha_is_bounded_to_minus_one_by_default() {
     use rdm_core::control::gains::GainSet;
@@ -108,11 +110,29 @@ fn alpha_is_bounded_to_minus_one_by_default() {
         }
         c.set_gains(&gains).unwrap();
         c.four_axis_command([0.0; 3], &[5.0; 4], 0.0).unwrap();
-        let out = c.step(0.0, &rot, &Vector3::zeros(), 25.2);
-        assert!((out.alpha - alpha).abs() < 1e-12, "alpha {}", out.alpha);
-        for (got, want) in out.thrust[..4].iter().zip(expected) {
-            assert!((got - want).abs() < 1e-12, "thrust {got} != {want}");
+        let alpha_events = |out: &rdm_core::control::attitude::AttitudeOutput| {
+            out.events
+                .iter()
+                .filter(|e| **e == SpinalEvent::AlphaBounded)
+                .count() as u64
+        };
+        // Two bounded steps in a row: counted twice, reported once (the first of the run).
+        let mut events = 0;
+        for t in [0.0, 0.005] {
+            let out = c.step(t, &rot, &Vector3::zeros(), 25.2);
+            assert!((out.alpha - alpha).abs() < 1e-12, "alpha {}", out.alpha);
+            for (got, want) in out.thrust[..4].iter().zip(expected) {
+                assert!((got - want).abs() < 1e-12, "thrust {got} != {want}");
+            }
+            events += alpha_events(&out);
         }
-        assert_eq!(c.counters().bounded_alphas, bounded);
+        assert_eq!(c.counters().bounded_alphas, 2 * bounded);
+        assert_eq!(events, bounded);
+        // A level step (roll terms 0, alpha 0) ends the run; the next bounded step starts one.
+        let out = c.step(0.01, &Matrix3::identity(), &Vector3::zeros(), 25.2);
+        assert_eq!((out.alpha, alpha_events(&out)), (0.0, 0));
+        let out = c.step(0.015, &rot, &Vector3::zeros(), 25.2);
+        assert_eq!(alpha_events(&out), bounded);
+        assert_eq!(c.counters().bounded_alphas, 3 * bounded);
     }
 }

@@ -95,7 +95,8 @@ impl ControlOutput {
     }
     /// Events since the previous step: ("ack", cmd), ("failsafe_timeout", None),
     /// ("failsafe_tilt", None), ("failsafe_command_tilt", None), ("rejected", message),
-    /// ("voltage_rejected", None), ("command_saturated", None), ("non_finite_output", None).
+    /// ("voltage_rejected", None), ("command_saturated", None), ("non_finite_output", None),
+    /// ("alpha_bounded", None); ("events_dropped", n) last when some were lost.
     #[getter]
     fn events<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
         events_list(py, &self.inner)

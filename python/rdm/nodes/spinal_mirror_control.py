@@ -33,6 +33,7 @@ _GUARD_TEXT = {
     "voltage_rejected": "guard: implausible battery voltage, the last good one is used",
     "command_saturated": "guard: four_axes/command thrust saturated",
     "non_finite_output": "guard: non-finite thrust, every motor at min duty",
+    "alpha_bounded": "guard: saturation factor alpha below -1, bounded to -1",
 }
 
 

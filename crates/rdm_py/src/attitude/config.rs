@@ -86,6 +86,7 @@ pub(crate) fn events_list<'py>(
             SpinalEvent::VoltageRejected => ("voltage_rejected", py.None()),
             SpinalEvent::CommandSaturated => ("command_saturated", py.None()),
             SpinalEvent::NonFiniteOutput => ("non_finite_output", py.None()),
+            SpinalEvent::AlphaBounded => ("alpha_bounded", py.None()),
         };
         list.append(item)?;
     }

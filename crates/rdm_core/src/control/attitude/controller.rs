@@ -136,6 +136,7 @@ pub struct AttitudeController {
     voltage_rejecting: bool,
     command_saturating: bool,
     output_non_finite: bool,
+    alpha_bounding: bool,
     events: EventList,
     counters: ControlCounters,
 }
@@ -181,6 +182,7 @@ impl AttitudeController {
             voltage_rejecting: false,
             command_saturating: false,
             output_non_finite: false,
+            alpha_bounding: false,
             events: EventList::default(),
             counters: ControlCounters::default(),
         })
@@ -435,6 +437,7 @@ impl AttitudeController {
         // Saturation level 2: z control (base + roll/pitch) beyond the thrust limit.
         let mut alpha = 0.0;
         let mut beta = 0.0;
+        let mut alpha_bounded = false;
         let mut max_thrust = 0.0;
         let mut max_index = 0;
         for i in 0..n {
@@ -454,6 +457,7 @@ impl AttitudeController {
                 // duties the clamp below keeps inside [min_duty, max_duty].
                 if self.config.bound_alpha && alpha < -1.0 {
                     alpha = -1.0;
+                    alpha_bounded = true;
                     self.counters.bounded_alphas += 1;
                 }
             } else if self.max_yaw_index.is_some() && self.base_thrust[0] != 0.0 {
@@ -488,6 +492,12 @@ impl AttitudeController {
                 beta = -1.0;
             }
         }
+        // The event reports the first bounded step of a run; a step with alpha >= -1 (or
+        // without level-2 saturation, or disarmed) ends the run.
+        if alpha_bounded && !self.alpha_bounding {
+            self.events.push(SpinalEvent::AlphaBounded);
+        }
+        self.alpha_bounding = alpha_bounded;
         let mut finite = true;
         for i in 0..n {
             self.thrust[i] = self.rp_term[i]

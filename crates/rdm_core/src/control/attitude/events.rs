@@ -125,6 +125,9 @@ pub enum SpinalEvent {
     CommandSaturated,
     /// A step computed a non-finite thrust; every rotor got `min_duty`. First of a run.
     NonFiniteOutput,
+    /// A step's saturation factor alpha fell below -1 and was bounded to -1
+    /// (`bound_alpha`). First of a run.
+    AlphaBounded,
 }
 
 /// Fixed-capacity list of events (no allocation). Events beyond the capacity are counted
