@@ -241,3 +241,15 @@ class SetpointRamp:
     def arrived(self) -> bool:
         # element-wise float ==, as np.all(position == goal)
         return self.position.tolist() == self.goal.tolist()
+
+    @classmethod
+    def arm_and_climb(
+        cls, onboard: Any, start: np.ndarray, speed: float, climb_z: float
+    ) -> SetpointRamp:
+        """Arms ``onboard`` with its target at ``start`` and returns the ramp that climbs from
+        there straight up to ``climb_z`` at ``speed`` (the take-off of the perching scenarios)."""
+        ramp = cls(start, speed)
+        ramp.set_goal(np.array([start[0], start[1], climb_z]))
+        onboard.set_target(ramp.position, 0.0)
+        onboard.arm()
+        return ramp

@@ -233,11 +233,9 @@ class PerchingScript:
         tm = self.timing
         if self.phase == "boot":
             if now >= tm.arm_at:
-                start = self.cog(stack)
-                self.ramp = SetpointRamp(start, tm.climb_speed)
-                self.ramp.set_goal(np.array([start[0], start[1], tm.climb_z]))
-                ob.set_target(self.ramp.position, 0.0)
-                ob.arm()
+                self.ramp = SetpointRamp.arm_and_climb(
+                    ob, self.cog(stack), tm.climb_speed, tm.climb_z
+                )
                 self.phase = "climb"
             return
         assert self.ramp is not None

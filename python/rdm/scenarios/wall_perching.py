@@ -199,11 +199,7 @@ class WallPerchingScript:
         n_q = ob.robot.n_q
         if self.phase == "boot":
             if now >= ARM_AT:
-                start = truth_cog(stack)
-                self.ramp = SetpointRamp(start, CLIMB_SPEED)
-                self.ramp.set_goal(np.array([start[0], start[1], CLIMB_Z]))
-                ob.set_target(self.ramp.position, 0.0)
-                ob.arm()
+                self.ramp = SetpointRamp.arm_and_climb(ob, truth_cog(stack), CLIMB_SPEED, CLIMB_Z)
                 self.phase = "climb"
             return
         assert self.ramp is not None
