@@ -1,6 +1,7 @@
 """A lost rotor (a dead ESC, a broken propeller): its detection from Spinal's attitude and
-gyro, and the feasibility figure behind the node's reaction (a cut: the motors stop after one
-control tick of Spinal's attitude loop on the thrust floor, ``OnboardStep._rotor_loss``).
+gyro, and the feasibility figure behind the node's reaction (a cut: the motors stop after
+``rotor_loss_arrest_s`` of Spinal's attitude loop on the thrust floor with Table V's gains,
+``OnboardStep._rotor_loss``).
 
 Why no flight on three rotors (``docs/flying.md`` "A lost rotor"): in the flat posture the
 CoG (x 0.483 m) lies 3.9 cm outside the triangle of rotors 1-3 (rotor 0 lost; likewise
