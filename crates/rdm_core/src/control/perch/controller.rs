@@ -3,8 +3,9 @@
 
 use nalgebra::{Matrix4, Matrix6x4};
 
+use super::error::ParamError;
 use super::filter::WrenchFilter;
-use super::params::{ParamError, PerchParams};
+use super::params::PerchParams;
 use super::qp::{PerchInput, PerchQp, PerchSolution};
 use super::status::PerchCounters;
 use crate::PERCH_ROTORS;

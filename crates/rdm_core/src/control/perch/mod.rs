@@ -17,6 +17,7 @@
 pub mod active_set;
 pub mod controller;
 pub mod dims;
+pub mod error;
 pub mod filter;
 pub mod params;
 pub mod plane;
@@ -26,8 +27,9 @@ pub mod status;
 
 pub use controller::PerchController;
 pub use dims::{N_ROWS, N_VARS, N_ZERO_ROWS};
+pub use error::ParamError;
 pub use filter::WrenchFilter;
-pub use params::{ParamError, PerchParams, PerchSolver};
+pub use params::{PerchParams, PerchSolver};
 pub use plane::{ContactPlane, CEILING_NORMAL};
 pub use qp::{PerchInput, PerchQp, PerchSolution};
 pub use status::{PerchCounters, PerchStatus};

@@ -1,5 +1,6 @@
 //! Parameters of the perching QP. Defaults are Table VII; the rest are named assumptions.
 
+use super::error::ParamError;
 use crate::PERCH_ROTORS;
 
 /// Which solver answers the perching QP of eq. (49).
@@ -119,23 +120,6 @@ impl Default for PerchParams {
         }
     }
 }
-
-/// A parameter that cannot be used, with the name of the field at fault.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ParamError {
-    /// Field name in [`PerchParams`].
-    pub field: &'static str,
-    /// Why it was refused.
-    pub reason: &'static str,
-}
-
-impl core::fmt::Display for ParamError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        write!(f, "perch parameter `{}`: {}", self.field, self.reason)
-    }
-}
-
-impl std::error::Error for ParamError {}
 
 fn positive(field: &'static str, v: f64) -> Result<(), ParamError> {
     if v.is_finite() && v > 0.0 {

@@ -18,7 +18,7 @@
 
 use nalgebra::{Matrix3, Matrix4, Matrix6x4, Vector3};
 
-use super::params::ParamError;
+use super::error::ParamError;
 use crate::PERCH_ROTORS;
 
 /// The ceiling's outward normal in foot axes (the plane of the paper's eqs. 39-44).

@@ -56,7 +56,8 @@ use nalgebra::{Matrix4, Matrix6x4};
 
 use super::active_set::DualActiveSet;
 use super::dims::{N_ROWS, N_VARS, N_ZERO_ROWS};
-use super::params::{ParamError, PerchParams};
+use super::error::ParamError;
+use super::params::PerchParams;
 use super::plane::ContactPlane;
 use super::reduced::REDUCED_ROWS;
 use super::status::{PerchCounters, PerchStatus};
