@@ -413,7 +413,15 @@ def test_lean_commands(lean_venv, tmp_path) -> None:
         env=_venv_env(),
     )
     assert resolved.returncode == 0, resolved.stderr
-    assert json.loads(resolved.stdout)["config"] == json.loads(check.stdout)["config"]
+    # the example sets one value beside the defaults: the damped roll loop's LQI weights
+    # (docs/flying.md "The hover's roll loop"), written out here as the file carries them
+    example_config = json.loads(resolved.stdout)["config"]
+    default_config = json.loads(check.stdout)["config"]
+    assert example_config.pop("lqi_q_weights") == [
+        20.0, 30.0, 30.0, 1.0, 600.0, 80.0, 100.0, 50.0, 20.0, 0.15, 1.0, 0.5
+    ]  # fmt: skip
+    assert default_config.pop("lqi_q_weights") is None
+    assert example_config == default_config
     for argv in (["sim"], ["hil", "--can", "udp", "--duration", "1"]):
         out = subprocess.run(
             [str(lean_venv["rdm"]), *argv],
