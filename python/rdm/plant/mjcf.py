@@ -134,7 +134,9 @@ def _style_robot_geoms(spec: mujoco.MjSpec, contact: ContactParams) -> None:
         geom.density = 0.0  # masses come from the URDF inertials only
 
 
-def _add_env_geom(spec: mujoco.MjSpec, contact: ContactParams, **kwargs: object) -> None:
+def add_env_geom(spec: mujoco.MjSpec, contact: ContactParams, **kwargs: object) -> None:
+    """Adds a world geom (``kwargs``: MuJoCo's ``add_geom`` arguments) that the robot's links
+    touch with the environment's contact parameters (the ceiling, the floor, a task's wall)."""
     geom = spec.worldbody.add_geom(**kwargs)
     geom.contype = 0
     geom.conaffinity = ENV_GROUP
@@ -224,7 +226,7 @@ def build_spec(desc: RobotDescription, options: BuildOptions | None = None) -> m
         _site_sensor(spec, f"{key}_torque", mujoco.mjtSensor.mjSENS_TORQUE, wrench_site(key))
 
     if opt.ceiling_height is not None:
-        _add_env_geom(
+        add_env_geom(
             spec,
             contact,
             name=CEILING_GEOM,
@@ -234,7 +236,7 @@ def build_spec(desc: RobotDescription, options: BuildOptions | None = None) -> m
             rgba=[0.6, 0.6, 0.7, 0.4],
         )
     if opt.floor_height is not None:
-        _add_env_geom(
+        add_env_geom(
             spec,
             contact,
             name=FLOOR_GEOM,

@@ -54,7 +54,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from rdm.plant.mjcf import CONTACT_SURFACE_PREFIX, ENV_GROUP, ContactParams
+from rdm.plant.mjcf import CONTACT_SURFACE_PREFIX, ContactParams, add_env_geom
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels
 
@@ -139,20 +139,15 @@ def wall_scene(base_position: tuple[float, float, float]) -> Callable[[mujoco.Mj
     y = base_position[1]
 
     def edit(spec: mujoco.MjSpec) -> None:
-        g = spec.worldbody.add_geom(
+        add_env_geom(
+            spec,
+            contact,
             name=WALL_GEOM,
             type=mujoco.mjtGeom.mjGEOM_BOX,
             size=[WALL_HALF_T, WALL_HALF_Y, (WALL_BELOW + WALL_ABOVE) / 2],
             pos=[face - WALL_HALF_T, y, foot_z + (WALL_ABOVE - WALL_BELOW) / 2],
             rgba=[0.85, 0.85, 0.8, 0.7],
         )
-        g.contype = 0
-        g.conaffinity = ENV_GROUP
-        g.condim = contact.condim
-        g.priority = 1
-        g.friction = [contact.friction, contact.torsional, contact.rolling]
-        g.solref = list(contact.solref)
-        g.solimp = list(contact.solimp)
 
     return edit
 
