@@ -96,7 +96,7 @@ def _state(stack: Stack) -> dict:
             sensor.bytes_dropped,
             sensor.saturated_samples,
             dict(sensor.errors),
-            sensor._wrench,
+            sensor.wrench,
         ),
         "plant_flags": (plant._stale, plant._needs_step1, plant._state_version),
         "sleep": None
@@ -257,16 +257,6 @@ def test_held_external_wrench_takes_the_python_step(tmp_path: Path) -> None:
     stats = _same(tmp_path, steps)
     assert stats["physics_python"] >= 500  # every step while the wrench is held
     assert stats["physics_fast"] > 2000
-
-
-def test_wrench_outside_the_sensor_range_is_clipped_by_the_python_node(tmp_path: Path) -> None:
-    def steps(stack: Stack) -> None:
-        stack.loop.run(1.0)
-        # A sensor whose range the resting foot load exceeds: every sample is clipped.
-        stack.sensor._limits = (0.05,) * 6
-        stack.loop.run(0.6)
-
-    _same(tmp_path, steps)
 
 
 def test_battery_voltage_of_time_leaves_the_bridge_to_python(tmp_path: Path) -> None:

@@ -17,6 +17,7 @@ mod gains;
 mod json_log;
 mod kernel;
 mod leptrino_scan;
+mod leptrino_sensor;
 mod lqi;
 mod model;
 mod neuron_bank;
@@ -59,6 +60,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     contact_gate::register(m)?;
     can_master::register(m)?;
     leptrino_scan::register(m)?;
+    leptrino_sensor::register(m)?;
     capture_index::register(m)?;
     rosserial::register(m)?;
     kernel::register(m)?;

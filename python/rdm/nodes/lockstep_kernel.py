@@ -7,8 +7,10 @@ simulated firmware side (plant bridge, Neuron bank, Spinal's idle, boot and rout
 ms, Leptrino streaming, the plant step) run in Rust on the cores the Python nodes already
 use. Every other tick is the node's own Python ``tick``. Before Python code runs, the kernel
 writes back what its fast ticks changed of the parts that code may read or change; after,
-it re-reads those parts' ``kernel_plan``. So the logs are the same bytes as without the
-kernel (tests/test_lockstep_kernel.py, tests/test_spinal_kernel_busy.py; docs/sim.md).
+it re-reads those parts' plans. The Leptrino stream state is one Rust object the node and
+the kernel share (``rdm._rdm.LeptrinoStreamCore``): only its pending UART bytes wait. So the
+logs are the same bytes as without the kernel (tests/test_lockstep_kernel.py,
+tests/test_spinal_kernel_busy.py; docs/sim.md).
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ import mujoco
 
 from rdm import _rdm
 from rdm.link.can_wire import DRAIN_AT, CanWireLink
+from rdm.link.tapped_link import TappedLink
+from rdm.link.uart_pipe import InProcessUartEnd
 from rdm.plant import option_flags
 from rdm.plant import sleep as plant_sleep
 
@@ -157,6 +161,25 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
     return plan
 
 
+def _leptrino_uart(node: Any) -> tuple[Callable[[], bool], Callable[..., int]]:
+    """``(idle, write)`` of the Leptrino node's UART for the kernel: ``idle()``, whether its
+    streaming tick can run in the kernel now (the UART is the one it had at attach, a
+    :class:`TappedLink` over an open :class:`InProcessUartEnd` with an open peer, so every
+    write is whole, and no host bytes wait: a command is answered first, in Python);
+    ``write``, that link's ``write_marked``."""
+    uart = node.uart
+    write = getattr(uart, "write_marked", None)
+    if type(uart) is not TappedLink or type(uart.link) is not InProcessUartEnd or write is None:
+        return (lambda: False), (lambda data, marks: 0)
+    end = uart.link
+
+    def idle() -> bool:
+        peer = end.peer
+        return node.uart is uart and not (end.inbox or end.closed or peer is None or peer.closed)
+
+    return idle, write
+
+
 def _bridge_store(bridge: PlantBridge) -> Callable[[int], None]:
     """Where the kernel writes the bridge's time-mismatch count back (its ticks are the
     count of its sampling schedule, the object the kernel advances)."""
@@ -194,7 +217,7 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         kind = kind_of(node)
         if kind == "leptrino":
             if leptrino is None:
-                kernel.attach_leptrino(i, node)
+                kernel.attach_leptrino(i, node._stream, *_leptrino_uart(node))
                 leptrino = node
         elif kind == "bank" and isinstance(node._wire, CanWireLink):
             kernel.attach_bank(

@@ -8,6 +8,7 @@ pub mod contact_gate;
 pub mod esc_duty;
 pub mod fixed_decimals;
 pub mod json_text;
+pub mod leptrino_sensor;
 pub mod leptrino_stream;
 pub mod mcap_chunk;
 pub mod plate_contact;

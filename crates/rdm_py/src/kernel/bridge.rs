@@ -89,10 +89,9 @@ struct Names {
     mag: Name,
 }
 
-/// What a fast bridge tick leaves to Python: the foot wrench when the Leptrino path did not
-/// take it, and the ground-truth call when a truth sample is due (in this order).
+/// What a fast bridge tick leaves to Python: the ground-truth call when a truth sample is
+/// due.
 pub(crate) struct BridgeOut {
-    pub(crate) wrench: Option<[f64; 6]>,
     pub(crate) truth: Option<(Py<PyAny>, u8)>,
 }
 
@@ -233,14 +232,14 @@ impl BridgeFast {
         Ok(())
     }
 
-    /// The tick at `now` (requires `ready`). Returns the foot wrench sample when the
-    /// Leptrino path did not take it (the caller hands it to the Python node).
+    /// The tick at `now` (requires `ready`); the foot wrench sample goes into the Leptrino
+    /// stream state (the plan guarantees a Leptrino part when wrench samples are due).
     pub(crate) fn tick(
         &mut self,
         py: Python<'_>,
         now: f64,
         plant: &mut PlantLink,
-        leptrino: Option<&mut LeptrinoFast>,
+        leptrino: Option<&LeptrinoFast>,
     ) -> PyResult<BridgeOut> {
         let Some(p) = &mut self.plan else {
             return Err(pyo3::exceptions::PyRuntimeError::new_err(
@@ -304,10 +303,7 @@ impl BridgeFast {
             None
         };
         if !due.has(Reading::Wrench) {
-            return Ok(BridgeOut {
-                wrench: None,
-                truth,
-            });
+            return Ok(BridgeOut { truth });
         }
         plant.fresh(py)?;
         let normals = p
@@ -339,14 +335,13 @@ impl BridgeFast {
             .as_ref()
             .expect("plan has the core with the wrench");
         let w = core.get().inner.sample(&ideal, &normals).values;
-        let taken = match leptrino {
-            Some(l) => l.set_wrench(py, w)?,
-            None => false,
+        let Some(l) = leptrino else {
+            return Err(pyo3::exceptions::PyRuntimeError::new_err(
+                "kernel: a bridge wrench sample without a Leptrino part",
+            ));
         };
-        Ok(BridgeOut {
-            wrench: if taken { None } else { Some(w) },
-            truth,
-        })
+        l.set_wrench(py, w);
+        Ok(BridgeOut { truth })
     }
 
     /// Write the counters (`store`) and the normal stream's position back.

@@ -9,8 +9,8 @@
 //!
 //! Exactness rule: the Python-visible state a fast path changes is written back (`flush`)
 //! before any Python code runs, and every plan is re-read (`invalidate`) after, so Python
-//! code always sees what the plain loop would have left. Each node's `kernel_plan` (Python)
-//! says when its fast path applies; `kernel_commit` takes the state back.
+//! code always sees what the plain loop would have left. A part whose state is a Rust core
+//! the node shares (the Leptrino stream) has nothing to write back but its pending UART bytes.
 
 mod attr;
 mod bank;
@@ -26,6 +26,7 @@ use pyo3::prelude::*;
 
 use crate::can_master::{CanMaster, CanWire};
 use crate::contact_gate::ContactGateCore;
+use crate::leptrino_sensor::LeptrinoStreamCore;
 use crate::neuron_bank::NeuronBank;
 use crate::rotor_plant::RotorPlantCore;
 use crate::stop_flag::StopFlag;
@@ -317,10 +318,18 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// Node `index` is a `LeptrinoSensorNode`.
-    fn attach_leptrino(&mut self, index: usize, node: &Bound<'_, PyAny>) -> PyResult<()> {
+    /// Node `index` is a `LeptrinoSensorNode` whose stream state is `stream`; `idle()` says
+    /// whether its UART is an open in-process pipe with no host bytes waiting, and
+    /// `write(data, marks)` is that UART's `write_marked`.
+    fn attach_leptrino(
+        &mut self,
+        index: usize,
+        stream: Py<LeptrinoStreamCore>,
+        idle: Py<PyAny>,
+        write: Py<PyAny>,
+    ) -> PyResult<()> {
         self.check_index(index)?;
-        self.leptrino = Some(LeptrinoFast::new(node));
+        self.leptrino = Some(LeptrinoFast::new(stream, idle, write));
         self.kinds[index] = Kind::Leptrino;
         self.touches[index] = LEPTRINO;
         Ok(())
