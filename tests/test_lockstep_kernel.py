@@ -117,8 +117,8 @@ def _state(stack: Stack) -> dict:
         if plant.contact_gate is None
         else (plant.contact_gate.off, plant.contact_gate.off_steps, plant.contact_gate.on_steps),
         "normals": (
-            plant.imu_model._normals._pos,
-            plant.wrench_models["foot_wrench"]._normals._pos,
+            plant.imu_model._normals.taken,
+            plant.wrench_models["foot_wrench"]._normals.taken,
         ),
         "qpos": d.qpos.tobytes(),
         "qvel": d.qvel.tobytes(),

@@ -32,6 +32,7 @@ __all__ = [
     "ModelError",
     "NeuronBank",
     "NeuronBankError",
+    "NormalStreamCore",
     "PcAxisController",
     "PerchController",
     "PerchError",
@@ -944,6 +945,17 @@ class WrenchNoiseCore:
         self, sensordata: np.ndarray, force_adr: int, torque_adr: int, normals: _Seq[float]
     ) -> tuple[float, float, float, float, float, float]:
         """The noisy wrench of :meth:`sample_at` as one tuple of six floats."""
+
+@_final
+class NormalStreamCore:
+    """Standard normals of one numpy ``Generator``, drawn ``chunk`` at a time
+    (``rdm_core::sim::normal_stream``); the sensor noise models' stream."""
+    def __new__(cls, rng: _Any, chunk: int = 1024) -> _Self: ...
+    def take(self, k: int) -> list[float]: ...
+    @property
+    def taken(self) -> int: ...
+    @property
+    def chunk(self) -> int: ...
 
 @_final
 class LeptrinoStreamCore:

@@ -21,6 +21,7 @@ mod leptrino_sensor;
 mod lqi;
 mod model;
 mod neuron_bank;
+mod normal_stream;
 mod perch;
 mod planner;
 mod plate_contact;
@@ -55,6 +56,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     plate_contact::register(m)?;
     neuron_bank::register(m)?;
     sensor_sim::register(m)?;
+    normal_stream::register(m)?;
     json_log::register(m)?;
     rotor_plant::register(m)?;
     contact_gate::register(m)?;

@@ -11,6 +11,7 @@ pub mod json_text;
 pub mod leptrino_sensor;
 pub mod leptrino_stream;
 pub mod mcap_chunk;
+pub mod normal_stream;
 pub mod plate_contact;
 pub mod python_float_repr;
 pub mod rotor_plant;

@@ -3,63 +3,30 @@
 //! outputs -> rotor duties, and the foot wrench sample (lazy forward, noise, Leptrino).
 
 use pyo3::prelude::*;
-use pyo3::types::{PyList, PyTuple};
+use pyo3::types::PyTuple;
 
 use super::attr::Name;
 use super::leptrino::LeptrinoFast;
 use super::plant::PlantLink;
 use crate::neuron_bank::NeuronBank;
+use crate::normal_stream::NormalStreamCore;
 use crate::sample_schedule::SampleSchedule;
 use crate::sensor_sim::{ImuNoiseCore, WrenchNoiseCore};
 use crate::untracked;
 use rdm_core::sim::sample_schedule::Reading;
 
-/// A `NormalStream` (`rdm.plant.sensors`): its `_buf` list read here, `_pos` kept here.
-struct Normals {
-    stream: Py<PyAny>,
-    buf: Py<PyList>,
-    pos: usize,
-}
-
-impl Normals {
-    fn load(stream: Bound<'_, PyAny>) -> PyResult<Self> {
-        Ok(Normals {
-            buf: stream.getattr("_buf")?.cast_into::<PyList>()?.unbind(),
-            pos: stream.getattr("_pos")?.extract()?,
-            stream: stream.unbind(),
-        })
-    }
-
-    /// The next `N` normals (`NormalStream.take(N)`).
-    fn take<const N: usize>(&mut self, py: Python<'_>) -> PyResult<[f64; N]> {
-        let buf = self.buf.bind(py);
-        if self.pos + N <= buf.len() {
-            let mut out = [0.0; N];
-            for (k, o) in out.iter_mut().enumerate() {
-                *o = buf.get_item(self.pos + k)?.extract()?;
-            }
-            self.pos += N;
-            return Ok(out);
-        }
-        // Refill in Python (the stream owns its generator), then follow the stream.
-        let stream = self.stream.bind(py);
-        stream.setattr("_pos", self.pos)?;
-        let out: [f64; N] = stream.call_method1("take", (N,))?.extract()?;
-        self.buf = stream.getattr("_buf")?.cast_into::<PyList>()?.unbind();
-        self.pos = stream.getattr("_pos")?.extract()?;
-        Ok(out)
-    }
-
-    fn flush(&self, py: Python<'_>) -> PyResult<()> {
-        self.stream.bind(py).setattr("_pos", self.pos)
-    }
+/// The next `N` normals of a noise model's stream (the object the model itself takes from).
+fn take<const N: usize>(py: Python<'_>, stream: &Py<NormalStreamCore>) -> PyResult<[f64; N]> {
+    let mut out = [0.0; N];
+    stream.bind(py).borrow_mut().take_into(py, &mut out)?;
+    Ok(out)
 }
 
 /// The IMU sample as the kernel takes it: into the Spinal mirror's `gyro`/`acc`/`mag`.
 struct ImuPath {
     adr: (usize, usize, usize),
     core: Py<ImuNoiseCore>,
-    normals: Normals,
+    normals: Py<NormalStreamCore>,
     sink: Py<PyAny>,
 }
 
@@ -73,7 +40,7 @@ struct Plan {
     /// (force, torque) addresses in sensordata of the foot wrench sensor.
     wrench_adr: (usize, usize),
     wrench_core: Option<Py<WrenchNoiseCore>>,
-    wrench_normals: Option<Normals>,
+    wrench_normals: Option<Py<NormalStreamCore>>,
     /// None: an IMU sample goes to the Python tick.
     imu: Option<ImuPath>,
     /// `PlantBridge._kernel_truth` (the ground-truth sample into its sink) and the parts it
@@ -147,7 +114,7 @@ impl BridgeFast {
             let wrench_normals = if normals.is_none() {
                 None
             } else {
-                Some(Normals::load(normals)?)
+                Some(normals.cast_into::<NormalStreamCore>()?.unbind())
             };
             let imu = t.get_item(8)?;
             let imu = if imu.is_none() {
@@ -157,7 +124,7 @@ impl BridgeFast {
                 Some(ImuPath {
                     adr: i.get_item(0)?.extract()?,
                     core: i.get_item(1)?.cast_into::<ImuNoiseCore>()?.unbind(),
-                    normals: Normals::load(i.get_item(2)?)?,
+                    normals: i.get_item(2)?.cast_into::<NormalStreamCore>()?.unbind(),
                     sink: i.get_item(3)?.unbind(),
                 })
             };
@@ -223,7 +190,7 @@ impl BridgeFast {
             };
             [three(imu.adr.0)?, three(imu.adr.1)?, three(imu.adr.2)?]
         };
-        let normals = imu.normals.take::<9>(py)?;
+        let normals = take::<9>(py, &imu.normals)?;
         let v = imu.core.get().inner.sample(&ideal, &normals).values;
         let sink = imu.sink.bind(py);
         names.gyro.set(sink, PyTuple::new(py, v[0])?)?;
@@ -306,11 +273,12 @@ impl BridgeFast {
             return Ok(BridgeOut { truth });
         }
         plant.fresh(py)?;
-        let normals = p
-            .wrench_normals
-            .as_mut()
-            .expect("plan has the normals with the wrench")
-            .take::<6>(py)?;
+        let normals = take::<6>(
+            py,
+            p.wrench_normals
+                .as_ref()
+                .expect("plan has the normals with the wrench"),
+        )?;
         let ideal = {
             let sd = plant.sensordata.bind(py);
             // SAFETY: read only, no Python runs while `sd` lives (untracked.rs).
@@ -344,18 +312,12 @@ impl BridgeFast {
         Ok(BridgeOut { truth })
     }
 
-    /// Write the counters (`store`) and the normal stream's position back.
+    /// Write the counters back (`store`).
     pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
         if !self.dirty {
             return Ok(());
         }
         if let Some(p) = &self.plan {
-            if let Some(n) = &p.wrench_normals {
-                n.flush(py)?;
-            }
-            if let Some(imu) = &p.imu {
-                imu.normals.flush(py)?;
-            }
             self.store.bind(py).call1((p.time_mismatches,))?;
         }
         self.dirty = false;
