@@ -108,7 +108,7 @@ def _state(stack: Stack) -> dict:
             plant.sleep.sleep_on,
             plant.sleep.settled,
             plant.model.opt.enableflags,
-            plant.sleep._v_last_ctrl.tobytes(),
+            plant.sleep.last_ctrl.tobytes(),
             d.tree_asleep.tobytes(),
             plant.model.tree_sleep_policy.tobytes(),
         ),

@@ -45,6 +45,7 @@ __all__ = [
     "QpInputError",
     "QpSolver",
     "RdmError",
+    "RestingSleepCore",
     "Robot",
     "RosserialFrameError",
     "RotorPlantCore",
@@ -947,6 +948,42 @@ class WrenchNoiseCore:
         """The noisy wrench of :meth:`sample_at` as one tuple of six floats."""
 
 @_final
+class RestingSleepCore:
+    """The robot's sleep at rest (``rdm_core::sim::resting_sleep``) on MuJoCo's arrays; the
+    state of ``rdm.plant.sleep.RestingSleep``, shared with the lockstep kernel."""
+    def __new__(
+        cls,
+        trees: _Seq[int],
+        rotors: _Seq[int],
+        allowed_value: int,
+        never_value: int,
+        sleep_bit: int,
+        ctrl: _NDArray[_np.float64],
+        policy: _NDArray[_np.int32],
+        tree_asleep: _NDArray[_np.int32],
+        opt: _Any,
+    ) -> _Self: ...
+    def before_step2(self, step1: Callable[[], object]) -> None: ...
+    def wake_next(self) -> None: ...
+    def asleep(self) -> bool: ...
+    @property
+    def trees(self) -> list[int]: ...
+    @property
+    def rotors(self) -> list[int]: ...
+    @property
+    def last_ctrl(self) -> _NDArray[_np.float64]: ...
+    @property
+    def pending(self) -> bool: ...
+    @property
+    def allowed(self) -> bool: ...
+    @property
+    def wakes(self) -> int: ...
+    @property
+    def sleep_on(self) -> bool: ...
+    @property
+    def settled(self) -> bool: ...
+
+@_final
 class NormalStreamCore:
     """Standard normals of one numpy ``Generator``, drawn ``chunk`` at a time
     (``rdm_core::sim::normal_stream``); the sensor noise models' stream."""
@@ -1443,7 +1480,7 @@ class LockstepKernel:
         sensordata: _F,
         ctrl: _F,
         servo_act: Sequence[int],
-        sleep: tuple[Any, ...] | None,
+        sleep: RestingSleepCore | None,
     ) -> None:
         """The plant and its parts (typed, read by ``rdm.nodes.lockstep_kernel``)."""
     def attach_bridge(

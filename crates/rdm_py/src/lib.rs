@@ -27,6 +27,7 @@ mod planner;
 mod plate_contact;
 mod position;
 mod qp;
+mod resting_sleep;
 mod rosserial;
 mod rotor_arrays;
 mod rotor_plant;
@@ -59,6 +60,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     normal_stream::register(m)?;
     json_log::register(m)?;
     rotor_plant::register(m)?;
+    resting_sleep::register(m)?;
     contact_gate::register(m)?;
     can_master::register(m)?;
     leptrino_scan::register(m)?;

@@ -25,7 +25,6 @@ from rdm.link.can_wire import DRAIN_AT, CanWireLink
 from rdm.link.tapped_link import TappedLink
 from rdm.link.uart_pipe import InProcessUartEnd
 from rdm.plant import option_flags
-from rdm.plant import sleep as plant_sleep
 
 from .lockstep import Lockstep
 from .neuron_bank import NeuronBankNode
@@ -41,7 +40,7 @@ def kind_of(node: Any) -> str | None:
 def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
     """Hand the kernel the plant's parts it holds for the plant's lifetime (typed values:
     MuJoCo's model, data and step functions, the option-flags address, the Rust cores, the
-    MjData views, the servo actuators and the resting-sleep arrays)."""
+    MjData views, the servo actuators and the resting-sleep core)."""
     model = plant.model
     sleep = plant.sleep
     kernel.attach_plant(
@@ -64,20 +63,7 @@ def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
         plant._v_sensordata,
         plant._v_ctrl,
         [int(a) for a in plant._servo_act],
-        None
-        if sleep is None
-        else (
-            sleep,
-            list(sleep.trees),
-            list(sleep.rotors),
-            plant_sleep.ALLOWED,
-            plant_sleep.NEVER,
-            plant_sleep.SLEEP_ENABLE_BIT,
-            sleep._v_policy,
-            sleep._v_tree_asleep,
-            sleep._v_last_ctrl,
-            sleep._opt,
-        ),
+        None if sleep is None else sleep._core,
     )
 
 

@@ -14,6 +14,7 @@ pub mod mcap_chunk;
 pub mod normal_stream;
 pub mod plate_contact;
 pub mod python_float_repr;
+pub mod resting_sleep;
 pub mod rotor_plant;
 pub mod sample_schedule;
 pub mod sensor_noise;

@@ -19,7 +19,6 @@ mod leptrino;
 mod option_flags;
 mod plant;
 mod run_loop;
-mod sleep;
 mod spinal;
 
 use pyo3::prelude::*;
@@ -28,27 +27,14 @@ use crate::can_master::{CanMaster, CanWire};
 use crate::contact_gate::ContactGateCore;
 use crate::leptrino_sensor::LeptrinoStreamCore;
 use crate::neuron_bank::NeuronBank;
+use crate::resting_sleep::RestingSleepCore;
 use crate::rotor_plant::RotorPlantCore;
 use crate::stop_flag::StopFlag;
 use bank::BankFast;
 use bridge::BridgeFast;
 use leptrino::LeptrinoFast;
 use plant::{PlantLink, PlantParts};
-use sleep::SleepParts;
 
-/// `attach_plant`'s `sleep` tuple (see there).
-type SleepTuple = (
-    Py<PyAny>,
-    Vec<usize>,
-    Vec<usize>,
-    i32,
-    i32,
-    i64,
-    Py<numpy::PyArray1<i32>>,
-    Py<numpy::PyArray1<i32>>,
-    Py<numpy::PyArray1<f64>>,
-    Py<PyAny>,
-);
 use spinal::{SpinalFast, SpinalTick};
 
 /// What a Python call may change, as a mask of the fast parts it invalidates.
@@ -195,10 +181,9 @@ impl LockstepKernel {
     /// `mj_step1`, `mj_step2`, `mj_forward`, `mj_sensorPos`, `mj_sensorVel`; `flags`:
     /// `(Plant._flags_address, model._address, option_flags.SEARCH_BYTES)` (None: unknown);
     /// `opt`: `model.opt`; the rotor and contact-gate cores; the contact tracker; the qpos,
-    /// sensordata and ctrl views; the servo actuator per joint; `sleep`: None or
-    /// `(RestingSleep, trees, rotor actuators, ALLOWED, NEVER, SLEEP_ENABLE_BIT, policy,
-    /// tree_asleep, last_ctrl, model.opt)`.
-    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    /// sensordata and ctrl views; the servo actuator per joint; `sleep`: the core of
+    /// `Plant.sleep` (None: the plant has none).
+    #[allow(clippy::too_many_arguments)]
     #[pyo3(signature = (plant, model, data, mj, flags, opt, rotors, gate, tracker, qpos, sensordata, ctrl, servo_act, sleep))]
     fn attach_plant(
         &mut self,
@@ -215,35 +200,8 @@ impl LockstepKernel {
         sensordata: Py<numpy::PyArray1<f64>>,
         ctrl: Py<numpy::PyArray1<f64>>,
         servo_act: Vec<usize>,
-        sleep: Option<SleepTuple>,
+        sleep: Option<Py<RestingSleepCore>>,
     ) -> PyResult<()> {
-        let sleep = sleep.map(
-            |(
-                obj,
-                trees,
-                rotors,
-                allowed_value,
-                never_value,
-                sleep_bit,
-                policy,
-                tree_asleep,
-                last_ctrl,
-                opt,
-            )| {
-                SleepParts {
-                    obj,
-                    trees,
-                    rotors,
-                    allowed_value,
-                    never_value,
-                    sleep_bit,
-                    policy,
-                    tree_asleep,
-                    last_ctrl,
-                    opt,
-                }
-            },
-        );
         let parts = PlantParts {
             model,
             data,
