@@ -88,8 +88,8 @@ def _state(stack: Stack) -> dict:
         "spinal_imu": (stack.spinal.gyro, stack.spinal.acc, stack.spinal.mag),
         "spinal_busy": _spinal_state(stack.spinal),
         "master": (stack.spinal.master.tx_count, stack.spinal.master._pending_events),
-        "boards": [(b.tx_count, b.changes[0], b.rx_count) for b in bank.boards],
-        "bank_changes": bank._last_changes,
+        "boards": [(b.tx_count, b.change_count, b.rx_count) for b in bank.boards],
+        "bank_changes": bank._core.changes(),
         "bridge": (bridge.ticks, bridge.schedule.count, bridge.time_mismatches),
         "leptrino": (
             sensor.frames_sent,

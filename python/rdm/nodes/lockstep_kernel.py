@@ -27,7 +27,6 @@ from rdm.link.uart_pipe import InProcessUartEnd
 from rdm.plant import option_flags
 
 from .lockstep import Lockstep
-from .neuron_bank import NeuronBankNode
 from .plant_bridge import PlantBridge
 
 
@@ -65,18 +64,6 @@ def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
         [int(a) for a in plant._servo_act],
         None if sleep is None else sleep._core,
     )
-
-
-def _bank_plan(bank: NeuronBankNode) -> Callable[[], tuple | None]:
-    """The plan the kernel reads for ``bank`` on a CAN wire: None until the plant bridge's
-    coupling is attached (a position push is then the core's own), else the change counters
-    the node last saw. The kernel writes the boards' ``tx_count`` and change counters back
-    itself."""
-
-    def plan() -> tuple | None:
-        return (bank._last_changes,) if bank._bridged else None
-
-    return plan
 
 
 def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[], tuple | None]:
@@ -206,9 +193,7 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
                 kernel.attach_leptrino(i, node._stream, *_leptrino_uart(node))
                 leptrino = node
         elif kind == "bank" and isinstance(node._wire, CanWireLink):
-            kernel.attach_bank(
-                i, node, node._core, node._wire.wire, list(node.boards), _bank_plan(node)
-            )
+            kernel.attach_bank(i, node._core, node._wire.wire)
         elif kind == "spinal" and node._wire_link is not None and spinal is None:
             kernel.attach_spinal(i, node, node.master.core, node._wire_link.wire, DRAIN_AT)
             spinal = node

@@ -241,20 +241,15 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// Node `index` is a `NeuronBankNode` whose board views are `boards` (the core's boards,
-    /// in order) on `wire`; `plan()` returns its plan tuple, or None while it has no Rust
-    /// tick.
+    /// Node `index` is a `NeuronBankNode` whose Rust bank `bank` ticks on `wire`.
     fn attach_bank(
         &mut self,
         index: usize,
-        node: &Bound<'_, PyAny>,
         bank: Py<NeuronBank>,
         wire: Py<CanWire>,
-        boards: Vec<Py<PyAny>>,
-        plan: Py<PyAny>,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.bank = Some(BankFast::new(node, bank, wire, boards, plan)?);
+        self.bank = Some(BankFast::new(bank, wire));
         self.kinds[index] = Kind::Bank;
         self.touches[index] = BANK;
         Ok(())
