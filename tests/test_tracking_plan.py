@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from rdm.model import Robot
+from rdm.planner import timing
 from rdm.plant import Plant
 from rdm.plant.mjcf import rotor_actuator, rotor_site
 from rdm.scenarios import tracking_plan as tp
@@ -156,7 +157,7 @@ def test_time_parameterisation_follows_the_plan_within_the_limits():
     t, q = path.times, path.q[:, :6]
     dt = np.diff(t)
     go = np.diff(t[t <= path.go_s])
-    assert np.allclose(go[:-1], tp.SAMPLE_S) and 0 < go[-1] <= tp.SAMPLE_S  # 40 Hz
+    assert np.allclose(go[:-1], timing.SAMPLE_S) and 0 < go[-1] <= timing.SAMPLE_S  # 40 Hz
     assert np.all(dt > 0)
     vel = np.diff(q, axis=0) / dt[:, None]
     assert np.abs(vel).max() <= tp.MAX_VELOCITY * (1 + 1e-6)
@@ -180,7 +181,7 @@ def test_ruckig_profile_against_finite_differences_of_a_straight_line():
     """One straight segment of 0.6 rad: duration and peak speed against the analytic
     jerk-limited rest-to-rest profile (v_max reached, a_max reached)."""
     line = np.outer(np.linspace(0.0, 1.0, 5), [0.6, -0.3, 0, 0, 0, 0])
-    t, q = tp.time_parameterise(line, 0.15, 0.15, 0.5, sample_s=0.001)
+    t, q = timing.time_parameterise(line, 0.15, 0.15, 0.5, sample_s=0.001)
     v, a, j = 0.15, 0.15, 0.5
     # time to reach v: a/j (jerk) + (v/a - a/j) (constant a) + a/j; cruise covers the rest
     t_acc = v / a + a / j

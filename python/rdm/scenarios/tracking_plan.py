@@ -8,10 +8,11 @@ mode (``flight``: base free, foot task, the thrust limits of the hover share; ``
 foot fixed, the thrust limits with the perching share, eq. 64), with every constraint kind of
 eq. (70): ``joint_limit``, ``joint_torque``, ``rotor_thrust``, ``stability``, ``collision``,
 ``airflow``. The planner's states (one per step, eq. 51) are a joint-space polyline; it is
-time-parameterised along its arc length with ruckig (jerk-limited, at rest at both ends),
-sampled at the 40 Hz position-control rate (Sec. VII-A), held at the goal, and retraced back
-to the start (the same states in reverse order, so every state of the return is a planned,
-constraint-checked state too). The phase machine then continues from the start posture.
+time-parameterised along its arc length with ruckig (:mod:`rdm.planner.timing`:
+jerk-limited, at rest at both ends), sampled at the 40 Hz position-control rate (Sec. VII-A),
+held at the goal, and retraced back to the start (the same states in reverse order, so
+every state of the return is a planned, constraint-checked state too). The phase machine
+then continues from the start posture.
 
 Goals (docs/scenarios.md, "tracking"):
 
@@ -26,19 +27,17 @@ to the paper's q, the paths are redundant).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
-from ruckig import InputParameter, Result, Ruckig
-from ruckig import Trajectory as RuckigTrajectory
 
 from rdm.model import Robot
 from rdm.planner.core import PlannerSetup, make_core
 from rdm.planner.plan import run_core
+from rdm.planner.timing import time_parameterise
 from rdm.planner.trajectory import Trajectory
 
 from .perching import PERCH_POSTURE, PERCHED_MOTION
@@ -68,8 +67,6 @@ FLIGHT_CONFIG: dict[str, float] = {"s2_foot": 100.0}
 MAX_VELOCITY = 0.15
 MAX_ACCELERATION = 0.15
 MAX_JERK = 0.5
-#: Sampling step of the sent path [s]: the 40 Hz position control rate (Sec. VII-A).
-SAMPLE_S = 1.0 / 40.0
 #: s held at the goal before the return (the goal error is averaged over its last 0.5 s).
 HOLD_S = 2.0
 GOAL_WINDOW_S = 0.5
@@ -143,54 +140,11 @@ def plan_stage(
     return tr
 
 
-def arc_length(q: np.ndarray) -> np.ndarray:
-    """Cumulative path parameter (m,) of the joint states ``q`` (m, k): the largest joint
-    change per step, summed (so |dq_j/ds| <= 1 for every joint)."""
-    steps = np.abs(np.diff(np.asarray(q, float), axis=0)).max(axis=1)
-    return np.concatenate([[0.0], np.cumsum(steps)])
-
-
-def time_parameterise(
-    q: np.ndarray,
-    max_velocity: float = MAX_VELOCITY,
-    max_acceleration: float = MAX_ACCELERATION,
-    max_jerk: float = MAX_JERK,
-    sample_s: float = SAMPLE_S,
-) -> tuple[np.ndarray, np.ndarray]:
-    """(times (m,), q (m, n)) of the polyline ``q`` (k, n) followed from rest to rest along its
-    arc length (:func:`arc_length` over the first six columns, the arm joints) with a
-    jerk-limited profile (ruckig), sampled every ``sample_s`` and at the end. Each joint's
-    speed is at most ``max_velocity`` (|dq_j/ds| <= 1); between the polyline's vertices the
-    samples lie on its segments."""
-    q = np.asarray(q, dtype=float)
-    s = arc_length(q[:, :6])
-    length = float(s[-1])
-    if length <= 0.0:
-        return np.array([0.0]), q[:1].copy()
-    inp = InputParameter(1)
-    inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [0.0], [0.0]
-    inp.target_position, inp.target_velocity, inp.target_acceleration = [length], [0.0], [0.0]
-    inp.max_velocity = [max_velocity]
-    inp.max_acceleration = [max_acceleration]
-    inp.max_jerk = [max_jerk]
-    profile = RuckigTrajectory(1)
-    if Ruckig(1).calculate(inp, profile) not in (Result.Working, Result.Finished):
-        raise ValueError("time_parameterise: ruckig refused the path (non-finite limits?)")
-    duration = float(profile.duration)
-    n = max(1, math.ceil(duration / sample_s))
-    times = np.minimum(np.arange(n + 1) * sample_s, duration)
-    times[-1] = duration
-    along = np.clip([profile.at_time(float(t))[0][0] for t in times], 0.0, length)
-    along[-1] = length
-    out = np.column_stack([np.interp(along, s, q[:, j]) for j in range(q.shape[1])])
-    return times, out
-
-
 @lru_cache(maxsize=8)
 def _stage_path(stage: str) -> StagePath:
     tr = plan_stage(stage)
     q_plan = np.asarray(tr.zeta, float)[:, 6:]
-    t_go, q_go = time_parameterise(q_plan)
+    t_go, q_go = time_parameterise(q_plan, MAX_VELOCITY, MAX_ACCELERATION, MAX_JERK)
     go = float(t_go[-1])
     t_back = go + HOLD_S + t_go
     q_back = q_go[::-1]
