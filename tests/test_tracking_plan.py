@@ -177,20 +177,6 @@ def test_time_parameterisation_follows_the_plan_within_the_limits():
         assert np.min(np.linalg.norm(a + s[:, None] * ab - x, axis=1)) < 1e-9
 
 
-def test_ruckig_profile_against_finite_differences_of_a_straight_line():
-    """One straight segment of 0.6 rad: duration and peak speed against the analytic
-    jerk-limited rest-to-rest profile (v_max reached, a_max reached)."""
-    line = np.outer(np.linspace(0.0, 1.0, 5), [0.6, -0.3, 0, 0, 0, 0])
-    t, q = timing.time_parameterise(line, 0.15, 0.15, 0.5, sample_s=0.001)
-    v, a, j = 0.15, 0.15, 0.5
-    # time to reach v: a/j (jerk) + (v/a - a/j) (constant a) + a/j; cruise covers the rest
-    t_acc = v / a + a / j
-    expected = 2 * t_acc + (0.6 - v * t_acc) / v
-    assert t[-1] == pytest.approx(expected, rel=1e-3)
-    speed = np.abs(np.diff(q[:, 0]) / np.diff(t))
-    assert speed.max() == pytest.approx(v, rel=1e-3)
-
-
 def test_unknown_stage_is_a_one_line_error():
     with pytest.raises(ValueError, match="stage='nope': one of"):
         tp.plan_stage("nope")
