@@ -8,10 +8,12 @@ executed (docs/scenarios.md, "tracking").
 * Joint RMSE: true q1..q6 against the sent plan (linear between its 40 Hz samples).
 * Planned margins (:func:`rdm.scenarios.tracking_plan.plan_margins`): thrust, torque, rho.
 * Executed margins over the motion window: true rotor thrusts to [thrust_min, thrust_max]
-  (the thrust constraint, eqs. 63-64, in both stages); perched, the true ZMP to the foot
-  plate's edge (Fig. 10 (E): "the ZMP was within the footplate area"); in flight, the root's
-  largest distance from its position before the motion (Fig. 9 (B): errors "less than
-  +-0.1 m").
+  (the thrust constraint, eqs. 63-64, in both stages; pass: >= 0); perched, the true ZMP's
+  margin to the foot plate's edge and the time it is within ``EDGE_MM`` of it (Fig. 10 (E):
+  "the ZMP was within the footplate area"; information: eq. 70 has no ZMP row and the
+  planner's static model keeps the ZMP at the plate centre); in flight, the root's largest
+  deviation per axis from its position before the motion (Fig. 9 (B): errors "less than
+  +-0.1 m"; information).
 """
 
 from __future__ import annotations
