@@ -223,9 +223,10 @@ class TaskScript(perching.PerchingScript):
             way.append((duration, q.copy(), linear))
             return duration
 
-        first_s = MOVE_S  # the first waypoint's duration (the hover above the first target)
+        first_s = None  # the first move's duration if the first waypoint is not the move
         if self.task == "drilling":  # the Sec. V planner, the drill tip as its end effector
             self.waypoint_source = "planned"
+            first_s = MOVE_S  # its waypoints are the 40 Hz samples of the moves
             tool = task_plan.ToolPlanner("rdm", base, q_now, obj.DRILL_LEN)
             self.targets = [lay.board_point(dx, dy) for dx, dy in DRILL_TARGETS]
             steps, presses, took = task_plan.drill_waypoints(
@@ -250,7 +251,6 @@ class TaskScript(perching.PerchingScript):
             q = task_ik.level(np.r_[VALVE_Q, np.zeros(robot.n_q - 6)])  # IK seed
             q1 = VALVE_Q[0]
             up = axis + np.array([0.0, 0.0, VALVE_HOVER])
-            first_s = 1.5 * MOVE_S
             t += go(up, obj.GRIPPER_AT, 1.5 * MOVE_S, axis=down, q1=q1)
             t += go(axis, obj.GRIPPER_AT, MOVE_S, axis=down, q1=q1)
             t0 = t
@@ -266,7 +266,7 @@ class TaskScript(perching.PerchingScript):
         self.t_task = now
         self.t_task_end = t
         # first waypoint (hover above the first target) reached + 0.5 s settling
-        self.t_enable = now + first_s + 0.5
+        self.t_enable = now + (way[0][0] if first_s is None else first_s) + 0.5
 
     # --------------------------------------------------------------- recording
     def _tool_object_geoms(self, model: mujoco.MjModel) -> tuple[set[int], set[int]]:
