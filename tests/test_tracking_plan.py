@@ -136,6 +136,30 @@ def test_static_joint_torques_of_the_plan_stay_under_stall(fk, stage):
         assert np.all(np.abs(tau) <= stall)
 
 
+@pytest.mark.parametrize("stage", ["flight", "perched"])
+def test_plan_keeps_joint_limits_and_rotor_airflow(fk, stage):
+    """Every planner state: the joints inside MuJoCo's joint ranges by at least the state
+    damper's forbidden band (0.01 rad, eqs. 58-60) unless the start already sits there (the
+    hanging posture's q1 = pi/2), and every rotor of one unit more than a rotor diameter from
+    every rotor of the other (eq. 68), from MuJoCo's rotor sites."""
+    path = tp.stage_path(stage)
+    m = fk.model
+    lo, hi = np.array([m.joint(n).range for n in fk.joint_names]).T
+    start = path.plan.zeta[0][6:]
+    diameter = max(r["diameter"] for r in Robot.default().rotors)
+    names = fk.rotor_names
+    for z in path.plan.zeta:
+        q = z[6:]
+        room = np.minimum(q - lo, hi - q)
+        at_start = np.minimum(start - lo, hi - start)
+        assert np.all((room >= 0.01 - 1e-9) | (room >= at_start - 1e-9)), q
+        d = _at(fk, q)
+        pos = {n: d.site_xpos[m.site(rotor_site(n)).id].copy() for n in names}
+        for a in names[:2]:
+            for b in names[2:]:
+                assert np.linalg.norm(pos[a] - pos[b]) > diameter
+
+
 def test_dropping_the_thrust_constraint_breaks_the_thrust_check(fk):
     """A planted bug: the thrust damper's forbidden band moved 100 N below the limit (the
     ``rotor_thrust`` constraint dropped). Toward a goal 20 % beyond the flight goal the planner
