@@ -3,9 +3,10 @@
 Oracle: the same stack run with ``StackOptions.lockstep_kernel=False`` (no fast part attached:
 every node's own Python tick). Both runs must write the same bytes in every log file and leave
 every node's Python-visible state the same, while the kernel really runs the fast paths
-(its per-node counts) and the oracle run none. Faults and the paths that leave the steady state are driven on purpose:
-a cut UART, a held external wrench on the plant, a wrench outside the foot sensor's range, a
-battery voltage that is a function of time, a node that stops the loop or raises.
+(its per-node counts) and the oracle run none. Faults and the paths that leave the steady
+state are driven on purpose: a cut UART, a held external wrench on the plant, a wrench
+outside the foot sensor's range, a battery voltage that is a function of time, a node that
+stops the loop or raises.
 """
 
 from __future__ import annotations
@@ -422,7 +423,7 @@ def test_python_only_nodes_tick_in_order_with_the_clock_set() -> None:
 def test_flight_scenario_script_declares_the_plant_only(tmp_path: Path) -> None:
     """The configuration-change scenario's script (``flight.make_script``: the ground
     truth at arming, then the onboard node's target, trajectory and arming) declares
-    ``("plant",)``: kernel and Python loop write the same files and state through the
+    ``("plant",)``: with and without the fast parts the same files and state through the
     boot, arming (the trajectory loaded) and the take-off."""
     from rdm.model import Robot
     from rdm.scenarios import flight

@@ -18,7 +18,11 @@ pub enum ScheduleError {
     /// Node `index`'s period is not a whole multiple of `dt`.
     NotMultiple { index: usize, period: f64, dt: f64 },
     /// Node `index`'s offset is not in `0..every`.
-    BadOffset { index: usize, offset: u64, every: u64 },
+    BadOffset {
+        index: usize,
+        offset: u64,
+        every: u64,
+    },
     /// One offset per node is needed.
     Lengths { periods: usize, offsets: usize },
 }
@@ -68,7 +72,7 @@ pub fn ticks_between(index: usize, period: f64, dt: f64) -> Result<u64, Schedule
         return Err(ScheduleError::BadPeriod { index, period });
     }
     let every = (period / dt).round_ties_even();
-    if every < 1.0 || every > 1e15 || (every * dt - period).abs() > 1e-9 * period.max(1.0) {
+    if !(1.0..=1e15).contains(&every) || (every * dt - period).abs() > 1e-9 * period.max(1.0) {
         return Err(ScheduleError::NotMultiple { index, period, dt });
     }
     Ok(every as u64)
@@ -113,11 +117,6 @@ impl TickSchedule {
             due: vec![0; periods.len()],
             len: 0,
         })
-    }
-
-    /// Number of nodes.
-    pub fn nodes(&self) -> usize {
-        self.every.len()
     }
 
     /// Base ticks between node `i`'s ticks.

@@ -32,12 +32,12 @@ use crate::contact_gate::ContactGateCore;
 use crate::neuron_bank::NeuronBank;
 use crate::rotor_plant::RotorPlantCore;
 use crate::stop_flag::StopFlag;
-use rdm_core::sim::tick_schedule::TickSchedule;
 use bank::BankFast;
 use bridge::BridgeFast;
 use leptrino::LeptrinoFast;
 use pacing::Pacing;
 use plant::{PlantLink, PlantParts};
+use rdm_core::sim::tick_schedule::TickSchedule;
 use sleep::SleepParts;
 
 /// `attach_plant`'s `sleep` tuple (see there).
@@ -363,7 +363,7 @@ impl LockstepKernel {
     /// `"bridge"`, `"bank"`, `"spinal"`, `"leptrino"`); the default is every part. Only
     /// these parts' deferred state is written back before it runs, and only their plans are
     /// re-read after (a part left out must be neither read nor changed by it: the logs
-    /// would differ from the Python loop's).
+    /// would differ from those of the nodes' own ticks).
     fn set_touches(&mut self, index: usize, parts: Vec<String>) -> PyResult<()> {
         self.check_index(index)?;
         self.touches[index] = parts_mask(&parts)?;
