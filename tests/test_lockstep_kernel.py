@@ -137,7 +137,8 @@ def _run(
 ) -> tuple[dict, dict, dict | None]:
     """(files by relative path, state, kernel stats) of the stack driven by ``steps`` (the
     hover script unless ``script`` is given)."""
-    opts = replace(sim_stack_options(0, "inproc", speed=None, **options), lockstep_kernel=kernel)
+    options = {"speed": None, **options}
+    opts = replace(sim_stack_options(0, "inproc", **options), lockstep_kernel=kernel)
     if script is None:
         script = make_script(np.array([0.483, 0.0, HOVER_Z]))
     stack = build_stack("k", tmp, opts, script)
@@ -297,6 +298,19 @@ def test_a_truth_sink_that_changes_a_node_has_its_plans_re_read(tmp_path: Path) 
 
     stats = _same(tmp_path, steps, log=True)
     assert stats["fast"][5] > 250  # Leptrino frames kept coming from the kernel
+
+
+def test_a_paced_run_same_bytes_and_state(tmp_path: Path) -> None:
+    """Paced to 4x real time, the loop sleeps after most ticks (Python may run in other
+    threads then: every part is written back first); the bytes and state equal the run
+    without fast parts, and the fast parts still ran."""
+
+    def steps(stack: Stack) -> None:
+        stack.loop.run(0.6)
+
+    stats = _same(tmp_path, steps, speed=4.0, log=False)
+    fast = _fast_counts(NODES, stats)
+    assert fast["neurons"] == 600 and stats["physics_fast"] > 500
 
 
 def _stopping_script(at: float) -> Callable[[Stack, float], None]:

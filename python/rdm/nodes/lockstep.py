@@ -3,13 +3,16 @@
 Time advances in base ticks of ``dt`` (1 ms = the 1 kHz physics rate). At base tick ``k`` the
 simulated time is exactly ``k * dt`` (a product, never a running sum, so no drift) and:
 
-1. the simulated clock is set to ``t = k * dt`` (the in-process CAN channels stamp with it);
+1. the simulated clock reads ``t = k * dt`` whenever Python code runs in the tick (the
+   in-process CAN channels stamp with it);
 2. every node due at ``k`` is ticked with ``t``, **in the order the nodes were given** (a fixed,
    deterministic order: put the plant bridge first, then firmware mirrors, then the PC side,
    then sensor streamers and loggers);
 3. *barriers* (objects with ``settle()``, e.g. pty pairs whose kernel delivery is asynchronous)
    are settled, so every byte written in this tick is readable in the next one;
 4. the physics (any object with ``step()``) advances one step, to ``(k + 1) * dt``.
+5. a run (not :meth:`Lockstep.step`) sleeps while ahead of ``speed``, reports ``progress``
+   when due, and ends here when :meth:`Lockstep.stop` was called.
 
 A node's period must be a whole multiple of ``dt`` (checked): a 40 Hz onboard node ticks every
 25th base tick, a 200 Hz Spinal every 5th, CAN master and Neuron mirrors every tick. An optional
