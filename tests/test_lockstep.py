@@ -192,6 +192,26 @@ def test_stop_from_the_progress_callback_and_step_is_not_paced():
     assert slow.k == 3
 
 
+def test_a_node_reads_the_loop_time_during_its_tick():
+    """``loop.k`` and ``loop.time`` inside a tick are the tick in progress (its ``now``), as
+    a node that stamps with the loop's time reads them. Catches a counter published before
+    the tick or read through the running loop (refused while it runs)."""
+    seen: list = []
+    loop: Lockstep
+
+    class Reader:
+        name, period = "reader", 0.002
+
+        def tick(self, now: float) -> None:
+            seen.append((loop.k, loop.time, now))
+
+    loop = Lockstep([Reader()], offsets={"reader": 1})
+    loop.run_ticks(7)
+    loop.step()
+    assert seen == [(k, k * 0.001, k * 0.001) for k in (1, 3, 5, 7)]
+    assert loop.k == 8
+
+
 @pytest.mark.parametrize(
     ("period", "kwargs"),
     [(0.0015, {}), (0.0, {}), (float("nan"), {}), (0.001, {"speed": -1.0}), (0.001, {"dt": 0})],

@@ -50,6 +50,7 @@ __all__ = [
     "SpinalStep",
     "SpinalStepOutput",
     "StopFlag",
+    "TickCounter",
     "WrenchFilter",
     "WrenchNoiseCore",
     "__version__",
@@ -1367,6 +1368,14 @@ class StopFlag:
         """Whether a stop was asked."""
 
 @_final
+class TickCounter:
+    """The lockstep loop's next base tick (the Rust loop sets it after every tick)."""
+
+    def __new__(cls) -> _Self: ...
+    def get(self) -> int:
+        """The next base tick."""
+
+@_final
 class LockstepKernel:
     """The lockstep loop behind ``rdm.nodes.lockstep.Lockstep``: per base tick the due nodes
     in order, the barriers, one physics step, then pacing and progress; fast paths for the
@@ -1382,6 +1391,7 @@ class LockstepKernel:
         physics: Any | None,
         clock: Any,
         stop: StopFlag,
+        counter: TickCounter,
         barriers: Sequence[Callable[[], Any]] = ...,
         speed: float | None = None,
         progress: Callable[[float, float, int, float], Any] | None = None,
@@ -1437,10 +1447,6 @@ class LockstepKernel:
         next ``k``."""
     @property
     def k(self) -> int: ...
-    @property
-    def dt(self) -> float: ...
-    @property
-    def speed(self) -> float | None: ...
     profile: bool
     """Time every node tick, the barriers and the physics step (``stats()``: ``fast_ns``,
     ``python_ns``, ``barriers_ns``, ``physics_ns``)."""

@@ -124,6 +124,9 @@ class Lockstep:
             set_channel_clock(name, self.clock)
         #: The stop request the loop reads after every tick.
         self.stop_flag = _rdm.StopFlag()
+        self._dt = float(dt)
+        self._speed = speed
+        self._tick = _rdm.TickCounter()  # k, readable from inside a tick
         self._nodes = list(nodes)
         offsets = dict(offsets or {})
         names: list[str] = []
@@ -158,6 +161,7 @@ class Lockstep:
             physics.step if physics is not None else None,
             self.clock,
             self.stop_flag,
+            self._tick,
             [b.settle for b in self.barriers],
             speed,
             report,
@@ -171,22 +175,22 @@ class Lockstep:
     @property
     def dt(self) -> float:
         """The base tick [s]."""
-        return self.kernel.dt
+        return self._dt
 
     @property
     def speed(self) -> float | None:
         """The real-time factor runs are paced to (None: as fast as possible)."""
-        return self.kernel.speed
+        return self._speed
 
     @property
     def k(self) -> int:
-        """The next base tick."""
-        return self.kernel.k
+        """The next base tick (during a tick: the tick in progress)."""
+        return self._tick.get()
 
     @property
     def time(self) -> float:
         """Simulated time of the next tick (seconds)."""
-        return self.kernel.k * self.kernel.dt
+        return self._tick.get() * self._dt
 
     @property
     def nodes(self) -> list[Node]:

@@ -32,6 +32,7 @@ use crate::contact_gate::ContactGateCore;
 use crate::neuron_bank::NeuronBank;
 use crate::rotor_plant::RotorPlantCore;
 use crate::stop_flag::StopFlag;
+use crate::tick_counter::TickCounter;
 use bank::BankFast;
 use bridge::BridgeFast;
 use leptrino::LeptrinoFast;
@@ -128,6 +129,8 @@ pub struct LockstepKernel {
     physics: Option<Py<PyAny>>,
     clock: Py<PyAny>,
     stop: Py<StopFlag>,
+    /// `k` as Python code reads it during a run.
+    counter: Py<TickCounter>,
     k: u64,
     clock_t: Option<f64>,
     plant: Option<PlantLink>,
@@ -148,14 +151,15 @@ impl LockstepKernel {
     /// Nodes named `names` with `periods` [s] and `offsets` [base ticks] (a node ticks at
     /// the base ticks `k` with `k % round(period / dt) == offset`); `ticks[i]`: node `i`'s
     /// `tick`; `physics`: the physics `step` (or None); `clock`: the `SimClock` the loop
-    /// sets; `stop`: the loop's stop request; `barriers`: `settle` callables run after the
+    /// sets; `stop`: the loop's stop request; `counter`: where the next base tick is
+    /// published after every tick (it starts at 0); `barriers`: `settle` callables run after the
     /// nodes of every tick; `speed`: the real-time factor to pace to (None: as fast as
     /// possible); `progress(sim_time, wall_time, ticks, real_time_factor)` every
     /// `progress_every` simulated seconds; `wall_clock`/`sleep`: injectable for tests (None:
     /// the process's monotonic clock and sleep).
     #[new]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (dt, names, periods, offsets, ticks, physics, clock, stop, barriers=Vec::new(), speed=None, progress=None, progress_every=1.0, profile=false, wall_clock=None, sleep=None))]
+    #[pyo3(signature = (dt, names, periods, offsets, ticks, physics, clock, stop, counter, barriers=Vec::new(), speed=None, progress=None, progress_every=1.0, profile=false, wall_clock=None, sleep=None))]
     fn new(
         dt: f64,
         names: Vec<String>,
@@ -165,6 +169,7 @@ impl LockstepKernel {
         physics: Option<Py<PyAny>>,
         clock: Py<PyAny>,
         stop: Py<StopFlag>,
+        counter: Py<TickCounter>,
         barriers: Vec<Py<PyAny>>,
         speed: Option<f64>,
         progress: Option<Py<PyAny>>,
@@ -187,6 +192,7 @@ impl LockstepKernel {
             pyo3::exceptions::PyValueError::new_err(format!("Lockstep: {who}{e}"))
         })?;
         let pacing = Pacing::new(speed, progress, progress_every, wall_clock, sleep)?;
+        counter.get().set(0);
         Ok(LockstepKernel {
             dt,
             schedule,
@@ -200,6 +206,7 @@ impl LockstepKernel {
             physics,
             clock,
             stop,
+            counter,
             k: 0,
             clock_t: None,
             plant: None,
@@ -429,18 +436,6 @@ impl LockstepKernel {
     #[getter]
     fn k(&self) -> u64 {
         self.k
-    }
-
-    /// The base tick length [s].
-    #[getter]
-    fn dt(&self) -> f64 {
-        self.dt
-    }
-
-    /// The real-time factor paced runs keep (None: as fast as possible).
-    #[getter]
-    fn speed(&self) -> Option<f64> {
-        self.pacing.speed
     }
 
     /// `{"fast": [...], "python": [...], "physics_fast": n, "physics_python": n,

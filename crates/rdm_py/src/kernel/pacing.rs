@@ -12,9 +12,9 @@ pub(super) struct Pacing {
     wall: Option<Py<PyAny>>,
     sleep: Option<Py<PyAny>>,
     /// Simulated seconds per wall second to pace to (None: as fast as possible).
-    pub(super) speed: Option<f64>,
+    speed: Option<f64>,
     /// `progress(sim_time, wall_time, ticks, real_time_factor)`.
-    pub(super) progress: Option<Py<PyAny>>,
+    progress: Option<Py<PyAny>>,
     progress_every: f64,
     wall0: f64,
     sim0: f64,
@@ -90,14 +90,15 @@ impl Pacing {
         Ok((ahead > 0.0).then_some(ahead))
     }
 
-    /// Sleep `seconds` (the process's sleep releases the GIL).
+    /// Sleep `seconds` (the process's sleep releases the GIL; a pending signal, e.g.
+    /// KeyboardInterrupt, is raised after it).
     pub(super) fn sleep(&self, py: Python<'_>, seconds: f64) -> PyResult<()> {
         match &self.sleep {
             Some(f) => f.bind(py).call1((seconds,)).map(|_| ()),
             None => {
                 let d = Duration::try_from_secs_f64(seconds).unwrap_or(Duration::ZERO);
                 py.detach(|| std::thread::sleep(d));
-                Ok(())
+                py.check_signals() // Ctrl-C during a paced run stops it here
             }
         }
     }

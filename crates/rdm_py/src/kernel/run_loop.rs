@@ -295,6 +295,7 @@ impl LockstepKernel {
                 self.counts.physics_ns += elapsed_ns(t0);
             }
             self.k = k + 1;
+            self.counter.get().set(self.k);
             if paced {
                 self.pace(py, t)?;
             }
