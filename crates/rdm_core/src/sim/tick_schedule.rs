@@ -2,9 +2,11 @@
 //!
 //! Time advances in base ticks of `dt`. Node `i` has a period that is a whole number
 //! `every[i]` of base ticks and an offset `offset[i]` in `0..every[i]`; it ticks at the base
-//! ticks `k` with `k % every[i] == offset[i]`, in the order the nodes were given. The
-//! schedule holds the periods and one buffer of node indices sized at setup: selecting the
-//! nodes due at a tick allocates nothing and takes one remainder per node.
+//! ticks `k` with `k % every[i] == offset[i]`, in the order the nodes were given. At setup the
+//! schedule lists the nodes due at each residue of `k` modulo the least common multiple of
+//! the `every`s (one remainder per tick then); when that cycle is longer than
+//! [`MAX_CYCLE`] ticks it tests every node at every tick instead (one remainder per node)
+//! into a buffer sized at setup. Selecting the nodes of a tick allocates nothing.
 
 use std::fmt;
 
@@ -78,13 +80,36 @@ pub fn ticks_between(index: usize, period: f64, dt: f64) -> Result<u64, Schedule
     Ok(every as u64)
 }
 
+/// Longest cycle (base ticks) listed at setup.
+pub const MAX_CYCLE: u64 = 100_000;
+
 /// The nodes' periods in base ticks and offsets, and the nodes due at the selected tick.
 #[derive(Clone, Debug)]
 pub struct TickSchedule {
     every: Vec<u64>,
     offset: Vec<u64>,
-    due: Vec<usize>,
+    /// Length of the listed cycle (0: none, every node tested at every tick).
+    cycle: u64,
+    /// The nodes due at residue `r` are `table[starts[r]..starts[r + 1]]`.
+    starts: Vec<usize>,
+    table: Vec<usize>,
+    /// Without a listed cycle: the nodes due at the selected tick.
+    scanned: Vec<usize>,
+    from: usize,
     len: usize,
+}
+
+/// The least common multiple of `every`, or None when it exceeds [`MAX_CYCLE`].
+fn cycle_of(every: &[u64]) -> Option<u64> {
+    let mut cycle: u64 = 1;
+    for &e in every {
+        let (mut a, mut b) = (cycle, e);
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        cycle = (cycle / a).checked_mul(e).filter(|&c| c <= MAX_CYCLE)?;
+    }
+    Some(cycle)
 }
 
 impl TickSchedule {
@@ -111,12 +136,28 @@ impl TickSchedule {
             }
             every.push(e);
         }
-        Ok(TickSchedule {
+        let mut s = TickSchedule {
+            cycle: 0,
+            starts: Vec::new(),
+            table: Vec::new(),
+            scanned: vec![0; every.len()],
             every,
             offset: offsets.to_vec(),
-            due: vec![0; periods.len()],
+            from: 0,
             len: 0,
-        })
+        };
+        if let Some(cycle) = cycle_of(&s.every) {
+            let (every, offset) = (&s.every, &s.offset);
+            s.starts.reserve(cycle as usize + 1);
+            s.starts.push(0);
+            for r in 0..cycle {
+                s.table
+                    .extend((0..every.len()).filter(|&i| r % every[i] == offset[i]));
+                s.starts.push(s.table.len());
+            }
+            s.cycle = cycle;
+        }
+        Ok(s)
     }
 
     /// Base ticks between node `i`'s ticks.
@@ -132,10 +173,16 @@ impl TickSchedule {
     /// Select base tick `k`: the nodes due at it, in node order, become [`due`](Self::due)'s
     /// `0..` (returns how many).
     pub fn select(&mut self, k: u64) -> usize {
+        if self.cycle > 0 {
+            let r = (k % self.cycle) as usize;
+            self.from = self.starts[r];
+            self.len = self.starts[r + 1] - self.from;
+            return self.len;
+        }
         let mut n = 0;
         for i in 0..self.every.len() {
             if k % self.every[i] == self.offset[i] {
-                self.due[n] = i;
+                self.scanned[n] = i;
                 n += 1;
             }
         }
@@ -146,7 +193,11 @@ impl TickSchedule {
     /// The `j`-th node due at the selected tick (`j` below what [`select`](Self::select)
     /// returned).
     pub fn due(&self, j: usize) -> usize {
-        self.due[..self.len][j]
+        if self.cycle > 0 {
+            self.table[self.from..self.from + self.len][j]
+        } else {
+            self.scanned[..self.len][j]
+        }
     }
 }
 
@@ -162,29 +213,56 @@ mod tests {
         assert_eq!(every, [25, 5, 1, 2, 1000]);
     }
 
-    #[test]
-    fn selected_nodes_are_those_with_the_offset_remainder_in_node_order() {
-        // Independent count: node i ticks at offset[i], offset[i] + every[i], ...
-        let periods = [0.001, 0.005, 0.025, 0.005];
-        let offsets = [0, 2, 7, 0];
-        let mut s = TickSchedule::new(0.001, &periods, &offsets).unwrap();
-        let every = [1u64, 5, 25, 5];
-        let mut expected: Vec<Vec<usize>> = vec![Vec::new(); 200];
-        for i in 0..4 {
+    /// The nodes due at each of `ticks` ticks, counted independently: node i ticks at
+    /// offset[i], offset[i] + every[i], ...
+    fn expected(every: &[u64], offsets: &[u64], ticks: usize) -> Vec<Vec<usize>> {
+        let mut out: Vec<Vec<usize>> = vec![Vec::new(); ticks];
+        for i in 0..every.len() {
             let mut k = offsets[i];
-            while k < 200 {
-                expected[k as usize].push(i);
+            while k < ticks as u64 {
+                out[k as usize].push(i);
                 k += every[i];
             }
         }
-        for (k, want) in expected.iter().enumerate() {
-            let n = s.select(k as u64);
+        out
+    }
+
+    fn check(s: &mut TickSchedule, want: &[Vec<usize>], from: u64) {
+        for (k, want) in (from..).zip(want) {
+            let n = s.select(k);
             let got: Vec<usize> = (0..n).map(|j| s.due(j)).collect();
             assert_eq!(&got, want, "tick {k}");
-            for i in 0..4 {
-                assert_eq!(s.is_due(i, k as u64), want.contains(&i));
+            for i in 0..s.every.len() {
+                assert_eq!(s.is_due(i, k), want.contains(&i));
             }
         }
+    }
+
+    #[test]
+    fn selected_nodes_are_those_with_the_offset_remainder_in_node_order() {
+        let periods = [0.001, 0.005, 0.025, 0.005];
+        let offsets = [0, 2, 7, 0];
+        let mut s = TickSchedule::new(0.001, &periods, &offsets).unwrap();
+        assert_eq!(s.cycle, 25);
+        check(&mut s, &expected(&[1, 5, 25, 5], &offsets, 200), 0);
+    }
+
+    #[test]
+    fn a_cycle_too_long_to_list_tests_every_node_at_every_tick() {
+        // lcm(997, 991) = 988_027 ticks: no table, the same nodes selected.
+        let offsets = [3, 990, 0];
+        let mut s = TickSchedule::new(1.0, &[997.0, 991.0, 2.0], &offsets).unwrap();
+        assert_eq!(s.cycle, 0);
+        let want = expected(&[997, 991, 2], &offsets, 3000);
+        check(&mut s, &want, 0);
+        let listed_offsets = [3, 90, 1];
+        let mut listed = TickSchedule::new(1.0, &[97.0, 91.0, 2.0], &listed_offsets).unwrap();
+        assert_eq!(listed.cycle, 97 * 91 * 2);
+        check(
+            &mut listed,
+            &expected(&[97, 91, 2], &listed_offsets, 20_000),
+            0,
+        );
     }
 
     #[test]
