@@ -231,8 +231,9 @@ class Lockstep:
         return self.stats
 
     def _advance(self, n: int, *, paced: bool) -> None:
-        """``n`` base ticks in the kernel. The nodes' ``tick`` attributes are read now: a node
-        whose ``tick`` was replaced (a wrapper) runs the replacement, never a fast part."""
+        """``n`` base ticks in the kernel. The nodes' ``tick`` attributes are read at each
+        call: a node whose ``tick`` was replaced (a wrapper) runs the replacement, never a
+        fast part."""
         nodes = self._nodes
         ticks = [node.tick for node in nodes]
         own = [

@@ -379,7 +379,7 @@ impl LockstepKernel {
 
     /// Advance `n` base ticks (fewer if the stop request is set during a tick); `paced`:
     /// with pacing and progress reports (a run), else without (a single step). `ticks[i]`
-    /// is node `i`'s `tick` now and `own[i]` whether it is the class's own method (a node
+    /// is node `i`'s present `tick` and `own[i]` whether it is the class's own method (a node
     /// whose `tick` was replaced runs only the replacement). Every deferred state is
     /// written back before it returns, also when a node raises (then `k` is the tick that
     /// raised). Returns the next `k`.
@@ -419,7 +419,7 @@ impl LockstepKernel {
         Ok(self.k)
     }
 
-    /// Time every node tick, the barriers and the physics step from now on (`stats()`'s
+    /// Time every node tick, the barriers and the physics step from this call on (`stats()`'s
     /// `fast_ns`, `python_ns` per node, `barriers_ns` and `physics_ns`: wall ns, each
     /// tick's flush and re-reads included in the node that caused them).
     #[setter]
