@@ -31,7 +31,6 @@ def test_kernel_note_names_the_nodes_run_in_rust_with_their_counts():
     }
     (note,) = lockstep._kernel_note(stats)
     assert note == "lockstep kernel, ticks run in Rust: plant_bridge 900/1000, physics 1000/1000"
-    assert lockstep._kernel_note(None) == ["no lockstep kernel: every tick in Python"]
 
 
 def test_the_median_run_is_reported_and_every_run_noted():

@@ -223,9 +223,9 @@ def test_straight_posture_keeps_the_gains_that_fly(mj):
 
 
 def test_hanging_flight_stage_flies_the_tracking_motion(tmp_path):
-    """The tracking scenario's flight stage in the hanging posture (1.0x motion): before the
-    hanging gain set the robot fell (Spinal's commanded-tilt fail-safe ~10 s after the fold,
-    with or without the motion)."""
+    """The tracking scenario's flight stage in the hanging posture (its planned path): before
+    the hanging gain set the robot fell (Spinal's commanded-tilt fail-safe ~10 s after the
+    fold, with or without the motion)."""
     res = tracking.run(tmp_path, flight_posture="hanging", duration=26.0, log=False, plots=False)
     assert not res.stack.spinal.counters.failsafes
     assert "flight" in res.facts

@@ -137,6 +137,81 @@ def test_as_fast_as_possible_never_sleeps_and_stop_from_a_node():
     assert loop.k == 20 and math.isclose(loop.time, 0.02)
 
 
+def test_barriers_settle_after_the_nodes_and_before_the_physics_of_every_tick():
+    """Oracle: the log written out from the rates (nodes due in order, then each barrier,
+    then the physics). Catches barriers settled before the nodes, after the physics, once
+    per run or not at all in a single ``step``."""
+    log: list = []
+
+    class Barrier:
+        def __init__(self, name: str) -> None:
+            self.name = name
+
+        def settle(self) -> None:
+            log.append((self.name, None))
+
+    loop = Lockstep(
+        [Recorder("a", 0.001, log), Recorder("b", 0.002, log)],
+        physics=CountingPhysics(log),
+        barriers=[Barrier("x"), Barrier("y")],
+    )
+    loop.run_ticks(4)
+    loop.step()
+    want: list = []
+    for k in range(5):
+        want.append(("a", k * 0.001))
+        if k % 2 == 0:
+            want.append(("b", k * 0.001))
+        want += [("x", None), ("y", None), ("<physics>", k + 1)]
+    assert log == want
+    assert loop.stats.base_ticks == 5 and loop.stats.ticks == {"a": 5, "b": 3}
+
+
+def test_stop_from_the_progress_callback_and_step_is_not_paced():
+    def no_sleep(s: float) -> None:
+        raise AssertionError("slept")
+
+    loop: Lockstep
+
+    def progress(p) -> None:
+        if p.sim_time >= 0.05 - 1e-12:
+            loop.stop()
+
+    loop = Lockstep(
+        [Recorder("n", 0.001, [])],
+        progress=progress,
+        progress_every=0.01,
+        wall_clock=lambda: 0.0,
+        sleep=no_sleep,
+    )
+    loop.run(1.0)
+    assert loop.k == 50  # the report after the tick at 49 ms asked for the stop
+    slow = Lockstep([Recorder("n", 0.001, [])], speed=1e-3, sleep=no_sleep)
+    for _ in range(3):
+        slow.step()  # a single step never sleeps (the caller paces it)
+    assert slow.k == 3
+
+
+def test_a_node_reads_the_loop_time_during_its_tick():
+    """``loop.k`` and ``loop.time`` inside a tick are the tick in progress (its ``now``), as
+    a node that stamps with the loop's time reads them. Catches a counter published before
+    the tick or read through the running loop (refused while it runs)."""
+    seen: list = []
+    loop: Lockstep
+
+    class Reader:
+        name, period = "reader", 0.002
+
+        def tick(self, now: float) -> None:
+            seen.append((loop.k, loop.time, now))
+
+    loop = Lockstep([Reader()], offsets={"reader": 1})
+    loop.run_ticks(7)
+    loop.step()
+    assert seen == [(k, k * 0.001, k * 0.001) for k in (1, 3, 5, 7)]
+    assert loop.k == 8
+
+
 @pytest.mark.parametrize(
     ("period", "kwargs"),
     [(0.0015, {}), (0.0, {}), (float("nan"), {}), (0.001, {"speed": -1.0}), (0.001, {"dt": 0})],

@@ -6,7 +6,7 @@ Spinal mirror's busy-ms state included (``_spinal_state``: control clock and cou
 ``last_output``, duty lists and their identity, ``_last_pub``, publisher and battery times,
 the session's counters and TX ring, the UART pump's and the chain's counters, the bytes
 waiting at the PC's end). The golden digests were recorded from runs whose files and state
-equalled those of the stack's Python loop (``StackOptions.lockstep_kernel=False``); after a
+equalled those of the stack without fast parts (``StackOptions.lockstep_kernel=False``); after a
 deliberate change of the simulated bytes, ``RDM_WRITE_GOLDEN=1 python -m pytest
 tests/test_spinal_kernel_busy.py`` records them again (say why in the commit). The
 kernel's ``stats()["spinal_busy"]`` shows which of its paths ran: routine steps, battery

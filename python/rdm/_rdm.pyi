@@ -53,6 +53,7 @@ __all__ = [
     "SpinalStep",
     "SpinalStepOutput",
     "StopFlag",
+    "TickCounter",
     "WrenchFilter",
     "WrenchNoiseCore",
     "__version__",
@@ -1457,18 +1458,37 @@ class StopFlag:
         """Whether a stop was asked."""
 
 @_final
+class TickCounter:
+    """The lockstep loop's next base tick (the Rust loop sets it after every tick)."""
+
+    def __new__(cls) -> _Self: ...
+    def get(self) -> int:
+        """The next base tick."""
+
+@_final
 class LockstepKernel:
-    """The unpaced lockstep loop in Rust with fast paths for the firmware side's steady
-    milliseconds (``rdm.nodes.lockstep_kernel``, docs/sim.md)."""
+    """The lockstep loop behind ``rdm.nodes.lockstep.Lockstep``: per base tick the due nodes
+    in order, the barriers, one physics step, then pacing and progress; fast paths for the
+    firmware side's steady milliseconds (``rdm.nodes.lockstep_kernel``, docs/sim.md)."""
 
     def __new__(
         cls,
         dt: float,
-        schedule: list[list[int]],
-        ticks: list[Any],
+        names: Sequence[str],
+        periods: Sequence[float],
+        offsets: Sequence[int],
+        ticks: Sequence[Any],
         physics: Any | None,
         clock: Any,
         stop: StopFlag,
+        counter: TickCounter,
+        barriers: Sequence[Callable[[], Any]] = ...,
+        speed: float | None = None,
+        progress: Callable[[float, float, int, float], Any] | None = None,
+        progress_every: float = 1.0,
+        profile: bool = False,
+        wall_clock: Callable[[], float] | None = None,
+        sleep: Callable[[float], Any] | None = None,
     ) -> _Self: ...
     def attach_plant(
         self,
@@ -1509,19 +1529,20 @@ class LockstepKernel:
     def set_touches(self, index: int, parts: list[str]) -> None:
         """The parts (``plant``, ``bridge``, ``bank``, ``spinal``, ``leptrino``) node
         ``index``'s Python tick may change; default all."""
-    def run(self, k0: int, n: int, ticks: list[Any], own: list[bool]) -> int:
-        """Advance ``n`` base ticks from ``k0`` with the nodes' present ``tick``s (``own``:
-        the class's own method, so its fast path may run); the next ``k``."""
+    def run(self, n: int, ticks: list[Any], own: list[bool], paced: bool = True) -> int:
+        """Advance ``n`` base ticks with the nodes' present ``tick``s (``own``: the class's
+        own method, so its fast path may run); ``paced``: with pacing and progress; the
+        next ``k``."""
     @property
     def k(self) -> int: ...
     profile: bool
-    """Time every node tick and physics step (``stats()``: ``fast_ns``, ``python_ns``,
-    ``physics_ns``)."""
+    """Time every node tick, the barriers and the physics step (``stats()``: ``fast_ns``,
+    ``python_ns``, ``barriers_ns``, ``physics_ns``)."""
     def stats(self) -> dict[str, Any]:
         """Ticks per node on the fast path and in Python, physics steps, boundaries, contact
         tracker updates, the Spinal busy ms run in the kernel (``spinal_busy``: ``steps``,
         ``battery_samples``, ``imu_frames``, ``servo_frames``, and the hand-overs to the
         mirror's Python continuations ``finish_step`` / ``finish_publish``, and the ms the
         mirror received in Python with the rest run in the kernel / in Python:
-        ``receive_then_kernel`` / ``receive_then_python``); with ``profile`` the wall ns of
-        each."""
+        ``receive_then_kernel`` / ``receive_then_python``), ``base_ticks``, ``wall_time``
+        (paced runs) and, measured with ``profile``, the wall ns of each."""

@@ -37,6 +37,7 @@ mod servo_goals;
 mod spinal_commands;
 mod spinal_mirror;
 mod stop_flag;
+mod tick_counter;
 mod untracked;
 
 #[pymodule]
@@ -69,6 +70,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     rosserial::register(m)?;
     kernel::register(m)?;
     stop_flag::register(m)?;
+    tick_counter::register(m)?;
     spinal_mirror::register(m)?;
     spinal_commands::register(m)?;
     servo_goals::register(m)?;

@@ -75,27 +75,29 @@ class RealTimeMeasurement(Measurement):
 
 
 def _build(base: str, profile: bool):
+    """The hover stack; ``profile``: timers per node and no fast part (every tick in the
+    node's own Python tick, so each node's share is its own)."""
+    from dataclasses import replace
+
     from rdm.scenarios.common import sim_stack_options
     from rdm.scenarios.hover import HOVER_Z, make_script
     from rdm.scenarios.stack import build_stack
 
-    opts = sim_stack_options(0, "inproc", speed=None)
+    opts = replace(sim_stack_options(0, "inproc", speed=None), lockstep_kernel=not profile)
     stack = build_stack("bench", base, opts, make_script(np.array([0.483, 0.0, HOVER_Z])))
     stack.loop.profile = profile
     return stack
 
 
 #: Base ticks timed together: one onboard period (40 Hz), so every sample holds the same mix
-#: of tick kinds. The loop runs them as ``rdm sim`` does (``Lockstep.run_ticks``: through
-#: the Rust lockstep kernel when the stack has one), which per-tick ``Lockstep.step`` calls
-#: would bypass.
+#: of tick kinds. The loop runs them as ``rdm sim`` does (``Lockstep.run_ticks``, with the
+#: lockstep kernel's fast parts).
 CHUNK_TICKS = 25
 
 
-def run_hover_stack(ticks: int) -> tuple[np.ndarray, float, float, dict | None]:
+def run_hover_stack(ticks: int) -> tuple[np.ndarray, float, float, dict]:
     """Wall ns per base tick (each the mean of its :data:`CHUNK_TICKS` chunk), total wall s
-    and CPU s of ``ticks`` base ticks of the hover stack, and the lockstep kernel's stats
-    (None without a kernel)."""
+    and CPU s of ``ticks`` base ticks of the hover stack, and the lockstep kernel's stats."""
     with tempfile.TemporaryDirectory(prefix="rdm-bench-lockstep-") as base:
         stack = _build(base, profile=False)
         try:
@@ -110,20 +112,16 @@ def run_hover_stack(ticks: int) -> tuple[np.ndarray, float, float, dict | None]:
                 ns[start : start + n] = (clock() - t0) // n
             wall = time.perf_counter() - wall0
             cpu = time.process_time() - cpu0
-            kernel = stack.loop.kernel
-            stats = None if kernel is None else dict(kernel.stats())
+            stats = dict(stack.loop.kernel.stats())
             names = [node.name for node in stack.loop.nodes]
         finally:
             stack.close()
-    if stats is not None:
-        stats["nodes"] = names
+    stats["nodes"] = names
     return ns, wall, cpu, stats
 
 
-def _kernel_note(stats: dict | None) -> list[str]:
+def _kernel_note(stats: dict) -> list[str]:
     """How many ticks of each node the lockstep kernel ran on its fast path."""
-    if stats is None:
-        return ["no lockstep kernel: every tick in Python"]
     parts = [
         f"{name} {fast}/{fast + py}"
         for name, fast, py in zip(stats["nodes"], stats["fast"], stats["python"], strict=True)
@@ -242,7 +240,7 @@ def run_lockstep(ctx: Context) -> list[Measurement]:
         ctx.progress("lockstep: profiled run for the per-node shares")
         shares = node_shares(ticks)
         notes.append(
-            "per node, Python loop with timers (share of wall, us per simulated ms): "
+            "per node, every tick in Python, timed (share of wall, us per simulated ms): "
             + ", ".join(f"{name} {share:.1%} {us:.0f}" for name, share, us in shares)
         )
     measurement = RealTimeMeasurement(

@@ -1,16 +1,15 @@
-"""The lockstep loop in Rust: :class:`rdm._rdm.LockstepKernel` behind :class:`Lockstep`.
+"""The fast parts of the lockstep loop (:class:`rdm._rdm.LockstepKernel`, behind :class:`Lockstep`).
 
-``Lockstep.run*`` without pacing, progress or profile runs its ticks through the kernel when
-one is attached (:func:`attach_kernel`): the same nodes in the same order at the same base
-ticks as ``Lockstep._run_fast``, but the loop itself and the routine milliseconds of the
-simulated firmware side (plant bridge, Neuron bank, Spinal's idle, boot and routine busy
-ms, Leptrino streaming, the plant step) run in Rust on the cores the Python nodes already
-use. Every other tick is the node's own Python ``tick``. Before Python code runs, the kernel
-writes back what its fast ticks changed of the parts that code may read or change; after,
-it re-reads those parts' plans. The Leptrino stream state is one Rust object the node and
-the kernel share (``rdm._rdm.LeptrinoStreamCore``): only its pending UART bytes wait. So the
-logs are the same bytes as without the kernel (tests/test_lockstep_kernel.py,
-tests/test_spinal_kernel_busy.py; docs/sim.md).
+:func:`attach_kernel` gives the loop's kernel the fast parts its nodes allow: the routine
+milliseconds of the simulated firmware side (plant bridge, Neuron bank, Spinal's idle, boot
+and routine busy ms, Leptrino streaming, the plant step) then run in Rust on the cores the
+Python nodes already use, at the same base ticks in the same order. Every other tick is the
+node's own Python ``tick``. Before Python code runs, the kernel writes back what its fast
+ticks changed of the parts that code may read or change; after, it re-reads those parts'
+plans. State that is one Rust object the node and the kernel share (the Leptrino stream,
+the Neuron bank, the resting sleep, the noise models' normal streams) needs neither: only
+the Leptrino's pending UART bytes wait. So the logs are the same bytes as with every tick
+in Python (tests/test_lockstep_kernel.py, tests/test_spinal_kernel_busy.py; docs/sim.md).
 """
 
 from __future__ import annotations
@@ -164,10 +163,10 @@ def _bridge_store(bridge: PlantBridge) -> Callable[[int], None]:
 
 
 def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKernel:
-    """Attach a kernel to ``loop`` (``loop.kernel``) and give it the fast paths its nodes
-    allow: ``plant`` (an :class:`rdm.plant.Plant`, the loop's physics) steps in the kernel;
-    a :class:`PlantBridge` whose boards are one bank's, a :class:`NeuronBankNode` on a
-    :class:`CanWireLink`, a :class:`SpinalMirror` whose Rust master ticks on that wire and a
+    """Give ``loop``'s kernel (``loop.kernel``) the fast parts its nodes allow: ``plant`` (an
+    :class:`rdm.plant.Plant`, the loop's physics) steps in the kernel; a :class:`PlantBridge`
+    whose boards are one bank's, a :class:`NeuronBankNode` on a :class:`CanWireLink`, a
+    :class:`SpinalMirror` whose Rust master ticks on that wire and a
     :class:`LeptrinoSensorNode` get their steady ticks run there. After any other node's
     Python tick every part is flushed and every plan re-read, unless the node (its class or
     the instance) declares what it may read or change in ``kernel_touches`` (part names:
@@ -175,14 +174,7 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
     onboard node writes into the Spinal and reads the Leptrino UART, a scenario script
     declares its own). Returns the kernel."""
     nodes = loop.nodes
-    index = {id(n): i for i, n in enumerate(nodes)}
-    schedule = [[index[id(e.node)] for e in slot] for slot in loop._schedule]
-    if not schedule:
-        raise ValueError("attach_kernel: the loop has no precomputed schedule")
-    physics = loop.physics.step if loop.physics is not None else None
-    kernel = _rdm.LockstepKernel(
-        loop.dt, schedule, [n.tick for n in nodes], physics, loop.clock, loop.stop_flag
-    )
+    kernel = loop.kernel
     if plant is not None and plant is loop.physics:
         _attach_plant(kernel, plant)
     leptrino = spinal = None
@@ -206,5 +198,4 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         if bridged and plant is node.plant and plant is loop.physics:
             plan = _bridge_plan(node, leptrino, spinal)
             kernel.attach_bridge(i, node.banks[0]._core, plan, _bridge_store(node))
-    loop.kernel = kernel
     return kernel

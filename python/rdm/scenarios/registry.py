@@ -90,7 +90,7 @@ SCENARIOS: dict[str, Scenario] = {
             "tracking",
             "tracking",
             "run",
-            "end-effector pose errors under the same joint motion in flight and perched (Fig. 13)",
+            "end-effector pose errors along planned joint paths, flight and perched (Figs. 6, 13)",
         ),
         Scenario(
             "drilling",

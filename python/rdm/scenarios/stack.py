@@ -170,9 +170,10 @@ class StackOptions:
     #: before); then seed 1's accelerometer bias (-0.13 m/s^2 in y: 0.8 deg of roll) tips the
     #: perched plate onto its edges (ZMP on the edge 10.5 % of the time, docs/sim.md).
     imu_acc_calibrated: bool = True
-    #: Run the unpaced lockstep loop in Rust (:mod:`rdm.nodes.lockstep_kernel`): the same
+    #: Give the lockstep loop its fast parts (:mod:`rdm.nodes.lockstep_kernel`): the same
     #: ticks, the same bytes in every log (tests/test_lockstep_kernel.py), the steady
-    #: milliseconds of the firmware side without Python. False: the Python loop.
+    #: milliseconds of the firmware side without Python. False: every tick is the node's
+    #: own Python ``tick``.
     lockstep_kernel: bool = True
     #: Joint servo model. ASSUMPTION: a stiff position servo (kp 150 N m/rad, kv 5 N m s/rad,
     #: about 1 deg of error at 2.6 N m, torque limited to the stall torque) as a Dynamixel X

@@ -1,11 +1,11 @@
 """Joint-space inverse kinematics of a tool point for the perched arm (damped least squares
 on the onboard model's analytic Jacobians, ``rdm.model.Robot.jacobian``).
 
-Why not ``rdm.planner.plan``: the planner's static-thrust model needs the CoG between the two
-rotor pairs and its perched start is q = (1.2, 0.8, 0, -0.9, 0, 0); in the scenario's hanging
-posture q = (pi/2, -0.5, 0, ...) the CoG is not between the pairs and the plan is infeasible
-from step 0 (docs/scenarios.md, ``## tasks``). This IK keeps the vectoring apparatus levelled
-the same way :func:`rdm.scenarios.perching.leveled` does (q3 stays 0).
+Used by the painting and valve tasks, which hold the tool axis (the brush into the wall, the
+gripper along the valve's hinge): the Sec. V planner (``rdm.planner``) takes a point or a
+full 6-D pose as its target, not an axis (drilling, whose axis is free, is planned by it:
+:mod:`rdm.scenarios.task_plan`). This IK keeps the vectoring apparatus levelled the same way
+:func:`rdm.scenarios.perching.leveled` does (q3 stays 0).
 """
 
 from __future__ import annotations

@@ -4,9 +4,11 @@ drilling`` ...).
 
 The robot perches exactly as in :mod:`rdm.scenarios.perching` (same script, constants and
 tuning; no joint motion of its own) and then the arm does the task against objects added to
-the MuJoCo scene (:mod:`rdm.scenarios.task_objects`). Joint goals come from the damped
-least-squares IK of :mod:`rdm.scenarios.task_ik` with the foot pose the PC knows (mocap)
-and the object positions (known to the operator, as in the paper's feed-forward planner);
+the MuJoCo scene (:mod:`rdm.scenarios.task_objects`). Joint goals come from the foot pose
+the PC knows (mocap) and the object positions (known to the operator, as in the paper's
+feed-forward planner): drilling's from the Sec. V planner with the drill tip as its end
+effector (:mod:`rdm.scenarios.task_plan`), painting's and the valve's from the damped
+least-squares IK of :mod:`rdm.scenarios.task_ik` (they need the tool axis held);
 the drill is pressed by commanding it ``PRESS_DEPTH`` behind the surface (the stiff
 position servos turn the offset into a contact force), the brush by its spring. Ground
 truth: MuJoCo contacts of the tool geoms, the brush joint, the valve hinge angle; the
@@ -42,7 +44,7 @@ from rdm.nodes.onboard_config import OnboardConfig
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels
 
-from . import painting, perching, task_ik
+from . import painting, perching, task_ik, task_plan
 from . import task_objects as obj
 from .common import (
     ScenarioResult,
@@ -87,9 +89,6 @@ TURN_S = 4.0
 #: fingers have 3 mm clearance; a 1 deg tilt moves their tips by 0.3 mm). 0.3 (drilling's
 #: default) gave 2.2 mm / 0.45 deg for a foot at (2, -3, 10) mrad, 0.1 gives 0.45 mm / 0.8 deg.
 VALVE_AXIS_WEIGHT = 0.1
-#: IK seed of the drilling targets: middle link leaning forward, end link down (keeps the
-#: arm rotors off the vertical through the foot: pitch authority, docs/planner.md rho).
-IK_SEED_DRILL = (math.pi / 2, -0.7, 0.0, 0.7, 0.0, 0.0)
 START_AFTER = 0.5  # s after the perching script's hold begins
 #: The task starts only on a settled perch: the foot's roll and pitch (mocap) within
 #: SETTLED_TILT_DEG of level for the last SETTLED_FOR_S. The plan and the objects' placement
@@ -154,6 +153,8 @@ class TaskScript(perching.PerchingScript):
         #: (start, end, label) of the pressing/sliding/turning windows
         self.windows: list[tuple[float, float, str]] = []
         self.ik_errors: list[float] = []
+        #: where the joint waypoints come from: "IK" (task_ik) or "planned" (task_plan)
+        self.waypoint_source = "IK"
         #: the painting tasks' stroke (painting.Stroke), None for the others
         self.stroke: painting.Stroke | None = None
         self.targets: list[np.ndarray] = []
@@ -222,17 +223,19 @@ class TaskScript(perching.PerchingScript):
             way.append((duration, q.copy(), linear))
             return duration
 
-        if self.task == "drilling":
-            q = task_ik.level(np.r_[IK_SEED_DRILL, np.zeros(robot.n_q - 6)])
-            for dx, dy in DRILL_TARGETS:
-                target = lay.board_point(dx, dy)
-                self.targets.append(target)
-                up = target + np.array([0.0, 0.0, HOVER])
-                t += go(up, obj.DRILL_LEN, MOVE_S)
-                t += go(target - [0.0, 0.0, PRESS_DEPTH], obj.DRILL_LEN, PRESS_S)
-                self.windows.append((t - 0.5 * PRESS_S, t + 0.5 * PRESS_S, "press"))
-                t += go(target - [0.0, 0.0, PRESS_DEPTH], obj.DRILL_LEN, PRESS_S * 0.5)
-                t += go(up, obj.DRILL_LEN, RETRACT_S)
+        first_s = None  # the first move's duration if the first waypoint is not the move
+        if self.task == "drilling":  # the Sec. V planner, the drill tip as its end effector
+            self.waypoint_source = "planned"
+            first_s = MOVE_S  # its waypoints are the 40 Hz samples of the moves
+            tool = task_plan.ToolPlanner("rdm", base, q_now, obj.DRILL_LEN)
+            self.targets = [lay.board_point(dx, dy) for dx, dy in DRILL_TARGETS]
+            steps, presses, took = task_plan.drill_waypoints(
+                tool, self.targets, HOVER, PRESS_DEPTH, MOVE_S, PRESS_S, RETRACT_S
+            )
+            way += steps
+            self.windows += [(t + a, t + b, "press") for a, b in presses]
+            self.ik_errors += [m.error for m in tool.moves]
+            t += took
         elif self.task in painting.PAINT_TASKS:
             self.stroke = painting.stroke_of(self.task, lay)
             s = self.stroke
@@ -263,7 +266,7 @@ class TaskScript(perching.PerchingScript):
         self.t_task = now
         self.t_task_end = t
         # first waypoint (hover above the first target) reached + 0.5 s settling
-        self.t_enable = now + way[0][0] + 0.5
+        self.t_enable = now + (way[0][0] if first_s is None else first_s) + 0.5
 
     # --------------------------------------------------------------- recording
     def _tool_object_geoms(self, model: mujoco.MjModel) -> tuple[set[int], set[int]]:
@@ -465,7 +468,7 @@ def evaluate(stack: Stack, script: TaskScript) -> ScenarioResult:
         Metric("foot contact kept while perched", kept, 1.0, "fraction", "min", limit=1.0),
         Metric("foot slip while perched", slip, None, "mm", "max", limit=1.0),
         Metric(
-            "max IK position error of the waypoints",
+            f"max {script.waypoint_source} position error of the waypoints",
             float(np.max(script.ik_errors) * 1e3) if script.ik_errors else nan,
             None,
             "mm",

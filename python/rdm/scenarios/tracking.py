@@ -1,5 +1,5 @@
 """``tracking``: end-effector pose tracking in flight vs perched (paper Sec. VII-C-2, Fig. 13,
-Table X).
+Table X), with the Sec. V planner in front of the position controller (Fig. 6).
 
 The paper moves the joints by a feed-forward planner while the root (base link) is held by
 the real-time position/attitude feedback, once flying and once perched, and compares the
@@ -7,14 +7,19 @@ end-effector pose errors (Table X). One run, built on the perching scenario's ph
 (:class:`rdm.scenarios.push.StagedPerchingScript`, ``perching.py`` unchanged):
 
 1. boot, arm, climb at q = 0 (as ``perching``);
-2. **flight stage** (arm straight, q = 0, the posture the flight scenario flies its Fig. 9
-   change from): settle, then the joints follow ``MOTION`` (joint offsets from the stage's
-   base posture) through :meth:`OnboardNode.set_trajectory`, while the CoG setpoint is
-   streamed so that the *planned* configuration keeps the root at a fixed point,
-   ``p_cog,ref(t) = p_root,ref + cog_in_foot(q_plan(t))`` (the flight scenario's reference);
+2. **flight stage** (arm straight, q = 0, the posture Fig. 9 starts its change from): settle,
+   then the joints follow the stage's planned path (:mod:`rdm.scenarios.tracking_plan`:
+   ``rdm.planner`` in flight mode to where Fig. 9 (A)'s end configuration puts the end
+   effector, held, retraced) through :meth:`OnboardNode.set_trajectory` at 40 Hz, while the
+   CoG setpoint is streamed so that the *planned* configuration keeps the root at a fixed
+   point, ``p_cog,ref(t) = p_root,ref + cog_in_foot(q_plan(t))`` (the flight scenario's
+   reference);
 3. fold to the hanging posture, approach, perch, settle (as ``perching``);
-4. **perched stage**: the same joint offsets from ``PERCH_POSTURE`` (same joint-space
-   amplitude and timing), the root on the ceiling, the setpoint held (as ``perching``).
+4. **perched stage**: the planner in perched mode from ``PERCH_POSTURE`` to the end effector
+   of Fig. 10's arm pose, the root on the ceiling, the setpoint held (as ``perching``).
+
+``motion=`` (joint offsets from each stage's base posture, the same in both stages) replaces
+the planned paths by hand-chosen ones (the flight-envelope study of docs/scenarios.md).
 
 Error definition (both stages alike). The end-effector target is where the planned
 configuration puts the end effector with the root where it was just before the motion:
@@ -62,6 +67,8 @@ from .perching import HANGING_FLIGHT_GAINS, PERCH_POSTURE, joint_path, onboard_c
 from .push import StagedPerchingScript
 from .servo_lag import joint_lags
 from .stack import Stack, build_stack
+from .tracking_margins import execution_metrics, stage_execution
+from .tracking_plan import StagePath, stage_path
 
 AXES = ("x", "y", "z")
 ANGLES = ("roll", "pitch", "yaw")
@@ -78,9 +85,9 @@ FLIGHT_POSTURES = {"straight": FLIGHT_POSTURE, "hanging": PERCH_POSTURE}
 #: (the configured y PID and Table V's x PID are linearly unstable there; docs/scenarios.md).
 #: The straight posture keeps the run's configuration (None).
 FLIGHT_STAGE_GAINS: dict[str, dict | None] = {"straight": None, "hanging": HANGING_FLIGHT_GAINS}
-#: The joint path: (duration [s], q1..q6 offset from the stage's base posture) segments,
-#: back to zero offset at the end. ASSUMPTION: Fig. 13's motion is not given; a slow arm
-#: pitch/yaw sweep of the size the flying robot tracks without saturating (docs).
+#: Hand-chosen joint offsets for ``run(motion=...)`` (the default run plans its paths):
+#: (duration [s], q1..q6 offset from the stage's base posture) segments, back to zero offset
+#: at the end; a slow arm pitch/yaw sweep (the flight-envelope study of docs/scenarios.md).
 MOTION: tuple[tuple[float, tuple[float, ...]], ...] = (
     (4.0, (0.0, -0.3, 0.2, 0.4, 0.3, 0.0)),
     (4.0, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)),
@@ -128,12 +135,22 @@ class StagePlan:
     points: list[tuple[float, np.ndarray]]
     t_start: float  # first sample of the motion
     t_end: float  # last sample of the motion
+    #: the planner's path (None: hand-chosen offsets)
+    path: StagePath | None = None
+
+    def goal_world(self, root_p: np.ndarray, root_r: np.ndarray) -> np.ndarray | None:
+        """The planned end-effector goal in the world with the root at (root_p, root_r)."""
+        return None if self.path is None else root_p + root_r @ self.path.goal
+
+
+#: Planned stage (:data:`rdm.scenarios.tracking_plan.STAGES`) of each flight posture.
+FLIGHT_PLAN_STAGE = {"straight": "flight", "hanging": "flight-hanging"}
 
 
 class TrackingScript(StagedPerchingScript):
     """Flight stage at q = 0 with the CoG setpoint streamed (root held); perched stage in the
-    hanging posture with the setpoint held. Same settle time, joint offsets and timing in
-    both."""
+    hanging posture with the setpoint held. Same settle time in both; the joint paths are the
+    planner's (``motion`` None) or the same hand-chosen offsets in both stages."""
 
     def __init__(
         self,
@@ -146,12 +163,20 @@ class TrackingScript(StagedPerchingScript):
             raise ValueError(f"flight_posture={flight_posture!r}: one of {list(FLIGHT_POSTURES)}")
         #: position gains of the flight stage (None: the run's configuration), restored after
         self.flight_gains = flight_gains
-        self.offsets = tuple(motion)
-        self.motion_s = motion_seconds(motion)
+        self.offsets = None if motion is None else tuple(motion)
+        self.paths: dict[str, StagePath] = {}
+        if self.offsets is None:
+            self.paths = {
+                "flight": stage_path(FLIGHT_PLAN_STAGE[flight_posture]),
+                "perched": stage_path("perched"),
+            }
+            seconds = {k: p.duration for k, p in self.paths.items()}
+        else:
+            seconds = dict.fromkeys(("flight", "perched"), motion_seconds(self.offsets))
         self.flight_posture = flight_posture
         super().__init__(
-            SETTLE_S + PRE_S + self.motion_s + AFTER_S,
-            SETTLE_S + PRE_S + self.motion_s + AFTER_S,
+            SETTLE_S + PRE_S + seconds["flight"] + AFTER_S,
+            SETTLE_S + PRE_S + seconds["perched"] + AFTER_S,
             flight_after="climb" if flight_posture == "straight" else "reconfigure",
         )
         self.robot = robot
@@ -161,11 +186,18 @@ class TrackingScript(StagedPerchingScript):
 
     def _send(self, stack: Stack, stage: str, now: float, start: float, base) -> StagePlan:
         n_q = stack.onboard.robot.n_q
-        segs = _absolute(base, self.offsets)
-        path, end = joint_path(start, np.asarray(base, float), segs, n_q)
+        planned = self.paths.get(stage)
+        if planned is None:
+            assert self.offsets is not None
+            segs = _absolute(base, self.offsets)
+            path, end = joint_path(start, np.asarray(base, float), segs, n_q)
+        else:  # the planner's samples at 40 Hz from the motion start
+            path = [(start + float(t), q) for t, q in zip(planned.times, planned.q, strict=True)]
+            end = start + planned.duration
         points = [(now, path[0][1]), *path]  # hold the base posture until the start
-        stack.onboard.set_trajectory(points)
-        plan = StagePlan(points, start, end)
+        if not stack.onboard.set_trajectory(points):
+            raise RuntimeError(f"tracking {stage}: the onboard node refused the joint path")
+        plan = StagePlan(points, start, end, planned)
         self.plans[stage] = plan
         return plan
 
@@ -405,12 +437,12 @@ def plot(stack: Stack, errs: dict[str, StageErrors | None]) -> None:
             ("foot position (truth)", {ax: a["foot"][:, k] for k, ax in enumerate(AXES)}, "m"),
             ("rotor thrust (truth)", {f"rotor{i + 1}": a["thrust"][:, i] for i in range(4)}, "N"),
         ],
-        title="tracking: the same joint offsets in flight (q = 0), then perched",
+        title="tracking: planned joint paths in flight (from q = 0), then perched",
     )
 
 
-#: upper bound of a run [s]; the run stops 0.5 s after the perched stage (~42 s by default)
-DEFAULT_DURATION = 60.0
+#: upper bound of a run [s]; the run stops 0.5 s after the perched stage (~58 s by default)
+DEFAULT_DURATION = 75.0
 
 
 def run(
@@ -419,7 +451,7 @@ def run(
     seed: int = 0,
     uart: str = "inproc",
     speed: float | None = None,
-    motion=MOTION,
+    motion=None,
     log: bool = True,
     plots: bool = True,
     flight_posture: str = "straight",
@@ -428,6 +460,8 @@ def run(
     servo: ServoParams | None = None,
 ) -> ScenarioResult:
     """Run the scenario: it stops after the perched stage, or at ``duration``.
+    ``motion``: None (the planner's paths, :mod:`rdm.scenarios.tracking_plan`) or hand-chosen
+    joint offsets, the same in both stages (e.g. :data:`MOTION`).
     ``flight_gains``: position gains of the flight stage ("posture": ``FLIGHT_STAGE_GAINS``
     of ``flight_posture``; None: the run's configuration; a dict: those).
     ``servo_lead_s``: feed-forward lead of the servo goals (None: the scenarios' identified
@@ -453,8 +487,12 @@ def run(
     errs = {s: stage_errors(stack, robot, script.plans.get(s)) for s in ("flight", "perched")}
     if plots:
         plot(stack, errs)
+    offsets = script.offsets
     facts: dict[str, Any] = {
-        "motion_offsets": [list(map(float, [d, *g])) for d, g in script.offsets],
+        "joint_path": "planner" if offsets is None else "offsets",
+        "motion_offsets": None
+        if offsets is None
+        else [list(map(float, [d, *g])) for d, g in offsets],
         "flight_posture": flight_posture,
         "t_flight_stage": script.t_flight_stage,
         "t_perch": script.t_perch,
@@ -480,7 +518,14 @@ def run(
                 "pos_floor_rmse": e.pos_floor_rmse.tolist(),
                 "att_floor_rmse": e.att_floor_rmse.tolist(),
             }
-    result = ScenarioResult("tracking", stack, metrics_of(stack, errs), facts)
+    executed = {}
+    for stage, e in errs.items():
+        plan = script.plans.get(stage)
+        if e is not None and plan is not None:
+            executed[stage] = stage_execution(stack, robot, plan, e, AFTER_S)
+            facts[stage].update(executed[stage])
+    metrics = metrics_of(stack, errs) + execution_metrics(executed)
+    result = ScenarioResult("tracking", stack, metrics, facts)
     result.errors = errs  # type: ignore[attr-defined]
     result.script = script  # type: ignore[attr-defined]
     return finish(result, seconds, wall)

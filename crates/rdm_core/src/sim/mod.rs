@@ -2,7 +2,8 @@
 //! error models and the sensor-side encoding of what a simulated sensor sends. They mirror
 //! the Python reference forms in `rdm.plant.sensors` / `rdm.protocol.leptrino` operation for
 //! operation, so a run gives the same bytes with either. The plant bridge's sampling
-//! schedule (`sample_schedule`) has this one form.
+//! schedule (`sample_schedule`) and the lockstep loop's node schedule (`tick_schedule`) have
+//! this one form.
 
 pub mod contact_gate;
 pub mod esc_duty;
@@ -18,3 +19,4 @@ pub mod resting_sleep;
 pub mod rotor_plant;
 pub mod sample_schedule;
 pub mod sensor_noise;
+pub mod tick_schedule;

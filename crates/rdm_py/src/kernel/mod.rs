@@ -1,22 +1,26 @@
-//! `LockstepKernel`: the lockstep loop of `rdm.nodes.lockstep.Lockstep` in Rust.
+//! `LockstepKernel`: the lockstep loop behind `rdm.nodes.lockstep.Lockstep`.
 //!
-//! It runs the same base ticks in the same order as `Lockstep._run_fast`: per millisecond,
-//! every due node's `tick(t)` in list order, then one physics step. For the nodes of the
-//! simulated stack that spend most milliseconds in a steady state (plant bridge, Neuron
-//! bank, Spinal's idle CAN ms, Leptrino streaming, the plant step) it runs that state here,
-//! on the Rust cores the Python nodes already use; everything else (a node outside its
-//! steady state, the onboard PC, loggers, scripts) is the node's own Python `tick`.
+//! Per base tick `k` (simulated time `k * dt`): every node due at `k`
+//! (`rdm_core::sim::tick_schedule`) ticks in list order, the barriers settle, the physics
+//! steps once; a paced run then sleeps to its real-time factor and reports progress. For the
+//! nodes of the simulated stack that spend most milliseconds in a steady state (plant bridge,
+//! Neuron bank, Spinal's idle CAN ms, Leptrino streaming, the plant step) an attached fast
+//! part runs that state here, on the Rust cores the Python nodes already use; everything
+//! else (a node outside its steady state, the onboard PC, loggers, scripts, every node of a
+//! loop without parts) is the node's own Python `tick`.
 //!
 //! Exactness rule: the Python-visible state a fast path changes is written back (`flush`)
 //! before any Python code runs, and every plan is re-read (`invalidate`) after, so Python
-//! code always sees what the plain loop would have left. A part whose state is a Rust core
-//! the node shares (the Leptrino stream) has nothing to write back but its pending UART bytes.
+//! code always sees what the node's own ticks would have left. A part whose state is a Rust
+//! core the node shares (Leptrino stream, Neuron bank, resting sleep, normal streams) has
+//! nothing to write back but the Leptrino's pending UART bytes.
 
 mod attr;
 mod bank;
 mod bridge;
 mod leptrino;
 mod option_flags;
+mod pacing;
 mod plant;
 mod run_loop;
 mod spinal;
@@ -30,10 +34,13 @@ use crate::neuron_bank::NeuronBank;
 use crate::resting_sleep::RestingSleepCore;
 use crate::rotor_plant::RotorPlantCore;
 use crate::stop_flag::StopFlag;
+use crate::tick_counter::TickCounter;
 use bank::BankFast;
 use bridge::BridgeFast;
 use leptrino::LeptrinoFast;
+use pacing::Pacing;
 use plant::{PlantLink, PlantParts};
+use rdm_core::sim::tick_schedule::TickSchedule;
 
 use spinal::{SpinalFast, SpinalTick};
 
@@ -88,14 +95,19 @@ struct Counts {
     fast_ns: Vec<u64>,
     python_ns: Vec<u64>,
     physics_ns: u64,
+    barriers_ns: u64,
 }
 
 /// The lockstep loop with fast paths (see the module doc).
 #[pyclass(module = "rdm._rdm", unsendable)]
 pub struct LockstepKernel {
     dt: f64,
-    schedule: Vec<Vec<usize>>,
+    schedule: TickSchedule,
     ticks: Vec<Py<PyAny>>,
+    /// `settle()` of each barrier, after the nodes of every tick.
+    barriers: Vec<Py<PyAny>>,
+    pacing: Pacing,
+    base_ticks: u64,
     kinds: Vec<Kind>,
     /// Per node, whether its fast path may run this `run` (false: its `tick` attribute is
     /// not the class's own method, e.g. a wrapper a test installed).
@@ -105,7 +117,9 @@ pub struct LockstepKernel {
     physics: Option<Py<PyAny>>,
     clock: Py<PyAny>,
     stop: Py<StopFlag>,
-    k: i64,
+    /// `k` as Python code reads it during a run.
+    counter: Py<TickCounter>,
+    k: u64,
     clock_t: Option<f64>,
     plant: Option<PlantLink>,
     bridge: Option<BridgeFast>,
@@ -122,32 +136,57 @@ pub struct LockstepKernel {
 
 #[pymethods]
 impl LockstepKernel {
-    /// `schedule[r]`: indices of the nodes due at base ticks `k` with `k % len(schedule) ==
-    /// r`, in tick order; `ticks[i]`: node `i`'s `tick`; `physics`: the physics `step` (or
-    /// None); `clock`: the `SimClock` the loop sets; `stop`: the loop's stop request.
+    /// Nodes named `names` with `periods` [s] and `offsets` [base ticks] (a node ticks at
+    /// the base ticks `k` with `k % round(period / dt) == offset`); `ticks[i]`: node `i`'s
+    /// `tick`; `physics`: the physics `step` (or None); `clock`: the `SimClock` the loop
+    /// sets; `stop`: the loop's stop request; `counter`: where the next base tick is
+    /// published after every tick (it starts at 0); `barriers`: `settle` callables run after the
+    /// nodes of every tick; `speed`: the real-time factor to pace to (None: as fast as
+    /// possible); `progress(sim_time, wall_time, ticks, real_time_factor)` every
+    /// `progress_every` simulated seconds; `wall_clock`/`sleep`: injectable for tests (None:
+    /// the process's monotonic clock and sleep).
     #[new]
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (dt, names, periods, offsets, ticks, physics, clock, stop, counter, barriers=Vec::new(), speed=None, progress=None, progress_every=1.0, profile=false, wall_clock=None, sleep=None))]
     fn new(
         dt: f64,
-        schedule: Vec<Vec<usize>>,
+        names: Vec<String>,
+        periods: Vec<f64>,
+        offsets: Vec<u64>,
         ticks: Vec<Py<PyAny>>,
         physics: Option<Py<PyAny>>,
         clock: Py<PyAny>,
         stop: Py<StopFlag>,
+        counter: Py<TickCounter>,
+        barriers: Vec<Py<PyAny>>,
+        speed: Option<f64>,
+        progress: Option<Py<PyAny>>,
+        progress_every: f64,
+        profile: bool,
+        wall_clock: Option<Py<PyAny>>,
+        sleep: Option<Py<PyAny>>,
     ) -> PyResult<Self> {
-        if schedule.is_empty() || !(dt.is_finite() && dt > 0.0) {
-            return Err(pyo3::exceptions::PyValueError::new_err(
-                "LockstepKernel: empty schedule or bad dt",
-            ));
-        }
-        if schedule.iter().flatten().any(|&i| i >= ticks.len()) {
-            return Err(pyo3::exceptions::PyValueError::new_err(
-                "LockstepKernel: schedule names a node index out of range",
-            ));
-        }
         let n = ticks.len();
+        if names.len() != n {
+            return Err(pyo3::exceptions::PyValueError::new_err(
+                "Lockstep: one name, period, offset and tick per node",
+            ));
+        }
+        let schedule = TickSchedule::new(dt, &periods, &offsets).map_err(|e| {
+            let who = e
+                .index()
+                .and_then(|i| names.get(i))
+                .map_or(String::new(), |name| format!("node {name:?} "));
+            pyo3::exceptions::PyValueError::new_err(format!("Lockstep: {who}{e}"))
+        })?;
+        let pacing = Pacing::new(speed, progress, progress_every, wall_clock, sleep)?;
+        counter.get().set(0);
         Ok(LockstepKernel {
             dt,
             schedule,
+            barriers,
+            pacing,
+            base_ticks: 0,
             kinds: vec![Kind::Python; n],
             own_tick: vec![true; n],
             touches: vec![ALL; n],
@@ -155,6 +194,7 @@ impl LockstepKernel {
             physics,
             clock,
             stop,
+            counter,
             k: 0,
             clock_t: None,
             plant: None,
@@ -168,8 +208,9 @@ impl LockstepKernel {
                 fast_ns: vec![0; n],
                 python_ns: vec![0; n],
                 physics_ns: 0,
+                barriers_ns: 0,
             },
-            profile: false,
+            profile,
             physics_fast: 0,
             physics_python: 0,
             boundaries: 0,
@@ -292,26 +333,28 @@ impl LockstepKernel {
     /// `"bridge"`, `"bank"`, `"spinal"`, `"leptrino"`); the default is every part. Only
     /// these parts' deferred state is written back before it runs, and only their plans are
     /// re-read after (a part left out must be neither read nor changed by it: the logs
-    /// would differ from the Python loop's).
+    /// would differ from those of the nodes' own ticks).
     fn set_touches(&mut self, index: usize, parts: Vec<String>) -> PyResult<()> {
         self.check_index(index)?;
         self.touches[index] = parts_mask(&parts)?;
         Ok(())
     }
 
-    /// Advance `n` base ticks from `k0` (fewer if a node sets the stop request);
-    /// returns the next `k`. `ticks[i]` is node `i`'s `tick` now and `own[i]` whether it is
-    /// the class's own method (a node whose `tick` was replaced runs only the replacement).
-    /// Every deferred state is written back before it returns, also when a node raises
-    /// (then `k` is the tick that raised).
+    /// Advance `n` base ticks (fewer if the stop request is set during a tick); `paced`:
+    /// with pacing and progress reports (a run), else without (a single step). `ticks[i]`
+    /// is node `i`'s present `tick` and `own[i]` whether it is the class's own method (a node
+    /// whose `tick` was replaced runs only the replacement). Every deferred state is
+    /// written back before it returns, also when a node raises (then `k` is the tick that
+    /// raised). Returns the next `k`.
+    #[pyo3(signature = (n, ticks, own, paced=true))]
     fn run(
         &mut self,
         py: Python<'_>,
-        k0: i64,
         n: i64,
         ticks: Vec<Py<PyAny>>,
         own: Vec<bool>,
-    ) -> PyResult<i64> {
+        paced: bool,
+    ) -> PyResult<u64> {
         if ticks.len() != self.ticks.len() || own.len() != self.ticks.len() {
             return Err(pyo3::exceptions::PyValueError::new_err(
                 "LockstepKernel.run: one tick and one flag per node",
@@ -319,23 +362,29 @@ impl LockstepKernel {
         }
         self.ticks = ticks;
         self.own_tick = own;
-        self.k = k0;
+        let k0 = self.k;
         self.clock_t = None;
         self.invalidate(ALL);
-        let r = self.run_inner(py, n);
-        let last_t = (self.k - 1).max(0) as f64 * self.dt;
+        if paced {
+            self.pacing.begin(py, k0 as f64 * self.dt)?;
+        }
+        let r = self.run_inner(py, n, paced);
+        self.base_ticks += self.k - k0;
+        let last_t = self.k.saturating_sub(1) as f64 * self.dt;
         let f = self.flush(py, ALL);
         if r.is_ok() && self.k > k0 && self.clock_t != Some(last_t) {
             self.clock.bind(py).setattr("now", last_t)?;
         }
+        let w = if paced { self.pacing.end(py) } else { Ok(()) };
         r?;
         f?;
+        w?;
         Ok(self.k)
     }
 
-    /// Time every node tick and physics step from now on (`stats()` then has `fast_ns`,
-    /// `python_ns` per node and `physics_ns`: wall ns, each tick's flush and re-reads
-    /// included in the node that caused them).
+    /// Time every node tick, the barriers and the physics step from this call on (`stats()`'s
+    /// `fast_ns`, `python_ns` per node, `barriers_ns` and `physics_ns`: wall ns, each
+    /// tick's flush and re-reads included in the node that caused them).
     #[setter]
     fn set_profile(&mut self, on: bool) {
         self.profile = on;
@@ -348,12 +397,13 @@ impl LockstepKernel {
 
     /// The next base tick (after `run`, also when it raised).
     #[getter]
-    fn k(&self) -> i64 {
+    fn k(&self) -> u64 {
         self.k
     }
 
     /// `{"fast": [...], "python": [...], "physics_fast": n, "physics_python": n,
-    /// "boundaries": n, ..., "spinal_busy": {...}}`: ticks per node index on each path;
+    /// "boundaries": n, "base_ticks": n, "wall_time": s, ..., "spinal_busy": {...}}`: ticks
+    /// per node index on each path, base ticks run, wall seconds of the paced runs;
     /// `spinal_busy`: the Spinal busy-ms work done here (`steps`, `battery_samples`,
     /// `imu_frames`, `servo_frames`), the ticks handed to the mirror's continuations
     /// (`finish_step`, `finish_publish`), and the ms the mirror received in Python with the
@@ -366,6 +416,8 @@ impl LockstepKernel {
         d.set_item("physics_fast", self.physics_fast)?;
         d.set_item("physics_python", self.physics_python)?;
         d.set_item("boundaries", self.boundaries)?;
+        d.set_item("base_ticks", self.base_ticks)?;
+        d.set_item("wall_time", self.pacing.wall_time)?;
         let (tf, tp) = self
             .plant
             .as_ref()
@@ -383,11 +435,10 @@ impl LockstepKernel {
         spinal.set_item("receive_then_kernel", sc.receive_then_kernel)?;
         spinal.set_item("receive_then_python", sc.receive_then_python)?;
         d.set_item("spinal_busy", spinal)?;
-        if self.profile {
-            d.set_item("fast_ns", self.counts.fast_ns.clone())?;
-            d.set_item("python_ns", self.counts.python_ns.clone())?;
-            d.set_item("physics_ns", self.counts.physics_ns)?;
-        }
+        d.set_item("fast_ns", self.counts.fast_ns.clone())?;
+        d.set_item("python_ns", self.counts.python_ns.clone())?;
+        d.set_item("physics_ns", self.counts.physics_ns)?;
+        d.set_item("barriers_ns", self.counts.barriers_ns)?;
         Ok(d)
     }
 }

@@ -1,5 +1,6 @@
 //! The lockstep loop's inner work: the fast parts' boundaries (flush before Python runs,
-//! invalidate after), one millisecond's node ticks and physics step, and `run`'s loop.
+//! invalidate after), one millisecond's node ticks, barriers and physics step, the pacing,
+//! and `run`'s loop.
 
 use super::*;
 
@@ -51,16 +52,6 @@ impl LockstepKernel {
     /// the same mask as `enter_python`'s) are re-read on their next use.
     pub(super) fn leave_python(&mut self, mask: u8) {
         self.invalidate(mask);
-    }
-
-    pub(super) fn python_tick(&mut self, py: Python<'_>, i: usize, t: f64) -> PyResult<()> {
-        let touches = self.touches[i];
-        self.enter_python(py, t, touches)?;
-        let r = self.ticks[i].bind(py).call1((t,));
-        self.leave_python(touches);
-        r?;
-        self.counts.python[i] += 1;
-        Ok(())
     }
 
     /// Node `i`'s tick at `t` on its fast path; false: not in its steady state now.
@@ -199,54 +190,100 @@ impl LockstepKernel {
         Ok(())
     }
 
-    pub(super) fn run_inner(&mut self, py: Python<'_>, n: i64) -> PyResult<()> {
-        let cycle = self.schedule.len();
+    /// After the nodes of the tick at `t`: every barrier's `settle()` (Python code that may
+    /// read anything: every part written back first).
+    fn settle(&mut self, py: Python<'_>, t: f64) -> PyResult<()> {
+        if self.barriers.is_empty() {
+            return Ok(());
+        }
+        let t0 = self.profile.then(std::time::Instant::now);
+        self.enter_python(py, t, ALL)?;
+        let mut r = Ok(());
+        for b in &self.barriers {
+            r = b.bind(py).call0().map(|_| ());
+            if r.is_err() {
+                break;
+            }
+        }
+        self.leave_python(ALL);
+        if let Some(t0) = t0 {
+            self.counts.barriers_ns += elapsed_ns(t0);
+        }
+        r
+    }
+
+    /// After the tick at `t` of a paced run: sleep while ahead of the real-time factor, then
+    /// the progress report when one is due (both may run Python code: every part written
+    /// back first).
+    fn pace(&mut self, py: Python<'_>, t: f64) -> PyResult<()> {
+        let sim = self.k as f64 * self.dt;
+        if let Some(seconds) = self.pacing.ahead(py, sim)? {
+            self.enter_python(py, t, ALL)?;
+            let r = self.pacing.sleep(py, seconds);
+            self.leave_python(ALL);
+            r?;
+        }
+        if self.pacing.report_due(sim) {
+            self.enter_python(py, t, ALL)?;
+            let r = self.pacing.report(py, sim, self.k);
+            self.leave_python(ALL);
+            r?;
+        }
+        Ok(())
+    }
+
+    /// Node `i`'s tick at `t`: its fast path when it is in its steady state, else its own
+    /// Python tick (for the Spinal mirror: received in Python, the rest here or there).
+    fn node_tick(&mut self, py: Python<'_>, i: usize, t: f64) -> PyResult<()> {
+        let t0 = self.profile.then(std::time::Instant::now);
+        let fast = if self.fast_tick(py, i, t)? {
+            true
+        } else if self.kinds[i] == Kind::Spinal && self.own_tick[i] && self.spinal.is_some() {
+            self.spinal_receive_tick(py, i, t)?
+        } else {
+            let touches = self.touches[i];
+            self.enter_python(py, t, touches)?;
+            let r = self.ticks[i].bind(py).call1((t,));
+            self.leave_python(touches);
+            r?;
+            false
+        };
+        let (count, ns) = if fast {
+            (&mut self.counts.fast, &mut self.counts.fast_ns)
+        } else {
+            (&mut self.counts.python, &mut self.counts.python_ns)
+        };
+        count[i] += 1;
+        if let Some(t0) = t0 {
+            ns[i] += elapsed_ns(t0);
+        }
+        Ok(())
+    }
+
+    /// `n` base ticks from `k` (fewer when the stop request is set during one): the due
+    /// nodes in order, the barriers, the physics step, and with `paced` the pacing and
+    /// progress. Allocates nothing per tick.
+    pub(super) fn run_inner(&mut self, py: Python<'_>, n: i64, paced: bool) -> PyResult<()> {
         for _ in 0..n {
             let k = self.k;
             let t = k as f64 * self.dt;
-            let slot = usize::try_from(k).unwrap_or(0) % cycle;
-            let mut stop = false;
-            for j in 0..self.schedule[slot].len() {
-                let i = self.schedule[slot][j];
-                let t0 = self.profile.then(std::time::Instant::now);
-                if self.fast_tick(py, i, t)? {
-                    self.counts.fast[i] += 1;
-                    if let Some(t0) = t0 {
-                        self.counts.fast_ns[i] += elapsed_ns(t0);
-                    }
-                } else if self.kinds[i] == Kind::Spinal && self.own_tick[i] && self.spinal.is_some()
-                {
-                    // received in Python; the rest here (fast) or there (python)
-                    let rest_here = self.spinal_receive_tick(py, i, t)?;
-                    if rest_here {
-                        self.counts.fast[i] += 1;
-                    } else {
-                        self.counts.python[i] += 1;
-                    }
-                    if let Some(t0) = t0 {
-                        let ns = elapsed_ns(t0);
-                        if rest_here {
-                            self.counts.fast_ns[i] += ns;
-                        } else {
-                            self.counts.python_ns[i] += ns;
-                        }
-                    }
-                    stop |= self.stop.get().get();
-                } else {
-                    self.python_tick(py, i, t)?;
-                    if let Some(t0) = t0 {
-                        self.counts.python_ns[i] += elapsed_ns(t0);
-                    }
-                    stop |= self.stop.get().get();
-                }
+            let due = self.schedule.select(k);
+            for j in 0..due {
+                let i = self.schedule.due(j);
+                self.node_tick(py, i, t)?;
             }
+            self.settle(py, t)?;
             let t0 = self.profile.then(std::time::Instant::now);
             self.physics_step(py, t)?;
             if let Some(t0) = t0 {
                 self.counts.physics_ns += elapsed_ns(t0);
             }
             self.k = k + 1;
-            if stop {
+            self.counter.get().set(self.k);
+            if paced {
+                self.pace(py, t)?;
+            }
+            if self.stop.get().get() {
                 break;
             }
         }
