@@ -138,7 +138,7 @@ class LeptrinoSensorNode:
 
     @property
     def errors(self) -> Counter[str]:
-        """Errors by kind (a new Counter each read): framing and command errors of the host's
+        """Errors by kind (a Counter built at each read): framing and command errors of the host's
         bytes, ``bad_wrench`` (refused samples), ``tx_short`` (writes cut short)."""
         out = Counter(self._errors)
         s = self._stream

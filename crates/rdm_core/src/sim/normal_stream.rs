@@ -41,7 +41,7 @@ impl NormalStream {
     }
 
     /// Fill `out` with the next values; when fewer are left, the taken ones are dropped and
-    /// `refill(buf, chunk)` appends `chunk` new ones (as often as `out` needs: at most
+    /// `refill(buf, chunk)` appends `chunk` more (as often as `out` needs: at most
     /// `out.len() / chunk + 1` times). A refill that appends nothing is an error.
     pub fn take<E>(
         &mut self,
