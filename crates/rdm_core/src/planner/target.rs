@@ -123,3 +123,56 @@ impl TaskRows {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// End effector at the identity (tool axis = world x), J_ee = I (6 x 6: δξ = δζ).
+    fn rows_toward(orientation: EeOrientation) -> (TaskRows, TaskErrors) {
+        let cfg = PlannerConfig::new(super::super::config::Mode::Perched);
+        let cfg = PlannerConfig {
+            s2_ee_orientation: 0.1,
+            ..cfg
+        };
+        let mut j = Matrix6xN::zeros(6);
+        j.fill_with_identity();
+        let mut t = TaskRows::new(6);
+        let e = t.fill(
+            &cfg,
+            &Isometry3::identity(),
+            &j,
+            &Vector3::new(0.0, 0.0, 0.0),
+            &orientation,
+        );
+        (t, e)
+    }
+
+    #[test]
+    fn axis_rows_turn_the_tool_axis_toward_the_target_about_a_normal() {
+        let (t, e) = rows_toward(EeOrientation::Axis(Vector3::new(0.0, 0.0, 2.0)));
+        assert!((e.orientation - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        assert_eq!(t.weights[3..], [0.1, 0.1, 0.0]);
+        // rotation rate of the least-squares step: rows 3-4 are orthonormal here
+        let mut w: Vector3<f64> = Vector3::zeros();
+        for r in 3..5 {
+            for c in 0..3 {
+                w[c] += t.rows[(r, 3 + c)] * t.step[r];
+            }
+            // each row is normal to the axis: a rotation about the axis does not move it
+            assert!(t.rows[(r, 3)].abs() < 1e-15);
+        }
+        let a = Vector3::x() + w.cross(&Vector3::x());
+        assert!((w.norm() - 0.03).abs() < 1e-12); // kappa_orientation
+        assert!((a.z - 0.03).abs() < 1e-12 && a.y.abs() < 1e-15);
+    }
+
+    #[test]
+    fn a_reached_axis_and_a_free_orientation_ask_for_no_rotation() {
+        let (t, e) = rows_toward(EeOrientation::Axis(Vector3::new(3.0, 0.0, 0.0)));
+        assert_eq!(e.orientation, 0.0);
+        assert_eq!(t.step[3..], [0.0; 3]);
+        let (t, _) = rows_toward(EeOrientation::Free);
+        assert_eq!(t.weights[3..], [0.0; 3]);
+    }
+}
