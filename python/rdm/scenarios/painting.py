@@ -15,7 +15,9 @@ sliding area length was over 0.5m in the vertical direction". Two surfaces:
 
 A :class:`Stroke` is the surface point where the stroke starts, its direction along the
 surface, the surface normal (toward the robot), the commanded length and the commanded
-brush compression along it. :func:`waypoints` turns it into the IK targets: hover
+brush compression along it (and, on the wall, the tool axis along it: the stroke is
+planned by ``rdm.planner`` with its point + tool-axis target; the panel's by the point-only
+IK of :mod:`rdm.scenarios.task_ik`). :func:`waypoints` turns it into the tool targets: hover
 ``hover`` m off the surface at the approach point, TOUCH_HOVER off the stroke start, touch
 down (the centre of the brush, compressed by the squeeze along the tool axis, one radius off
 the surface), settle, the stroke in STROKE_SAMPLES linear samples, dwell, lift off.
@@ -46,7 +48,7 @@ STROKE_START = -0.01
 #: 0.5 m (the contact point lands ~1 cm off the commanded start: sag, tilted tool).
 STROKE = 0.52
 STROKE_S = 10.0  # s for the stroke: 5.2 cm/s
-STROKE_SAMPLES = 52  # IK samples along the stroke (1 cm apart, linear in joint space)
+STROKE_SAMPLES = 52  # tool targets along the stroke (1 cm apart, linear in joint space)
 PAINT_APPROACH_DX = 0.20
 #: Commanded brush compression along the tool axis (spring force BRUSH_PRELOAD +
 #: BRUSH_STIFFNESS * squeeze = 3.5 N); the tool axis is tilted, so commanding the squeeze
