@@ -93,10 +93,11 @@ IK_SEED_WALL = (1.4, -1.3, 0.0, 0.0, 0.0, 0.0)
 #: q2's limit at the top (87 mm short) and on the rotor thrust at the bottom (72 mm).
 WALL_TILT = (math.radians(26.0), math.radians(-34.0))
 #: The planned approach to the wall passes the brush tip through (dx, dz) from the foot with
-#: the tool axis pitched by the angle (rad, up from +x), half a move_s each way. ASSUMPTION:
-#: the tool pose halfway (in joint space) between the perching posture and the hover pose.
-#: Planned straight to the hover, the arm folds (q4 -1.5 rad, q1 1.32) and the foot slipped
-#: 0.9-1.4 mm in that move (seed 0; 1.9 mm over the run, limit 1 mm).
+#: the tool axis pitched by the angle (rad, up from +x), 3 x move_s to it and 3 x move_s on
+#: to the hover. ASSUMPTION: the tool pose halfway (in joint space) between the perching
+#: posture and the IK's hover pose. Planned straight to the hover, the arm folds (q4 -1.5
+#: rad, q1 1.32) and the foot slipped 1.9 mm (4 s; limit 1 mm); shorter moves via this pose
+#: slipped 6.1 mm (2 + 2 s) or lost foot contact for a tick (4 + 6 s, 4 of 20 seeds).
 WALL_VIA = (0.671, -0.78, math.radians(-18.7))
 
 
