@@ -856,11 +856,24 @@ class CorePlanner:
     def end_effector_pose(
         self,
     ) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]: ...
+    def task_rows(
+        self,
+        position: list[float],
+        orientation: list[float] | None = None,
+        axis: list[float] | None = None,
+    ) -> tuple[NDArray[np.float64], list[float], list[float]]:
+        """End-effector task rows (eqs. 54, 56) at the current state: (rows 6 x n_free,
+        step delta-xi [6], weights [6]); rows the target leaves free have weight 0."""
     def step(
-        self, position: list[float], orientation: list[float] | None = None
+        self,
+        position: list[float],
+        orientation: list[float] | None = None,
+        axis: list[float] | None = None,
     ) -> dict[str, object]:
-        """Keys: status ("moved" or "qp_failed:<status>"), position_error,
-        orientation_error, binding (constraint name or None)."""
+        """At most one of ``orientation`` (quaternion [x, y, z, w]) or ``axis`` (world
+        direction of the end-effector x axis, rotation about it free). Keys: status
+        ("moved" or "qp_failed:<status>"), position_error, orientation_error (rad; the
+        axis angle for an axis target), binding (constraint name or None)."""
     def feasible_force(self) -> tuple[tuple[float, float, float], float] | None: ...
 
 # --- qp ---

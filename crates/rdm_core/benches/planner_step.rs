@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use rdm_core::model::RobotDescription;
-use rdm_core::planner::{Mode, Planner, PlannerConfig, ShapePair, ShapeSpec};
+use rdm_core::planner::{EeOrientation, Mode, Planner, PlannerConfig, ShapePair, ShapeSpec};
 
 const URDF: &str = include_str!("../../../python/rdm/data/robots/rdm/rdm.urdf");
 const TOML: &str = include_str!("../../../python/rdm/data/robots/rdm/rdm.toml");
@@ -60,7 +60,7 @@ fn run(planner: &mut Planner, start: &[f64], k: usize) {
         planner.set_zeta(start).unwrap();
     }
     let target = TARGETS[(k / 40) % TARGETS.len()];
-    black_box(planner.step(&target, None).ok());
+    black_box(planner.step(&target, &EeOrientation::Free).ok());
 }
 
 fn percentiles() {

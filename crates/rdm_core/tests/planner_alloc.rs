@@ -4,8 +4,11 @@
 
 use std::alloc::System;
 
+use nalgebra::Vector3;
 use rdm_core::model::RobotDescription;
-use rdm_core::planner::{Mode, Planner, PlannerConfig, ShapePair, ShapeSpec, StepStatus};
+use rdm_core::planner::{
+    EeOrientation, Mode, Planner, PlannerConfig, ShapePair, ShapeSpec, StepStatus,
+};
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 
 #[global_allocator]
@@ -48,7 +51,7 @@ fn planner_step_allocates_only_in_clarabel_timers() {
     let start = planner.zeta().to_vec();
     let target = [0.2, -0.3, -0.7];
     // Warm-up step: Clarabel's timer map gets its entries on the first solve.
-    planner.step(&target, None).unwrap();
+    planner.step(&target, &EeOrientation::Free).unwrap();
 
     let region = Region::new(GLOBAL);
     let mut moved = 0usize;
@@ -57,11 +60,20 @@ fn planner_step_allocates_only_in_clarabel_timers() {
         if k % 50 == 0 {
             planner.set_zeta(&start).unwrap();
             // A NaN target is rejected before any work, without allocating.
-            if planner.step(&[f64::NAN, 0.0, 0.0], None).is_err() {
+            if planner
+                .step(&[f64::NAN, 0.0, 0.0], &EeOrientation::Free)
+                .is_err()
+            {
                 rejected += 1;
             }
         }
-        if let Ok(r) = planner.step(&target, None) {
+        // every other step toward a tool axis (the 5-D target), alike without allocating
+        let orientation = if k % 2 == 0 {
+            EeOrientation::Free
+        } else {
+            EeOrientation::Axis(Vector3::new(0.3, 0.0, -1.0))
+        };
+        if let Ok(r) = planner.step(&target, &orientation) {
             if r.status == StepStatus::Moved {
                 moved += 1;
             }

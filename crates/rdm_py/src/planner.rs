@@ -1,7 +1,7 @@
 //! Binding of `rdm_core::planner`: `CorePlanner` (one robot, one mode) and
 //! `feasible_force`.
 
-use nalgebra::{Quaternion, UnitQuaternion};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyReadonlyArray1};
 use pyo3::create_exception;
@@ -10,7 +10,8 @@ use pyo3::types::{PyDict, PyList};
 
 use rdm_core::model::RobotDescription;
 use rdm_core::planner::{
-    feasible_force, DamperParams, Mode, Planner, PlannerConfig, ShapePair, ShapeSpec, StepStatus,
+    feasible_force, DamperParams, EeOrientation, Mode, Planner, PlannerConfig, ShapePair,
+    ShapeSpec, StepStatus,
 };
 
 use crate::errors::{DescriptionError, RdmError};
@@ -221,19 +222,40 @@ impl CorePlanner {
         ([t.x, t.y, t.z], [q.x, q.y, q.z, q.w])
     }
 
-    /// One step toward `position` (and `orientation` quaternion [x, y, z, w]).
-    #[pyo3(signature = (position, orientation = None))]
+    /// End-effector task rows (eqs. 54, 56) toward `position` with `orientation` or
+    /// `axis` at the current state: (rows 6 x n_free over the free state entries, step
+    /// delta-xi [6], weights [6]); rows a target leaves free have weight 0.
+    #[pyo3(signature = (position, orientation = None, axis = None))]
+    #[allow(clippy::type_complexity)]
+    fn task_rows<'py>(
+        &mut self,
+        py: Python<'py>,
+        position: [f64; 3],
+        orientation: Option<[f64; 4]>,
+        axis: Option<[f64; 3]>,
+    ) -> PyResult<(Bound<'py, PyAny>, [f64; 6], [f64; 6])> {
+        let target = ee_orientation(orientation, axis)?;
+        self.inner.task_rows(&position, &target).map_err(perr)?;
+        let free = self.inner.free().to_vec();
+        let t = self.inner.task();
+        let rows = Array2::from_shape_fn((6, free.len()), |(r, c)| t.rows[(r, free[c])]);
+        Ok((rows.into_pyarray(py).into_any(), t.step, t.weights))
+    }
+
+    /// One step toward `position` and at most one of `orientation` (quaternion
+    /// [x, y, z, w]) or `axis` (world direction of the end-effector x axis).
+    #[pyo3(signature = (position, orientation = None, axis = None))]
     fn step<'py>(
         &mut self,
         py: Python<'py>,
         position: [f64; 3],
         orientation: Option<[f64; 4]>,
+        axis: Option<[f64; 3]>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let quat = orientation
-            .map(|o| UnitQuaternion::from_quaternion(Quaternion::new(o[3], o[0], o[1], o[2])));
+        let target = ee_orientation(orientation, axis)?;
         let inner = &mut self.inner;
         let r = py
-            .detach(move || inner.step(&position, quat.as_ref()))
+            .detach(move || inner.step(&position, &target))
             .map_err(perr)?;
         let d = PyDict::new(py);
         let status = match r.status {
@@ -257,6 +279,23 @@ impl CorePlanner {
             feasible_force(inner.robot(), ws, cfg.gravity, cfg.perch_force)
                 .map(|f| (f.per_axis, f.feasible))
         })
+    }
+}
+
+/// The orientation part of a target from the binding's optional arguments.
+fn ee_orientation(
+    orientation: Option<[f64; 4]>,
+    axis: Option<[f64; 3]>,
+) -> PyResult<EeOrientation> {
+    match (orientation, axis) {
+        (Some(_), Some(_)) => Err(perr(
+            "orientation, axis: give at most one (a full pose or a tool axis)",
+        )),
+        (Some(o), None) => Ok(EeOrientation::Pose(UnitQuaternion::from_quaternion(
+            Quaternion::new(o[3], o[0], o[1], o[2]),
+        ))),
+        (None, Some(a)) => Ok(EeOrientation::Axis(Vector3::from(a))),
+        (None, None) => Ok(EeOrientation::Free),
     }
 }
 

@@ -18,6 +18,10 @@ ORIENTATION_TOLERANCE = 1e-3
 #: Steps without 10 µm of improvement before a plan is declared stalled.
 PATIENCE = 40
 MAX_STEPS = 800
+#: m per rad of orientation error in the progress measure of an oriented target (a stall is
+#: PATIENCE steps without 10 µm of position error + ANGLE_LENGTH x angle error).
+#: ASSUMPTION: 0.1 m, the tools' length (1 mrad = 0.1 mm at the tool point).
+ANGLE_LENGTH = 0.1
 
 
 def _record(core: _rdm.CorePlanner, lay: dict, target: np.ndarray) -> tuple:
@@ -43,12 +47,20 @@ def run_core(
     mode: str,
     max_steps: int = MAX_STEPS,
     tolerance: float = TOLERANCE,
+    axis: Sequence[float] | None = None,
 ) -> Trajectory:
     """Step ``core`` toward ``target`` = (x, y, z[, roll, pitch, yaw]) until the error is
-    below ``tolerance`` or progress stalls."""
+    below ``tolerance`` (and the orientation error below ``ORIENTATION_TOLERANCE``) or
+    progress stalls. ``axis``: with a 3-D target, the world direction the end-effector x axis
+    (the tool axis) must reach, the rotation about it free (the 5-D task of docs/planner.md
+    "Target kinds"; the core's ``s2_ee_orientation`` weighs it)."""
     target = tuple(float(t) for t in target)
     pos = np.array(target[:3])
     quat = None
+    if axis is not None:
+        axis = [float(a) for a in axis]
+        if len(target) != 3 or len(axis) != 3 or not np.linalg.norm(axis) > 0:
+            raise ValueError("axis: 3 non-zero values, with a 3-D target only")
     if len(target) == 6:
         # imported here: scipy.spatial costs 0.3 s of start-up, and most targets are points
         from scipy.spatial.transform import Rotation
@@ -60,9 +72,11 @@ def run_core(
     rows = [_record(core, lay, pos)]
     bindings: list[str | None] = [None]
     best, since, blocking, reached = rows[0][-1], 0, None, False
+    rot_err = 0.0
     for _ in range(max_steps):
-        r = core.step(list(pos), quat)
-        rot_ok = r["orientation_error"] < ORIENTATION_TOLERANCE if quat else True
+        r = core.step(list(pos), quat, axis)
+        rot_err = float(r["orientation_error"])
+        rot_ok = rot_err < ORIENTATION_TOLERANCE if quat or axis else True
         if r["position_error"] < tolerance and rot_ok:
             reached = True
             break
@@ -71,7 +85,7 @@ def run_core(
             break
         rows.append(_record(core, lay, pos))
         bindings.append(r["binding"])
-        err = rows[-1][-1]
+        err = rows[-1][-1] + (rot_err * ANGLE_LENGTH if quat or axis else 0.0)
         if err < best - 1e-5:
             best, since = err, 0
         else:
@@ -81,7 +95,8 @@ def run_core(
                 blocking = seen.most_common(1)[0][0] if seen else "none (local minimum)"
                 break
     if not reached and blocking is None:
-        final_rot_ok = True
+        # the last reported orientation error (before the last step)
+        final_rot_ok = rot_err < ORIENTATION_TOLERANCE if quat or axis else True
         if rows[-1][-1] < tolerance and final_rot_ok:
             reached = True
         else:

@@ -80,11 +80,12 @@ def time_parameterise(
 
 
 def over_duration(
-    q: np.ndarray, duration: float, sample_s: float = SAMPLE_S
+    q: np.ndarray, duration: float, sample_s: float = SAMPLE_S, linear: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """(times (m,) in (0, duration], q (m, n)) of the polyline ``q`` (k, n) followed from rest
-    to rest in ``duration`` s with ``s(t) = L (1 - cos(pi t / duration)) / 2``, sampled every
-    ``sample_s`` and at the end (the start state itself is not repeated)."""
+    to rest in ``duration`` s with ``s(t) = L (1 - cos(pi t / duration)) / 2`` (``linear``:
+    at constant speed, ``s(t) = L t / duration``, for a path cut into successive moves),
+    sampled every ``sample_s`` and at the end (the start state itself is not repeated)."""
     q = _check(q)
     if not duration > 0.0:
         raise ValueError(f"duration: must be > 0 s, got {duration}")
@@ -92,7 +93,8 @@ def over_duration(
     n = max(1, math.ceil(duration / sample_s))
     times = np.minimum(np.arange(1, n + 1) * sample_s, duration)
     times[-1] = duration
-    along = float(s[-1]) * 0.5 * (1.0 - np.cos(np.pi * times / duration))
+    frac = times / duration if linear else 0.5 * (1.0 - np.cos(np.pi * times / duration))
+    along = float(s[-1]) * frac
     out = _sample(q, s, along)
     out[-1] = q[-1]
     return times, out

@@ -15,7 +15,9 @@ sliding area length was over 0.5m in the vertical direction". Two surfaces:
 
 A :class:`Stroke` is the surface point where the stroke starts, its direction along the
 surface, the surface normal (toward the robot), the commanded length and the commanded
-brush compression along it. :func:`waypoints` turns it into the IK targets: hover
+brush compression along it (and, on the wall, the tool axis along it: the stroke is
+planned by ``rdm.planner`` with its point + tool-axis target; the panel's by the point-only
+IK of :mod:`rdm.scenarios.task_ik`). :func:`waypoints` turns it into the tool targets: hover
 ``hover`` m off the surface at the approach point, TOUCH_HOVER off the stroke start, touch
 down (the centre of the brush, compressed by the squeeze along the tool axis, one radius off
 the surface), settle, the stroke in STROKE_SAMPLES linear samples, dwell, lift off.
@@ -46,7 +48,7 @@ STROKE_START = -0.01
 #: 0.5 m (the contact point lands ~1 cm off the commanded start: sag, tilted tool).
 STROKE = 0.52
 STROKE_S = 10.0  # s for the stroke: 5.2 cm/s
-STROKE_SAMPLES = 52  # IK samples along the stroke (1 cm apart, linear in joint space)
+STROKE_SAMPLES = 52  # tool targets along the stroke (1 cm apart, linear in joint space)
 PAINT_APPROACH_DX = 0.20
 #: Commanded brush compression along the tool axis (spring force BRUSH_PRELOAD +
 #: BRUSH_STIFFNESS * squeeze = 3.5 N); the tool axis is tilted, so commanding the squeeze
@@ -73,6 +75,8 @@ WALL_SAG_FROM = 0.05
 WALL_SAG_RATE = 0.045
 #: m: the commanded squeeze stays 4 mm short of the brush's travel (the hard stop).
 WALL_SQUEEZE_MAX = obj.BRUSH_TRAVEL - 0.004
+#: m along the tool axis to the tip of the free (uncompressed) brush
+BRUSH_TIP = obj.BRUSH_AT + obj.BRUSH_RADIUS
 TOUCH_HOVER = 0.01  # m off the surface at the stroke start before touching down
 APPROACH_S, TOUCH_S = 2.0, 1.5
 #: s the last stroke sample is held inside the stroke window: the brush trails its command
@@ -83,6 +87,18 @@ STROKE_DWELL = 1.0
 IK_SEED_PANEL = (math.pi / 2, -0.7, 0.0, 1.45, 0.0, 0.0)
 #: IK seed of the wall stroke: the arm reaching forward (wall_reach's best branch).
 IK_SEED_WALL = (1.4, -1.3, 0.0, 0.0, 0.0, 0.0)
+#: Tool-axis tilt of the planned wall stroke [rad] at its top and bottom (up from the wall
+#: normal, linear along the stroke). ASSUMPTION, from the axis the point-only IK settled
+#: on (+26 deg at the top, -34 deg at the bottom): a horizontal axis stops the planner on
+#: q2's limit at the top (87 mm short) and on the rotor thrust at the bottom (72 mm).
+WALL_TILT = (math.radians(26.0), math.radians(-34.0))
+#: The planned approach to the wall passes the brush tip through (dx, dz) from the foot with
+#: the tool axis pitched by the angle (rad, up from +x), 3 x move_s to it and 3 x move_s on
+#: to the hover. ASSUMPTION: the tool pose halfway (in joint space) between the perching
+#: posture and the IK's hover pose. Planned straight to the hover, the arm folds (q4 -1.5
+#: rad, q1 1.32) and the foot slipped 1.9 mm (4 s; limit 1 mm); shorter moves via this pose
+#: slipped 6.1 mm (2 + 2 s) or lost foot contact for a tick (4 + 6 s, 4 of 20 seeds).
+WALL_VIA = (0.671, -0.78, math.radians(-18.7))
 
 
 @dataclass(frozen=True)
@@ -96,10 +112,25 @@ class Stroke:
     approach: np.ndarray  # surface point the brush first hovers off
     squeeze: Callable[[float], float]  # commanded compression [m] at stroke coordinate u
     seed: tuple[float, ...]  # IK seed q1..q6
+    #: tool-axis tilt [rad] at the stroke's start and end (the axis turned from -normal
+    #: toward -direction, linear in u) for a stroke planned by rdm.planner; None: the axis
+    #: is left free (joint-space IK, task_ik)
+    tilt: tuple[float, float] | None = None
+    #: (tool point, tool axis) world, the first move passes through on its way to the
+    #: approach hover; None: straight there
+    via: tuple[np.ndarray, np.ndarray] | None = None
 
     def point(self, u: float) -> np.ndarray:
         """Surface point ``u`` m along the stroke."""
         return self.start + self.direction * u
+
+    def axis(self, u: float) -> np.ndarray | None:
+        """Tool axis (world, unit, into the surface) ``u`` m along the stroke; None if free."""
+        if self.tilt is None:
+            return None
+        a, b = self.tilt
+        th = a + (b - a) * min(1.0, max(0.0, u / self.length))
+        return -self.normal * math.cos(th) - self.direction * math.sin(th)
 
 
 def panel_squeeze(u: float) -> float:
@@ -128,6 +159,11 @@ def stroke_of(task: str, lay: obj.TaskLayout) -> Stroke:
             start + np.array([0.0, 0.0, -WALL_APPROACH_BELOW]),
             wall_squeeze,
             IK_SEED_WALL,
+            WALL_TILT,
+            (
+                np.array([fx + WALL_VIA[0], fy, fz + WALL_VIA[1]]),
+                np.array([math.cos(WALL_VIA[2]), 0.0, math.sin(WALL_VIA[2])]),
+            ),
         )
     if task == "painting-panel":
         return Stroke(
@@ -142,7 +178,8 @@ def stroke_of(task: str, lay: obj.TaskLayout) -> Stroke:
     raise ValueError(f"task: one of {PAINT_TASKS}, got {task!r}")
 
 
-#: go(target, tool_x, duration, linear) -> duration: one IK waypoint (tasks.TaskScript)
+#: go(target, tool_x, duration, linear=False, axis=None) -> duration: one waypoint, the tool
+#: point ``tool_x`` m along the tool axis at ``target`` (and the axis along ``axis``)
 Go = Callable[..., float]
 
 
@@ -151,23 +188,28 @@ def waypoints(
 ) -> tuple[float, float, float]:
     """Send the stroke's waypoints through ``go``. Returns (total s, stroke window start and
     end s from the first waypoint's start): the window is the stroke plus its dwell."""
-    tip = obj.BRUSH_AT + obj.BRUSH_RADIUS  # tip of the free (uncompressed) brush
+    tip = BRUSH_TIP
     r = s.normal * obj.BRUSH_RADIUS
-    t = go(s.approach + s.normal * hover, tip, 2 * move_s)
-    t += go(s.start + s.normal * TOUCH_HOVER, tip, APPROACH_S)
+    a0, a1 = s.axis(0.0), s.axis(s.length)
+    if s.via is None:
+        t = go(s.approach + s.normal * hover, tip, 2 * move_s, axis=a0)
+    else:
+        t = go(s.via[0], tip, 3 * move_s, axis=s.via[1])
+        t += go(s.approach + s.normal * hover, tip, 3 * move_s, axis=a0)
+    t += go(s.start + s.normal * TOUCH_HOVER, tip, APPROACH_S, axis=a0)
     centre = obj.BRUSH_AT - s.squeeze(0.0)
-    t += go(s.start + r, centre, TOUCH_S)
-    t += go(s.start + r, centre, 0.5 * press_s)  # settle on the surface
+    t += go(s.start + r, centre, TOUCH_S, axis=a0)
+    t += go(s.start + r, centre, 0.5 * press_s, axis=a0)  # settle on the surface
     t0 = t
     p = s.start + r
     for k in range(1, STROKE_SAMPLES + 1):
         u = s.length * k / STROKE_SAMPLES
         p = s.point(u) + r
         centre = obj.BRUSH_AT - s.squeeze(u)
-        t += go(p, centre, STROKE_S / STROKE_SAMPLES, linear=True)
-    t += go(p, centre, STROKE_DWELL, linear=True)
+        t += go(p, centre, STROKE_S / STROKE_SAMPLES, linear=True, axis=s.axis(u))
+    t += go(p, centre, STROKE_DWELL, linear=True, axis=a1)
     t1 = t
-    t += go(s.point(s.length) + s.normal * hover, tip, retract_s)
+    t += go(s.point(s.length) + s.normal * hover, tip, retract_s, axis=a1)
     return t, t0, t1
 
 

@@ -1,11 +1,12 @@
 """Joint-space inverse kinematics of a tool point for the perched arm (damped least squares
 on the onboard model's analytic Jacobians, ``rdm.model.Robot.jacobian``).
 
-Used by the painting and valve tasks, which hold the tool axis (the brush into the wall, the
-gripper along the valve's hinge): the Sec. V planner (``rdm.planner``) takes a point or a
-full 6-D pose as its target, not an axis (drilling, whose axis is free, is planned by it:
-:mod:`rdm.scenarios.task_plan`). This IK keeps the vectoring apparatus levelled the same way
-:func:`rdm.scenarios.perching.leveled` does (q3 stays 0).
+Used by the ``painting-panel`` stroke and the wall-reach sweep
+(:mod:`rdm.scenarios.wall_reach`), whose tool axis is left free; the other tasks' tool paths
+are planned by the Sec. V planner (:mod:`rdm.scenarios.task_plan`, with its point +
+tool-axis target where the axis must be held: the wall painting and the valve). This IK
+keeps the vectoring apparatus levelled the same way :func:`rdm.scenarios.perching.leveled`
+does (q3 stays 0).
 """
 
 from __future__ import annotations
@@ -43,7 +44,6 @@ def level(q: np.ndarray) -> np.ndarray:
 class IkResult:
     q: np.ndarray
     position_error: float  # m
-    axis_error: float  # rad (0 when no axis was asked)
     iterations: int
 
 
@@ -64,22 +64,20 @@ def solve(
     q_start: np.ndarray,
     target: np.ndarray,
     tool_x: float,
-    axis: np.ndarray | None = None,
     q1_ref: float = math.pi / 2,
     q1_weight: float = 0.02,
-    axis_weight: float = 0.3,
     damping: float = 1e-3,
     iterations: int = 200,
     tol: float = 1e-4,
 ) -> IkResult:
     """Joints (q1, q2, q4, q5 free) that put the tool point ``tool_x`` m along the
-    end-effector x axis at ``target`` (world), optionally with that axis along ``axis``.
-    ``q1_weight`` pulls q1 toward ``q1_ref`` (the root link hanging straight down)."""
+    end-effector x axis at ``target`` (world), the axis left free. ``q1_weight`` pulls q1
+    toward ``q1_ref`` (the root link hanging straight down)."""
     q = level(np.asarray(q_start, dtype=float))
     target = np.asarray(target, dtype=float)
     cols = np.array(IK_JOINTS)
     lo, hi = np.asarray(robot.joint_limits, dtype=float).T
-    pos_err = ax_err = math.inf
+    pos_err = math.inf
     it = 0
     while it < iterations:
         it += 1
@@ -90,14 +88,6 @@ def solve(
         jw = jac[3:, 6:][:, cols]
         j_tip = jv - _skew(x_axis * tool_x) @ jw  # v_tip = v_ee + w x r
         rows, errs = [j_tip], [e]
-        ax_err = 0.0
-        if axis is not None:
-            a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-            err_w = np.cross(x_axis, a)  # rotation that turns x_axis toward a
-            ax_err = math.acos(max(-1.0, min(1.0, float(x_axis @ a))))
-            # d(x_axis)/dt = w x x_axis: project the rotation rate on the error direction
-            rows.append(axis_weight * jw)
-            errs.append(axis_weight * err_w)
         reg = np.zeros((1, cols.size))
         reg[0, 0] = q1_weight
         rows.append(reg)
@@ -105,11 +95,11 @@ def solve(
         a_mat = np.vstack(rows)
         b = np.concatenate(errs)
         pos_err = float(np.linalg.norm(e))
-        if pos_err < tol and ax_err < 1e-3:
+        if pos_err < tol:
             break
         dq = np.linalg.solve(a_mat.T @ a_mat + damping * np.eye(cols.size), a_mat.T @ b)
         step = np.clip(dq, -0.1, 0.1)
         q[cols] += step
         q[cols] = np.clip(q[cols], lo[cols] + 1e-3, hi[cols] - 1e-3)
         q = level(q)
-    return IkResult(q, pos_err, ax_err, it)
+    return IkResult(q, pos_err, it)

@@ -26,6 +26,9 @@ from rdm.planner.timing import over_duration
 from rdm.planner.trajectory import Trajectory
 
 TOOL_LINK = "tool_tip"
+#: S2' orientation weight of the tool-axis rows (docs/planner.md "Target kinds"); the position
+#: rows weigh 1. ASSUMPTION: 0.1, as a 6-D target's.
+AXIS_WEIGHT = 0.1
 
 
 def with_tool_tip(urdf: str, toml: str, tool_x: float) -> tuple[str, str]:
@@ -96,7 +99,8 @@ class ToolPlanner:
     def __post_init__(self) -> None:
         setup = PlannerSetup.for_robot(self.robot, "perched")
         urdf, toml = with_tool_tip(setup.urdf, setup.toml, self.tool_x)
-        self.setup = PlannerSetup(urdf, toml, "perched", {**setup.config, **self.config})
+        cfg = {"s2_ee_orientation": AXIS_WEIGHT, **setup.config, **self.config}
+        self.setup = PlannerSetup(urdf, toml, "perched", cfg)
         base = np.asarray(self.base, dtype=float)
         self._foot_p = base[:3]
         self._foot_r = _rpy_matrix(base[3:])
@@ -115,14 +119,35 @@ class ToolPlanner:
         pos, _ = self.core.end_effector_pose()
         return self._foot_p + self._foot_r @ np.asarray(pos, dtype=float)
 
-    def move(self, target_world: np.ndarray, duration: float) -> PlannedMove:
+    def move(
+        self,
+        target_world: np.ndarray,
+        duration: float,
+        axis: np.ndarray | None = None,
+        tool_x: float | None = None,
+        linear: bool = False,
+    ) -> PlannedMove:
         """Plan the tip from where the last move ended to ``target_world`` and follow the
-        states in ``duration`` s. A move that stops short (``Unreachable``) keeps its last
-        state; its ``error`` says by how much."""
+        states in ``duration`` s. ``axis`` (world): the direction the tool axis (end-effector
+        x) must reach, the rotation about it free (the planner's 5-D target). ``tool_x``
+        (needs ``axis``): the target is for the point ``tool_x`` m along the axis instead of
+        the tip (the tip's target is shifted along the target axis). ``linear``: followed
+        at constant speed (one of successive samples of a path) instead of rest to rest.
+        A move that stops short
+        (``Unreachable``) keeps its last state; its ``error`` says by how much."""
         target = np.asarray(target_world, dtype=float)
-        tr = run_core(self.core, tuple(self.to_foot(target)), "perched")
+        axis_foot = None
+        if axis is not None:
+            a = np.asarray(axis, dtype=float)
+            a = a / np.linalg.norm(a)
+            axis_foot = tuple(self._foot_r.T @ a)
+            if tool_x is not None:
+                target = target + a * (self.tool_x - tool_x)
+        elif tool_x is not None:
+            raise ValueError("tool_x: needs an axis (the tip is shifted along it)")
+        tr = run_core(self.core, tuple(self.to_foot(target)), "perched", axis=axis_foot)
         q = np.asarray(tr.zeta, dtype=float)[:, 6:]
-        times, qs = over_duration(q, duration)
+        times, qs = over_duration(q, duration, linear=linear)
         m = PlannedMove(target, tr, times, qs)
         self.moves.append(m)
         return m
@@ -155,3 +180,35 @@ def drill_waypoints(
         way += tool.move(up, retract_s).waypoints()
         t += retract_s
     return way, windows, t
+
+
+def valve_waypoints(
+    tool: ToolPlanner,
+    axis_point: np.ndarray,
+    hover: float,
+    approach_s: float,
+    grip_s: float,
+    turn: float,
+    turn_s: float,
+    hold_s: float,
+    samples: int = 10,
+) -> tuple[list[tuple[float, np.ndarray, bool]], tuple[float, float], float]:
+    """The valve sequence: the gripper centre to ``hover`` above ``axis_point`` (world, on
+    the hinge axis) in ``approach_s`` and down onto it in ``grip_s``, the tool axis pointing
+    down the hinge (the planner's 5-D target: the rotation about the axis is the tool roll
+    q6's), then q6 turned by ``turn`` rad in ``samples`` linear steps over ``turn_s`` and held
+    ``hold_s``. The q6 axis is the tool axis, so the turn keeps the planned gripper centre
+    and axis. Returns (waypoints, turn window (start, end) s, total seconds)."""
+    down = np.array([0.0, 0.0, -1.0])
+    point = np.asarray(axis_point, dtype=float)
+    way: list[tuple[float, np.ndarray, bool]] = []
+    way += tool.move(point + np.array([0.0, 0.0, hover]), approach_s, axis=down).waypoints()
+    way += tool.move(point, grip_s, axis=down).waypoints()
+    t0 = approach_s + grip_s
+    q = way[-1][1]
+    for k in range(1, samples + 1):
+        qk = q.copy()
+        qk[5] = q[5] + turn * k / samples
+        way.append((turn_s / samples, qk, True))
+    way.append((hold_s, way[-1][1], True))
+    return way, (t0, t0 + turn_s), t0 + turn_s + hold_s

@@ -6,9 +6,10 @@ The robot perches exactly as in :mod:`rdm.scenarios.perching` (same script, cons
 tuning; no joint motion of its own) and then the arm does the task against objects added to
 the MuJoCo scene (:mod:`rdm.scenarios.task_objects`). Joint goals come from the foot pose
 the PC knows (mocap) and the object positions (known to the operator, as in the paper's
-feed-forward planner): drilling's from the Sec. V planner with the drill tip as its end
-effector (:mod:`rdm.scenarios.task_plan`), painting's and the valve's from the damped
-least-squares IK of :mod:`rdm.scenarios.task_ik` (they need the tool axis held);
+feed-forward planner): drilling's, the wall painting's and the valve's from the Sec. V
+planner with the tool point as its end effector (:mod:`rdm.scenarios.task_plan`; the
+brush and the gripper with its point + tool-axis target), painting-panel's from the
+point-only IK of :mod:`rdm.scenarios.task_ik`;
 the drill is pressed by commanding it ``PRESS_DEPTH`` behind the surface (the stiff
 position servos turn the offset into a contact force), the brush by its spring. Ground
 truth: MuJoCo contacts of the tool geoms, the brush joint, the valve hinge angle; the
@@ -84,11 +85,6 @@ VALVE_Q = (1.4, -0.5, 0.0, math.pi / 2 - 0.9, 0.0, 0.0)
 VALVE_HOVER = 0.05  # m above the grip pose: finger tips 15 mm above the handle bar
 VALVE_TURN = 1.2  # rad of q6
 TURN_S = 4.0
-#: Weight of the vertical-axis rows in the valve IK. q3 = 0 leaves 4 joints for 3 position
-#: + 2 axis rows, so with a tilted/yawed foot both cannot hold exactly: position wins (the
-#: fingers have 3 mm clearance; a 1 deg tilt moves their tips by 0.3 mm). 0.3 (drilling's
-#: default) gave 2.2 mm / 0.45 deg for a foot at (2, -3, 10) mrad, 0.1 gives 0.45 mm / 0.8 deg.
-VALVE_AXIS_WEIGHT = 0.1
 START_AFTER = 0.5  # s after the perching script's hold begins
 #: The task starts only on a settled perch: the foot's roll and pitch (mocap) within
 #: SETTLED_TILT_DEG of level for the last SETTLED_FOR_S. The plan and the objects' placement
@@ -153,7 +149,8 @@ class TaskScript(perching.PerchingScript):
         #: (start, end, label) of the pressing/sliding/turning windows
         self.windows: list[tuple[float, float, str]] = []
         self.ik_errors: list[float] = []
-        #: where the joint waypoints come from: "IK" (task_ik) or "planned" (task_plan)
+        #: where the joint waypoints come from: "IK" (task_ik, painting-panel) or "planned"
+        #: (task_plan)
         self.waypoint_source = "IK"
         #: the painting tasks' stroke (painting.Stroke), None for the others
         self.stroke: painting.Stroke | None = None
@@ -212,13 +209,14 @@ class TaskScript(perching.PerchingScript):
         lay = self.layout
         t = now
 
-        def go(target, tool_x, duration, q6=0.0, linear=False, q_from=None, axis=None, q1=None):
+        def go(target, tool_x, duration, linear=False, axis=None):
+            """One IK waypoint (painting-panel: the point only, the axis left free)."""
             nonlocal q
-            start = q if q_from is None else q_from
-            kw = {} if q1 is None else {"q1_ref": q1, "axis_weight": VALVE_AXIS_WEIGHT}
-            res = task_ik.solve(robot, base, start, target, tool_x, axis=axis, **kw)
+            if axis is not None:
+                raise ValueError("axis: the joint-space IK holds no tool axis (plan it)")
+            res = task_ik.solve(robot, base, q, target, tool_x)
             q = res.q.copy()
-            q[5] = q6
+            q[5] = 0.0
             self.ik_errors.append(res.position_error)
             way.append((duration, q.copy(), linear))
             return duration
@@ -240,26 +238,35 @@ class TaskScript(perching.PerchingScript):
             self.stroke = painting.stroke_of(self.task, lay)
             s = self.stroke
             self.targets = [s.start, s.point(s.length)]
-            q = task_ik.level(np.r_[s.seed, np.zeros(robot.n_q - 6)])
-            took, w0, w1 = painting.waypoints(go, s, HOVER, MOVE_S, PRESS_S, RETRACT_S)
+            step = go
+            if s.tilt is not None:  # the Sec. V planner, the brush tip as its end effector
+                self.waypoint_source = "planned"
+                first_s = 6 * MOVE_S  # its waypoints are the 40 Hz samples of the moves
+                tool = task_plan.ToolPlanner("rdm", base, q_now, painting.BRUSH_TIP)
+
+                def step(target, tool_x, duration, linear=False, axis=None):
+                    m = tool.move(target, duration, axis=axis, tool_x=tool_x, linear=linear)
+                    way.extend(m.waypoints())
+                    self.ik_errors.append(m.error)
+                    return duration
+            else:
+                q = task_ik.level(np.r_[s.seed, np.zeros(robot.n_q - 6)])
+            took, w0, w1 = painting.waypoints(step, s, HOVER, MOVE_S, PRESS_S, RETRACT_S)
             self.windows.append((t + w0, t + w1, "stroke"))
             t += took
-        else:
+        else:  # the Sec. V planner, the gripper centre as its end effector
+            self.waypoint_source = "planned"
+            first_s = 1.5 * MOVE_S
             axis = lay.valve_axis
             self.targets = [axis]
-            down = np.array([0.0, 0.0, -1.0])  # tool axis along the valve's hinge
-            q = task_ik.level(np.r_[VALVE_Q, np.zeros(robot.n_q - 6)])  # IK seed
-            q1 = VALVE_Q[0]
-            up = axis + np.array([0.0, 0.0, VALVE_HOVER])
-            t += go(up, obj.GRIPPER_AT, 1.5 * MOVE_S, axis=down, q1=q1)
-            t += go(axis, obj.GRIPPER_AT, MOVE_S, axis=down, q1=q1)
-            t0 = t
-            n = 10
-            for k in range(1, n + 1):
-                turn = VALVE_TURN * k / n
-                t += go(axis, obj.GRIPPER_AT, TURN_S / n, turn, linear=True, axis=down, q1=q1)
-            self.windows.append((t0, t, "turn"))
-            t += go(axis, obj.GRIPPER_AT, 1.0, q6=VALVE_TURN, axis=down, q1=q1)
+            tool = task_plan.ToolPlanner("rdm", base, q_now, obj.GRIPPER_AT)
+            steps, turn_window, took = task_plan.valve_waypoints(
+                tool, axis, VALVE_HOVER, 1.5 * MOVE_S, MOVE_S, VALVE_TURN, TURN_S, 1.0
+            )
+            way += steps
+            self.windows.append((t + turn_window[0], t + turn_window[1], "turn"))
+            self.ik_errors += [m.error for m in tool.moves]
+            t += took
         points = _trajectory(now, q_now, way, stack.onboard.robot.n_q)
         stack.onboard.set_trajectory(points)
         self.q_plan = points
@@ -353,7 +360,7 @@ def _trajectory(t0: float, q_start: np.ndarray, way, n_q: int) -> list:
 
 def duration_of(task: str) -> float:
     """Simulated seconds that cover perching (~15 s) and the task."""
-    durations = {"drilling": 36.0, "painting": 39.0, "painting-panel": 39.0, "valve": 28.0}
+    durations = {"drilling": 36.0, "painting": 47.0, "painting-panel": 39.0, "valve": 28.0}
     return durations[task] + SETTLE_ALLOWANCE_S
 
 

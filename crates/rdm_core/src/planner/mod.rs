@@ -16,9 +16,11 @@ pub mod leveling;
 pub mod quantities;
 pub mod shapes;
 pub mod step;
+pub mod target;
 pub mod thrust;
 
 pub use config::{DamperParams, Mode, PlannerConfig, ShapePair, ShapeSpec};
 pub use force::{feasible_force, FeasibleForce};
 pub use quantities::{Quantities, QuantityLayout};
 pub use step::{Planner, PlannerError, StepReport, StepStatus};
+pub use target::{EeOrientation, TaskErrors, TaskRows};

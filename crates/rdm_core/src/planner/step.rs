@@ -1,11 +1,12 @@
 //! The planner: one QP per step (eqs. 50-51, 69-70).
 
-use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Vector3};
 
 use super::config::{Mode, PlannerConfig};
 use super::constraints::{all_constraints, Constraint, Context};
 use super::leveling::Leveler;
 use super::quantities::{Quantities, QuantityLayout};
+use super::target::{EeOrientation, TaskRows};
 use crate::model::{Frame, Matrix6xN, ModelError, RobotDescription};
 use crate::qp::{DenseQp, QpError, QpSettings, QpStatus};
 
@@ -78,6 +79,7 @@ pub struct Planner {
     jac: Vec<f64>,
     j_ee: Matrix6xN,
     j_foot: Matrix6xN,
+    task: TaskRows,
     limits: Vec<(f64, f64)>,
     thrust_min: Vec<f64>,
     p: Vec<f64>,
@@ -146,6 +148,7 @@ impl Planner {
         let mut planner = Self {
             j_ee: Matrix6xN::zeros(6 + n_q),
             j_foot: Matrix6xN::zeros(6 + n_q),
+            task: TaskRows::new(6 + n_q),
             robot,
             cfg,
             leveler,
@@ -239,42 +242,62 @@ impl Planner {
             .map_err(PlannerError::from)
     }
 
-    /// One planning step toward `position` (and `orientation`, if given; world frame).
-    pub fn step(
+    /// The end-effector task rows of the last `step` or `task_rows` call.
+    pub fn task(&self) -> &TaskRows {
+        &self.task
+    }
+
+    /// Linearize and fill the end-effector task rows toward `position` and `orientation`
+    /// (world frame; [`super::target`]) at the current state, as `step` does.
+    pub fn task_rows(
         &mut self,
         position: &[f64; 3],
-        orientation: Option<&UnitQuaternion<f64>>,
-    ) -> Result<StepReport, PlannerError> {
+        orientation: &EeOrientation,
+    ) -> Result<(f64, f64), PlannerError> {
         if !finite(position) {
             return Err(PlannerError::BadInput("target position"));
+        }
+        match orientation {
+            EeOrientation::Axis(a) if !(finite(a.as_slice()) && a.norm() > 1e-9) => {
+                return Err(PlannerError::BadInput("target axis"));
+            }
+            EeOrientation::Pose(r) if !finite(r.coords.as_slice()) => {
+                return Err(PlannerError::BadInput("target orientation"));
+            }
+            _ => {}
         }
         self.linearize()?;
         let ws = self.quantities.workspace();
         let ee = Frame::Link(self.robot.end_effector_link);
-        let foot = Frame::Link(self.robot.foot_link);
         self.robot
             .frame_jacobian(ws, ee, &mut self.j_ee)
             .map_err(PlannerError::Model)?;
+        let ee_pose = ws.link_pose[self.robot.end_effector_link];
+        let e = self.task.fill(
+            &self.cfg,
+            &ee_pose,
+            &self.j_ee,
+            &Vector3::from(*position),
+            orientation,
+        );
+        Ok((e.position, e.orientation))
+    }
+
+    /// One planning step toward `position` and `orientation` (world frame).
+    pub fn step(
+        &mut self,
+        position: &[f64; 3],
+        orientation: &EeOrientation,
+    ) -> Result<StepReport, PlannerError> {
+        let (pos_err, rot_err) = self.task_rows(position, orientation)?;
+        let ws = self.quantities.workspace();
+        let foot = Frame::Link(self.robot.foot_link);
         self.robot
             .frame_jacobian(ws, foot, &mut self.j_foot)
             .map_err(PlannerError::Model)?;
-        let ee_pose = ws.link_pose[self.robot.end_effector_link];
         let foot_pose = ws.link_pose[self.robot.foot_link];
-
-        // eq. (54), with the step length capped at the remaining error so that it
-        // converges instead of chattering around the target.
-        let e_pos = Vector3::from(*position) - ee_pose.translation.vector;
-        let pos_err = e_pos.norm();
-        let d_pos = e_pos * (self.cfg.kappa_position / pos_err.max(1e-12)).min(1.0);
-        let (e_rot, w_rot) = match orientation {
-            Some(r) => (
-                (r * ee_pose.rotation.inverse()).scaled_axis(),
-                self.cfg.s2_ee_orientation,
-            ),
-            None => (Vector3::zeros(), 0.0),
-        };
-        let rot_err = e_rot.norm();
-        let d_rot = e_rot * (self.cfg.kappa_orientation / rot_err.max(1e-12)).min(1.0);
+        // eq. (54)'s step (capped at the remaining error so that it converges instead of
+        // chattering around the target) and eq. (56)'s rows: self.task (task_rows).
         let foot_pos = self.foot_hold.translation.vector - foot_pose.translation.vector;
         let foot_rot = (self.foot_hold.rotation * foot_pose.rotation.inverse()).scaled_axis();
 
@@ -294,18 +317,14 @@ impl Planner {
                 _ => self.cfg.s1_joint,
             };
             for r in 0..6 {
-                let (w_ee, target_ee) = if r < 3 {
-                    (self.cfg.s2_ee_position, d_pos[r])
-                } else {
-                    (w_rot, d_rot[r - 3])
-                };
+                let (w_ee, target_ee) = (self.task.weights[r], self.task.step[r]);
                 let target_foot = if r < 3 { foot_pos[r] } else { foot_rot[r - 3] };
-                let je = self.j_ee[(r, ka)];
+                let je = self.task.rows[(r, ka)];
                 let jf = self.j_foot[(r, ka)];
                 self.q[a] -= w_ee * je * target_ee + w_foot * jf * target_foot;
                 for (b, &kb) in self.free.iter().enumerate() {
                     self.p[a * nf + b] +=
-                        w_ee * je * self.j_ee[(r, kb)] + w_foot * jf * self.j_foot[(r, kb)];
+                        w_ee * je * self.task.rows[(r, kb)] + w_foot * jf * self.j_foot[(r, kb)];
                 }
             }
         }
