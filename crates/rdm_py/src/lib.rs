@@ -22,6 +22,7 @@ mod model;
 mod neuron_bank;
 mod perch;
 mod planner;
+mod plant_bridge;
 mod plate_contact;
 mod position;
 mod qp;
@@ -69,5 +70,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     spinal_commands::register(m)?;
     servo_goals::register(m)?;
     sample_schedule::register(m)?;
+    plant_bridge::register(m)?;
     Ok(())
 }

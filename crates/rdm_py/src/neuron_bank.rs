@@ -1,7 +1,6 @@
 //! Bindings of `rdm_core::firmware::neuron_bank`: every Neuron of one CAN bus ticked in one
 //! call (python-can messages in, `(board, can_id, payload)` frames out).
 
-use numpy::{PyArray1, PyArrayMethods};
 use pyo3::create_exception;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList, PyTuple};
@@ -209,38 +208,6 @@ impl NeuronBank {
         .map_err(bridge_err)?;
         self.bridge = Some(b);
         Ok(())
-    }
-
-    /// One bridge tick: snapshot the joints of `qpos`, then write the servo targets (rad) of
-    /// changed boards into `targets` and their ESC duties into `duties`; returns
-    /// `(targets_changed, duties_changed)`.
-    fn bridge_tick(
-        &mut self,
-        qpos: &Bound<'_, PyArray1<f64>>,
-        targets: &Bound<'_, PyArray1<f64>>,
-        duties: &Bound<'_, PyArray1<f64>>,
-    ) -> PyResult<(bool, bool)> {
-        let bridge = self
-            .bridge
-            .as_mut()
-            .ok_or_else(|| err("bridge_tick: no bridge attached".into()))?;
-        let qpos = qpos.try_readonly()?;
-        let mut targets = targets.try_readwrite()?;
-        let mut duties = duties.try_readwrite()?;
-        let qpos = qpos
-            .as_slice()
-            .map_err(|_| err("qpos: must be C-contiguous".into()))?;
-        let targets = targets
-            .as_slice_mut()
-            .map_err(|_| err("targets: must be C-contiguous".into()))?;
-        let duties = duties
-            .as_slice_mut()
-            .map_err(|_| err("duties: must be C-contiguous".into()))?;
-        bridge.snapshot(qpos).map_err(bridge_err)?;
-        let c = bridge
-            .couple(&self.core, targets, duties)
-            .map_err(bridge_err)?;
-        Ok((c.targets, c.duties))
     }
 
     /// Fault hook: joint `joint`'s servo output stops following its goal (its plant target
@@ -499,7 +466,9 @@ impl NeuronBank {
         self.core.boards().len()
     }
 
-    /// [`NeuronBank::bridge_tick`] on slices.
+    /// One bridge tick (`crate::plant_bridge::PlantBridgeCore`): snapshot the joints of
+    /// `qpos`, then write the servo targets (rad) of changed boards into `targets` and their
+    /// ESC duties into `duties`; returns `(targets_changed, duties_changed)`.
     pub(crate) fn kernel_bridge_tick(
         &mut self,
         qpos: &[f64],

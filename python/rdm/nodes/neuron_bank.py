@@ -366,11 +366,6 @@ class NeuronBankNode:
         attached coupling's ``_rdm.NeuronBank.stick_joint``)."""
         self._core.stick_joint(joint)
 
-    def bridge_tick(self, qpos: Any, targets: Any, duties: Any) -> tuple[bool, bool]:
-        """Snapshot + goals -> ``targets`` + ESC outputs -> ``duties`` (``NeuronBank.
-        bridge_tick``); returns ``(targets_changed, duties_changed)``."""
-        return self._core.bridge_tick(qpos, targets, duties)
-
     def _push_positions(self) -> None:
         # A servo reads the bridge's snapshot when it first needs the position after a
         # snapshot; the snapshot is fixed until the next one, so pushing it before the frames
