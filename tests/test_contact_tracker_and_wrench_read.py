@@ -1,22 +1,18 @@
-"""The foot contact tracker's first-contact anchor and measurement, the bridge's 1 kHz
-foot-sensor reads, and the Neuron bank's change counters.
+"""The foot contact tracker's first-contact anchor and measurement, and the bridge's 1 kHz
+foot-sensor reads.
 
 Oracles: the anchor rule applied to MuJoCo's own contact list (``data.contact.geom`` and
 ``model.geom_bodyid``), the measurement derived from MuJoCo's contact objects and
 ``mj_contactForce`` (``truth_reference.measure_reference``), the wrench noise model's numpy
-array form on MuJoCo's ideal sensor values with numpy's generator called once per sample,
-and the bank core's own counters."""
+array form on MuJoCo's ideal sensor values with numpy's generator called once per sample."""
 
 from __future__ import annotations
 
 import math
-import random
 
-import can
 import numpy as np
 import pytest
 from float_bits import same_bits
-from test_neuron_bank import SPECS, Bank
 from truth_reference import measure_reference
 
 from rdm.plant import Plant
@@ -152,30 +148,3 @@ def test_bridge_wrench_reads_equal_the_array_form_of_the_ideal_values():
         plant.wrench("nope")
     with pytest.raises(ValueError, match="unknown wrench sensor 'nope'"):
         plant.wrench_values("nope")
-
-
-def test_bank_change_counters_follow_the_core_on_random_frames():
-    twin = Bank(SPECS)
-    rng = random.Random(4)
-    bank = twin.bank
-    moved = 0
-    try:
-        last = None
-        for ms in range(400):
-            for _ in range(rng.randrange(3)):
-                can_id = rng.choice([0x000, 0x001, 0x0E0, 0x111, 0x112, 0x135, 0x1F7, 0x7FF])
-                data = bytes(rng.randrange(256) for _ in range(rng.randrange(9)))
-                twin.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
-            twin.tick(ms * 0.001)
-            now = [b.changes[0] for b in bank.boards]
-            assert now == bank._core.changes(), ms
-            if now != last and last is not None:
-                moved += 1
-            last = now
-            if ms % 50 == 0:
-                value = rng.randrange(1000)
-                bank.boards[1].esc.held_value = value  # bumps a counter
-                assert [b.changes[0] for b in bank.boards] == bank._core.changes()
-    finally:
-        twin.close()
-    assert moved > 0

@@ -72,7 +72,7 @@ def _view_state(v) -> dict:
         "flash_slave_id": st["flash_slave_id"],
         "imu_send_flag": st["imu_send_flag"],
         "esc": (v.esc.held_value, v.esc.stopped, v.esc.value),
-        "changes": v.changes[0],
+        "changes": v.change_count,
         "connected": st["connected"],
         "rx": (st["rx_count"], st["rx_filtered"], st["rx_errors"], st["rx_kinds"], st["reboots"]),
         "tx": (v.tx_count, v.tx_errors),

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from rdm import _rdm
+from rdm._rdm import NormalStreamCore
 from rdm.plant import Plant
 from rdm.plant.mjcf import rotor_site
 from rdm.plant.sensors import (
@@ -27,7 +28,6 @@ from rdm.plant.sensors import (
     LEPTRINO_FULL_SCALE_COUNTS,
     MAG_LSB,
     NORMAL_CHUNK,
-    NormalStream,
 )
 
 
@@ -37,12 +37,13 @@ def _same(x, y) -> bool:
 
 
 def test_normal_stream_equals_one_generator_call_per_take():
-    stream = NormalStream(np.random.default_rng(5))
+    stream = NormalStreamCore(np.random.default_rng(5), NORMAL_CHUNK)
     ref = np.random.default_rng(5)
     sizes = np.random.default_rng(1).integers(1, 40, 2000)  # crosses many chunk boundaries
     assert sizes.sum() > 10 * NORMAL_CHUNK
     for k in sizes.tolist():
         assert _same(stream.take(k), ref.normal(0.0, 1.0, k)), k
+    assert stream.taken == sizes.sum()
 
 
 def _flying_plant() -> Plant:

@@ -38,7 +38,7 @@ class _NullUart:
 def test_set_wrench_equals_a_numpy_clip_and_counts_saturation_alike(entry: str):
     node = LeptrinoSensorNode(_NullUart(), "CFS034CA301U")
     values = entry == "set_wrench_values"  # one 6-tuple (the plant bridge's 1 kHz input)
-    lim = np.array(node._limits)
+    lim = np.array(node.limits)
     gen = np.random.default_rng(12)
     saturated = bad = 0
     for k in range(3000):
@@ -50,7 +50,7 @@ def test_set_wrench_equals_a_numpy_clip_and_counts_saturation_alike(entry: str):
             w[gen.integers(6)] = gen.choice([math.nan, math.inf, -math.inf])
         elif kind == 3:
             w = np.round(w)  # whole numbers, passed as Python ints below
-        before = node._wrench
+        before = node.wrench
         if kind == 3:
             ints = [int(v) for v in w]
             if values:
@@ -66,11 +66,11 @@ def test_set_wrench_equals_a_numpy_clip_and_counts_saturation_alike(entry: str):
             node.set_wrench(w[:3], w[3:])
         if not np.all(np.isfinite(w)):
             bad += 1
-            assert node._wrench is before
+            assert node.wrench == before
             continue
         want = np.clip(w, -lim, lim)
         saturated += bool(np.any(np.abs(w) > lim))
-        got = np.array(node._wrench, dtype=float)
+        got = np.array(node.wrench, dtype=float)
         assert np.array_equal(got, want) and np.array_equal(np.signbit(got), np.signbit(want))
     if values:
         node.set_wrench_values((1.0, 2.0, 3.0, 4.0, 5.0))  # five values: refused

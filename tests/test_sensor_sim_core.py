@@ -277,7 +277,7 @@ def test_leptrino_node_stream_decodes_to_the_wrench_in_rated_counts():
         (event,) = lp.LeptrinoStreamParser().feed(bytes(uart.out))
         sample = lp.parse_response(event.payload)
         assert isinstance(sample, lp.ForceData)
-        counts = tuple(round(v * 10000 / r) for v, r in zip(node._wrench, rated, strict=True))
+        counts = tuple(round(v * 10000 / r) for v, r in zip(node.wrench, rated, strict=True))
         assert sample.raw == counts
         assert sample.temperature == node.temperature and sample.term_no == node.sensor_no
         assert sample.status == 0 and sample.result == 0
@@ -287,9 +287,14 @@ def test_leptrino_node_stream_decodes_to_the_wrench_in_rated_counts():
 def test_leptrino_node_refuses_a_temperature_outside_int16():
     node = LeptrinoSensorNode(_Uart(), "CFS034CA301U")
     node.set_wrench([1.0, 2.0, 3.0], [0.1, 0.2, 0.3])
-    node.temperature = 25.0  # a float
+    frame = node._stream.sample_frame()
+    with pytest.raises(ValueError, match=r"temperature 25\.0 must be an int"):
+        node.temperature = 25.0  # a float
+    with pytest.raises(ValueError, match=r"temperature 40000 must be an int in -32768\.\.32767"):
+        node.temperature = 40000
+    with pytest.raises(ValueError, match=r"sensor_no 255 must be an int in 0\.\.254"):
+        node.sensor_no = 255
     with pytest.raises(ValueError, match="temperature"):
-        node._sample_frame()
-    node.temperature = 40000
-    with pytest.raises(ValueError, match="temperature"):
-        node._sample_frame()
+        LeptrinoSensorNode(_Uart(), "CFS034CA301U", temperature=-32769)
+    # the refused values left the stream as it was
+    assert node.temperature == 250 and node._stream.sample_frame() == frame

@@ -270,19 +270,32 @@ impl NeuronBank {
         stamp: f64,
         wire: &Bound<'_, crate::can_master::CanWire>,
     ) -> PyResult<Vec<usize>> {
-        let mut w = wire.borrow_mut();
-        w.core.take_for_neurons(&mut self.rx);
-        let out = self.core.tick(now, &self.rx).map_err(bank_err)?;
-        let mut boards = Vec::with_capacity(out.len());
-        for e in out {
-            w.core.send(
-                rdm_core::firmware::can_wire::Sender::Neurons,
-                stamp,
-                e.frame,
-            );
-            boards.push(e.board);
-        }
+        let mut boards = Vec::new();
+        self.kernel_tick_wire(now, stamp, &mut wire.borrow_mut().core, &mut boards)?;
         Ok(boards)
+    }
+
+    /// A frame of board `k` (a [`tick`] output) went to the bus (`sent`) or the bus refused
+    /// it (the wire's frames are counted by [`tick_wire`] itself).
+    fn count_tx(&mut self, k: usize, sent: bool) -> PyResult<()> {
+        self.core.count_tx(k, sent).map_err(bank_err)
+    }
+
+    /// `(sent, refused)` frames of board `k`.
+    fn tx_count(&self, k: usize) -> PyResult<(u64, u64)> {
+        let c = self.core.tx_count(k).map_err(bank_err)?;
+        Ok((c.sent, c.errors))
+    }
+
+    /// Change counter of board `k` (bumped by goal / torque / ESC output changes).
+    fn board_changes(&self, k: usize) -> PyResult<u64> {
+        Ok(self.core.board(k).map_err(bank_err)?.changes)
+    }
+
+    /// Whether the plant bridge's coupling is attached (`attach_bridge`).
+    #[getter]
+    fn bridged(&self) -> bool {
+        self.bridge.is_some()
     }
 
     /// True when a frame the boards sent last tick passes another board's id filter.
@@ -461,11 +474,6 @@ impl NeuronBank {
 /// Accessors of the lockstep kernel (`crate::kernel`): the same work as the Python-facing
 /// methods above, on slices and the core wire, without Python objects in between.
 impl NeuronBank {
-    /// How many boards the bank has.
-    pub(crate) fn board_count(&self) -> usize {
-        self.core.boards().len()
-    }
-
     /// One bridge tick (`crate::plant_bridge::PlantBridgeCore`): snapshot the joints of
     /// `qpos`, then write the servo targets (rad) of changed boards into `targets` and their
     /// ESC duties into `duties`; returns `(targets_changed, duties_changed)`.
@@ -510,25 +518,20 @@ impl NeuronBank {
             );
             boards.push(e.board);
         }
+        for &b in boards.iter() {
+            self.core.count_tx(b, true).map_err(bank_err)?;
+        }
         Ok(())
+    }
+
+    /// Whether the plant bridge's coupling is attached.
+    pub(crate) fn is_bridged(&self) -> bool {
+        self.bridge.is_some()
     }
 
     /// [`NeuronBank::sent_frames_heard`].
     pub(crate) fn kernel_sent_frames_heard(&self) -> bool {
         self.core.sent_frames_heard()
-    }
-
-    /// Whether the change counters equal `last`; if not, `last` takes them.
-    pub(crate) fn kernel_refresh_changes(&self, last: &mut Vec<u64>) -> bool {
-        let boards = self.core.boards();
-        if boards.len() == last.len()
-            && boards.iter().zip(last.iter()).all(|(b, l)| b.changes == *l)
-        {
-            return true;
-        }
-        last.clear();
-        last.extend(boards.iter().map(|b| b.changes));
-        false
     }
 }
 

@@ -6,8 +6,10 @@ and routine busy ms, Leptrino streaming, the plant step) then run in Rust on the
 Python nodes already use, at the same base ticks in the same order. Every other tick is the
 node's own Python ``tick``. Before Python code runs, the kernel writes back what its fast
 ticks changed of the parts that code may read or change; after, it re-reads those parts'
-``kernel_plan``. So the logs are the same bytes as with every tick in Python
-(tests/test_lockstep_kernel.py, tests/test_spinal_kernel_busy.py; docs/sim.md).
+plans. State that is one Rust object the node and the kernel share (the Leptrino stream,
+the Neuron bank, the resting sleep, the noise models' normal streams) needs neither: only
+the Leptrino's pending UART bytes wait. So the logs are the same bytes as with every tick
+in Python (tests/test_lockstep_kernel.py, tests/test_spinal_kernel_busy.py; docs/sim.md).
 """
 
 from __future__ import annotations
@@ -19,11 +21,11 @@ import mujoco
 
 from rdm import _rdm
 from rdm.link.can_wire import DRAIN_AT, CanWireLink
+from rdm.link.tapped_link import TappedLink
+from rdm.link.uart_pipe import InProcessUartEnd
 from rdm.plant import option_flags
-from rdm.plant import sleep as plant_sleep
 
 from .lockstep import Lockstep
-from .neuron_bank import NeuronBankNode
 from .plant_bridge import PlantBridge
 
 
@@ -36,7 +38,7 @@ def kind_of(node: Any) -> str | None:
 def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
     """Hand the kernel the plant's parts it holds for the plant's lifetime (typed values:
     MuJoCo's model, data and step functions, the option-flags address, the Rust cores, the
-    MjData views, the servo actuators and the resting-sleep arrays)."""
+    MjData views, the servo actuators and the resting-sleep core)."""
     model = plant.model
     sleep = plant.sleep
     kernel.attach_plant(
@@ -59,33 +61,8 @@ def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
         plant._v_sensordata,
         plant._v_ctrl,
         [int(a) for a in plant._servo_act],
-        None
-        if sleep is None
-        else (
-            sleep,
-            list(sleep.trees),
-            list(sleep.rotors),
-            plant_sleep.ALLOWED,
-            plant_sleep.NEVER,
-            plant_sleep.SLEEP_ENABLE_BIT,
-            sleep._v_policy,
-            sleep._v_tree_asleep,
-            sleep._v_last_ctrl,
-            sleep._opt,
-        ),
+        None if sleep is None else sleep._core,
     )
-
-
-def _bank_plan(bank: NeuronBankNode) -> Callable[[], tuple | None]:
-    """The plan the kernel reads for ``bank`` on a CAN wire: None until the plant bridge's
-    coupling is attached (a position push is then the core's own), else the change counters
-    the node last saw. The kernel writes the boards' ``tx_count`` and change counters back
-    itself."""
-
-    def plan() -> tuple | None:
-        return (bank._last_changes,) if bank._bridged else None
-
-    return plan
 
 
 def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[], tuple | None]:
@@ -148,6 +125,25 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
     return plan
 
 
+def _leptrino_uart(node: Any) -> tuple[Callable[[], bool], Callable[..., int]]:
+    """``(idle, write)`` of the Leptrino node's UART for the kernel: ``idle()``, whether its
+    streaming tick can run in the kernel now (the UART is the one it had at attach, a
+    :class:`TappedLink` over an open :class:`InProcessUartEnd` with an open peer, so every
+    write is whole, and no host bytes wait: a command is answered first, in Python);
+    ``write``, that link's ``write_marked``."""
+    uart = node.uart
+    write = getattr(uart, "write_marked", None)
+    if type(uart) is not TappedLink or type(uart.link) is not InProcessUartEnd or write is None:
+        return (lambda: False), (lambda data, marks: 0)
+    end = uart.link
+
+    def idle() -> bool:
+        peer = end.peer
+        return node.uart is uart and not (end.inbox or end.closed or peer is None or peer.closed)
+
+    return idle, write
+
+
 def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKernel:
     """Give ``loop``'s kernel (``loop.kernel``) the fast parts its nodes allow: ``plant`` (an
     :class:`rdm.plant.Plant`, the loop's physics) steps in the kernel; a :class:`PlantBridge`
@@ -168,12 +164,10 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         kind = kind_of(node)
         if kind == "leptrino":
             if leptrino is None:
-                kernel.attach_leptrino(i, node)
+                kernel.attach_leptrino(i, node._stream, *_leptrino_uart(node))
                 leptrino = node
         elif kind == "bank" and isinstance(node._wire, CanWireLink):
-            kernel.attach_bank(
-                i, node, node._core, node._wire.wire, list(node.boards), _bank_plan(node)
-            )
+            kernel.attach_bank(i, node._core, node._wire.wire)
         elif kind == "spinal" and node._wire_link is not None and spinal is None:
             kernel.attach_spinal(i, node, node.master.core, node._wire_link.wire, DRAIN_AT)
             spinal = node

@@ -18,7 +18,7 @@ each other's frames as boards on one bus do (colliding slave ids).
 
 :attr:`NeuronBankNode.boards` holds one :class:`NeuronBoardView` per board with the part of
 the mirror interface the plant bridge, the stack and the tools use (``slave_id``,
-``servos[i].goal / torque_enable``, ``changes``, ``esc.duty``, ``set_imu`` ...).
+``servos[i].goal / torque_enable``, ``change_count``, ``esc.duty``, ``set_imu`` ...).
 """
 
 from __future__ import annotations
@@ -109,7 +109,6 @@ class EscView(EscOutputs):
     @held_value.setter
     def held_value(self, value: int) -> None:
         self._board._bank._core.set_esc_held_value(self._board._k, value)
-        self._board._bank._refresh_changes()
 
     @property
     def stopped(self) -> bool:
@@ -190,7 +189,7 @@ class ServoView:
 
 class NeuronBoardView:
     """One board of a :class:`NeuronBankNode`: what a plant, the stack and the tools read and
-    set (``slave_id``, ``servos[i].goal / torque_enable``, ``changes``, ``esc.duty``,
+    set (``slave_id``, ``servos[i].goal / torque_enable``, ``change_count``, ``esc.duty``,
     ``set_imu`` ...)."""
 
     def __init__(self, bank: NeuronBankNode, k: int, spec: NeuronSpec) -> None:
@@ -202,15 +201,27 @@ class NeuronBoardView:
         self.plant_driven = spec.plant_driven
         self.servos = [ServoView(self, i) for i in range(len(spec.servos))]
         self.esc = EscView(self)
-        #: The core's change counter of this board (refreshed after every bank tick).
-        self.changes = [0]
-        self.tx_count = 0
-        self.tx_errors = 0
         self._outputs_at = -1
         self._outputs_cache: tuple[list[int], list[bool]] = ([], [])
 
+    @property
+    def change_count(self) -> int:
+        """The core's change counter of this board (bumped by goal / torque / ESC output
+        changes)."""
+        return self._bank._core.board_changes(self._k)
+
+    @property
+    def tx_count(self) -> int:
+        """Frames this board sent on its bus (counted by the core)."""
+        return self._bank._core.tx_count(self._k)[0]
+
+    @property
+    def tx_errors(self) -> int:
+        """Frames of this board its bus refused."""
+        return self._bank._core.tx_count(self._k)[1]
+
     def _outputs(self) -> tuple[list[int], list[bool]]:
-        c = self.changes[0]
+        c = self.change_count
         if c != self._outputs_at:
             self._outputs_cache = self._bank._core.servo_outputs(self._k)
             self._outputs_at = c
@@ -339,10 +350,6 @@ class NeuronBankNode:
         self.period = period
         self._core = _rdm.NeuronBank([s.core_dict() for s in specs])
         self.boards = [NeuronBoardView(self, k, s) for k, s in enumerate(specs)]
-        #: The plant bridge's coupling runs in the core (:meth:`attach_bridge`).
-        self._bridged = False
-        #: The core's counters as last copied into the boards (None: copy at the next tick).
-        self._last_changes: list[int] | None = None
 
     def attach_bridge(
         self,
@@ -359,7 +366,6 @@ class NeuronBankNode:
         self._core.attach_bridge(
             int(center), list(qadr), list(scale), list(servos), list(rotors), list(group_boards)
         )
-        self._bridged = True
 
     def stick_joint(self, joint: int) -> None:
         """Fault hook: joint ``joint``'s servo output stops following its goal (the
@@ -370,23 +376,14 @@ class NeuronBankNode:
         # A servo reads the bridge's snapshot when it first needs the position after a
         # snapshot; the snapshot is fixed until the next one, so pushing it before the frames
         # are handled gives the same positions.
-        if self._bridged:
+        if self._core.bridged:
             self._core.bridge_push_positions()
-
-    def _refresh_changes(self) -> None:
-        # Most milliseconds no board's counter moves: one list comparison instead of a
-        # write per board.
-        changes = self._core.changes()
-        if changes != self._last_changes:
-            self._last_changes = changes
-            for board, c in zip(self.boards, changes, strict=True):
-                board.changes[0] = c
 
     def _push_positions_if_read(self, non_pwm_pending: bool) -> None:
         """Positions are only read while handling a frame other than a PWM broadcast (MOTOR
         device, id < 0x100): servo words, requests, board configs, or a frame a board sent
         last tick that another board accepts (colliding slave ids)."""
-        if self._bridged and (non_pwm_pending or self._core.sent_frames_heard()):
+        if self._core.bridged and (non_pwm_pending or self._core.sent_frames_heard()):
             self._push_positions()
 
     def tick(self, now: float) -> None:
@@ -394,23 +391,15 @@ class NeuronBankNode:
         if self._wire is not None:  # the Rust wire to the Rust master (docs/canbus.md)
             wire = self._wire.wire
             self._push_positions_if_read(wire.neurons_pending_non_pwm())
-            boards = self.boards
-            for k in self._core.tick_wire(now, self._wire.clock(), wire):
-                boards[k].tx_count += 1
-            self._refresh_changes()
+            self._core.tick_wire(now, self._wire.clock(), wire)  # counts the sent frames
             return
         messages = list(drain(self.bus))
         self._push_positions_if_read(any(m.arbitration_id >= 0x100 for m in messages))
         out = self._core.tick(now, messages)
         if out:
-            bus = self.bus
-            boards = self.boards
+            bus, core = self.bus, self._core
             for k, can_id, payload in out:
-                if send_neuron_payload(bus, can_id, payload):
-                    boards[k].tx_count += 1
-                else:
-                    boards[k].tx_errors += 1
-        self._refresh_changes()
+                core.count_tx(k, send_neuron_payload(bus, can_id, payload))
 
     def close(self) -> None:
         """Shut the bus down (the node owns it)."""

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rdm._rdm import ImuNoiseCore, WrenchNoiseCore
+from rdm._rdm import ImuNoiseCore, NormalStreamCore, WrenchNoiseCore
 from rdm.plant.description import WrenchSensorSpec
 
 GYRO_LSB = math.radians(2000.0 / 32767.0)  # rad/s
@@ -23,36 +23,10 @@ MAG_LSB = 4912.0 / 32760.0  # uT
 GYRO_RANGE = math.radians(2000.0)  # +-2000 dps
 ACCEL_RANGE = 8.0 * 9.80665  # +-8 g
 LEPTRINO_FULL_SCALE_COUNTS = 10000.0
-#: Standard normals drawn per refill of a :class:`NormalStream`.
+#: Standard normals drawn per refill of a model's normal stream (``rdm._rdm.NormalStreamCore``,
+#: the one owner of the model's generator from its construction on: the IMU's after its
+#: biases are drawn; a take of ``k`` gives what ``k`` more ``rng.normal(0.0, 1.0)`` draws would).
 NORMAL_CHUNK = 1024
-
-
-class NormalStream:
-    """Standard normals of one generator, drawn ``NORMAL_CHUNK`` at a time.
-
-    ``take(k)`` returns the next ``k`` values of the stream ``rng.normal(0.0, 1.0, k)`` calls
-    would return one call after another: numpy's ``Generator.normal`` draws element by element
-    with no state carried between calls, so one big draw is the concatenation of small ones
-    (checked in tests/test_plant_sensors_and_bridge.py). Saves numpy's per-call overhead at 1 kHz.
-    The generator then runs ahead of what was taken: the stream owns it.
-    """
-
-    __slots__ = ("_buf", "_pos", "_rng")
-
-    def __init__(self, rng: np.random.Generator) -> None:
-        self._rng = rng
-        self._buf: list[float] = []
-        self._pos = 0
-
-    def take(self, k: int) -> list[float]:
-        pos = self._pos
-        end = pos + k
-        buf = self._buf
-        if end > len(buf):
-            buf = self._buf = buf[pos:] + self._rng.normal(0.0, 1.0, NORMAL_CHUNK).tolist()
-            pos, end = 0, k
-        self._pos = end
-        return buf[pos:end]
 
 
 @dataclass(frozen=True)
@@ -109,8 +83,6 @@ class ImuModel:
     """
 
     def __init__(self, noise: ImuNoise, rng: np.random.Generator) -> None:
-        self._rng = rng
-
         def bias(explicit: tuple[float, float, float] | None, std: float) -> np.ndarray:
             drawn = rng.normal(0.0, std, 3)  # always drawn: the stream does not depend on it
             return drawn if explicit is None else np.asarray(explicit, dtype=float)
@@ -119,7 +91,7 @@ class ImuModel:
         self._gyro_bias = _frozen(bias(noise.gyro_bias, noise.gyro_bias_std))
         self._accel_bias = _frozen(bias(noise.accel_bias, noise.accel_bias_std))
         self._mag_bias = _frozen(bias(noise.mag_bias, noise.mag_bias_std))
-        self._normals = NormalStream(rng)
+        self._normals = NormalStreamCore(rng, NORMAL_CHUNK)
         self._rebuild()
 
     def _rebuild(self) -> None:
@@ -227,8 +199,7 @@ class WrenchSensorModel:
         self.spec = spec
         self.rated = _frozen(np.array([*spec.force_range, *spec.torque_range], dtype=float))
         self._rated_list = self.rated.tolist()
-        self._rng = rng
-        self._normals = NormalStream(rng)
+        self._normals = NormalStreamCore(rng, NORMAL_CHUNK)
         self.noise = noise
 
     @property

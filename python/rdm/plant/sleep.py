@@ -32,6 +32,8 @@ from collections.abc import Callable, Iterable
 import mujoco
 import numpy as np
 
+from rdm._rdm import RestingSleepCore
+
 _SLEEP_BIT = getattr(mujoco.mjtEnableBit, "mjENBL_SLEEP", None)
 _POLICY = getattr(mujoco, "mjtSleepPolicy", None)
 
@@ -39,6 +41,7 @@ _POLICY = getattr(mujoco, "mjtSleepPolicy", None)
 SLEEP_AVAILABLE = _SLEEP_BIT is not None and _POLICY is not None
 #: ``mjENBL_SLEEP`` of ``opt.enableflags`` (0 on a MuJoCo without sleeping).
 SLEEP_ENABLE_BIT = int(_SLEEP_BIT) if _SLEEP_BIT is not None else 0
+#: The bit the rule switches in ``opt.enableflags`` (read when a :class:`RestingSleep` is made).
 _SLEEP_ENABLE = SLEEP_ENABLE_BIT
 ALLOWED = int(_POLICY.mjSLEEP_ALLOWED) if _POLICY is not None else -1
 NEVER = int(_POLICY.mjSLEEP_NEVER) if _POLICY is not None else -1
@@ -55,9 +58,10 @@ class RestingSleep:
     sleep checks (``mj_sleepState`` for every actuator and sensor, ~2.6k instructions a step)
     are skipped; the numbers are the same (docs/plant.md "Sleeping at rest").
 
-    The lockstep kernel runs the same rule on the same arrays (``crates/rdm_py/src/kernel/
-    sleep.rs``); its Python-visible state is ``pending``, ``allowed``, ``wakes``,
-    ``sleep_on`` and ``settled``.
+    The rule and its state (the last controls, ``pending``, ``allowed``, ``wakes``,
+    ``sleep_on``, ``settled``) live in one Rust object, ``rdm._rdm.RestingSleepCore``
+    (``rdm_core::sim::resting_sleep``), on MuJoCo's own arrays; the lockstep kernel's plant
+    step calls the same object.
     """
 
     def __init__(
@@ -74,73 +78,64 @@ class RestingSleep:
             raise ValueError("RestingSleep: no tree to put to sleep")
         #: The rotor actuators (``ctrl`` indices): the robot sleeps only with all of them at 0.
         self.rotors = [int(r) for r in rotors]
-        self._opt = model.opt
         model.opt.enableflags |= int(_SLEEP_BIT)
-        #: ``mjENBL_SLEEP`` is set now.
-        self.sleep_on = True
-        #: A step ran with "never" and sleeping on since the policy was last "allowed" (the
-        #: robot's countdown to sleep is reset): sleeping may go off.
-        self.settled = False
         model.opt.sleep_tolerance = SLEEP_TOLERANCE
-        model.tree_sleep_policy[:] = NEVER  # only the robot may sleep (written below)
-        # Views on the model and data arrays (stable for their lifetime).
-        self._v_policy = model.tree_sleep_policy
-        self._v_tree_asleep = data.tree_asleep
-        self._v_ctrl = data.ctrl
-        #: The controls of the last step (what a step compares its own with).
-        self._v_last_ctrl = np.array(data.ctrl, dtype=float)
-        #: The next step counts as changed (start, reset, an outside change of the state).
-        self.pending = True
-        #: The policy now written for the trees ("allowed" True, "never" False).
-        self.allowed = False
-        #: Steps that found the robot asleep and woke it for a changed control.
-        self.wakes = 0
-        self._write(False)
+        model.tree_sleep_policy[:] = NEVER  # only the robot may sleep (allowed by the rule)
+        #: The rule and its state (MuJoCo's sleeping on, the policy "never", the next step
+        #: counted as changed).
+        self._core = RestingSleepCore(
+            self.trees,
+            self.rotors,
+            ALLOWED,
+            NEVER,
+            _SLEEP_ENABLE,
+            data.ctrl,
+            model.tree_sleep_policy,
+            data.tree_asleep,
+            model.opt,
+        )
 
-    def _write(self, allowed: bool) -> None:
-        policy = self._v_policy
-        value = ALLOWED if allowed else NEVER
-        for t in self.trees:
-            policy[t] = value
-        self.allowed = allowed
+    @property
+    def pending(self) -> bool:
+        """The next step counts as changed (start, reset, an outside change of the state)."""
+        return self._core.pending
+
+    @property
+    def allowed(self) -> bool:
+        """The policy now written for the trees ("allowed" True, "never" False)."""
+        return self._core.allowed
+
+    @property
+    def wakes(self) -> int:
+        """Steps that found the robot asleep and woke it for a changed control."""
+        return self._core.wakes
+
+    @property
+    def sleep_on(self) -> bool:
+        """``mjENBL_SLEEP`` is set now."""
+        return self._core.sleep_on
+
+    @property
+    def settled(self) -> bool:
+        """A step ran with "never" and sleeping on since the policy was last "allowed" (the
+        robot's countdown to sleep is reset): sleeping may go off."""
+        return self._core.settled
+
+    @property
+    def last_ctrl(self) -> np.ndarray:
+        """The controls of the last step (a copy)."""
+        return self._core.last_ctrl
 
     def asleep(self) -> bool:
         """Whether a robot tree is asleep."""
-        asleep = self._v_tree_asleep
-        return any(asleep[t] >= 0 for t in self.trees)
+        return self._core.asleep()
 
     def wake_next(self) -> None:
         """Treat the next step as changed (the caller may have changed the state)."""
-        self.pending = True
+        self._core.wake_next()
 
     def before_step2(self, step1: Callable[[], None]) -> None:
         """This step's rule, once its controls are written: allowed if they equal the last
         step's and the rotors are stopped, else never, and a sleeping robot woken now
         (``step1`` on the same state); then MuJoCo's sleeping on or off for ``mj_step2``."""
-        self._policy(step1)
-        # on while "allowed" and for the first "never" step, which resets MuJoCo's countdown
-        on = self.allowed or not self.settled
-        self.settled = not self.allowed
-        if on != self.sleep_on:
-            flags = self._opt.enableflags
-            self._opt.enableflags = flags | _SLEEP_ENABLE if on else flags & ~_SLEEP_ENABLE
-            self.sleep_on = on
-
-    def _policy(self, step1: Callable[[], None]) -> None:
-        ctrl = self._v_ctrl
-        last = self._v_last_ctrl
-        if not self.pending and np.array_equal(ctrl, last):
-            stopped = all(ctrl[r] == 0.0 for r in self.rotors)
-            if stopped != self.allowed:
-                self._write(stopped)
-            return
-        self.pending = False
-        np.copyto(last, ctrl)
-        if not self.allowed:
-            # "never" held through the last step: MuJoCo cannot have put the robot to sleep
-            # (and a robot found asleep was woken when "never" was written)
-            return
-        self._write(False)
-        if self.asleep():
-            step1()  # mj_wake: policy "never" wakes the tree; the same state's stages again
-            self.wakes += 1
+        self._core.before_step2(step1)

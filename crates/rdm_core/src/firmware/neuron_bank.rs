@@ -34,6 +34,13 @@ pub enum BankError {
     Sensor(usize),
 }
 
+/// Frames a board handed to its bus: sent whole, and refused by the bus.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TxCount {
+    pub sent: u64,
+    pub errors: u64,
+}
+
 /// The Neurons of one bus.
 #[derive(Debug, Clone)]
 pub struct NeuronBank {
@@ -41,6 +48,8 @@ pub struct NeuronBank {
     tx: TxQueue,
     previous: TxQueue,
     previous_heard: bool,
+    /// Per board (bank order).
+    tx_counts: Vec<TxCount>,
 }
 
 /// `floor(now * 1000 + 1e-6)`: seconds to whole ms, robust to float sums (`base.to_ms`).
@@ -62,6 +71,7 @@ impl NeuronBank {
             boards.push(NeuronBoard::new(s).map_err(|e| BankError::Board(k, e))?);
         }
         Ok(NeuronBank {
+            tx_counts: vec![TxCount::default(); boards.len()],
             boards,
             tx: TxQueue::with_capacity(tx_capacity),
             previous: TxQueue::with_capacity(tx_capacity),
@@ -82,6 +92,29 @@ impl NeuronBank {
     /// One board, mutable (IMU samples, test hooks).
     pub fn board_mut(&mut self, k: usize) -> Result<&mut NeuronBoard, BankError> {
         self.boards.get_mut(k).ok_or(BankError::BoardIndex(k))
+    }
+
+    /// A frame of board `board` (a [`Self::tick`] output) went to the bus (`sent`) or the bus
+    /// refused it.
+    pub fn count_tx(&mut self, board: usize, sent: bool) -> Result<(), BankError> {
+        let c = self
+            .tx_counts
+            .get_mut(board)
+            .ok_or(BankError::BoardIndex(board))?;
+        if sent {
+            c.sent += 1;
+        } else {
+            c.errors += 1;
+        }
+        Ok(())
+    }
+
+    /// Board `board`'s frames sent and refused.
+    pub fn tx_count(&self, board: usize) -> Result<TxCount, BankError> {
+        self.tx_counts
+            .get(board)
+            .copied()
+            .ok_or(BankError::BoardIndex(board))
     }
 
     /// Fault hook: board `board`'s MCU resets at the call ([`NeuronBoard::power_cycle`]).
@@ -177,5 +210,23 @@ impl NeuronBank {
     /// frames. Lets a caller skip work that only frames can need.
     pub fn sent_frames_heard(&self) -> bool {
         self.previous_heard
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_counters_are_per_board_and_checked() {
+        let settings = [BoardSettings::new(1), BoardSettings::new(2)];
+        let mut bank = NeuronBank::new(&settings, 16).expect("valid settings");
+        bank.count_tx(1, true).unwrap();
+        bank.count_tx(1, true).unwrap();
+        bank.count_tx(1, false).unwrap();
+        assert_eq!(bank.tx_count(0), Ok(TxCount::default()));
+        assert_eq!(bank.tx_count(1), Ok(TxCount { sent: 2, errors: 1 }));
+        assert_eq!(bank.count_tx(2, true), Err(BankError::BoardIndex(2)));
+        assert_eq!(bank.tx_count(2), Err(BankError::BoardIndex(2)));
     }
 }

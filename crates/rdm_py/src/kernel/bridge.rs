@@ -5,62 +5,29 @@
 //! truth samples the core's schedule says are due.
 
 use pyo3::prelude::*;
-use pyo3::types::{PyList, PyTuple};
+use pyo3::types::PyTuple;
 
 use super::attr::Name;
 use super::leptrino::LeptrinoFast;
 use super::plant::PlantLink;
+use crate::normal_stream::NormalStreamCore;
 use crate::plant_bridge::PlantBridgeCore;
 use crate::sensor_sim::{ImuNoiseCore, WrenchNoiseCore};
 use crate::untracked;
 use rdm_core::sim::sample_schedule::Reading;
 
-/// A `NormalStream` (`rdm.plant.sensors`): its `_buf` list read here, `_pos` kept here.
-struct Normals {
-    stream: Py<PyAny>,
-    buf: Py<PyList>,
-    pos: usize,
-}
-
-impl Normals {
-    fn load(stream: Bound<'_, PyAny>) -> PyResult<Self> {
-        Ok(Normals {
-            buf: stream.getattr("_buf")?.cast_into::<PyList>()?.unbind(),
-            pos: stream.getattr("_pos")?.extract()?,
-            stream: stream.unbind(),
-        })
-    }
-
-    /// The next `N` normals (`NormalStream.take(N)`).
-    fn take<const N: usize>(&mut self, py: Python<'_>) -> PyResult<[f64; N]> {
-        let buf = self.buf.bind(py);
-        if self.pos + N <= buf.len() {
-            let mut out = [0.0; N];
-            for (k, o) in out.iter_mut().enumerate() {
-                *o = buf.get_item(self.pos + k)?.extract()?;
-            }
-            self.pos += N;
-            return Ok(out);
-        }
-        // Refill in Python (the stream owns its generator), then follow the stream.
-        let stream = self.stream.bind(py);
-        stream.setattr("_pos", self.pos)?;
-        let out: [f64; N] = stream.call_method1("take", (N,))?.extract()?;
-        self.buf = stream.getattr("_buf")?.cast_into::<PyList>()?.unbind();
-        self.pos = stream.getattr("_pos")?.extract()?;
-        Ok(out)
-    }
-
-    fn flush(&self, py: Python<'_>) -> PyResult<()> {
-        self.stream.bind(py).setattr("_pos", self.pos)
-    }
+/// The next `N` normals of a noise model's stream (the object the model itself takes from).
+fn take<const N: usize>(py: Python<'_>, stream: &Py<NormalStreamCore>) -> PyResult<[f64; N]> {
+    let mut out = [0.0; N];
+    stream.bind(py).borrow_mut().take_into(py, &mut out)?;
+    Ok(out)
 }
 
 /// The IMU sample as the kernel takes it: into the Spinal mirror's `gyro`/`acc`/`mag`.
 struct ImuPath {
     adr: (usize, usize, usize),
     core: Py<ImuNoiseCore>,
-    normals: Normals,
+    normals: Py<NormalStreamCore>,
     sink: Py<PyAny>,
 }
 
@@ -69,7 +36,7 @@ struct Plan {
     /// (force, torque) addresses in sensordata of the foot wrench sensor.
     wrench_adr: (usize, usize),
     wrench_core: Option<Py<WrenchNoiseCore>>,
-    wrench_normals: Option<Normals>,
+    wrench_normals: Option<Py<NormalStreamCore>>,
     /// None: an IMU sample goes to the Python tick.
     imu: Option<ImuPath>,
     /// `PlantBridge._kernel_truth` (the ground-truth sample into its sink) and the parts it
@@ -83,10 +50,9 @@ struct Names {
     mag: Name,
 }
 
-/// What a fast bridge tick leaves to Python: the foot wrench when the Leptrino path did not
-/// take it, and the ground-truth call when a truth sample is due (in this order).
+/// What a fast bridge tick leaves to Python: the ground-truth call when a truth sample is
+/// due.
 pub(crate) struct BridgeOut {
-    pub(crate) wrench: Option<[f64; 6]>,
     pub(crate) truth: Option<(Py<PyAny>, u8)>,
 }
 
@@ -99,7 +65,6 @@ pub(crate) struct BridgeFast {
     core: Py<PlantBridgeCore>,
     plan: Option<Plan>,
     loaded: bool,
-    dirty: bool,
 }
 
 impl BridgeFast {
@@ -114,7 +79,6 @@ impl BridgeFast {
             core,
             plan: None,
             loaded: false,
-            dirty: false,
         }
     }
 
@@ -133,7 +97,7 @@ impl BridgeFast {
             let wrench_normals = if normals.is_none() {
                 None
             } else {
-                Some(Normals::load(normals)?)
+                Some(normals.cast_into::<NormalStreamCore>()?.unbind())
             };
             let imu = t.get_item(3)?;
             let imu = if imu.is_none() {
@@ -143,7 +107,7 @@ impl BridgeFast {
                 Some(ImuPath {
                     adr: i.get_item(0)?.extract()?,
                     core: i.get_item(1)?.cast_into::<ImuNoiseCore>()?.unbind(),
-                    normals: Normals::load(i.get_item(2)?)?,
+                    normals: i.get_item(2)?.cast_into::<NormalStreamCore>()?.unbind(),
                     sink: i.get_item(3)?.unbind(),
                 })
             };
@@ -209,7 +173,7 @@ impl BridgeFast {
             };
             [three(imu.adr.0)?, three(imu.adr.1)?, three(imu.adr.2)?]
         };
-        let normals = imu.normals.take::<9>(py)?;
+        let normals = take::<9>(py, &imu.normals)?;
         let v = imu.core.get().inner.sample(&ideal, &normals).values;
         let sink = imu.sink.bind(py);
         names.gyro.set(sink, PyTuple::new(py, v[0])?)?;
@@ -218,21 +182,20 @@ impl BridgeFast {
         Ok(())
     }
 
-    /// The tick at `now` (requires `ready`). Returns the foot wrench sample when the
-    /// Leptrino path did not take it (the caller hands it to the Python node).
+    /// The tick at `now` (requires `ready`); the foot wrench sample goes into the Leptrino
+    /// stream state (the plan guarantees a Leptrino part when wrench samples are due).
     pub(crate) fn tick(
         &mut self,
         py: Python<'_>,
         now: f64,
         plant: &mut PlantLink,
-        leptrino: Option<&mut LeptrinoFast>,
+        leptrino: Option<&LeptrinoFast>,
     ) -> PyResult<BridgeOut> {
         let Some(p) = &mut self.plan else {
             return Err(pyo3::exceptions::PyRuntimeError::new_err(
                 "kernel: bridge tick without a plan",
             ));
         };
-        self.dirty = true;
         // 1-4: the core's coupling, then the plant commands it asks for.
         let plant_time = plant.time(py)?;
         let mut core = self.core.bind(py).borrow_mut();
@@ -261,17 +224,15 @@ impl BridgeFast {
             None
         };
         if !due.has(Reading::Wrench) {
-            return Ok(BridgeOut {
-                wrench: None,
-                truth,
-            });
+            return Ok(BridgeOut { truth });
         }
         plant.fresh(py)?;
-        let normals = p
-            .wrench_normals
-            .as_mut()
-            .expect("plan has the normals with the wrench")
-            .take::<6>(py)?;
+        let normals = take::<6>(
+            py,
+            p.wrench_normals
+                .as_ref()
+                .expect("plan has the normals with the wrench"),
+        )?;
         let ideal = {
             let sd = plant.sensordata.bind(py);
             // SAFETY: read only, no Python runs while `sd` lives (untracked.rs).
@@ -296,30 +257,18 @@ impl BridgeFast {
             .as_ref()
             .expect("plan has the core with the wrench");
         let w = core.get().inner.sample(&ideal, &normals).values;
-        let taken = match leptrino {
-            Some(l) => l.set_wrench(py, w)?,
-            None => false,
+        let Some(l) = leptrino else {
+            return Err(pyo3::exceptions::PyRuntimeError::new_err(
+                "kernel: a bridge wrench sample without a Leptrino part",
+            ));
         };
-        Ok(BridgeOut {
-            wrench: if taken { None } else { Some(w) },
-            truth,
-        })
+        l.set_wrench(py, w);
+        Ok(BridgeOut { truth })
     }
 
-    /// Write the normal streams' positions back.
-    pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
-        if !self.dirty {
-            return Ok(());
-        }
-        if let Some(p) = &self.plan {
-            if let Some(n) = &p.wrench_normals {
-                n.flush(py)?;
-            }
-            if let Some(imu) = &p.imu {
-                imu.normals.flush(py)?;
-            }
-        }
-        self.dirty = false;
+    /// Nothing to write back: the bridge's state is its core's, the normal streams' are
+    /// theirs.
+    pub(crate) fn flush(&mut self, _py: Python<'_>) -> PyResult<()> {
         Ok(())
     }
 }

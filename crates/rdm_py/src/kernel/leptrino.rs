@@ -1,180 +1,81 @@
-//! The Leptrino foot-sensor mirror's streaming tick (`LeptrinoSensorNode.tick` while no host
-//! command is waiting) and its `set_wrench_values` for samples inside the rated limits.
-//! Frames go to a buffer written to the UART in one call before Python code runs.
+//! The Leptrino sensor's streaming tick (`LeptrinoSensorNode.tick` while no host command is
+//! waiting) on its stream state, `LeptrinoStreamCore`, which the node shares. Frames wait in
+//! that state and go to the UART in one `write_marked` call before any Python code runs.
 
+use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyList, PyTuple};
-use rdm_core::sim::leptrino_stream::encode_force_frame;
+use pyo3::types::{PyBytes, PyList};
 
-use super::attr::read_plan;
-
-/// Plan of `LeptrinoSensorNode.kernel_plan()`.
-struct Plan {
-    streaming: bool,
-    limits: [f64; 6],
-    rated: [f64; 6],
-    temperature: i64,
-    sensor_no: i64,
-}
+use crate::leptrino_sensor::LeptrinoStreamCore;
 
 pub(crate) struct LeptrinoFast {
-    node: Py<PyAny>,
-    plan: Option<Plan>,
-    loaded: bool,
-    /// The wrench of the last `set_wrench` here, and whether it is newer than `frame`.
-    wrench: [f64; 6],
-    wrench_new: bool,
-    frame: Vec<u8>,
-    frame_valid: bool,
-    /// Frames not yet written and their count, and each frame's (tick time s, end in `out`)
-    /// for the capture's time index (`TappedLink.write_marked`).
-    out: Vec<u8>,
-    frames: i64,
-    marks: Vec<(f64, usize)>,
-    dirty: bool,
+    stream: Py<LeptrinoStreamCore>,
+    /// `idle()`: the node's UART is an open in-process pipe with no host bytes waiting
+    /// (`rdm.nodes.lockstep_kernel`); asked again after Python code ran.
+    idle: Py<PyAny>,
+    /// `write_marked(data, marks) -> int` of the node's UART.
+    write: Py<PyAny>,
+    ready: Option<bool>,
 }
 
 impl LeptrinoFast {
-    /// The Leptrino sensor node.
-    pub(crate) fn node<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
-        self.node.bind(py).clone()
-    }
-
-    pub(crate) fn new(node: &Bound<'_, PyAny>) -> Self {
+    pub(crate) fn new(stream: Py<LeptrinoStreamCore>, idle: Py<PyAny>, write: Py<PyAny>) -> Self {
         LeptrinoFast {
-            node: node.clone().unbind(),
-            plan: None,
-            loaded: false,
-            wrench: [0.0; 6],
-            wrench_new: false,
-            frame: Vec::with_capacity(64),
-            frame_valid: false,
-            out: Vec::with_capacity(4096),
-            frames: 0,
-            marks: Vec::with_capacity(64),
-            dirty: false,
+            stream,
+            idle,
+            write,
+            ready: None,
         }
     }
 
     pub(crate) fn invalidate(&mut self) {
-        self.loaded = false;
-    }
-
-    fn ensure_loaded(&mut self, py: Python<'_>) -> PyResult<()> {
-        if self.loaded {
-            return Ok(());
-        }
-        self.plan = None;
-        self.frame_valid = false;
-        self.wrench_new = false;
-        if let Some(t) = read_plan(self.node.bind(py))? {
-            let wrench: [f64; 6] = t.get_item(5)?.extract()?;
-            let frame = t.get_item(6)?;
-            self.wrench = wrench;
-            if !frame.is_none() {
-                self.frame.clear();
-                self.frame
-                    .extend_from_slice(frame.cast::<PyBytes>()?.as_bytes());
-                self.frame_valid = true;
-            }
-            self.plan = Some(Plan {
-                streaming: t.get_item(0)?.extract()?,
-                limits: t.get_item(1)?.extract()?,
-                rated: t.get_item(2)?.extract()?,
-                temperature: t.get_item(3)?.extract()?,
-                sensor_no: t.get_item(4)?.extract()?,
-            });
-        }
-        self.loaded = true;
-        Ok(())
+        self.ready = None;
     }
 
     /// Whether the tick can run here now.
     pub(crate) fn ready(&mut self, py: Python<'_>) -> PyResult<bool> {
-        self.ensure_loaded(py)?;
-        Ok(self.plan.is_some())
-    }
-
-    /// `set_wrench_values` of a sample inside the limits (true); false: not taken (outside
-    /// the limits, non-finite, or no plan), the caller runs the Python method.
-    pub(crate) fn set_wrench(&mut self, py: Python<'_>, w: [f64; 6]) -> PyResult<bool> {
-        self.ensure_loaded(py)?;
-        let Some(plan) = &self.plan else {
-            return Ok(false);
-        };
-        // The node's chained comparisons: NaN fails them.
-        let inside = w
-            .iter()
-            .zip(plan.limits.iter())
-            .all(|(v, l)| -l <= *v && *v <= *l);
-        if !inside {
-            return Ok(false);
+        if let Some(r) = self.ready {
+            return Ok(r);
         }
-        self.wrench = w;
-        self.wrench_new = true;
-        self.dirty = true;
-        Ok(true)
+        let r = self.idle.bind(py).call0()?.is_truthy()?;
+        self.ready = Some(r);
+        Ok(r)
     }
 
-    /// The streaming tick at `now` (requires `ready`): one sample frame while streaming; false
-    /// when the frame cannot be encoded here (the caller runs the Python tick).
+    /// The bridge's wrench sample into the sensor (clipped or refused and counted there).
+    pub(crate) fn set_wrench(&self, py: Python<'_>, w: [f64; 6]) {
+        self.stream.bind(py).borrow_mut().inner.set_wrench(&w);
+    }
+
+    /// The streaming tick at `now` (requires `ready`); false when the frame cannot be
+    /// encoded (the caller runs the Python tick, which raises).
     pub(crate) fn tick(&mut self, py: Python<'_>, now: f64) -> PyResult<bool> {
-        self.ensure_loaded(py)?;
-        let Some(plan) = &self.plan else {
-            return Ok(false);
-        };
-        if !plan.streaming {
-            return Ok(true); // no command waiting, not streaming: the tick does nothing
-        }
-        if self.wrench_new || !self.frame_valid {
-            match encode_force_frame(
-                &self.wrench,
-                &plan.rated,
-                plan.temperature,
-                0,
-                plan.sensor_no,
-                0,
-            ) {
-                Ok(f) => {
-                    self.frame.clear();
-                    self.frame.extend_from_slice(f.as_bytes());
-                    self.frame_valid = true;
-                    self.wrench_new = false;
-                }
-                Err(_) => return Ok(false),
-            }
-        }
-        self.out.extend_from_slice(&self.frame);
-        self.marks.push((now, self.out.len()));
-        self.frames += 1;
-        self.dirty = true;
-        Ok(true)
+        Ok(self
+            .stream
+            .bind(py)
+            .borrow_mut()
+            .inner
+            .stream_tick(now)
+            .is_ok())
     }
 
-    /// Write the frames and the wrench back (`LeptrinoSensorNode.kernel_commit`).
+    /// Write the pending frames to the UART (an `OSError` is a write of nothing).
     pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
-        if !self.dirty {
-            return Ok(());
-        }
-        if self.plan.is_none() {
-            self.dirty = false;
-            return Ok(());
-        }
-        let wrench = PyTuple::new(py, self.wrench)?;
-        let frame = if self.frame_valid && !self.wrench_new {
-            Some(PyBytes::new(py, &self.frame))
-        } else {
-            None
+        let stream = self.stream.bind(py);
+        let (data, marks) = {
+            let s = stream.borrow();
+            let (data, marks) = s.inner.pending();
+            if data.is_empty() {
+                return Ok(());
+            }
+            (PyBytes::new(py, data), PyList::new(py, marks)?)
         };
-        let data = PyBytes::new(py, &self.out);
-        let marks = PyList::new(py, &self.marks)?;
-        self.node
-            .bind(py)
-            .call_method1("kernel_commit", (data, self.frames, wrench, frame, marks))?;
-        self.out.clear();
-        self.marks.clear();
-        self.frames = 0;
-        self.dirty = false;
+        let written = match self.write.bind(py).call1((&data, marks)) {
+            Ok(n) => n.extract::<usize>()?,
+            Err(e) if e.is_instance_of::<PyOSError>(py) => 0,
+            Err(e) => return Err(e),
+        };
+        stream.borrow_mut().inner.pending_written(written);
         Ok(())
     }
 }

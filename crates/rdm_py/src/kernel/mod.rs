@@ -11,8 +11,9 @@
 //!
 //! Exactness rule: the Python-visible state a fast path changes is written back (`flush`)
 //! before any Python code runs, and every plan is re-read (`invalidate`) after, so Python
-//! code always sees what the node's own ticks would have left. Each node's `kernel_plan`
-//! (Python) says when its fast path applies; `kernel_commit` takes the state back.
+//! code always sees what the node's own ticks would have left. A part whose state is a Rust
+//! core the node shares (Leptrino stream, Neuron bank, resting sleep, normal streams) has
+//! nothing to write back but the Leptrino's pending UART bytes.
 
 mod attr;
 mod bank;
@@ -22,15 +23,16 @@ mod option_flags;
 mod pacing;
 mod plant;
 mod run_loop;
-mod sleep;
 mod spinal;
 
 use pyo3::prelude::*;
 
 use crate::can_master::{CanMaster, CanWire};
 use crate::contact_gate::ContactGateCore;
+use crate::leptrino_sensor::LeptrinoStreamCore;
 use crate::neuron_bank::NeuronBank;
 use crate::plant_bridge::PlantBridgeCore;
+use crate::resting_sleep::RestingSleepCore;
 use crate::rotor_plant::RotorPlantCore;
 use crate::stop_flag::StopFlag;
 use crate::tick_counter::TickCounter;
@@ -40,21 +42,7 @@ use leptrino::LeptrinoFast;
 use pacing::Pacing;
 use plant::{PlantLink, PlantParts};
 use rdm_core::sim::tick_schedule::TickSchedule;
-use sleep::SleepParts;
 
-/// `attach_plant`'s `sleep` tuple (see there).
-type SleepTuple = (
-    Py<PyAny>,
-    Vec<usize>,
-    Vec<usize>,
-    i32,
-    i32,
-    i64,
-    Py<numpy::PyArray1<i32>>,
-    Py<numpy::PyArray1<i32>>,
-    Py<numpy::PyArray1<f64>>,
-    Py<PyAny>,
-);
 use spinal::{SpinalFast, SpinalTick};
 
 /// What a Python call may change, as a mask of the fast parts it invalidates.
@@ -235,10 +223,9 @@ impl LockstepKernel {
     /// `mj_step1`, `mj_step2`, `mj_forward`, `mj_sensorPos`, `mj_sensorVel`; `flags`:
     /// `(Plant._flags_address, model._address, option_flags.SEARCH_BYTES)` (None: unknown);
     /// `opt`: `model.opt`; the rotor and contact-gate cores; the contact tracker; the qpos,
-    /// sensordata and ctrl views; the servo actuator per joint; `sleep`: None or
-    /// `(RestingSleep, trees, rotor actuators, ALLOWED, NEVER, SLEEP_ENABLE_BIT, policy,
-    /// tree_asleep, last_ctrl, model.opt)`.
-    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    /// sensordata and ctrl views; the servo actuator per joint; `sleep`: the core of
+    /// `Plant.sleep` (None: the plant has none).
+    #[allow(clippy::too_many_arguments)]
     #[pyo3(signature = (plant, model, data, mj, flags, opt, rotors, gate, tracker, qpos, sensordata, ctrl, servo_act, sleep))]
     fn attach_plant(
         &mut self,
@@ -255,35 +242,8 @@ impl LockstepKernel {
         sensordata: Py<numpy::PyArray1<f64>>,
         ctrl: Py<numpy::PyArray1<f64>>,
         servo_act: Vec<usize>,
-        sleep: Option<SleepTuple>,
+        sleep: Option<Py<RestingSleepCore>>,
     ) -> PyResult<()> {
-        let sleep = sleep.map(
-            |(
-                obj,
-                trees,
-                rotors,
-                allowed_value,
-                never_value,
-                sleep_bit,
-                policy,
-                tree_asleep,
-                last_ctrl,
-                opt,
-            )| {
-                SleepParts {
-                    obj,
-                    trees,
-                    rotors,
-                    allowed_value,
-                    never_value,
-                    sleep_bit,
-                    policy,
-                    tree_asleep,
-                    last_ctrl,
-                    opt,
-                }
-            },
-        );
         let parts = PlantParts {
             model,
             data,
@@ -322,20 +282,15 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// Node `index` is a `NeuronBankNode` whose board views are `boards` (the core's boards,
-    /// in order) on `wire`; `plan()` returns its plan tuple, or None while it has no Rust
-    /// tick.
+    /// Node `index` is a `NeuronBankNode` whose Rust bank `bank` ticks on `wire`.
     fn attach_bank(
         &mut self,
         index: usize,
-        node: &Bound<'_, PyAny>,
         bank: Py<NeuronBank>,
         wire: Py<CanWire>,
-        boards: Vec<Py<PyAny>>,
-        plan: Py<PyAny>,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.bank = Some(BankFast::new(node, bank, wire, boards, plan)?);
+        self.bank = Some(BankFast::new(bank, wire));
         self.kinds[index] = Kind::Bank;
         self.touches[index] = BANK;
         Ok(())
@@ -357,10 +312,18 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// Node `index` is a `LeptrinoSensorNode`.
-    fn attach_leptrino(&mut self, index: usize, node: &Bound<'_, PyAny>) -> PyResult<()> {
+    /// Node `index` is a `LeptrinoSensorNode` whose stream state is `stream`; `idle()` says
+    /// whether its UART is an open in-process pipe with no host bytes waiting, and
+    /// `write(data, marks)` is that UART's `write_marked`.
+    fn attach_leptrino(
+        &mut self,
+        index: usize,
+        stream: Py<LeptrinoStreamCore>,
+        idle: Py<PyAny>,
+        write: Py<PyAny>,
+    ) -> PyResult<()> {
         self.check_index(index)?;
-        self.leptrino = Some(LeptrinoFast::new(node));
+        self.leptrino = Some(LeptrinoFast::new(stream, idle, write));
         self.kinds[index] = Kind::Leptrino;
         self.touches[index] = LEPTRINO;
         Ok(())

@@ -1,14 +1,15 @@
 //! The plant side of the kernel: `rdm.plant.Plant`'s lazy forward pass and its one-step
 //! physics (`Plant.sync`, `Plant.step(1)`), with the plant's flags kept here between Python
-//! calls and written back before any Python code runs.
+//! calls and written back before any Python code runs; the sleep-at-rest rule is the plant's
+//! own `RestingSleepCore`.
 
 use numpy::PyArrayMethods;
 use pyo3::prelude::*;
 
 use super::attr::Name;
 use super::option_flags::OptionFlags;
-use super::sleep::{SleepLink, SleepParts};
 use crate::contact_gate::ContactGateCore;
+use crate::resting_sleep::RestingSleepCore;
 use crate::rotor_plant::RotorPlantCore;
 use crate::untracked;
 
@@ -50,7 +51,8 @@ pub(crate) struct PlantParts {
     pub(crate) sensordata: Py<numpy::PyArray1<f64>>,
     pub(crate) ctrl: Py<numpy::PyArray1<f64>>,
     pub(crate) servo_act: Vec<usize>,
-    pub(crate) sleep: Option<SleepParts>,
+    /// `Plant.sleep`'s core (the robot's sleep at rest), when the plant has it.
+    pub(crate) sleep: Option<Py<RestingSleepCore>>,
 }
 
 /// One MuJoCo plant as the kernel drives it.
@@ -75,8 +77,8 @@ pub(crate) struct PlantLink {
     pub(crate) ctrl: Py<numpy::PyArray1<f64>>,
     /// Servo actuator index per joint (`Plant._servo_act`).
     servo_act: Vec<usize>,
-    /// `Plant.sleep` (the robot's sleep at rest), when the plant has it.
-    sleep: Option<SleepLink>,
+    /// `Plant.sleep`'s core (the robot's sleep at rest), when the plant has it.
+    sleep: Option<Py<RestingSleepCore>>,
     names: Names,
     // ---- plan (read by `load`, written back by `flush`)
     loaded: bool,
@@ -127,7 +129,7 @@ impl PlantLink {
             sensordata: parts.sensordata,
             ctrl: parts.ctrl,
             servo_act: parts.servo_act,
-            sleep: parts.sleep.map(|s| SleepLink::new(py, s)),
+            sleep: parts.sleep,
             names: Names {
                 stale: Name::new(py, "_stale"),
                 needs_step1: Name::new(py, "_needs_step1"),
@@ -176,9 +178,6 @@ impl PlantLink {
         let external_empty = n.external.get(p)?.len()? == 0;
         self.step_ok = n.rotors_in_core.truthy(p)? && external_empty;
         self.load_tracker(py)?;
-        if let Some(s) = &mut self.sleep {
-            s.load(py)?;
-        }
         self.loaded = true;
         Ok(())
     }
@@ -232,9 +231,6 @@ impl PlantLink {
 
     /// Write the flags back (before Python code runs).
     pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
-        if let Some(s) = &mut self.sleep {
-            s.flush(py)?;
-        }
         if !self.dirty {
             return Ok(());
         }
@@ -278,7 +274,10 @@ impl PlantLink {
         self.ensure_loaded(py)?;
         // Sensors only in the forward pass a reading runs, while the robot cannot fall
         // asleep in this step (`Plant.step`, lazy_sensors).
-        let may_sleep = self.sleep.as_ref().is_some_and(|s| s.allowed());
+        let may_sleep = self
+            .sleep
+            .as_ref()
+            .is_some_and(|s| s.bind(py).borrow().is_allowed());
         if self.sensor_bit == 0 || may_sleep {
             self.passes(py, None)?;
         } else {
@@ -321,11 +320,12 @@ impl PlantLink {
         }
         self.needs_step1 = true;
         self.rotors.bind(py).borrow_mut().run(py, true)?;
-        if let Some(sleep) = &mut self.sleep {
+        if let Some(sleep) = &self.sleep {
             // this step's controls written: the sleep rule (a changed control wakes now)
             let step1 = self.step1.bind(py);
-            sleep.before_step2(py, self.ctrl.bind(py), || step1.call1((m, d)).map(|_| ()))?;
-            if let Some(flags) = lazy.filter(|_| sleep.allowed()) {
+            let mut sleep = sleep.bind(py).borrow_mut();
+            sleep.run_before_step2(py, || step1.call1((m, d)).map(|_| ()))?;
+            if let Some(flags) = lazy.filter(|_| sleep.is_allowed()) {
                 // the robot may fall asleep in this step: its sensors as mj_step1 gives them
                 self.flags.set(py, flags)?;
                 self.sensor_pos.bind(py).call1((m, d))?;

@@ -70,16 +70,7 @@ impl LockstepKernel {
                     return Ok(false);
                 }
                 let (b, p) = (self.bridge.as_mut().unwrap(), self.plant.as_mut().unwrap());
-                let out = b.tick(py, t, p, self.leptrino.as_mut())?;
-                if let Some(w) = out.wrench {
-                    // The Leptrino node's own checks (outside the limits, non-finite).
-                    self.enter_python(py, t, LEPTRINO)?;
-                    let r = self.leptrino_node(py).and_then(|n| {
-                        n.call_method1("set_wrench_values", (pyo3::types::PyTuple::new(py, w)?,))
-                    });
-                    self.leave_python(LEPTRINO);
-                    r?;
-                }
+                let out = b.tick(py, t, p, self.leptrino.as_ref())?;
                 if let Some((truth, touches)) = out.truth {
                     // The ground-truth sample and its sink (the logger): Python's.
                     self.enter_python(py, t, touches)?;
@@ -178,13 +169,6 @@ impl LockstepKernel {
         self.leave_python(touches);
         r?;
         Ok(false)
-    }
-
-    pub(super) fn leptrino_node<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        self.leptrino
-            .as_ref()
-            .map(|l| l.node(py))
-            .ok_or_else(|| pyo3::exceptions::PyRuntimeError::new_err("kernel: no Leptrino node"))
     }
 
     pub(super) fn physics_step(&mut self, py: Python<'_>, t: f64) -> PyResult<()> {
