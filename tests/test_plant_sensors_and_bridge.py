@@ -121,7 +121,7 @@ def test_bridge_present_positions_equal_the_array_expression():
             q[k % n] = specials[k % len(specials)]
             qpos[qadr] = q
             core.couple(0.0, 0.0, qpos)
-            bank._push_positions()
+            bank._core.bridge_push_positions()
             want = (2048 + qpos[qadr] * scale).tolist()
             assert _same([s.position for s in bank.boards[0].servos], want), k
     finally:
