@@ -144,6 +144,10 @@ def _run(
     stack = build_stack("k", tmp, opts, script)
     try:
         steps(stack)
+        # The bridge's one state object: one schedule tick per loop tick of the bridge (the
+        # loop's own count), each at the plant's time.
+        bridge_ticks = stack.loop.stats.ticks["plant_bridge"]
+        assert stack.bridge.ticks == bridge_ticks and stack.bridge.time_mismatches == 0
         state = _state(stack)
         stats = stack.loop.kernel.stats()
         if not kernel:  # the oracle: every tick in the node's own Python tick
@@ -266,7 +270,7 @@ def test_held_external_wrench_takes_the_python_step(tmp_path: Path) -> None:
 def test_battery_voltage_of_time_leaves_the_bridge_to_python(tmp_path: Path) -> None:
     def steps(stack: Stack) -> None:
         stack.loop.run(1.8)
-        stack.bridge._battery = lambda t: 25.2 if t < 2.2 else 24.6
+        stack.bridge.set_battery(lambda t: 25.2 if t < 2.2 else 24.6)
         stack.loop.run(0.8)
 
     stats = _same(tmp_path, steps)

@@ -16,6 +16,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from rdm import _rdm
 from rdm._rdm import NormalStreamCore
 from rdm.plant import Plant
 from rdm.plant.mjcf import rotor_site
@@ -110,7 +111,8 @@ def test_bridge_present_positions_equal_the_array_expression():
     scale = np.random.default_rng(2).uniform(-900.0, 900.0, n)
     qadr = [3, 0, 5, 1]
     bank.attach_bridge(2048, qadr, scale.tolist(), [(0, i, i) for i in range(n)], [], [0])
-    qpos, targets, duties = np.zeros(7), np.zeros(n), np.zeros(0)
+    core = _rdm.PlantBridgeCore([0.0] * n, 0, 0.001, _rdm.SampleSchedule(0, 0, 0, 0), [bank._core])
+    qpos = np.zeros(7)
     gen = np.random.default_rng(4)
     specials = [0.0, -0.0, 1e-300, -1e-300, 5e-324]
     try:
@@ -118,8 +120,8 @@ def test_bridge_present_positions_equal_the_array_expression():
             q = gen.normal(size=n) * 10.0 ** gen.uniform(-8, 2)
             q[k % n] = specials[k % len(specials)]
             qpos[qadr] = q
-            bank.bridge_tick(qpos, targets, duties)
-            bank._push_positions()
+            core.couple(0.0, 0.0, qpos)
+            bank._core.bridge_push_positions()
             want = (2048 + qpos[qadr] * scale).tolist()
             assert _same([s.position for s in bank.boards[0].servos], want), k
     finally:

@@ -103,7 +103,7 @@ def test_battery_and_imu_set_from_outside_are_read_when_used(tmp_path: Path) -> 
 
     def steps(stack: Stack) -> None:
         stack.loop.run(1.8)
-        stack.bridge._battery = lambda t: 25.2 - 0.7 * math.floor((t - 1.8) / 0.13)
+        stack.bridge.set_battery(lambda t: 25.2 - 0.7 * math.floor((t - 1.8) / 0.13))
         stack.loop.run(1.2)
 
     stats = _golden(tmp_path, "battery_and_imu", steps)

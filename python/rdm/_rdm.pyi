@@ -38,6 +38,7 @@ __all__ = [
     "PerchError",
     "PerchQp",
     "PlannerError",
+    "PlantBridgeCore",
     "PlateContactCore",
     "PositionControlError",
     "PositionController",
@@ -909,7 +910,6 @@ class NeuronBank:
         """:meth:`tick` on a :class:`CanWire`: the frames the master sent; replies go on the
         wire stamped ``stamp`` (the channel clock); the sending board index of each reply."""
     def tick(self, now: float, messages: list[object]) -> list[tuple[int, int, bytes]]: ...
-    def sent_frames_heard(self) -> bool: ...
     def attach_bridge(
         self,
         center: int,
@@ -919,9 +919,6 @@ class NeuronBank:
         rotors: list[tuple[int, int]],
         group_boards: list[int],
     ) -> None: ...
-    def bridge_tick(
-        self, qpos: np.ndarray, targets: np.ndarray, duties: np.ndarray
-    ) -> tuple[bool, bool]: ...
     def bridge_push_positions(self) -> None: ...
     def stick_joint(self, joint: int) -> None: ...
     def power_cycle(self, k: int) -> None: ...
@@ -1320,7 +1317,6 @@ class CanWire:
     def dropped(self) -> tuple[int, int]: ...
     @property
     def log_len(self) -> int: ...
-    def neurons_pending_non_pwm(self) -> bool: ...
     def drain_log(self, channel: str) -> str: ...
     def set_loss(self, p: float, seed: int) -> None: ...
     def bus_off(self, start: float, disturbed_s: float) -> None: ...
@@ -1479,6 +1475,47 @@ class TickCounter:
         """The next base tick."""
 
 @_final
+class PlantBridgeCore:
+    """The plant bridge's state (targets and duties last commanded, battery voltage applied,
+    time-mismatch count), its sampling schedule and the Neuron banks it couples: the one
+    object ``rdm.nodes.plant_bridge.PlantBridge`` and the lockstep kernel tick. ``period``
+    must be finite and > 0 (ValueError otherwise)."""
+
+    def __new__(
+        cls,
+        targets: list[float],
+        rotors: int,
+        period: float,
+        schedule: SampleSchedule,
+        banks: list[NeuronBank],
+    ) -> _Self: ...
+    def couple(self, plant_time: float, now: float, qpos: np.ndarray) -> tuple[bool, bool]:
+        """Count a time mismatch, then each bank's coupling into ``targets``/``duties``;
+        returns ``(targets_changed, duties_changed)``."""
+    @property
+    def targets(self) -> np.ndarray:
+        """Servo targets (rad) last written (a copy)."""
+    @property
+    def duties(self) -> np.ndarray:
+        """Rotor duties last written (a copy)."""
+    @property
+    def schedule(self) -> SampleSchedule:
+        """The sampling schedule."""
+    @property
+    def time_mismatches(self) -> int:
+        """Ticks that found the plant more than half a period away."""
+    def set_fixed_battery(self, volts: float | None) -> None:
+        """The battery is the constant ``volts`` or (None) a function of time from now on."""
+    def apply_voltage(self, volts: float) -> bool:
+        """Take ``volts`` as this tick's voltage; True if it differs from the last applied."""
+    @property
+    def voltage(self) -> float | None:
+        """The last voltage applied (None before the first tick)."""
+    @property
+    def battery_steady(self) -> bool:
+        """True when the battery is a constant already applied."""
+
+@_final
 class LockstepKernel:
     """The lockstep loop behind ``rdm.nodes.lockstep.Lockstep``: per base tick the due nodes
     in order, the barriers, one physics step, then pacing and progress; fast paths for the
@@ -1524,9 +1561,8 @@ class LockstepKernel:
     def attach_bridge(
         self,
         index: int,
-        bank: NeuronBank,
+        core: PlantBridgeCore,
         plan: Callable[[], tuple[Any, ...] | None],
-        store: Callable[[int], None],
     ) -> None: ...
     def attach_bank(self, index: int, bank: NeuronBank, wire: CanWire) -> None: ...
     def attach_spinal(

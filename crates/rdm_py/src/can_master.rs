@@ -495,11 +495,6 @@ impl CanWire {
         self.core.log_len()
     }
 
-    /// True when a frame other than a PWM broadcast (id >= 0x100) waits for the Neurons.
-    fn neurons_pending_non_pwm(&self) -> bool {
-        self.core.for_neurons().iter().any(|f| f.id >= 0x100)
-    }
-
     /// The logged frames as `candump -L` lines on `channel`; empties the log.
     fn drain_log(&mut self, channel: &str) -> String {
         let mut out = String::with_capacity(self.core.log_len() * 40);

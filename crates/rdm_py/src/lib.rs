@@ -24,6 +24,7 @@ mod neuron_bank;
 mod normal_stream;
 mod perch;
 mod planner;
+mod plant_bridge;
 mod plate_contact;
 mod position;
 mod qp;
@@ -75,5 +76,6 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     spinal_commands::register(m)?;
     servo_goals::register(m)?;
     sample_schedule::register(m)?;
+    plant_bridge::register(m)?;
     Ok(())
 }

@@ -1,7 +1,6 @@
 //! Bindings of `rdm_core::firmware::neuron_bank`: every Neuron of one CAN bus ticked in one
 //! call (python-can messages in, `(board, can_id, payload)` frames out).
 
-use numpy::{PyArray1, PyArrayMethods};
 use pyo3::create_exception;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList, PyTuple};
@@ -211,38 +210,6 @@ impl NeuronBank {
         Ok(())
     }
 
-    /// One bridge tick: snapshot the joints of `qpos`, then write the servo targets (rad) of
-    /// changed boards into `targets` and their ESC duties into `duties`; returns
-    /// `(targets_changed, duties_changed)`.
-    fn bridge_tick(
-        &mut self,
-        qpos: &Bound<'_, PyArray1<f64>>,
-        targets: &Bound<'_, PyArray1<f64>>,
-        duties: &Bound<'_, PyArray1<f64>>,
-    ) -> PyResult<(bool, bool)> {
-        let bridge = self
-            .bridge
-            .as_mut()
-            .ok_or_else(|| err("bridge_tick: no bridge attached".into()))?;
-        let qpos = qpos.try_readonly()?;
-        let mut targets = targets.try_readwrite()?;
-        let mut duties = duties.try_readwrite()?;
-        let qpos = qpos
-            .as_slice()
-            .map_err(|_| err("qpos: must be C-contiguous".into()))?;
-        let targets = targets
-            .as_slice_mut()
-            .map_err(|_| err("targets: must be C-contiguous".into()))?;
-        let duties = duties
-            .as_slice_mut()
-            .map_err(|_| err("duties: must be C-contiguous".into()))?;
-        bridge.snapshot(qpos).map_err(bridge_err)?;
-        let c = bridge
-            .couple(&self.core, targets, duties)
-            .map_err(bridge_err)?;
-        Ok((c.targets, c.duties))
-    }
-
     /// Fault hook: joint `joint`'s servo output stops following its goal (its plant target
     /// frozen at the next snapshot's angle; `BankBridge::stick_joint`).
     fn stick_joint(&mut self, joint: usize) -> PyResult<()> {
@@ -268,7 +235,9 @@ impl NeuronBank {
     }
 
     /// Advance to `now` (s) with the python-can messages drained from the bus (in order);
-    /// returns `[(board_index, can_id, payload), ...]` to send, in order.
+    /// returns `[(board_index, can_id, payload), ...]` to send, in order. With the bridge
+    /// attached, its snapshot's present positions are pushed first when a frame of this tick
+    /// reads them (`push_positions_if_read`).
     fn tick<'py>(
         &mut self,
         py: Python<'py>,
@@ -279,6 +248,7 @@ impl NeuronBank {
         for m in messages.iter() {
             self.rx.push(rx_frame_of(py, &m)?);
         }
+        self.push_positions_if_read()?;
         let out = self.core.tick(now, &self.rx).map_err(bank_err)?;
         let list = PyList::empty(py);
         for e in out {
@@ -296,7 +266,8 @@ impl NeuronBank {
     }
 
     /// [`tick`] on a `CanWire`: the frames the master sent, replies sent on the wire stamped
-    /// `stamp` (the channel clock); returns the sending board index of each reply.
+    /// `stamp` (the channel clock); returns the sending board index of each reply. The one
+    /// form of the wire tick: the lockstep kernel calls it too (`kernel_tick_wire`).
     fn tick_wire(
         &mut self,
         now: f64,
@@ -329,11 +300,6 @@ impl NeuronBank {
     #[getter]
     fn bridged(&self) -> bool {
         self.bridge.is_some()
-    }
-
-    /// True when a frame the boards sent last tick passes another board's id filter.
-    fn sent_frames_heard(&self) -> bool {
-        self.core.sent_frames_heard()
     }
 
     /// Number of boards.
@@ -507,7 +473,9 @@ impl NeuronBank {
 /// Accessors of the lockstep kernel (`crate::kernel`): the same work as the Python-facing
 /// methods above, on slices and the core wire, without Python objects in between.
 impl NeuronBank {
-    /// [`NeuronBank::bridge_tick`] on slices.
+    /// One bridge tick (`crate::plant_bridge::PlantBridgeCore`): snapshot the joints of
+    /// `qpos`, then write the servo targets (rad) of changed boards into `targets` and their
+    /// ESC duties into `duties`; returns `(targets_changed, duties_changed)`.
     pub(crate) fn kernel_bridge_tick(
         &mut self,
         qpos: &[f64],
@@ -525,9 +493,20 @@ impl NeuronBank {
         Ok((c.targets, c.duties))
     }
 
-    /// [`NeuronBank::bridge_push_positions`].
-    pub(crate) fn kernel_push_positions(&mut self) -> PyResult<()> {
-        self.bridge_push_positions()
+    /// With the bridge attached, push its snapshot's present positions when a frame of this
+    /// tick (`rx`) reads them: positions are read only while handling a frame other than a
+    /// PWM broadcast (MOTOR device, id < 0x100: servo words, requests, board configs) or a
+    /// frame a board sent last tick that another board accepts (colliding slave ids). The
+    /// snapshot is fixed until the next one, so pushing before the frames are handled gives
+    /// the positions a servo reads when it first needs them.
+    fn push_positions_if_read(&mut self) -> PyResult<()> {
+        let Some(b) = self.bridge.as_mut() else {
+            return Ok(());
+        };
+        if self.rx.iter().any(|f| f.id >= 0x100) || self.core.sent_frames_heard() {
+            b.push_positions(&mut self.core).map_err(bridge_err)?;
+        }
+        Ok(())
     }
 
     /// [`NeuronBank::tick_wire`] on the core wire; the sending boards go to `boards`.
@@ -540,6 +519,7 @@ impl NeuronBank {
     ) -> PyResult<()> {
         boards.clear();
         wire.take_for_neurons(&mut self.rx);
+        self.push_positions_if_read()?;
         let out = self.core.tick(now, &self.rx).map_err(bank_err)?;
         for e in out {
             wire.send(
@@ -553,16 +533,6 @@ impl NeuronBank {
             self.core.count_tx(b, true).map_err(bank_err)?;
         }
         Ok(())
-    }
-
-    /// Whether the plant bridge's coupling is attached.
-    pub(crate) fn is_bridged(&self) -> bool {
-        self.bridge.is_some()
-    }
-
-    /// [`NeuronBank::sent_frames_heard`].
-    pub(crate) fn kernel_sent_frames_heard(&self) -> bool {
-        self.core.sent_frames_heard()
     }
 }
 

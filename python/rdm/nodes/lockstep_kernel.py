@@ -66,14 +66,14 @@ def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
 
 
 def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[], tuple | None]:
-    """The plan the kernel reads for ``bridge`` (called again after Python code ran): None
-    when its tick has no Rust form now (boards of several banks, a battery voltage that is a
-    function of time or not yet applied, ESCs outside the Rust duty map, a wrench sink other
-    than ``leptrino``'s ``set_wrench_values``), else the counters, the sampling schedule, the foot
-    wrench path (addresses, noise core, normal stream), the targets and duties arrays, the
-    IMU path when its only sink is ``spinal``'s ``set_imu_sample`` (else None: an IMU ms is
-    Python's), the truth call and the parts it may change. Mocap samples are Python's. The
-    kernel writes the counters back through :func:`_bridge_store`."""
+    """The sample paths the kernel reads for ``bridge`` (called again after Python code
+    ran): None when its tick has no Rust form now (ESCs outside the Rust duty map, a wrench
+    sink other than ``leptrino``'s ``set_wrench_values``), else the foot wrench path
+    (addresses, noise core, normal stream), the IMU path when its only sink is ``spinal``'s
+    ``set_imu_sample`` (else None: an IMU ms is Python's), the truth call and the parts it
+    may change. Mocap samples are Python's. The bridge's state (counters, schedule, targets,
+    duties, battery) is its ``_core``, the one object both tick forms use; the kernel ticks
+    it only while its battery is a constant already applied."""
     plant = bridge.plant
     cls = type(plant)
 
@@ -82,9 +82,6 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
 
     def plan() -> tuple | None:
         b = bridge
-        battery = b._battery
-        if len(b.banks) != 1 or callable(battery) or battery != b._voltage:
-            return None
         if not (plant._duties_in_core and all(e._v_factor is not None for e in plant.escs)):
             return None
         imu_on, wrench_on, _, truth_on = (n > 0 for n in b.schedule.every)
@@ -115,14 +112,9 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
             imu = (plant._imu_adr, model._core, model._normals, spinal)
         touches = b.truth_sink_touches
         return (
-            b.time_mismatches,
-            0.5 * b.period,
-            b.schedule,
             adr,
             core,
             normals,
-            b._targets,
-            b._duties,
             imu,
             truth if truth_on else None,
             ["plant", "bridge", "bank", "spinal", "leptrino"]
@@ -152,20 +144,10 @@ def _leptrino_uart(node: Any) -> tuple[Callable[[], bool], Callable[..., int]]:
     return idle, write
 
 
-def _bridge_store(bridge: PlantBridge) -> Callable[[int], None]:
-    """Where the kernel writes the bridge's time-mismatch count back (its ticks are the
-    count of its sampling schedule, the object the kernel advances)."""
-
-    def store(time_mismatches: int) -> None:
-        bridge.time_mismatches = time_mismatches
-
-    return store
-
-
 def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKernel:
     """Give ``loop``'s kernel (``loop.kernel``) the fast parts its nodes allow: ``plant`` (an
     :class:`rdm.plant.Plant`, the loop's physics) steps in the kernel; a :class:`PlantBridge`
-    whose boards are one bank's, a :class:`NeuronBankNode` on a :class:`CanWireLink`, a
+    on that plant (its ``_core``), a :class:`NeuronBankNode` on a :class:`CanWireLink`, a
     :class:`SpinalMirror` whose Rust master ticks on that wire and a
     :class:`LeptrinoSensorNode` get their steady ticks run there. After any other node's
     Python tick every part is flushed and every plan re-read, unless the node (its class or
@@ -194,8 +176,6 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         if touches is not None and kind_of(node) is None:
             kernel.set_touches(i, list(touches))
     for i, node in enumerate(nodes):
-        bridged = kind_of(node) == "bridge" and len(node.banks) == 1
-        if bridged and plant is node.plant and plant is loop.physics:
-            plan = _bridge_plan(node, leptrino, spinal)
-            kernel.attach_bridge(i, node.banks[0]._core, plan, _bridge_store(node))
+        if kind_of(node) == "bridge" and plant is node.plant and plant is loop.physics:
+            kernel.attach_bridge(i, node._core, _bridge_plan(node, leptrino, spinal))
     return kernel

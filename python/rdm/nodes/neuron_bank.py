@@ -372,35 +372,14 @@ class NeuronBankNode:
         attached coupling's ``_rdm.NeuronBank.stick_joint``)."""
         self._core.stick_joint(joint)
 
-    def bridge_tick(self, qpos: Any, targets: Any, duties: Any) -> tuple[bool, bool]:
-        """Snapshot + goals -> ``targets`` + ESC outputs -> ``duties`` (``NeuronBank.
-        bridge_tick``); returns ``(targets_changed, duties_changed)``."""
-        return self._core.bridge_tick(qpos, targets, duties)
-
-    def _push_positions(self) -> None:
-        # A servo reads the bridge's snapshot when it first needs the position after a
-        # snapshot; the snapshot is fixed until the next one, so pushing it before the frames
-        # are handled gives the same positions.
-        if self._core.bridged:
-            self._core.bridge_push_positions()
-
-    def _push_positions_if_read(self, non_pwm_pending: bool) -> None:
-        """Positions are only read while handling a frame other than a PWM broadcast (MOTOR
-        device, id < 0x100): servo words, requests, board configs, or a frame a board sent
-        last tick that another board accepts (colliding slave ids)."""
-        if self._core.bridged and (non_pwm_pending or self._core.sent_frames_heard()):
-            self._push_positions()
-
     def tick(self, now: float) -> None:
         """Drain the bus, run every board at ``now``, send their frames in order."""
         if self._wire is not None:  # the Rust wire to the Rust master (docs/canbus.md)
-            wire = self._wire.wire
-            self._push_positions_if_read(wire.neurons_pending_non_pwm())
-            self._core.tick_wire(now, self._wire.clock(), wire)  # counts the sent frames
+            # the core pushes the bridge's positions when a frame reads them, counts the sent
+            # frames (the lockstep kernel makes the same call)
+            self._core.tick_wire(now, self._wire.clock(), self._wire.wire)
             return
-        messages = list(drain(self.bus))
-        self._push_positions_if_read(any(m.arbitration_id >= 0x100 for m in messages))
-        out = self._core.tick(now, messages)
+        out = self._core.tick(now, list(drain(self.bus)))
         if out:
             bus, core = self.bus, self._core
             for k, can_id, payload in out:

@@ -19,9 +19,11 @@ nodes), in this order:
 7. every ``mocap_period``: foot pose -> ``mocap_sink(now, position, quaternion_wxyz)``;
    every ``truth_period``: ``truth_sink(GroundTruth)`` (the logger).
 
-Steps 1, 2 and 4 are the Rust coupling of each Neuron bank the boards belong to
-(``rdm_core::firmware::bank_bridge``, ``NeuronBankNode.bridge_tick``): this node converts and
-forwards.
+The bridge's state (the targets and duties last commanded, the battery voltage applied,
+the sampling schedule, the time-mismatch count) and steps 1, 2 and 4 (the coupling of each
+Neuron bank the boards belong to, ``rdm_core::firmware::bank_bridge``) live in one
+:class:`rdm._rdm.PlantBridgeCore` (``_core``): this node forwards to it and runs the sinks,
+and the lockstep kernel ticks the same object.
 
 Commands flow mirror -> plant with one tick of delay (the mirrors tick after the bridge), as a
 real PWM/servo update lands on the next control period.
@@ -207,7 +209,7 @@ class PlantBridge:
             neuron = by_slave.get(nl.slave)
             if neuron is None:
                 raise ValueError(f"PlantBridge: no Neuron mirror with slave id {nl.slave}")
-            if not callable(getattr(getattr(neuron, "_bank", None), "bridge_tick", None)):
+            if not callable(getattr(getattr(neuron, "_bank", None), "attach_bridge", None)):
                 raise ValueError(
                     f"PlantBridge: Neuron {nl.slave} is not a board of a NeuronBankNode"
                 )
@@ -227,7 +229,6 @@ class PlantBridge:
                     raise ValueError(f"PlantBridge: layout rotor {nl.rotor!r} not in the plant")
                 self._rotor_map.append((rotor_index[nl.rotor], neuron))
         self._imu_neurons = [by_slave[n.slave] for n in self.layout.neurons if n.imu]
-        self._battery = battery_voltage
         self._battery_sinks = list(battery_sinks)
         self._imu_sink = imu_sink
         self._wrench_sinks = dict(wrench_sinks or {})
@@ -246,20 +247,26 @@ class PlantBridge:
         wrench_n = _ratio(wrench_period, period, "wrench_period")
         mocap_n = _ratio(mocap_period, period, "mocap_period")
         truth_n = _ratio(truth_period, period, "truth_period")
+        #: The sampling schedule (the core's).
         self.schedule = _rdm.SampleSchedule(
             imu_n if imu_sink is not None or self._imu_neurons else 0,
             wrench_n if self._wrench_sinks else 0,
             mocap_n if mocap_sink is not None else 0,
             truth_n if truth_sink is not None else 0,
         )
-        self._targets = plant.servo_positions()
-        self._duties = np.full(len(plant.rotor_names), 0.5)
         #: The Neuron banks the coupling runs in (each holds its boards' part), layout order.
         self.banks: list = []
         self._attach_banks()
-        self._voltage: float | None = None
+        self._core = _rdm.PlantBridgeCore(
+            [float(q) for q in plant.servo_positions()],
+            len(plant.rotor_names),
+            period,
+            self.schedule,
+            [bank._core for bank in self.banks],
+        )
+        self._battery: float | Callable[[float], float] = 23.0
+        self.set_battery(battery_voltage)
         self._foot_body = plant.model.body(plant.description.foot_frame).id
-        self.time_mismatches = 0
 
     def _attach_banks(self) -> None:
         """Attach each bank's part of the coupling (``NeuronBankNode.attach_bridge``): its
@@ -286,28 +293,21 @@ class PlantBridge:
 
     def tick(self, now: float) -> None:
         """Couple plant and mirrors at ``now`` (see the module doc)."""
-        plant = self.plant
-        if abs(plant.time - now) > 0.5 * self.period:
-            self.time_mismatches += 1
         self._couple(now)
         self._sample(now)
 
     def _couple(self, now: float) -> None:
-        """Steps 1-4: each bank snapshots the joints, writes its changed goals into
-        ``_targets`` and its changed ESC outputs into ``_duties``; the plant is commanded
-        when they moved, the targets before the battery voltage and the voltage before the
-        duties (the plant converts a duty at the voltage it holds when commanded)."""
-        plant = self.plant
-        qpos, targets, duties = plant._v_qpos, self._targets, self._duties
-        targets_changed = duties_changed = False
-        for bank in self.banks:
-            t, d = bank.bridge_tick(qpos, targets, duties)
-            targets_changed |= t
-            duties_changed |= d
+        """Steps 1-4: the core counts a time mismatch, each bank snapshots the joints and
+        writes its changed goals and ESC outputs into the core's targets and duties; the
+        plant is commanded when they moved, the targets before the battery voltage and the
+        voltage before the duties (the plant converts a duty at the voltage it holds when
+        commanded)."""
+        plant, core = self.plant, self._core
+        targets_changed, duties_changed = core.couple(plant.time, now, plant._v_qpos)
         if targets_changed:
-            plant.set_servo_targets(targets)
+            plant.set_servo_targets(core.targets)
         if self._apply_battery(now) or duties_changed:
-            plant.set_rotor_duties(duties)
+            plant.set_rotor_duties(core.duties)
 
     def stick_servo(self, joint: str) -> None:
         """Fault hook (``rdm sim mission --fault stuck-servo``): the servo of ``joint`` stops
@@ -323,14 +323,14 @@ class PlantBridge:
         """The battery voltage from now on (volts, or a function of simulated time): the
         plant's ESCs and the battery sinks take it at the next tick."""
         self._battery = volts
+        self._core.set_fixed_battery(None if callable(volts) else float(volts))
 
     def _apply_battery(self, now: float) -> bool:
         """Apply the battery voltage of ``now`` if it changed (plant ESCs, then the sinks);
         True if it did: the duties must be re-commanded."""
         volts = self._battery(now) if callable(self._battery) else self._battery
-        if volts == self._voltage:
+        if not self._core.apply_voltage(volts):
             return False
-        self._voltage = volts
         self.plant.set_battery_voltage(volts)
         for sink in self._battery_sinks:
             sink(volts)
@@ -356,6 +356,11 @@ class PlantBridge:
             self._truth_sink(plant.ground_truth())
 
     @property
+    def time_mismatches(self) -> int:
+        """Ticks that found the plant more than half a period away from the tick's time."""
+        return self._core.time_mismatches
+
+    @property
     def ticks(self) -> int:
         """Ticks taken so far (the sampling schedule counts them)."""
         return self.schedule.count
@@ -363,4 +368,4 @@ class PlantBridge:
     @property
     def battery_voltage(self) -> float | None:
         """The last voltage applied."""
-        return self._voltage
+        return self._core.voltage

@@ -1,10 +1,11 @@
 //! Simulation-side models that run every simulated millisecond next to the plant: sensor
 //! error models and the sensor-side encoding of what a simulated sensor sends. They mirror
 //! the Python reference forms in `rdm.plant.sensors` / `rdm.protocol.leptrino` operation for
-//! operation, so a run gives the same bytes with either. The plant bridge's sampling
-//! schedule (`sample_schedule`) and the lockstep loop's node schedule (`tick_schedule`) have
-//! this one form.
+//! operation, so a run gives the same bytes with either. The plant bridge's state
+//! (`bridge_state`), its sampling schedule (`sample_schedule`) and the lockstep loop's node
+//! schedule (`tick_schedule`) have this one form.
 
+pub mod bridge_state;
 pub mod contact_gate;
 pub mod esc_duty;
 pub mod fixed_decimals;

@@ -1,7 +1,7 @@
-//! The Neuron bank's wire tick (`NeuronBankNode.tick` on a `CanWireLink` with the bridge
-//! attached): present positions pushed when a frame will read them, the Rust boards ticked,
-//! replies on the wire. The bank's counters (frames sent per board, change counters) are
-//! the core's own: nothing to write back.
+//! The Neuron bank's wire tick (`NeuronBankNode.tick` on a `CanWireLink`): the one call
+//! `NeuronBank.tick_wire` makes (the bridge snapshot's present positions pushed when a frame
+//! will read them, the Rust boards ticked, replies on the wire). The bank's counters (frames
+//! sent per board, change counters) are the core's own: nothing to write back.
 
 use pyo3::prelude::*;
 
@@ -26,20 +26,15 @@ impl BankFast {
 
     pub(crate) fn invalidate(&mut self) {}
 
-    /// The tick runs here once the plant bridge's coupling is attached (a position push is
-    /// then the core's own).
-    pub(crate) fn ready(&mut self, py: Python<'_>) -> PyResult<bool> {
-        Ok(self.bank.bind(py).borrow().is_bridged())
+    /// The wire tick is the bank's one form (`NeuronBank.tick_wire`): it always runs here.
+    pub(crate) fn ready(&mut self, _py: Python<'_>) -> PyResult<bool> {
+        Ok(true)
     }
 
-    /// The tick at `now` (requires `ready`); replies stamped `now` (the channel clock).
+    /// The tick at `now`; replies stamped `now` (the channel clock).
     pub(crate) fn tick(&mut self, py: Python<'_>, now: f64) -> PyResult<()> {
         let mut bank = self.bank.bind(py).borrow_mut();
         let mut wire = self.wire.bind(py).borrow_mut();
-        let pending = wire.core.for_neurons().iter().any(|f| f.id >= 0x100);
-        if pending || bank.kernel_sent_frames_heard() {
-            bank.kernel_push_positions()?;
-        }
         bank.kernel_tick_wire(now, now, &mut wire.core, &mut self.boards)
     }
 

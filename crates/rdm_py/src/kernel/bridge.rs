@@ -1,6 +1,8 @@
-//! The plant bridge's millisecond (`PlantBridge.tick`, boards of one bank) when no IMU,
-//! mocap or ground-truth sample is due: joints -> Neurons, goals -> servo controls, ESC
-//! outputs -> rotor duties, and the foot wrench sample (lazy forward, noise, Leptrino).
+//! The plant bridge's millisecond when no mocap sample is due (nor an IMU or truth sample
+//! without a Rust path): the coupling of the bridge's one `PlantBridgeCore` (joints ->
+//! Neurons, goals -> servo controls, ESC outputs -> rotor duties; the object
+//! `PlantBridge.tick` ticks), then the IMU, foot wrench (lazy forward, noise, Leptrino) and
+//! truth samples the core's schedule says are due.
 
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
@@ -8,9 +10,8 @@ use pyo3::types::PyTuple;
 use super::attr::Name;
 use super::leptrino::LeptrinoFast;
 use super::plant::PlantLink;
-use crate::neuron_bank::NeuronBank;
 use crate::normal_stream::NormalStreamCore;
-use crate::sample_schedule::SampleSchedule;
+use crate::plant_bridge::PlantBridgeCore;
 use crate::sensor_sim::{ImuNoiseCore, WrenchNoiseCore};
 use crate::untracked;
 use rdm_core::sim::sample_schedule::Reading;
@@ -30,13 +31,8 @@ struct ImuPath {
     sink: Py<PyAny>,
 }
 
-/// The bridge's plan (`rdm.nodes.lockstep_kernel`).
+/// The bridge's sample paths (`rdm.nodes.lockstep_kernel`).
 struct Plan {
-    time_mismatches: i64,
-    half_period: f64,
-    /// `PlantBridge.schedule`: its Python ticks and these advance the one counter, which is
-    /// also the bridge's tick count.
-    schedule: Py<SampleSchedule>,
     /// (force, torque) addresses in sensordata of the foot wrench sensor.
     wrench_adr: (usize, usize),
     wrench_core: Option<Py<WrenchNoiseCore>>,
@@ -46,8 +42,6 @@ struct Plan {
     /// `PlantBridge._kernel_truth` (the ground-truth sample into its sink) and the parts it
     /// may change; None: a truth sample goes to the Python tick.
     truth: Option<(Py<PyAny>, u8)>,
-    targets: Py<numpy::PyArray1<f64>>,
-    duties: Py<numpy::PyArray1<f64>>,
 }
 
 struct Names {
@@ -66,36 +60,25 @@ pub(crate) struct BridgeFast {
     /// Returns the plan tuple, or None when the tick has no Rust form now
     /// (`rdm.nodes.lockstep_kernel`).
     plan_of: Py<PyAny>,
-    /// `store(time_mismatches)`: the mismatch count back into the node.
-    store: Py<PyAny>,
     names: Names,
-    bank: Py<NeuronBank>,
+    /// `PlantBridge._core`: the state, schedule and banks both tick forms use.
+    core: Py<PlantBridgeCore>,
     plan: Option<Plan>,
     loaded: bool,
-    dirty: bool,
-    scratch: Vec<f64>,
 }
 
 impl BridgeFast {
-    pub(crate) fn new(
-        py: Python<'_>,
-        bank: Py<NeuronBank>,
-        plan_of: Py<PyAny>,
-        store: Py<PyAny>,
-    ) -> Self {
+    pub(crate) fn new(py: Python<'_>, core: Py<PlantBridgeCore>, plan_of: Py<PyAny>) -> Self {
         BridgeFast {
             plan_of,
-            store,
             names: Names {
                 gyro: Name::new(py, "gyro"),
                 acc: Name::new(py, "acc"),
                 mag: Name::new(py, "mag"),
             },
-            bank,
+            core,
             plan: None,
             loaded: false,
-            dirty: false,
-            scratch: Vec::with_capacity(16),
         }
     }
 
@@ -110,13 +93,13 @@ impl BridgeFast {
         let plan = self.plan_of.bind(py).call0()?;
         self.plan = if !plan.is_none() {
             let t = plan.cast_into::<PyTuple>()?;
-            let normals = t.get_item(5)?;
+            let normals = t.get_item(2)?;
             let wrench_normals = if normals.is_none() {
                 None
             } else {
                 Some(normals.cast_into::<NormalStreamCore>()?.unbind())
             };
-            let imu = t.get_item(8)?;
+            let imu = t.get_item(3)?;
             let imu = if imu.is_none() {
                 None
             } else {
@@ -128,19 +111,16 @@ impl BridgeFast {
                     sink: i.get_item(3)?.unbind(),
                 })
             };
-            let truth = t.get_item(9)?;
+            let truth = t.get_item(4)?;
             let truth = if truth.is_none() {
                 None
             } else {
-                let parts: Vec<String> = t.get_item(10)?.extract()?;
+                let parts: Vec<String> = t.get_item(5)?.extract()?;
                 Some((truth.unbind(), super::parts_mask(&parts)?))
             };
-            let core = t.get_item(4)?;
+            let core = t.get_item(1)?;
             Some(Plan {
-                time_mismatches: t.get_item(0)?.extract()?,
-                half_period: t.get_item(1)?.extract()?,
-                schedule: t.get_item(2)?.cast_into::<SampleSchedule>()?.unbind(),
-                wrench_adr: t.get_item(3)?.extract()?,
+                wrench_adr: t.get_item(0)?.extract()?,
                 wrench_core: if core.is_none() {
                     None
                 } else {
@@ -149,8 +129,6 @@ impl BridgeFast {
                 wrench_normals,
                 imu,
                 truth,
-                targets: t.get_item(6)?.extract()?,
-                duties: t.get_item(7)?.extract()?,
             })
         } else {
             None
@@ -159,13 +137,18 @@ impl BridgeFast {
         Ok(())
     }
 
-    /// Whether the tick can run here: a plan, and no IMU / mocap / truth sample due.
+    /// Whether the tick can run here: a plan, a constant battery already applied, and no
+    /// mocap sample (nor IMU / truth sample without its path) due.
     pub(crate) fn ready(&mut self, py: Python<'_>) -> PyResult<bool> {
         self.ensure_loaded(py)?;
         let Some(p) = &self.plan else {
             return Ok(false);
         };
-        let due = p.schedule.bind(py).borrow().inner.peek();
+        let core = self.core.bind(py).borrow();
+        if !core.state.battery_steady() {
+            return Ok(false);
+        }
+        let due = core.schedule.bind(py).borrow().inner.peek();
         Ok((p.imu.is_some() || !due.has(Reading::Imu))
             && !due.has(Reading::Mocap)
             && (p.truth.is_some() || !due.has(Reading::Truth)))
@@ -213,52 +196,23 @@ impl BridgeFast {
                 "kernel: bridge tick without a plan",
             ));
         };
-        self.dirty = true;
-        if (plant.time(py)? - now).abs() > p.half_period {
-            p.time_mismatches += 1;
-        }
-        // 1-4: the Rust coupling (bank.bridge_tick), then the plant commands it asks for.
+        // 1-4: the core's coupling, then the plant commands it asks for.
+        let plant_time = plant.time(py)?;
+        let mut core = self.core.bind(py).borrow_mut();
         let (targets_changed, duties_changed) = {
-            let (qpos, targets, duties) =
-                (plant.qpos.bind(py), p.targets.bind(py), p.duties.bind(py));
-            let apart = untracked::disjoint(targets, duties)
-                && untracked::disjoint(targets, qpos)
-                && untracked::disjoint(duties, qpos);
-            if !apart {
-                return Err(pyo3::exceptions::PyValueError::new_err(
-                    "bridge arrays: targets, duties and qpos must not share memory",
-                ));
-            }
-            // SAFETY: the three buffers are disjoint (checked above); kernel_bridge_tick is
-            // Rust and runs no Python (untracked.rs).
-            let (qpos, targets, duties) = unsafe {
-                (
-                    untracked::read(qpos, "qpos")?,
-                    untracked::write(targets, "bridge targets")?,
-                    untracked::write(duties, "bridge duties")?,
-                )
-            };
-            self.bank
-                .bind(py)
-                .borrow_mut()
-                .kernel_bridge_tick(qpos, targets, duties)?
+            // SAFETY: read only; kernel_couple is Rust and runs no Python (untracked.rs).
+            let qpos = unsafe { untracked::read(plant.qpos.bind(py), "qpos") }?;
+            core.kernel_couple(py, plant_time, now, qpos)?
         };
         if targets_changed {
-            self.scratch.clear();
-            // SAFETY: read only, copied out before any Python runs (untracked.rs).
-            let targets = unsafe { untracked::read(p.targets.bind(py), "bridge targets") }?;
-            self.scratch.extend_from_slice(targets);
-            plant.set_servo_targets(py, &self.scratch)?;
+            plant.set_servo_targets(py, &core.state.targets)?;
         }
         if duties_changed {
-            self.scratch.clear();
-            // SAFETY: as for the targets.
-            let duties = unsafe { untracked::read(p.duties.bind(py), "bridge duties") }?;
-            self.scratch.extend_from_slice(duties);
-            plant.command_duties(py, &self.scratch)?;
+            plant.command_duties(py, &core.state.duties)?;
         }
         // 5-7: the IMU, the wrench, the truth (ready() excluded mocap).
-        let due = p.schedule.bind(py).borrow_mut().inner.advance();
+        let due = core.schedule.bind(py).borrow_mut().inner.advance();
+        drop(core);
         if due.has(Reading::Imu) {
             let imu = p.imu.as_mut().expect("ready() checked the IMU path");
             Self::imu_sample_of(&self.names, py, imu, plant)?;
@@ -312,15 +266,9 @@ impl BridgeFast {
         Ok(BridgeOut { truth })
     }
 
-    /// Write the counters back (`store`).
-    pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
-        if !self.dirty {
-            return Ok(());
-        }
-        if let Some(p) = &self.plan {
-            self.store.bind(py).call1((p.time_mismatches,))?;
-        }
-        self.dirty = false;
+    /// Nothing to write back: the bridge's state is its core's, the normal streams' are
+    /// theirs.
+    pub(crate) fn flush(&mut self, _py: Python<'_>) -> PyResult<()> {
         Ok(())
     }
 }

@@ -31,6 +31,7 @@ use crate::can_master::{CanMaster, CanWire};
 use crate::contact_gate::ContactGateCore;
 use crate::leptrino_sensor::LeptrinoStreamCore;
 use crate::neuron_bank::NeuronBank;
+use crate::plant_bridge::PlantBridgeCore;
 use crate::resting_sleep::RestingSleepCore;
 use crate::rotor_plant::RotorPlantCore;
 use crate::stop_flag::StopFlag;
@@ -264,19 +265,18 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// Node `index` is a `PlantBridge` coupled through `bank` (needs `attach_plant`);
-    /// `plan()` returns its plan tuple, or None when its tick has no Rust form now;
-    /// `store(time_mismatches)` writes the mismatch count back.
+    /// Node `index` is a `PlantBridge` whose state is `core` (`PlantBridge._core`, needs
+    /// `attach_plant`); `plan()` returns its sample paths, or None when its tick has no Rust
+    /// form now.
     fn attach_bridge(
         &mut self,
         py: Python<'_>,
         index: usize,
-        bank: Py<NeuronBank>,
+        core: Py<PlantBridgeCore>,
         plan: Py<PyAny>,
-        store: Py<PyAny>,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.bridge = Some(BridgeFast::new(py, bank, plan, store));
+        self.bridge = Some(BridgeFast::new(py, core, plan));
         self.kinds[index] = Kind::Bridge;
         self.touches[index] = BRIDGE | PLANT | LEPTRINO;
         Ok(())
