@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import struct
 import subprocess
 import sys
 from pathlib import Path
@@ -30,6 +31,7 @@ import numpy as np
 import pytest
 
 import rdm
+from rdm.nodes.onboard import OnboardNode
 from rdm.plant.ceiling import NoCeilingEffect
 from rdm.plant.sensors import ImuReading
 from rdm.scenarios import mission
@@ -195,9 +197,8 @@ def test_any_dead_rotor_is_detected_named_and_cut_upright(tmp_path, monkeypatch,
     monkeypatch.setattr(mission, "DEAD_ROTOR", rotor)
     record, stack = _quick(tmp_path, "dead-esc")
     assert isinstance(stack.plant.ceiling_effects[rotor], DeadRotor)
-    assert not any(
-        isinstance(e, DeadRotor) for k, e in enumerate(stack.plant.ceiling_effects) if k != rotor
-    )
+    effects = stack.plant.ceiling_effects
+    assert sum(isinstance(e, DeadRotor) for e in effects) == 1
     node, at = stack.onboard, record["fault_at_s"]
     assert node.monitors.counts["rotor_lost"] == 1 and node.lost_rotor == rotor
     assert node.lost_heavy == (rotor == 1)
@@ -423,7 +424,17 @@ def test_can_loss_drops_its_share_of_the_pwm_broadcasts(tmp_path):
     assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
 
 
-def test_neuron_reset_is_detected_the_board_comes_back_and_the_robot_lands(tmp_path):
+def test_neuron_reset_is_detected_the_board_comes_back_and_the_robot_lands(tmp_path, monkeypatch):
+    # every rpy/gain payload the node puts on the Spinal UART, with the node's time
+    gains: list[tuple[float, bytes]] = []
+    publish = OnboardNode._publish_payload
+
+    def spy(node, topic, payload):
+        if topic == "rpy/gain":
+            gains.append((node._now, bytes(payload)))
+        return publish(node, topic, payload)
+
+    monkeypatch.setattr(OnboardNode, "_publish_payload", spy)
     record, stack = _quick(tmp_path, "neuron-reset")
     at = record["fault_at_s"]
     k = mission.RESET_BOARD
@@ -463,10 +474,24 @@ def test_neuron_reset_is_detected_the_board_comes_back_and_the_robot_lands(tmp_p
     detected = node.monitors.first_trip["rotor_lost"]
     cut = node.monitors.first_trip["rotor_lost_cut"]
     assert node.lost_rotor == 0 and at < detected <= at + 0.05
-    # rotor 0 comes back inside the arrest; its gains and gyro-moment row went out zero, so
-    # Spinal gives it the 1 N floor, not the 15-17 N its roll error asked of it with them
-    back = (a["t"] > at + 0.12) & (a["t"] < cut)
-    assert back.any() and a["thrust"][back, 0].max() < 3.0
+
+    # rotor 0 comes back inside the arrest: the rpy/gain rows sent from the detection to the
+    # cut (decoded here from the wire layout: uint32 count, then roll_p, roll_i, roll_d,
+    # pitch_p, pitch_i, pitch_d, yaw_d as int16 per motor) have rotor 0's roll and pitch
+    # terms zero and the other rotors' not; before the fault every row is whole
+    def rows(payload: bytes) -> np.ndarray:
+        (count,) = struct.unpack_from("<I", payload)
+        return np.frombuffer(payload, "<i2", count * 7, 4).reshape(count, 7)
+
+    # the detection's tick: its last payload (a synthesis may have sent whole rows before the
+    # trip in the same tick), then every one up to the cut
+    at_trip = [rows(p) for t, p in gains if t == detected]
+    arrest = at_trip[-1:] + [rows(p) for t, p in gains if detected < t < cut]
+    assert at_trip
+    for r in arrest:
+        assert not r[0, :6].any() and r[1:, :6].any(axis=1).all()
+    before = [rows(p) for t, p in gains if t < at]
+    assert before and before[-1][:, :6].any(axis=1).all()
     # the ground truth: tilt in the air under 30 deg, disarmed on the floor
     floor = a["cog"][np.searchsorted(a["t"], mission.ARM_AT) - 1, 2]
     airborne = a["cog"][:, 2] > floor + 0.05

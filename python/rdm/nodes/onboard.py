@@ -178,8 +178,9 @@ class OnboardNode(OnboardOperator, OnboardReceive, OnboardStep, OnboardSend):
         self.last_command: ControlCommand | None = None
         #: when a lost rotor was detected (None: not lost, or disarmed since)
         self.rotor_lost_at: float | None = None
-        #: which rotor the detection named (:func:`rdm.nodes.onboard_rotor_loss.lost_rotor`;
-        #: None: not named); its gain and gyro-moment rows go out zero during the arrest
+        #: which rotor the last detection named (:func:`rdm.nodes.onboard_rotor_loss.
+        #: lost_rotor`; None: none yet, or not named); its gain and gyro-moment rows go out
+        #: zero during the arrest (while ``rotor_lost_at`` is set)
         self.lost_rotor: int | None = None
         #: whether the lost rotor carries more than a quarter of the weight (the specific
         #: force dropped below ``MonitorLimits.rotor_loss_specific_force``)

@@ -209,7 +209,7 @@ class OnboardStep:
         and the robot falls."""
         lim = self.config.monitors
         if not flying:
-            self.rotor_lost_at = self.lost_rotor = None
+            self.rotor_lost_at = None  # lost_rotor keeps the last detection's rotor
             self.control.use_arrest_gains(False)  # the configured weights for the next flight
             return
         if self.rotor_lost_at is not None:
