@@ -9,10 +9,12 @@
 * The plant-side faults (``rdm.scenarios.mission_faults``): IMU outliers at their rate and
   beyond Spinal's ranges, each one dropped by Spinal's estimator (its ``out_of_range``
   counter equals the injected count) and refused by the node (``imu_implausible``, the same
-  count), the flight ending safe; a dead rotor gives no
-  thrust, the node's ``rotor_lost`` trips within 0.1 s, stops the turn (Table V's LQI gains
-  for ``rotor_loss_arrest_s``) and cuts the motors, and the ground truth's tilt stays under
-  30 deg down to the floor.
+  count), the flight ending safe; a dead rotor (any of the four) gives no
+  thrust, the node's ``rotor_lost`` trips within 0.1 s, names the rotor, stops the turn
+  (Table V's LQI gains without its row for ``rotor_loss_arrest_s``, a light rotor's
+  ``rotor_loss_light_arrest_s``) and cuts the motors, and the ground truth's tilt stays
+  under 30 deg down to the floor. A Neuron reset stops rotor 0's ESC for the reboot: the
+  same reaction, the rotor back inside the arrest held on the thrust floor, the robot landed.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import struct
 import subprocess
 import sys
 from pathlib import Path
@@ -28,6 +31,7 @@ import numpy as np
 import pytest
 
 import rdm
+from rdm.nodes.onboard import OnboardNode
 from rdm.plant.ceiling import NoCeilingEffect
 from rdm.plant.sensors import ImuReading
 from rdm.scenarios import mission
@@ -182,6 +186,33 @@ def test_dead_esc_is_detected_cut_and_falls_upright(tmp_path):
     assert not stack.spinal.core.armed and node.state.value == "idle"
     # Spinal's own tilt fail-safe (57 deg) never had to act
     assert not stack.spinal.counters.failsafes["failsafe_tilt"]
+    assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
+
+
+@pytest.mark.parametrize("rotor", [1, 2, 3])
+def test_any_dead_rotor_is_detected_named_and_cut_upright(tmp_path, monkeypatch, rotor):
+    """A dead rotor 1 (as heavy as rotor 0: the specific force drops) or 2, 3 (3.8 N: the
+    attitude alone shows it): the node names it, arrests the turn without it and cuts; the
+    ground truth stays under 30 deg down to the floor."""
+    monkeypatch.setattr(mission, "DEAD_ROTOR", rotor)
+    record, stack = _quick(tmp_path, "dead-esc")
+    assert isinstance(stack.plant.ceiling_effects[rotor], DeadRotor)
+    effects = stack.plant.ceiling_effects
+    assert sum(isinstance(e, DeadRotor) for e in effects) == 1
+    node, at = stack.onboard, record["fault_at_s"]
+    assert node.monitors.counts["rotor_lost"] == 1 and node.lost_rotor == rotor
+    assert node.lost_heavy == (rotor == 1)
+    lim = node.config.monitors
+    arrest = lim.rotor_loss_arrest_s if rotor == 1 else lim.rotor_loss_light_arrest_s
+    cut_after = node.monitors.first_trip["rotor_lost_cut"] - record["detected_at_s"]
+    assert at < record["detected_at_s"] <= at + 0.1
+    assert arrest - 1e-6 <= cut_after <= arrest + 1e-6
+    a = truth_arrays(stack)
+    floor = a["cog"][np.searchsorted(a["t"], mission.ARM_AT) - 1, 2]
+    airborne = a["cog"][:, 2] > floor + 0.05
+    assert np.degrees(np.abs(roll_pitch(a["quat"][airborne]))).max() <= mission.MAX_TILT_DEG
+    assert abs(a["cog"][-1, 2] - floor) < 0.05
+    assert not stack.spinal.core.armed and node.state.value == "idle"
     assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
 
 
@@ -393,7 +424,17 @@ def test_can_loss_drops_its_share_of_the_pwm_broadcasts(tmp_path):
     assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
 
 
-def test_neuron_reset_is_detected_the_board_comes_back_and_the_crash_is_reported(tmp_path):
+def test_neuron_reset_is_detected_the_board_comes_back_and_the_robot_lands(tmp_path, monkeypatch):
+    # every rpy/gain payload the node puts on the Spinal UART, with the node's time
+    gains: list[tuple[float, bytes]] = []
+    publish = OnboardNode._publish_payload
+
+    def spy(node, topic, payload):
+        if topic == "rpy/gain":
+            gains.append((node._now, bytes(payload)))
+        return publish(node, topic, payload)
+
+    monkeypatch.setattr(OnboardNode, "_publish_payload", spy)
     record, stack = _quick(tmp_path, "neuron-reset")
     at = record["fault_at_s"]
     k = mission.RESET_BOARD
@@ -425,12 +466,38 @@ def test_neuron_reset_is_detected_the_board_comes_back_and_the_crash_is_reported
     a = truth_arrays(stack)
     window = (a["t"] > at + 0.04) & (a["t"] < at + 0.09)
     assert a["thrust"][window, 0].max() < 0.5
-    # rotor 0 without thrust rolls the robot: the node's lost-rotor detection trips and cuts
-    # (docs/flying.md "A lost rotor"); the record follows the ground truth's tilt
-    assert stack.onboard.monitors.counts["rotor_lost"] == 1
-    assert stack.onboard.monitors.counts["rotor_lost_cut"] == 1
-    assert record["fault_detected"] and record["outcome"] in ("landed", "crashed")
-    assert record["safe"] == (record["max_tilt_deg"] <= mission.MAX_TILT_DEG)
+    # rotor 0 without thrust rolls the robot: the node's lost-rotor detection names it and
+    # cuts (docs/flying.md "A lost rotor")
+    node = stack.onboard
+    assert node.monitors.counts["rotor_lost"] == 1
+    assert node.monitors.counts["rotor_lost_cut"] == 1
+    detected = node.monitors.first_trip["rotor_lost"]
+    cut = node.monitors.first_trip["rotor_lost_cut"]
+    assert node.lost_rotor == 0 and at < detected <= at + 0.05
+
+    # rotor 0 comes back inside the arrest: the rpy/gain rows sent from the detection to the
+    # cut (decoded here from the wire layout: uint32 count, then roll_p, roll_i, roll_d,
+    # pitch_p, pitch_i, pitch_d, yaw_d as int16 per motor) have rotor 0's roll and pitch
+    # terms zero and the other rotors' not; before the fault every row is whole
+    def rows(payload: bytes) -> np.ndarray:
+        (count,) = struct.unpack_from("<I", payload)
+        return np.frombuffer(payload, "<i2", count * 7, 4).reshape(count, 7)
+
+    # the detection's tick: its last payload (a synthesis may have sent whole rows before the
+    # trip in the same tick), then every one up to the cut
+    at_trip = [rows(p) for t, p in gains if t == detected]
+    arrest = at_trip[-1:] + [rows(p) for t, p in gains if detected < t < cut]
+    assert at_trip
+    for r in arrest:
+        assert not r[0, :6].any() and r[1:, :6].any(axis=1).all()
+    before = [rows(p) for t, p in gains if t < at]
+    assert before and before[-1][:, :6].any(axis=1).all()
+    # the ground truth: tilt in the air under 30 deg, disarmed on the floor
+    floor = a["cog"][np.searchsorted(a["t"], mission.ARM_AT) - 1, 2]
+    airborne = a["cog"][:, 2] > floor + 0.05
+    assert np.degrees(np.abs(roll_pitch(a["quat"][airborne]))).max() <= mission.MAX_TILT_DEG
+    assert abs(a["cog"][-1, 2] - floor) < 0.05
+    assert record["fault_detected"] and record["safe"] and record["outcome"] == "landed"
 
 
 def test_no_goal_resync_without_a_fault(tmp_path):

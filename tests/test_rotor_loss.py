@@ -4,6 +4,12 @@
 * :func:`diverging_axis`: trips only when the error is beyond the angle **and** the gyro turns
   it further beyond the rate (catches a dropped sign test: a swing back to the target is no
   fault; a dropped rate test: a slow lean is none either).
+* :func:`lost_rotor` on the shipped robot against scipy's ``solve_ivp`` of Euler's rigid-body
+  equations (the full inertia, I_xz included): each rotor's hover thrust removed, the body
+  rates 20 ms later name that rotor, in the class its thrust puts it in (catches a sign
+  flip: the rotor across; swapped roll and pitch rows; an inverted class filter). The
+  class boundary and :func:`turning_axis`'s threshold, and ``MonitorLimits``' check of the
+  specific-force window.
 * :func:`three_rotor_hover_tilt` on the shipped robot against scipy: ``linprog`` finds no
   nonnegative thrusts of the three remaining rotors that balance roll and pitch level, and
   the smallest offset of a thrust centroid from the CoG comes from ``nnls`` over convex
@@ -15,11 +21,18 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
 from scipy.optimize import linprog, nnls
 
 from rdm.model import Robot
 from rdm.nodes.onboard_monitors import MonitorLimits
-from rdm.nodes.onboard_rotor_loss import diverging_axis, three_rotor_hover_tilt
+from rdm.nodes.onboard_rotor_loss import (
+    diverging_axis,
+    lost_rotor,
+    three_rotor_hover_tilt,
+    turning_axis,
+)
 
 LIM = MonitorLimits()
 TILT, RATE = LIM.rotor_loss_tilt_rad, LIM.rotor_loss_rate_rad_s
@@ -70,3 +83,52 @@ def test_a_cog_inside_the_triangle_hovers_level() -> None:
     assert level is not None and tilt == 0.0
     r = pos[[0, 2, 3]] - cog
     assert np.allclose([level.sum(), level @ r[:, 1], level @ r[:, 0]], [30.0, 0.0, 0.0])
+
+
+def _hover_terms() -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """The shipped robot's allocation rows (f_z, m_x, m_y, m_z; vertical thrusts, no drag),
+    level hover thrusts (least norm: weight, no roll or pitch moment), inertia and weight."""
+    robot = Robot.default()
+    out = robot.evaluate([0.0] * robot.n_q)
+    pos, cog = np.asarray(out["rotor_positions"]), np.asarray(out["cog"])
+    weight = float(out["mass"]) * 9.80665
+    r = pos - cog
+    qbar = np.vstack([np.ones(len(r)), r[:, 1], -r[:, 0], np.zeros(len(r))])
+    hover = np.linalg.lstsq(qbar[:3], [weight, 0.0, 0.0], rcond=None)[0]
+    return qbar, hover, np.asarray(out["inertia"], dtype=float), weight
+
+
+@pytest.mark.parametrize("lost", [0, 1, 2, 3])
+def test_the_rotor_whose_loss_turns_the_body_is_named(lost: int) -> None:
+    qbar, hover, inertia, weight = _hover_terms()
+    assert np.all(hover > 0)
+    # the moment the lost hover thrust leaves unbalanced, r x (0, 0, -f)
+    torque = -hover[lost] * np.array([qbar[1, lost], qbar[2, lost], 0.0])
+    inv = np.linalg.inv(inertia)
+
+    def euler(_t: float, w: np.ndarray) -> np.ndarray:
+        return inv @ (torque - np.cross(w, inertia @ w))
+
+    w = solve_ivp(euler, (0.0, 0.02), np.zeros(3), rtol=1e-9, atol=1e-12).y[:, -1]
+    heavy = bool(hover[lost] > 0.25 * weight)
+    assert heavy == (lost in (0, 1))  # the front rotors carry 14.4 of 36.3 N each
+    rates = (float(w[0]), float(w[1]))
+    assert lost_rotor(qbar, hover, inertia, rates, heavy, weight) == lost
+    # the other class has no rotor that turns the body this way... or names another one
+    assert lost_rotor(qbar, hover, inertia, rates, not heavy, weight) != lost
+    # no turn: no rotor named
+    assert lost_rotor(qbar, hover, inertia, (0.0, 0.0), heavy, weight) is None
+
+
+def test_turning_axis_is_the_faster_rate_beyond_the_threshold() -> None:
+    early = LIM.rotor_loss_early_rate_rad_s
+    assert turning_axis(early, (-0.7, 0.1)) == "roll"
+    assert turning_axis(early, (0.2, 0.9)) == "pitch"
+    assert turning_axis(early, (0.4, -0.45)) is None
+
+
+def test_the_specific_force_window_must_be_ordered() -> None:
+    with pytest.raises(ValueError, match="rotor_loss_min_specific_force"):
+        MonitorLimits(rotor_loss_min_specific_force=8.0)
+    with pytest.raises(ValueError, match="rotor_loss_light_arrest_s"):
+        MonitorLimits(rotor_loss_light_arrest_s=0.0)

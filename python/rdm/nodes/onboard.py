@@ -178,6 +178,13 @@ class OnboardNode(OnboardOperator, OnboardReceive, OnboardStep, OnboardSend):
         self.last_command: ControlCommand | None = None
         #: when a lost rotor was detected (None: not lost, or disarmed since)
         self.rotor_lost_at: float | None = None
+        #: which rotor the last detection named (:func:`rdm.nodes.onboard_rotor_loss.
+        #: lost_rotor`; None: none yet, or not named); its gain and gyro-moment rows go out
+        #: zero during the arrest (while ``rotor_lost_at`` is set)
+        self.lost_rotor: int | None = None
+        #: whether the lost rotor carries more than a quarter of the weight (the specific
+        #: force dropped below ``MonitorLimits.rotor_loss_specific_force``)
+        self.lost_heavy = True
         #: The joint goals [rad] of the last ``servo/target_states`` sent (the vectoring
         #: joints' angles written over the plan in flight), in joint order.
         self.last_servo_goals: list[float] | None = None
@@ -199,7 +206,8 @@ class OnboardNode(OnboardOperator, OnboardReceive, OnboardStep, OnboardSend):
         self._torque_sent_at: float | None = None
         # messages rebuilt only when their content changed (same object -> same bytes)
         self._gains_msg: tuple[tuple[bytes, str, tuple[int, ...]], Any] | None = None
-        self._p_matrix_msg: tuple[Any, Any] | None = None
+        #: (wire terms, message, lost rotor whose row the message zeroes)
+        self._p_matrix_msg: tuple[Any, Any, int | None] | None = None
         self._desire_msg: tuple[Any, Any] | None = None
         #: ``servo/states`` readings seen before (the servos hold still for many messages) are
         #: applied from their cached joint writes

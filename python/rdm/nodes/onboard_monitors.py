@@ -99,17 +99,45 @@ class MonitorLimits:
     #: m/s^2: the thrust has dropped. ASSUMPTION: 7.35 (0.75 g); the hover's readings stay at
     #: 9.0 or above, a dead rotor 0 (14.4 of 36.4 N) reads 3.2-5.9 within 25 ms, while a
     #: tilt from a transient (the ESCs holding their pulse through a CAN bus-off) keeps it
-    #: near g. A lost rotor carrying less than a quarter of the weight is not detected.
+    #: near g. Below it a rotor carrying more than a quarter of the weight is lost.
     rotor_loss_specific_force: float = 7.35
+    #: ... and above this, m/s^2: not every motor stopped (the Neurons' watchdog after a
+    #: 150 ms bus-off: 1.0 m/s^2, a fall, not a lost rotor). ASSUMPTION: 2.5 (a lost rotor 0
+    #: reads 3.2 or more).
+    rotor_loss_min_specific_force: float = 2.5
+    #: With the thrust dropped, the gyro's roll or pitch rate beyond this, rad/s, trips at
+    #: once, whatever the attitude error's sign (the first tick that shows a Neuron reset:
+    #: roll 0.3 deg the other way, gyro 0.7-1.3 rad/s). ASSUMPTION: 0.5; the 20 fault-free
+    #: quick missions never turn faster than 0.75 rad/s away from their target.
+    rotor_loss_early_rate_rad_s: float = 0.5
+    #: A lighter rotor (rotor 2 or 3, 3.8 N: the specific force barely drops): roll or pitch
+    #: off its target by more than this, rad, turning further faster than
+    #: ``rotor_loss_rate_rad_s``. ASSUMPTION: 0.0175 (1 deg); a dead rotor 2 or 3 shows
+    #: 1.5-2.7 deg at 1.6-1.9 rad/s 45 ms after the fault, the fault-free missions no tick
+    #: turning away from the target faster than 0.75 rad/s.
+    rotor_loss_light_tilt_rad: float = 0.0175
+    #: ... with the specific force below this, m/s^2 (the thrust dropped a little: under
+    #: g, not the impact of a touchdown). ASSUMPTION: 9.5; a dead rotor 2 or 3 reads
+    #: 8.95-9.35 at the ticks it trips, a battery-sag landing's touchdown 16.5 (pitch 5 deg
+    #: off at 1.7 rad/s: a false trip without this bound).
+    rotor_loss_light_specific_force: float = 9.5
     #: The reaction: for ``rotor_loss_arrest_s`` the base thrust of every rotor at
-    #: ``rotor_loss_fall_thrust``, N, roll and pitch targets 0 and Table V's LQI gains
-    #: (``ControlPipeline.use_arrest_gains``: Spinal's 1 kHz attitude loop stops the turn),
-    #: then ARM_OFF (the motors stop) and the robot falls keeping its attitude. ASSUMPTION:
-    #: ``motor_info``'s ``min_thrust`` (1 N) and four control ticks (0.1 s at 40 Hz): with
-    #: one tick or the damped roll loop's gains the turn goes on through the fall
-    #: (docs/flying.md "A lost rotor").
+    #: ``rotor_loss_fall_thrust``, N, roll and pitch targets the attitude of the tick (the
+    #: turn stopped where it is, not turned back), Table V's LQI gains
+    #: (``ControlPipeline.use_arrest_gains``) with the lost rotor's row and its gyro-moment
+    #: row zero (Spinal's 1 kHz attitude loop stops the turn with the other rotors, and a
+    #: rotor that comes back, a reset Neuron's, gets only the floor), then ARM_OFF (the
+    #: motors stop) and the robot falls keeping its attitude. ASSUMPTION: ``motor_info``'s
+    #: ``min_thrust`` (1 N) and four control ticks (0.1 s at 40 Hz): with one tick or the
+    #: damped roll loop's gains the turn goes on through the fall (docs/flying.md "A lost
+    #: rotor").
     rotor_loss_fall_thrust: float = 1.0
     rotor_loss_arrest_s: float = 0.1
+    #: A light rotor's arrest, s, with roll and pitch targets 0: the other three rotors can
+    #: level the robot (the CoG inside their triangle). ASSUMPTION: 0.3 s (12 ticks); with
+    #: the heavy rotor's 0.1 s and the attitude held, a dead rotor 2 or 3 rolls on at about
+    #: 1 rad/s through the fall (33-38 deg, 6 seeds each; 0.2 s levelled: 21-23 deg).
+    rotor_loss_light_arrest_s: float = 0.3
 
     def __post_init__(self) -> None:
         for name in (
@@ -127,12 +155,26 @@ class MonitorLimits:
             "rotor_loss_tilt_rad",
             "rotor_loss_rate_rad_s",
             "rotor_loss_specific_force",
+            "rotor_loss_min_specific_force",
+            "rotor_loss_early_rate_rad_s",
+            "rotor_loss_light_tilt_rad",
+            "rotor_loss_light_specific_force",
             "rotor_loss_fall_thrust",
             "rotor_loss_arrest_s",
+            "rotor_loss_light_arrest_s",
         ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"MonitorLimits.{name}={v!r} must be finite and > 0")
+        if not (
+            self.rotor_loss_min_specific_force
+            < self.rotor_loss_specific_force
+            <= self.rotor_loss_light_specific_force
+        ):
+            raise ValueError(
+                "MonitorLimits: need rotor_loss_min_specific_force < rotor_loss_specific_force"
+                " <= rotor_loss_light_specific_force"
+            )
         lo, hi = self.cell_plausible
         if not (0 < lo < self.cell_low < self.cell_arm_min <= hi and math.isfinite(hi)):
             raise ValueError(

@@ -1,7 +1,8 @@
-"""A lost rotor (a dead ESC, a broken propeller): its detection from Spinal's attitude and
-gyro, and the feasibility figure behind the node's reaction (a cut: the motors stop after
-``rotor_loss_arrest_s`` of Spinal's attitude loop on the thrust floor with Table V's gains,
-``OnboardStep._rotor_loss``).
+"""A lost rotor (a dead ESC, a broken propeller, a Neuron resetting under its ESC): its
+detection from Spinal's attitude, gyro and accelerometer, which rotor it is, and the
+feasibility figure behind the node's reaction (``OnboardStep._rotor_loss``: for
+``rotor_loss_arrest_s`` Spinal's attitude loop, on Table V's gains without the lost rotor's
+row, holds the attitude on the thrust floor, then the motors stop).
 
 Why no flight on three rotors (``docs/flying.md`` "A lost rotor"): in the flat posture the
 CoG (x 0.483 m) lies 3.9 cm outside the triangle of rotors 1-3 (rotor 0 lost; likewise
@@ -12,14 +13,24 @@ thrust line by 2.5 cm x tan(tilt) and, with no net sideways force, add no roll o
 moment at all. The
 reduced-attitude "relaxed hover" on the two diagonal rotors needs the CoG on their diagonal
 (3.9 cm off). Losing rotor 2 or 3 (3.8 N in hover, behind the CoG) leaves the CoG inside the
-triangle of the other three (yaw then unbalanced); that case is not handled separately (and
-its thrust drop is too small for the detection).
+triangle of the other three (yaw then unbalanced); the node treats it as any lost rotor.
 
-Detection (:func:`diverging_axis`, thresholds ``MonitorLimits.rotor_loss_*``): on roll or
-pitch, the attitude error against the target last sent beyond ``rotor_loss_tilt_rad`` **and**
-the gyro turning it further (same sign) faster than ``rotor_loss_rate_rad_s``; the node adds
-the thrust drop (the accelerometer's specific force below ``rotor_loss_specific_force``). A
-lost rotor gives the roll axis about 250 rad/s^2 (14.4 N x 0.07 m / 0.004 kg m^2).
+Detection (thresholds ``MonitorLimits.rotor_loss_*``), in two classes of rotor:
+
+* a rotor carrying more than a quarter of the weight (rotor 0 or 1 here): the
+  accelerometer's specific force below ``rotor_loss_specific_force`` (the thrust dropped)
+  and above ``rotor_loss_min_specific_force`` (not every motor stopped), and either roll or
+  pitch diverging (:func:`diverging_axis` with ``rotor_loss_tilt_rad``,
+  ``rotor_loss_rate_rad_s``) or the gyro turning faster than ``rotor_loss_early_rate_rad_s``
+  on roll or pitch (:func:`turning_axis`: the first tick that shows the thrust drop, before
+  the attitude error has its sign);
+* a lighter rotor (rotor 2 or 3): the specific force barely drops (3.8 of 36.4 N): below
+  ``rotor_loss_light_specific_force`` (not a touchdown's impact), with roll or pitch
+  diverging beyond ``rotor_loss_light_tilt_rad`` at ``rotor_loss_rate_rad_s``.
+
+A lost rotor 0 gives the roll axis about 250 rad/s^2 (14.4 N x 0.07 m / 0.004 kg m^2).
+:func:`lost_rotor` names the rotor: of the class the specific force gives, the one whose
+loss turns the body the way the gyro shows.
 """
 
 from __future__ import annotations
@@ -43,6 +54,40 @@ def diverging_axis(
         if abs(error) > tilt_rad and abs(rate) > rate_rad_s and (error > 0) == (rate > 0):
             return name
     return None
+
+
+def turning_axis(rate_rad_s: float, rates: tuple[float, float]) -> str | None:
+    """``"roll"`` or ``"pitch"``: the faster of the two gyro rates (rad/s) when it exceeds
+    ``rate_rad_s``, else None."""
+    roll, pitch = abs(rates[0]), abs(rates[1])
+    if max(roll, pitch) <= rate_rad_s:
+        return None
+    return "roll" if roll >= pitch else "pitch"
+
+
+def lost_rotor(
+    allocation_bar: np.ndarray,
+    hover_thrust: np.ndarray,
+    inertia: np.ndarray,
+    rates: tuple[float, float],
+    heavy: bool,
+    weight: float,
+) -> int | None:
+    """The rotor whose loss explains the turn: among the rotors of the class (``heavy``:
+    hover thrust above a quarter of ``weight``, N; else the others), the one whose lost
+    hover thrust turns the body most along the gyro's roll and pitch ``rates``. Its
+    angular acceleration is ``-f_i (m_x,i / I_xx, m_y,i / I_yy)`` with ``m_x,i``, ``m_y,i``
+    the rows of ``allocation_bar`` (f_z, m_x, m_y, m_z; 4 x N, CoG frame) and ``f_i`` its
+    hover thrust. None: no rotor of the class, or none turns the body that way."""
+    qbar = np.asarray(allocation_bar, dtype=float)
+    f = np.asarray(hover_thrust, dtype=float)
+    i = np.asarray(inertia, dtype=float)
+    accel = -f * np.vstack([qbar[1] / i[0, 0], qbar[2] / i[1, 1]])
+    score = np.asarray(rates, dtype=float) @ accel
+    member = f > 0.25 * weight if heavy else f <= 0.25 * weight
+    score = np.where(member, score, -np.inf)
+    best = int(np.argmax(score))
+    return best if math.isfinite(score[best]) and score[best] > 0.0 else None
 
 
 def three_rotor_hover_tilt(

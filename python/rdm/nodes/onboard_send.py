@@ -208,8 +208,15 @@ class OnboardSend:
         )
 
     def _send_gains(self) -> None:
+        """``rpy/gain`` from the pipeline's wire gains; while a lost rotor is arrested its
+        roll and pitch P/I/D go out zero (Spinal's loop stops the turn with the other
+        rotors; a rotor that comes back, a reset Neuron's, gets only the thrust floor)."""
         wire = self.control.gains_wire
         assert wire is not None
+        lost = self.lost_rotor if self.rotor_lost_at is not None else None
+        if lost is not None and wire.ndim == 2 and 0 <= lost < wire.shape[0]:
+            wire = wire.copy()
+            wire[lost, :6] = 0  # roll_p .. pitch_d; yaw_d kept
         if (
             wire.dtype == np.int16
             and wire.ndim == 2

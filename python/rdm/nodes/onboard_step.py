@@ -17,10 +17,14 @@ import numpy as np
 from rdm.nodes.onboard_arming import FlightState
 from rdm.nodes.onboard_control import ControlCommand, Setpoint, State
 from rdm.nodes.onboard_flight import FlightMode
-from rdm.nodes.onboard_rotor_loss import diverging_axis
+from rdm.nodes.onboard_rotor_loss import diverging_axis, lost_rotor, turning_axis
 
 #: The operator modes in which a lost rotor is watched for (no contact, a flat posture held).
 ROTOR_LOSS_MODES = (FlightMode.MANUAL, FlightMode.TAKEOFF, FlightMode.HOVER, FlightMode.LAND)
+#: ... a light one (its attitude signs only): not in a landing, whose touchdown tips the
+#: body as fast (low-battery and battery-sag landings: 2.6-12 deg off the target at 1.6-1.7
+#: rad/s). ASSUMPTION: a light rotor lost while landing is not detected.
+LIGHT_ROTOR_LOSS_MODES = (FlightMode.MANUAL, FlightMode.TAKEOFF, FlightMode.HOVER)
 
 try:  # the C function np.interp ends in for float data (without its Python layers)
     from numpy._core.multiarray import interp as _interp
@@ -45,16 +49,7 @@ class OnboardStep:
                 self.counts["gains_kept"] += 1
         pm = ctl.p_matrix_wire()
         if pm is not None:
-            cached = self._p_matrix_msg
-            if cached is None or cached[0] is not pm:  # the pipeline reuses pm while q holds
-                rows, inertia = pm
-                unit = self._msg["pinv_unit"]
-                msg = self._msg["p_matrix_pseudo_inverse_inertia"].new(
-                    pseudo_inverse=[unit.new(r=r, p=p, y=y) for r, p, y in rows],
-                    inertia=inertia,
-                )
-                cached = self._p_matrix_msg = (pm, msg)
-            self._publish_same("p_matrix_pseudo_inverse_inertia", cached[1])
+            self._send_p_matrix(pm)
         if self.config.send_desire_coordinate and ctl.terms is not None:
             cached_desire = self._desire_msg
             if cached_desire is None or cached_desire[0] is not ctl.terms:
@@ -98,6 +93,25 @@ class OnboardStep:
                 self._send_servo_targets(goals)
             else:
                 self._send_servo_targets(targets)
+
+    def _send_p_matrix(self, pm: tuple[list[tuple[int, int, int]], list[int]]) -> None:
+        """``p_matrix_pseudo_inverse_inertia`` from the pipeline's wire terms; while a lost
+        rotor is arrested its row is zero (no gyro-moment term on a rotor that may come
+        back: a reset Neuron's)."""
+        lost = self.lost_rotor if self.rotor_lost_at is not None else None
+        cached = self._p_matrix_msg
+        # the pipeline reuses pm while q holds
+        if cached is None or cached[0] is not pm or cached[2] != lost:
+            rows, inertia = pm
+            if lost is not None:
+                rows = [(0, 0, 0) if k == lost else row for k, row in enumerate(rows)]
+            unit = self._msg["pinv_unit"]
+            msg = self._msg["p_matrix_pseudo_inverse_inertia"].new(
+                pseudo_inverse=[unit.new(r=r, p=p, y=y) for r, p, y in rows],
+                inertia=inertia,
+            )
+            cached = self._p_matrix_msg = (pm, msg, lost)
+        self._publish_same("p_matrix_pseudo_inverse_inertia", cached[1])
 
     def _flight_step(
         self, now: float, targets: np.ndarray | None, dt: float
@@ -190,30 +204,82 @@ class OnboardStep:
 
     def _rotor_loss(self, now: float, flying: bool) -> None:
         """A lost rotor (:mod:`rdm.nodes.onboard_rotor_loss`): detected in flight, Spinal's
-        attitude loop, on Table V's LQI gains, stops the turn on the thrust floor
-        (:meth:`_fall_command`), then the node disarms (the motors stop) and the robot falls."""
+        attitude loop, on Table V's LQI gains without the lost rotor's row, stops the turn on
+        the thrust floor (:meth:`_fall_command`), then the node disarms (the motors stop)
+        and the robot falls."""
         lim = self.config.monitors
         if not flying:
-            self.rotor_lost_at = None
+            self.rotor_lost_at = None  # lost_rotor keeps the last detection's rotor
             self.control.use_arrest_gains(False)  # the configured weights for the next flight
             return
         if self.rotor_lost_at is not None:
             # Spinal's 1 kHz attitude loop on the thrust floor stops the turn for
-            # ``rotor_loss_arrest_s``; then the motors stop (ARM_OFF) and the robot falls
-            # keeping its attitude
-            due = now - self.rotor_lost_at >= lim.rotor_loss_arrest_s - 1e-9
+            # ``rotor_loss_arrest_s`` (a light rotor: ``rotor_loss_light_arrest_s``); then
+            # the motors stop (ARM_OFF) and the robot falls keeping its attitude
+            arrest = lim.rotor_loss_arrest_s if self.lost_heavy else lim.rotor_loss_light_arrest_s
+            due = now - self.rotor_lost_at >= arrest - 1e-9
             if due and self.arming.state is not FlightState.DISARMING:
                 why = f"{now - self.rotor_lost_at:.3f} s after the detection"
                 self.monitors.trip("rotor_lost_cut", f"{why}: ARM_OFF, falling", now)
                 self.arming.disarm(now)
                 self._arming_messages(now)  # this tick, not the next one's arming step
             return
+        found = self._rotor_loss_signs(now)
+        if found is None:
+            return
+        axis, heavy, force = found
+        self.lost_heavy = heavy
+        euler, gyro = self.imu_euler, self.imu_gyro
+        assert euler is not None and gyro is not None
+        rates = (float(gyro[0]), float(gyro[1]))
+        t = self.control.terms
+        self.lost_rotor = (
+            None
+            if t is None
+            else lost_rotor(
+                t.allocation_bar,
+                t.hover_thrust,
+                t.inertia,
+                rates,
+                heavy,
+                t.mass * self.config.gravity,
+            )
+        )
+        self.rotor_lost_at = now
+        c = self.last_command
+        target = (0.0, 0.0) if c is None else (float(c.angles[0]), float(c.angles[1]))
+        i = 0 if axis == "roll" else 1
+        self.monitors.trip(
+            "rotor_lost",
+            f"rotor {self.lost_rotor if self.lost_rotor is not None else '?'} "
+            f"({'heavy' if heavy else 'light'}): {axis} "
+            f"{math.degrees(float(euler[i]) - target[i]):.1f} deg off its target, "
+            f"turning at {rates[i]:.2f} rad/s, specific force {force:.2f} m/s^2: "
+            f"its gains off, base thrust to {lim.rotor_loss_fall_thrust} N, then ARM_OFF",
+            now,
+        )
+        self.counts["rotor_lost_fall"] += 1
+        # Table V's stiffer roll loop without the lost rotor's row, and its gyro-moment row
+        # zero, both sent in this tick
+        self.control.use_arrest_gains(True)
+        if self.control.gains_wire is not None:
+            self._send_gains()
+        pm = self.control.p_matrix_wire()
+        if pm is not None:
+            self._send_p_matrix(pm)
+        if self.flight.mode is not FlightMode.LAND:
+            self.flight.request_land(now)
+
+    def _rotor_loss_signs(self, now: float) -> tuple[str, bool, float] | None:
+        """The tick's lost-rotor signs (module doc of :mod:`rdm.nodes.onboard_rotor_loss`):
+        the axis turning, whether the rotor is a heavy one (the specific force dropped) and
+        the specific force, m/s^2; None without them or outside the watched flight."""
+        lim = self.config.monitors
         euler, gyro, acc = self.imu_euler, self.imu_gyro, self._imu_acc
         if (
             euler is None
             or gyro is None
             or acc is None
-            or math.sqrt(math.fsum(v * v for v in acc)) >= lim.rotor_loss_specific_force
             or self.flight.mode not in ROTOR_LOSS_MODES
             or self._trajectory is not None
             or self.control.perching
@@ -223,47 +289,62 @@ class OnboardStep:
             or self._command_at is None
             or now - self._command_at > self.config.flight.command_hold_s + 1e-9
         ):
-            return
+            return None
+        force = math.sqrt(math.fsum(v * v for v in acc))
+        if force <= lim.rotor_loss_min_specific_force or not self._off_the_floor():
+            return None  # every motor stopped (a fall), not one rotor; or on the floor
         c = self.last_command
         target = (0.0, 0.0) if c is None else (float(c.angles[0]), float(c.angles[1]))
-        axis = diverging_axis(
-            lim.rotor_loss_tilt_rad,
-            lim.rotor_loss_rate_rad_s,
-            (float(euler[0]), float(euler[1])),
-            target,
-            (float(gyro[0]), float(gyro[1])),
+        roll_pitch = (float(euler[0]), float(euler[1]))
+        rates = (float(gyro[0]), float(gyro[1]))
+        heavy = force < lim.rotor_loss_specific_force
+        if heavy:
+            axis = diverging_axis(
+                lim.rotor_loss_tilt_rad, lim.rotor_loss_rate_rad_s, roll_pitch, target, rates
+            ) or turning_axis(lim.rotor_loss_early_rate_rad_s, rates)
+        elif (
+            force < lim.rotor_loss_light_specific_force
+            and self.flight.mode in LIGHT_ROTOR_LOSS_MODES
+        ):
+            axis = diverging_axis(
+                lim.rotor_loss_light_tilt_rad, lim.rotor_loss_rate_rad_s, roll_pitch, target, rates
+            )
+        else:
+            axis = None
+        return None if axis is None else (axis, heavy, force)
+
+    def _off_the_floor(self) -> bool:
+        """Motion capture's height at least ``rp_integration_height`` above the arming
+        height (the floor): a foot on the floor tips the body as a lost rotor does (a
+        low-battery descent resting on one foot in ``hover``: 12-14 deg off the target at
+        1.7-2.0 rad/s, specific force 7.2-7.6 m/s^2). ASSUMPTION: a rotor lost below that
+        height is not detected."""
+        mocap, floor = self.mocap, self._arm_z
+        return (
+            mocap is not None
+            and floor is not None
+            and float(mocap[0][2]) - floor >= self.config.rp_integration_height
         )
-        if axis is None:
-            return
-        self.rotor_lost_at = now
-        i = 0 if axis == "roll" else 1
-        self.monitors.trip(
-            "rotor_lost",
-            f"{axis} {math.degrees(float(euler[i]) - target[i]):.1f} deg off its target, "
-            f"turning away at {float(gyro[i]):.2f} rad/s, specific force "
-            f"{math.sqrt(math.fsum(v * v for v in acc)):.2f} m/s^2: base thrust to "
-            f"{lim.rotor_loss_fall_thrust} N, then ARM_OFF",
-            now,
-        )
-        self.counts["rotor_lost_fall"] += 1
-        # Table V's stiffer roll loop for the arrest, sent in this tick
-        if self.control.use_arrest_gains(True) and self.control.gains_wire is not None:
-            self._send_gains()
-        if self.flight.mode is not FlightMode.LAND:
-            self.flight.request_land(now)
 
     def _fall_command(self) -> ControlCommand | None:
-        """The command while a lost rotor's turn is stopped: roll and pitch targets 0, no yaw
-        term, every rotor's base thrust at ``rotor_loss_fall_thrust`` (Spinal's attitude terms
-        on top), the vectoring angles of the last command."""
+        """The command while a lost rotor's turn is stopped: roll and pitch targets, for a
+        heavy rotor, the attitude of the tick (the turn stopped where it is: no error for
+        Spinal's loop to turn back, so a rotor that comes back is not driven hard), for a
+        light one 0 (the other three can level the robot), no yaw term, every rotor's base
+        thrust at ``rotor_loss_fall_thrust`` (Spinal's attitude terms on top), the
+        vectoring angles of the last command."""
         c = self.last_command
         if c is None:
             return None
         floor = self.config.monitors.rotor_loss_fall_thrust
         thrust = np.full(np.asarray(c.base_thrust).shape, floor)
+        euler = self.imu_euler
+        angles = (0.0, 0.0, 0.0)
+        if self.lost_heavy and euler is not None:
+            angles = (float(euler[0]), float(euler[1]), 0.0)
         return replace(
             c,
-            angles=(0.0, 0.0, 0.0),
+            angles=angles,
             base_thrust=thrust,
             flight_thrust=thrust,
             perch_thrust=np.zeros_like(thrust),
