@@ -1252,6 +1252,14 @@ class CanMaster:
         """``tick_wire``; frames sent if running, no event pending and log_len < drain_at,
         else -1 (the tuple is then in ``last_wire_tick``)."""
     @property
+    def tx_count(self) -> int:
+        """Frames sent: every ``tick_wire`` frame plus those ``count_sent`` added."""
+    def count_sent(self, n: int) -> None:
+        """Add ``n`` frames the python-can path sent."""
+    @property
+    def pending_events(self) -> int:
+        """Log events not yet taken by ``pop_events``."""
+    @property
     def last_wire_tick(self) -> tuple[int, int, int, int]: ...
     @property
     def state_index(self) -> int: ...

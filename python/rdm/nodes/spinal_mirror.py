@@ -313,9 +313,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
             stamp = clock.now if clock.__class__ is SimClock else clock()
             sent = self._tick_wire_steady(now_ms, stamp, link.wire, DRAIN_AT)
             self._can_ms = now_ms
-            if sent >= 0:  # still running, no event pending, the log short
-                master.tx_count += sent
-                master._pending_events = 0
+            if sent >= 0:  # still running, no event pending, the log short (core counted)
                 if master._events:
                     self._forward_can_events()
             else:
