@@ -480,6 +480,9 @@ class SpinalStep(_SpinalControllerMessages):
         self, now_s: float, gyro: Any, acc: Any, mag: Any, voltage: float
     ) -> SpinalStepOutput: ...
     @property
+    def steps(self) -> int:
+        """Steps run since construction (``step`` and the lockstep kernel's steps)."""
+    @property
     def estimator_counters(self) -> dict[str, int]: ...
     def restart_gyro_calibration(self) -> None: ...
     def calibration_data(self) -> list[float]:

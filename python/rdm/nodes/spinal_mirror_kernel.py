@@ -189,7 +189,7 @@ class SpinalKernelInterface:
 
     def kernel_finish_step(self, now_ms: int, tail: bool) -> None:
         """The rest of a kernel tick whose control step the kernel ran (``last_output``,
-        ``control_steps``, ``_next_control`` and, without ``tail``, ``duties`` written back)
+        ``_next_control`` and, without ``tail``, ``duties`` written back; the core counted it)
         but did not finish: with ``tail`` the step had events (``_step_tail``), else the core
         declined the duty list; then the CAN ms, publishers and output as :meth:`tick`."""
         if tail:

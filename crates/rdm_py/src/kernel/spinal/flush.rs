@@ -29,7 +29,6 @@ impl Duties {
 /// What the busy ms changed since the last flush.
 #[derive(Default)]
 pub(super) struct Deferred {
-    pub(super) steps: i64,
     pub(super) next_control: bool,
     /// The output of the last control step here (its `SpinalStepOutput` is made at flush).
     pub(super) output: Option<SpinalOutput>,
@@ -50,8 +49,9 @@ pub(super) struct Deferred {
 impl SpinalFast {
     /// Write the mirror's state back: clock and CAN ms (`now_ms`, `_now_s`, `_can_ms`) and
     /// what the busy ms changed (battery, control step, duties, publications, the UART
-    /// bytes). The CAN master's counters are its own (`CanMaster.tx_count`,
-    /// `pending_events`): nothing of them is written here.
+    /// bytes). The CAN master's counters (`CanMaster.tx_count`, `pending_events`) and the
+    /// control step count (`SpinalStep.steps`) are their cores' own: nothing of them is
+    /// written here.
     pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
         if !self.dirty {
             return Ok(());
@@ -72,11 +72,6 @@ impl SpinalFast {
                 last.set_item(n.battery_sample.key(py), ms)?;
                 n.battery_due_ms.set(node, p.battery_due_ms)?;
                 n.battery_voltage.set(node, v)?;
-            }
-            if d.steps > 0 {
-                let counters = n.counters.get(node)?;
-                let steps = n.control_steps.i64(&counters)?;
-                n.control_steps.set(&counters, steps + d.steps)?;
             }
             if d.next_control {
                 n.next_control.set(node, p.next_control)?;

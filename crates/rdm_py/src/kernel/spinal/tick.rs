@@ -60,7 +60,6 @@ impl SpinalFast {
                     .step_raw(p.now_s, gyro, acc, mag, voltage);
                 p.next_control += b.period;
                 d.next_control = true;
-                d.steps += 1;
                 d.output = Some(out);
                 b.output = Some(out);
                 b.has_output = true;
