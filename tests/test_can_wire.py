@@ -14,7 +14,7 @@ from hover_run_files import hover_run_files
 
 from rdm.link.can import open_can
 from rdm.link.can_wire import CanWireError, CanWireLink, WireCandump
-from rdm.link.inproc_can import SimClock, add_tap, remove_tap, set_channel_clock
+from rdm.link.inproc_can import InProcessBus, SimClock, add_tap, remove_tap, set_channel_clock
 from rdm.nodes.can_master import SERVO_FIELDS, CanMaster, MasterState
 from rdm.nodes.neuron_bank import NeuronBankNode, NeuronSpec
 from rdm.nodes.servo_model import ServoConfig
@@ -115,6 +115,45 @@ def test_wire_equals_python_bus_and_candump(tmp_path):
     assert logs[0] == logs[1]
     assert logs[0].count(b"\n") > 5000  # (4 s of it are the two board-config pauses)
     assert b" 722#07 R" in logs[0]  # the reboot went out
+
+
+class _CountingBus(InProcessBus):
+    """An in-process bus that counts the frames it accepts (the send count the master's
+    ``tx_count`` must match, taken from the bus, not from the master)."""
+
+    def __init__(self, channel: str) -> None:
+        super().__init__(channel)
+        self.sent = 0
+
+    def send_standard(self, can_id: int, data: bytes) -> None:
+        super().send_standard(can_id, data)
+        self.sent += 1
+
+
+def test_tx_count_and_pending_events_are_the_cores(tmp_path):
+    """``tx_count`` equals the frames the python-can bus accepted (``count_sent``) and, on
+    the wire, the same count (``tick_wire``'s own); the pending events are exactly the ones
+    ``pop_events`` then returns, every ms of a boot and run."""
+    bus, wire = Rig(tmp_path, wired=False), Rig(tmp_path, wired=True)
+    counting = _CountingBus(bus.channel)
+    bus.master.bus.shutdown()
+    bus.master.bus = counting
+    popped = 0
+    try:
+        for t in range(2500):
+            for r in (bus, wire):
+                r.tick(t)
+                m = r.master
+                pending = m._pending_events
+                events = m.pop_events()
+                assert len(events) == pending and m._pending_events == 0, (t, events)
+                popped += len(events)
+            assert bus.master.tx_count == counting.sent == wire.master.tx_count, t
+        assert bus.master.state is MasterState.RUNNING
+        assert counting.sent > 1000 and popped >= 2  # the frames and each "running" event
+    finally:
+        for r in (bus, wire):
+            r.close()
 
 
 def test_other_endpoint_on_a_wired_channel_is_refused(tmp_path):

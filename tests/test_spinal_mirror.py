@@ -653,3 +653,20 @@ def test_can_disconnect_is_logged_over_rosserial(rig: Rig):
     # the last frame came in at about t_cut; "no frame for more than 100 ms" (sec. 2.6)
     assert t_cut + 100 <= errors[0][0] <= t_cut + 103
     assert errors[1][0] - errors[0][0] == 1000
+
+
+def test_control_steps_are_the_cores_count(rig: Rig):
+    """``counters.control_steps`` equals the control outputs the mirror produced (a new
+    ``last_output`` object per step, one step at most per 1 ms tick at 200 Hz), which is
+    ``core.steps``, and one per 5 ms."""
+    rig.wait_can_running()
+    start = rig.mirror.counters.control_steps
+    outputs = 0
+    last = rig.mirror.last_output
+    for _ in range(500):
+        rig.step()
+        if rig.mirror.last_output is not last:
+            outputs += 1
+            last = rig.mirror.last_output
+    assert rig.mirror.counters.control_steps - start == outputs == 100
+    assert rig.mirror.counters.control_steps == rig.mirror.core.steps

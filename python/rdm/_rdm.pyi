@@ -481,6 +481,9 @@ class SpinalStep(_SpinalControllerMessages):
         self, now_s: float, gyro: Any, acc: Any, mag: Any, voltage: float
     ) -> SpinalStepOutput: ...
     @property
+    def steps(self) -> int:
+        """Steps run since construction (``step`` and the lockstep kernel's steps)."""
+    @property
     def estimator_counters(self) -> dict[str, int]: ...
     def restart_gyro_calibration(self) -> None: ...
     def calibration_data(self) -> list[float]:
@@ -1261,6 +1264,14 @@ class CanMaster:
     def tick_wire_steady(self, now_ms: int, stamp: float, wire: CanWire, drain_at: int) -> int:
         """``tick_wire``; frames sent if running, no event pending and log_len < drain_at,
         else -1 (the tuple is then in ``last_wire_tick``)."""
+    @property
+    def tx_count(self) -> int:
+        """Frames sent: every ``tick_wire`` frame plus those ``count_sent`` added."""
+    def count_sent(self, n: int) -> None:
+        """Add ``n`` frames the python-can path sent."""
+    @property
+    def pending_events(self) -> int:
+        """Log events not yet taken by ``pop_events``."""
     @property
     def last_wire_tick(self) -> tuple[int, int, int, int]: ...
     @property

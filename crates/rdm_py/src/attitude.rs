@@ -447,6 +447,8 @@ controller_pymethods!(PyAttitudeController, {
 #[pyclass(module = "rdm._rdm", name = "SpinalStep")]
 pub struct PySpinalStep {
     inner: SpinalStep,
+    /// Steps run (`step` and the kernel's `step_raw`): the mirror's `control_steps`.
+    steps: u64,
 }
 
 impl PySpinalStep {
@@ -465,6 +467,7 @@ impl PySpinalStep {
         mag: [f64; 3],
         voltage: f64,
     ) -> SpinalOutput {
+        self.steps = self.steps.saturating_add(1);
         self.inner
             .step(now_s, &ImuSample { gyro, acc, mag }, voltage)
     }
@@ -535,7 +538,13 @@ controller_pymethods!(PySpinalStep, {
         };
         let inner =
             SpinalStep::new(config).map_err(|f| RdmError::new_err(format!("{f}: out of range")))?;
-        Ok(Self { inner })
+        Ok(Self { inner, steps: 0 })
+    }
+
+    /// Steps run since construction (`step`, and the lockstep kernel's steps).
+    #[getter]
+    fn steps(&self) -> u64 {
+        self.steps
     }
 
     /// The estimator's counters (see `AttitudeEstimator.counters`).
@@ -553,6 +562,7 @@ controller_pymethods!(PySpinalStep, {
         mag: [f64; 3],
         voltage: f64,
     ) -> SpinalStepOutput {
+        self.steps = self.steps.saturating_add(1);
         let out = self
             .inner
             .step(now_s, &ImuSample { gyro, acc, mag }, voltage);

@@ -53,6 +53,8 @@ pub struct CanMaster {
     duties: Vec<f64>,
     /// `tick_wire`'s tuple of the last `tick_wire_steady` call.
     last_wire: (u8, usize, usize, usize),
+    /// Frames sent: counted by `tick_wire`, and by `count_sent` for the python-can path.
+    tx_count: u64,
 }
 
 fn servo_tuple<'py>(py: Python<'py>, slave: u8, s: &ServoEntry) -> PyResult<Bound<'py, PyTuple>> {
@@ -139,6 +141,7 @@ impl CanMaster {
             rx: Vec::with_capacity(256),
             duties: Vec::with_capacity(16),
             last_wire: (0, 0, 0, 0),
+            tx_count: 0,
         }
     }
 
@@ -179,8 +182,27 @@ impl CanMaster {
             w.core.send(Sender::Master, stamp, e.frame);
         }
         let sent = out.len();
+        self.tx_count = self.tx_count.saturating_add(sent as u64);
         let events = self.core.events().count();
         (state_index(self.core.state), events, sent, w.core.log_len())
+    }
+
+    /// Frames sent: every frame of `tick_wire` plus those `count_sent` added (the python-can
+    /// path's accepted sends).
+    #[getter]
+    fn tx_count(&self) -> u64 {
+        self.tx_count
+    }
+
+    /// Add `n` frames the python-can path sent (`tick_ms`'s frames the bus accepted).
+    fn count_sent(&mut self, n: u64) {
+        self.tx_count = self.tx_count.saturating_add(n);
+    }
+
+    /// Log events not yet taken by `pop_events`.
+    #[getter]
+    fn pending_events(&self) -> usize {
+        self.core.events().count()
     }
 
     /// [`tick_wire`] for the steady state, with one int back instead of a tuple: the frames

@@ -192,10 +192,8 @@ class CanMaster:
         self.period = 0.001
         self.boot_delay_ms = boot_delay_ms
         self.state = MasterState.BOOTING
-        self.tx_count = 0
         self.tx_errors = 0
         self._events: list[LogEvent] = []
-        self._pending_events = 0
 
     @property
     def bus(self) -> can.BusABC:
@@ -221,22 +219,24 @@ class CanMaster:
             self.apply_wire_tick(self._core.tick_wire(now_ms, link.clock(), link.wire))
             return
         messages = list(drain(self._bus))
-        state, self._pending_events, out = self._core.tick_ms(now_ms, messages)
+        state, _, out = self._core.tick_ms(now_ms, messages)
         self.state = _STATES[state]
         if out:
             send_standard = self._send_standard
+            sent = 0
             for can_id, payload in out:
                 if send_neuron_payload_via(self._bus, send_standard, can_id, payload):
-                    self.tx_count += 1
+                    sent += 1
                 else:
                     self.tx_errors += 1
+            self._core.count_sent(sent)
 
     def apply_wire_tick(self, result: tuple[int, int, int, int]) -> None:
         """Take the core's ``tick_wire`` result ``(state, pending_events, sent, log_len)``:
-        phase, events to fetch, frames counted, the wire log drained when long."""
-        state, self._pending_events, sent, logged = result
+        the phase, and the wire log drained when long (the core counts the frames sent and
+        holds the events)."""
+        state, _, _, logged = result
         self.state = _STATES[state]
-        self.tx_count += sent
         if logged >= DRAIN_AT:
             self._wire.drain()
 
@@ -244,6 +244,16 @@ class CanMaster:
     def wire(self) -> CanWireLink | None:
         """The :class:`CanWireLink` this master ticks on (None on a python-can bus)."""
         return self._wire
+
+    @property
+    def tx_count(self) -> int:
+        """Frames sent (counted by the core: its wire ticks and the bus's accepted sends)."""
+        return self._core.tx_count
+
+    @property
+    def _pending_events(self) -> int:
+        """Log events the core holds, not yet taken."""
+        return self._core.pending_events
 
     @property
     def core(self) -> _rdm.CanMaster:
@@ -399,7 +409,6 @@ class CanMaster:
     def _take_events(self) -> None:
         if not self._pending_events:
             return
-        self._pending_events = 0
         for stamp, code, arg in self._core.pop_events():
             self._events.append(self._event(stamp, code, arg))
 

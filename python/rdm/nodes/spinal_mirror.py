@@ -95,10 +95,17 @@ class MirrorCounters:
     frames_rejected: Counter[str] = field(default_factory=Counter)
     dropped: int = 0
     logs: Counter[str] = field(default_factory=Counter)
-    control_steps: int = 0
     control_overruns: int = 0
     configured: int = 0
     sync_lost: int = 0
+    #: The control step core whose own count is :attr:`control_steps` (None: no steps).
+    step_core: SpinalStep | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def control_steps(self) -> int:
+        """Control steps run (``SpinalStep.steps``: the Python tick's and the kernel's)."""
+        core = self.step_core
+        return 0 if core is None else core.steps
 
 
 class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernelInterface):
@@ -208,7 +215,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         )
         self._command_topics = tuple(slot.name for slot in self.session.subscribers)
         self._imu_codec: Any = None  # the imu publisher's codec, checked for _imu_frame
-        self.counters = MirrorCounters()
+        self.counters = MirrorCounters(step_core=self.core)
         self.gyro = LEVEL_GYRO
         self.acc = LEVEL_ACC
         self.mag = LEVEL_MAG
@@ -313,9 +320,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
             stamp = clock.now if clock.__class__ is SimClock else clock()
             sent = self._tick_wire_steady(now_ms, stamp, link.wire, DRAIN_AT)
             self._can_ms = now_ms
-            if sent >= 0:  # still running, no event pending, the log short
-                master.tx_count += sent
-                master._pending_events = 0
+            if sent >= 0:  # still running, no event pending, the log short (core counted)
                 if master._events:
                     self._forward_can_events()
             else:

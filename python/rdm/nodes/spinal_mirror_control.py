@@ -73,8 +73,7 @@ class SpinalControl:
     def _step(self, now: float) -> None:
         voltage = self.battery_voltage if self.battery_voltage is not None else self.battery_input
         out = self.core.step(now, self.gyro, self.acc, self.mag, voltage)
-        self.last_output = out
-        self.counters.control_steps += 1
+        self.last_output = out  # the core counts the step (counters.control_steps)
         if self.pwm_test is None:
             # No event and the controller's own duties: the list _step_tail builds, from
             # the core's output in one call (None: an event or another case, below).

@@ -40,8 +40,8 @@ class SpinalKernelInterface:
         waiting, the master not steady on the wire, events or output pending.
         Before the master first runs, the last item is its phase index (the kernel then runs
         the idle ms of the boot: a CAN ms that stays in that phase); else None.
-        The kernel writes ``now_ms``, ``_now_s``, ``_can_ms`` and the master's ``tx_count``
-        and ``_pending_events`` back itself, as the steady tick leaves them."""
+        The kernel writes ``now_ms``, ``_now_s`` and ``_can_ms`` back itself, as the steady
+        tick leaves them; the master's ``tx_count`` and pending events are its Rust core's."""
         if self.now_ms is None or self._next_control is None:
             return None
         inbox = self.uart.inbox
@@ -189,7 +189,7 @@ class SpinalKernelInterface:
 
     def kernel_finish_step(self, now_ms: int, tail: bool) -> None:
         """The rest of a kernel tick whose control step the kernel ran (``last_output``,
-        ``control_steps``, ``_next_control`` and, without ``tail``, ``duties`` written back)
+        ``_next_control`` and, without ``tail``, ``duties`` written back; the core counted it)
         but did not finish: with ``tail`` the step had events (``_step_tail``), else the core
         declined the duty list; then the CAN ms, publishers and output as :meth:`tick`."""
         if tail:

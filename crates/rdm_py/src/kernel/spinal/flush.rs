@@ -29,7 +29,6 @@ impl Duties {
 /// What the busy ms changed since the last flush.
 #[derive(Default)]
 pub(super) struct Deferred {
-    pub(super) steps: i64,
     pub(super) next_control: bool,
     /// The output of the last control step here (its `SpinalStepOutput` is made at flush).
     pub(super) output: Option<SpinalOutput>,
@@ -48,9 +47,11 @@ pub(super) struct Deferred {
 }
 
 impl SpinalFast {
-    /// Write the mirror's state back: clock and CAN ms (`now_ms`, `_now_s`, `_can_ms`), the
-    /// master's counters of the steady CAN ms (`tx_count`, `_pending_events` = 0) and what
-    /// the busy ms changed (battery, control step, duties, publications, the UART bytes).
+    /// Write the mirror's state back: clock and CAN ms (`now_ms`, `_now_s`, `_can_ms`) and
+    /// what the busy ms changed (battery, control step, duties, publications, the UART
+    /// bytes). The CAN master's counters (`CanMaster.tx_count`, `pending_events`) and the
+    /// control step count (`SpinalStep.steps`) are their cores' own: nothing of them is
+    /// written here.
     pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
         if !self.dirty {
             return Ok(());
@@ -61,12 +62,6 @@ impl SpinalFast {
             n.now_ms.set(node, p.now_ms)?;
             n.now_s.set(node, p.now_s)?;
             n.can_ms.set(node, p.can_ms)?;
-            if self.steady {
-                let master = n.master.get(node)?;
-                let tx = n.tx_count.i64(&master)?;
-                n.tx_count.set(&master, tx + self.tx_delta)?;
-                n.pending_events.set(&master, 0)?;
-            }
             let d = std::mem::take(&mut self.deferred);
             let last_pub = if d.battery.is_some() || d.imu_last || d.servo_last {
                 Some(n.last_pub.get(node)?.cast_into::<PyDict>()?)
@@ -77,11 +72,6 @@ impl SpinalFast {
                 last.set_item(n.battery_sample.key(py), ms)?;
                 n.battery_due_ms.set(node, p.battery_due_ms)?;
                 n.battery_voltage.set(node, v)?;
-            }
-            if d.steps > 0 {
-                let counters = n.counters.get(node)?;
-                let steps = n.control_steps.i64(&counters)?;
-                n.control_steps.set(&counters, steps + d.steps)?;
             }
             if d.next_control {
                 n.next_control.set(node, p.next_control)?;
@@ -133,8 +123,6 @@ impl SpinalFast {
         self.tx.clear();
         self.tx_marks.clear();
         self.deferred = Deferred::default();
-        self.tx_delta = 0;
-        self.steady = false;
         self.dirty = false;
         Ok(())
     }

@@ -54,9 +54,6 @@ pub(crate) struct SpinalFast {
     drain_at: usize,
     plan: Option<Plan>,
     loaded: bool,
-    tx_delta: i64,
-    /// A steady CAN tick ran since the last flush (the master's pending events are 0).
-    steady: bool,
     dirty: bool,
     decision: Decision,
     deferred: Deferred,
@@ -99,8 +96,6 @@ impl SpinalFast {
             drain_at,
             plan: None,
             loaded: false,
-            tx_delta: 0,
-            steady: false,
             dirty: false,
             decision: Decision::Idle,
             deferred: Deferred::default(),

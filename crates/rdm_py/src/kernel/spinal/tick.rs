@@ -60,7 +60,6 @@ impl SpinalFast {
                     .step_raw(p.now_s, gyro, acc, mag, voltage);
                 p.next_control += b.period;
                 d.next_control = true;
-                d.steps += 1;
                 d.output = Some(out);
                 b.output = Some(out);
                 b.has_output = true;
@@ -109,8 +108,6 @@ impl SpinalFast {
             py,
             m,
             now,
-            &mut self.tx_delta,
-            &mut self.steady,
         ) {
             return Ok(SpinalTick::Finish(m));
         }
@@ -209,10 +206,9 @@ impl SpinalFast {
     }
 
     /// The CAN ms (`tick_wire_steady`): the steady master's, or, before it first runs
-    /// (`boot_state`), one that stays in that phase with no event and a short log (what
-    /// `RustCanMaster.tick_ms` + `apply_wire_tick` then do: count the frames, pending
-    /// events 0); false: the tick's result is for Python (`Finish`).
-    #[allow(clippy::too_many_arguments)]
+    /// (`boot_state`), one that stays in that phase with no event and a short log (the
+    /// master counts its frames and holds its events itself); false: the tick's result is
+    /// for Python (`Finish`).
     fn can_tick(
         master: &Py<CanMaster>,
         wire: &Py<CanWire>,
@@ -221,28 +217,15 @@ impl SpinalFast {
         py: Python<'_>,
         m: i64,
         now: f64,
-        tx_delta: &mut i64,
-        steady: &mut bool,
     ) -> bool {
         let mut master = master.bind(py).borrow_mut();
         let sent = master.tick_wire_steady(m, now, wire.bind(py), drain_at);
-        let sent = match boot_state {
-            None => sent,
+        match boot_state {
+            None => sent >= 0,
             Some(phase) => {
-                let (state, events, sent, logged) = master.last_wire_tick();
-                if state == phase && events == 0 && logged < drain_at {
-                    i64::try_from(sent).unwrap_or(i64::MAX)
-                } else {
-                    -1
-                }
+                let (state, events, _, logged) = master.last_wire_tick();
+                state == phase && events == 0 && logged < drain_at
             }
-        };
-        if sent >= 0 {
-            *tx_delta += sent;
-            *steady = true;
-            true
-        } else {
-            false
         }
     }
 }
