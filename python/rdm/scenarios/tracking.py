@@ -39,7 +39,7 @@ by chance (a sag that cancels part of a rounding), not by a margin the rounding 
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -67,8 +67,8 @@ from .perching import HANGING_FLIGHT_GAINS, PERCH_POSTURE, joint_path, onboard_c
 from .push import StagedPerchingScript
 from .servo_lag import joint_lags
 from .stack import Stack, build_stack
-from .tracking_margins import execution_metrics, stage_execution
-from .tracking_plan import StagePath, stage_path
+from .tracking_margins import StageErrors, execution_metrics, stage_execution
+from .tracking_plan import StagePath, StagePlan, plan_arrays, plan_at, stage_path
 
 AXES = ("x", "y", "z")
 ANGLES = ("roll", "pitch", "yaw")
@@ -115,32 +115,6 @@ def motion_seconds(motion) -> float:
 def _frames(robot: Robot, q: np.ndarray) -> dict[str, np.ndarray]:
     fr = robot.evaluate(q)["frames"]
     return {k: np.asarray(fr[k], dtype=float) for k in ("foot", "cog", "end_effector")}
-
-
-def plan_arrays(points: list[tuple[float, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """(times (m,), full q (m, n_q)) of a planned path's samples."""
-    return np.array([p[0] for p in points]), np.array([p[1] for p in points])
-
-
-def plan_at(points: list[tuple[float, np.ndarray]], t: np.ndarray) -> np.ndarray:
-    """Planned full q at times ``t``: linear between the samples, held outside (as the node)."""
-    times, qs = plan_arrays(points)
-    return np.column_stack([np.interp(t, times, qs[:, j]) for j in range(qs.shape[1])])
-
-
-@dataclass
-class StagePlan:
-    """The joint path a stage sent and when its motion ran."""
-
-    points: list[tuple[float, np.ndarray]]
-    t_start: float  # first sample of the motion
-    t_end: float  # last sample of the motion
-    #: the planner's path (None: hand-chosen offsets)
-    path: StagePath | None = None
-
-    def goal_world(self, root_p: np.ndarray, root_r: np.ndarray) -> np.ndarray | None:
-        """The planned end-effector goal in the world with the root at (root_p, root_r)."""
-        return None if self.path is None else root_p + root_r @ self.path.goal
 
 
 #: Planned stage (:data:`rdm.scenarios.tracking_plan.STAGES`) of each flight posture.
@@ -231,25 +205,6 @@ class TrackingScript(StagedPerchingScript):
     def perched_tick(self, stack: Stack, now: float, s: float) -> None:
         if "perched" not in self.plans:
             self._send(stack, "perched", now, now + SETTLE_S + PRE_S, PERCH_POSTURE)
-
-
-@dataclass
-class StageErrors:
-    t: np.ndarray
-    pos_err: np.ndarray  # (n, 3) [m], world axes
-    att_err: np.ndarray  # (n, 3) [rad], rotation vector of R_true R_ref^T, world axes
-    pos_rmse: np.ndarray
-    att_rmse: np.ndarray
-    pos_std: np.ndarray
-    pos_max: np.ndarray
-    att_max: np.ndarray
-    root_std: np.ndarray  # true foot position std over the window [m]
-    root_p: np.ndarray  # root position used for the target [m]
-    root_r: np.ndarray  # root orientation used for the target
-    joint_lag_s: np.ndarray  # q1..q6: how far the true joints trail the plan [s] (NaN: still)
-    #: RMSE of the plan rounded to encoder counts against the plan (ideal servos' floor)
-    pos_floor_rmse: np.ndarray
-    att_floor_rmse: np.ndarray
 
 
 def goal_resolution(q: np.ndarray, servo_map: ServoMap) -> np.ndarray:

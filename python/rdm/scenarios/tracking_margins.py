@@ -18,6 +18,7 @@ executed (docs/scenarios.md, "tracking").
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -27,11 +28,10 @@ from rdm.sim import Metric
 
 from .common import truth_arrays
 from .perching import EDGE_MM, PLATE_HALF
-from .tracking_plan import plan_margins
+from .tracking_plan import StagePlan, plan_at, plan_margins
 
 if TYPE_CHECKING:
     from .stack import Stack
-    from .tracking import StageErrors, StagePlan
 
 #: Goal tolerance [m] of the tracked end effector (a "max" metric): perched, the root is on
 #: the ceiling and only the servos' sag and resolution are left (0.2 mm measured); in flight
@@ -40,6 +40,25 @@ if TYPE_CHECKING:
 GOAL_TOLERANCE = {"flight": 0.05, "perched": 0.002}
 #: Fig. 9 (B): root position errors in flight "less than +-0.1 m".
 PAPER_FLIGHT_ROOT_ERROR = 0.1
+
+
+@dataclass
+class StageErrors:
+    t: np.ndarray
+    pos_err: np.ndarray  # (n, 3) [m], world axes
+    att_err: np.ndarray  # (n, 3) [rad], rotation vector of R_true R_ref^T, world axes
+    pos_rmse: np.ndarray
+    att_rmse: np.ndarray
+    pos_std: np.ndarray
+    pos_max: np.ndarray
+    att_max: np.ndarray
+    root_std: np.ndarray  # true foot position std over the window [m]
+    root_p: np.ndarray  # root position used for the target [m]
+    root_r: np.ndarray  # root orientation used for the target
+    joint_lag_s: np.ndarray  # q1..q6: how far the true joints trail the plan [s] (NaN: still)
+    #: RMSE of the plan rounded to encoder counts against the plan (ideal servos' floor)
+    pos_floor_rmse: np.ndarray
+    att_floor_rmse: np.ndarray
 
 
 def _window(t: np.ndarray, plan: StagePlan, after_s: float) -> np.ndarray:
@@ -52,9 +71,6 @@ def stage_execution(
     """Execution figures of one stage (see the module doc); empty for hand-chosen offsets."""
     if plan.path is None:
         return {}
-    # imported here: tracking imports this module
-    from .tracking import plan_at
-
     a = truth_arrays(stack)
     t = a["t"]
     win = _window(t, plan, after_s)

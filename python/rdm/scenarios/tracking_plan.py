@@ -178,3 +178,29 @@ def plan_margins(tr: Trajectory, robot: Robot) -> dict[str, float]:
         "clearance_m": float(np.min(tr.clearance)),
         "airflow_m": float(np.min(tr.airflow)),
     }
+
+
+@dataclass
+class StagePlan:
+    """The joint path a stage sent and when its motion ran."""
+
+    points: list[tuple[float, np.ndarray]]
+    t_start: float  # first sample of the motion
+    t_end: float  # last sample of the motion
+    #: the planner's path (None: hand-chosen offsets)
+    path: StagePath | None = None
+
+    def goal_world(self, root_p: np.ndarray, root_r: np.ndarray) -> np.ndarray | None:
+        """The planned end-effector goal in the world with the root at (root_p, root_r)."""
+        return None if self.path is None else root_p + root_r @ self.path.goal
+
+
+def plan_arrays(points: list[tuple[float, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """(times (m,), full q (m, n_q)) of a planned path's samples."""
+    return np.array([p[0] for p in points]), np.array([p[1] for p in points])
+
+
+def plan_at(points: list[tuple[float, np.ndarray]], t: np.ndarray) -> np.ndarray:
+    """Planned full q at times ``t``: linear between the samples, held outside (as the node)."""
+    times, qs = plan_arrays(points)
+    return np.column_stack([np.interp(t, times, qs[:, j]) for j in range(qs.shape[1])])
