@@ -140,6 +140,51 @@ def test_no_contact_within_the_rise_limit_returns_to_the_start() -> None:
         p.rig.close()
 
 
+class SpikyPerch(Perch):
+    """:class:`Perch` whose foot sensor adds ``spike`` N to its normal force on the feeds in
+    ``spike_at`` (counted from the approach's start), as a noisy wrench sensor at times."""
+
+    def __init__(self, spike_at: set[int], spike: float = 5.0, **flight) -> None:
+        super().__init__(**flight)
+        self.spike_at, self.spike, self.feeds = spike_at, spike, None
+        self.pushes: list[tuple[float, float]] = []  # (time, the true push)
+
+    def feed(self, t: float) -> None:
+        if self.feeds is not None:
+            self.pushes.append((t, self.plant.push))
+            self.feeds += 1
+            if self.feeds in self.spike_at:
+                self.plant.push += self.spike
+        super().feed(t)
+
+
+@pytest.mark.parametrize("hold_s", [0.0, 0.05])
+def test_contact_needs_the_force_to_hold_for_contact_hold_s(hold_s: float) -> None:
+    """Two readings above ``contact_fz`` one tick each, 0.2 s apart, in the approach: with
+    ``contact_hold_s`` 0 the first perches away from the ceiling; with 0.05 s (three 25 ms
+    feeds) neither does, and the true contact perches at the ceiling 0.05 s after the first
+    true reading above it. Bugs caught: the hold ignored, a count that does not restart after
+    a quiet reading (the second spike would then complete it)."""
+    p = SpikyPerch({4, 12}, contact_hold_s=hold_s) if hold_s else SpikyPerch({4, 12})
+    try:
+        p.hover()
+        assert p.node.perch() is None
+        p.feeds = 0
+        p.run_until(lambda: p.mode == "perched", 10.0)
+        z = p.node.flight.hold_position[2]
+        if hold_s == 0.0:
+            assert z < CEILING - 0.01 and p.plant.push == 0.0
+            assert p.node.counts["contact_pending"] == 0
+        else:
+            assert z == pytest.approx(CEILING, abs=0.01)
+            fz = FlightLimits().contact_fz
+            first = next(t for t, push in p.pushes if push > fz)
+            assert p.node.flight.perched_at - first == pytest.approx(hold_s, abs=DT + 1e-9)
+            assert p.node.counts["contact_pending"] >= 2 + 2
+    finally:
+        p.rig.close()
+
+
 def test_perch_is_refused_when_it_cannot_be_done() -> None:
     p = Perch(foot=False)
     try:

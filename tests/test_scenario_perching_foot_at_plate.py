@@ -1,7 +1,9 @@
 """``perching-foot-at-plate`` end to end: the robot flown is the foot-at-plate description, the
 perching QP runs with Table VII's parameters, and every metric row is recomputed here from the
 raw per-tick records (MuJoCo ground truth and the scenario's rotor probe) with numpy written
-apart from the scenario's code. One default run (55 s simulated, ``log=False``)."""
+apart from the scenario's code, and the perch's measured state is held against the figures of
+docs/scenarios.md with margins a regression crosses. One default run (64 s simulated,
+``log=False``)."""
 
 from __future__ import annotations
 
@@ -36,12 +38,14 @@ def test_registered_next_to_perching():
 
 def test_arm_motion_has_the_hanging_goals_at_fig10_timing():
     """The variant's arm motion: the hanging scenario's goals, 10 s per segment (Fig. 10's
-    52-62 s episode), and the default run long enough for a hold after it (contact near 15 s
-    + settle + motion). Bugs caught: the 3 s segments of ``perching.PERCHED_MOTION`` kept,
-    a goal dropped or reordered, a duration that ends inside the motion."""
+    52-62 s episode), after 10 s perched at rest, and the default run long enough for a hold
+    after it (contact near 15 s + settle + motion). Bugs caught: the 3 s segments of
+    ``perching.PERCHED_MOTION`` kept, a goal dropped or reordered, the hanging scenario's
+    1.5 s settle kept, a duration that ends inside the motion."""
     assert [d for d, _ in fp.FOOT_PLATE_MOTION] == [10.0, 10.0, 10.0]
     assert [g for _, g in fp.FOOT_PLATE_MOTION] == [g for _, g in perching.PERCHED_MOTION]
-    assert fp.DEFAULT_DURATION > 15.0 + perching.SETTLE_S + 30.0 + 5.0
+    assert fp.SETTLE_S == 10.0 and fp.TIMING.settle_s == fp.SETTLE_S
+    assert fp.DEFAULT_DURATION > 15.0 + fp.SETTLE_S + 30.0 + 5.0
 
 
 def test_the_shipped_description_puts_the_foot_unit_at_the_plate():
@@ -59,8 +63,11 @@ def test_the_shipped_description_puts_the_foot_unit_at_the_plate():
 def test_flies_the_foot_at_plate_robot_with_table_vii(run):
     """MuJoCo's rotor sites put the foot rotors ~6 cm under the ceiling while perched (the
     shipped far-tip robot: 0.42 m), the arm rotors far below; the onboard perching QP holds
-    Table VII's numbers. Bugs caught: the variant flying the default robot (``robot`` not
-    passed to the stack), or the hanging scenario's eps_z = 8 N left in."""
+    Table VII's numbers with eq. (38)'s feedback gain at 0.25, and Spinal's roll/pitch
+    integration is held while the root link turns, the contact confirmed over 0.05 s. Bugs
+    caught: the variant flying the default robot (``robot`` not passed to the stack), the
+    hanging scenario's eps_z = 8 N left in, the feedback gain, the integration hold or the
+    contact hold not reaching the onboard node."""
     res, _, p, _ = run
     w = fp.thrust_windows(p, res.facts["t_perch"])
     foot = p["distance"][w["settled"]][:, list(fp.FOOT_ROTORS)]
@@ -71,6 +78,10 @@ def test_flies_the_foot_at_plate_robot_with_table_vii(run):
     assert (params["mu_x"], params["mu_y"], params["mu_z"]) == (0.9, 0.9, 0.5)
     assert (params["half_size_x"], params["half_size_y"]) == (0.04, 0.07)
     assert params["perch_rotors"] == [1.0, 1.0, 0.0, 0.0]
+    assert params["feedback_gain"] == 0.25
+    assert res.stack.onboard.config.rp_integration_hold_rate == 0.02
+    assert res.stack.onboard.config.flight.contact_hold_s == 0.05
+    assert res.stack.onboard.counts["rp_integration_held"] >= 1
     assert res.facts["robot"] == fp.ROBOT
 
 
@@ -163,3 +174,45 @@ def test_perches_and_finishes_the_arm_motion(run):
     assert rows["perching QP solved ticks"].ours >= 0.99
     assert rows["joint goal reached after the motion"].ours < 5.0
     assert math.isfinite(rows["foot rotor thrust in the hold after the arm motion / flight"].ours)
+
+
+def test_edge_split_recomputed_from_truth(run):
+    """The ZMP-on-edge time split by the script's phase at each truth sample: the arm motion
+    and the rest (settle, hold), both from 1.5 s after the switch. Bugs caught: the split
+    taken from the probe's ticks instead of the truth samples, the settle's first 1.5 s (the
+    contact transient) counted as rest, the two windows swapped."""
+    res, rows, p, a = run
+    tp = res.facts["t_perch"]
+    t, zmp = a["t"], a["zmp"]
+    motion_t = p["t"][p["phase"] == "motion"]
+    start, end = motion_t.min(), motion_t.max()
+    off = (0.05 - np.abs(zmp[:, 0]) > 1e-3) & (0.075 - np.abs(zmp[:, 1]) > 1e-3)
+    late = t >= tp + 1.5
+    during = late & (t >= start) & (t < end + 0.01)
+    rest = late & ~during
+    got_motion = rows["time with the ZMP on the plate edge during the arm motion"].ours
+    got_rest = rows["time with the ZMP on the plate edge at rest (settled and hold)"].ours
+    assert got_motion == pytest.approx(1.0 - off[during].mean(), abs=5e-3)
+    assert got_rest == pytest.approx(1.0 - off[rest].mean(), abs=5e-3)
+
+
+def test_measured_state_of_the_perch(run):
+    """docs/scenarios.md's seed-0 figures with margins: the foot thrust settled and in the hold
+    within 7 % of flight (1.05 / 1.04; with the fold's integral kept 1.08-1.11), the normal
+    force above Table VII's eps_z with room (1.45 N; 1.11 N with kappa = 0.5, 0.96 N with
+    kappa = 1), the plate off its edge at rest (0 %) and on it 18 % of the perched time (24 %
+    with kappa = 0.5, 33 % with kappa = 1), of which the arm motion 28 % (38 %, 50 %),
+    contact kept, no slip. Bugs caught: the integration hold or the feedback gain lost
+    (thrust, F_z, edge time), the contact switch on the first reading (edge time at rest),
+    the settle cut back to 1.5 s (the settled thrust then still in the transition)."""
+    _, rows, _, _ = run
+    settled = rows["foot rotor thrust settled after contact / flight"].ours
+    hold = rows["foot rotor thrust in the hold after the arm motion / flight"].ours
+    assert 0.97 < settled < 1.07 and 0.97 < hold < 1.07, (settled, hold)
+    assert rows["foot rotor thrust settled after contact / flight"].passed
+    assert rows["min normal force while perched"].ours > 1.3
+    assert rows["time with the ZMP on the plate edge at rest (settled and hold)"].ours < 0.02
+    assert rows["time with the ZMP on the plate edge during the arm motion"].ours < 0.33
+    assert rows[f"time with the ZMP on the plate edge (< {perching.EDGE_MM:g} mm)"].ours < 0.21
+    assert rows["foot contact kept while perched"].ours == 1.0
+    assert rows["foot slip while perched"].ours < 0.1

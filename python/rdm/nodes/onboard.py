@@ -191,6 +191,9 @@ class OnboardNode(OnboardOperator, OnboardReceive, OnboardStep, OnboardSend):
         self.last_alpha_beta: tuple[tuple[float, ...], tuple[float, ...]] | None = None
         self._requests: list[str] = []
         self._perch_request = False
+        #: node time of the first of the approach ticks whose foot reading has been above
+        #: ``FlightLimits.contact_fz`` since (``FlightLimits.contact_hold_s``)
+        self._contact_since: float | None = None
         #: the name of the position-gain profile in effect ("default": ``position_gains``)
         self.gain_profile = "default"
         self._started = False

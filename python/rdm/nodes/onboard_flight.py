@@ -111,6 +111,11 @@ class FlightLimits:
     approach_rise_max: float = 1.0
     #: Foot-sensor normal force that means contact, N. ASSUMPTION.
     contact_fz: float = 3.0
+    #: How long the foot sensor's fresh normal force must stay above ``contact_fz`` (every
+    #: approach tick) before the approach switches to perched, s (>= 0; 0: the first reading
+    #: above it). A single noisy reading then does not start the perch with the altitude loop
+    #: held away from the ceiling (docs/scenarios.md "perching-foot-at-plate"). ASSUMPTION.
+    contact_hold_s: float = 0.0
     #: Altitude setpoint above the contact height once perched, m (>= 0). ASSUMPTION.
     press_offset: float = 0.0
     #: Position-gain profile switched in at contact (``OnboardConfig.gain_profiles``,
@@ -155,6 +160,8 @@ class FlightLimits:
                 raise ValueError(f"FlightLimits.{name}={v!r} must be finite and > 0")
         if not (math.isfinite(self.land_undershoot) and self.land_undershoot >= 0):
             raise ValueError(f"FlightLimits.land_undershoot={self.land_undershoot!r} must be >= 0")
+        if not (math.isfinite(self.contact_hold_s) and self.contact_hold_s >= 0):
+            raise ValueError(f"FlightLimits.contact_hold_s={self.contact_hold_s!r} must be >= 0")
         if not (math.isfinite(self.press_offset) and self.press_offset >= 0):
             raise ValueError(f"FlightLimits.press_offset={self.press_offset!r} must be >= 0")
         if self.approach_speed > self.max_velocity[2]:

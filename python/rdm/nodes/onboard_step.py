@@ -188,6 +188,8 @@ class OnboardStep:
         self._rotor_loss(now, flying)
         if self.flight.mode is FlightMode.APPROACH and p is not None:
             self._contact_check(now, float(p[2]))
+        else:
+            self._contact_since = None
         landing = self.arming.state is FlightState.LANDING
         sp = self.flight.update(now, flying, landing, p, v, yaw, self.setpoint.position, dt)
         self._flight_setpoint = None if sp is None else Setpoint(*sp)
@@ -354,13 +356,22 @@ class OnboardStep:
 
     def _contact_check(self, now: float, z: float) -> None:
         """The approach's contact: the foot sensor's fresh normal force above
-        ``FlightLimits.contact_fz`` -> perched at the measured height ``z``, the
-        ``perched_gains`` profile now and the perching control from the next tick (whose
-        synthesis then sees it first, as for :meth:`request_perch`)."""
+        ``FlightLimits.contact_fz`` on every approach tick for ``FlightLimits.contact_hold_s``
+        -> perched at the measured height ``z``, the ``perched_gains`` profile now and the
+        perching control from the next tick (whose synthesis then sees it first, as for
+        :meth:`request_perch`). A reading at or below it, or a tick outside the approach,
+        starts the count again."""
         lim = self.config.flight
         wrench = None if self.foot is None else self.foot.latest(now, self.config.foot_timeout_s)
         if wrench is None or not float(wrench[2]) > lim.contact_fz:
+            self._contact_since = None
             return
+        if self._contact_since is None:
+            self._contact_since = now
+        if now - self._contact_since < lim.contact_hold_s - 1e-9:
+            self.counts["contact_pending"] += 1
+            return
+        self._contact_since = None
         self.flight.contact(now, z)
         self._perch_request = True  # the next tick's model update and synthesis perch
         if self.gain_profile != lim.perched_gains:

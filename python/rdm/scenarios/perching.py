@@ -172,6 +172,9 @@ class PerchTiming:
     fold_gains: dict | None = field(default_factory=lambda: dict(FOLD_GAINS))
     #: fraction of the fold's duration at which ``fold_gains`` take over
     fold_gains_at: float = FOLD_GAINS_AT
+    #: seconds perched before the arm motion starts (the ZMP-edge metric starts after
+    #: :data:`SETTLE_S` whatever this is)
+    settle_s: float = SETTLE_S
 
 
 #: A shorter perching run for the process-level runs in the emulated VM (docs/processes.md):
@@ -264,7 +267,9 @@ class PerchingScript:
             if self.fold_gains_window is not None:  # the node switched to its perched gains
                 self.fold_gains_window = (self.fold_gains_window[0], self.t_perch)
             self.phase = "settle"
-        elif self.phase == "settle" and self.t_perch is not None and now - self.t_perch > SETTLE_S:
+        elif (
+            self.phase == "settle" and self.t_perch is not None and now - self.t_perch > tm.settle_s
+        ):
             self.phase = "motion"
             points, self.t_motion_end = joint_path(now, np.array(PERCH_POSTURE), self.motion, n_q)
             ob.set_trajectory(points)

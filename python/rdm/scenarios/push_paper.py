@@ -176,8 +176,8 @@ PAPER_PLAN = PaperPushPlan(
     perch_params={"epsilon_z": PERCHED_EPSILON_Z},
     perch_cutoff_hz=PERCHED_CUTOFF_HZ,
     gap_s=GAP_S,
-    # the foot-at-plate robot perches with Spinal's integral kept through the fold
-    # (perching_foot_at_plate.RP_INTEGRATION_HOLD_RATE)
+    # Spinal's integral kept through the fold (docs/scenarios.md, "Where the integral comes
+    # from": held, the perched min F_z was 0.81 N instead of 0.88 N)
     rp_integration_hold_rate=None,
 )
 #: upper bound of a run [s]; the run stops 0.5 s after the perched stage (~71 s)

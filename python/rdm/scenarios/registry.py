@@ -63,8 +63,9 @@ SCENARIOS: dict[str, Scenario] = {
             "perching_foot_at_plate",
             "run",
             "perching with the foot unit at the plate end of the root link (rotors 6 cm under "
-            "the ceiling) and Table VII's eps_z = 1 N; Fig. 10 B's thrust return and the flat "
-            "plate are not reached (rows marked NO, docs/scenarios.md)",
+            "the ceiling) and Table VII's eps_z = 1 N; the foot thrust returns to the flight "
+            "level and the plate rests flat, but rocks on an edge during the arm motion (rows "
+            "marked NO, docs/scenarios.md)",
         ),
         Scenario(
             "wall-perching",
