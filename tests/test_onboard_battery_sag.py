@@ -85,7 +85,7 @@ def test_the_trip_is_counted_logged_and_names_the_pack(caplog) -> None:
     m = Monitors(MonitorLimits(), cells=6)
     with caplog.at_level(logging.WARNING, logger="rdm.onboard"):
         feed(m, spinal_readings(steps([25.2] * 5 + [23.7] * 3), 3500, 500))
-    reason = "pack 23.70 V, 1.50 V below its 25.20 V of the last 2 s (more than 1.20 V)"
+    reason = "pack 23.70 V, 1.500 V below its 25.20 V of the last 2 s (more than 1.200 V)"
     assert list(m.events) == [{"t": 2.5, "monitor": "battery_sag", "reason": reason}]
     assert [r.getMessage() for r in caplog.records] == [f"t=2.500 battery_sag: {reason}"]
     assert m.first_trip == {"battery_sag": 2.5}

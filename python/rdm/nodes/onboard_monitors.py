@@ -339,8 +339,8 @@ class Monitors:
             "battery_sag",
             peak - latest > bound,
             now,
-            f"pack {latest:.2f} V, {peak - latest:.2f} V below its {peak:.2f} V of the last"
-            f" {self.limits.sag_window_s:g} s (more than {bound:.2f} V)",
+            f"pack {latest:.2f} V, {peak - latest:.3f} V below its {peak:.2f} V of the last"
+            f" {self.limits.sag_window_s:g} s (more than {bound:.3f} V)",
         )
 
     def battery_low(self, now: float) -> bool:
