@@ -62,8 +62,8 @@ class MonitorLimits:
     #: than this many V per cell below its highest of the last ``sag_window_s`` trips
     #: ``battery_sag`` (the node lands). ASSUMPTION: 0.2 V/cell (1.2 V for 6S), above a load
     #: step's sag (JSK's hover compensation example: 0.05 ohm x 22 A = 1.1 V from rest to
-    #: hover) and 17 times a 6S pack's discharge over the window in a 4 min flight (25.2 to
-    #: 21 V: 0.07 V in 2 s); a 1 V/s sag trips 1.4-1.5 s after it starts.
+    #: hover) and 34 times a 6S pack's discharge over the window in a 4 min flight (25.2 to
+    #: 21 V: 0.035 V in 2 s); a 1 V/s sag trips 1.45-1.52 s after it starts (the mission).
     cell_sag_v: float = 0.2
     #: ... the window, s: sags slower than ``cell_sag_v`` x cells per ``sag_window_s`` (0.6
     #: V/s for 6S) are left to ``battery_low``. ASSUMPTION: 2 s.
