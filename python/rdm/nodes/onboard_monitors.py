@@ -12,6 +12,17 @@ value kept. A plausible reading below ``cell_low`` x cells for ``low_battery_s``
 ``battery_low`` (the node lands). Arming is refused without a plausible reading at or above
 ``cell_arm_min`` x cells once one has arrived. JSK instead maps a sag-compensated voltage onto
 a Li-Po percentage; a per-cell threshold on Spinal's filtered voltage is the ASSUMPTION here.
+
+Battery sag (``battery_sag``, the node lands): Spinal low-passes its reading (0.99/0.01 every
+20 ms, a 2 s time constant, jsk-flight-navigation.md sec. 8), so a pack falling 1 V/s reads
+2 V high and crosses ``cell_low`` seconds after the thrust has given out (the duty to
+thrust map goes with V^2). The node undoes the filter: from a reading ``y`` and the newest
+one ``y0`` at least ``PACK_SPAN_S`` older (``dt`` apart), ``a = 0.99^(dt / 0.02)`` and the
+pack voltage over that span is ``(y - a y0) / (1 - a)`` (:func:`pack_voltage`). A pack
+voltage more than ``cell_sag_v`` x cells below its highest of the last ``sag_window_s``
+trips ``battery_sag``. ASSUMPTION: the thresholds (:class:`MonitorLimits`); a load step
+(take-off, a climb) sags the pack by the pack's resistance times the current step, below
+the threshold (JSK's hover sag compensation: 0.05 ohm x 22 A = 1.1 V).
 """
 
 from __future__ import annotations
@@ -47,6 +58,16 @@ class MonitorLimits:
     low_battery_s: float = 1.0
     #: Refuse to arm below this cell voltage, V.
     cell_arm_min: float = 3.6
+    #: Battery sag: the pack voltage (Spinal's low-pass undone, :func:`pack_voltage`) more
+    #: than this many V per cell below its highest of the last ``sag_window_s`` trips
+    #: ``battery_sag`` (the node lands). ASSUMPTION: 0.2 V/cell (1.2 V for 6S), above a load
+    #: step's sag (JSK's hover compensation example: 0.05 ohm x 22 A = 1.1 V from rest to
+    #: hover) and 34 times a 6S pack's discharge over the window in a 4 min flight (25.2 to
+    #: 21 V: 0.035 V in 2 s); a 1 V/s sag trips 1.45-1.52 s after it starts (the mission).
+    cell_sag_v: float = 0.2
+    #: ... the window, s: sags slower than ``cell_sag_v`` x cells per ``sag_window_s`` (0.6
+    #: V/s for 6S) are left to ``battery_low``. ASSUMPTION: 2 s.
+    sag_window_s: float = 2.0
     #: What losing the ground station does while perched: "hold" (stay perched) or "land".
     ground_loss_perched: str = "hold"
     #: Joint tracking: a joint whose present angle (``servo/states``) stays further than
@@ -149,6 +170,8 @@ class MonitorLimits:
             "imu_quat_norm_tol",
             "servo_timeout_s",
             "low_battery_s",
+            "cell_sag_v",
+            "sag_window_s",
             "joint_tracking_rad",
             "joint_tracking_s",
             "perch_qp_fail_s",
@@ -195,6 +218,30 @@ def battery_cells(voltages: list[float]) -> int:
     return max(1, round(top / CELL_FULL_V))
 
 
+#: Spinal's battery filter (``bat.h``, jsk-flight-navigation.md sec. 8): every
+#: ``SPINAL_BATTERY_SAMPLE_S`` the reading becomes ``SPINAL_BATTERY_FILTER`` x itself plus
+#: the rest x the ADC sample.
+SPINAL_BATTERY_FILTER = 0.99
+SPINAL_BATTERY_SAMPLE_S = 0.02
+#: The span the pack voltage is taken over, s: the filter undone over a longer span
+#: amplifies the reading's rounding and the count of filter steps between two receive times
+#: less (over 0.5 s, 1/(1 - 0.99^25) = 4.5 times; one step miscounted: 3.5 % of the
+#: reading's lag). ASSUMPTION: 0.5 s (the pack voltage then lags the pack by about 0.25 s).
+PACK_SPAN_S = 0.5
+#: Battery readings and pack voltages kept (Spinal publishes every 100 ms: 6 and 21 needed);
+#: a faster stream shortens the span and the window rather than growing the lists.
+READINGS_KEPT = 64
+PACK_KEPT = 256
+
+
+def pack_voltage(y: float, y0: float, dt: float) -> float:
+    """The pack voltage over the ``dt`` s before the Spinal reading ``y``, ``y0`` the reading
+    ``dt`` earlier: the filter ``y <- a y + (1 - a) v`` undone over ``dt / 0.02`` steps with
+    the pack ``v`` held over them."""
+    a = SPINAL_BATTERY_FILTER ** (dt / SPINAL_BATTERY_SAMPLE_S)
+    return (y - a * y0) / (1.0 - a)
+
+
 #: How many of the latest monitor events the status carries.
 EVENTS_KEPT = 32
 #: Spinal publishes ``imu`` no faster than every 5 ms (``IMU_PUB_INTERVAL``,
@@ -217,6 +264,10 @@ class Monitors:
         self.first_trip: dict[str, float] = {}
         self.voltage: float | None = None
         self._low_since: float | None = None
+        #: plausible readings (receive time, V) back to the newest one ``PACK_SPAN_S`` old
+        self._readings: deque[tuple[float, float]] = deque(maxlen=READINGS_KEPT)
+        #: pack voltages (time, V) of the last ``sag_window_s``
+        self._pack: deque[tuple[float, float]] = deque(maxlen=PACK_KEPT)
         self._stale: set[str] = set()
         self._since: dict[str, float] = {}
         #: the last plausible ``imu`` reading: receive time, gyro, quaternion
@@ -253,7 +304,44 @@ class Monitors:
             self._low_since = None
         elif self._low_since is None:
             self._low_since = now
+        self._track_pack(volts, now)
         return True
+
+    def _track_pack(self, volts: float, now: float) -> None:
+        """Add the pack voltage at ``now`` (:func:`pack_voltage` from the newest reading at
+        least ``PACK_SPAN_S`` older) and drop those older than ``sag_window_s``."""
+        readings = self._readings
+        if readings and now < readings[-1][0]:  # the clock went back: start again
+            readings.clear()
+            self._pack.clear()
+        elif readings and now == readings[-1][0]:  # two in one receive: the newer one
+            readings.pop()
+        while len(readings) >= 2 and now - readings[1][0] >= PACK_SPAN_S - 1e-9:
+            readings.popleft()
+        if readings and now - readings[0][0] >= PACK_SPAN_S - 1e-9:
+            at, y0 = readings[0]
+            self._pack.append((now, pack_voltage(volts, y0, now - at)))
+        readings.append((now, volts))
+        pack = self._pack
+        while pack and now - pack[0][0] > self.limits.sag_window_s + 1e-9:
+            pack.popleft()
+
+    def battery_sag(self, now: float) -> bool:
+        """Whether the pack voltage is more than ``cell_sag_v`` x cells below its highest of
+        the last ``sag_window_s`` (trips once per episode)."""
+        pack = self._pack
+        if not pack:
+            return self.stale("battery_sag", False, now, "")
+        peak = max(v for _, v in pack)
+        latest = pack[-1][1]
+        bound = self.limits.cell_sag_v * self.cells
+        return self.stale(
+            "battery_sag",
+            peak - latest > bound,
+            now,
+            f"pack {latest:.2f} V, {peak - latest:.3f} V below its {peak:.2f} V of the last"
+            f" {self.limits.sag_window_s:g} s (more than {bound:.3f} V)",
+        )
 
     def battery_low(self, now: float) -> bool:
         """Whether the voltage stayed below ``cell_low`` for ``low_battery_s`` (trips once)."""

@@ -399,6 +399,8 @@ class OnboardStep:
                     self._react("geofence", now)
             if m.battery_low(now):
                 self._react("battery_low", now)
+            if m.battery_sag(now):
+                self._react("battery_sag", now)
         if self.foot is not None and self.control.perching:
             missing = self.foot.latest(now, self.config.foot_timeout_s) is None
             m.stale("foot_stale", missing, now, "no foot-sensor sample while perched")

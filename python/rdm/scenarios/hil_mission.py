@@ -410,7 +410,8 @@ def _record(stack: Stack, op: Operator, final: dict, wall: float, err: str) -> d
         "heartbeat-loss": bool(monitors.get("ground_lost")),
         "mocap-loss": bool(final.get("counts", {}).get("command_withheld")),
         "uart-cut": bool(monitors.get("spinal_silent")),
-        "low-battery": bool(monitors.get("battery_low")),
+        # either battery monitor: the step down to 3.4 V/cell trips battery_sag first
+        "low-battery": bool(monitors.get("battery_low") or monitors.get("battery_sag")),
         "replayed-command": "replayed" in json.dumps(link) or "stale" in json.dumps(link),
         "garbage-datagram": "too_deep" in json.dumps(link) or "malformed" in json.dumps(link),
         "foot-sensor-loss": bool(monitors.get("foot_stale")),

@@ -260,16 +260,20 @@ def _can_wire(stack: Stack) -> Any:
     return link
 
 
-#: Which monitor or counter shows that the node noticed each fault.
-_DETECTED_BY = {
+#: The node's battery monitors: a level held (``battery_low``) and a sag (``battery_sag``);
+#: either detects a battery fault (a step down to 3.4 V/cell trips the sag rule first).
+_BATTERY_MONITORS = ("battery_low", "battery_sag")
+#: Which monitor or counter (or which of several monitors) shows that the node noticed each
+#: fault.
+_DETECTED_BY: dict[str, tuple[str, str | tuple[str, ...]]] = {
     "heartbeat-loss": ("monitors", "ground_lost"),
     "mocap-loss": ("node", "command_withheld"),
     "uart-cut": ("monitors", "spinal_silent"),
-    "low-battery": ("monitors", "battery_low"),
+    "low-battery": ("monitors", _BATTERY_MONITORS),
     "bad-adc-scale": ("spinal", "adc_scale_implausible"),
     "uart-noise-1e-4": ("parser", "bad_frames"),
     "uart-noise-1e-3": ("parser", "bad_frames"),
-    "battery-sag": ("monitors", "battery_low"),
+    "battery-sag": ("monitors", _BATTERY_MONITORS),
     "foot-sensor-loss": ("monitors", "foot_stale"),
     # each outlier dropped by Spinal's estimator (``out_of_range``); its accelerometer value
     # reaches the node on ``imu``, which refuses it
@@ -317,6 +321,7 @@ def outcome(stack: Stack, script: MissionScript, a: dict[str, np.ndarray]) -> di
     if max_tilt > MAX_TILT_DEG:
         result = "crashed"
     where, key = _DETECTED_BY.get(script.fault, ("", ""))
+    keys = (key,) if isinstance(key, str) else key
     counts = {
         "monitors": node.monitors.counts,
         "node": node.counts,
@@ -334,7 +339,7 @@ def outcome(stack: Stack, script: MissionScript, a: dict[str, np.ndarray]) -> di
         and max_tilt <= MAX_TILT_DEG
         and script.max_duty <= max_duty_allowed + 1e-9,
         "fault": script.fault,
-        "fault_detected": bool(counts[key]) if key else None,
+        "fault_detected": any(counts[k] for k in keys) if key else None,
         "fault_at_s": script.fault_at,
         "final_state": node.state.value,
         "max_tilt_deg": max_tilt,
@@ -345,15 +350,13 @@ def outcome(stack: Stack, script: MissionScript, a: dict[str, np.ndarray]) -> di
     }
     if script.fault != "none":  # when the node's monitor first tripped (None: another counter)
         after = script.fault_at or 0
-        first = node.monitors.first_trip.get(key) if where == "monitors" else None
-        trips = [
-            e["t"]
-            for e in node.monitors.events
-            if where == "monitors" and e["monitor"] == key and e["t"] >= after
-        ]
-        if first is not None and first >= after:  # the event list keeps only the latest
-            trips.insert(0, first)
-        record["detected_at_s"] = trips[0] if trips else None
+        names = keys if where == "monitors" else ()
+        trips = [e["t"] for e in node.monitors.events if e["monitor"] in names and e["t"] >= after]
+        for k in names:  # the event list keeps only the latest
+            first = node.monitors.first_trip.get(k)
+            if first is not None and first >= after:
+                trips.append(first)
+        record["detected_at_s"] = min(trips) if trips else None
     return record
 
 
