@@ -37,12 +37,13 @@ def kind_of(node: Any) -> str | None:
 
 def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
     """Hand the kernel the plant's parts it holds for the plant's lifetime (typed values:
-    MuJoCo's model, data and step functions, the option-flags address, the Rust cores, the
-    MjData views, the servo actuators and the resting-sleep core)."""
+    MuJoCo's model, data and step functions, the option-flags address and the sensor bit,
+    the plant's Rust cores (state, rotors, collision gate, foot contact tracker, resting
+    sleep), the tracker face's ``update``, the MjData views and the servo actuators)."""
     model = plant.model
     sleep = plant.sleep
+    tracker = plant._tracker
     kernel.attach_plant(
-        plant,
         model,
         plant._data,
         [
@@ -54,9 +55,12 @@ def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
         ],
         (plant._flags_address, getattr(model, "_address", None), option_flags.SEARCH_BYTES),
         model.opt,
+        plant._sensor_bit,
+        plant._state,
         plant._rotors,
         plant._contact_gate,
-        plant._tracker,
+        tracker._core,
+        tracker.update,
         plant._v_qpos,
         plant._v_sensordata,
         plant._v_ctrl,

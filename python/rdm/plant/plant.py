@@ -24,7 +24,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from rdm._rdm import ContactGateCore, RotorPlantCore
+from rdm._rdm import ContactGateCore, PlantStateCore, RotorPlantCore
 from rdm.plant.ceiling import CeilingEffect, NoCeilingEffect, ParametricCeilingEffect
 from rdm.plant.contact_gate import build_contact_gate
 from rdm.plant.description import RobotDescription, load_robot
@@ -133,11 +133,12 @@ class Plant(PlantReadings, PlantTruthReadout):
             scene(self.spec)
         self.model = self.spec.compile()
         self._data = mujoco.MjData(self.model)
-        #: True after a step until the lazy ``mj_forward`` ran (see :meth:`sync`).
-        self._stale = False
-        self._needs_step1 = True
-        #: Changes with every step / reset / outside access to ``data`` (ground-truth cache).
-        self._state_version = 0
+        #: The lazy forward pass (stale after a step until the ``mj_forward`` of :meth:`sync`
+        #: ran; whether the next step runs ``mj_step1``), the state version the ground-truth
+        #: cache keys on (every step / reset / outside access to ``data`` moves it), the
+        #: rejected servo goals and whether a step can run in Rust: one Rust object this
+        #: face and the lockstep kernel both change.
+        self._state = PlantStateCore()
         self._truth_cache: tuple[int, GroundTruth] | None = None
         m = self.model
         self.seed = seed
@@ -182,7 +183,6 @@ class Plant(PlantReadings, PlantTruthReadout):
         self._ceiling_z = ceiling_height
         self._imu_noise = imu_noise or ImuNoise()
         self._wrench_noise = wrench_noise or WrenchNoise()
-        self.rejected_commands = 0
         self._thrusts_list = [0.0] * len(self.rotor_names)
         # Cached views on the MjData buffers (stable for the data's lifetime): attribute
         # access through the bindings costs more than the arithmetic at 1 kHz.
@@ -267,6 +267,11 @@ class Plant(PlantReadings, PlantTruthReadout):
         return self._contact_gate
 
     @property
+    def rejected_commands(self) -> int:
+        """Servo goals refused (non-finite entries of :meth:`set_servo_targets`)."""
+        return self._state.rejected_commands
+
+    @property
     def ceiling_effects(self) -> tuple[CeilingEffect, ...]:
         """Ceiling-effect model per rotor (assign a new sequence to change them)."""
         return self._ceiling_effects
@@ -278,17 +283,18 @@ class Plant(PlantReadings, PlantTruthReadout):
             raise ValueError(f"ceiling_effects: expected {len(self.rotor_names)} models")
         self._ceiling_effects = effects
         # The Rust step covers the shipped models; any other model keeps the Python path.
-        self._rotors_in_core = all(_core_ceiling(self._rotors, i, e) for i, e in enumerate(effects))
+        self._state.rotors_in_core = all(
+            _core_ceiling(self._rotors, i, e) for i, e in enumerate(effects)
+        )
 
     # ----------------------------------------------------------------- lazy forward
     @property
     def data(self) -> mujoco.MjData:
         """The MuJoCo data, brought up to date (:meth:`sync`) before it is handed out. The
         caller may change the state through it, so the next step recomputes everything."""
-        if self._stale:
+        if self._state.stale:
             self.sync()
-        self._needs_step1 = True
-        self._state_version += 1  # the caller may change the state: no cached truth
+        self._state.touched()  # the caller may change the state: mj_step1, no cached truth
         if self.sleep is not None:
             self.sleep.wake_next()
         if self._contact_gate is not None:
@@ -297,7 +303,7 @@ class Plant(PlantReadings, PlantTruthReadout):
 
     def _fresh(self) -> mujoco.MjData:
         """The data after :meth:`sync`, for the plant's own reads and ctrl/xfrc writes."""
-        if self._stale:
+        if self._state.stale:
             self.sync()
         return self._data
 
@@ -305,8 +311,7 @@ class Plant(PlantReadings, PlantTruthReadout):
         """Make every derived quantity refer to the present state: held external wrenches
         re-aimed at the bodies' new poses, then one ``mj_forward``. Runs by itself before a
         reading or a command; calling it again before the next step does nothing."""
-        self._stale = False
-        self._needs_step1 = False  # this forward covers the next step's mj_step1 stages
+        self._state.synced()  # this forward covers the next step's mj_step1 stages
         m, d = self.model, self._data
         if self._external:
             mujoco.mj_kinematics(m, d)
@@ -335,9 +340,7 @@ class Plant(PlantReadings, PlantTruthReadout):
         ``base_position``/``base_quaternion`` (ignored with ``fixed_base``), rotors already
         spinning at ``thrusts`` (default stopped). Sensor generators are re-seeded."""
         m, d = self.model, self._data
-        self._stale = False
-        self._needs_step1 = True
-        self._state_version += 1
+        self._state.reset()
         if self._contact_gate is not None:
             self._contact_gate.enable()
         mujoco.mj_resetData(m, d)
@@ -368,6 +371,7 @@ class Plant(PlantReadings, PlantTruthReadout):
             self._rotors.set_alpha(i, esc.lag_factor(m.opt.timestep))
         self._tracker.reset()
         self._external.clear()
+        self._state.wrenches_held = False
         self._seed_sensors()
         mujoco.mj_forward(m, d)
         self._apply_rotor_thrusts()
@@ -405,7 +409,7 @@ class Plant(PlantReadings, PlantTruthReadout):
         """Goal positions (joint_order) [rad]; non-finite entries keep the previous goal."""
         q = _vector(q, len(self.joint_names), "q")
         ok = np.isfinite(q)
-        self.rejected_commands += int(np.count_nonzero(~ok))
+        self._state.reject(int(np.count_nonzero(~ok)))
         # Sync first: readings taken after this command still see the forward
         # pass of the previous ctrl, as when the forward ran right after the step.
         self._fresh().ctrl[self._servo_act[ok]] = q[ok]
@@ -433,6 +437,7 @@ class Plant(PlantReadings, PlantTruthReadout):
         if not (f.any() or t.any()):
             del self._external[bid]
             self._fresh().xfrc_applied[bid] = 0.0
+        self._state.wrenches_held = bool(self._external)
         self._apply_external()
 
     def _apply_external(self) -> None:
@@ -464,7 +469,7 @@ class Plant(PlantReadings, PlantTruthReadout):
         Otherwise plain floats in one pass; the arithmetic is the same as
         :meth:`_rotor_distances` and :meth:`Esc.thrust` give.
         """
-        if self._rotors_in_core:
+        if self._state.rotors_in_core:
             self._rotors.apply()
             return
         h = self._ceiling_z
@@ -512,22 +517,19 @@ class Plant(PlantReadings, PlantTruthReadout):
             tracker.update(d)  # contacts of this step's start: keep the slip anchor
             if gate is not None:
                 gate.update()  # contacts off for the next pass if none can occur in it
-        self._stale = True  # the forward pass runs when something reads (see sync)
-        self._needs_step1 = True
-        self._state_version += 1
+        self._state.stepped()  # the forward pass runs when something reads (see sync)
 
     def _passes(self, m: mujoco.MjModel, d: mujoco.MjData, lazy_flags: int | None) -> None:
         """One step's MuJoCo passes with this step's rotor, wrench and sleep writes;
         ``lazy_flags``: the sensor bit is set, these are the flags without it."""
-        if self._stale or self._needs_step1:
+        if self._state.begin_step():
             mujoco.mj_step1(m, d)
         # else: a forward pass (sync) already ran on this very state: mj_step1's position
         # and velocity stages would recompute the same numbers (they do not depend on
         # ctrl or xfrc_applied), so only mj_step2 runs (bit-identical; docs/plant.md).
-        self._needs_step1 = True
         # First-order ESC lag, exact discretisation (Esc.update with a cached factor),
         # then the ceiling-scaled thrusts into ctrl: one Rust call for the shipped models.
-        if self._rotors_in_core:
+        if self._state.rotors_in_core:
             self._rotors.step()
         else:
             self._rotors.advance_lag()

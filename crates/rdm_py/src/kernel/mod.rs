@@ -29,9 +29,11 @@ use pyo3::prelude::*;
 
 use crate::can_master::{CanMaster, CanWire};
 use crate::contact_gate::ContactGateCore;
+use crate::foot_tracker::FootTrackerCore;
 use crate::leptrino_sensor::LeptrinoStreamCore;
 use crate::neuron_bank::NeuronBank;
 use crate::plant_bridge::PlantBridgeCore;
+use crate::plant_state::PlantStateCore;
 use crate::resting_sleep::RestingSleepCore;
 use crate::rotor_plant::RotorPlantCore;
 use crate::stop_flag::StopFlag;
@@ -72,7 +74,6 @@ macro_rules! part {
         }
     };
 }
-part!(PlantLink);
 part!(BridgeFast);
 part!(BankFast);
 part!(SpinalFast);
@@ -218,26 +219,30 @@ impl LockstepKernel {
         })
     }
 
-    /// The plant (`rdm.plant.Plant`) the physics step and the bridge drive, with its parts
+    /// The plant (`rdm.plant.Plant`) the physics step and the bridge drive, as its parts
     /// (read by the caller, `rdm.nodes.lockstep_kernel`): `model`, `data`; `mj`: MuJoCo's
     /// `mj_step1`, `mj_step2`, `mj_forward`, `mj_sensorPos`, `mj_sensorVel`; `flags`:
     /// `(Plant._flags_address, model._address, option_flags.SEARCH_BYTES)` (None: unknown);
-    /// `opt`: `model.opt`; the rotor and contact-gate cores; the contact tracker; the qpos,
-    /// sensordata and ctrl views; the servo actuator per joint; `sleep`: the core of
-    /// `Plant.sleep` (None: the plant has none).
+    /// `opt`: `model.opt`; `sensor_bit`: the bit set in `opt.disableflags` while a step runs
+    /// (0: none); the plant's state, rotor and contact-gate cores; `tracker`: the foot contact
+    /// tracker's core and `tracker_update` its face's `update`; the qpos, sensordata and ctrl
+    /// views; the servo actuator per joint; `sleep`: the core of `Plant.sleep` (None: none).
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (plant, model, data, mj, flags, opt, rotors, gate, tracker, qpos, sensordata, ctrl, servo_act, sleep))]
+    #[pyo3(signature = (model, data, mj, flags, opt, sensor_bit, state, rotors, gate, tracker, tracker_update, qpos, sensordata, ctrl, servo_act, sleep))]
     fn attach_plant(
         &mut self,
-        plant: &Bound<'_, PyAny>,
+        py: Python<'_>,
         model: Py<PyAny>,
         data: Py<PyAny>,
         mj: [Py<PyAny>; 5],
         flags: (Option<usize>, Option<usize>, usize),
         opt: Py<PyAny>,
+        sensor_bit: i64,
+        state: Py<PlantStateCore>,
         rotors: Py<RotorPlantCore>,
         gate: Option<Py<ContactGateCore>>,
-        tracker: Py<PyAny>,
+        tracker: Py<FootTrackerCore>,
+        tracker_update: Py<PyAny>,
         qpos: Py<numpy::PyArray1<f64>>,
         sensordata: Py<numpy::PyArray1<f64>>,
         ctrl: Py<numpy::PyArray1<f64>>,
@@ -252,16 +257,19 @@ impl LockstepKernel {
             model_address: flags.1,
             search_bytes: flags.2,
             opt,
+            sensor_bit,
+            state,
             rotors,
             gate,
             tracker,
+            tracker_update,
             qpos,
             sensordata,
             ctrl,
             servo_act,
             sleep,
         };
-        self.plant = Some(PlantLink::new(plant.py(), plant, parts));
+        self.plant = Some(PlantLink::new(py, parts));
         Ok(())
     }
 
