@@ -113,6 +113,23 @@ def test_a_moved_contact_list_is_detected_and_reread():
     assert _tracker_state(tracker) == oracle.state()
 
 
+def test_the_tracker_core_refuses_bad_input_with_one_line():
+    """A negative or NaN release time and a geom view that is not (n, 2) pairs are refused
+    with a ValueError naming the argument; the refused release time leaves the old one."""
+    from rdm._rdm import FootTrackerCore
+
+    for bad in (-0.1, math.nan):
+        with pytest.raises(ValueError, match=r"^release_time: must be >= 0"):
+            FootTrackerCore([1, 2], bad)
+    core = FootTrackerCore([1, 2], 0.1)
+    with pytest.raises(ValueError, match=r"^release_time"):
+        core.release_time = -1.0
+    assert core.release_time == 0.1
+    with pytest.raises(ValueError, match=r"^geom: expected \(n, 2\)"):
+        core.keep_view(object(), 1, 0, np.zeros((1, 3), dtype=np.int32))
+    assert core.idle() and core.view_address is None
+
+
 def _wrench_reference(plant: Plant, key: str, rng: np.random.Generator) -> np.ndarray:
     """The noisy wrench in numpy: MuJoCo's ideal values, six normals of one generator call,
     clipped at the rated capacity and quantised to rated / 10000."""

@@ -7,7 +7,8 @@ Python nodes already use, at the same base ticks in the same order. Every other 
 node's own Python ``tick``. Before Python code runs, the kernel writes back what its fast
 ticks changed of the parts that code may read or change; after, it re-reads those parts'
 plans. State that is one Rust object the node and the kernel share (the Leptrino stream,
-the Neuron bank, the resting sleep, the noise models' normal streams) needs neither: only
+the Neuron bank, the plant's state and foot contact tracker, the resting sleep, the noise
+models' normal streams) needs neither: only
 the Leptrino's pending UART bytes wait. So the logs are the same bytes as with every tick
 in Python (tests/test_lockstep_kernel.py, tests/test_spinal_kernel_busy.py; docs/sim.md).
 """

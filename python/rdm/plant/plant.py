@@ -381,11 +381,7 @@ class Plant(PlantReadings, PlantTruthReadout):
     def set_rotor_duties(self, duties: Sequence[float] | np.ndarray) -> None:
         """PWM duty per rotor in [0.5, 1] (0.5 stops the motor); goes through the ESC model."""
         escs = self.escs
-        n = len(escs)
-        if type(duties) is np.ndarray and duties.dtype == np.float64 and duties.shape == (n,):
-            values = duties.tolist()  # the bridge's duty array: the same floats as below
-        else:
-            values = _vector(duties, n, "duties").tolist()
+        values = _vector(duties, len(escs), "duties").tolist()
         if self._duties_in_core and all(e._v_factor is not None for e in escs):
             # Every ESC's clamp, count and duty -> thrust map in one Rust call (the numbers
             # and counters of Esc.command_duty; an ESC whose map the core does not hold, e.g.

@@ -12,8 +12,9 @@
 //! Exactness rule: the Python-visible state a fast path changes is written back (`flush`)
 //! before any Python code runs, and every plan is re-read (`invalidate`) after, so Python
 //! code always sees what the node's own ticks would have left. A part whose state is a Rust
-//! core the node shares (Leptrino stream, Neuron bank, resting sleep, normal streams) has
-//! nothing to write back but the Leptrino's pending UART bytes.
+//! core the node shares (Leptrino stream, Neuron bank, the plant's state and foot contact
+//! tracker, resting sleep, normal streams) has nothing to write back but the Leptrino's
+//! pending UART bytes.
 
 mod attr;
 mod bank;
