@@ -41,6 +41,7 @@ __all__ = [
     "PlannerError",
     "PlantBridgeCore",
     "PlantStateCore",
+    "PlantStepCore",
     "PlateContactCore",
     "PositionControlError",
     "PositionController",
@@ -1299,6 +1300,33 @@ class PlantStateCore:
     def stepped(self) -> None: ...
     def reject(self, n: int) -> None: ...
 
+@_final
+class PlantStepCore:
+    """``rdm.plant.Plant``'s physics step and lazy forward pass (``Plant.step``,
+    ``Plant.sync``), shared with the lockstep kernel; the face's ``callbacks`` (rotors outside
+    the core, apply and re-aim held wrenches, the tracker face's ``update``) run only when
+    the state needs them."""
+
+    def __new__(
+        cls,
+        model: Any,
+        data: Any,
+        mj: Sequence[Any],
+        flags: tuple[int | None, int | None, int],
+        opt: Any,
+        sensor_bit: int,
+        state: PlantStateCore,
+        rotors: RotorPlantCore,
+        gate: ContactGateCore | None,
+        tracker: FootTrackerCore,
+        sleep: RestingSleepCore | None,
+        callbacks: Sequence[Callable[..., None]],
+    ) -> _Self: ...
+    def step(self, n: int) -> None:
+        """Advance ``n`` physics steps."""
+    def sync(self) -> None:
+        """The forward pass on the present state (held wrenches re-aimed first)."""
+
 # --- CAN master and wire ---
 class CanMasterError(RdmError): ...
 
@@ -1606,24 +1634,15 @@ class LockstepKernel:
     ) -> _Self: ...
     def attach_plant(
         self,
-        model: Any,
-        data: Any,
-        mj: Sequence[Any],
-        flags: tuple[int | None, int | None, int],
-        opt: Any,
-        sensor_bit: int,
+        stepper: PlantStepCore,
         state: PlantStateCore,
         rotors: RotorPlantCore,
-        gate: ContactGateCore | None,
-        tracker: FootTrackerCore,
-        tracker_update: Callable[[Any], None],
         qpos: _F,
         sensordata: _F,
         ctrl: _F,
         servo_act: Sequence[int],
-        sleep: RestingSleepCore | None,
     ) -> None:
-        """The plant and its parts (typed, read by ``rdm.nodes.lockstep_kernel``)."""
+        """The plant's parts (typed, read by ``rdm.nodes.lockstep_kernel``)."""
     def attach_bridge(
         self,
         index: int,

@@ -18,13 +18,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-import mujoco
-
 from rdm import _rdm
 from rdm.link.can_wire import DRAIN_AT, CanWireLink
 from rdm.link.tapped_link import TappedLink
 from rdm.link.uart_pipe import InProcessUartEnd
-from rdm.plant import option_flags
 
 from .lockstep import Lockstep
 from .plant_bridge import PlantBridge
@@ -38,35 +35,15 @@ def kind_of(node: Any) -> str | None:
 
 def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
     """Hand the kernel the plant's parts it holds for the plant's lifetime (typed values:
-    MuJoCo's model, data and step functions, the option-flags address and the sensor bit,
-    the plant's Rust cores (state, rotors, collision gate, foot contact tracker, resting
-    sleep), the tracker face's ``update``, the MjData views and the servo actuators)."""
-    model = plant.model
-    sleep = plant.sleep
-    tracker = plant._tracker
+    the plant's step, state and rotor cores, the MjData views and the servo actuators)."""
     kernel.attach_plant(
-        model,
-        plant._data,
-        [
-            mujoco.mj_step1,
-            mujoco.mj_step2,
-            mujoco.mj_forward,
-            mujoco.mj_sensorPos,
-            mujoco.mj_sensorVel,
-        ],
-        (plant._flags_address, getattr(model, "_address", None), option_flags.SEARCH_BYTES),
-        model.opt,
-        plant._sensor_bit,
+        plant._stepper,
         plant._state,
         plant._rotors,
-        plant._contact_gate,
-        tracker._core,
-        tracker.update,
         plant._v_qpos,
         plant._v_sensordata,
         plant._v_ctrl,
         [int(a) for a in plant._servo_act],
-        None if sleep is None else sleep._core,
     )
 
 

@@ -18,13 +18,14 @@ are parts of :class:`Plant` in modules of their own.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
-from rdm._rdm import ContactGateCore, PlantStateCore, RotorPlantCore
+from rdm._rdm import ContactGateCore, PlantStateCore, PlantStepCore, RotorPlantCore
 from rdm.plant.ceiling import CeilingEffect, NoCeilingEffect, ParametricCeilingEffect
 from rdm.plant.contact_gate import build_contact_gate
 from rdm.plant.description import RobotDescription, load_robot
@@ -41,7 +42,7 @@ from rdm.plant.mjcf import (
     rotor_site,
     servo_actuator,
 )
-from rdm.plant.option_flags import disableflags_address
+from rdm.plant.option_flags import SEARCH_BYTES, disableflags_address
 from rdm.plant.readings import PlantReadings
 from rdm.plant.sensors import (
     ImuModel,
@@ -257,6 +258,34 @@ class Plant(PlantReadings, PlantTruthReadout):
         )
         #: Where the kernel writes that bit (None: through ``opt.disableflags``).
         self._flags_address = disableflags_address(m) if self._sensor_bit else None
+        plant = weakref.proxy(self)  # the step's callbacks hold the plant weakly
+        #: The physics step and the forward pass (:meth:`step`, :meth:`sync`) in Rust, the
+        #: one form the lockstep kernel calls too; Python only where the state needs it.
+        self._stepper = PlantStepCore(
+            m,
+            d,
+            [
+                mujoco.mj_step1,
+                mujoco.mj_step2,
+                mujoco.mj_forward,
+                mujoco.mj_sensorPos,
+                mujoco.mj_sensorVel,
+            ],
+            (self._flags_address, getattr(m, "_address", None), SEARCH_BYTES),
+            m.opt,
+            self._sensor_bit,
+            self._state,
+            self._rotors,
+            self._contact_gate,
+            self._tracker._core,
+            None if self.sleep is None else self.sleep._core,
+            [
+                lambda: plant._step_rotors(),
+                lambda: plant._apply_external(),
+                lambda: plant._aim_external(),
+                self._tracker.update,
+            ],
+        )
         self._seed_sensors()
         self.reset()
 
@@ -311,13 +340,14 @@ class Plant(PlantReadings, PlantTruthReadout):
         """Make every derived quantity refer to the present state: held external wrenches
         re-aimed at the bodies' new poses, then one ``mj_forward``. Runs by itself before a
         reading or a command; calling it again before the next step does nothing."""
-        self._state.synced()  # this forward covers the next step's mj_step1 stages
+        self._stepper.sync()
+
+    def _aim_external(self) -> None:
+        """Before a forward pass with held wrenches: kinematics, then the wrenches re-aimed."""
         m, d = self.model, self._data
-        if self._external:
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_comPos(m, d)
-            self._apply_external()
-        mujoco.mj_forward(m, d)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        self._apply_external()
 
     # ----------------------------------------------------------------- set-up and reset
     def _seed_sensors(self) -> None:
@@ -493,56 +523,22 @@ class Plant(PlantReadings, PlantTruthReadout):
         return np.array(self._rotors.applied(), dtype=float)
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` physics steps (readings then refer to the new time)."""
-        m, d = self.model, self._data
-        tracker = self._tracker
-        gate = self._contact_gate
-        opt, sensor_bit, sleep = m.opt, self._sensor_bit, self.sleep
-        for _ in range(int(n)):
-            # Sensors only in the forward pass a reading runs (sync), while the robot cannot
-            # fall asleep in this step (it would keep values no step computed).
-            if sensor_bit and (sleep is None or not sleep.allowed):
-                flags = opt.disableflags
-                opt.disableflags = flags | sensor_bit
-                try:
-                    self._passes(m, d, flags)
-                finally:
-                    opt.disableflags = flags
-            else:
-                self._passes(m, d, None)
-            tracker.update(d)  # contacts of this step's start: keep the slip anchor
-            if gate is not None:
-                gate.update()  # contacts off for the next pass if none can occur in it
-        self._state.stepped()  # the forward pass runs when something reads (see sync)
+        """Advance ``n`` physics steps (readings then refer to the new time).
 
-    def _passes(self, m: mujoco.MjModel, d: mujoco.MjData, lazy_flags: int | None) -> None:
-        """One step's MuJoCo passes with this step's rotor, wrench and sleep writes;
-        ``lazy_flags``: the sensor bit is set, these are the flags without it."""
-        if self._state.begin_step():
-            mujoco.mj_step1(m, d)
-        # else: a forward pass (sync) already ran on this very state: mj_step1's position
-        # and velocity stages would recompute the same numbers (they do not depend on
-        # ctrl or xfrc_applied), so only mj_step2 runs (bit-identical; docs/plant.md).
-        # First-order ESC lag, exact discretisation (Esc.update with a cached factor),
-        # then the ceiling-scaled thrusts into ctrl: one Rust call for the shipped models.
-        if self._state.rotors_in_core:
-            self._rotors.step()
-        else:
-            self._rotors.advance_lag()
-            self._apply_rotor_thrusts()
-        if self._external:
-            self._apply_external()
-        if self.sleep is not None:  # this step's controls written: the sleep rule
-            self.sleep.before_step2(self._step1_now)
-            if lazy_flags is not None and self.sleep.allowed:
-                # the robot may fall asleep in this step: its sensors as mj_step1 gives them
-                m.opt.disableflags = lazy_flags
-                mujoco.mj_sensorPos(m, d)
-                mujoco.mj_sensorVel(m, d)
-        mujoco.mj_step2(m, d)
+        Per step (``PlantStepCore``): ``mj_step1`` unless a forward pass (:meth:`sync`) already
+        ran on this very state (its position and velocity stages depend on neither ctrl nor
+        xfrc_applied: bit-identical, docs/plant.md), the ESC lags and ceiling-scaled thrusts
+        into ctrl (:meth:`_step_rotors` for a model outside the rotor core), the held external
+        wrenches, the sleep rule, ``mj_step2`` with MuJoCo's sensors off while the robot
+        cannot fall asleep (lazy sensors), the foot contact tracker and the collision gate.
+        """
+        self._stepper.step(int(n))
 
-    def _step1_now(self) -> None:
-        mujoco.mj_step1(self.model, self._data)
+    def _step_rotors(self) -> None:
+        """The ESC lags (exact discretisation) and the ceiling-scaled thrusts into ctrl for a
+        ceiling model outside the rotor core."""
+        self._rotors.advance_lag()
+        self._apply_rotor_thrusts()
 
     @property
     def time(self) -> float:

@@ -20,7 +20,6 @@ mod attr;
 mod bank;
 mod bridge;
 mod leptrino;
-mod option_flags;
 mod pacing;
 mod plant;
 mod run_loop;
@@ -29,13 +28,11 @@ mod spinal;
 use pyo3::prelude::*;
 
 use crate::can_master::{CanMaster, CanWire};
-use crate::contact_gate::ContactGateCore;
-use crate::foot_tracker::FootTrackerCore;
 use crate::leptrino_sensor::LeptrinoStreamCore;
 use crate::neuron_bank::NeuronBank;
 use crate::plant_bridge::PlantBridgeCore;
 use crate::plant_state::PlantStateCore;
-use crate::resting_sleep::RestingSleepCore;
+use crate::plant_step::PlantStepCore;
 use crate::rotor_plant::RotorPlantCore;
 use crate::stop_flag::StopFlag;
 use crate::tick_counter::TickCounter;
@@ -221,57 +218,28 @@ impl LockstepKernel {
     }
 
     /// The plant (`rdm.plant.Plant`) the physics step and the bridge drive, as its parts
-    /// (read by the caller, `rdm.nodes.lockstep_kernel`): `model`, `data`; `mj`: MuJoCo's
-    /// `mj_step1`, `mj_step2`, `mj_forward`, `mj_sensorPos`, `mj_sensorVel`; `flags`:
-    /// `(Plant._flags_address, model._address, option_flags.SEARCH_BYTES)` (None: unknown);
-    /// `opt`: `model.opt`; `sensor_bit`: the bit set in `opt.disableflags` while a step runs
-    /// (0: none); the plant's state, rotor and contact-gate cores; `tracker`: the foot contact
-    /// tracker's core and `tracker_update` its face's `update`; the qpos, sensordata and ctrl
-    /// views; the servo actuator per joint; `sleep`: the core of `Plant.sleep` (None: none).
+    /// (read by the caller, `rdm.nodes.lockstep_kernel`): its step, state and rotor cores,
+    /// the qpos, sensordata and ctrl views and the servo actuator per joint.
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (model, data, mj, flags, opt, sensor_bit, state, rotors, gate, tracker, tracker_update, qpos, sensordata, ctrl, servo_act, sleep))]
     fn attach_plant(
         &mut self,
-        py: Python<'_>,
-        model: Py<PyAny>,
-        data: Py<PyAny>,
-        mj: [Py<PyAny>; 5],
-        flags: (Option<usize>, Option<usize>, usize),
-        opt: Py<PyAny>,
-        sensor_bit: i64,
+        stepper: Py<PlantStepCore>,
         state: Py<PlantStateCore>,
         rotors: Py<RotorPlantCore>,
-        gate: Option<Py<ContactGateCore>>,
-        tracker: Py<FootTrackerCore>,
-        tracker_update: Py<PyAny>,
         qpos: Py<numpy::PyArray1<f64>>,
         sensordata: Py<numpy::PyArray1<f64>>,
         ctrl: Py<numpy::PyArray1<f64>>,
         servo_act: Vec<usize>,
-        sleep: Option<Py<RestingSleepCore>>,
-    ) -> PyResult<()> {
-        let parts = PlantParts {
-            model,
-            data,
-            mj,
-            flags_address: flags.0,
-            model_address: flags.1,
-            search_bytes: flags.2,
-            opt,
-            sensor_bit,
+    ) {
+        self.plant = Some(PlantLink::new(PlantParts {
+            stepper,
             state,
             rotors,
-            gate,
-            tracker,
-            tracker_update,
             qpos,
             sensordata,
             ctrl,
             servo_act,
-            sleep,
-        };
-        self.plant = Some(PlantLink::new(py, parts));
-        Ok(())
+        }));
     }
 
     /// Node `index` is a `PlantBridge` whose state is `core` (`PlantBridge._core`, needs
@@ -427,10 +395,7 @@ impl LockstepKernel {
         d.set_item("boundaries", self.boundaries)?;
         d.set_item("base_ticks", self.base_ticks)?;
         d.set_item("wall_time", self.pacing.wall_time)?;
-        let (tf, tp) = self
-            .plant
-            .as_ref()
-            .map_or((0, 0), |p| (p.tracker_fast, p.tracker_python));
+        let (tf, tp) = self.plant.as_ref().map_or((0, 0), |p| p.tracker_counts(py));
         d.set_item("tracker_fast", tf)?;
         d.set_item("tracker_python", tp)?;
         let sc = self.spinal.as_ref().map(|s| s.counts).unwrap_or_default();
