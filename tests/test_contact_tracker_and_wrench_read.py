@@ -51,8 +51,8 @@ class _AnchorOracle:
 
 
 def _tracker_state(t) -> tuple:
-    anchor = None if t._anchor_pos is None else (t._anchor_pos.tolist(), t._anchor_rot.tolist())
-    return (t._last_contact_time, anchor)
+    anchor = None if t.anchor_pos is None else (t.anchor_pos.tolist(), t.anchor_rot.tolist())
+    return (t.last_contact_time, anchor)
 
 
 def _landing_plant() -> Plant:
@@ -101,15 +101,33 @@ def test_a_moved_contact_list_is_detected_and_reread():
         plant.step(1)
         oracle.observe(plant._data)
     tracker = plant._tracker
-    data, ncon, addr, view = tracker._geom_view
-    assert ncon == plant._data.ncon > 0 and data is plant._data
-    tracker._geom_view = (data, ncon, addr + 8, view)  # pretend the list moved
+    core, data, ncon = tracker._core, plant._data, plant._data.ncon
+    view = core.view_of(data, ncon)
+    assert ncon > 0 and view is not None
+    core.keep_view(data, ncon, core.view_address + 8, view)  # pretend the list moved
     points = tracker.measure_contacts(plant._fresh())[0]
     oracle.observe(plant._data, points > 0)
-    assert tracker.view_misses == 1 and tracker._geom_view[0] is None
+    assert tracker.view_misses == 1 and core.view_of(data, ncon) is None
     plant.step(1)
     oracle.observe(plant._data)
     assert _tracker_state(tracker) == oracle.state()
+
+
+def test_the_tracker_core_refuses_bad_input_with_one_line():
+    """A negative or NaN release time and a geom view that is not (n, 2) pairs are refused
+    with a ValueError naming the argument; the refused release time leaves the old one."""
+    from rdm._rdm import FootTrackerCore
+
+    for bad in (-0.1, math.nan):
+        with pytest.raises(ValueError, match=r"^release_time: must be >= 0"):
+            FootTrackerCore([1, 2], bad)
+    core = FootTrackerCore([1, 2], 0.1)
+    with pytest.raises(ValueError, match=r"^release_time"):
+        core.release_time = -1.0
+    assert core.release_time == 0.1
+    with pytest.raises(ValueError, match=r"^geom: expected \(n, 2\)"):
+        core.keep_view(object(), 1, 0, np.zeros((1, 3), dtype=np.int32))
+    assert core.idle() and core.view_address is None
 
 
 def _wrench_reference(plant: Plant, key: str, rng: np.random.Generator) -> np.ndarray:

@@ -61,7 +61,7 @@ def _awake_copy(plant: Plant) -> Plant:
     state = np.empty(mujoco.mj_stateSize(plant.model, kind))
     mujoco.mj_getState(plant.model, plant._data, state, kind)
     mujoco.mj_setState(copy.model, copy._data, state, kind)
-    copy._stale = copy._needs_step1 = True
+    copy._state.stale = copy._state.needs_step1 = True
     return copy
 
 

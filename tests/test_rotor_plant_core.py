@@ -117,7 +117,7 @@ def test_plant_rust_path_equals_python_path_over_a_flight_near_the_ceiling() -> 
         p.reset(base_position=(0.0, 0.0, 0.6), base_quaternion=(0.99, 0.05, 0.1, 0.0))
         plants.append(p)
     fast, slow = plants
-    assert fast._rotors_in_core and not slow._rotors_in_core
+    assert fast._state.rotors_in_core and not slow._state.rotors_in_core
     for k in range(60):
         duties = [0.6 + 0.01 * ((k * (i + 3)) % 17) for i in range(4)]
         for p in plants:

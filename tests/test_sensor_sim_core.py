@@ -3,8 +3,9 @@
 ``rdm._rdm.WrenchNoiseCore`` / ``ImuNoiseCore`` (behind ``WrenchSensorModel.sample_list`` and
 ``ImuModel.sample_lists``) against an independent numpy array form (``np.clip``, ``np.round``),
 bit for bit (signed zeros, NaN, inf, saturation, ties of the rounding);
-``rdm._rdm.leptrino_force_frame`` and the Leptrino node's frame cache against
-``rdm.protocol.leptrino``'s encoder.
+the Leptrino node's sample frames (its ``rdm._rdm.LeptrinoStreamCore``) through
+``rdm.protocol.leptrino``'s stream parser and response decoder against the counts' rule
+written out.
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ import math
 import numpy as np
 import pytest
 
-from rdm._rdm import leptrino_force_frame
 from rdm.nodes.leptrino_sensor import LeptrinoSensorNode
 from rdm.plant.description import WrenchSensorSpec
 from rdm.plant.sensors import (
@@ -196,45 +196,45 @@ def _decoded(frame: bytes) -> lp.ForceData:
     return sample
 
 
-def test_leptrino_force_frame_decodes_to_the_rated_counts():
+def test_leptrino_frames_decode_to_the_rated_counts():
+    """The node's sample frame of a wrench, decoded by the PC side, holds round(w * 10000 /
+    rated) per axis (ties to even), with DLE bytes stuffed; at the int16 limits a wrench
+    beyond them is clipped to them (counted). Catches a truncating or half-up rounding, a
+    swapped axis, a missing DLE stuffing and a clip at the rated value."""
     gen = np.random.default_rng(3)
-    rated = [10000.0] * 6  # raw = round(w): exact ties below
-    model_rated = list(lp.MODELS["CFS034CA301U"].rated)
-    cases = []
-    for _ in range(1500):
-        r = model_rated if gen.random() < 0.5 else rated
-        cases.append(((gen.normal(0, 0.5, 6) * np.array(r)).tolist(), r))
+    unit = lp.SensorModel("unit", (10000.0,) * 6)  # raw = round(w): exact ties below
     ties = [k + 0.5 for k in range(-6, 6)]
-    cases += [(ties[i : i + 6], rated) for i in range(0, 7)]
-    cases += [([16.0, 16.0 * 257, -16.0, 4112.0, 0.0, -0.0], rated)]  # DLE bytes: stuffing
-    cases += [([32767.0, -32768.0, 32767.4, -32768.4, 0.0, 0.0], rated)]  # int16 limits
-    cases += [([32767.5, 0.0, 0.0, 0.0, 0.0, 0.0], rated)]  # rounds to 32768: rejected
-    cases += [([-32768.6, 0.0, 0.0, 0.0, 0.0, 0.0], rated)]
-    cases += [([x, 0.0, 0.0, 0.0, 0.0, 0.0], rated) for x in (math.nan, math.inf, -math.inf)]
-    seen_dle = rejected = 0
-    for wrench, r in cases:
-        want = _counts(wrench, r)
-        got = leptrino_force_frame(wrench, r, 250, 0, 0, 0)
-        if want is None:
-            assert got is None, wrench
-            rejected += 1
-            continue
-        sample = _decoded(got)
-        assert sample.raw == want, wrench
-        assert (sample.temperature, sample.status, sample.term_no, sample.result) == (250, 0, 0, 0)
-        seen_dle += b"\x10\x10" in got
-    assert seen_dle and rejected == 5
-    w = [1.0] * 6
+    unit_cases = [ties[i : i + 6] for i in range(0, 7)]
+    unit_cases += [[16.0, 16.0 * 257, -16.0, 4112.0, 0.0, -0.0]]  # DLE bytes: stuffing
+    unit_cases += [[32767.0, -32767.0, 32766.6, -32766.6, 0.0, 0.0]]  # int16 limits
+    seen_dle = 0
+    for model in (unit, lp.MODELS["CFS034CA301U"]):
+        node = LeptrinoSensorNode(_Uart(), model)
+        rated = list(model.rated)
+        cases = [(gen.normal(0, 0.5, 6) * np.array(rated)).tolist() for _ in range(750)]
+        for w in cases + (unit_cases if model is unit else []):
+            node.set_wrench(w[:3], w[3:])
+            frame = node._stream.sample_frame()
+            sample = _decoded(frame)
+            assert sample.raw == _counts(w, rated), w
+            assert (sample.temperature, sample.status, sample.term_no, sample.result) == (
+                250,
+                0,
+                0,
+                0,
+            )
+            seen_dle += b"\x10\x10" in frame
+        assert node.saturated_samples == 0
+    assert seen_dle
+    node = LeptrinoSensorNode(_Uart(), unit)
+    node.set_wrench([32767.4, -32768.4, 1e9], [-1e9, 0.0, 0.0])  # beyond int16: clipped
+    assert _decoded(node._stream.sample_frame()).raw == (32767, -32767, 32767, -32767, 0, 0)
+    assert node.saturated_samples == 1
+    node.set_wrench([1.0] * 3, [1.0] * 3)
     for temp, term in ((-32768, 0), (32767, 254), (-1, 16)):
-        sample = _decoded(leptrino_force_frame(w, rated, temp, 0, term, 0))
+        node.temperature, node.sensor_no = temp, term
+        sample = _decoded(node._stream.sample_frame())
         assert (sample.raw, sample.temperature, sample.term_no) == ((1,) * 6, temp, term)
-    for temp, status, term, result in (
-        (32768, 0, 0, 0),
-        (0, 256, 0, 0),
-        (0, 0, -1, 0),
-        (0, 0, 0, 300),
-    ):
-        assert leptrino_force_frame(w, rated, temp, status, term, result) is None
 
 
 class _Uart:

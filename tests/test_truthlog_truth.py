@@ -107,8 +107,8 @@ def test_one_call_record_equals_the_other_forms_through_takeoff_and_flight(fixed
             _assert_same(a, c)
             # the tracker state stays in step too (the one-call path changes nothing)
             for p in (arrays, plain):
-                assert p._tracker._last_contact_time == fast._tracker._last_contact_time
-                assert (p._tracker._anchor_pos is None) is (fast._tracker._anchor_pos is None)
+                assert p._tracker.last_contact_time == fast._tracker.last_contact_time
+                assert (p._tracker.anchor_pos is None) is (fast._tracker.anchor_pos is None)
     if not fixed_base:
         assert idle_seen[True] > 50 and idle_seen[False] > 10  # both paths were exercised
         assert used == idle_seen[True]

@@ -77,10 +77,10 @@ def measure_reference(
     torque = -_t_mul(rot, torque_w)
     tracker._track(data, points > 0)
     zmp = _t_mul(rot, cop_num / normal_sum)[:2] if normal_sum > 0 else np.full(2, np.nan)
-    if tracker._anchor_pos is None or tracker._anchor_rot is None:
+    if tracker.anchor_pos is None or tracker.anchor_rot is None:
         return points, force, torque, zmp, np.zeros(2), 0.0
-    anchor_rot = tracker._anchor_rot
-    slip = (origin - tracker._anchor_pos)[:2]
+    anchor_rot = tracker.anchor_rot
+    slip = (origin - tracker.anchor_pos)[:2]
     return points, force, torque, zmp, slip.copy(), _yaw(anchor_rot[:, 2], anchor_rot, rot)
 
 

@@ -23,6 +23,7 @@ __all__ = [
     "ControlOutput",
     "CorePlanner",
     "DescriptionError",
+    "FootTrackerCore",
     "ImuNoiseCore",
     "LeptrinoStreamCore",
     "LockstepKernel",
@@ -39,6 +40,8 @@ __all__ = [
     "PerchQp",
     "PlannerError",
     "PlantBridgeCore",
+    "PlantStateCore",
+    "PlantStepCore",
     "PlateContactCore",
     "PositionControlError",
     "PositionController",
@@ -74,7 +77,6 @@ __all__ = [
     "gyro_compensation",
     "json_float_list",
     "json_record",
-    "leptrino_force_frame",
     "leptrino_ok_sample_run",
     "rosserial_frame",
     "rosserial_scan",
@@ -1076,15 +1078,6 @@ class ImuNoiseCore:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
         """:meth:`sample` of the 3 x 3 ideal values at the addresses (ValueError outside)."""
 
-def leptrino_force_frame(
-    wrench: _Seq[float],
-    rated: _Seq[float],
-    temperature: int,
-    status: int,
-    term_no: int,
-    result: int,
-) -> bytes | None: ...
-
 # --- json_log ---
 def json_float_list(values: npt.NDArray[np.float64]) -> str:
     """``"v0,v1,..."``: each value as Python's ``repr(float)``, NaN and infinities as
@@ -1245,6 +1238,94 @@ class PlateContactCore:
     def yaw_about(r0: np.ndarray, r1: np.ndarray) -> float | None:
         """The turn from ``r0`` to ``r1`` (row-major, 9 values) about ``r0``'s z axis; None
         when a value on the way is NaN."""
+
+@_final
+class FootTrackerCore:
+    """The foot plate's first-contact anchor and last contact time (``release_time``: the
+    longest contact gap the anchor survives) with the cached view of MuJoCo's contact geom
+    pairs; the state of ``FootContactTracker`` (rdm.plant.truth), shared with the lockstep
+    kernel's plant step."""
+
+    def __new__(cls, plate_geoms: list[int], release_time: float) -> _Self:
+        """ValueError on a negative or NaN ``release_time``."""
+    release_time: float
+    @property
+    def last_contact_time(self) -> float: ...
+    @property
+    def anchor_pos(self) -> np.ndarray | None:
+        """The plate's world position at first contact (a new array), or None."""
+    @property
+    def anchor_rot(self) -> np.ndarray | None:
+        """The plate's 3x3 rotation at first contact (a new array), or None."""
+    def idle(self) -> bool:
+        """No anchor and no contact time to release."""
+    def reset(self) -> None: ...
+    def track(self, time: float, in_contact: bool) -> bool:
+        """One step with or without a plate contact; True: a contact without an anchor."""
+    def set_anchor(self, pos: np.ndarray, rot: np.ndarray) -> None:
+        """The anchor: position (3) and row-major rotation (9)."""
+    def update(self, data: Any, ncon: int, time: float) -> int:
+        """One step's bookkeeping: 0 done, 1 no cached view of this contact list (nothing
+        changed), 2 a plate contact began without an anchor (the time is stamped)."""
+    def keep_view(self, data: Any, ncon: int, address: int, geom: np.ndarray) -> None: ...
+    def view_of(self, data: Any, ncon: int) -> np.ndarray | None: ...
+    @property
+    def view_address(self) -> int | None: ...
+    def forget_view(self) -> None:
+        """Drop the cached view (counted in ``view_misses``)."""
+    @property
+    def view_misses(self) -> int: ...
+    def plate_in(self, geom: np.ndarray) -> bool: ...
+
+@_final
+class PlantStateCore:
+    """The plant's lazy-forward flags (``stale``, ``needs_step1``), its state ``version``,
+    the rejected servo goals and whether a step can run in Rust (``rotors_in_core`` and no
+    ``wrenches_held``); shared by ``rdm.plant.Plant`` and the lockstep kernel."""
+
+    def __new__(cls) -> _Self: ...
+    stale: bool
+    needs_step1: bool
+    rotors_in_core: bool
+    wrenches_held: bool
+    @property
+    def version(self) -> int: ...
+    @property
+    def rejected_commands(self) -> int: ...
+    def synced(self) -> None: ...
+    def touched(self) -> None: ...
+    def reset(self) -> None: ...
+    def begin_step(self) -> bool:
+        """Whether this step runs ``mj_step1``."""
+    def stepped(self) -> None: ...
+    def reject(self, n: int) -> None: ...
+
+@_final
+class PlantStepCore:
+    """``rdm.plant.Plant``'s physics step and lazy forward pass (``Plant.step``,
+    ``Plant.sync``), shared with the lockstep kernel; the face's ``callbacks`` (rotors outside
+    the core, apply and re-aim held wrenches, the tracker face's ``update``) run only when
+    the state needs them."""
+
+    def __new__(
+        cls,
+        model: Any,
+        data: Any,
+        mj: Sequence[Any],
+        flags: tuple[int | None, int | None, int],
+        opt: Any,
+        sensor_bit: int,
+        state: PlantStateCore,
+        rotors: RotorPlantCore,
+        gate: ContactGateCore | None,
+        tracker: FootTrackerCore,
+        sleep: RestingSleepCore | None,
+        callbacks: Sequence[Callable[..., None]],
+    ) -> _Self: ...
+    def step(self, n: int) -> None:
+        """Advance ``n`` physics steps."""
+    def sync(self) -> None:
+        """The forward pass on the present state (held wrenches re-aimed first)."""
 
 # --- CAN master and wire ---
 class CanMasterError(RdmError): ...
@@ -1553,22 +1634,15 @@ class LockstepKernel:
     ) -> _Self: ...
     def attach_plant(
         self,
-        plant: Any,
-        model: Any,
-        data: Any,
-        mj: Sequence[Any],
-        flags: tuple[int | None, int | None, int],
-        opt: Any,
+        stepper: PlantStepCore,
+        state: PlantStateCore,
         rotors: RotorPlantCore,
-        gate: ContactGateCore | None,
-        tracker: Any,
         qpos: _F,
         sensordata: _F,
         ctrl: _F,
         servo_act: Sequence[int],
-        sleep: RestingSleepCore | None,
     ) -> None:
-        """The plant and its parts (typed, read by ``rdm.nodes.lockstep_kernel``)."""
+        """The plant's parts (typed, read by ``rdm.nodes.lockstep_kernel``)."""
     def attach_bridge(
         self,
         index: int,

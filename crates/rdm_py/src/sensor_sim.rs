@@ -1,13 +1,10 @@
-//! Bindings of `rdm_core::sim`: the per-sample sensor error models (IMU, 6-axis wrench) and
-//! the Leptrino sample frame encoder, called by `rdm.plant.sensors` and
-//! `rdm.nodes.leptrino_sensor` once per sample. The standard normals stay drawn by numpy on
+//! Bindings of `rdm_core::sim`: the per-sample sensor error models (IMU, 6-axis wrench),
+//! called by `rdm.plant.sensors` once per sample. The standard normals stay drawn by numpy on
 //! the Python side (the seeded stream is numpy's); these only do the float work.
 
 use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::PyBytes;
-use rdm_core::sim::leptrino_stream::encode_force_frame;
 use rdm_core::sim::sensor_noise::{ImuNoiseModel, ImuSample, WrenchNoiseModel, WrenchSample};
 
 /// A float array handed to Python.
@@ -182,26 +179,8 @@ impl ImuNoiseCore {
     }
 }
 
-/// The Leptrino sample frame of a wrench, or None where the Python encoder raises
-/// (non-finite wrench, int16 overflow, a byte field out of range).
-#[pyfunction]
-fn leptrino_force_frame<'py>(
-    py: Python<'py>,
-    wrench: [f64; 6],
-    rated: [f64; 6],
-    temperature: i64,
-    status: i64,
-    term_no: i64,
-    result: i64,
-) -> Option<Bound<'py, PyBytes>> {
-    encode_force_frame(&wrench, &rated, temperature, status, term_no, result)
-        .ok()
-        .map(|f| PyBytes::new(py, f.as_bytes()))
-}
-
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<WrenchNoiseCore>()?;
     m.add_class::<ImuNoiseCore>()?;
-    m.add_function(wrap_pyfunction!(leptrino_force_frame, m)?)?;
     Ok(())
 }

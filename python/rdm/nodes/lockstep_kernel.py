@@ -7,7 +7,8 @@ Python nodes already use, at the same base ticks in the same order. Every other 
 node's own Python ``tick``. Before Python code runs, the kernel writes back what its fast
 ticks changed of the parts that code may read or change; after, it re-reads those parts'
 plans. State that is one Rust object the node and the kernel share (the Leptrino stream,
-the Neuron bank, the resting sleep, the noise models' normal streams) needs neither: only
+the Neuron bank, the plant's state and foot contact tracker, the resting sleep, the noise
+models' normal streams) needs neither: only
 the Leptrino's pending UART bytes wait. So the logs are the same bytes as with every tick
 in Python (tests/test_lockstep_kernel.py, tests/test_spinal_kernel_busy.py; docs/sim.md).
 """
@@ -17,13 +18,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-import mujoco
-
 from rdm import _rdm
 from rdm.link.can_wire import DRAIN_AT, CanWireLink
 from rdm.link.tapped_link import TappedLink
 from rdm.link.uart_pipe import InProcessUartEnd
-from rdm.plant import option_flags
 
 from .lockstep import Lockstep
 from .plant_bridge import PlantBridge
@@ -37,31 +35,15 @@ def kind_of(node: Any) -> str | None:
 
 def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
     """Hand the kernel the plant's parts it holds for the plant's lifetime (typed values:
-    MuJoCo's model, data and step functions, the option-flags address, the Rust cores, the
-    MjData views, the servo actuators and the resting-sleep core)."""
-    model = plant.model
-    sleep = plant.sleep
+    the plant's step, state and rotor cores, the MjData views and the servo actuators)."""
     kernel.attach_plant(
-        plant,
-        model,
-        plant._data,
-        [
-            mujoco.mj_step1,
-            mujoco.mj_step2,
-            mujoco.mj_forward,
-            mujoco.mj_sensorPos,
-            mujoco.mj_sensorVel,
-        ],
-        (plant._flags_address, getattr(model, "_address", None), option_flags.SEARCH_BYTES),
-        model.opt,
+        plant._stepper,
+        plant._state,
         plant._rotors,
-        plant._contact_gate,
-        plant._tracker,
         plant._v_qpos,
         plant._v_sensordata,
         plant._v_ctrl,
         [int(a) for a in plant._servo_act],
-        None if sleep is None else sleep._core,
     )
 
 

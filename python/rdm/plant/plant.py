@@ -18,13 +18,14 @@ are parts of :class:`Plant` in modules of their own.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
-from rdm._rdm import ContactGateCore, RotorPlantCore
+from rdm._rdm import ContactGateCore, PlantStateCore, PlantStepCore, RotorPlantCore
 from rdm.plant.ceiling import CeilingEffect, NoCeilingEffect, ParametricCeilingEffect
 from rdm.plant.contact_gate import build_contact_gate
 from rdm.plant.description import RobotDescription, load_robot
@@ -41,7 +42,7 @@ from rdm.plant.mjcf import (
     rotor_site,
     servo_actuator,
 )
-from rdm.plant.option_flags import disableflags_address
+from rdm.plant.option_flags import SEARCH_BYTES, disableflags_address
 from rdm.plant.readings import PlantReadings
 from rdm.plant.sensors import (
     ImuModel,
@@ -133,11 +134,12 @@ class Plant(PlantReadings, PlantTruthReadout):
             scene(self.spec)
         self.model = self.spec.compile()
         self._data = mujoco.MjData(self.model)
-        #: True after a step until the lazy ``mj_forward`` ran (see :meth:`sync`).
-        self._stale = False
-        self._needs_step1 = True
-        #: Changes with every step / reset / outside access to ``data`` (ground-truth cache).
-        self._state_version = 0
+        #: The lazy forward pass (stale after a step until the ``mj_forward`` of :meth:`sync`
+        #: ran; whether the next step runs ``mj_step1``), the state version the ground-truth
+        #: cache keys on (every step / reset / outside access to ``data`` moves it), the
+        #: rejected servo goals and whether a step can run in Rust: one Rust object this
+        #: face and the lockstep kernel both change.
+        self._state = PlantStateCore()
         self._truth_cache: tuple[int, GroundTruth] | None = None
         m = self.model
         self.seed = seed
@@ -182,7 +184,6 @@ class Plant(PlantReadings, PlantTruthReadout):
         self._ceiling_z = ceiling_height
         self._imu_noise = imu_noise or ImuNoise()
         self._wrench_noise = wrench_noise or WrenchNoise()
-        self.rejected_commands = 0
         self._thrusts_list = [0.0] * len(self.rotor_names)
         # Cached views on the MjData buffers (stable for the data's lifetime): attribute
         # access through the bindings costs more than the arithmetic at 1 kHz.
@@ -257,6 +258,34 @@ class Plant(PlantReadings, PlantTruthReadout):
         )
         #: Where the kernel writes that bit (None: through ``opt.disableflags``).
         self._flags_address = disableflags_address(m) if self._sensor_bit else None
+        plant = weakref.proxy(self)  # the step's callbacks hold the plant weakly
+        #: The physics step and the forward pass (:meth:`step`, :meth:`sync`) in Rust, the
+        #: one form the lockstep kernel calls too; Python only where the state needs it.
+        self._stepper = PlantStepCore(
+            m,
+            d,
+            [
+                mujoco.mj_step1,
+                mujoco.mj_step2,
+                mujoco.mj_forward,
+                mujoco.mj_sensorPos,
+                mujoco.mj_sensorVel,
+            ],
+            (self._flags_address, getattr(m, "_address", None), SEARCH_BYTES),
+            m.opt,
+            self._sensor_bit,
+            self._state,
+            self._rotors,
+            self._contact_gate,
+            self._tracker._core,
+            None if self.sleep is None else self.sleep._core,
+            [
+                lambda: plant._step_rotors(),
+                lambda: plant._apply_external(),
+                lambda: plant._aim_external(),
+                self._tracker.update,
+            ],
+        )
         self._seed_sensors()
         self.reset()
 
@@ -265,6 +294,11 @@ class Plant(PlantReadings, PlantTruthReadout):
         """The collision gate (its ``off_steps`` / ``on_steps`` count the steps after which
         contacts were off / on), or None."""
         return self._contact_gate
+
+    @property
+    def rejected_commands(self) -> int:
+        """Servo goals refused (non-finite entries of :meth:`set_servo_targets`)."""
+        return self._state.rejected_commands
 
     @property
     def ceiling_effects(self) -> tuple[CeilingEffect, ...]:
@@ -278,17 +312,18 @@ class Plant(PlantReadings, PlantTruthReadout):
             raise ValueError(f"ceiling_effects: expected {len(self.rotor_names)} models")
         self._ceiling_effects = effects
         # The Rust step covers the shipped models; any other model keeps the Python path.
-        self._rotors_in_core = all(_core_ceiling(self._rotors, i, e) for i, e in enumerate(effects))
+        self._state.rotors_in_core = all(
+            _core_ceiling(self._rotors, i, e) for i, e in enumerate(effects)
+        )
 
     # ----------------------------------------------------------------- lazy forward
     @property
     def data(self) -> mujoco.MjData:
         """The MuJoCo data, brought up to date (:meth:`sync`) before it is handed out. The
         caller may change the state through it, so the next step recomputes everything."""
-        if self._stale:
+        if self._state.stale:
             self.sync()
-        self._needs_step1 = True
-        self._state_version += 1  # the caller may change the state: no cached truth
+        self._state.touched()  # the caller may change the state: mj_step1, no cached truth
         if self.sleep is not None:
             self.sleep.wake_next()
         if self._contact_gate is not None:
@@ -297,7 +332,7 @@ class Plant(PlantReadings, PlantTruthReadout):
 
     def _fresh(self) -> mujoco.MjData:
         """The data after :meth:`sync`, for the plant's own reads and ctrl/xfrc writes."""
-        if self._stale:
+        if self._state.stale:
             self.sync()
         return self._data
 
@@ -305,14 +340,14 @@ class Plant(PlantReadings, PlantTruthReadout):
         """Make every derived quantity refer to the present state: held external wrenches
         re-aimed at the bodies' new poses, then one ``mj_forward``. Runs by itself before a
         reading or a command; calling it again before the next step does nothing."""
-        self._stale = False
-        self._needs_step1 = False  # this forward covers the next step's mj_step1 stages
+        self._stepper.sync()
+
+    def _aim_external(self) -> None:
+        """Before a forward pass with held wrenches: kinematics, then the wrenches re-aimed."""
         m, d = self.model, self._data
-        if self._external:
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_comPos(m, d)
-            self._apply_external()
-        mujoco.mj_forward(m, d)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        self._apply_external()
 
     # ----------------------------------------------------------------- set-up and reset
     def _seed_sensors(self) -> None:
@@ -335,9 +370,7 @@ class Plant(PlantReadings, PlantTruthReadout):
         ``base_position``/``base_quaternion`` (ignored with ``fixed_base``), rotors already
         spinning at ``thrusts`` (default stopped). Sensor generators are re-seeded."""
         m, d = self.model, self._data
-        self._stale = False
-        self._needs_step1 = True
-        self._state_version += 1
+        self._state.reset()
         if self._contact_gate is not None:
             self._contact_gate.enable()
         mujoco.mj_resetData(m, d)
@@ -368,6 +401,7 @@ class Plant(PlantReadings, PlantTruthReadout):
             self._rotors.set_alpha(i, esc.lag_factor(m.opt.timestep))
         self._tracker.reset()
         self._external.clear()
+        self._state.wrenches_held = False
         self._seed_sensors()
         mujoco.mj_forward(m, d)
         self._apply_rotor_thrusts()
@@ -377,11 +411,7 @@ class Plant(PlantReadings, PlantTruthReadout):
     def set_rotor_duties(self, duties: Sequence[float] | np.ndarray) -> None:
         """PWM duty per rotor in [0.5, 1] (0.5 stops the motor); goes through the ESC model."""
         escs = self.escs
-        n = len(escs)
-        if type(duties) is np.ndarray and duties.dtype == np.float64 and duties.shape == (n,):
-            values = duties.tolist()  # the bridge's duty array: the same floats as below
-        else:
-            values = _vector(duties, n, "duties").tolist()
+        values = _vector(duties, len(escs), "duties").tolist()
         if self._duties_in_core and all(e._v_factor is not None for e in escs):
             # Every ESC's clamp, count and duty -> thrust map in one Rust call (the numbers
             # and counters of Esc.command_duty; an ESC whose map the core does not hold, e.g.
@@ -405,7 +435,7 @@ class Plant(PlantReadings, PlantTruthReadout):
         """Goal positions (joint_order) [rad]; non-finite entries keep the previous goal."""
         q = _vector(q, len(self.joint_names), "q")
         ok = np.isfinite(q)
-        self.rejected_commands += int(np.count_nonzero(~ok))
+        self._state.reject(int(np.count_nonzero(~ok)))
         # Sync first: readings taken after this command still see the forward
         # pass of the previous ctrl, as when the forward ran right after the step.
         self._fresh().ctrl[self._servo_act[ok]] = q[ok]
@@ -433,6 +463,7 @@ class Plant(PlantReadings, PlantTruthReadout):
         if not (f.any() or t.any()):
             del self._external[bid]
             self._fresh().xfrc_applied[bid] = 0.0
+        self._state.wrenches_held = bool(self._external)
         self._apply_external()
 
     def _apply_external(self) -> None:
@@ -464,7 +495,7 @@ class Plant(PlantReadings, PlantTruthReadout):
         Otherwise plain floats in one pass; the arithmetic is the same as
         :meth:`_rotor_distances` and :meth:`Esc.thrust` give.
         """
-        if self._rotors_in_core:
+        if self._state.rotors_in_core:
             self._rotors.apply()
             return
         h = self._ceiling_z
@@ -492,59 +523,22 @@ class Plant(PlantReadings, PlantTruthReadout):
         return np.array(self._rotors.applied(), dtype=float)
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` physics steps (readings then refer to the new time)."""
-        m, d = self.model, self._data
-        tracker = self._tracker
-        gate = self._contact_gate
-        opt, sensor_bit, sleep = m.opt, self._sensor_bit, self.sleep
-        for _ in range(int(n)):
-            # Sensors only in the forward pass a reading runs (sync), while the robot cannot
-            # fall asleep in this step (it would keep values no step computed).
-            if sensor_bit and (sleep is None or not sleep.allowed):
-                flags = opt.disableflags
-                opt.disableflags = flags | sensor_bit
-                try:
-                    self._passes(m, d, flags)
-                finally:
-                    opt.disableflags = flags
-            else:
-                self._passes(m, d, None)
-            tracker.update(d)  # contacts of this step's start: keep the slip anchor
-            if gate is not None:
-                gate.update()  # contacts off for the next pass if none can occur in it
-        self._stale = True  # the forward pass runs when something reads (see sync)
-        self._needs_step1 = True
-        self._state_version += 1
+        """Advance ``n`` physics steps (readings then refer to the new time).
 
-    def _passes(self, m: mujoco.MjModel, d: mujoco.MjData, lazy_flags: int | None) -> None:
-        """One step's MuJoCo passes with this step's rotor, wrench and sleep writes;
-        ``lazy_flags``: the sensor bit is set, these are the flags without it."""
-        if self._stale or self._needs_step1:
-            mujoco.mj_step1(m, d)
-        # else: a forward pass (sync) already ran on this very state: mj_step1's position
-        # and velocity stages would recompute the same numbers (they do not depend on
-        # ctrl or xfrc_applied), so only mj_step2 runs (bit-identical; docs/plant.md).
-        self._needs_step1 = True
-        # First-order ESC lag, exact discretisation (Esc.update with a cached factor),
-        # then the ceiling-scaled thrusts into ctrl: one Rust call for the shipped models.
-        if self._rotors_in_core:
-            self._rotors.step()
-        else:
-            self._rotors.advance_lag()
-            self._apply_rotor_thrusts()
-        if self._external:
-            self._apply_external()
-        if self.sleep is not None:  # this step's controls written: the sleep rule
-            self.sleep.before_step2(self._step1_now)
-            if lazy_flags is not None and self.sleep.allowed:
-                # the robot may fall asleep in this step: its sensors as mj_step1 gives them
-                m.opt.disableflags = lazy_flags
-                mujoco.mj_sensorPos(m, d)
-                mujoco.mj_sensorVel(m, d)
-        mujoco.mj_step2(m, d)
+        Per step (``PlantStepCore``): ``mj_step1`` unless a forward pass (:meth:`sync`) already
+        ran on this very state (its position and velocity stages depend on neither ctrl nor
+        xfrc_applied: bit-identical, docs/plant.md), the ESC lags and ceiling-scaled thrusts
+        into ctrl (:meth:`_step_rotors` for a model outside the rotor core), the held external
+        wrenches, the sleep rule, ``mj_step2`` with MuJoCo's sensors off while the robot
+        cannot fall asleep (lazy sensors), the foot contact tracker and the collision gate.
+        """
+        self._stepper.step(int(n))
 
-    def _step1_now(self) -> None:
-        mujoco.mj_step1(self.model, self._data)
+    def _step_rotors(self) -> None:
+        """The ESC lags (exact discretisation) and the ceiling-scaled thrusts into ctrl for a
+        ceiling model outside the rotor core."""
+        self._rotors.advance_lag()
+        self._apply_rotor_thrusts()
 
     @property
     def time(self) -> float:

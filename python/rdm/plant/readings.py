@@ -22,7 +22,7 @@ class PlantReadings:
 
     def imu(self) -> ImuReading:
         """One noisy IMU sample in the IMU frame (root link, at the processor)."""
-        if self._stale:
+        if self._state.stale:
             self.sync()
         g, a, m = self._imu_adr
         # One Rust call reads the three ideal values from the sensordata view.
@@ -46,7 +46,7 @@ class PlantReadings:
         adr = self._wrench_adr.get(sensor)
         if adr is None:
             raise ValueError(f"sensor: unknown wrench sensor {sensor!r}")
-        if self._stale:
+        if self._state.stale:
             self.sync()
         return adr
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from itertools import chain
 
 import mujoco
 import numpy as np
@@ -69,6 +68,9 @@ _ZEROS3 = np.zeros(3)
 _ZEROS3.flags.writeable = False
 _NAN2 = np.full(2, np.nan)
 _NAN2.flags.writeable = False
+#: ``FootTrackerCore.update``'s answers: build the contact view, set the anchor.
+_NEEDS_VIEW = 1
+_NEEDS_ANCHOR = 2
 
 
 def _dot3(a: np.ndarray, b: np.ndarray) -> float:
@@ -129,19 +131,14 @@ class FootContactTracker:
         release_time: float = 0.1,
     ) -> None:
         self._model = model
-        self.release_time = release_time
-        self._last_contact_time = -math.inf
         self._plate_body = plate_body
         self._env_geoms = env_geoms
-        self._anchor_pos: np.ndarray | None = None
-        self._anchor_rot: np.ndarray | None = None
         self._buf = np.zeros(6)
         self._views: tuple = (None, None, None)  # (data, its xpos, its xmat)
-        self._plate_geoms = frozenset(np.flatnonzero(model.geom_bodyid == plate_body).tolist())
-        #: (data, ncon, address, ``data.contact.geom`` view) of the last contact list read
-        self._geom_view: tuple = (None, 0, 0, None)
-        #: Times a cached contact view was found pointing elsewhere (see :meth:`update`).
-        self.view_misses = 0
+        plate_geoms = sorted(np.flatnonzero(model.geom_bodyid == plate_body).tolist())
+        #: The anchor, the last contact time and the cached contact view, in Rust (the one
+        #: object this face and the lockstep kernel's plant step both update).
+        self._core = _rdm.FootTrackerCore(plate_geoms, release_time)
         self._bodyids: list[int] | None = None
         #: :meth:`measure_contacts` in Rust (None: :meth:`measure_contacts_arrays`)
         self._sums_core: _rdm.PlateContactCore | None = _rdm.PlateContactCore(
@@ -150,6 +147,36 @@ class FootContactTracker:
             plate_body,
         )
 
+    @property
+    def release_time(self) -> float:
+        """Longest contact gap [s] the first-contact anchor survives."""
+        return self._core.release_time
+
+    @release_time.setter
+    def release_time(self, seconds: float) -> None:
+        self._core.release_time = seconds
+
+    @property
+    def last_contact_time(self) -> float:
+        """The last time the plate touched an environment surface (-inf: none since the
+        last release)."""
+        return self._core.last_contact_time
+
+    @property
+    def anchor_pos(self) -> np.ndarray | None:
+        """The plate's world position at first contact (a copy), or None."""
+        return self._core.anchor_pos
+
+    @property
+    def anchor_rot(self) -> np.ndarray | None:
+        """The plate's rotation matrix at first contact (a copy), or None."""
+        return self._core.anchor_rot
+
+    @property
+    def view_misses(self) -> int:
+        """Times a cached contact view was found pointing elsewhere (see :meth:`update`)."""
+        return self._core.view_misses
+
     def update(self, data: mujoco.MjData) -> None:
         """Per-step bookkeeping of the first-contact anchor (cheap: no contact forces).
 
@@ -157,40 +184,21 @@ class FootContactTracker:
         ``data.contact.geom`` view (~5 us to build through the bindings) is built again only
         when ``ncon`` changes (its address is re-checked at every :meth:`measure`; a moved
         list is counted in ``view_misses`` and read again)."""
+        core = self._core
         ncon = data.ncon
-        if ncon:
-            cached = self._geom_view
-            if cached[1] != ncon or cached[0] is not data:
-                geom = data.contact.geom
-                cached = self._geom_view = (
-                    data,
-                    ncon,
-                    geom.__array_interface__["data"][0],
-                    geom,
-                )
-            in_contact = self._plate_in(cached[3])
-        elif self._anchor_pos is None and self._last_contact_time == -math.inf:
-            return  # no contact and nothing to release: _track would change nothing
-        else:
-            in_contact = False
-        self._track(data, in_contact)
-
-    def kernel_plan(self, data: mujoco.MjData) -> tuple | None:
-        """For ``rdm._rdm.LockstepKernel``: (ncon of the cached contact view, the view, the
-        plate's geoms, whether the anchor is set) when :meth:`update` would use the cached
-        view for ``data``, else None. With the anchor set and a plate contact in the view,
-        :meth:`update` only stamps ``_last_contact_time`` (the kernel does that itself)."""
-        cached = self._geom_view
-        if cached[0] is not data or not cached[1]:
-            return None
-        anchored = self._anchor_pos is not None and self._anchor_rot is not None
-        return (cached[1], cached[3], sorted(self._plate_geoms), anchored)
+        status = core.update(data, ncon, data.time)
+        if status == _NEEDS_VIEW:
+            geom = data.contact.geom
+            core.keep_view(data, ncon, geom.__array_interface__["data"][0], geom)
+            status = core.update(data, ncon, data.time)
+        if status == _NEEDS_ANCHOR:
+            self._anchor(data)
 
     def idle(self) -> bool:
         """No contact anchor and no contact time to release: :meth:`measure` of an empty
         contact list then changes nothing and gives fixed numbers (no contact, -(R.T @ 0)
         force and torque, NaN ZMP, zero slip and yaw)."""
-        return self._anchor_pos is None and self._last_contact_time == -math.inf
+        return self._core.idle()
 
     def plate_contact(self, data: mujoco.MjData) -> bool:
         """Whether a present contact involves a plate geom (:meth:`measure_contacts` sums
@@ -201,41 +209,32 @@ class FootContactTracker:
         ncon = data.ncon
         if not ncon:
             return False
-        cached = self._geom_view
-        return self._plate_in(
-            cached[3] if cached[0] is data and cached[1] == ncon else data.contact.geom
-        )
-
-    def _plate_in(self, geom: np.ndarray) -> bool:
-        """Whether a plate geom is in ``geom`` (a ``data.contact.geom`` view: ncon pairs)."""
-        return not self._plate_geoms.isdisjoint(chain.from_iterable(geom.tolist()))
+        geom = self._core.view_of(data, ncon)
+        return self._core.plate_in(data.contact.geom if geom is None else geom)
 
     def _check_view(self, data: mujoco.MjData) -> None:
         """Drop the cached contact view if the list has moved (counted in ``view_misses``)."""
-        cached = self._geom_view
+        core = self._core
+        ncon = data.ncon
         if (
-            cached[0] is data
-            and cached[1] == data.ncon
-            and cached[1]
-            and data.contact.geom.__array_interface__["data"][0] != cached[2]
+            ncon
+            and core.view_of(data, ncon) is not None
+            and data.contact.geom.__array_interface__["data"][0] != core.view_address
         ):
-            self.view_misses += 1
-            self._geom_view = (None, 0, 0, None)
+            core.forget_view()
 
     def _track(self, data: mujoco.MjData, in_contact: bool) -> None:
-        if in_contact:
-            self._last_contact_time = float(data.time)
-            if self._anchor_pos is None:
-                self._anchor_pos = data.xpos[self._plate_body].copy()
-                self._anchor_rot = data.xmat[self._plate_body].reshape(3, 3).copy()
-        elif float(data.time) - self._last_contact_time > self.release_time:
-            self.reset()
+        if self._core.track(float(data.time), in_contact):
+            self._anchor(data)
+
+    def _anchor(self, data: mujoco.MjData) -> None:
+        """The plate's present pose as the first-contact anchor."""
+        pb = self._plate_body
+        self._core.set_anchor(data.xpos[pb], data.xmat[pb])
 
     def reset(self) -> None:
         """Forget the first-contact anchor."""
-        self._last_contact_time = -math.inf
-        self._anchor_pos = None
-        self._anchor_rot = None
+        self._core.reset()
 
     def measure(
         self, data: mujoco.MjData
@@ -254,14 +253,15 @@ class FootContactTracker:
         # -(rot.T @ zeros) for the force and the torque: one product.
         force = -_t_mul(rot, _ZEROS3)
         torque = force.copy()
-        if self._anchor_pos is not None or self._last_contact_time != -math.inf:
+        core = self._core
+        if not core.idle():
             self._track(data, False)
         zmp = _NAN2.copy()
-        if self._anchor_pos is None or self._anchor_rot is None:
+        anchor_pos, anchor_rot = core.anchor_pos, core.anchor_rot
+        if anchor_pos is None or anchor_rot is None:
             return 0, force, torque, zmp, np.zeros(2), 0.0
         origin = xpos[pb]
-        anchor_rot = self._anchor_rot
-        slip = (origin - self._anchor_pos)[:2]
+        slip = (origin - anchor_pos)[:2]
         yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
         return 0, force, torque, zmp, slip.copy(), yaw
 
@@ -298,7 +298,7 @@ class FootContactTracker:
             return self.measure_contacts_arrays(data)
         points, force, torque, zmp = measured
         self._track(data, points > 0)
-        anchor_pos, anchor_rot = self._anchor_pos, self._anchor_rot
+        anchor_pos, anchor_rot = self._core.anchor_pos, self._core.anchor_rot
         if anchor_pos is None or anchor_rot is None:
             return points, force, torque, zmp, np.zeros(2), 0.0
         slip = (origin - anchor_pos)[:2]
@@ -354,10 +354,10 @@ class FootContactTracker:
         torque = -_t_mul(rot, torque_w)
         self._track(data, points > 0)
         zmp = _t_mul(rot, cop_num / normal_sum)[:2] if normal_sum > 0 else np.full(2, np.nan)
-        if self._anchor_pos is None or self._anchor_rot is None:
+        anchor_pos, anchor_rot = self._core.anchor_pos, self._core.anchor_rot
+        if anchor_pos is None or anchor_rot is None:
             return points, force, torque, zmp, np.zeros(2), 0.0
-        anchor_rot = self._anchor_rot
-        slip = (origin - self._anchor_pos)[:2]
+        slip = (origin - anchor_pos)[:2]
         yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
         return points, force, torque, zmp, slip.copy(), yaw
 

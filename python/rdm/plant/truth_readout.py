@@ -20,10 +20,10 @@ class PlantTruthReadout:
         (e.g. a logger and a mocap node in one tick), it returns the same object: treat
         its arrays as read-only."""
         cached = self._truth_cache
-        if cached is not None and cached[0] == self._state_version:
+        if cached is not None and cached[0] == self._state.version:
             return cached[1]
         truth = self._ground_truth()
-        self._truth_cache = (self._state_version, truth)
+        self._truth_cache = (self._state.version, truth)
         return truth
 
     def _ground_truth(self) -> GroundTruth:

@@ -30,10 +30,6 @@ impl Name {
         obj.setattr(self.0.bind(obj.py()), value)
     }
 
-    pub(crate) fn f64(&self, obj: &Bound<'_, PyAny>) -> PyResult<f64> {
-        self.get(obj)?.extract()
-    }
-
     pub(crate) fn i64(&self, obj: &Bound<'_, PyAny>) -> PyResult<i64> {
         self.get(obj)?.extract()
     }
@@ -41,11 +37,6 @@ impl Name {
     /// Python truthiness (`bool(obj.name)`).
     pub(crate) fn truthy(&self, obj: &Bound<'_, PyAny>) -> PyResult<bool> {
         self.get(obj)?.is_truthy()
-    }
-
-    /// `obj.name is None`.
-    pub(crate) fn is_none(&self, obj: &Bound<'_, PyAny>) -> PyResult<bool> {
-        Ok(self.get(obj)?.is_none())
     }
 }
 

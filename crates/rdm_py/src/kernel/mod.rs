@@ -12,14 +12,14 @@
 //! Exactness rule: the Python-visible state a fast path changes is written back (`flush`)
 //! before any Python code runs, and every plan is re-read (`invalidate`) after, so Python
 //! code always sees what the node's own ticks would have left. A part whose state is a Rust
-//! core the node shares (Leptrino stream, Neuron bank, resting sleep, normal streams) has
-//! nothing to write back but the Leptrino's pending UART bytes.
+//! core the node shares (Leptrino stream, Neuron bank, the plant's state and foot contact
+//! tracker, resting sleep, normal streams) has nothing to write back but the Leptrino's
+//! pending UART bytes.
 
 mod attr;
 mod bank;
 mod bridge;
 mod leptrino;
-mod option_flags;
 mod pacing;
 mod plant;
 mod run_loop;
@@ -28,11 +28,11 @@ mod spinal;
 use pyo3::prelude::*;
 
 use crate::can_master::{CanMaster, CanWire};
-use crate::contact_gate::ContactGateCore;
 use crate::leptrino_sensor::LeptrinoStreamCore;
 use crate::neuron_bank::NeuronBank;
 use crate::plant_bridge::PlantBridgeCore;
-use crate::resting_sleep::RestingSleepCore;
+use crate::plant_state::PlantStateCore;
+use crate::plant_step::PlantStepCore;
 use crate::rotor_plant::RotorPlantCore;
 use crate::stop_flag::StopFlag;
 use crate::tick_counter::TickCounter;
@@ -72,7 +72,6 @@ macro_rules! part {
         }
     };
 }
-part!(PlantLink);
 part!(BridgeFast);
 part!(BankFast);
 part!(SpinalFast);
@@ -218,51 +217,29 @@ impl LockstepKernel {
         })
     }
 
-    /// The plant (`rdm.plant.Plant`) the physics step and the bridge drive, with its parts
-    /// (read by the caller, `rdm.nodes.lockstep_kernel`): `model`, `data`; `mj`: MuJoCo's
-    /// `mj_step1`, `mj_step2`, `mj_forward`, `mj_sensorPos`, `mj_sensorVel`; `flags`:
-    /// `(Plant._flags_address, model._address, option_flags.SEARCH_BYTES)` (None: unknown);
-    /// `opt`: `model.opt`; the rotor and contact-gate cores; the contact tracker; the qpos,
-    /// sensordata and ctrl views; the servo actuator per joint; `sleep`: the core of
-    /// `Plant.sleep` (None: the plant has none).
+    /// The plant (`rdm.plant.Plant`) the physics step and the bridge drive, as its parts
+    /// (read by the caller, `rdm.nodes.lockstep_kernel`): its step, state and rotor cores,
+    /// the qpos, sensordata and ctrl views and the servo actuator per joint.
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (plant, model, data, mj, flags, opt, rotors, gate, tracker, qpos, sensordata, ctrl, servo_act, sleep))]
     fn attach_plant(
         &mut self,
-        plant: &Bound<'_, PyAny>,
-        model: Py<PyAny>,
-        data: Py<PyAny>,
-        mj: [Py<PyAny>; 5],
-        flags: (Option<usize>, Option<usize>, usize),
-        opt: Py<PyAny>,
+        stepper: Py<PlantStepCore>,
+        state: Py<PlantStateCore>,
         rotors: Py<RotorPlantCore>,
-        gate: Option<Py<ContactGateCore>>,
-        tracker: Py<PyAny>,
         qpos: Py<numpy::PyArray1<f64>>,
         sensordata: Py<numpy::PyArray1<f64>>,
         ctrl: Py<numpy::PyArray1<f64>>,
         servo_act: Vec<usize>,
-        sleep: Option<Py<RestingSleepCore>>,
-    ) -> PyResult<()> {
-        let parts = PlantParts {
-            model,
-            data,
-            mj,
-            flags_address: flags.0,
-            model_address: flags.1,
-            search_bytes: flags.2,
-            opt,
+    ) {
+        self.plant = Some(PlantLink::new(PlantParts {
+            stepper,
+            state,
             rotors,
-            gate,
-            tracker,
             qpos,
             sensordata,
             ctrl,
             servo_act,
-            sleep,
-        };
-        self.plant = Some(PlantLink::new(plant.py(), plant, parts));
-        Ok(())
+        }));
     }
 
     /// Node `index` is a `PlantBridge` whose state is `core` (`PlantBridge._core`, needs
@@ -418,10 +395,7 @@ impl LockstepKernel {
         d.set_item("boundaries", self.boundaries)?;
         d.set_item("base_ticks", self.base_ticks)?;
         d.set_item("wall_time", self.pacing.wall_time)?;
-        let (tf, tp) = self
-            .plant
-            .as_ref()
-            .map_or((0, 0), |p| (p.tracker_fast, p.tracker_python));
+        let (tf, tp) = self.plant.as_ref().map_or((0, 0), |p| p.tracker_counts(py));
         d.set_item("tracker_fast", tf)?;
         d.set_item("tracker_python", tp)?;
         let sc = self.spinal.as_ref().map(|s| s.counts).unwrap_or_default();

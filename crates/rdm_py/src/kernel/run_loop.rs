@@ -6,9 +6,9 @@ use super::*;
 
 impl LockstepKernel {
     /// Every attached fast part with its mask bit.
-    pub(super) fn parts(&mut self) -> [(u8, Option<&mut dyn Part>); 5] {
+    /// (The plant has none: its state is the plant's own Rust cores.)
+    pub(super) fn parts(&mut self) -> [(u8, Option<&mut dyn Part>); 4] {
         [
-            (PLANT, self.plant.as_mut().map(|p| p as &mut dyn Part)),
             (BRIDGE, self.bridge.as_mut().map(|p| p as &mut dyn Part)),
             (BANK, self.bank.as_mut().map(|p| p as &mut dyn Part)),
             (SPINAL, self.spinal.as_mut().map(|p| p as &mut dyn Part)),
@@ -63,7 +63,7 @@ impl LockstepKernel {
             Kind::Python => Ok(false),
             Kind::Bridge => {
                 let ready = match (self.bridge.as_mut(), self.plant.as_mut()) {
-                    (Some(b), Some(p)) => b.ready(py)? && p.sync_ready(py)?,
+                    (Some(b), Some(p)) => b.ready(py)? && p.step_ready(py),
                     _ => false,
                 };
                 if !ready {
@@ -176,7 +176,7 @@ impl LockstepKernel {
             return Ok(());
         };
         if let Some(p) = self.plant.as_mut() {
-            if p.step_ready(py)? {
+            if p.step_ready(py) {
                 p.step(py)?;
                 self.physics_fast += 1;
                 return Ok(());

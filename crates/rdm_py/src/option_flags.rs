@@ -1,22 +1,21 @@
-//! `model.opt.disableflags` as the kernel reads and writes it around a step (lazy sensors):
+//! `model.opt.disableflags` as the plant's step reads and writes it (lazy sensors):
 //! the int itself when `rdm.plant.option_flags` found its address, else the bindings'
 //! property (three attribute accesses a step, ~2k instructions).
 
 use pyo3::prelude::*;
-
-use super::attr::Name;
+use pyo3::types::PyString;
 
 pub(crate) enum OptionFlags {
     /// `Plant._flags_address`: the int32 inside the model the link keeps alive.
     Raw(*mut i32),
     /// `model.opt` and the interned `disableflags`.
-    Attr(Py<PyAny>, Name),
+    Attr(Py<PyAny>, Py<PyString>),
 }
 
 impl OptionFlags {
     /// From `Plant._flags_address` (None: the property of `opt`). The address is used only
     /// where the probe could have found it: aligned, inside the first `searched` bytes
-    /// (`rdm.plant.option_flags.SEARCH_BYTES`) of the model the link holds (`model._address`),
+    /// (`rdm.plant.option_flags.SEARCH_BYTES`) of the model the step core holds (`model._address`),
     /// so a plant whose model was swapped after the probe falls back to the property
     /// instead of writing into freed memory.
     pub(crate) fn new(
@@ -34,16 +33,16 @@ impl OptionFlags {
             {
                 OptionFlags::Raw(a as *mut i32)
             }
-            _ => OptionFlags::Attr(opt, Name::new(py, "disableflags")),
+            _ => OptionFlags::Attr(opt, PyString::intern(py, "disableflags").unbind()),
         }
     }
 
     pub(crate) fn get(&self, py: Python<'_>) -> PyResult<i64> {
         match self {
             // SAFETY: the address was probed inside the live model (option_flags.py), which
-            // the plant link holds; no MuJoCo call runs while the GIL is held here.
+            // the step core holds; no MuJoCo call runs while the GIL is held here.
             OptionFlags::Raw(p) => Ok(i64::from(unsafe { p.read() })),
-            OptionFlags::Attr(opt, name) => name.i64(opt.bind(py)),
+            OptionFlags::Attr(opt, name) => opt.bind(py).getattr(name.bind(py))?.extract(),
         }
     }
 
@@ -57,7 +56,7 @@ impl OptionFlags {
                 unsafe { p.write(v) };
                 Ok(())
             }
-            OptionFlags::Attr(opt, name) => name.set(opt.bind(py), flags),
+            OptionFlags::Attr(opt, name) => opt.bind(py).setattr(name.bind(py), flags),
         }
     }
 }
