@@ -6,10 +6,9 @@ The robot perches exactly as in :mod:`rdm.scenarios.perching` (same script, cons
 tuning; no joint motion of its own) and then the arm does the task against objects added to
 the MuJoCo scene (:mod:`rdm.scenarios.task_objects`). Joint goals come from the foot pose
 the PC knows (mocap) and the object positions (known to the operator, as in the paper's
-feed-forward planner): drilling's, the wall painting's and the valve's from the Sec. V
-planner with the tool point as its end effector (:mod:`rdm.scenarios.task_plan`; the
-brush and the gripper with its point + tool-axis target), painting-panel's from the
-point-only IK of :mod:`rdm.scenarios.task_ik`;
+feed-forward planner), every task's from the Sec. V planner with the tool point as its
+end effector (:mod:`rdm.scenarios.task_plan`; the wall brush and the gripper with its point
++ tool-axis target, the drill and the panel brush with the point alone);
 the drill is pressed by commanding it ``PRESS_DEPTH`` behind the surface (the stiff
 position servos turn the offset into a contact force), the brush by its spring. Ground
 truth: MuJoCo contacts of the tool geoms, the brush joint, the valve hinge angle; the
@@ -45,7 +44,7 @@ from rdm.nodes.onboard_config import OnboardConfig
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels
 
-from . import painting, perching, task_ik, task_plan
+from . import painting, perching, task_plan
 from . import task_objects as obj
 from .common import (
     ScenarioResult,
@@ -103,8 +102,8 @@ SETTLE_ALLOWANCE_S = 3.0
 def _valve_layout(robot) -> obj.TaskLayout:
     """Valve axis at the gripper centre of VALVE_Q with the foot at the nominal spot."""
     base = obj.TaskLayout()
-    q = task_ik.level(np.r_[VALVE_Q, np.zeros(4)])
-    p, _ = task_ik.tool_pose(robot, np.r_[base.nominal_foot, 0.0, 0.0, 0.0], q, obj.GRIPPER_AT)
+    q = perching.leveled(np.asarray(VALVE_Q, dtype=float), robot.n_q)
+    p, _ = task_plan.tool_pose(robot, np.r_[base.nominal_foot, 0.0, 0.0, 0.0], q, obj.GRIPPER_AT)
     fx = base.nominal_foot[0]
     return obj.TaskLayout(valve_x=float(p[0] - fx), valve_handle_z=float(p[2]))
 
@@ -148,10 +147,8 @@ class TaskScript(perching.PerchingScript):
         self.t_task_end: float | None = None
         #: (start, end, label) of the pressing/sliding/turning windows
         self.windows: list[tuple[float, float, str]] = []
+        #: m between each planned move's tool point and its target at the move's end
         self.ik_errors: list[float] = []
-        #: where the joint waypoints come from: "IK" (task_ik, painting-panel) or "planned"
-        #: (task_plan)
-        self.waypoint_source = "IK"
         #: the painting tasks' stroke (painting.Stroke), None for the others
         self.stroke: painting.Stroke | None = None
         self.targets: list[np.ndarray] = []
@@ -198,33 +195,20 @@ class TaskScript(perching.PerchingScript):
     # ------------------------------------------------------------------ planning
     def _start(self, stack: Stack, now: float) -> None:
         gt = stack.plant.ground_truth()  # the foot pose as mocap gives it
-        base = np.r_[gt.base_position, task_ik.rpy_of_quaternion(gt.base_quaternion)]
+        base = np.r_[gt.base_position, task_plan.rpy_of_quaternion(gt.base_quaternion)]
         # bring the objects (contacts still off) to the perched foot
         self.layout = self.compiled_layout.around_foot(gt.base_position[0], gt.base_position[1])
         obj.place_objects(stack.plant.model, self.compiled_layout, self.layout)
         robot = stack.onboard.robot
-        q = task_ik.level(np.r_[perching.PERCH_POSTURE, np.zeros(robot.n_q - 6)])
-        q_now = q.copy()  # where the joints are (the perching posture): the path starts here
-        way: list[tuple[float, np.ndarray, bool]] = []  # (duration, q, linear)
+        # where the joints are (the perching posture): the path starts here
+        q_now = perching.leveled(np.asarray(perching.PERCH_POSTURE, dtype=float), robot.n_q)
+        way: list[tuple[float, np.ndarray]] = []  # (seconds after the previous one, q)
         lay = self.layout
         t = now
-
-        def go(target, tool_x, duration, linear=False, axis=None):
-            """One IK waypoint (painting-panel: the point only, the axis left free)."""
-            nonlocal q
-            if axis is not None:
-                raise ValueError("axis: the joint-space IK holds no tool axis (plan it)")
-            res = task_ik.solve(robot, base, q, target, tool_x)
-            q = res.q.copy()
-            q[5] = 0.0
-            self.ik_errors.append(res.position_error)
-            way.append((duration, q.copy(), linear))
-            return duration
-
-        first_s = None  # the first move's duration if the first waypoint is not the move
-        if self.task == "drilling":  # the Sec. V planner, the drill tip as its end effector
-            self.waypoint_source = "planned"
-            first_s = MOVE_S  # its waypoints are the 40 Hz samples of the moves
+        # the Sec. V planner with the tool point as its end effector; its waypoints are the
+        # 40 Hz samples of the moves. first_s: seconds to the tool's first hover pose
+        if self.task == "drilling":
+            first_s = MOVE_S
             tool = task_plan.ToolPlanner("rdm", base, q_now, obj.DRILL_LEN)
             self.targets = [lay.board_point(dx, dy) for dx, dy in DRILL_TARGETS]
             steps, presses, took = task_plan.drill_waypoints(
@@ -232,30 +216,24 @@ class TaskScript(perching.PerchingScript):
             )
             way += steps
             self.windows += [(t + a, t + b, "press") for a, b in presses]
-            self.ik_errors += [m.error for m in tool.moves]
-            t += took
         elif self.task in painting.PAINT_TASKS:
             self.stroke = painting.stroke_of(self.task, lay)
             s = self.stroke
             self.targets = [s.start, s.point(s.length)]
-            step = go
-            if s.tilt is not None:  # the Sec. V planner, the brush tip as its end effector
-                self.waypoint_source = "planned"
-                first_s = 6 * MOVE_S  # its waypoints are the 40 Hz samples of the moves
-                tool = task_plan.ToolPlanner("rdm", base, q_now, painting.BRUSH_TIP)
+            first_s = painting.approach_s(s, MOVE_S)
+            # the wall's tool axis is held by its 5-D targets; the panel's is free, its
+            # yaw held (task_plan.POINT_CONFIG)
+            cfg = task_plan.POINT_CONFIG if s.tilt is None else {}
+            tool = task_plan.ToolPlanner("rdm", base, q_now, painting.BRUSH_TIP, cfg)
 
-                def step(target, tool_x, duration, linear=False, axis=None):
-                    m = tool.move(target, duration, axis=axis, tool_x=tool_x, linear=linear)
-                    way.extend(m.waypoints())
-                    self.ik_errors.append(m.error)
-                    return duration
-            else:
-                q = task_ik.level(np.r_[s.seed, np.zeros(robot.n_q - 6)])
+            def step(target, tool_x, duration, linear=False, axis=None):
+                m = tool.move(target, duration, axis=axis, tool_x=tool_x, linear=linear)
+                way.extend(m.waypoints())
+                return duration
+
             took, w0, w1 = painting.waypoints(step, s, HOVER, MOVE_S, PRESS_S, RETRACT_S)
             self.windows.append((t + w0, t + w1, "stroke"))
-            t += took
-        else:  # the Sec. V planner, the gripper centre as its end effector
-            self.waypoint_source = "planned"
+        else:  # the gripper centre as the end effector
             first_s = 1.5 * MOVE_S
             axis = lay.valve_axis
             self.targets = [axis]
@@ -265,15 +243,15 @@ class TaskScript(perching.PerchingScript):
             )
             way += steps
             self.windows.append((t + turn_window[0], t + turn_window[1], "turn"))
-            self.ik_errors += [m.error for m in tool.moves]
-            t += took
-        points = _trajectory(now, q_now, way, stack.onboard.robot.n_q)
+        self.ik_errors += [m.error for m in tool.moves]
+        t += took
+        points = _trajectory(now, q_now, way, robot.n_q)
         stack.onboard.set_trajectory(points)
         self.q_plan = points
         self.t_task = now
         self.t_task_end = t
-        # first waypoint (hover above the first target) reached + 0.5 s settling
-        self.t_enable = now + (way[0][0] if first_s is None else first_s) + 0.5
+        # first hover pose reached + 0.5 s settling
+        self.t_enable = now + first_s + 0.5
 
     # --------------------------------------------------------------- recording
     def _tool_object_geoms(self, model: mujoco.MjModel) -> tuple[set[int], set[int]]:
@@ -341,20 +319,13 @@ class TaskScript(perching.PerchingScript):
 
 
 def _trajectory(t0: float, q_start: np.ndarray, way, n_q: int) -> list:
-    """Joint points: cosine segments (zero end velocity) or, for ``linear`` waypoints (the
-    dense stroke/turn samples), one point each (the onboard node interpolates linearly)."""
+    """Joint points: the start, then one per waypoint (seconds after the previous one, q);
+    the onboard node interpolates linearly between them (the planned moves' 40 Hz samples)."""
     points = [(t0, np.asarray(q_start, float)[:n_q].copy())]
-    start, t = np.asarray(q_start, float), t0
-    for duration, goal, linear in way:
-        if linear:
-            t += duration
-            points.append((t, goal.copy()))
-        else:
-            for k in range(1, 11):
-                s = 0.5 - 0.5 * math.cos(math.pi * k / 10)
-                points.append((t + duration * k / 10, task_ik.level(start + s * (goal - start))))
-            t += duration
-        start = goal
+    t = t0
+    for duration, goal in way:
+        t += duration
+        points.append((t, goal.copy()))
     return points
 
 
@@ -475,7 +446,7 @@ def evaluate(stack: Stack, script: TaskScript) -> ScenarioResult:
         Metric("foot contact kept while perched", kept, 1.0, "fraction", "min", limit=1.0),
         Metric("foot slip while perched", slip, None, "mm", "max", limit=1.0),
         Metric(
-            f"max {script.waypoint_source} position error of the waypoints",
+            "max planned position error of the waypoints",
             float(np.max(script.ik_errors) * 1e3) if script.ik_errors else nan,
             None,
             "mm",
