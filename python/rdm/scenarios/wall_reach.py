@@ -82,6 +82,7 @@ def wall_line(
             m = tool.move(np.array([fx + wall_dx, fy, fz - depth]), 1.0)
             if m.error >= POSITION_TOL:
                 continue
+            tool.core.set_zeta(np.asarray(m.plan.zeta[-1], dtype=float))  # the plan's end
             axis = tool.axis_world()
             tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(axis[0])))))
             if best is None or tilt < best.tilt_deg:
