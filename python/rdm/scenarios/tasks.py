@@ -59,10 +59,9 @@ from .stack import Stack, build_stack
 TASKS = ("drilling", *painting.PAINT_TASKS, "valve")
 #: Tasks flown with Spinal's roll/pitch integration held during the fold
 #: (``perching.RP_INTEGRATION_HOLD_RATE``); the others keep the fold's integral (None): held,
-#: the valve's perching QP fails from 22.0 s instead of 26.2 s (a second
-#: ``perch_qp_failed``) and its foot slips 0.14 mm instead of 0.03, the wall painting's
-#: foot 0.72 mm instead of 0.65 and the panel's brush loses contact 0.6 % of the stroke
-#: (seed 0; docs/scenarios.md, "Where the integral comes from").
+#: the valve trips ``perch_qp_failed`` twice (none without) and its foot slips 0.14 mm
+#: instead of 0.035, the wall painting's foot 0.74 mm instead of 0.64 and the panel's
+#: 0.43 mm instead of 0.36 (seed 0; docs/scenarios.md, "Where the integral comes from").
 RP_HOLD_TASKS = ("drilling",)
 EE_SENSOR = "end_effector_wrench"
 #: Hole targets (dx, dy) relative to the nominal foot, on the board top. ASSUMPTION.
