@@ -76,9 +76,9 @@ MOVE_S, PRESS_S, RETRACT_S = 2.0, 2.0, 1.0
 #: Valve: joint configuration whose gripper centre defines the valve axis (end link
 #: vertical: q1 + q2 + q4 = pi/2), and the q6 turn commanded. q1 = 1.4, not pi/2: q1's
 #: upper limit is pi/2 and raising the gripper with the end link kept vertical needs q1 to
-#: grow (the hover pose 5 cm above needs q1 = 1.54); from q1 = pi/2 the IK had no room
-#: (333 mm / 4.7 mm errors, clamped at the limit). The axis is 0.32 m in x from the foot,
-#: like the drilling targets (0.24-0.30 m).
+#: grow (the hover pose 5 cm above needs q1 = 1.54); from q1 = pi/2 a point-only joint
+#: path with q3 = 0 had no room (333 mm / 4.7 mm errors, clamped at the limit). The axis is
+#: 0.32 m in x from the foot, like the drilling targets (0.24-0.30 m).
 VALVE_Q = (1.4, -0.5, 0.0, math.pi / 2 - 0.9, 0.0, 0.0)
 VALVE_HOVER = 0.05  # m above the grip pose: finger tips 15 mm above the handle bar
 VALVE_TURN = 1.2  # rad of q6
