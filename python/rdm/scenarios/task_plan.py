@@ -40,8 +40,8 @@ POINT_PASSES = 4
 #: keeps a point-only plan near the yaw it starts from (docs/planner.md, "Holding the yaw").
 YAW_JOINTS = (2, 4)
 YAW_HOLD = 1e-2
-#: Planner configuration of the point-only tool paths that hold the yaw (painting-panel, the
-#: wall-reach sweep).
+#: Planner configuration of the point-only tool paths, which hold the yaw (drilling,
+#: painting-panel, the wall-reach sweep).
 POINT_CONFIG = {"s1_joint_overrides": [(j, YAW_HOLD) for j in YAW_JOINTS]}
 
 

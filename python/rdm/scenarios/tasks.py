@@ -208,7 +208,8 @@ class TaskScript(perching.PerchingScript):
         # 40 Hz samples of the moves. first_s: seconds to the tool's first hover pose
         if self.task == "drilling":
             first_s = MOVE_S
-            tool = task_plan.ToolPlanner("rdm", base, q_now, obj.DRILL_LEN)
+            # point-only moves, the yaw held (task_plan.POINT_CONFIG)
+            tool = task_plan.ToolPlanner("rdm", base, q_now, obj.DRILL_LEN, task_plan.POINT_CONFIG)
             self.targets = [lay.board_point(dx, dy) for dx, dy in DRILL_TARGETS]
             steps, presses, took = task_plan.drill_waypoints(
                 tool, self.targets, HOVER, PRESS_DEPTH, MOVE_S, PRESS_S, RETRACT_S
