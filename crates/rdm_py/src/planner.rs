@@ -72,6 +72,11 @@ fn parse_config(mode: Mode, d: Option<&Bound<'_, PyDict>>) -> PyResult<PlannerCo
     f!("gravity", gravity);
     f!("fd_step", fd_step);
     f!("qp_max_iter", qp_max_iter);
+    if let Some(v) = d.get_item("s1_joint_overrides")? {
+        c.s1_joint_overrides = v.extract().map_err(|_| {
+            perr("config['s1_joint_overrides']: expected a list of (joint index, weight)")
+        })?;
+    }
     damper(d, "state", &mut c.state)?;
     damper(d, "torque", &mut c.torque)?;
     damper(d, "thrust", &mut c.thrust)?;

@@ -8,16 +8,16 @@ sliding area length was over 0.5m in the vertical direction". Two surfaces:
   ``TaskLayout.wall_dx`` = 0.75 m in front of the foot, inside the band
   :mod:`rdm.scenarios.wall_reach` found (0.70-0.80 m give a 0.5 m vertical stroke). At
   0.80 m the pressed brush puts q2 on its -90 deg limit at the top of the stroke and the
-  bottom sample is out of reach (IK 3.0 mm off, the run lost contact on 6 % of the stroke);
-  at 0.75 m the IK stays within 0.7 mm. The stroke runs down the wall (-z) from ``WALL_TOP``
+  bottom sample is out of reach (the point-only tool path with q3 = 0 was 3.0 mm off, the run
+  lost contact on 6 % of the stroke). The stroke runs down the wall (-z) from ``WALL_TOP``
   below the foot;
 * ``painting-panel``: a horizontal panel below the arm (normal +z), the stroke along +x.
 
 A :class:`Stroke` is the surface point where the stroke starts, its direction along the
 surface, the surface normal (toward the robot), the commanded length and the commanded
-brush compression along it (and, on the wall, the tool axis along it: the stroke is
-planned by ``rdm.planner`` with its point + tool-axis target; the panel's by the point-only
-IK of :mod:`rdm.scenarios.task_ik`). :func:`waypoints` turns it into the tool targets: hover
+brush compression along it (and, on the wall, the tool axis along it: the wall stroke is
+planned by ``rdm.planner`` with its point + tool-axis target, the panel's with the point
+alone, the axis the planner's choice). :func:`waypoints` turns it into the tool targets: hover
 ``hover`` m off the surface at the approach point, TOUCH_HOVER off the stroke start, touch
 down (the centre of the brush, compressed by the squeeze along the tool axis, one radius off
 the surface), settle, the stroke in STROKE_SAMPLES linear samples, dwell, lift off.
@@ -38,11 +38,10 @@ from . import task_objects as obj
 
 PAINT_TASKS = ("painting", "painting-panel")
 #: Panel (ASSUMPTIONS, docs/scenarios.md "Painting"): the brush slides along +x on the panel
-#: from dx = STROKE_START to STROKE_START + STROKE (relative to the foot x). IK sweep at the
-#: press height (panel z 0.60): on the elbow-forward branch q4 stays in about [0.3, 1.5] over
-#: dx -0.01 -> 0.51 (q4 reaches 0, the stretched arm, near dx 0.55). The hover pose 3 cm
-#: above dx < 0.11 needs q4 past its +pi/2 limit, so the brush hovers above
-#: PAINT_APPROACH_DX, moves to TOUCH_HOVER above the stroke start and touches down there.
+#: from dx = STROKE_START to STROKE_START + STROKE (relative to the foot x). With q3 = 0
+#: (a planar arm) the hover pose 3 cm above dx < 0.11 needs q4 past its +pi/2 limit, so the
+#: brush hovers above PAINT_APPROACH_DX, moves to TOUCH_HOVER above the stroke start and
+#: touches down there.
 STROKE_START = -0.01
 #: m commanded, on both surfaces, so that the measured contact path covers the paper's
 #: 0.5 m (the contact point lands ~1 cm off the commanded start: sag, tilted tool).
@@ -54,15 +53,17 @@ PAINT_APPROACH_DX = 0.20
 #: BRUSH_STIFFNESS * squeeze = 3.5 N); the tool axis is tilted, so commanding the squeeze
 #: along the axis (not a depth along the normal) keeps the contact point under the command.
 PAINT_SQUEEZE = 0.010
-#: Panel sag compensation (tuned from a run, ASSUMPTION): with a constant squeeze the
-#: measured compression fell to 0 at the far end (the near-stretched arm rides higher); the
-#: squeeze grows linearly by PAINT_SAG_EXTRA from dx = PAINT_SAG_FROM to the stroke end.
-PAINT_SAG_FROM = 0.30
-PAINT_SAG_EXTRA = 0.008
+#: Panel sag compensation (tuned from runs, ASSUMPTION): with 8 mm from dx 0.30 the measured
+#: compression fell to 0 over the last 0.15 m of the planned stroke (the foot pitches up to
+#: -2.3 deg on its plate edge as the arm reaches out, and the brush rides higher); the
+#: squeeze grows linearly by PAINT_SAG_EXTRA from dx = PAINT_SAG_FROM to the stroke end
+#: (16 mm from 0.25: compression above 1 mm on 92 % of the window; 20 mm: 93 %).
+PAINT_SAG_FROM = 0.25
+PAINT_SAG_EXTRA = 0.016
 #: Wall: the stroke starts WALL_TOP m below the foot and runs STROKE m down the wall.
 WALL_TOP = 0.30
 #: m below the stroke start where the brush first hovers off the wall: 3 cm off the wall at
-#: the stroke start itself needs q2 past its -90 deg limit (IK 0.6 mm off, clamped).
+#: the stroke start itself needs q2 past its -90 deg limit (with q3 = 0).
 WALL_APPROACH_BELOW = 0.05
 #: Wall sag compensation (tuned from runs, ASSUMPTION): with a constant squeeze the measured
 #: compression fell from 7.7 mm to 0 (the brush on its stop) ~0.3 m down the stroke: the
@@ -82,22 +83,19 @@ APPROACH_S, TOUCH_S = 2.0, 1.5
 #: s the last stroke sample is held inside the stroke window: the brush trails its command
 #: (servo compliance against the brush friction) and catches up while still in contact.
 STROKE_DWELL = 1.0
-#: IK seed of the panel stroke: the elbow-forward branch (q2 < 0, q4 > 0); the other branch
-#: passes the middle link through the vertical under the foot (rho of eq. (65) ~1e-4).
-IK_SEED_PANEL = (math.pi / 2, -0.7, 0.0, 1.45, 0.0, 0.0)
-#: IK seed of the wall stroke: the arm reaching forward (wall_reach's best branch).
-IK_SEED_WALL = (1.4, -1.3, 0.0, 0.0, 0.0, 0.0)
 #: Tool-axis tilt of the planned wall stroke [rad] at its top and bottom (up from the wall
-#: normal, linear along the stroke). ASSUMPTION, from the axis the point-only IK settled
-#: on (+26 deg at the top, -34 deg at the bottom): a horizontal axis stops the planner on
-#: q2's limit at the top (87 mm short) and on the rotor thrust at the bottom (72 mm).
+#: normal, linear along the stroke). ASSUMPTION, from the axis a point-only tool path with
+#: q3 = 0 settled on (+26 deg at the top, -34 deg at the bottom): a horizontal axis stops the
+#: planner on q2's limit at the top (87 mm short) and on the rotor thrust at the bottom
+#: (72 mm).
 WALL_TILT = (math.radians(26.0), math.radians(-34.0))
 #: The planned approach to the wall passes the brush tip through (dx, dz) from the foot with
 #: the tool axis pitched by the angle (rad, up from +x), 3 x move_s to it and 3 x move_s on
 #: to the hover. ASSUMPTION: the tool pose halfway (in joint space) between the perching
-#: posture and the IK's hover pose. Planned straight to the hover, the arm folds (q4 -1.5
-#: rad, q1 1.32) and the foot slipped 1.9 mm (4 s; limit 1 mm); shorter moves via this pose
-#: slipped 6.1 mm (2 + 2 s) or lost foot contact for a tick (4 + 6 s, 4 of 20 seeds).
+#: posture and the hover pose of a point-only tool path with q3 = 0. Planned straight to
+#: the hover, the arm folds (q4 -1.5 rad, q1 1.32) and the foot slipped 1.9 mm (4 s; limit
+#: 1 mm); shorter moves via this pose slipped 6.1 mm (2 + 2 s) or lost foot contact for a
+#: tick (4 + 6 s, 4 of 20 seeds).
 WALL_VIA = (0.671, -0.78, math.radians(-18.7))
 
 
@@ -111,10 +109,9 @@ class Stroke:
     length: float  # m commanded
     approach: np.ndarray  # surface point the brush first hovers off
     squeeze: Callable[[float], float]  # commanded compression [m] at stroke coordinate u
-    seed: tuple[float, ...]  # IK seed q1..q6
     #: tool-axis tilt [rad] at the stroke's start and end (the axis turned from -normal
-    #: toward -direction, linear in u) for a stroke planned by rdm.planner; None: the axis
-    #: is left free (joint-space IK, task_ik)
+    #: toward -direction, linear in u) held by the planner's 5-D target; None: the axis is
+    #: the planner's choice (a 3-D target)
     tilt: tuple[float, float] | None = None
     #: (tool point, tool axis) world, the first move passes through on its way to the
     #: approach hover; None: straight there
@@ -158,7 +155,6 @@ def stroke_of(task: str, lay: obj.TaskLayout) -> Stroke:
             STROKE,
             start + np.array([0.0, 0.0, -WALL_APPROACH_BELOW]),
             wall_squeeze,
-            IK_SEED_WALL,
             WALL_TILT,
             (
                 np.array([fx + WALL_VIA[0], fy, fz + WALL_VIA[1]]),
@@ -173,9 +169,13 @@ def stroke_of(task: str, lay: obj.TaskLayout) -> Stroke:
             STROKE,
             np.array([fx + PAINT_APPROACH_DX, fy, lay.panel_top_z]),
             panel_squeeze,
-            IK_SEED_PANEL,
         )
     raise ValueError(f"task: one of {PAINT_TASKS}, got {task!r}")
+
+
+def approach_s(s: Stroke, move_s: float) -> float:
+    """Seconds :func:`waypoints` takes to the first hover pose (via ``s.via`` if any)."""
+    return (6.0 if s.via is not None else 2.0) * move_s
 
 
 #: go(target, tool_x, duration, linear=False, axis=None) -> duration: one waypoint, the tool

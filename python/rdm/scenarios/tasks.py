@@ -6,10 +6,9 @@ The robot perches exactly as in :mod:`rdm.scenarios.perching` (same script, cons
 tuning; no joint motion of its own) and then the arm does the task against objects added to
 the MuJoCo scene (:mod:`rdm.scenarios.task_objects`). Joint goals come from the foot pose
 the PC knows (mocap) and the object positions (known to the operator, as in the paper's
-feed-forward planner): drilling's, the wall painting's and the valve's from the Sec. V
-planner with the tool point as its end effector (:mod:`rdm.scenarios.task_plan`; the
-brush and the gripper with its point + tool-axis target), painting-panel's from the
-point-only IK of :mod:`rdm.scenarios.task_ik`;
+feed-forward planner), every task's from the Sec. V planner with the tool point as its
+end effector (:mod:`rdm.scenarios.task_plan`; the wall brush and the gripper with its point
++ tool-axis target, the drill and the panel brush with the point alone);
 the drill is pressed by commanding it ``PRESS_DEPTH`` behind the surface (the stiff
 position servos turn the offset into a contact force), the brush by its spring. Ground
 truth: MuJoCo contacts of the tool geoms, the brush joint, the valve hinge angle; the
@@ -45,7 +44,7 @@ from rdm.nodes.onboard_config import OnboardConfig
 from rdm.sim import Metric
 from rdm.sim.plots import plot_panels
 
-from . import painting, perching, task_ik, task_plan
+from . import painting, perching, task_plan
 from . import task_objects as obj
 from .common import (
     ScenarioResult,
@@ -60,10 +59,9 @@ from .stack import Stack, build_stack
 TASKS = ("drilling", *painting.PAINT_TASKS, "valve")
 #: Tasks flown with Spinal's roll/pitch integration held during the fold
 #: (``perching.RP_INTEGRATION_HOLD_RATE``); the others keep the fold's integral (None): held,
-#: the valve's perching QP fails from 22.0 s instead of 26.2 s (a second
-#: ``perch_qp_failed``) and its foot slips 0.14 mm instead of 0.03, the wall painting's
-#: foot 0.72 mm instead of 0.65 and the panel's brush loses contact 0.6 % of the stroke
-#: (seed 0; docs/scenarios.md, "Where the integral comes from").
+#: the valve trips ``perch_qp_failed`` twice (none without) and its foot slips 0.14 mm
+#: instead of 0.035, the wall painting's foot 0.74 mm instead of 0.64 and the panel's
+#: 0.43 mm instead of 0.36 (seed 0; docs/scenarios.md, "Where the integral comes from").
 RP_HOLD_TASKS = ("drilling",)
 EE_SENSOR = "end_effector_wrench"
 #: Hole targets (dx, dy) relative to the nominal foot, on the board top. ASSUMPTION.
@@ -78,9 +76,9 @@ MOVE_S, PRESS_S, RETRACT_S = 2.0, 2.0, 1.0
 #: Valve: joint configuration whose gripper centre defines the valve axis (end link
 #: vertical: q1 + q2 + q4 = pi/2), and the q6 turn commanded. q1 = 1.4, not pi/2: q1's
 #: upper limit is pi/2 and raising the gripper with the end link kept vertical needs q1 to
-#: grow (the hover pose 5 cm above needs q1 = 1.54); from q1 = pi/2 the IK had no room
-#: (333 mm / 4.7 mm errors, clamped at the limit). The axis is 0.32 m in x from the foot,
-#: like the drilling targets (0.24-0.30 m).
+#: grow (the hover pose 5 cm above needs q1 = 1.54); from q1 = pi/2 a point-only joint
+#: path with q3 = 0 had no room (333 mm / 4.7 mm errors, clamped at the limit). The axis is
+#: 0.32 m in x from the foot, like the drilling targets (0.24-0.30 m).
 VALVE_Q = (1.4, -0.5, 0.0, math.pi / 2 - 0.9, 0.0, 0.0)
 VALVE_HOVER = 0.05  # m above the grip pose: finger tips 15 mm above the handle bar
 VALVE_TURN = 1.2  # rad of q6
@@ -103,8 +101,8 @@ SETTLE_ALLOWANCE_S = 3.0
 def _valve_layout(robot) -> obj.TaskLayout:
     """Valve axis at the gripper centre of VALVE_Q with the foot at the nominal spot."""
     base = obj.TaskLayout()
-    q = task_ik.level(np.r_[VALVE_Q, np.zeros(4)])
-    p, _ = task_ik.tool_pose(robot, np.r_[base.nominal_foot, 0.0, 0.0, 0.0], q, obj.GRIPPER_AT)
+    q = perching.leveled(np.asarray(VALVE_Q, dtype=float), robot.n_q)
+    p, _ = task_plan.tool_pose(robot, np.r_[base.nominal_foot, 0.0, 0.0, 0.0], q, obj.GRIPPER_AT)
     fx = base.nominal_foot[0]
     return obj.TaskLayout(valve_x=float(p[0] - fx), valve_handle_z=float(p[2]))
 
@@ -148,10 +146,8 @@ class TaskScript(perching.PerchingScript):
         self.t_task_end: float | None = None
         #: (start, end, label) of the pressing/sliding/turning windows
         self.windows: list[tuple[float, float, str]] = []
+        #: m between each planned move's tool point and its target at the move's end
         self.ik_errors: list[float] = []
-        #: where the joint waypoints come from: "IK" (task_ik, painting-panel) or "planned"
-        #: (task_plan)
-        self.waypoint_source = "IK"
         #: the painting tasks' stroke (painting.Stroke), None for the others
         self.stroke: painting.Stroke | None = None
         self.targets: list[np.ndarray] = []
@@ -198,64 +194,46 @@ class TaskScript(perching.PerchingScript):
     # ------------------------------------------------------------------ planning
     def _start(self, stack: Stack, now: float) -> None:
         gt = stack.plant.ground_truth()  # the foot pose as mocap gives it
-        base = np.r_[gt.base_position, task_ik.rpy_of_quaternion(gt.base_quaternion)]
+        base = np.r_[gt.base_position, task_plan.rpy_of_quaternion(gt.base_quaternion)]
         # bring the objects (contacts still off) to the perched foot
         self.layout = self.compiled_layout.around_foot(gt.base_position[0], gt.base_position[1])
         obj.place_objects(stack.plant.model, self.compiled_layout, self.layout)
         robot = stack.onboard.robot
-        q = task_ik.level(np.r_[perching.PERCH_POSTURE, np.zeros(robot.n_q - 6)])
-        q_now = q.copy()  # where the joints are (the perching posture): the path starts here
-        way: list[tuple[float, np.ndarray, bool]] = []  # (duration, q, linear)
+        # where the joints are (the perching posture): the path starts here
+        q_now = perching.leveled(np.asarray(perching.PERCH_POSTURE, dtype=float), robot.n_q)
+        way: list[tuple[float, np.ndarray]] = []  # (seconds after the previous one, q)
         lay = self.layout
         t = now
-
-        def go(target, tool_x, duration, linear=False, axis=None):
-            """One IK waypoint (painting-panel: the point only, the axis left free)."""
-            nonlocal q
-            if axis is not None:
-                raise ValueError("axis: the joint-space IK holds no tool axis (plan it)")
-            res = task_ik.solve(robot, base, q, target, tool_x)
-            q = res.q.copy()
-            q[5] = 0.0
-            self.ik_errors.append(res.position_error)
-            way.append((duration, q.copy(), linear))
-            return duration
-
-        first_s = None  # the first move's duration if the first waypoint is not the move
-        if self.task == "drilling":  # the Sec. V planner, the drill tip as its end effector
-            self.waypoint_source = "planned"
-            first_s = MOVE_S  # its waypoints are the 40 Hz samples of the moves
-            tool = task_plan.ToolPlanner("rdm", base, q_now, obj.DRILL_LEN)
+        # the Sec. V planner with the tool point as its end effector; its waypoints are the
+        # 40 Hz samples of the moves. first_s: seconds to the tool's first hover pose
+        if self.task == "drilling":
+            first_s = MOVE_S
+            # point-only moves, the yaw held (task_plan.POINT_CONFIG)
+            tool = task_plan.ToolPlanner("rdm", base, q_now, obj.DRILL_LEN, task_plan.POINT_CONFIG)
             self.targets = [lay.board_point(dx, dy) for dx, dy in DRILL_TARGETS]
             steps, presses, took = task_plan.drill_waypoints(
                 tool, self.targets, HOVER, PRESS_DEPTH, MOVE_S, PRESS_S, RETRACT_S
             )
             way += steps
             self.windows += [(t + a, t + b, "press") for a, b in presses]
-            self.ik_errors += [m.error for m in tool.moves]
-            t += took
         elif self.task in painting.PAINT_TASKS:
             self.stroke = painting.stroke_of(self.task, lay)
             s = self.stroke
             self.targets = [s.start, s.point(s.length)]
-            step = go
-            if s.tilt is not None:  # the Sec. V planner, the brush tip as its end effector
-                self.waypoint_source = "planned"
-                first_s = 6 * MOVE_S  # its waypoints are the 40 Hz samples of the moves
-                tool = task_plan.ToolPlanner("rdm", base, q_now, painting.BRUSH_TIP)
+            first_s = painting.approach_s(s, MOVE_S)
+            # the wall's tool axis is held by its 5-D targets; the panel's is free, its
+            # yaw held (task_plan.POINT_CONFIG)
+            cfg = task_plan.POINT_CONFIG if s.tilt is None else {}
+            tool = task_plan.ToolPlanner("rdm", base, q_now, painting.BRUSH_TIP, cfg)
 
-                def step(target, tool_x, duration, linear=False, axis=None):
-                    m = tool.move(target, duration, axis=axis, tool_x=tool_x, linear=linear)
-                    way.extend(m.waypoints())
-                    self.ik_errors.append(m.error)
-                    return duration
-            else:
-                q = task_ik.level(np.r_[s.seed, np.zeros(robot.n_q - 6)])
+            def step(target, tool_x, duration, linear=False, axis=None):
+                m = tool.move(target, duration, axis=axis, tool_x=tool_x, linear=linear)
+                way.extend(m.waypoints())
+                return duration
+
             took, w0, w1 = painting.waypoints(step, s, HOVER, MOVE_S, PRESS_S, RETRACT_S)
             self.windows.append((t + w0, t + w1, "stroke"))
-            t += took
-        else:  # the Sec. V planner, the gripper centre as its end effector
-            self.waypoint_source = "planned"
+        else:  # the gripper centre as the end effector
             first_s = 1.5 * MOVE_S
             axis = lay.valve_axis
             self.targets = [axis]
@@ -265,15 +243,15 @@ class TaskScript(perching.PerchingScript):
             )
             way += steps
             self.windows.append((t + turn_window[0], t + turn_window[1], "turn"))
-            self.ik_errors += [m.error for m in tool.moves]
-            t += took
-        points = _trajectory(now, q_now, way, stack.onboard.robot.n_q)
+        self.ik_errors += [m.error for m in tool.moves]
+        t += took
+        points = _trajectory(now, q_now, way, robot.n_q)
         stack.onboard.set_trajectory(points)
         self.q_plan = points
         self.t_task = now
         self.t_task_end = t
-        # first waypoint (hover above the first target) reached + 0.5 s settling
-        self.t_enable = now + (way[0][0] if first_s is None else first_s) + 0.5
+        # first hover pose reached + 0.5 s settling
+        self.t_enable = now + first_s + 0.5
 
     # --------------------------------------------------------------- recording
     def _tool_object_geoms(self, model: mujoco.MjModel) -> tuple[set[int], set[int]]:
@@ -341,20 +319,13 @@ class TaskScript(perching.PerchingScript):
 
 
 def _trajectory(t0: float, q_start: np.ndarray, way, n_q: int) -> list:
-    """Joint points: cosine segments (zero end velocity) or, for ``linear`` waypoints (the
-    dense stroke/turn samples), one point each (the onboard node interpolates linearly)."""
+    """Joint points: the start, then one per waypoint (seconds after the previous one, q);
+    the onboard node interpolates linearly between them (the planned moves' 40 Hz samples)."""
     points = [(t0, np.asarray(q_start, float)[:n_q].copy())]
-    start, t = np.asarray(q_start, float), t0
-    for duration, goal, linear in way:
-        if linear:
-            t += duration
-            points.append((t, goal.copy()))
-        else:
-            for k in range(1, 11):
-                s = 0.5 - 0.5 * math.cos(math.pi * k / 10)
-                points.append((t + duration * k / 10, task_ik.level(start + s * (goal - start))))
-            t += duration
-        start = goal
+    t = t0
+    for duration, goal in way:
+        t += duration
+        points.append((t, goal.copy()))
     return points
 
 
@@ -475,7 +446,7 @@ def evaluate(stack: Stack, script: TaskScript) -> ScenarioResult:
         Metric("foot contact kept while perched", kept, 1.0, "fraction", "min", limit=1.0),
         Metric("foot slip while perched", slip, None, "mm", "max", limit=1.0),
         Metric(
-            f"max {script.waypoint_source} position error of the waypoints",
+            "max planned position error of the waypoints",
             float(np.max(script.ik_errors) * 1e3) if script.ik_errors else nan,
             None,
             "mm",

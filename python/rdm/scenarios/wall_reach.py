@@ -2,20 +2,19 @@
 walls using a brush ... the sliding area length was over 0.5 m in the vertical direction").
 
 The wall is the plane x = foot x + ``wall_dx`` (world), facing the robot (normal -x). For
-brush-tip points on a vertical line of that plane (y = foot y) this module solves the
-perched arm's tool-point IK (:func:`rdm.scenarios.task_ik.solve`: q1, q2, q4, q5 free, q3 = 0,
-vectoring units levelled) and reports, per depth below the foot, whether the tip lands on
-the wall and the angle between the tool axis and the wall normal. The compliant brush
-(task_objects BRUSH_*) compresses along the tool axis, so a tilted tool still presses it;
-ASSUMPTION: tilts up to ``max_tilt_deg`` (default 50 deg, the horizontal painting stroke
-already runs at up to ~47 deg) keep the brush pressed and sliding.
+brush-tip points on a vertical line of that plane (y = foot y) this module plans the brush
+tip there with the Sec. V planner (``rdm.planner`` through :class:`rdm.scenarios.task_plan.
+ToolPlanner`: perched, every constraint of eq. 70, the tip as the end effector, its axis
+free, the yaw joints held as in the tasks' point-only moves, ``task_plan.POINT_CONFIG``),
+from the scenarios' hanging posture family (:data:`SEEDS`), and reports, per depth below the
+foot, whether the tip lands on the wall and the angle between the tool axis and the wall
+normal. The compliant brush (task_objects BRUSH_*) compresses along the tool axis, so a
+tilted tool still presses it; ASSUMPTION: tilts up to ``max_tilt_deg`` (default 50 deg, the
+horizontal painting stroke already runs at up to ~49 deg) keep the brush pressed and sliding.
 
-The vertical stroke this gives is the longest run of consecutive reachable depths. Measured
-(5 cm steps, foot level at TaskLayout.nominal_foot): a wall 0.80 m in front of the foot is
-reached from 0.35 to 0.85 m below it with tilts 0-37 deg (0.5 m, the paper's stroke); 0.70 m:
-0.45-0.95 m, tilts up to 46 deg; 0.30 m: only 0.90-1.10 m below the foot (the arm folds).
-The ``painting`` scenario's wall stands at 0.75 m (:mod:`rdm.scenarios.painting`: at 0.80 m
-the pressed brush is out of reach at the bottom of the stroke).
+The vertical stroke this gives is the longest run of consecutive reachable depths (figures:
+docs/scenarios.md, "Painting a wall: reach"). The ``painting`` scenario's wall stands at
+0.75 m (:mod:`rdm.scenarios.painting`).
 """
 
 from __future__ import annotations
@@ -25,13 +24,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import task_ik
+from . import perching, task_plan
 from . import task_objects as obj
 
-#: IK seeds (q1..q6): the elbow-forward branch of the painting stroke and three others; the
-#: best reachable solution (smallest tilt) over the seeds is kept.
+#: Start postures (q1..q6) of the plans: the perching posture the tasks start from and three
+#: others; the best reached solution (smallest tilt) over the starts is kept.
 SEEDS: tuple[tuple[float, ...], ...] = (
-    (math.pi / 2, -0.7, 0.0, 1.45, 0.0, 0.0),
+    tuple(perching.PERCH_POSTURE),
     (1.2, -0.3, 0.0, 0.8, 0.0, 0.0),
     (1.0, -1.0, 0.0, 1.5, 0.0, 0.0),
     (1.5, 0.3, 0.0, -0.5, 0.0, 0.0),
@@ -56,38 +55,38 @@ def tool_tip() -> float:
 
 
 def wall_line(
-    robot,
     wall_dx: float,
     depths: np.ndarray,
     foot: tuple[float, float, float] | None = None,
     max_tilt_deg: float = 50.0,
+    robot: str = "rdm",
 ) -> list[WallPoint]:
-    """IK of the brush tip on the wall x = foot x + ``wall_dx`` at each of ``depths`` [m]
-    below a level foot at ``foot`` (default TaskLayout.nominal_foot)."""
+    """Plans of the brush tip onto the wall x = foot x + ``wall_dx`` at each of ``depths``
+    [m] below a level foot at ``foot`` (default TaskLayout.nominal_foot), each from every
+    start in :data:`SEEDS`."""
     if not wall_dx > 0.0:
         raise ValueError(f"wall_dx: must be > 0 (the wall is in front of the foot), got {wall_dx}")
     fx, fy, fz = foot or obj.TaskLayout().nominal_foot
     base = np.array([fx, fy, fz, 0.0, 0.0, 0.0])
-    tip = tool_tip()
-    pad = np.zeros(robot.n_q - 6)
+    from rdm.model import Robot
+    from rdm.planner.core import PlannerSetup
+
+    setup = PlannerSetup.for_robot(robot, "perched")
+    n_q = Robot.from_strs(setup.urdf, setup.toml).n_q
     out = []
     for depth in np.asarray(depths, dtype=float):
         best: WallPoint | None = None
         for seed in SEEDS:
-            res = task_ik.solve(
-                robot,
-                base,
-                task_ik.level(np.r_[seed, pad]),
-                [fx + wall_dx, fy, fz - depth],
-                tip,
-                iterations=300,
-            )
-            if res.position_error >= POSITION_TOL:
+            q0 = perching.leveled(np.asarray(seed, dtype=float), n_q)
+            tool = task_plan.ToolPlanner(robot, base, q0, tool_tip(), task_plan.POINT_CONFIG)
+            m = tool.move(np.array([fx + wall_dx, fy, fz - depth]), 1.0)
+            if m.error >= POSITION_TOL:
                 continue
-            _, axis = task_ik.tool_pose(robot, base, res.q, tip)
+            tool.core.set_zeta(np.asarray(m.plan.zeta[-1], dtype=float))  # the plan's end
+            axis = tool.axis_world()
             tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(axis[0])))))
             if best is None or tilt < best.tilt_deg:
-                best = WallPoint(float(depth), tilt <= max_tilt_deg, tilt, res.q)
+                best = WallPoint(float(depth), tilt <= max_tilt_deg, tilt, m.q[-1].copy())
         out.append(best or WallPoint(float(depth), False, math.nan, None))
     return out
 
@@ -131,7 +130,7 @@ def planner_line(wall_dx: float, depths: np.ndarray, robot: str = "rdm") -> list
     With the orientation free the tool axis is not into the wall (-0.5 m: tilts ~49-58 deg at
     depths 0.30, 0.60, 0.85 m, the axis partly along y): a brush stroke needs 6-D targets.
     The planner's frame is its own (q = (1.2, 0.8, 0, -0.9, 0, 0) start), not the task
-    scenarios' hanging posture q1 = pi/2 (see :mod:`rdm.scenarios.task_ik`)."""
+    scenarios' hanging posture q1 = pi/2 (:func:`wall_line` starts from that one)."""
     from rdm.model import Robot
     from rdm.planner.core import PlannerSetup, make_core
     from rdm.planner.plan import run_core

@@ -61,6 +61,11 @@ pub struct PlannerConfig {
     pub s1_position: f64,
     pub s1_orientation: f64,
     pub s1_joint: f64,
+    /// Per-joint S1 entries (joint index in q, weight) replacing `s1_joint` for those joints,
+    /// e.g. a large weight on the yaw joints keeps a point-only plan near the yaw it starts
+    /// from (the regulariser acts on every step, so the yaw drifts only where the task needs
+    /// it). Empty by default.
+    pub s1_joint_overrides: Vec<(usize, f64)>,
     /// S2' (end effector) position and orientation weights (eq. 57).
     pub s2_ee_position: f64,
     pub s2_ee_orientation: f64,
@@ -106,6 +111,7 @@ impl PlannerConfig {
             s1_position: 1e-2,
             s1_orientation: 1e-2,
             s1_joint: 1e-4,
+            s1_joint_overrides: Vec::new(),
             s2_ee_position: 1.0,
             s2_ee_orientation: 0.0,
             s2_foot: 1e-2,

@@ -115,6 +115,14 @@ impl Planner {
         }
         let leveler = Leveler::new(&robot).map_err(PlannerError::Description)?;
         let n_q = robot.n_q();
+        for &(j, w) in &cfg.s1_joint_overrides {
+            if j >= n_q || leveler.is_unit_angle(j) || !(w.is_finite() && w >= 0.0) {
+                return Err(PlannerError::Description(format!(
+                    "s1_joint_overrides: ({j}, {w}) must name a joint of q (not a vectoring \
+                     angle) with a finite weight >= 0"
+                )));
+            }
+        }
         let mut free: Vec<usize> = Vec::with_capacity(6 + n_q);
         if cfg.mode == Mode::Flight {
             free.extend(0..6);
@@ -314,7 +322,12 @@ impl Planner {
             self.p[a * nf + a] = match ka {
                 0..=2 => self.cfg.s1_position,
                 3..=5 => self.cfg.s1_orientation,
-                _ => self.cfg.s1_joint,
+                _ => self
+                    .cfg
+                    .s1_joint_overrides
+                    .iter()
+                    .find(|&&(j, _)| j + 6 == ka)
+                    .map_or(self.cfg.s1_joint, |&(_, w)| w),
             };
             for r in 0..6 {
                 let (w_ee, target_ee) = (self.task.weights[r], self.task.step[r]);
