@@ -30,7 +30,7 @@ class ServoParams:
     frictionloss: float = 0.0
     #: Time constant [s] of the servo's goal smoothing: the position loop follows the goal
     #: through a first-order filter (MuJoCo ``filterexact`` actuator dynamics), standing for
-    #: the Dynamixel profile generator that ramps a new Goal Position instead of stepping to
+    #: the Dynamixel profile generator that ramps each Goal Position written instead of stepping to
     #: it (Profile Acceleration / Profile Velocity). 0 (default): no smoothing, the goal is
     #: the loop's reference at once (Profile Velocity 0, "infinite", the factory value).
     goal_filter_s: float = 0.0

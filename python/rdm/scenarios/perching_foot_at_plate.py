@@ -108,7 +108,7 @@ SETTLE_S = 10.0
 CONTACT_HOLD_S = 0.05
 #: Time constant [s] of the joint servos' goal smoothing (``ServoParams.goal_filter_s``: the
 #: plant's position loop follows each Dynamixel goal through a first-order filter, standing
-#: for the servo's profile generator, which ramps a new Goal Position when Profile
+#: for the servo's profile generator, which ramps each Goal Position written when Profile
 #: Velocity/Acceleration are set; 0 elsewhere: the goal steps). At the arm motion's 0.06
 #: rad/s a joint's goal steps one encoder count (1.53 mrad) every 20-30 ms; unsmoothed, the
 #: stack's 150 N m/rad servo turns each count into a 0.23 N m torque step whose reaction tips
