@@ -110,6 +110,36 @@ def test_unloaded_servo_follows_the_linear_second_order_model() -> None:
     assert max(trace) <= 0.2 + 1e-6  # no overshoot: a first-order-like response
 
 
+def test_servo_goal_filter_follows_the_filtered_second_order_model() -> None:
+    """With ``goal_filter_s`` tau the loop follows the goal through 1 / (tau s + 1): q6's
+    step response against scipy's (kp / ((I + armature) s^2 + kv s + kp)) / (tau s + 1).
+    Catches a filter not applied (the unfiltered response leads by ~tau), a wrong time
+    constant and a filter state starting at 0 instead of the reset posture."""
+    servo = ServoParams(kp=150.0, kv=5.0, goal_filter_s=0.05)
+    plant = Plant("rdm", fixed_base=True, ceiling_height=None, servo=servo)
+    q0 = np.zeros(10)
+    q0[5] = 0.3
+    plant.reset(q0=q0)
+    plant.step(50)
+    assert plant.servo_positions()[5] == pytest.approx(0.3, abs=1e-9)  # at rest on q0
+    q = q0.copy()
+    q[5] = 0.5
+    plant.set_servo_targets(q)
+    n = 400
+    trace = []
+    for _ in range(n):
+        plant.step(1)
+        trace.append(plant.servo_positions()[5] - 0.3)
+    inertia = 2.1375e-05 + servo.armature
+    tau = servo.goal_filter_s
+    den = np.polymul([tau, 1.0], [inertia, servo.kv, servo.kp])
+    t = np.arange(1, n + 1) * 1e-3
+    _, y = signal.step(signal.lti([servo.kp], den), T=t)
+    assert np.max(np.abs(np.array(trace) - 0.2 * y)) < 0.004
+    with pytest.raises(ValueError, match="goal_filter_s"):
+        ServoParams(goal_filter_s=-0.01)
+
+
 def test_cli_export_loads_in_mujoco(tmp_path) -> None:
     out = tmp_path / "model.xml"
     assert cli_main(["plant", "--export", str(out), "--robot", "rcm"]) == 0

@@ -195,6 +195,10 @@ def build_spec(desc: RobotDescription, options: BuildOptions | None = None) -> m
         act.ctrlrange = rng
         act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
         act.forcerange = [-stall, stall]
+        if opt.servo.goal_filter_s > 0:
+            # The loop's reference is the filter state (act), first-order toward ctrl.
+            act.dyntype = mujoco.mjtDyn.mjDYN_FILTEREXACT
+            act.dynprm[0] = opt.servo.goal_filter_s
 
     # Rotors: thrust + drag torque on a site whose z axis is the rotor axis.
     for rotor in desc.rotors:

@@ -383,6 +383,8 @@ class Plant(PlantReadings, PlantTruthReadout):
         )
         d.qpos[self._qadr] = q
         d.ctrl[self._servo_act] = q
+        if self.options.servo.goal_filter_s > 0:  # the smoothed goal starts at rest on q
+            d.act[m.actuator_actadr[self._servo_act]] = q
         if not self.options.fixed_base:
             quat = _vector(base_quaternion, 4, "base_quaternion")
             norm = np.linalg.norm(quat)

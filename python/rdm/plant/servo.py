@@ -7,6 +7,7 @@ With a light load the step response is first-order with time constant ``kv / kp`
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 # ASSUMPTION: datasheet stall currents at 12 V, used only to turn torque into a current
@@ -27,10 +28,20 @@ class ServoParams:
     kv: float = 1.5
     armature: float = 0.01
     frictionloss: float = 0.0
+    #: Time constant [s] of the servo's goal smoothing: the position loop follows the goal
+    #: through a first-order filter (MuJoCo ``filterexact`` actuator dynamics), standing for
+    #: the Dynamixel profile generator that ramps each Goal Position written instead of stepping to
+    #: it (Profile Acceleration / Profile Velocity). 0 (default): no smoothing, the goal is
+    #: the loop's reference at once (Profile Velocity 0, "infinite", the factory value).
+    goal_filter_s: float = 0.0
 
     def __post_init__(self) -> None:
         if not (self.kp > 0 and self.kv >= 0 and self.armature >= 0 and self.frictionloss >= 0):
             raise ValueError("ServoParams: kp > 0 and kv, armature, frictionloss >= 0 required")
+        if not (math.isfinite(self.goal_filter_s) and self.goal_filter_s >= 0):
+            raise ValueError(
+                f"ServoParams: goal_filter_s {self.goal_filter_s!r} must be finite and >= 0"
+            )
 
     @property
     def time_constant(self) -> float:

@@ -17,6 +17,10 @@ perch, arm motion, hold) and the same metric rows, with these differences:
   between the transition and the first joint motion allow it; 1.5 s in ``perching``);
 * the perched arm motion is slower (:data:`FOOT_PLATE_MOTION`, 10 s per segment instead of
   3 s, Fig. 10's timing), the run :data:`DEFAULT_DURATION` long.
+* the plant's joint servos follow their goals through the goal smoothing of
+  :data:`SERVO_GOAL_FILTER_S` (``ServoParams.goal_filter_s``, the Dynamixel profile
+  generator's ramp; 0 elsewhere), so the arm motion's one-count goal steps do not tip the
+  plate.
 
 Spinal's roll/pitch integration is held during the fold as in every hanging-posture
 experiment (``perching.RP_INTEGRATION_HOLD_RATE``), and the approach switches to perched once
@@ -36,13 +40,14 @@ docs/scenarios.md "perching-foot-at-plate" has the figures and what the paper fi
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from rdm.nodes.onboard_flight import FlightLimits
+from rdm.plant.servo import ServoParams
 from rdm.sim import Metric
 
 from . import perching
@@ -57,7 +62,7 @@ from .perching import (
     evaluate,
     onboard_config,
 )
-from .stack import Stack, build_stack
+from .stack import Stack, StackOptions, build_stack
 
 NAME = "perching-foot-at-plate"
 #: The shipped description with the foot unit at the plate (``rdm.descriptions.FOOT_AT_PLATE``).
@@ -79,9 +84,9 @@ TABLE_VII_PARAMS: dict = {
 #: keeps 80 % of the ceiling effect's lift as press instead of half (Sec. VII-B: "the
 #: F_foot_z increased to fix the footplate on the ceiling" while "the rotor thrust during
 #: perching is equal to the thrust during flight"), at a quarter of the loop gain through
-#: the 1 Hz filter. Seed 0 (0.5, 1.0 in brackets): min F_z 1.45 N (1.11, 0.96), ZMP on the
-#: edge 18 % (24 %, 33 %), foot thrust in the hold 1.04 (1.03, 1.02) of flight; 0 (no
-#: feedback term) 1.75 N, 11 %, 1.05; docs/scenarios.md.
+#: the 1 Hz filter. Seed 0 with the servo goals unsmoothed (0.5, 1.0 in brackets): min F_z
+#: 1.45 N (1.11, 0.96), ZMP on the edge 18 % (24 %, 33 %), foot thrust in the hold 1.04
+#: (1.03, 1.02) of flight; 0 (no feedback term) 1.75 N, 11 %, 1.05; docs/scenarios.md.
 FEEDBACK_GAIN = 0.25
 #: The perching parameters of the run: Table VII as printed, and :data:`FEEDBACK_GAIN`.
 PERCH_PARAMS: dict = {**TABLE_VII_PARAMS, "feedback_gain": FEEDBACK_GAIN}
@@ -101,6 +106,21 @@ SETTLE_S = 10.0
 #: Sec. VII-B: the wrench sensor "shows significant amount of noise at times". ASSUMPTION:
 #: 0.05 s, three 40 Hz ticks.
 CONTACT_HOLD_S = 0.05
+#: Time constant [s] of the joint servos' goal smoothing (``ServoParams.goal_filter_s``: the
+#: plant's position loop follows each Dynamixel goal through a first-order filter, standing
+#: for the servo's profile generator, which ramps each Goal Position written when Profile
+#: Velocity/Acceleration are set; 0 elsewhere: the goal steps). At the arm motion's 0.06
+#: rad/s a joint's goal steps one encoder count (1.53 mrad) every 20-30 ms; unsmoothed, the
+#: stack's 150 N m/rad servo turns each count into a 0.23 N m torque step whose reaction tips
+#: the plate (1.9 N of press carries 0.14 N m about x) onto the other edge. ASSUMPTION: 0.05
+#: s, the first-order goal lag of the Neuron's servo model (``ServoConfig.time_constant``,
+#: docs/canbus.md); the paper and JSK's published settings give no Profile Acceleration.
+#: Seed 0, ZMP on the edge during the arm motion: 28 % unsmoothed, 2.9 % at 0.03 s, 0.5 % at
+#: 0.05 s, 0.03 % at 0.07 s; docs/scenarios.md.
+SERVO_GOAL_FILTER_S = 0.05
+#: The joint servos of the run: the stack's (:class:`rdm.scenarios.stack.StackOptions`) with
+#: :data:`SERVO_GOAL_FILTER_S`.
+SERVO = replace(StackOptions().servo or ServoParams(), goal_filter_s=SERVO_GOAL_FILTER_S)
 #: The phase machine's timing: ``perching``'s with :data:`SETTLE_S`.
 TIMING = PerchTiming(settle_s=SETTLE_S)
 #: Rotors of the foot vectoring apparatus (Table VII's Q_perch = Q(q) diag[1, 1, 0, 0]).
@@ -298,6 +318,7 @@ def run(
     :func:`rdm.scenarios.perching.run`. The result's ``script`` is the :class:`RotorProbe`
     (its raw per-tick records)."""
     stack_overrides.setdefault("robot", ROBOT)
+    stack_overrides.setdefault("servo", SERVO)
     if "onboard" not in stack_overrides:
         stack_overrides["onboard"] = onboard_config(
             perch_params=dict(PERCH_PARAMS),

@@ -64,8 +64,8 @@ SCENARIOS: dict[str, Scenario] = {
             "run",
             "perching with the foot unit at the plate end of the root link (rotors 6 cm under "
             "the ceiling) and Table VII's eps_z = 1 N; the foot thrust returns to the flight "
-            "level and the plate rests flat, but rocks on an edge during the arm motion (rows "
-            "marked NO, docs/scenarios.md)",
+            "level and, with the servos' goal smoothing, the plate stays off its edges at rest "
+            "and through the arm motion (docs/scenarios.md)",
         ),
         Scenario(
             "wall-perching",
