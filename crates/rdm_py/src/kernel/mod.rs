@@ -34,6 +34,7 @@ use crate::neuron_bank::NeuronBank;
 use crate::plant_bridge::PlantBridgeCore;
 use crate::resting_sleep::RestingSleepCore;
 use crate::rotor_plant::RotorPlantCore;
+use crate::spinal_state::SpinalMirrorState;
 use crate::stop_flag::StopFlag;
 use crate::tick_counter::TickCounter;
 use bank::BankFast;
@@ -296,17 +297,20 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// Node `index` is a `SpinalMirror` whose Rust CAN master `master` ticks on `wire`.
+    /// Node `index` is a `SpinalMirror` with the clock and battery state `state` whose Rust
+    /// CAN master `master` ticks on `wire`.
+    #[allow(clippy::too_many_arguments)]
     fn attach_spinal(
         &mut self,
         index: usize,
         node: &Bound<'_, PyAny>,
+        state: Py<SpinalMirrorState>,
         master: Py<CanMaster>,
         wire: Py<CanWire>,
         drain_at: usize,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.spinal = Some(SpinalFast::new(node, master, wire, drain_at));
+        self.spinal = Some(SpinalFast::new(node, state, master, wire, drain_at));
         self.kinds[index] = Kind::Spinal;
         self.touches[index] = SPINAL;
         Ok(())

@@ -5,20 +5,12 @@ use pyo3::prelude::*;
 use crate::kernel::attr::Name;
 
 pub(super) struct Names {
-    pub(super) now_ms: Name,
-    pub(super) now_s: Name,
-    pub(super) can_ms: Name,
-    pub(super) next_control: Name,
     pub(super) counters: Name,
     pub(super) last_output: Name,
     pub(super) duties: Name,
     pub(super) duties_to_master: Name,
     pub(super) last_pub: Name,
     pub(super) next_pub_ms: Name,
-    pub(super) battery_due_ms: Name,
-    pub(super) battery_voltage: Name,
-    pub(super) battery_input: Name,
-    pub(super) adc_scale: Name,
     pub(super) gyro: Name,
     pub(super) acc: Name,
     pub(super) mag: Name,
@@ -46,20 +38,12 @@ pub(super) struct Names {
 impl Names {
     pub(super) fn new(py: Python<'_>) -> Names {
         Names {
-            now_ms: Name::new(py, "now_ms"),
-            now_s: Name::new(py, "_now_s"),
-            can_ms: Name::new(py, "_can_ms"),
-            next_control: Name::new(py, "_next_control"),
             counters: Name::new(py, "counters"),
             last_output: Name::new(py, "last_output"),
             duties: Name::new(py, "duties"),
             duties_to_master: Name::new(py, "_duties_to_master"),
             last_pub: Name::new(py, "_last_pub"),
             next_pub_ms: Name::new(py, "_next_pub_ms"),
-            battery_due_ms: Name::new(py, "_battery_due_ms"),
-            battery_voltage: Name::new(py, "battery_voltage"),
-            battery_input: Name::new(py, "battery_input"),
-            adc_scale: Name::new(py, "adc_scale"),
             gyro: Name::new(py, "gyro"),
             acc: Name::new(py, "acc"),
             mag: Name::new(py, "mag"),

@@ -14,16 +14,14 @@ use crate::spinal_mirror::{clamp_duty, servo_states_frame_into, ServoFrame};
 impl SpinalFast {
     /// The tick at `now` (requires `ready`).
     pub(crate) fn tick(&mut self, py: Python<'_>, now: f64) -> PyResult<SpinalTick> {
-        let m = Self::to_ms(now);
         let Some(p) = &mut self.plan else {
             return Err(pyo3::exceptions::PyRuntimeError::new_err(
                 "kernel: Spinal tick without a plan",
             ));
         };
-        if now > p.now_s {
-            p.now_s = now;
-        }
-        p.now_ms = m;
+        let mut st = self.state.bind(py).try_borrow_mut()?;
+        let s = &mut st.inner;
+        let m = s.tick_begin(now);
         self.dirty = true;
         let decision = std::mem::replace(&mut self.decision, Decision::Idle);
         let boot = p.boot_state.is_some();
@@ -37,16 +35,16 @@ impl SpinalFast {
         if let Some(busy) = busy {
             let b = p.busy.as_mut().ok_or_else(no_plan)?;
             let d = &mut self.deferred;
-            if let Some(v) = busy.battery {
-                p.battery_due_ms = m + b.battery_period;
-                d.battery = Some((m, v));
+            if busy.battery {
+                // `ready` checked the sample is finite: the voltage takes it.
+                s.battery_sample(m);
+                d.battery_ms = Some(m);
                 self.counts.batteries += 1;
             }
             if let Some(StepInput {
                 gyro,
                 acc,
                 mag,
-                voltage,
                 motors,
                 from_output,
             }) = busy.step
@@ -54,12 +52,14 @@ impl SpinalFast {
                 let core = b.core.as_ref().ok_or_else(|| {
                     pyo3::exceptions::PyRuntimeError::new_err("kernel: Spinal step without core")
                 })?;
-                let out = core
-                    .bind(py)
-                    .try_borrow_mut()?
-                    .step_raw(p.now_s, gyro, acc, mag, voltage);
-                p.next_control += b.period;
-                d.next_control = true;
+                let out = core.bind(py).try_borrow_mut()?.step_raw(
+                    s.now_s,
+                    gyro,
+                    acc,
+                    mag,
+                    s.step_voltage(),
+                );
+                s.next_control = s.next_control.map(|t| t + b.period);
                 d.output = Some(out);
                 b.output = Some(out);
                 b.has_output = true;
@@ -99,7 +99,8 @@ impl SpinalFast {
                 }
             }
         }
-        p.can_ms = m;
+        s.can_ms = Some(m);
+        drop(st);
         if !Self::can_tick(
             &self.master,
             &self.wire,
