@@ -1480,10 +1480,28 @@ class StopFlag:
 
 @_final
 class SpinalMirrorState:
-    """The Spinal mirror's clock and battery state, shared by its Python tick and the
-    lockstep kernel: ``SpinalMirrorState(battery_input)`` before the first tick."""
+    """The Spinal mirror's clock, IMU sample and battery state, shared by its Python tick and
+    the lockstep kernel: ``SpinalMirrorState(battery_input, gyro, acc, mag)`` before the
+    first tick."""
 
-    def __new__(cls, battery_input: float) -> _Self: ...
+    def __new__(
+        cls,
+        battery_input: float,
+        gyro: Sequence[float],
+        acc: Sequence[float],
+        mag: Sequence[float],
+    ) -> _Self: ...
+    def set_imu_sample(
+        self, gyro: Sequence[float], acc: Sequence[float], mag: Sequence[float]
+    ) -> None:
+        """The IMU sample the next control steps and ``imu`` publications use: gyro rad/s,
+        acc m/s^2, mag uT (three numbers each)."""
+    @property
+    def gyro(self) -> tuple[float, float, float]: ...
+    @property
+    def acc(self) -> tuple[float, float, float]: ...
+    @property
+    def mag(self) -> tuple[float, float, float]: ...
     def tick_begin(self, now: float) -> int:
         """The tick's ms at ``now`` (s; never before the last tick's); ``now_s`` the latest
         time. ValueError for a non-finite ``now``."""

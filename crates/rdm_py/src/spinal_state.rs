@@ -1,12 +1,14 @@
-//! `SpinalMirrorState`: the Spinal mirror's clock and battery state
+//! `SpinalMirrorState`: the Spinal mirror's clock, IMU sample and battery state
 //! (`rdm_core::firmware::spinal_state::SpinalState`), shared by the mirror's Python tick
 //! and the lockstep kernel's fast part.
 
 use pyo3::prelude::*;
+use rdm_core::estimate::ImuSample;
 use rdm_core::firmware::spinal_state::SpinalState;
 
-/// The Spinal mirror's clock and battery state: `SpinalMirrorState(battery_input)` before
-/// the first tick (raw battery reading in V, ADC scale 1).
+/// The Spinal mirror's clock, IMU sample and battery state:
+/// `SpinalMirrorState(battery_input, gyro, acc, mag)` before the first tick (raw battery
+/// reading in V, ADC scale 1, the IMU sample: rad/s, m/s^2, uT).
 #[pyclass(module = "rdm._rdm")]
 pub struct SpinalMirrorState {
     pub(crate) inner: SpinalState,
@@ -15,10 +17,37 @@ pub struct SpinalMirrorState {
 #[pymethods]
 impl SpinalMirrorState {
     #[new]
-    fn new(battery_input: f64) -> Self {
+    fn new(battery_input: f64, gyro: [f64; 3], acc: [f64; 3], mag: [f64; 3]) -> Self {
         SpinalMirrorState {
-            inner: SpinalState::new(battery_input),
+            inner: SpinalState::new(battery_input, ImuSample { gyro, acc, mag }),
         }
+    }
+
+    /// The IMU sample the next control steps and `imu` publications use: gyro rad/s, acc
+    /// m/s^2, mag uT (body frame; three numbers each).
+    fn set_imu_sample(&mut self, gyro: [f64; 3], acc: [f64; 3], mag: [f64; 3]) {
+        self.inner.imu = ImuSample { gyro, acc, mag };
+    }
+
+    /// The IMU sample's gyro (rad/s).
+    #[getter]
+    fn gyro(&self) -> (f64, f64, f64) {
+        let [x, y, z] = self.inner.imu.gyro;
+        (x, y, z)
+    }
+
+    /// The IMU sample's accelerometer (m/s^2).
+    #[getter]
+    fn acc(&self) -> (f64, f64, f64) {
+        let [x, y, z] = self.inner.imu.acc;
+        (x, y, z)
+    }
+
+    /// The IMU sample's magnetometer (uT).
+    #[getter]
+    fn mag(&self) -> (f64, f64, f64) {
+        let [x, y, z] = self.inner.imu.mag;
+        (x, y, z)
     }
 
     /// The tick's clock at `now` (s): its ms (`floor(now * 1000 + 1e-6)`, never before the

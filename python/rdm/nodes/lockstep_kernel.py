@@ -109,7 +109,7 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
             and getattr(plant.imu, "__func__", None) is cls.imu
         ):
             model = plant.imu_model
-            imu = (plant._imu_adr, model._core, model._normals, spinal)
+            imu = (plant._imu_adr, model._core, model._normals, spinal._state)
         touches = b.truth_sink_touches
         return (
             adr,

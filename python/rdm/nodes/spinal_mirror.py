@@ -143,9 +143,9 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         # runs the CAN schedule for every elapsed ms and the control at rate_hz.
         self.period = float(period)
         self.rate_hz = float(rate_hz)
-        #: The clock, CAN ms, control time and battery (one Rust state: the Python tick and
-        #: the lockstep kernel both read and change it).
-        self._state = SpinalMirrorState(DEFAULT_BATTERY_V)
+        #: The clock, CAN ms, control time, IMU sample and battery (one Rust state: the
+        #: Python tick and the lockstep kernel both read and change it).
+        self._state = SpinalMirrorState(DEFAULT_BATTERY_V, LEVEL_GYRO, LEVEL_ACC, LEVEL_MAG)
         self.uart = UartPump(uart)
         self.master = CanMaster(can_bus, boot_delay_ms=boot_delay_ms)
         self.core = SpinalStep(self.rate_hz, **spinal_options)
@@ -219,9 +219,6 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         self._command_topics = tuple(slot.name for slot in self.session.subscribers)
         self._imu_codec: Any = None  # the imu publisher's codec, checked for _imu_frame
         self.counters = MirrorCounters(step_core=self.core)
-        self.gyro = LEVEL_GYRO
-        self.acc = LEVEL_ACC
-        self.mag = LEVEL_MAG
         #: ``set_adc_scale`` as the firmware takes it (any positive scale); False: a scale
         #: giving an implausible battery reading is rejected (see :meth:`_on_adc_scale`)
         self.firmware_adc_scale = False
@@ -248,15 +245,28 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         self, gyro: Sequence[float], acc: Sequence[float], mag: Sequence[float]
     ) -> None:
         """The IMU sample the next control steps use: gyro rad/s, acc m/s^2, mag uT (body)."""
-        self.gyro = _floats(gyro)
-        self.acc = _floats(acc)
-        self.mag = _floats(mag)
+        self._state.set_imu_sample(_floats(gyro), _floats(acc), _floats(mag))
 
     def set_battery_voltage(self, volts: float) -> None:
         """The raw battery reading (V), sampled every 20 ms and low-passed as the firmware does."""
         self._state.battery_input = float(volts)
 
-    # ---------------------------------------------------------------- clock and battery
+    # ---------------------------------------------------------------- clock, IMU, battery
+    @property
+    def gyro(self) -> tuple[float, float, float]:
+        """The IMU sample's gyro (rad/s, body frame)."""
+        return self._state.gyro
+
+    @property
+    def acc(self) -> tuple[float, float, float]:
+        """The IMU sample's accelerometer (m/s^2, body frame)."""
+        return self._state.acc
+
+    @property
+    def mag(self) -> tuple[float, float, float]:
+        """The IMU sample's magnetometer (uT, body frame)."""
+        return self._state.mag
+
     @property
     def now_ms(self) -> int | None:
         """The ms of the last tick (None: no tick yet)."""

@@ -60,8 +60,8 @@ class SpinalControl:
             state.next_control += period
 
     def _step(self, now: float) -> None:
-        voltage = self._state.step_voltage()
-        out = self.core.step(now, self.gyro, self.acc, self.mag, voltage)
+        state = self._state
+        out = self.core.step(now, state.gyro, state.acc, state.mag, state.step_voltage())
         self.last_output = out  # the core counts the step (counters.control_steps)
         if self.pwm_test is None:
             # No event and the controller's own duties: the list _step_tail builds, from

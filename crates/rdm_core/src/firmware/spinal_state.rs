@@ -1,9 +1,13 @@
-//! The Spinal mirror's clock and battery state (`rdm.nodes.spinal_mirror.SpinalMirror`):
-//! the tick's millisecond and time, the last CAN millisecond, the next control time and
-//! the battery task (raw reading, ADC scale, low-passed voltage, next sample ms).
+//! The Spinal mirror's clock, IMU sample and battery state
+//! (`rdm.nodes.spinal_mirror.SpinalMirror`): the tick's millisecond and time, the last CAN
+//! millisecond, the next control time, the IMU sample the control steps and the `imu`
+//! publication use, and the battery task (raw reading, ADC scale, low-passed voltage, next
+//! sample ms).
 //!
 //! The mirror's Python tick and the lockstep kernel's fast part (`rdm._rdm.LockstepKernel`)
 //! both read and change this one state (docs/spinal.md "State").
+
+use crate::estimate::ImuSample;
 
 /// HAL ms between two battery samples (the firmware's battery task).
 pub const BATTERY_SAMPLE_MS: i64 = 20;
@@ -14,7 +18,7 @@ pub const NEVER_MS: i64 = -(1 << 62);
 /// Slack of the control-time comparison (s): a step is due at `now >= next - 1e-9`.
 pub const CONTROL_SLACK_S: f64 = 1e-9;
 
-/// The clock and battery state of one Spinal mirror.
+/// The clock, IMU sample and battery state of one Spinal mirror.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SpinalState {
     /// The ms of the last tick (None: no tick yet).
@@ -33,12 +37,14 @@ pub struct SpinalState {
     pub adc_scale: f64,
     /// The low-passed voltage the firmware uses (None: no sample yet).
     pub battery_voltage: Option<f64>,
+    /// The IMU sample (body frame): gyro rad/s, acc m/s^2, mag uT.
+    pub imu: ImuSample,
 }
 
 impl SpinalState {
-    /// The state before the first tick, with the raw battery reading `battery_input` (V)
-    /// and an ADC scale of 1.
-    pub fn new(battery_input: f64) -> Self {
+    /// The state before the first tick, with the raw battery reading `battery_input` (V),
+    /// an ADC scale of 1 and the IMU sample `imu`.
+    pub fn new(battery_input: f64, imu: ImuSample) -> Self {
         SpinalState {
             now_ms: None,
             now_s: 0.0,
@@ -48,6 +54,7 @@ impl SpinalState {
             battery_input,
             adc_scale: 1.0,
             battery_voltage: None,
+            imu,
         }
     }
 
@@ -118,9 +125,15 @@ impl SpinalState {
 mod tests {
     use super::*;
 
+    const LEVEL: ImuSample = ImuSample {
+        gyro: [0.0; 3],
+        acc: [0.0, 0.0, 9.80665],
+        mag: [30.0, 0.0, -40.0],
+    };
+
     #[test]
     fn tick_begin_floors_and_never_goes_back() {
-        let mut s = SpinalState::new(25.2);
+        let mut s = SpinalState::new(25.2, LEVEL);
         // Python: math.floor(0.0029989 * 1000 + 1e-6) == 2; the 1e-6 slack takes
         // 0.0029999995 to 3.
         assert_eq!(s.tick_begin(0.0029989), 2);
@@ -133,7 +146,7 @@ mod tests {
 
     #[test]
     fn battery_low_pass_and_rejection() {
-        let mut s = SpinalState::new(24.0);
+        let mut s = SpinalState::new(24.0, LEVEL);
         assert!(s.battery_sample(0));
         assert_eq!(s.battery_voltage, Some(24.0));
         assert_eq!(s.battery_due_ms, 20);
@@ -150,7 +163,7 @@ mod tests {
 
     #[test]
     fn control_due_with_slack() {
-        let mut s = SpinalState::new(25.2);
+        let mut s = SpinalState::new(25.2, LEVEL);
         assert!(s.control_due());
         s.next_control = Some(0.005);
         s.now_s = 0.005 - 5e-10;

@@ -271,13 +271,12 @@ impl LockstepKernel {
     /// form now.
     fn attach_bridge(
         &mut self,
-        py: Python<'_>,
         index: usize,
         core: Py<PlantBridgeCore>,
         plan: Py<PyAny>,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.bridge = Some(BridgeFast::new(py, core, plan));
+        self.bridge = Some(BridgeFast::new(core, plan));
         self.kinds[index] = Kind::Bridge;
         self.touches[index] = BRIDGE | PLANT | LEPTRINO;
         Ok(())

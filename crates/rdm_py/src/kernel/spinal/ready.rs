@@ -7,8 +7,6 @@ use rdm_core::firmware::spinal_state::{SpinalState, CONTROL_SLACK_S};
 use rdm_core::MAX_ROTORS;
 
 use super::SpinalFast;
-use crate::kernel::attr::Name;
-use crate::spinal_mirror::float3;
 
 /// What `ready` found the tick at `now` to be.
 #[derive(Clone, Copy)]
@@ -26,13 +24,10 @@ pub(super) struct BusyTick {
     pub(super) publish: Option<Publish>,
 }
 
-/// A control step's input: the IMU sample and the motor number (the voltage is the
-/// state's, after the tick's battery sample).
+/// A control step's input: the motor number (the IMU sample and the voltage are the
+/// state's, the voltage after the tick's battery sample).
 #[derive(Clone, Copy)]
 pub(super) struct StepInput {
-    pub(super) gyro: [f64; 3],
-    pub(super) acc: [f64; 3],
-    pub(super) mag: [f64; 3],
     pub(super) motors: usize,
     /// The duty list is the clamped controller output (`_duty_list`); false: `motors` idle
     /// duties (`_step_tail` before the CAN model is adopted: the master's motor number is
@@ -40,14 +35,13 @@ pub(super) struct StepInput {
     pub(super) from_output: bool,
 }
 
-/// The publications of a tick: which are due, the stamp, the `imu` sample's acc and mag.
+/// The publications of a tick: which are due, the stamp (the `imu` frame's acc and mag
+/// are the state's IMU sample).
 #[derive(Clone, Copy)]
 pub(super) struct Publish {
     pub(super) imu_due: bool,
     pub(super) servo_due: bool,
     pub(super) stamp: (u32, u32),
-    pub(super) acc: [f64; 3],
-    pub(super) mag: [f64; 3],
 }
 
 impl SpinalFast {
@@ -79,8 +73,6 @@ impl SpinalFast {
         let Some(b) = &p.busy else {
             return Ok(false);
         };
-        let node = self.node.bind(py);
-        let n = &self.names;
         // The battery task: a finite sample (else the Python tick counts the rejection).
         if battery_due && s.battery_next().is_none() {
             return Ok(false);
@@ -100,18 +92,7 @@ impl SpinalFast {
             if motors > MAX_ROTORS || (p.boot_state.is_none() && !from_output) {
                 return Ok(false);
             }
-            let three = |name: &Name| -> PyResult<Option<[f64; 3]>> {
-                Ok(name.get(node)?.extract::<[f64; 3]>().ok())
-            };
-            let (Some(gyro), Some(acc), Some(mag)) =
-                (three(&n.gyro)?, three(&n.acc)?, three(&n.mag)?)
-            else {
-                return Ok(false);
-            };
             Some(StepInput {
-                gyro,
-                acc,
-                mag,
                 motors,
                 from_output,
             })
@@ -137,20 +118,10 @@ impl SpinalFast {
             let Some(stamp) = client_stamp(m, b.sync) else {
                 return Ok(false);
             };
-            let (acc, mag) = if imu_due {
-                match (float3(&n.acc.get(node)?), float3(&n.mag.get(node)?)) {
-                    (Some(a), Some(g)) => (a, g),
-                    _ => return Ok(false),
-                }
-            } else {
-                ([0.0; 3], [0.0; 3])
-            };
             Some(Publish {
                 imu_due,
                 servo_due,
                 stamp,
-                acc,
-                mag,
             })
         } else {
             None

@@ -42,9 +42,6 @@ impl SpinalFast {
                 self.counts.batteries += 1;
             }
             if let Some(StepInput {
-                gyro,
-                acc,
-                mag,
                 motors,
                 from_output,
             }) = busy.step
@@ -52,13 +49,10 @@ impl SpinalFast {
                 let core = b.core.as_ref().ok_or_else(|| {
                     pyo3::exceptions::PyRuntimeError::new_err("kernel: Spinal step without core")
                 })?;
-                let out = core.bind(py).try_borrow_mut()?.step_raw(
-                    s.now_s,
-                    gyro,
-                    acc,
-                    mag,
-                    s.step_voltage(),
-                );
+                let out =
+                    core.bind(py)
+                        .try_borrow_mut()?
+                        .step_raw(s.now_s, &s.imu, s.step_voltage());
                 s.next_control = s.next_control.map(|t| t + b.period);
                 d.output = Some(out);
                 b.output = Some(out);
@@ -100,6 +94,7 @@ impl SpinalFast {
             }
         }
         s.can_ms = Some(m);
+        let imu = s.imu;
         drop(st);
         if !Self::can_tick(
             &self.master,
@@ -116,8 +111,6 @@ impl SpinalFast {
             imu_due,
             servo_due,
             stamp,
-            acc,
-            mag,
         }) = busy.and_then(|busy| busy.publish)
         {
             let b = p.busy.as_mut().ok_or_else(no_plan)?;
@@ -140,9 +133,9 @@ impl SpinalFast {
                 };
                 let estimate = &out.estimate;
                 let values = ImuValues {
-                    acc,
+                    acc: imu.acc,
                     gyro: estimate.angular_velocity.into(),
-                    mag,
+                    mag: imu.mag,
                     quaternion: estimate.quaternion,
                 };
                 match imu_frame(topic, stamp, &values) {
