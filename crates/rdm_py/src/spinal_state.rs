@@ -141,6 +141,17 @@ impl SpinalMirrorState {
         self.inner.adc_scale = scale;
     }
 
+    /// The earliest ms a periodic publisher can be due.
+    #[getter]
+    fn next_pub_ms(&self) -> i64 {
+        self.inner.next_pub_ms
+    }
+
+    #[setter]
+    fn set_next_pub_ms(&mut self, ms: i64) {
+        self.inner.next_pub_ms = ms;
+    }
+
     /// The low-passed battery voltage (V; None: no sample yet).
     #[getter]
     fn battery_voltage(&self) -> Option<f64> {

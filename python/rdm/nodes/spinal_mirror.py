@@ -230,7 +230,6 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         self.pwm_test: list[float] | None = None
         self._master_was_running = False
         self._last_pub: dict[str, int] = {}
-        self._next_pub_ms = -(2**62)  # earliest ms a publisher can be due (see _publish)
         self._duties_to_master: list[float] | None = None
         self._idle_lo = self._idle_hi = 0  # ClientSession.idle_window after the last spin
         # The Rust master on a CanWireLink: tick's steady-state CAN ms in one core call.
@@ -311,6 +310,11 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         return self._state.next_control
 
     @property
+    def _next_pub_ms(self) -> int:
+        """The earliest ms a periodic publisher can be due (see ``_publish``)."""
+        return self._state.next_pub_ms
+
+    @property
     def _battery_due_ms(self) -> int:
         """The first ms the battery task samples again."""
         return self._state.battery_due_ms
@@ -370,7 +374,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         else:
             self._can(now_ms)
             self._forward_can_events()
-        if now_ms >= self._next_pub_ms:
+        if now_ms >= self._state.next_pub_ms:
             self._publish(now_ms)
         if self.session.pending_frames or self.uart.pending:  # else send has nothing to do
             self.uart.send(self.session.take_output())

@@ -32,12 +32,12 @@ class SpinalKernelInterface:
 
     def kernel_plan(self) -> tuple | None:
         """The window in which :meth:`tick` is only the steady CAN ms, for
-        ``rdm._rdm.LockstepKernel`` (docs/sim.md): (idle window lo, hi, next publisher ms,
-        busy plan, boot phase); the kernel runs a tick at ms m itself when m is inside the
-        idle window, before the battery, control and publisher times, and one past the CAN
-        ms (those three and the clock it reads and changes in ``_state``, the mirror's
-        :class:`rdm._rdm.SpinalMirrorState`). None when no tick can run so: bytes
-        waiting, the master not steady on the wire, events or output pending.
+        ``rdm._rdm.LockstepKernel`` (docs/sim.md): (idle window lo, hi, whether
+        ``_publish`` can publish, busy plan, boot phase); the kernel runs a tick at ms m
+        itself when m is inside the idle window, before the battery, control and publisher
+        times, and one past the CAN ms (those and the clock it reads and changes in
+        ``_state``, the mirror's :class:`rdm._rdm.SpinalMirrorState`). None when no tick can
+        run so: bytes waiting, the master not steady on the wire, events or output pending.
         Before the master first runs, the last item is its phase index (the kernel then runs
         the idle ms of the boot: a CAN ms that stays in that phase); else None.
         The master's ``tx_count`` and pending events are its Rust core's."""
@@ -58,15 +58,15 @@ class SpinalKernelInterface:
             return None
         if master._events or self.session.pending_frames or self.uart.pending:
             return None
-        next_pub = self._next_pub_ms
-        if boot and (not self.session.configured or self.last_output is None):
-            next_pub = 2**62  # _publish returns at once until Python code changes that
+        # _publish returns at once in the boot until Python code configures the session and
+        # a step leaves an output
+        live = not boot or (self.session.configured and self.last_output is not None)
         return (
             self._idle_lo,
             self._idle_hi,
-            next_pub,
+            live,
             # In the boot a busy ms needs an output already (else the kernel's step would
-            # make _publish live while next_pub above says never).
+            # make _publish live while ``live`` above says no).
             self._kernel_busy_plan() if not boot or self.last_output is not None else None,
             master.core.state_index if boot else None,
         )
@@ -189,7 +189,7 @@ class SpinalKernelInterface:
         """The rest of a kernel tick whose publication the kernel declined (a value its
         frame builders decline, a frame the TX ring or the UART queue would not take): the
         publishers and output as :meth:`tick`."""
-        if now_ms >= self._next_pub_ms:
+        if now_ms >= self._state.next_pub_ms:
             self._publish(now_ms)
         if self.session.pending_frames or self.uart.pending:
             self.uart.send(self.session.take_output())
@@ -229,7 +229,7 @@ class SpinalKernelInterface:
         master = self.master
         master.apply_wire_tick(master.core.last_wire_tick)
         self._forward_can_events()
-        if now_ms >= self._next_pub_ms:
+        if now_ms >= self._state.next_pub_ms:
             self._publish(now_ms)
         if self.session.pending_frames or self.uart.pending:
             self.uart.send(self.session.take_output())

@@ -1,8 +1,8 @@
 //! The Spinal mirror's clock, IMU sample and battery state
 //! (`rdm.nodes.spinal_mirror.SpinalMirror`): the tick's millisecond and time, the last CAN
 //! millisecond, the next control time, the IMU sample the control steps and the `imu`
-//! publication use, and the battery task (raw reading, ADC scale, low-passed voltage, next
-//! sample ms).
+//! publication use, the battery task (raw reading, ADC scale, low-passed voltage, next
+//! sample ms) and the earliest ms a publisher is due.
 //!
 //! The mirror's Python tick and the lockstep kernel's fast part (`rdm._rdm.LockstepKernel`)
 //! both read and change this one state (docs/spinal.md "State").
@@ -39,6 +39,8 @@ pub struct SpinalState {
     pub battery_voltage: Option<f64>,
     /// The IMU sample (body frame): gyro rad/s, acc m/s^2, mag uT.
     pub imu: ImuSample,
+    /// The earliest ms a periodic publisher can be due.
+    pub next_pub_ms: i64,
 }
 
 impl SpinalState {
@@ -55,6 +57,7 @@ impl SpinalState {
             adc_scale: 1.0,
             battery_voltage: None,
             imu,
+            next_pub_ms: NEVER_MS,
         }
     }
 

@@ -39,7 +39,6 @@ pub(super) struct Deferred {
     pub(super) battery_ms: Option<i64>,
     pub(super) imu_last: bool,
     pub(super) servo_last: bool,
-    pub(super) next_pub: bool,
     pub(super) frames: i64,
     pub(super) imu_frames: i64,
     pub(super) servo_frames: i64,
@@ -87,9 +86,6 @@ impl SpinalFast {
                 if d.servo_last {
                     last.set_item(n.servo_states.key(py), b.servo_last)?;
                 }
-            }
-            if d.next_pub {
-                n.next_pub_ms.set(node, p.next_pub_ms)?;
             }
             if d.frames > 0 {
                 let data = PyBytes::new(py, &self.tx);

@@ -17,7 +17,9 @@ use crate::spinal_mirror::exact_i64;
 pub(super) struct Plan {
     pub(super) idle_lo: i64,
     pub(super) idle_hi: i64,
-    pub(super) next_pub_ms: i64,
+    /// False: `_publish` returns at once (the boot before the session is configured and
+    /// a control output exists) whatever `next_pub_ms` says.
+    pub(super) publish_live: bool,
     /// None: busy ms are the Python tick's.
     pub(super) busy: Option<Busy>,
     /// Before the CAN master first runs: its phase index (booting, enumerating,
@@ -173,7 +175,7 @@ impl SpinalFast {
             Some(Plan {
                 idle_lo: t.get_item(0)?.extract()?,
                 idle_hi: t.get_item(1)?.extract()?,
-                next_pub_ms: t.get_item(2)?.extract()?,
+                publish_live: t.get_item(2)?.is_truthy()?,
                 busy: if busy.is_none() {
                     None
                 } else {

@@ -65,7 +65,7 @@ impl SpinalFast {
         }
         let battery_due = m >= s.battery_due_ms;
         let control_due = now_s >= next_control - CONTROL_SLACK_S;
-        let publish_due = m >= p.next_pub_ms;
+        let publish_due = p.publish_live && m >= s.next_pub_ms;
         if !battery_due && !control_due && !publish_due {
             self.decision = Decision::Idle;
             return Ok(true);

@@ -182,8 +182,8 @@ impl SpinalFast {
             }
             let imu_next = b.imu_last.map_or(i64::MIN, |t| t + b.imu_period);
             let servo_next = b.servo_last.map_or(i64::MIN, |t| t + b.servo_period);
-            p.next_pub_ms = imu_next.min(servo_next).min(b.others_next);
-            d.next_pub = true;
+            self.state.bind(py).try_borrow_mut()?.inner.next_pub_ms =
+                imu_next.min(servo_next).min(b.others_next);
             let sent = i64::from(imu_sent) + i64::from(servo_sent);
             d.frames += sent;
             d.imu_frames += i64::from(imu_sent);
