@@ -8,11 +8,9 @@ methods read the mirror's state and call its tick's steps.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 from rdm.control.attitude import SpinalStep
-from rdm.link.capture_index import timed_capture_of
 from rdm.link.inproc_can import SimClock
 from rdm.nodes.can_master import IDLE_DUTY, MasterState
 from rdm.nodes.spinal_mirror_publishers import (
@@ -87,7 +85,8 @@ class SpinalKernelInterface:
         * the TX ring (output size, chunk size, chunks; -1 when not empty) and whether the
           UART writes any send of up to ``max_pending`` bytes whole (``UartPump.writes_whole``),
           and the UART chain (``UartPump._chain``) through which the kernel writes the
-          output itself (None: no in-process chain; then it calls :meth:`kernel_commit_tx`).
+          output itself (None: no in-process chain; then the publications are the Python
+          tick's).
 
         The kernel reads the IMU sample from the mirror, and the battery from its
         ``_state``, when it uses them (another node may set them without a re-read)."""
@@ -193,34 +192,6 @@ class SpinalKernelInterface:
             self._publish(now_ms)
         if self.session.pending_frames or self.uart.pending:
             self.uart.send(self.session.take_output())
-
-    def kernel_commit_tx(
-        self,
-        data: bytes,
-        frames: int,
-        imu: int,
-        servo: int,
-        marks: Sequence[tuple[float, int]] = (),
-    ) -> None:
-        """The kernel's publications since the last write back: ``frames`` frames queued
-        and taken by ``take_output`` (``imu`` on ``imu``, ``servo`` on ``servo/states``),
-        ``data`` their bytes in order, written in one :meth:`UartPump.send` (whole, as the
-        plan's ``writes_whole`` said: the same bytes and counters as one send per tick);
-        ``marks`` each tick's ``(time s, end)`` in ``data`` for the capture's time index.
-        With the plan's UART chain the kernel does the same without this call: the
-        counters, then ``UartPump._write_chain``'s effect of a whole write and ``bytes_out``."""
-        self.session.counts["tx_frames"] += frames
-        published = self.counters.published
-        if imu:
-            published["imu"] += imu
-        if servo:
-            published["servo/states"] += servo
-        capture = timed_capture_of(self.uart.link) if marks else None
-        if capture is None or self.uart.pending:  # queued bytes first: those take the clock
-            self.uart.send(data)
-        else:
-            with capture.marked(marks):
-                self.uart.send(data)
 
     def kernel_finish_wire_tick(self, now_ms: int) -> None:
         """The rest of a kernel tick whose CAN ms was not steady (``tick_wire_steady`` gave

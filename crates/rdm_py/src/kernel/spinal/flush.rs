@@ -90,21 +90,17 @@ impl SpinalFast {
             if d.frames > 0 {
                 let data = PyBytes::new(py, &self.tx);
                 self.tx.clear();
-                match p.busy.as_ref().and_then(|b| b.chain.as_ref()) {
-                    Some(chain) => Self::commit_tx(n, node, chain, &data, &d, &self.tx_marks)?,
-                    None => {
-                        node.call_method1(
-                            n.commit_tx.key(py),
-                            (
-                                data,
-                                d.frames,
-                                d.imu_frames,
-                                d.servo_frames,
-                                PyList::new(py, &self.tx_marks)?,
-                            ),
-                        )?;
-                    }
-                }
+                // `ready` publishes only with a chain to write through.
+                let chain = p
+                    .busy
+                    .as_ref()
+                    .and_then(|b| b.chain.as_ref())
+                    .ok_or_else(|| {
+                        pyo3::exceptions::PyRuntimeError::new_err(
+                            "kernel: Spinal frames without a UART chain",
+                        )
+                    })?;
+                Self::commit_tx(n, node, chain, &data, &d, &self.tx_marks)?;
             }
         }
         self.tx.clear();

@@ -60,7 +60,7 @@ pub(crate) struct SpinalFast {
     dirty: bool,
     decision: Decision,
     deferred: Deferred,
-    /// Frames not yet written (`kernel_commit_tx`), and this tick's.
+    /// Frames not yet written (`flush` writes them through the UART chain), and this tick's.
     tx: Vec<u8>,
     tick_tx: Vec<u8>,
     /// Per publishing tick in `tx`: (its time s, end of its bytes in `tx`), for the capture's

@@ -58,7 +58,7 @@ pub(super) struct Busy {
     pub(super) writes_whole: bool,
     pub(super) max_pending: usize,
     /// The UART chain `(droppable, tapped, end)` the kernel writes the output through; None
-    /// (no chain to write through): `kernel_commit_tx`.
+    /// (no chain to write through): the publications are the Python tick's.
     pub(super) chain: Option<Chain>,
 }
 

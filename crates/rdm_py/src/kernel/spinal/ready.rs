@@ -112,6 +112,7 @@ impl SpinalFast {
                 || (!control_due && b.output.is_none())
                 || b.chunks.is_none()
                 || !b.writes_whole
+                || b.chain.is_none()
             {
                 return Ok(false);
             }
