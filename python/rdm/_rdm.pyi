@@ -54,6 +54,7 @@ __all__ = [
     "RosserialFrameError",
     "RotorPlantCore",
     "SampleSchedule",
+    "SpinalMirrorState",
     "SpinalStep",
     "SpinalStepOutput",
     "StopFlag",
@@ -1559,6 +1560,68 @@ class StopFlag:
         """Whether a stop was asked."""
 
 @_final
+class SpinalMirrorState:
+    """The Spinal mirror's clock, IMU sample and battery state, shared by its Python tick and
+    the lockstep kernel: ``SpinalMirrorState(battery_input, gyro, acc, mag)`` before the
+    first tick."""
+
+    def __new__(
+        cls,
+        battery_input: float,
+        gyro: Sequence[float],
+        acc: Sequence[float],
+        mag: Sequence[float],
+    ) -> _Self: ...
+    def set_imu_sample(
+        self, gyro: Sequence[float], acc: Sequence[float], mag: Sequence[float]
+    ) -> None:
+        """The IMU sample the next control steps and ``imu`` publications use: gyro rad/s,
+        acc m/s^2, mag uT (three numbers each)."""
+    @property
+    def gyro(self) -> tuple[float, float, float]: ...
+    @property
+    def acc(self) -> tuple[float, float, float]: ...
+    @property
+    def mag(self) -> tuple[float, float, float]: ...
+    def tick_begin(self, now: float) -> int:
+        """The tick's ms at ``now`` (s; never before the last tick's); ``now_s`` the latest
+        time. ValueError for a non-finite ``now``."""
+    def control_due(self) -> bool:
+        """Whether a control step is due at ``now_s``."""
+    def battery_sample(self, now_ms: int) -> bool:
+        """The battery task at ``now_ms``; False: the sample is not finite (rejected)."""
+    def step_voltage(self) -> float:
+        """``battery_voltage``, else ``battery_input``."""
+    @property
+    def now_ms(self) -> int | None: ...
+    @property
+    def now_s(self) -> float: ...
+    @property
+    def can_ms(self) -> int | None: ...
+    @can_ms.setter
+    def can_ms(self, value: int | None) -> None: ...
+    @property
+    def next_control(self) -> float | None: ...
+    @next_control.setter
+    def next_control(self, value: float | None) -> None: ...
+    @property
+    def battery_due_ms(self) -> int: ...
+    @property
+    def battery_input(self) -> float: ...
+    @battery_input.setter
+    def battery_input(self, value: float) -> None: ...
+    @property
+    def adc_scale(self) -> float: ...
+    @adc_scale.setter
+    def adc_scale(self, value: float) -> None: ...
+    @property
+    def battery_voltage(self) -> float | None: ...
+    @property
+    def next_pub_ms(self) -> int: ...
+    @next_pub_ms.setter
+    def next_pub_ms(self, value: int) -> None: ...
+
+@_final
 class TickCounter:
     """The lockstep loop's next base tick (the Rust loop sets it after every tick)."""
 
@@ -1651,7 +1714,13 @@ class LockstepKernel:
     ) -> None: ...
     def attach_bank(self, index: int, bank: NeuronBank, wire: CanWire) -> None: ...
     def attach_spinal(
-        self, index: int, node: Any, master: CanMaster, wire: CanWire, drain_at: int
+        self,
+        index: int,
+        node: Any,
+        state: SpinalMirrorState,
+        master: CanMaster,
+        wire: CanWire,
+        drain_at: int,
     ) -> None: ...
     def attach_leptrino(
         self,

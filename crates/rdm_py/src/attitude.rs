@@ -459,17 +459,9 @@ impl PySpinalStep {
 
     /// [`SpinalStep::step`] without the Python object (the lockstep kernel's control step,
     /// `crate::kernel::spinal`): the same call `step` makes.
-    pub(crate) fn step_raw(
-        &mut self,
-        now_s: f64,
-        gyro: [f64; 3],
-        acc: [f64; 3],
-        mag: [f64; 3],
-        voltage: f64,
-    ) -> SpinalOutput {
+    pub(crate) fn step_raw(&mut self, now_s: f64, imu: &ImuSample, voltage: f64) -> SpinalOutput {
         self.steps = self.steps.saturating_add(1);
-        self.inner
-            .step(now_s, &ImuSample { gyro, acc, mag }, voltage)
+        self.inner.step(now_s, imu, voltage)
     }
 
     /// The controller's motor number (the `motor_number` property).

@@ -41,6 +41,7 @@ mod sensor_sim;
 mod servo_goals;
 mod spinal_commands;
 mod spinal_mirror;
+mod spinal_state;
 mod stop_flag;
 mod tick_counter;
 mod untracked;
@@ -80,6 +81,7 @@ fn _rdm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     stop_flag::register(m)?;
     tick_counter::register(m)?;
     spinal_mirror::register(m)?;
+    spinal_state::register(m)?;
     spinal_commands::register(m)?;
     servo_goals::register(m)?;
     sample_schedule::register(m)?;

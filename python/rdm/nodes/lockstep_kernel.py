@@ -91,7 +91,7 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
             and getattr(plant.imu, "__func__", None) is cls.imu
         ):
             model = plant.imu_model
-            imu = (plant._imu_adr, model._core, model._normals, spinal)
+            imu = (plant._imu_adr, model._core, model._normals, spinal._state)
         touches = b.truth_sink_touches
         return (
             adr,
@@ -151,7 +151,9 @@ def attach_kernel(loop: Lockstep, plant: Any | None = None) -> _rdm.LockstepKern
         elif kind == "bank" and isinstance(node._wire, CanWireLink):
             kernel.attach_bank(i, node._core, node._wire.wire)
         elif kind == "spinal" and node._wire_link is not None and spinal is None:
-            kernel.attach_spinal(i, node, node.master.core, node._wire_link.wire, DRAIN_AT)
+            kernel.attach_spinal(
+                i, node, node._state, node.master.core, node._wire_link.wire, DRAIN_AT
+            )
             spinal = node
     for i, node in enumerate(nodes):
         touches = getattr(node, "kernel_touches", None)

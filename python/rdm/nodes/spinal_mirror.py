@@ -28,13 +28,13 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from math import floor as _floor
 from types import SimpleNamespace
 from typing import Any, ClassVar
 
 import can
 import numpy as np
 
+from rdm._rdm import SpinalMirrorState
 from rdm.control.attitude import CommandRejectedError, SpinalStep
 from rdm.link.can_wire import DRAIN_AT
 from rdm.link.inproc_can import SimClock
@@ -143,6 +143,9 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         # runs the CAN schedule for every elapsed ms and the control at rate_hz.
         self.period = float(period)
         self.rate_hz = float(rate_hz)
+        #: The clock, CAN ms, control time, IMU sample and battery (one Rust state: the
+        #: Python tick and the lockstep kernel both read and change it).
+        self._state = SpinalMirrorState(DEFAULT_BATTERY_V, LEVEL_GYRO, LEVEL_ACC, LEVEL_MAG)
         self.uart = UartPump(uart)
         self.master = CanMaster(can_bus, boot_delay_ms=boot_delay_ms)
         self.core = SpinalStep(self.rate_hz, **spinal_options)
@@ -216,30 +219,18 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         self._command_topics = tuple(slot.name for slot in self.session.subscribers)
         self._imu_codec: Any = None  # the imu publisher's codec, checked for _imu_frame
         self.counters = MirrorCounters(step_core=self.core)
-        self.gyro = LEVEL_GYRO
-        self.acc = LEVEL_ACC
-        self.mag = LEVEL_MAG
-        self.battery_input = DEFAULT_BATTERY_V
-        self.adc_scale = 1.0
         #: ``set_adc_scale`` as the firmware takes it (any positive scale); False: a scale
         #: giving an implausible battery reading is rejected (see :meth:`_on_adc_scale`)
         self.firmware_adc_scale = False
         #: the highest reference voltage of the last accepted ``motor_info`` (the full battery)
         self.reference_voltage = DEFAULT_BATTERY_V
-        self.battery_voltage: float | None = None  # the low-passed value the firmware uses
         self.mag_declination = 0.0
         self.last_output: Any = None
         self.duties: list[float] = []
         self.pwm_test: list[float] | None = None
-        self.now_ms: int | None = None
-        self._now_s = 0.0
-        self._next_control: float | None = None
-        self._can_ms: int | None = None
         self._master_was_running = False
         self._last_pub: dict[str, int] = {}
-        self._next_pub_ms = -(2**62)  # earliest ms a publisher can be due (see _publish)
         self._duties_to_master: list[float] | None = None
-        self._battery_due_ms = -(2**62)  # first ms _battery samples again
         self._idle_lo = self._idle_hi = 0  # ClientSession.idle_window after the last spin
         # The Rust master on a CanWireLink: tick's steady-state CAN ms in one core call.
         wire = self.master.wire
@@ -253,13 +244,80 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         self, gyro: Sequence[float], acc: Sequence[float], mag: Sequence[float]
     ) -> None:
         """The IMU sample the next control steps use: gyro rad/s, acc m/s^2, mag uT (body)."""
-        self.gyro = _floats(gyro)
-        self.acc = _floats(acc)
-        self.mag = _floats(mag)
+        self._state.set_imu_sample(_floats(gyro), _floats(acc), _floats(mag))
 
     def set_battery_voltage(self, volts: float) -> None:
         """The raw battery reading (V), sampled every 20 ms and low-passed as the firmware does."""
-        self.battery_input = float(volts)
+        self._state.battery_input = float(volts)
+
+    # ---------------------------------------------------------------- clock, IMU, battery
+    @property
+    def gyro(self) -> tuple[float, float, float]:
+        """The IMU sample's gyro (rad/s, body frame)."""
+        return self._state.gyro
+
+    @property
+    def acc(self) -> tuple[float, float, float]:
+        """The IMU sample's accelerometer (m/s^2, body frame)."""
+        return self._state.acc
+
+    @property
+    def mag(self) -> tuple[float, float, float]:
+        """The IMU sample's magnetometer (uT, body frame)."""
+        return self._state.mag
+
+    @property
+    def now_ms(self) -> int | None:
+        """The ms of the last tick (None: no tick yet)."""
+        return self._state.now_ms
+
+    @property
+    def battery_input(self) -> float:
+        """The raw battery reading (V) before the ADC scale."""
+        return self._state.battery_input
+
+    @battery_input.setter
+    def battery_input(self, volts: float) -> None:
+        self._state.battery_input = volts
+
+    @property
+    def adc_scale(self) -> float:
+        """The ADC scale of the battery reading (``set_adc_scale``)."""
+        return self._state.adc_scale
+
+    @adc_scale.setter
+    def adc_scale(self, scale: float) -> None:
+        self._state.adc_scale = scale
+
+    @property
+    def battery_voltage(self) -> float | None:
+        """The low-passed battery voltage the firmware uses (None: no sample yet)."""
+        return self._state.battery_voltage
+
+    @property
+    def _now_s(self) -> float:
+        """The latest tick time (s)."""
+        return self._state.now_s
+
+    @property
+    def _can_ms(self) -> int | None:
+        """The last ms the CAN master ran (None: not yet)."""
+        return self._state.can_ms
+
+    @property
+    def _next_control(self) -> float | None:
+        """When the next control step is due (s; None: at the next tick)."""
+        return self._state.next_control
+
+    @property
+    def _next_pub_ms(self) -> int:
+        """The earliest ms a periodic publisher can be due (see ``_publish``)."""
+        return self._state.next_pub_ms
+
+    @property
+    def _battery_due_ms(self) -> int:
+        """The first ms the battery task samples again."""
+        return self._state.battery_due_ms
 
     # ---------------------------------------------------------------- node interface
     def tick(self, now: float) -> None:
@@ -267,39 +325,26 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         # Every step's own "nothing to do" check is inline, so that an idle ms (no UART
         # byte, no control step or publisher due, one steady CAN ms) costs one Rust call and
         # a few comparisons. Each skip is exactly the guarded step's no-op.
-        now_ms = self._tick_begin(now)
+        now_ms = self._state.tick_begin(now)
         inbox = self.uart.inbox
         if inbox is None or inbox or not self._idle_lo <= now_ms < self._idle_hi:
             self._receive(now_ms)  # else: no byte to read and spin(b"") would do nothing
         self._tick_rest(now_ms)
 
-    def _tick_begin(self, now: float) -> int:
-        """:meth:`tick`'s clock: the ms of ``now`` (never before the last one) and ``_now_s``.
-        Calling it again with the same ``now`` changes nothing."""
-        now_ms = _floor(now * 1000.0 + 1e-6)  # rdm.nodes.base.to_ms(now)
-        last_ms = self.now_ms
-        if last_ms is not None and now_ms < last_ms:
-            now_ms = last_ms  # time never goes back
-        if now.__class__ is not float:
-            now = float(now)
-        if now > self._now_s:  # max(self._now_s, now)
-            self._now_s = now
-        self.now_ms = now_ms
-        return now_ms
-
     def _tick_rest(self, now_ms: int) -> None:
         """:meth:`tick` after the UART receive: battery, due control steps, the tail."""
-        if now_ms >= self._battery_due_ms:
+        state = self._state
+        if now_ms >= state.battery_due_ms:
             self._battery(now_ms)
-        next_control = self._next_control
-        if next_control is None or self._now_s >= next_control - 1e-9:
-            self._control(self._now_s)
+        if state.control_due():
+            self._control(state.now_s)
         self._tick_tail(now_ms)
 
     def _tick_tail(self, now_ms: int) -> None:
         """:meth:`tick` after the control steps: the CAN ms, publishers and UART output (also
         the lockstep kernel's continuation of a ms whose control step it ran)."""
-        can_ms = self._can_ms
+        state = self._state
+        can_ms = state.can_ms
         link = self._wire_link
         master = self.master
         if (
@@ -319,7 +364,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
             clock = ch.clock
             stamp = clock.now if clock.__class__ is SimClock else clock()
             sent = self._tick_wire_steady(now_ms, stamp, link.wire, DRAIN_AT)
-            self._can_ms = now_ms
+            state.can_ms = now_ms
             if sent >= 0:  # still running, no event pending, the log short (core counted)
                 if master._events:
                     self._forward_can_events()
@@ -329,7 +374,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
         else:
             self._can(now_ms)
             self._forward_can_events()
-        if now_ms >= self._next_pub_ms:
+        if now_ms >= self._state.next_pub_ms:
             self._publish(now_ms)
         if self.session.pending_frames or self.uart.pending:  # else send has nothing to do
             self.uart.send(self.session.take_output())
@@ -351,7 +396,8 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
 
     # ---------------------------------------------------------------- CAN
     def _can(self, now_ms: int) -> None:
-        can_ms = self._can_ms
+        state = self._state
+        can_ms = state.can_ms
         if self._master_was_running and can_ms is not None and now_ms == can_ms + 1:
             # The steady state: one new ms, the model adopted; the loop below for t = now_ms.
             master = self.master
@@ -364,9 +410,9 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
                         master.set_motor_duties(duties)
                         self._duties_to_master = duties
             master.tick_ms(now_ms)
-            self._can_ms = now_ms
+            state.can_ms = now_ms
             return
-        start = now_ms if self._can_ms is None else self._can_ms + 1
+        start = now_ms if can_ms is None else can_ms + 1
         start = max(start, now_ms - MAX_CAN_CATCH_UP_MS + 1)
         for t in range(start, now_ms + 1):
             if self.master.state is MasterState.RUNNING:
@@ -381,7 +427,7 @@ class SpinalMirror(SpinalCommands, SpinalControl, SpinalPublishers, SpinalKernel
                     self.master.set_motor_duties(self.duties)
                     self._duties_to_master = self.duties
             self.master.tick_ms(t)
-        self._can_ms = now_ms
+        state.can_ms = now_ms
 
     def _adopt_can_model(self) -> None:
         """Spine::init: motor number and model inferred from CAN go to the controller."""

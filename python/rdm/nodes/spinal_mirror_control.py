@@ -8,7 +8,6 @@ read the mirror's state (``core``, ``master``, ``counters``, ``pwm_test`` ...).
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from rdm._rdm import spinal_duty_list as _duty_list
@@ -16,9 +15,6 @@ from rdm.control.attitude import MAX_ROTORS
 from rdm.nodes.can_master import IDLE_DUTY
 from rdm.protocol.rosserial import constants as C
 
-BATTERY_SAMPLE_MS = 20  # HAL ms: the battery task runs every 20 ms
-#: Battery low-pass ``v = 0.99 v + 0.01 new`` per 20 ms sample.
-BATTERY_FILTER = 0.99
 #: Control steps replayed at most per tick when the loop runs late; then re-phased.
 MAX_CONTROL_CATCH_UP = 5
 
@@ -42,37 +38,30 @@ class SpinalControl:
     part of it)."""
 
     def _battery(self, now_ms: int) -> None:
-        last = self._last_pub.get("_battery_sample")
-        if last is not None and now_ms - last < BATTERY_SAMPLE_MS:
-            return
+        """The battery task (every 20 ms, ``SpinalMirrorState.battery_sample``: the low-pass
+        ``v = 0.99 v + 0.01 sample``); a non-finite sample is counted and the voltage kept."""
         self._last_pub["_battery_sample"] = now_ms
-        self._battery_due_ms = now_ms + BATTERY_SAMPLE_MS
-        sample = self.battery_input * self.adc_scale
-        if not math.isfinite(sample):
+        if not self._state.battery_sample(now_ms):
             self.counters.rejected["battery_non_finite"] += 1
-            return
-        v = self.battery_voltage
-        self.battery_voltage = (
-            sample if v is None else BATTERY_FILTER * v + (1 - BATTERY_FILTER) * sample
-        )
 
     def _control(self, now: float) -> None:
         period = 1.0 / self.rate_hz
-        if self._next_control is None:
-            self._next_control = now
+        state = self._state
+        if state.next_control is None:
+            state.next_control = now
         steps = 0
-        while now >= self._next_control - 1e-9:
+        while now >= state.next_control - 1e-9:
             if steps == MAX_CONTROL_CATCH_UP:
                 self.counters.control_overruns += 1
-                self._next_control = now + period
+                state.next_control = now + period
                 break
             self._step(now)
             steps += 1
-            self._next_control += period
+            state.next_control += period
 
     def _step(self, now: float) -> None:
-        voltage = self.battery_voltage if self.battery_voltage is not None else self.battery_input
-        out = self.core.step(now, self.gyro, self.acc, self.mag, voltage)
+        state = self._state
+        out = self.core.step(now, state.gyro, state.acc, state.mag, state.step_voltage())
         self.last_output = out  # the core counts the step (counters.control_steps)
         if self.pwm_test is None:
             # No event and the controller's own duties: the list _step_tail builds, from

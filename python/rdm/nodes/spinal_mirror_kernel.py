@@ -8,14 +8,11 @@ methods read the mirror's state and call its tick's steps.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 from rdm.control.attitude import SpinalStep
-from rdm.link.capture_index import timed_capture_of
 from rdm.link.inproc_can import SimClock
 from rdm.nodes.can_master import IDLE_DUTY, MasterState
-from rdm.nodes.spinal_mirror_control import BATTERY_FILTER, BATTERY_SAMPLE_MS
 from rdm.nodes.spinal_mirror_publishers import (
     _NEVER,
     BATTERY_PUB_MS,
@@ -33,21 +30,19 @@ class SpinalKernelInterface:
 
     def kernel_plan(self) -> tuple | None:
         """The window in which :meth:`tick` is only the steady CAN ms, for
-        ``rdm._rdm.LockstepKernel`` (docs/sim.md): (now_ms, _now_s, idle window lo, hi,
-        battery due ms, next control time, CAN ms, next publisher ms); the kernel runs a
-        tick at ms m itself when m is inside the idle window, before the battery, control and
-        publisher times, and one past the CAN ms. None when no tick can run so: bytes
-        waiting, the master not steady on the wire, events or output pending.
+        ``rdm._rdm.LockstepKernel`` (docs/sim.md): (idle window lo, hi, whether
+        ``_publish`` can publish, busy plan, boot phase); the kernel runs a tick at ms m
+        itself when m is inside the idle window, before the battery, control and publisher
+        times, and one past the CAN ms (those and the clock it reads and changes in
+        ``_state``, the mirror's :class:`rdm._rdm.SpinalMirrorState`). None when no tick can
+        run so: bytes waiting, the master not steady on the wire, events or output pending.
         Before the master first runs, the last item is its phase index (the kernel then runs
         the idle ms of the boot: a CAN ms that stays in that phase); else None.
-        The kernel writes ``now_ms``, ``_now_s`` and ``_can_ms`` back itself, as the steady
-        tick leaves them; the master's ``tx_count`` and pending events are its Rust core's."""
-        if self.now_ms is None or self._next_control is None:
-            return None
+        The master's ``tx_count`` and pending events are its Rust core's."""
         inbox = self.uart.inbox
         link = self._wire_link
         master = self.master
-        if inbox is None or inbox or link is None or self._can_ms is None:
+        if inbox is None or inbox or link is None:
             return None
         # Before the master first runs (boot, enumeration, configuration) the tick's CAN ms
         # is the master's plain tick_ms, with no duty hand-over.
@@ -61,20 +56,15 @@ class SpinalKernelInterface:
             return None
         if master._events or self.session.pending_frames or self.uart.pending:
             return None
-        next_pub = self._next_pub_ms
-        if boot and (not self.session.configured or self.last_output is None):
-            next_pub = 2**62  # _publish returns at once until Python code changes that
+        # _publish returns at once in the boot until Python code configures the session and
+        # a step leaves an output
+        live = not boot or (self.session.configured and self.last_output is not None)
         return (
-            self.now_ms,
-            self._now_s,
             self._idle_lo,
             self._idle_hi,
-            self._battery_due_ms,
-            self._next_control,
-            self._can_ms,
-            next_pub,
+            live,
             # In the boot a busy ms needs an output already (else the kernel's step would
-            # make _publish live while next_pub above says never).
+            # make _publish live while ``live`` above says no).
             self._kernel_busy_plan() if not boot or self.last_output is not None else None,
             master.core.state_index if boot else None,
         )
@@ -86,7 +76,6 @@ class SpinalKernelInterface:
         * ``step_core``: the :class:`SpinalStep` when a control step's routine is
           ``_step``'s one-call duty list (no pwm test, the Rust master's one-call duty
           hand-over), else None; ``period`` (``1 / rate_hz``) and the idle duty;
-        * the battery filter and sample period;
         * ``configured``, ``last_output``; ``imu_topic`` when the ``imu`` publication is
           :meth:`_publish_imu_frame`'s (the checked codec, a :class:`ClientClock`), the
           clock's sync state (None unless a :class:`ClientClock`: then no publication
@@ -96,10 +85,11 @@ class SpinalKernelInterface:
         * the TX ring (output size, chunk size, chunks; -1 when not empty) and whether the
           UART writes any send of up to ``max_pending`` bytes whole (``UartPump.writes_whole``),
           and the UART chain (``UartPump._chain``) through which the kernel writes the
-          output itself (None: no in-process chain; then it calls :meth:`kernel_commit_tx`).
+          output itself (None: no in-process chain; then the publications are the Python
+          tick's).
 
-        The kernel reads the IMU sample, battery input, ADC scale and battery voltage from
-        the mirror itself when it uses them (another node may set them without a re-read)."""
+        The kernel reads the IMU sample from the mirror, and the battery from its
+        ``_state``, when it uses them (another node may set them without a re-read)."""
         core = self.core
         step_core = core if core.__class__ is SpinalStep and self.pwm_test is None else None
         session = self.session
@@ -136,8 +126,6 @@ class SpinalKernelInterface:
             step_core,
             1.0 / self.rate_hz,
             IDLE_DUTY,
-            BATTERY_FILTER,
-            BATTERY_SAMPLE_MS,
             session.configured,
             self.last_output,
             imu_topic,
@@ -174,7 +162,7 @@ class SpinalKernelInterface:
         control, CAN ms, publishers, output) as in any ms of its plan, or calls
         :meth:`kernel_receive_rest` when that ms is not one it runs. The same calls
         in the same order as :meth:`tick` (docs/spinal.md "In the simulated stack")."""
-        now_ms = self._tick_begin(now)
+        now_ms = self._state.tick_begin(now)
         inbox = self.uart.inbox
         if inbox is None or inbox or not self._idle_lo <= now_ms < self._idle_hi:
             self._receive(now_ms)
@@ -185,7 +173,7 @@ class SpinalKernelInterface:
 
     def kernel_receive_rest(self, now: float) -> None:
         """The rest of a :meth:`kernel_receive_tick` whose plan the kernel did not run."""
-        self._tick_rest(self._tick_begin(now))
+        self._tick_rest(self._state.tick_begin(now))
 
     def kernel_finish_step(self, now_ms: int, tail: bool) -> None:
         """The rest of a kernel tick whose control step the kernel ran (``last_output``,
@@ -200,38 +188,10 @@ class SpinalKernelInterface:
         """The rest of a kernel tick whose publication the kernel declined (a value its
         frame builders decline, a frame the TX ring or the UART queue would not take): the
         publishers and output as :meth:`tick`."""
-        if now_ms >= self._next_pub_ms:
+        if now_ms >= self._state.next_pub_ms:
             self._publish(now_ms)
         if self.session.pending_frames or self.uart.pending:
             self.uart.send(self.session.take_output())
-
-    def kernel_commit_tx(
-        self,
-        data: bytes,
-        frames: int,
-        imu: int,
-        servo: int,
-        marks: Sequence[tuple[float, int]] = (),
-    ) -> None:
-        """The kernel's publications since the last write back: ``frames`` frames queued
-        and taken by ``take_output`` (``imu`` on ``imu``, ``servo`` on ``servo/states``),
-        ``data`` their bytes in order, written in one :meth:`UartPump.send` (whole, as the
-        plan's ``writes_whole`` said: the same bytes and counters as one send per tick);
-        ``marks`` each tick's ``(time s, end)`` in ``data`` for the capture's time index.
-        With the plan's UART chain the kernel does the same without this call: the
-        counters, then ``UartPump._write_chain``'s effect of a whole write and ``bytes_out``."""
-        self.session.counts["tx_frames"] += frames
-        published = self.counters.published
-        if imu:
-            published["imu"] += imu
-        if servo:
-            published["servo/states"] += servo
-        capture = timed_capture_of(self.uart.link) if marks else None
-        if capture is None or self.uart.pending:  # queued bytes first: those take the clock
-            self.uart.send(data)
-        else:
-            with capture.marked(marks):
-                self.uart.send(data)
 
     def kernel_finish_wire_tick(self, now_ms: int) -> None:
         """The rest of a kernel tick whose CAN ms was not steady (``tick_wire_steady`` gave
@@ -240,7 +200,7 @@ class SpinalKernelInterface:
         master = self.master
         master.apply_wire_tick(master.core.last_wire_tick)
         self._forward_can_events()
-        if now_ms >= self._next_pub_ms:
+        if now_ms >= self._state.next_pub_ms:
             self._publish(now_ms)
         if self.session.pending_frames or self.uart.pending:
             self.uart.send(self.session.take_output())

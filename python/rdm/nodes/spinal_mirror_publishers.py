@@ -48,9 +48,10 @@ class SpinalPublishers:
     def _publish(self, now_ms: int) -> None:
         if not self.session.configured or self.last_output is None:
             return
-        if now_ms < self._next_pub_ms:
+        state = self._state
+        if now_ms < state.next_pub_ms:
             return  # no publisher due (exact: the earliest ms any check below fires)
-        self._next_pub_ms = self._publish_due(now_ms)
+        state.next_pub_ms = self._publish_due(now_ms)
 
     def _publish_due(self, now_ms: int) -> int:
         """Each publisher due at ``now_ms`` publishes, in this order, and stamps its

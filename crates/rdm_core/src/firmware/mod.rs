@@ -14,3 +14,4 @@ pub mod neuron_servo;
 pub mod neuron_tx;
 pub mod rosserial_frame;
 pub mod spinal_frame;
+pub mod spinal_state;

@@ -7,13 +7,14 @@
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
-use super::attr::Name;
 use super::leptrino::LeptrinoFast;
 use super::plant::PlantLink;
 use crate::normal_stream::NormalStreamCore;
 use crate::plant_bridge::PlantBridgeCore;
 use crate::sensor_sim::{ImuNoiseCore, WrenchNoiseCore};
+use crate::spinal_state::SpinalMirrorState;
 use crate::untracked;
+use rdm_core::estimate::ImuSample;
 use rdm_core::sim::sample_schedule::Reading;
 
 /// The next `N` normals of a noise model's stream (the object the model itself takes from).
@@ -23,12 +24,13 @@ fn take<const N: usize>(py: Python<'_>, stream: &Py<NormalStreamCore>) -> PyResu
     Ok(out)
 }
 
-/// The IMU sample as the kernel takes it: into the Spinal mirror's `gyro`/`acc`/`mag`.
+/// The IMU sample as the kernel takes it: into the Spinal mirror's state.
 struct ImuPath {
     adr: (usize, usize, usize),
     core: Py<ImuNoiseCore>,
     normals: Py<NormalStreamCore>,
-    sink: Py<PyAny>,
+    /// The Spinal mirror's state (`SpinalMirror._state`).
+    sink: Py<SpinalMirrorState>,
 }
 
 /// The bridge's sample paths (`rdm.nodes.lockstep_kernel`).
@@ -44,12 +46,6 @@ struct Plan {
     truth: Option<(Py<PyAny>, u8)>,
 }
 
-struct Names {
-    gyro: Name,
-    acc: Name,
-    mag: Name,
-}
-
 /// What a fast bridge tick leaves to Python: the ground-truth call when a truth sample is
 /// due.
 pub(crate) struct BridgeOut {
@@ -60,7 +56,6 @@ pub(crate) struct BridgeFast {
     /// Returns the plan tuple, or None when the tick has no Rust form now
     /// (`rdm.nodes.lockstep_kernel`).
     plan_of: Py<PyAny>,
-    names: Names,
     /// `PlantBridge._core`: the state, schedule and banks both tick forms use.
     core: Py<PlantBridgeCore>,
     plan: Option<Plan>,
@@ -68,14 +63,9 @@ pub(crate) struct BridgeFast {
 }
 
 impl BridgeFast {
-    pub(crate) fn new(py: Python<'_>, core: Py<PlantBridgeCore>, plan_of: Py<PyAny>) -> Self {
+    pub(crate) fn new(core: Py<PlantBridgeCore>, plan_of: Py<PyAny>) -> Self {
         BridgeFast {
             plan_of,
-            names: Names {
-                gyro: Name::new(py, "gyro"),
-                acc: Name::new(py, "acc"),
-                mag: Name::new(py, "mag"),
-            },
             core,
             plan: None,
             loaded: false,
@@ -108,7 +98,7 @@ impl BridgeFast {
                     adr: i.get_item(0)?.extract()?,
                     core: i.get_item(1)?.cast_into::<ImuNoiseCore>()?.unbind(),
                     normals: i.get_item(2)?.cast_into::<NormalStreamCore>()?.unbind(),
-                    sink: i.get_item(3)?.unbind(),
+                    sink: i.get_item(3)?.cast_into::<SpinalMirrorState>()?.unbind(),
                 })
             };
             let truth = t.get_item(4)?;
@@ -154,13 +144,9 @@ impl BridgeFast {
             && (p.truth.is_some() || !due.has(Reading::Truth)))
     }
 
-    /// `Plant.imu()` into `SpinalMirror.set_imu_sample` (the sink of the plan).
-    fn imu_sample_of(
-        names: &Names,
-        py: Python<'_>,
-        imu: &mut ImuPath,
-        plant: &mut PlantLink,
-    ) -> PyResult<()> {
+    /// `Plant.imu()` into the Spinal mirror's state (`SpinalMirror.set_imu_sample`, the
+    /// sink of the plan).
+    fn imu_sample_of(py: Python<'_>, imu: &mut ImuPath, plant: &mut PlantLink) -> PyResult<()> {
         plant.fresh(py)?;
         let ideal = {
             let sd = plant.sensordata.bind(py);
@@ -175,10 +161,11 @@ impl BridgeFast {
         };
         let normals = take::<9>(py, &imu.normals)?;
         let v = imu.core.get().inner.sample(&ideal, &normals).values;
-        let sink = imu.sink.bind(py);
-        names.gyro.set(sink, PyTuple::new(py, v[0])?)?;
-        names.acc.set(sink, PyTuple::new(py, v[1])?)?;
-        names.mag.set(sink, PyTuple::new(py, v[2])?)?;
+        imu.sink.bind(py).try_borrow_mut()?.inner.imu = ImuSample {
+            gyro: v[0],
+            acc: v[1],
+            mag: v[2],
+        };
         Ok(())
     }
 
@@ -215,7 +202,7 @@ impl BridgeFast {
         drop(core);
         if due.has(Reading::Imu) {
             let imu = p.imu.as_mut().expect("ready() checked the IMU path");
-            Self::imu_sample_of(&self.names, py, imu, plant)?;
+            Self::imu_sample_of(py, imu, plant)?;
         }
         let truth = if due.has(Reading::Truth) {
             let (call, touches) = p.truth.as_ref().expect("ready() checked the truth path");

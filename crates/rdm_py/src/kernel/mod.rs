@@ -34,6 +34,7 @@ use crate::plant_bridge::PlantBridgeCore;
 use crate::plant_state::PlantStateCore;
 use crate::plant_step::PlantStepCore;
 use crate::rotor_plant::RotorPlantCore;
+use crate::spinal_state::SpinalMirrorState;
 use crate::stop_flag::StopFlag;
 use crate::tick_counter::TickCounter;
 use bank::BankFast;
@@ -247,13 +248,12 @@ impl LockstepKernel {
     /// form now.
     fn attach_bridge(
         &mut self,
-        py: Python<'_>,
         index: usize,
         core: Py<PlantBridgeCore>,
         plan: Py<PyAny>,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.bridge = Some(BridgeFast::new(py, core, plan));
+        self.bridge = Some(BridgeFast::new(core, plan));
         self.kinds[index] = Kind::Bridge;
         self.touches[index] = BRIDGE | PLANT | LEPTRINO;
         Ok(())
@@ -273,17 +273,20 @@ impl LockstepKernel {
         Ok(())
     }
 
-    /// Node `index` is a `SpinalMirror` whose Rust CAN master `master` ticks on `wire`.
+    /// Node `index` is a `SpinalMirror` with the clock and battery state `state` whose Rust
+    /// CAN master `master` ticks on `wire`.
+    #[allow(clippy::too_many_arguments)]
     fn attach_spinal(
         &mut self,
         index: usize,
         node: &Bound<'_, PyAny>,
+        state: Py<SpinalMirrorState>,
         master: Py<CanMaster>,
         wire: Py<CanWire>,
         drain_at: usize,
     ) -> PyResult<()> {
         self.check_index(index)?;
-        self.spinal = Some(SpinalFast::new(node, master, wire, drain_at));
+        self.spinal = Some(SpinalFast::new(node, state, master, wire, drain_at));
         self.kinds[index] = Kind::Spinal;
         self.touches[index] = SPINAL;
         Ok(())

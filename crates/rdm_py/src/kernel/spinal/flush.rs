@@ -1,6 +1,5 @@
 //! What the busy ms changed since the last flush, and the flush that writes it back to the
-//! mirror (clock, CAN ms, counters, battery, control step, duties, publications, the UART
-//! bytes).
+//! mirror (battery sample ms, control output, duties, publications, the UART bytes).
 
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
@@ -29,7 +28,6 @@ impl Duties {
 /// What the busy ms changed since the last flush.
 #[derive(Default)]
 pub(super) struct Deferred {
-    pub(super) next_control: bool,
     /// The output of the last control step here (its `SpinalStepOutput` is made at flush).
     pub(super) output: Option<SpinalOutput>,
     /// The last duty list (`duties`), whether it is also the one handed over, and the last
@@ -37,21 +35,21 @@ pub(super) struct Deferred {
     pub(super) duties: Option<Duties>,
     pub(super) duties_handed: bool,
     pub(super) handed: Option<Duties>,
-    pub(super) battery: Option<(i64, f64)>,
+    /// The ms of the last battery sample here (`_last_pub["_battery_sample"]`).
+    pub(super) battery_ms: Option<i64>,
     pub(super) imu_last: bool,
     pub(super) servo_last: bool,
-    pub(super) next_pub: bool,
     pub(super) frames: i64,
     pub(super) imu_frames: i64,
     pub(super) servo_frames: i64,
 }
 
 impl SpinalFast {
-    /// Write the mirror's state back: clock and CAN ms (`now_ms`, `_now_s`, `_can_ms`) and
-    /// what the busy ms changed (battery, control step, duties, publications, the UART
-    /// bytes). The CAN master's counters (`CanMaster.tx_count`, `pending_events`) and the
-    /// control step count (`SpinalStep.steps`) are their cores' own: nothing of them is
-    /// written here.
+    /// Write the mirror's Python state back: what the busy ms changed (battery sample ms,
+    /// control output, duties, publications, the UART bytes). The clock, CAN ms, control
+    /// time and battery voltage (`SpinalMirrorState`), the CAN master's counters
+    /// (`CanMaster.tx_count`, `pending_events`) and the control step count
+    /// (`SpinalStep.steps`) are their Rust objects' own: nothing of them is written here.
     pub(crate) fn flush(&mut self, py: Python<'_>) -> PyResult<()> {
         if !self.dirty {
             return Ok(());
@@ -59,22 +57,14 @@ impl SpinalFast {
         if let Some(p) = &self.plan {
             let node = self.node.bind(py);
             let n = &self.names;
-            n.now_ms.set(node, p.now_ms)?;
-            n.now_s.set(node, p.now_s)?;
-            n.can_ms.set(node, p.can_ms)?;
             let d = std::mem::take(&mut self.deferred);
-            let last_pub = if d.battery.is_some() || d.imu_last || d.servo_last {
+            let last_pub = if d.battery_ms.is_some() || d.imu_last || d.servo_last {
                 Some(n.last_pub.get(node)?.cast_into::<PyDict>()?)
             } else {
                 None
             };
-            if let (Some((ms, v)), Some(last)) = (d.battery, &last_pub) {
+            if let (Some(ms), Some(last)) = (d.battery_ms, &last_pub) {
                 last.set_item(n.battery_sample.key(py), ms)?;
-                n.battery_due_ms.set(node, p.battery_due_ms)?;
-                n.battery_voltage.set(node, v)?;
-            }
-            if d.next_control {
-                n.next_control.set(node, p.next_control)?;
             }
             if let Some(out) = d.output {
                 n.last_output
@@ -97,27 +87,20 @@ impl SpinalFast {
                     last.set_item(n.servo_states.key(py), b.servo_last)?;
                 }
             }
-            if d.next_pub {
-                n.next_pub_ms.set(node, p.next_pub_ms)?;
-            }
             if d.frames > 0 {
                 let data = PyBytes::new(py, &self.tx);
                 self.tx.clear();
-                match p.busy.as_ref().and_then(|b| b.chain.as_ref()) {
-                    Some(chain) => Self::commit_tx(n, node, chain, &data, &d, &self.tx_marks)?,
-                    None => {
-                        node.call_method1(
-                            n.commit_tx.key(py),
-                            (
-                                data,
-                                d.frames,
-                                d.imu_frames,
-                                d.servo_frames,
-                                PyList::new(py, &self.tx_marks)?,
-                            ),
-                        )?;
-                    }
-                }
+                // `ready` publishes only with a chain to write through.
+                let chain = p
+                    .busy
+                    .as_ref()
+                    .and_then(|b| b.chain.as_ref())
+                    .ok_or_else(|| {
+                        pyo3::exceptions::PyRuntimeError::new_err(
+                            "kernel: Spinal frames without a UART chain",
+                        )
+                    })?;
+                Self::commit_tx(n, node, chain, &data, &d, &self.tx_marks)?;
             }
         }
         self.tx.clear();

@@ -27,6 +27,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
 use crate::can_master::{CanMaster, CanWire};
+use crate::spinal_state::SpinalMirrorState;
 use flush::Deferred;
 use names::Names;
 use plan::Plan;
@@ -48,6 +49,8 @@ pub(crate) struct BusyCounts {
 
 pub(crate) struct SpinalFast {
     node: Py<PyAny>,
+    /// The mirror's clock and battery state (`SpinalMirror._state`), changed in place.
+    state: Py<SpinalMirrorState>,
     names: Names,
     master: Py<CanMaster>,
     wire: Py<CanWire>,
@@ -57,7 +60,7 @@ pub(crate) struct SpinalFast {
     dirty: bool,
     decision: Decision,
     deferred: Deferred,
-    /// Frames not yet written (`kernel_commit_tx`), and this tick's.
+    /// Frames not yet written (`flush` writes them through the UART chain), and this tick's.
     tx: Vec<u8>,
     tick_tx: Vec<u8>,
     /// Per publishing tick in `tx`: (its time s, end of its bytes in `tx`), for the capture's
@@ -83,6 +86,7 @@ pub(crate) enum SpinalTick {
 impl SpinalFast {
     pub(crate) fn new(
         node: &Bound<'_, PyAny>,
+        state: Py<SpinalMirrorState>,
         master: Py<CanMaster>,
         wire: Py<CanWire>,
         drain_at: usize,
@@ -90,6 +94,7 @@ impl SpinalFast {
         let py = node.py();
         SpinalFast {
             node: node.clone().unbind(),
+            state,
             names: Names::new(py),
             master,
             wire,
@@ -144,11 +149,6 @@ impl SpinalFast {
             .bind(py)
             .call_method1(pyo3::intern!(py, "kernel_receive_rest"), (now,))?;
         Ok(())
-    }
-
-    /// `to_ms(now)` as the mirror computes it.
-    fn to_ms(now: f64) -> i64 {
-        (now * 1000.0 + 1e-6).floor() as i64
     }
 
     /// `SpinalMirror.kernel_finish_wire_tick(now_ms)` (after a flush of every part).

@@ -2,7 +2,7 @@
 //! and its busy part (`SpinalMirror._kernel_busy_plan`), read from the mirror's tuples.
 
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyFloat, PyTuple};
+use pyo3::types::{PyBool, PyTuple};
 use rdm_core::control::attitude::SpinalOutput;
 
 use super::SpinalFast;
@@ -12,15 +12,14 @@ use crate::kernel::attr::read_plan;
 use crate::spinal_mirror::exact_i64;
 
 /// Plan of `SpinalMirror.kernel_plan()`: the window in which a tick is only the CAN ms.
+/// The clock, CAN ms, control time and battery are the mirror's `SpinalMirrorState`,
+/// read and changed in place.
 pub(super) struct Plan {
-    pub(super) now_ms: i64,
-    pub(super) now_s: f64,
     pub(super) idle_lo: i64,
     pub(super) idle_hi: i64,
-    pub(super) battery_due_ms: i64,
-    pub(super) next_control: f64,
-    pub(super) can_ms: i64,
-    pub(super) next_pub_ms: i64,
+    /// False: `_publish` returns at once (the boot before the session is configured and
+    /// a control output exists) whatever `next_pub_ms` says.
+    pub(super) publish_live: bool,
     /// None: busy ms are the Python tick's.
     pub(super) busy: Option<Busy>,
     /// Before the CAN master first runs: its phase index (booting, enumerating,
@@ -34,8 +33,6 @@ pub(super) struct Busy {
     pub(super) core: Option<Py<PySpinalStep>>,
     pub(super) period: f64,
     pub(super) idle_duty: f64,
-    pub(super) battery_filter: f64,
-    pub(super) battery_period: i64,
     pub(super) configured: bool,
     /// `last_output is not None`, and its values when it is a `SpinalStepOutput`.
     pub(super) has_output: bool,
@@ -61,7 +58,7 @@ pub(super) struct Busy {
     pub(super) writes_whole: bool,
     pub(super) max_pending: usize,
     /// The UART chain `(droppable, tapped, end)` the kernel writes the output through; None
-    /// (no chain to write through): `kernel_commit_tx`.
+    /// (no chain to write through): the publications are the Python tick's.
     pub(super) chain: Option<Chain>,
 }
 
@@ -103,11 +100,6 @@ fn opt_topic(v: &Bound<'_, PyAny>) -> PyResult<Option<u16>> {
     Ok(opt_i64(v)?.and_then(|t| u16::try_from(t).ok()))
 }
 
-/// An exact Python float's value.
-pub(super) fn exact_f64(v: &Bound<'_, PyAny>) -> Option<f64> {
-    v.cast_exact::<PyFloat>().ok().map(|f| f.value())
-}
-
 impl Busy {
     fn load(t: &Bound<'_, PyTuple>) -> PyResult<Busy> {
         let core = t.get_item(0)?;
@@ -116,16 +108,16 @@ impl Busy {
         } else {
             Some(core.cast_into::<PySpinalStep>()?.unbind())
         };
-        let last_output = t.get_item(6)?;
+        let last_output = t.get_item(4)?;
         let output = last_output
             .cast_exact::<SpinalStepOutput>()
             .ok()
             .map(|o| o.get().inner);
         // spinal_imu_frame's argument checks: an exact bool, exact ints when synced.
-        let synced = t.get_item(8)?;
+        let synced = t.get_item(6)?;
         let (sync, sync_ok) = match synced.cast_exact::<PyBool>() {
             Ok(s) if s.is_true() => {
-                match (exact_i64(&t.get_item(9)?), exact_i64(&t.get_item(10)?)) {
+                match (exact_i64(&t.get_item(7)?), exact_i64(&t.get_item(8)?)) {
                     (Some(tick), Some(ns)) => (Some((tick, ns)), true),
                     _ => (None, false),
                 }
@@ -133,38 +125,36 @@ impl Busy {
             Ok(_) => (None, true),
             Err(_) => (None, false),
         };
-        let servo_core = t.get_item(14)?;
+        let servo_core = t.get_item(12)?;
         let servo_core = if servo_core.is_none() {
             None
         } else {
             Some(servo_core.cast_into_exact::<CanMaster>()?.unbind())
         };
-        let chunks: i64 = t.get_item(20)?.extract()?;
+        let chunks: i64 = t.get_item(18)?.extract()?;
         Ok(Busy {
             core,
             period: t.get_item(1)?.extract()?,
             idle_duty: t.get_item(2)?.extract()?,
-            battery_filter: t.get_item(3)?.extract()?,
-            battery_period: t.get_item(4)?.extract()?,
-            configured: t.get_item(5)?.is_truthy()?,
+            configured: t.get_item(3)?.is_truthy()?,
             has_output: !last_output.is_none(),
             output,
-            imu_topic: opt_topic(&t.get_item(7)?)?,
+            imu_topic: opt_topic(&t.get_item(5)?)?,
             sync,
             sync_ok,
-            imu_last: opt_i64(&t.get_item(11)?)?,
-            imu_period: t.get_item(12)?.extract()?,
-            servo_topic: opt_topic(&t.get_item(13)?)?,
+            imu_last: opt_i64(&t.get_item(9)?)?,
+            imu_period: t.get_item(10)?.extract()?,
+            servo_topic: opt_topic(&t.get_item(11)?)?,
             servo_core,
-            servo_last: opt_i64(&t.get_item(15)?)?,
-            servo_period: t.get_item(16)?.extract()?,
-            others_next: t.get_item(17)?.extract()?,
-            output_size: t.get_item(18)?.extract()?,
-            chunk_bytes: t.get_item(19)?.extract()?,
+            servo_last: opt_i64(&t.get_item(13)?)?,
+            servo_period: t.get_item(14)?.extract()?,
+            others_next: t.get_item(15)?.extract()?,
+            output_size: t.get_item(16)?.extract()?,
+            chunk_bytes: t.get_item(17)?.extract()?,
             chunks: usize::try_from(chunks).ok(),
-            writes_whole: t.get_item(21)?.is_truthy()?,
-            max_pending: t.get_item(22)?.extract()?,
-            chain: Chain::load(&t.get_item(23)?)?,
+            writes_whole: t.get_item(19)?.is_truthy()?,
+            max_pending: t.get_item(20)?.extract()?,
+            chain: Chain::load(&t.get_item(21)?)?,
         })
     }
 }
@@ -181,22 +171,17 @@ impl SpinalFast {
     /// The plan from `SpinalMirror.kernel_plan()`'s tuple (None: no plan).
     pub(super) fn load(&mut self, plan: Option<Bound<'_, PyTuple>>) -> PyResult<()> {
         self.plan = if let Some(t) = plan {
-            let busy = t.get_item(8)?;
+            let busy = t.get_item(3)?;
             Some(Plan {
-                now_ms: t.get_item(0)?.extract()?,
-                now_s: t.get_item(1)?.extract()?,
-                idle_lo: t.get_item(2)?.extract()?,
-                idle_hi: t.get_item(3)?.extract()?,
-                battery_due_ms: t.get_item(4)?.extract()?,
-                next_control: t.get_item(5)?.extract()?,
-                can_ms: t.get_item(6)?.extract()?,
-                next_pub_ms: t.get_item(7)?.extract()?,
+                idle_lo: t.get_item(0)?.extract()?,
+                idle_hi: t.get_item(1)?.extract()?,
+                publish_live: t.get_item(2)?.is_truthy()?,
                 busy: if busy.is_none() {
                     None
                 } else {
                     Some(Busy::load(busy.cast::<PyTuple>()?)?)
                 },
-                boot_state: t.get_item(9)?.extract()?,
+                boot_state: t.get_item(4)?.extract()?,
             })
         } else {
             None

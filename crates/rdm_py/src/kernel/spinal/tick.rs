@@ -14,16 +14,14 @@ use crate::spinal_mirror::{clamp_duty, servo_states_frame_into, ServoFrame};
 impl SpinalFast {
     /// The tick at `now` (requires `ready`).
     pub(crate) fn tick(&mut self, py: Python<'_>, now: f64) -> PyResult<SpinalTick> {
-        let m = Self::to_ms(now);
         let Some(p) = &mut self.plan else {
             return Err(pyo3::exceptions::PyRuntimeError::new_err(
                 "kernel: Spinal tick without a plan",
             ));
         };
-        if now > p.now_s {
-            p.now_s = now;
-        }
-        p.now_ms = m;
+        let mut st = self.state.bind(py).try_borrow_mut()?;
+        let s = &mut st.inner;
+        let m = s.tick_begin(now);
         self.dirty = true;
         let decision = std::mem::replace(&mut self.decision, Decision::Idle);
         let boot = p.boot_state.is_some();
@@ -37,16 +35,13 @@ impl SpinalFast {
         if let Some(busy) = busy {
             let b = p.busy.as_mut().ok_or_else(no_plan)?;
             let d = &mut self.deferred;
-            if let Some(v) = busy.battery {
-                p.battery_due_ms = m + b.battery_period;
-                d.battery = Some((m, v));
+            if busy.battery {
+                // `ready` checked the sample is finite: the voltage takes it.
+                s.battery_sample(m);
+                d.battery_ms = Some(m);
                 self.counts.batteries += 1;
             }
             if let Some(StepInput {
-                gyro,
-                acc,
-                mag,
-                voltage,
                 motors,
                 from_output,
             }) = busy.step
@@ -54,12 +49,11 @@ impl SpinalFast {
                 let core = b.core.as_ref().ok_or_else(|| {
                     pyo3::exceptions::PyRuntimeError::new_err("kernel: Spinal step without core")
                 })?;
-                let out = core
-                    .bind(py)
-                    .try_borrow_mut()?
-                    .step_raw(p.now_s, gyro, acc, mag, voltage);
-                p.next_control += b.period;
-                d.next_control = true;
+                let out =
+                    core.bind(py)
+                        .try_borrow_mut()?
+                        .step_raw(s.now_s, &s.imu, s.step_voltage());
+                s.next_control = s.next_control.map(|t| t + b.period);
                 d.output = Some(out);
                 b.output = Some(out);
                 b.has_output = true;
@@ -99,7 +93,9 @@ impl SpinalFast {
                 }
             }
         }
-        p.can_ms = m;
+        s.can_ms = Some(m);
+        let imu = s.imu;
+        drop(st);
         if !Self::can_tick(
             &self.master,
             &self.wire,
@@ -115,8 +111,6 @@ impl SpinalFast {
             imu_due,
             servo_due,
             stamp,
-            acc,
-            mag,
         }) = busy.and_then(|busy| busy.publish)
         {
             let b = p.busy.as_mut().ok_or_else(no_plan)?;
@@ -139,9 +133,9 @@ impl SpinalFast {
                 };
                 let estimate = &out.estimate;
                 let values = ImuValues {
-                    acc,
+                    acc: imu.acc,
                     gyro: estimate.angular_velocity.into(),
-                    mag,
+                    mag: imu.mag,
                     quaternion: estimate.quaternion,
                 };
                 match imu_frame(topic, stamp, &values) {
@@ -188,8 +182,8 @@ impl SpinalFast {
             }
             let imu_next = b.imu_last.map_or(i64::MIN, |t| t + b.imu_period);
             let servo_next = b.servo_last.map_or(i64::MIN, |t| t + b.servo_period);
-            p.next_pub_ms = imu_next.min(servo_next).min(b.others_next);
-            d.next_pub = true;
+            self.state.bind(py).try_borrow_mut()?.inner.next_pub_ms =
+                imu_next.min(servo_next).min(b.others_next);
             let sent = i64::from(imu_sent) + i64::from(servo_sent);
             d.frames += sent;
             d.imu_frames += i64::from(imu_sent);
