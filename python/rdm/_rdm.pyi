@@ -1144,10 +1144,10 @@ class RotorPlantCore:
     def set_truth_record(
         self, new: Callable[[type], Any], cls: type, fields: tuple[str, ...], plate_body: int
     ) -> None:
-        """The record ``truth_free`` builds: ``new(cls)`` with its ``__dict__`` filled in
+        """The record ``truth_record`` builds: ``new(cls)`` with its ``__dict__`` filled in
         ``fields`` order (the 18 GroundTruth fields; ValueError otherwise), and the foot plate
-        body of the contact measurement."""
-    def truth_free(
+        body of the no-contact numbers."""
+    def truth_record(
         self,
         time: float,
         xpos: np.ndarray,
@@ -1156,11 +1156,13 @@ class RotorPlantCore:
         qpos: np.ndarray,
         qvel: np.ndarray,
         subtree_com: np.ndarray,
-    ) -> Any | None:
-        """The whole ground-truth record of a plant with no contact and no contact anchor:
-        the ``truth_arrays`` values, the EE quaternion as zeros (filled by the caller), no
-        contact, force/torque -0.0, ZMP NaN, slip 0, yaw 0; None if the plate frame is not
-        finite."""
+        measured: tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float] | None = None,
+    ) -> Any:
+        """The whole ground-truth record: the ``truth_arrays`` values, the EE quaternion as
+        zeros (filled by the caller) and ``measured`` = ``FootContactTracker.measure``'s
+        (points, force, torque, zmp, slip, slip_yaw), or None for no plate contact and no
+        anchor: no contact, force/torque ``-(R.T @ 0)`` (R the plate frame), ZMP NaN, slip 0,
+        yaw 0. ValueError on a ``measured`` of another length."""
 
 # --- plate contact (ground truth) ---
 @_final

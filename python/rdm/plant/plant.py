@@ -218,7 +218,7 @@ class Plant(PlantReadings, PlantTruthReadout):
             self._vadr.tolist(),
             self.options.fixed_base,
         )
-        # The flying robot's whole record in one call (:meth:`_ground_truth`).
+        # The whole record in one call (:meth:`_ground_truth`).
         self._rotors.set_truth_record(object.__new__, GroundTruth, TRUTH_FIELDS, self._plate_body)
         self._v_ee_xmat = d.xmat[self._ee_body]
         self.ceiling_effects = (

@@ -46,23 +46,9 @@ class GroundTruth:
     # (kept through contact gaps < 0.1 s; zero when there is no contact anchor)
     foot_slip_yaw: float  # rotation about the ceiling normal since first contact [rad]
 
-    @classmethod
-    def from_values(cls, *values: object) -> GroundTruth:
-        """An instance from every field's value in field order, without the frozen
-        ``__init__``'s per-field ``object.__setattr__`` (the same object: equal, same
-        ``__dict__``); for the plant's 100 Hz record."""
-        if len(values) != len(_TRUTH_FIELDS):
-            raise TypeError(
-                f"GroundTruth.from_values: {len(values)} values for {len(_TRUTH_FIELDS)} fields"
-            )
-        truth = object.__new__(cls)
-        truth.__dict__.update(zip(_TRUTH_FIELDS, values, strict=True))
-        return truth
 
-
-_TRUTH_FIELDS = tuple(GroundTruth.__dataclass_fields__)
 #: The :class:`GroundTruth` field names in field order.
-TRUTH_FIELDS = _TRUTH_FIELDS
+TRUTH_FIELDS = tuple(GroundTruth.__dataclass_fields__)
 #: Read-only constants of the no-contact measurement.
 _ZEROS3 = np.zeros(3)
 _ZEROS3.flags.writeable = False
