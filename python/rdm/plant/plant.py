@@ -489,8 +489,10 @@ class Plant(PlantReadings, PlantTruthReadout):
 
         Every model a :class:`ParametricCeilingEffect` / :class:`NoCeilingEffect`: one Rust
         call (``RotorPlantCore.apply``, the same IEEE operations as the Python form below).
-        Otherwise plain floats in one pass; the arithmetic is the same as
-        :meth:`_rotor_distances` and :meth:`Esc.thrust` give.
+        Kept in Python because a caller's own :class:`CeilingEffect` (any other class, or
+        coefficients whose ``**`` overflows in Python) is Python code the Rust core cannot
+        call per rotor: its ``thrust_ratio`` scales the thrusts here, in plain floats in one
+        pass (the distance arithmetic of :meth:`_rotor_distances`).
         """
         if self._state.rotors_in_core:
             self._rotors.apply()
