@@ -1216,7 +1216,7 @@ class ContactGateCore:
 class PlateContactCore:
     """The foot plate's contact measurement of ``FootContactTracker.measure_contacts``
     (rdm.plant.truth): contact sums, foot-frame force, torque and ZMP from MuJoCo's contact
-    views and ``efc_force`` (elliptic cones), the bits of the numpy forms."""
+    views and ``efc_force`` (elliptic or pyramidal cones, ``mj_contactForce``'s forces)."""
 
     def __new__(cls, geom_body: list[int], environment: list[bool], plate_body: int) -> _Self:
         """``geom_body`` = ``model.geom_bodyid``; ``environment[g]``: geom g is an
@@ -1228,14 +1228,15 @@ class PlateContactCore:
         pos: np.ndarray,
         efc_address: np.ndarray,
         dim: np.ndarray,
+        friction: np.ndarray,
         efc_force: np.ndarray,
         origin: np.ndarray,
         rot: np.ndarray,
-    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray] | None:
+        pyramidal: bool,
+    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
         """``(points, force, torque, zmp)`` (what the robot applies, foot frame; ZMP NaN
-        without normal force) of the plate's contacts, or None when a sum is NaN.
-        ValueError on mismatched shapes, IndexError on a geom or constraint row out of
-        range."""
+        without normal force; NaN sums stay NaN) of the plate's contacts. ValueError on
+        mismatched shapes, IndexError on a geom or constraint row out of range."""
     @staticmethod
     def yaw_about(r0: np.ndarray, r1: np.ndarray) -> float | None:
         """The turn from ``r0`` to ``r1`` (row-major, 9 values) about ``r0``'s z axis; None
