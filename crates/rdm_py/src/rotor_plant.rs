@@ -291,18 +291,7 @@ impl RotorPlantCore {
     /// count non-finite values, new target thrusts. ValueError if the count is wrong
     /// (nothing changes then).
     fn command_duties(&mut self, duties: Vec<f64>) -> PyResult<()> {
-        if duties.len() != self.escs.len() {
-            return Err(PyValueError::new_err(format!(
-                "duties: expected {} values, got {}",
-                self.escs.len(),
-                duties.len()
-            )));
-        }
-        for (i, (e, d)) in self.escs.iter_mut().zip(&duties).enumerate() {
-            let target = e.command(*d);
-            self.inner.set_target(i, target);
-        }
-        Ok(())
+        self.kernel_command_duties(&duties)
     }
 
     /// Thrusts of the last apply/step, ceiling effect included [N].
@@ -508,7 +497,8 @@ impl RotorPlantCore {
 }
 
 impl RotorPlantCore {
-    /// [`RotorPlantCore::command_duties`] on a slice (the lockstep kernel's duty hand-over).
+    /// [`RotorPlantCore::command_duties`] on a slice (its one body; the lockstep kernel's
+    /// duty hand-over calls it directly).
     pub(crate) fn kernel_command_duties(&mut self, duties: &[f64]) -> PyResult<()> {
         if duties.len() != self.escs.len() {
             return Err(PyValueError::new_err(format!(

@@ -21,7 +21,7 @@
 //! [`PlateContactModel::measure`] goes on to the foot-frame numbers of `_contact_result`
 //! (`-(Rᵀ Σf)`, `-(Rᵀ Στ)`, the ZMP `Rᵀ (Σ|f_n| r / Σ|f_n|)`) and [`yaw_about`] is
 //! `_yaw_about`: the products `Rᵀ v` and the dot products summed in index order, as numpy's
-//! small products do (the tests compare the bits against the numpy forms).
+//! small products do (the tests compare the bits against a numpy derivation).
 
 /// One row of MuJoCo's contact list (the fields the sums read).
 #[derive(Debug, Clone, Copy)]
