@@ -93,6 +93,26 @@ def test_decode_uart_json_lines(tmp_path, capsys):
     assert errors == ["3 bytes outside any frame", "message_checksum", "truncated"]
 
 
+def test_bad_frame_lines_are_the_golden_text(tmp_path, capsys):
+    """A corrupt frame's line in both forms, written out by hand: the human line's detail and
+    the JSON line are json.dumps's default text with the keys in the record's order
+    (offset, kind, ok, error, bytes)."""
+    frame = bytearray(hexframe(topic_vec("four_axes/command")))
+    frame[10] ^= 0x40
+    path = tmp_path / "bad.bin"
+    path.write_bytes(bytes(frame))
+    hexed = bytes(frame).hex()
+    assert main(["decode", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert text == f'@0 BAD message_checksum {{"kind": "bad_frame", "bytes": "{hexed}"}}\n'
+    assert main(["decode", "--json", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert text == (
+        '{"offset": 0, "kind": "bad_frame", "ok": false, "error": "message_checksum", '
+        f'"bytes": "{hexed}"}}\n'
+    )
+
+
 def test_decode_learns_ids_from_the_handshake_and_flags_md5_mismatch(tmp_path, capsys):
     reply = [hexframe(v) for v in GOLDEN["handshake"]["client_reply"]]
     # a device whose ids differ from the default layout: imu announced on id 170

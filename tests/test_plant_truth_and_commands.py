@@ -194,16 +194,17 @@ def test_ground_truth_equals_mujocos_data_through_contact_and_flight():
     assert any(not c for c, _ in saw)  # and in flight
 
 
-def test_ground_truth_from_values_equals_the_dataclass_init():
+def test_the_core_record_equals_the_dataclass_init():
+    # RotorPlantCore.truth_record fills the record's __dict__ without the frozen __init__:
+    # the same fields in the same order, the same values, still frozen.
     plant = Plant("rdm", seed=0)
-    values = list(_truth_fields(ground_truth_reference(plant)).values())
-    made = GroundTruth.from_values(*values)
+    made = plant._ground_truth()
+    values = list(_truth_fields(made).values())
     assert list(made.__dict__) == list(GroundTruth(*values).__dict__)
     _assert_same_truth(made, GroundTruth(*values))
+    _assert_same_truth(made, ground_truth_reference(plant))
     with pytest.raises(AttributeError):
         made.time = 1.0  # still frozen
-    with pytest.raises(TypeError):
-        GroundTruth.from_values(*values[:-1])
 
 
 # ------------------------------------------------------------------------- duty commands
@@ -261,16 +262,30 @@ def test_duty_map_equals_the_firmware_inverse_formula():
             assert math.isclose(esc.target_thrust, want, rel_tol=0, abs_tol=1e-12)
 
 
-def test_duty_commands_where_python_raises_keep_the_python_path():
+@pytest.mark.parametrize("volts", [0.0, -24.0, math.nan, math.inf, 1e-160, 1e200])
+def test_a_voltage_without_a_finite_duty_map_is_refused(volts):
+    """0 V, a negative or non-finite voltage, one whose (v_ref / V) ** 2 overflows (1e-160)
+    or rounds to 0 (1e200): refused with the argument's name, the ESC keeps its map."""
     plant = Plant("rdm", seed=0)
-    plant.escs[2].voltage = 0.0  # (v_ref / 0) ** 2 raises: no map for the core
-    with pytest.raises(ZeroDivisionError):
-        plant.set_rotor_duties([0.7, 0.7, 0.7, 0.7])
-    plant.escs[2].voltage = 24.0
+    esc = plant.escs[2]
+    with pytest.raises(ValueError, match=r"^voltage: "):
+        esc.voltage = volts
+    with pytest.raises(ValueError, match=r"^voltage: "):
+        plant.set_battery_voltage(volts)
+    with pytest.raises(ValueError, match=r"^voltage: "):
+        Esc(esc.params, volts)
+    assert esc.voltage == esc.params.v_ref
     plant.set_rotor_duties([0.7, 0.7, 0.7, 0.7])
-    ref = Esc(plant.escs[2].params, 24.0)
-    ref.command_duty(0.7)
-    assert plant.escs[2].target_thrust == ref.target_thrust
+    _, want, _ = _steady_thrust(esc.params, 0.7, esc.params.v_ref)
+    assert same_bits(esc.target_thrust, want)
+
+
+def test_the_escs_are_fixed():
+    plant = Plant("rdm", seed=0)
+    with pytest.raises(AttributeError):
+        plant.escs = list(plant.escs)
+    with pytest.raises(TypeError):
+        plant.escs[0] = Esc()  # type: ignore[index]
 
 
 # ------------------------------------------------------------------------------- mocap

@@ -1,8 +1,8 @@
-"""The flying robot's ground-truth record in one Rust call (``RotorPlantCore.truth_free``)
-against the record built from the tracker's measurement and the MjData copies
-(``Plant._ground_truth_arrays``) and the truth derived directly from MuJoCo
-(``truth_reference.ground_truth_reference``: the contact objects, ``mj_contactForce``, numpy
-copies); the contact measurement in Rust against its numpy form and that derivation."""
+"""The ground-truth record in one Rust call (``RotorPlantCore.truth_record``, with its own
+no-contact numbers for the flying robot or the tracker's measurement) against the truth
+derived directly from MuJoCo (``truth_reference.ground_truth_reference``: the contact
+objects, ``mj_contactForce``, numpy copies); the contact measurement in Rust against that
+derivation."""
 
 from __future__ import annotations
 
@@ -38,17 +38,22 @@ def _assert_same(a: GroundTruth, b: GroundTruth) -> None:
 
 
 @contextmanager
-def _truth_free_calls(plant: Plant) -> Iterator[list[str]]:
-    """The ``truth_free`` calls of ``plant``'s rotor core while the block runs (a spy in
-    front of it)."""
-    calls: list[str] = []
+def _free_records(plant: Plant) -> Iterator[list[bool]]:
+    """Per ``truth_record`` call of ``plant``'s rotor core while the block runs, whether it
+    wrote the no-contact numbers itself (no measurement given; a spy in front of it)."""
+    calls: list[bool] = []
     real = plant._rotors
 
     class Spy:
         def __getattr__(self, name):
-            if name == "truth_free":
-                calls.append(name)
-            return getattr(real, name)
+            if name != "truth_record":
+                return getattr(real, name)
+
+            def record(*args):
+                calls.append(len(args) == 8 and args[7] is None)
+                return real.truth_record(*args)
+
+            return record
 
     plant._rotors = Spy()
     try:
@@ -67,51 +72,43 @@ def _takeoff_plants(fixed_base: bool = False, n: int = 3) -> list[Plant]:
 
 
 @pytest.mark.parametrize("fixed_base", [False, True])
-def test_one_call_record_equals_the_other_forms_through_takeoff_and_flight(fixed_base):
+def test_one_call_record_equals_the_reference_through_takeoff_and_flight(fixed_base):
     # On the floor (contacts, an anchor), lift-off (anchor released after 0.1 s), flight
-    # with changing thrusts and joint targets: the one-call record is taken whenever the
-    # tracker is idle, and every record equals the two other forms on twin plants.
-    fast, arrays, plain = _takeoff_plants(fixed_base)
+    # with changing thrusts and joint targets: the core writes the no-contact numbers
+    # itself whenever the tracker is idle without plate contact, and every record equals
+    # the reference derivation on a twin plant.
+    fast, plain = _takeoff_plants(fixed_base, n=2)
     rng = np.random.default_rng(5)
-    used = 0
+    free_calls: list[bool] = []
     idle_seen = {True: 0, False: 0}
     for k in range(1200):
         if k == 200 or (k > 200 and k % 150 == 0):
             thrusts = rng.uniform(8.0, 11.0, 4)
             targets = rng.uniform(-0.4, 0.4, len(fast._qadr))
-            for p in (fast, arrays, plain):
+            for p in (fast, plain):
                 p.set_rotor_thrusts(thrusts)
                 p.set_servo_targets(targets)
-        for p in (fast, arrays, plain):
+        for p in (fast, plain):
             p.step(1)
         if k % 4 == 0:
             idle = fast._fresh().ncon == 0 and fast._tracker.idle()
             idle_seen[idle] += 1
+            with _free_records(fast) as calls:
+                a = fast._ground_truth()
+            assert len(calls) == 1
+            free_calls += calls
             if idle:
-                d = fast._fresh()
-                direct = fast._rotors.truth_free(
-                    float(d.time),
-                    fast._v_xpos,
-                    fast._v_xquat,
-                    fast._v_xmat,
-                    fast._v_qpos,
-                    fast._v_qvel,
-                    fast._v_subtree_com,
-                )
-                assert direct is not None
-                used += 1
-            a = fast._ground_truth()
-            b = arrays._ground_truth_arrays()
-            c = ground_truth_reference(plain)
-            _assert_same(a, b)
-            _assert_same(a, c)
+                assert calls == [True]
+            if calls == [True]:  # the core's numbers only where they are the measurement's
+                assert a.foot_contact_points == 0 and not a.foot_slip.any()
+            _assert_same(a, ground_truth_reference(plain))
             # the tracker state stays in step too (the one-call path changes nothing)
-            for p in (arrays, plain):
-                assert p._tracker.last_contact_time == fast._tracker.last_contact_time
-                assert (p._tracker.anchor_pos is None) is (fast._tracker.anchor_pos is None)
+            assert plain._tracker.last_contact_time == fast._tracker.last_contact_time
+            assert (plain._tracker.anchor_pos is None) is (fast._tracker.anchor_pos is None)
     if not fixed_base:
-        assert idle_seen[True] > 50 and idle_seen[False] > 10  # both paths were exercised
-        assert used == idle_seen[True]
+        assert idle_seen[True] > 50 and idle_seen[False] > 10  # both kinds were exercised
+        # on the floor resting on other links counts as free too; in contact, a measurement
+        assert idle_seen[True] <= sum(free_calls) < len(free_calls)
 
 
 def test_records_are_fresh_arrays_not_views_or_shared():
@@ -135,7 +132,9 @@ def test_records_are_fresh_arrays_not_views_or_shared():
         a.time = 1.0  # still a frozen record
 
 
-def test_non_finite_plate_frame_takes_the_measurement_path():
+def test_non_finite_plate_frame_gives_the_reference_bits():
+    # The core's no-contact force and torque are -(R.T @ 0) summed in row order: NaN in the
+    # column of a non-finite entry, the NaN bits numpy's form gives.
     plant, ref = _takeoff_plants(n=2)
     for p in (plant, ref):
         p.reset(base_position=(0.0, 0.0, 0.8))
@@ -143,19 +142,10 @@ def test_non_finite_plate_frame_takes_the_measurement_path():
     for value in (np.nan, np.inf, -np.inf):
         for p in (plant, ref):
             p._data.xmat[p._plate_body][4] = value
-        d = plant._fresh()
-        views = (
-            plant._v_xpos,
-            plant._v_xquat,
-            plant._v_xmat,
-            plant._v_qpos,
-            plant._v_qvel,
-            plant._v_subtree_com,
-        )
-        assert plant._rotors.truth_free(float(d.time), *views) is None
-        with np.errstate(invalid="ignore"):
+        with _free_records(plant) as calls, np.errstate(invalid="ignore"):
             a = plant._ground_truth()
             _assert_same(a, ground_truth_reference(ref))
+        assert calls == [True]
         # -(R.T @ 0): NaN in the column of the non-finite entry (R[1, 1])
         assert np.isnan(a.foot_contact_force[1]) and not np.isnan(a.foot_contact_force[0])
 
@@ -184,19 +174,23 @@ def test_record_setup_and_call_errors():
     views = (d.xpos, d.xquat, d.xmat, d.qpos, d.qvel, d.subtree_com)
     fresh = RotorPlantCore([], [], None, d.site_xpos, d.site_xmat, d.ctrl)
     with pytest.raises(ValueError, match="set_truth_record"):
-        fresh.truth_free(0.0, *views)
+        fresh.truth_record(0.0, *views)
     with pytest.raises(ValueError, match="fields"):
         fresh.set_truth_record(object.__new__, GroundTruth, TRUTH_FIELDS[:-1], 0)
-    fresh.set_truth_record(object.__new__, GroundTruth, TRUTH_FIELDS, d.xpos.shape[0])
-    with pytest.raises(IndexError, match="xmat"):
-        fresh.truth_free(0.0, *views)
     fresh.set_truth_record(object.__new__, GroundTruth, TRUTH_FIELDS, plant._plate_body)
     with pytest.raises(ValueError, match="set_truth_layout"):
-        fresh.truth_free(0.0, *views)  # the copies' layout is still missing
+        fresh.truth_record(0.0, *views)  # the copies' layout is still missing
+    rotors = plant._rotors
+    with pytest.raises(ValueError, match=r"^measured: expected"):
+        rotors.truth_record(0.0, *views, (0, None))
+    rotors.set_truth_record(object.__new__, GroundTruth, TRUTH_FIELDS, d.xpos.shape[0])
+    with pytest.raises(IndexError, match="xmat"):
+        rotors.truth_record(0.0, *views)
+    rotors.set_truth_record(object.__new__, GroundTruth, TRUTH_FIELDS, plant._plate_body)
     with pytest.raises(ValueError, match="xmat"):
-        plant._rotors.truth_free(0.0, d.xpos, d.xquat, d.xmat[::2], d.qpos, d.qvel, d.subtree_com)
+        rotors.truth_record(0.0, d.xpos, d.xquat, d.xmat[::2], d.qpos, d.qvel, d.subtree_com)
     with pytest.raises(TypeError):
-        plant._rotors.truth_free(
+        rotors.truth_record(
             0.0, d.xpos, d.xquat, d.xmat.astype(np.float32), d.qpos, d.qvel, d.subtree_com
         )
     # The plant's own record still works after all that on another core.
@@ -230,15 +224,16 @@ def _measures_equal(a: tuple, b: tuple) -> None:
             assert struct.pack("<d", x) == struct.pack("<d", y)
 
 
-def test_contact_measurement_and_its_numpy_form_equal_mujocos_contacts_when_perched():
+def test_contact_measurement_equals_mujocos_contacts_when_perched():
     # Perched on the ceiling (4 plate contacts), pushed sideways and twisted (slip, yaw,
-    # contacts thinning out), then released: three twin plants, one per form.
+    # contacts thinning out), then released: twin plants, the Rust measurement on one, the
+    # mj_contactForce derivation on the other.
     thrust = _perch_thrusts(4.0)
-    plants = [_perch_plant(NoCeilingEffect()) for _ in range(3)]
+    plants = [_perch_plant(NoCeilingEffect()) for _ in range(2)]
     for p in plants:
         p.reset(base_position=(0.0, 0.0, 2.0 - 5e-4), thrusts=thrust)
         p.set_rotor_thrusts(thrust)
-    fast, arrays, plain = plants
+    fast, plain = plants
     seen = set()
     for k in range(900):
         for p in plants:
@@ -251,71 +246,41 @@ def test_contact_measurement_and_its_numpy_form_equal_mujocos_contacts_when_perc
             p.step(1)
         if k % 3 == 0:
             a = fast._tracker.measure_contacts(fast._fresh())
-            b = arrays._tracker.measure_contacts_arrays(arrays._fresh())
             c = measure_reference(plain._tracker, plain._fresh())
-            _measures_equal(a, b)
             _measures_equal(a, c)
             seen.add((a[0], a[5] != 0.0))
     assert {n for n, _ in seen} == {0, 1, 2, 3, 4}  # perched on 4 points .. released
     assert any(n > 0 and yaw for n, yaw in seen)  # twisted while in contact
 
 
-def test_a_nan_in_the_contact_sums_takes_the_array_form():
-    thrust = _perch_thrusts(4.0)
-    plants = [_perch_plant(NoCeilingEffect()) for _ in range(2)]
-    for p in plants:
-        p.reset(base_position=(0.0, 0.0, 2.0 - 5e-4), thrusts=thrust)
-        p.set_rotor_thrusts(thrust)
-        p.step(60)
-    fast, ref = plants
-    for p in plants:
-        d = p._fresh()
-        assert d.ncon > 0
-        p._data.contact.pos[0] = [np.nan, 0.0, np.inf]
-    calls = []
-    arrays = fast._tracker.measure_contacts_arrays
-
-    def spy(data):
-        calls.append(1)
-        return arrays(data)
-
-    fast._tracker.measure_contacts_arrays = spy
-    with np.errstate(invalid="ignore"):
-        a = fast._tracker.measure_contacts(fast._data)
-        b = ref._tracker.measure_contacts_arrays(ref._data)
-    assert calls == [1]
-    _measures_equal(a, b)
-
-
-def test_resting_on_other_links_takes_the_one_call_record():
+def test_resting_on_other_links_takes_the_no_contact_numbers():
     """The stack's robot on the floor rests on its root and middle links, not the foot
-    plate: contacts the measurement does not sum, so the one-call record (its numbers for
-    an empty contact list) is taken, equal to the two other forms on twin plants; a plate
-    contact (perched on the ceiling) keeps the measurement path."""
+    plate: contacts the measurement does not sum, so the core writes its numbers for an
+    empty contact list, equal to the reference on a twin plant; a plate contact (perched on
+    the ceiling) takes the tracker's measurement."""
     plants = []
-    for _ in range(3):
+    for _ in range(2):
         # awake throughout: this test is about the contacts of the resting robot, which a
         # sleeping robot does not have (rdm.plant.sleep)
         p = Plant("rdm", seed=0, ceiling_height=1.6, floor_height=0.0, sleep=False)
         p.reset(base_position=(0.0, 0.0, 0.12))
         plants.append(p)
-    fast, arrays, plain = plants
-    one_call = seen = 0
+    fast, plain = plants
+    free = seen = 0
     for k in range(600):
         for p in plants:
             p.step(1)
         if k % 10 == 9:
             d = fast._fresh()
             plate = fast._tracker.plate_contact(d)
-            with _truth_free_calls(fast) as calls:
+            with _free_records(fast) as calls:
                 a = fast._ground_truth()
-            one_call += len(calls)
-            _assert_same(a, arrays._ground_truth_arrays())
+            free += sum(calls)
             _assert_same(a, ground_truth_reference(plain))
             if d.ncon and not plate:
                 seen += 1
     assert seen > 40  # resting on the floor, the plate free
-    assert one_call == 60 and fast._tracker.idle()
+    assert free == 60 and fast._tracker.idle()
 
     perched = _perch_plant(NoCeilingEffect())
     twin = _perch_plant(NoCeilingEffect())
@@ -324,6 +289,7 @@ def test_resting_on_other_links_takes_the_one_call_record():
         p.step(200)
     d = perched._fresh()
     assert d.ncon and perched._tracker.plate_contact(d)
-    a = perched._ground_truth()
-    assert a.foot_contact_points > 0
+    with _free_records(perched) as calls:
+        a = perched._ground_truth()
+    assert calls == [False] and a.foot_contact_points > 0
     _assert_same(a, ground_truth_reference(twin))

@@ -1145,10 +1145,10 @@ class RotorPlantCore:
     def set_truth_record(
         self, new: Callable[[type], Any], cls: type, fields: tuple[str, ...], plate_body: int
     ) -> None:
-        """The record ``truth_free`` builds: ``new(cls)`` with its ``__dict__`` filled in
+        """The record ``truth_record`` builds: ``new(cls)`` with its ``__dict__`` filled in
         ``fields`` order (the 18 GroundTruth fields; ValueError otherwise), and the foot plate
-        body of the contact measurement."""
-    def truth_free(
+        body of the no-contact numbers."""
+    def truth_record(
         self,
         time: float,
         xpos: np.ndarray,
@@ -1157,11 +1157,13 @@ class RotorPlantCore:
         qpos: np.ndarray,
         qvel: np.ndarray,
         subtree_com: np.ndarray,
-    ) -> Any | None:
-        """The whole ground-truth record of a plant with no contact and no contact anchor:
-        the ``truth_arrays`` values, the EE quaternion as zeros (filled by the caller), no
-        contact, force/torque -0.0, ZMP NaN, slip 0, yaw 0; None if the plate frame is not
-        finite."""
+        measured: tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float] | None = None,
+    ) -> Any:
+        """The whole ground-truth record: the ``truth_arrays`` values, the EE quaternion as
+        zeros (filled by the caller) and ``measured`` = ``FootContactTracker.measure``'s
+        (points, force, torque, zmp, slip, slip_yaw), or None for no plate contact and no
+        anchor: no contact, force/torque ``-(R.T @ 0)`` (R the plate frame), ZMP NaN, slip 0,
+        yaw 0. ValueError on a ``measured`` of another length."""
 
 # --- plate contact (ground truth) ---
 @_final
@@ -1215,7 +1217,7 @@ class ContactGateCore:
 class PlateContactCore:
     """The foot plate's contact measurement of ``FootContactTracker.measure_contacts``
     (rdm.plant.truth): contact sums, foot-frame force, torque and ZMP from MuJoCo's contact
-    views and ``efc_force`` (elliptic cones), the bits of the numpy forms."""
+    views and ``efc_force`` (elliptic or pyramidal cones, ``mj_contactForce``'s forces)."""
 
     def __new__(cls, geom_body: list[int], environment: list[bool], plate_body: int) -> _Self:
         """``geom_body`` = ``model.geom_bodyid``; ``environment[g]``: geom g is an
@@ -1227,14 +1229,15 @@ class PlateContactCore:
         pos: np.ndarray,
         efc_address: np.ndarray,
         dim: np.ndarray,
+        friction: np.ndarray,
         efc_force: np.ndarray,
         origin: np.ndarray,
         rot: np.ndarray,
-    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray] | None:
+        pyramidal: bool,
+    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
         """``(points, force, torque, zmp)`` (what the robot applies, foot frame; ZMP NaN
-        without normal force) of the plate's contacts, or None when a sum is NaN.
-        ValueError on mismatched shapes, IndexError on a geom or constraint row out of
-        range."""
+        without normal force; NaN sums stay NaN) of the plate's contacts. ValueError on
+        mismatched shapes, IndexError on a geom or constraint row out of range."""
     @staticmethod
     def yaw_about(r0: np.ndarray, r1: np.ndarray) -> float | None:
         """The turn from ``r0`` to ``r1`` (row-major, 9 values) about ``r0``'s z axis; None

@@ -1,6 +1,6 @@
 //! Binding of `rdm_core::sim::plate_contact`: the foot plate's contact measurement of
-//! `rdm.plant.truth.FootContactTracker.measure_contacts`, read straight from MuJoCo's
-//! contact-list views (strided numpy arrays) and `efc_force`.
+//! `rdm.plant.truth.FootContactTracker.measure_contacts` (its only form), read straight from
+//! MuJoCo's contact-list views (strided numpy arrays) and `efc_force`.
 
 use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyIndexError, PyValueError};
@@ -42,12 +42,13 @@ impl PlateContactCore {
     }
 
     /// The plate's contacts measured in its frame: ``geom`` (n, 2), ``frame`` (n, 9),
-    /// ``pos`` (n, 3), ``efc_address`` (n,), ``dim`` (n,) (the ``data.contact`` views of an
-    /// elliptic-cone model), ``efc_force``, the plate origin and its row-major rotation
-    /// (``data.xmat`` row). Returns ``(points, force, torque, zmp)`` (new float64 arrays:
-    /// what the robot applies, foot frame; ZMP NaN without a normal force), or None when a
-    /// sum is NaN. ValueError (``RdmError`` for origin / rot) on mismatched shapes, IndexError
-    /// on a geom or constraint row outside the model / ``efc_force``.
+    /// ``pos`` (n, 3), ``efc_address`` (n,), ``dim`` (n,), ``friction`` (n, 5) (the
+    /// ``data.contact`` views), ``efc_force``, the plate origin and its row-major rotation
+    /// (``data.xmat`` row), and whether the friction cone is pyramidal (``opt.cone``).
+    /// Returns ``(points, force, torque, zmp)`` (new float64 arrays: what the robot applies,
+    /// foot frame; ZMP NaN without a normal force; NaN sums stay NaN). ValueError
+    /// (``RdmError`` for origin / rot) on mismatched shapes, IndexError on a geom or
+    /// constraint row outside the model / ``efc_force``.
     #[allow(clippy::too_many_arguments)]
     fn measure<'py>(
         &self,
@@ -57,11 +58,14 @@ impl PlateContactCore {
         pos: PyReadonlyArray2<'py, f64>,
         efc_address: PyReadonlyArray1<'py, i32>,
         dim: PyReadonlyArray1<'py, i32>,
+        friction: PyReadonlyArray2<'py, f64>,
         efc_force: PyReadonlyArray1<'py, f64>,
         origin: PyReadonlyArray1<'py, f64>,
         rot: PyReadonlyArray1<'py, f64>,
-    ) -> PyResult<Option<MeasureOut<'py>>> {
+        pyramidal: bool,
+    ) -> PyResult<MeasureOut<'py>> {
         let (geom, frame, pos) = (geom.as_array(), frame.as_array(), pos.as_array());
+        let friction = friction.as_array();
         let (efc_address, dim) = (efc_address.as_array(), dim.as_array());
         let n = geom.nrows();
         if geom.ncols() != 2
@@ -69,15 +73,17 @@ impl PlateContactCore {
             || pos.dim() != (n, 3)
             || efc_address.len() != n
             || dim.len() != n
+            || friction.dim() != (n, 5)
         {
             return Err(PyValueError::new_err(format!(
-                "contact views: geom {:?}, frame {:?}, pos {:?}, efc_address {}, dim {} \
-                 (expected (n, 2), (n, 9), (n, 3), n, n)",
+                "contact views: geom {:?}, frame {:?}, pos {:?}, efc_address {}, dim {}, \
+                 friction {:?} (expected (n, 2), (n, 9), (n, 3), n, n, (n, 5))",
                 geom.dim(),
                 frame.dim(),
                 pos.dim(),
                 efc_address.len(),
-                dim.len()
+                dim.len(),
+                friction.dim()
             )));
         }
         let origin: [f64; 3] = to_vector::<3>(&origin, "origin")?.into();
@@ -89,6 +95,7 @@ impl PlateContactCore {
                 pos: [0.0; 3],
                 efc_address: efc_address[i],
                 dim: dim[i],
+                friction: [0.0; 5],
             };
             for (k, v) in row.frame.iter_mut().enumerate() {
                 *v = frame[(i, k)];
@@ -96,23 +103,28 @@ impl PlateContactCore {
             for (k, v) in row.pos.iter_mut().enumerate() {
                 *v = pos[(i, k)];
             }
+            for (k, v) in row.friction.iter_mut().enumerate() {
+                *v = friction[(i, k)];
+            }
             row
         });
-        let measured = match efc_force.as_slice() {
-            Ok(f) => self.inner.measure(rows, f, origin, &rot),
-            Err(_) => self
-                .inner
-                .measure(rows, &efc_force.as_array().to_vec(), origin, &rot),
+        let m = match efc_force.as_slice() {
+            Ok(f) => self.inner.measure(rows, f, origin, &rot, pyramidal),
+            Err(_) => self.inner.measure(
+                rows,
+                &efc_force.as_array().to_vec(),
+                origin,
+                &rot,
+                pyramidal,
+            ),
         }
         .map_err(|e| PyIndexError::new_err(e.to_string()))?;
-        Ok(measured.map(|m| {
-            (
-                m.points,
-                PyArray1::from_slice(py, &m.force),
-                PyArray1::from_slice(py, &m.torque),
-                PyArray1::from_slice(py, &m.zmp),
-            )
-        }))
+        Ok((
+            m.points,
+            PyArray1::from_slice(py, &m.force),
+            PyArray1::from_slice(py, &m.torque),
+            PyArray1::from_slice(py, &m.zmp),
+        ))
     }
 
     /// ``_yaw_about(r0[:, 2], r0, r1)`` of two row-major rotations (9 values each): the

@@ -25,11 +25,11 @@ pub(crate) struct RotorPlantCore {
     ctrl: Py<PyArray1<f64>>,
     /// Where the ground truth reads MjData (see ``set_truth_layout``); None: not set.
     truth: Option<TruthLayout>,
-    /// How :meth:`truth_free` builds a record (see ``set_truth_record``); None: not set.
+    /// How :meth:`truth_record` builds a record (see ``set_truth_record``); None: not set.
     record: Option<TruthRecord>,
 }
 
-/// The record class of :meth:`RotorPlantCore.truth_free` (``rdm.plant.truth.GroundTruth``).
+/// The record class of :meth:`RotorPlantCore.truth_record` (``rdm.plant.truth.GroundTruth``).
 struct TruthRecord {
     /// ``object.__new__``
     new: Py<PyAny>,
@@ -291,18 +291,7 @@ impl RotorPlantCore {
     /// count non-finite values, new target thrusts. ValueError if the count is wrong
     /// (nothing changes then).
     fn command_duties(&mut self, duties: Vec<f64>) -> PyResult<()> {
-        if duties.len() != self.escs.len() {
-            return Err(PyValueError::new_err(format!(
-                "duties: expected {} values, got {}",
-                self.escs.len(),
-                duties.len()
-            )));
-        }
-        for (i, (e, d)) in self.escs.iter_mut().zip(&duties).enumerate() {
-            let target = e.command(*d);
-            self.inner.set_target(i, target);
-        }
-        Ok(())
+        self.kernel_command_duties(&duties)
     }
 
     /// Thrusts of the last apply/step, ceiling effect included [N].
@@ -385,7 +374,7 @@ impl RotorPlantCore {
             .into_pyobject(py)
     }
 
-    /// The record :meth:`truth_free` builds: ``new(cls)`` (``object.__new__``) with its
+    /// The record :meth:`truth_record` builds: ``new(cls)`` (``object.__new__``) with its
     /// ``__dict__`` filled in ``fields`` order (the 18 ``GroundTruth`` fields), and the foot
     /// plate body whose frame the contact measurement uses.
     fn set_truth_record(
@@ -411,14 +400,17 @@ impl RotorPlantCore {
         Ok(())
     }
 
-    /// The whole ground-truth record of a plant with no contact and no contact anchor (the
-    /// flying robot) in one call: the :meth:`truth_arrays` values, the end-effector
-    /// quaternion as zeros (the caller fills it with ``mju_mat2Quat``), no contact, force and
-    /// torque ``-(R.T @ 0)`` = -0.0 each (R the plate's frame), ZMP NaN, slip 0, slip yaw 0:
-    /// the values of ``FootContactTracker.measure`` for an empty contact list. None (nothing
-    /// built) when the plate frame holds a non-finite value: the caller takes its own path.
+    /// The whole ground-truth record in one call: the :meth:`truth_arrays` values, the
+    /// end-effector quaternion as zeros (the caller fills it with ``mju_mat2Quat``) and the
+    /// foot contact measurement ``measured`` = ``(points, force, torque, zmp, slip,
+    /// slip_yaw)`` of ``FootContactTracker.measure`` (its objects as given; in contact when
+    /// ``points > 0``), or None for a plant with no plate contact and no contact anchor (the
+    /// flying robot): no contact, force and torque ``-(R.T @ 0)`` (R the plate's frame,
+    /// summed in row order: -0.0 for a finite R), ZMP NaN, slip 0, slip yaw 0, the numbers
+    /// ``measure`` gives for an empty contact list.
     #[allow(clippy::too_many_arguments)]
-    fn truth_free<'py>(
+    #[pyo3(signature = (time, xpos, xquat, xmat, qpos, qvel, subtree_com, measured=None))]
+    fn truth_record<'py>(
         &self,
         py: Python<'py>,
         time: f64,
@@ -428,17 +420,19 @@ impl RotorPlantCore {
         qpos: &Bound<'py, numpy::PyArrayDyn<f64>>,
         qvel: &Bound<'py, numpy::PyArrayDyn<f64>>,
         subtree_com: &Bound<'py, numpy::PyArrayDyn<f64>>,
-    ) -> PyResult<Option<Bound<'py, PyAny>>> {
+        measured: Option<&Bound<'py, PyTuple>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let record = self
             .record
             .as_ref()
             .ok_or_else(|| PyValueError::new_err("set_truth_record: not called"))?;
-        let pb = record.plate_body;
-        let plate = c_slice(xmat, "xmat")?
-            .get(pb * 9..pb * 9 + 9)
-            .ok_or_else(|| PyIndexError::new_err(format!("xmat: body {pb} out of range")))?;
-        if !plate.iter().all(|v| v.is_finite()) {
-            return Ok(None);
+        if let Some(m) = measured {
+            if m.len() != 6 {
+                return Err(PyValueError::new_err(format!(
+                    "measured: expected (points, force, torque, zmp, slip, slip_yaw), got {} values",
+                    m.len()
+                )));
+            }
         }
         let arrays = self.truth_arrays(py, xpos, xquat, qpos, qvel, subtree_com)?;
         let obj = record.new.bind(py).call1((record.cls.bind(py),))?;
@@ -455,14 +449,37 @@ impl RotorPlantCore {
         }
         dict.set_item(f(9)?, PyArray1::<f64>::zeros(py, 4, false))?;
         dict.set_item(f(10)?, arrays.get_item(8)?)?;
-        dict.set_item(f(11)?, false)?;
-        dict.set_item(f(12)?, 0)?;
-        dict.set_item(f(13)?, PyArray1::from_slice(py, &[-0.0; 3]))?;
-        dict.set_item(f(14)?, PyArray1::from_slice(py, &[-0.0; 3]))?;
-        dict.set_item(f(15)?, PyArray1::from_slice(py, &[f64::NAN; 2]))?;
-        dict.set_item(f(16)?, PyArray1::<f64>::zeros(py, 2, false))?;
-        dict.set_item(f(17)?, 0.0)?;
-        Ok(Some(obj))
+        match measured {
+            Some(m) => {
+                let points = m.get_item(0)?;
+                dict.set_item(f(11)?, points.gt(0)?)?;
+                dict.set_item(f(12)?, points)?;
+                for i in 1..6 {
+                    dict.set_item(f(i + 12)?, m.get_item(i)?)?;
+                }
+            }
+            None => {
+                let pb = record.plate_body;
+                let plate = c_slice(xmat, "xmat")?
+                    .get(pb * 9..pb * 9 + 9)
+                    .ok_or_else(|| {
+                        PyIndexError::new_err(format!("xmat: body {pb} out of range"))
+                    })?;
+                // -(R.T @ 0), each component summed over R's rows in order
+                let mut zero = [0.0f64; 3];
+                for (j, z) in zero.iter_mut().enumerate() {
+                    *z = -(plate[j] * 0.0 + plate[3 + j] * 0.0 + plate[6 + j] * 0.0);
+                }
+                dict.set_item(f(11)?, false)?;
+                dict.set_item(f(12)?, 0)?;
+                dict.set_item(f(13)?, PyArray1::from_slice(py, &zero))?;
+                dict.set_item(f(14)?, PyArray1::from_slice(py, &zero))?;
+                dict.set_item(f(15)?, PyArray1::from_slice(py, &[f64::NAN; 2]))?;
+                dict.set_item(f(16)?, PyArray1::<f64>::zeros(py, 2, false))?;
+                dict.set_item(f(17)?, 0.0)?;
+            }
+        }
+        Ok(obj)
     }
 
     /// Overwrite the applied thrusts (computed by the caller's own ceiling models).
@@ -480,7 +497,8 @@ impl RotorPlantCore {
 }
 
 impl RotorPlantCore {
-    /// [`RotorPlantCore::command_duties`] on a slice (the lockstep kernel's duty hand-over).
+    /// [`RotorPlantCore::command_duties`] on a slice (its one body; the lockstep kernel's
+    /// duty hand-over calls it directly).
     pub(crate) fn kernel_command_duties(&mut self, duties: &[f64]) -> PyResult<()> {
         if duties.len() != self.escs.len() {
             return Err(PyValueError::new_err(format!(

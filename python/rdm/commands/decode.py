@@ -197,11 +197,6 @@ def bad_reason(rec: dict[str, Any]) -> str:
 
 def _json_line(rec: dict[str, Any]) -> str:
     """One record as valid JSON: a value that is not a finite number is null."""
-    if _plain_bad_frame(rec):  # json.dumps's own text for these keys and values
-        return (
-            f'{{"offset": {rec["offset"]}, "kind": "bad_frame", "ok": false, '
-            f'"error": "{rec["error"]}", "bytes": "{rec["bytes"]}"}}'
-        )
     try:
         return json_text(rec, default=str)
     except ValueError:
@@ -216,29 +211,8 @@ def _where(rec: dict[str, Any]) -> str:
     return "?"
 
 
-#: Bad-frame reasons of the UART decoder: plain words, written without a JSON encoder.
-_PLAIN_REASONS = frozenset(
-    ("version", "length_checksum", "oversize", "message_checksum", "timeout", "truncated")
-)
-
-
-def _plain_bad_frame(rec: dict[str, Any]) -> bool:
-    """A UART bad-frame record of the usual five keys (garbage floods are made of them)."""
-    return (
-        len(rec) == 5
-        and rec.get("kind") == "bad_frame"
-        and rec.get("error") in _PLAIN_REASONS
-        and rec.get("offset").__class__ is int
-        and rec.get("bytes").__class__ is str
-        and rec["bytes"].isalnum()
-    )
-
-
 def format_record(rec: dict[str, Any]) -> str:
     """One human-readable line for a decoded record."""
-    if _plain_bad_frame(rec):  # the general form below, without json.dumps
-        detail = f'{{"kind": "bad_frame", "bytes": "{rec["bytes"]}"}}'
-        return f"@{rec['offset']} BAD {rec['error']} {detail}"
     if not rec.get("ok", False):
         detail = {k: v for k, v in rec.items() if k not in ("offset", "line", "ok", "error")}
         return f"{_where(rec)} BAD {rec.get('error')} {json.dumps(detail, default=str)}"

@@ -49,9 +49,9 @@ def _attach_plant(kernel: _rdm.LockstepKernel, plant: Any) -> None:
 
 def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[], tuple | None]:
     """The sample paths the kernel reads for ``bridge`` (called again after Python code
-    ran): None when its tick has no Rust form now (ESCs outside the Rust duty map, a wrench
-    sink other than ``leptrino``'s ``set_wrench_values``), else the foot wrench path
-    (addresses, noise core, normal stream), the IMU path when its only sink is ``spinal``'s
+    ran): None when its tick has no Rust form now (a wrench sink other than ``leptrino``'s
+    ``set_wrench_values``), else the foot wrench path (addresses, noise core, normal stream),
+    the IMU path when its only sink is ``spinal``'s
     ``set_imu_sample`` (else None: an IMU ms is Python's), the truth call and the parts it
     may change. Mocap samples are Python's. The bridge's state (counters, schedule, targets,
     duties, battery) is its ``_core``, the one object both tick forms use; the kernel ticks
@@ -64,8 +64,6 @@ def _bridge_plan(bridge: PlantBridge, leptrino: Any, spinal: Any) -> Callable[[]
 
     def plan() -> tuple | None:
         b = bridge
-        if not (plant._duties_in_core and all(e._v_factor is not None for e in plant.escs)):
-            return None
         imu_on, wrench_on, _, truth_on = (n > 0 for n in b.schedule.every)
         adr, core, normals = (0, 0), None, None
         if wrench_on:

@@ -79,12 +79,22 @@ class _ThrustStore(Protocol):
     def set_rejected(self, i: int, value: int) -> None: ...
 
 
-def _v_factor_or_none(params: EscParams, voltage: float) -> float | None:
-    """``params.v_factor(voltage)``, None where Python raises (0 V, overflow)."""
+def _checked_v_factor(params: EscParams, voltage: float) -> float:
+    """``params.v_factor(voltage)``, or ValueError naming ``voltage`` where it is not a
+    positive finite number (0 V, a voltage whose factor overflows or rounds to 0): every
+    ESC map then divides by a usable factor, in Rust and in :meth:`EscParams.steady_thrust`."""
+    if not (math.isfinite(voltage) and voltage > 0):
+        raise ValueError(f"voltage: must be a positive number, got {voltage}")
     try:
-        return params.v_factor(voltage)
-    except (ZeroDivisionError, OverflowError):
-        return None
+        factor = params.v_factor(voltage)
+    except OverflowError:
+        factor = math.inf
+    if not (math.isfinite(factor) and factor > 0):
+        raise ValueError(
+            f"voltage: (v_ref / voltage) ** 2 must be a positive finite number, got {voltage}"
+            f" (v_ref {params.v_ref})"
+        )
+    return factor
 
 
 class Esc:
@@ -102,8 +112,8 @@ class Esc:
         self._own_rejected = 0
         self._params = params or EscParams()
         self._voltage = self._params.v_ref if voltage is None else voltage
-        #: (v_ref / voltage) ** 2, None where Python cannot compute it.
-        self._v_factor = _v_factor_or_none(self._params, self._voltage)
+        #: (v_ref / voltage) ** 2 (a positive finite number, see :func:`_checked_v_factor`).
+        self._v_factor = _checked_v_factor(self._params, self._voltage)
         self.duty = IDLE_DUTY
         self.rejected = 0  # count of non-finite commands replaced by a stop
 
@@ -118,8 +128,7 @@ class Esc:
         store = self._store
         if store is not None:
             p = self._params
-            vf = math.nan if self._v_factor is None else self._v_factor
-            store.set_esc_map(self._slot, p.p2, p.p1, p.p0, p.thrust_max, vf)
+            store.set_esc_map(self._slot, p.p2, p.p1, p.p0, p.thrust_max, self._v_factor)
 
     @property
     def params(self) -> EscParams:
@@ -128,8 +137,8 @@ class Esc:
 
     @params.setter
     def params(self, value: EscParams) -> None:
+        self._v_factor = _checked_v_factor(value, self._voltage)
         self._params = value
-        self._v_factor = _v_factor_or_none(value, self._voltage)
         self._push_map()
 
     @property
@@ -139,8 +148,8 @@ class Esc:
 
     @voltage.setter
     def voltage(self, value: float) -> None:
+        self._v_factor = _checked_v_factor(self._params, value)
         self._voltage = value
-        self._v_factor = _v_factor_or_none(self._params, value)
         self._push_map()
 
     @property
@@ -195,8 +204,6 @@ class Esc:
 
     def set_voltage(self, voltage: float) -> None:
         """Battery voltage [V] (changes the duty -> thrust map of later duty commands)."""
-        if not (math.isfinite(voltage) and voltage > 0):
-            raise ValueError(f"voltage: must be a positive number, got {voltage}")
         self.voltage = voltage
 
     def command_duty(self, duty: float) -> None:

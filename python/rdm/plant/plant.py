@@ -172,7 +172,7 @@ class Plant(PlantReadings, PlantTruthReadout):
         }
 
         base = esc or EscParams()
-        self.escs = [
+        self._escs = tuple(
             Esc(
                 EscParams(base.p2, base.p1, base.p0, base.v_ref, r.thrust_max, base.tau)
                 if esc is None
@@ -180,7 +180,7 @@ class Plant(PlantReadings, PlantTruthReadout):
                 battery_voltage,
             )
             for r in desc.rotors
-        ]
+        )
         self._ceiling_z = ceiling_height
         self._imu_noise = imu_noise or ImuNoise()
         self._wrench_noise = wrench_noise or WrenchNoise()
@@ -208,7 +208,7 @@ class Plant(PlantReadings, PlantTruthReadout):
         self._rotors = RotorPlantCore(
             self._rotor_site_list, acts, ceiling_height, d.site_xpos, d.site_xmat, d.ctrl
         )
-        for i, e in enumerate(self.escs):
+        for i, e in enumerate(self._escs):
             e.attach(self._rotors, i)
         # Where the ground truth's one-call copy reads MjData (:meth:`_ground_truth`).
         self._rotors.set_truth_layout(
@@ -218,12 +218,9 @@ class Plant(PlantReadings, PlantTruthReadout):
             self._vadr.tolist(),
             self.options.fixed_base,
         )
-        # The flying robot's whole record in one call (:meth:`_ground_truth`).
+        # The whole record in one call (:meth:`_ground_truth`).
         self._rotors.set_truth_record(object.__new__, GroundTruth, TRUTH_FIELDS, self._plate_body)
         self._v_ee_xmat = d.xmat[self._ee_body]
-        #: Every ESC keeps its state in ``self._rotors`` at its rotor index: duty commands
-        #: may go to the core in one call (``escs`` must not be replaced afterwards).
-        self._duties_in_core = True
         self.ceiling_effects = (
             [ParametricCeilingEffect(radius=r.radius) for r in desc.rotors]
             if ceiling_effect is None
@@ -294,6 +291,12 @@ class Plant(PlantReadings, PlantTruthReadout):
         """The collision gate (its ``off_steps`` / ``on_steps`` count the steps after which
         contacts were off / on), or None."""
         return self._contact_gate
+
+    @property
+    def escs(self) -> tuple[Esc, ...]:
+        """The ESC model per rotor (fixed: each keeps its state in the rotor core at its rotor
+        index, the state :meth:`set_rotor_duties` commands in one call)."""
+        return self._escs
 
     @property
     def rejected_commands(self) -> int:
@@ -411,17 +414,11 @@ class Plant(PlantReadings, PlantTruthReadout):
 
     # ---------------------------------------------------------------------- commands
     def set_rotor_duties(self, duties: Sequence[float] | np.ndarray) -> None:
-        """PWM duty per rotor in [0.5, 1] (0.5 stops the motor); goes through the ESC model."""
-        escs = self.escs
-        values = _vector(duties, len(escs), "duties").tolist()
-        if self._duties_in_core and all(e._v_factor is not None for e in escs):
-            # Every ESC's clamp, count and duty -> thrust map in one Rust call (the numbers
-            # and counters of Esc.command_duty; an ESC whose map the core does not hold, e.g.
-            # at a voltage where Python's division raises, keeps the loop below).
-            self._rotors.command_duties(values)
-            return
-        for esc, duty in zip(escs, values, strict=True):
-            esc.command_duty(duty)
+        """PWM duty per rotor in [0.5, 1] (0.5 stops the motor); goes through the ESC model:
+        every ESC's clamp, non-finite count and duty -> thrust map in one Rust call (the
+        numbers and counters of :meth:`Esc.command_duty`; every ESC's voltage factor is a
+        positive finite number, so the core holds every map)."""
+        self._rotors.command_duties(_vector(duties, len(self._escs), "duties").tolist())
 
     def set_rotor_thrusts(self, thrusts: Sequence[float] | np.ndarray) -> None:
         """Steady thrust command per rotor [N] (the ESC lag still applies)."""
@@ -494,8 +491,10 @@ class Plant(PlantReadings, PlantTruthReadout):
 
         Every model a :class:`ParametricCeilingEffect` / :class:`NoCeilingEffect`: one Rust
         call (``RotorPlantCore.apply``, the same IEEE operations as the Python form below).
-        Otherwise plain floats in one pass; the arithmetic is the same as
-        :meth:`_rotor_distances` and :meth:`Esc.thrust` give.
+        Kept in Python because a caller's own :class:`CeilingEffect` (any other class, or
+        coefficients whose ``**`` overflows in Python) is Python code the Rust core cannot
+        call per rotor: its ``thrust_ratio`` scales the thrusts here, in plain floats in one
+        pass (the distance arithmetic of :meth:`_rotor_distances`).
         """
         if self._state.rotors_in_core:
             self._rotors.apply()

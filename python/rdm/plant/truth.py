@@ -14,8 +14,8 @@ import numpy as np
 
 from rdm import _rdm
 
-#: The cone whose contact forces ``mj_contactForce`` copies from ``efc_force``.
-_ELLIPTIC = mujoco.mjtCone.mjCONE_ELLIPTIC
+#: The cone whose contact forces ``mj_contactForce`` decodes from pyramid forces.
+_PYRAMIDAL = mujoco.mjtCone.mjCONE_PYRAMIDAL
 
 
 @dataclass(frozen=True)
@@ -46,23 +46,9 @@ class GroundTruth:
     # (kept through contact gaps < 0.1 s; zero when there is no contact anchor)
     foot_slip_yaw: float  # rotation about the ceiling normal since first contact [rad]
 
-    @classmethod
-    def from_values(cls, *values: object) -> GroundTruth:
-        """An instance from every field's value in field order, without the frozen
-        ``__init__``'s per-field ``object.__setattr__`` (the same object: equal, same
-        ``__dict__``); for the plant's 100 Hz record."""
-        if len(values) != len(_TRUTH_FIELDS):
-            raise TypeError(
-                f"GroundTruth.from_values: {len(values)} values for {len(_TRUTH_FIELDS)} fields"
-            )
-        truth = object.__new__(cls)
-        truth.__dict__.update(zip(_TRUTH_FIELDS, values, strict=True))
-        return truth
 
-
-_TRUTH_FIELDS = tuple(GroundTruth.__dataclass_fields__)
 #: The :class:`GroundTruth` field names in field order.
-TRUTH_FIELDS = _TRUTH_FIELDS
+TRUTH_FIELDS = tuple(GroundTruth.__dataclass_fields__)
 #: Read-only constants of the no-contact measurement.
 _ZEROS3 = np.zeros(3)
 _ZEROS3.flags.writeable = False
@@ -133,15 +119,13 @@ class FootContactTracker:
         self._model = model
         self._plate_body = plate_body
         self._env_geoms = env_geoms
-        self._buf = np.zeros(6)
         self._views: tuple = (None, None, None)  # (data, its xpos, its xmat)
         plate_geoms = sorted(np.flatnonzero(model.geom_bodyid == plate_body).tolist())
         #: The anchor, the last contact time and the cached contact view, in Rust (the one
         #: object this face and the lockstep kernel's plant step both update).
         self._core = _rdm.FootTrackerCore(plate_geoms, release_time)
-        self._bodyids: list[int] | None = None
-        #: :meth:`measure_contacts` in Rust (None: :meth:`measure_contacts_arrays`)
-        self._sums_core: _rdm.PlateContactCore | None = _rdm.PlateContactCore(
+        #: :meth:`measure_contacts` in Rust
+        self._sums_core = _rdm.PlateContactCore(
             model.geom_bodyid.tolist(),
             [g in env_geoms for g in range(model.ngeom)],
             plate_body,
@@ -270,99 +254,33 @@ class FootContactTracker:
     ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """(points, force, torque, zmp, slip, slip_yaw) of the plate's present contacts, in
         Rust (``rdm._rdm.PlateContactCore``): per plate contact the force ``mj_contactForce``
-        gives for an elliptic cone (its constraint forces copied from ``efc_force``), summed
-        into force, torque about the plate origin and the centre of pressure, reported in the
-        plate frame, and the slip yaw; products summed in index order (no fused multiply-add),
-        the order of :meth:`measure_contacts_arrays`, so the same bits. A pyramidal-cone model
-        (whose contact forces need MuJoCo's pyramid decoding) and sums holding a NaN take
-        :meth:`measure_contacts_arrays`."""
+        gives (an elliptic cone's constraint forces copied from ``efc_force``, a pyramidal
+        cone's decoded), rotated out of the contact frame and summed into force, torque about
+        the plate origin and the centre of pressure, reported in the plate frame, and the
+        slip yaw; products summed in index order (no fused multiply-add)."""
         self._check_view(data)
-        core = self._sums_core
-        if core is None or self._model.opt.cone != _ELLIPTIC:
-            return self.measure_contacts_arrays(data)
         contact = data.contact
         pb = self._plate_body
         origin = data.xpos[pb]
         rot = data.xmat[pb]
-        measured = core.measure(
+        points, force, torque, zmp = self._sums_core.measure(
             contact.geom,
             contact.frame,
             contact.pos,
             contact.efc_address,
             contact.dim,
+            contact.friction,
             data.efc_force,
             origin,
             rot,
+            self._model.opt.cone == _PYRAMIDAL,
         )
-        if measured is None:
-            return self.measure_contacts_arrays(data)
-        points, force, torque, zmp = measured
         self._track(data, points > 0)
         anchor_pos, anchor_rot = self._core.anchor_pos, self._core.anchor_rot
         if anchor_pos is None or anchor_rot is None:
             return points, force, torque, zmp, np.zeros(2), 0.0
         slip = (origin - anchor_pos)[:2]
-        yaw = core.yaw_about(anchor_rot.ravel(), rot)
+        yaw = self._sums_core.yaw_about(anchor_rot.ravel(), rot)
         if yaw is None:
             yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot.reshape(3, 3))
         return points, force, torque, zmp, slip.copy(), yaw
-
-    def measure_contacts_arrays(
-        self, data: mujoco.MjData
-    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """The contact measurement in numpy over the contact list read as three arrays
-        (geom pairs, frames, positions): per contact ``mj_contactForce`` rotated out of the
-        contact frame, summed into force, torque about the plate origin and the centre of
-        pressure, reported in the plate frame; the form :meth:`measure_contacts` takes for a
-        pyramidal cone and when its sums hold a NaN."""
-        self._check_view(data)
-        m = self._model
-        pb = self._plate_body
-        env = self._env_geoms
-        bodyid = self._bodyid_list()
-        origin = data.xpos[pb]
-        rot = data.xmat[pb].reshape(3, 3)
-        force_w = np.zeros(3)
-        torque_w = np.zeros(3)
-        cop_num = np.zeros(3)
-        normal_sum = 0.0
-        points = 0
-        contact = data.contact
-        pairs = contact.geom.tolist()
-        frames = contact.frame
-        positions = contact.pos
-        buf = self._buf
-        for i, (g1, g2) in enumerate(pairs):
-            if bodyid[g1] == pb and g2 in env:
-                sign = -1.0
-            elif bodyid[g2] == pb and g1 in env:
-                sign = 1.0
-            else:
-                continue
-            mujoco.mj_contactForce(m, data, i, buf)
-            frame = frames[i].reshape(3, 3)
-            f = sign * _t_mul(frame, buf[:3])
-            t = sign * _t_mul(frame, buf[3:])
-            pos = positions[i]
-            force_w += f
-            torque_w += t + np.cross(pos - origin, f)
-            n = abs(buf[0])
-            cop_num += n * (pos - origin)
-            normal_sum += n
-            points += 1
-        force = -_t_mul(rot, force_w)
-        torque = -_t_mul(rot, torque_w)
-        self._track(data, points > 0)
-        zmp = _t_mul(rot, cop_num / normal_sum)[:2] if normal_sum > 0 else np.full(2, np.nan)
-        anchor_pos, anchor_rot = self._core.anchor_pos, self._core.anchor_rot
-        if anchor_pos is None or anchor_rot is None:
-            return points, force, torque, zmp, np.zeros(2), 0.0
-        slip = (origin - anchor_pos)[:2]
-        yaw = _yaw_about(anchor_rot[:, 2], anchor_rot, rot)
-        return points, force, torque, zmp, slip.copy(), yaw
-
-    def _bodyid_list(self) -> list[int]:
-        ids = self._bodyids
-        if ids is None:
-            ids = self._bodyids = self._model.geom_bodyid.tolist()
-        return ids

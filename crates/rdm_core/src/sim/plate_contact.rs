@@ -2,22 +2,26 @@
 //! and centre-of-pressure numerator of every contact between the plate and the environment,
 //! in world axes, from MuJoCo's contact list and constraint forces.
 //!
-//! This is the per-contact loop of `FootContactTracker.measure_contacts`
-//! (`rdm.plant.truth`), the same IEEE operations in the same order, so both give the same
-//! bits (tests/test_plate_contact_sums.py compares them on perched states):
-//! * the contact force is `mj_contactForce` of an elliptic (or frictionless) cone: the
-//!   contact's `dim` constraint forces copied from `efc_force`, zeros after them and for an
-//!   excluded contact (`efc_address < 0`);
+//! This is the contact measurement of `FootContactTracker.measure_contacts`
+//! (`rdm.plant.truth`), its only form; tests/test_truthlog_truth.py compares its bits with
+//! a numpy derivation through `mj_contactForce` on perched states:
+//! * the contact force is `mj_contactForce`'s: for an elliptic cone the contact's `dim`
+//!   constraint forces copied from `efc_force`; for a pyramidal cone `mju_decodePyramid` of
+//!   its `2 (dim - 1)` pyramid forces (normal: their sum in order; tangent i:
+//!   `(p[2i] - p[2i+1]) mu_i`; a frictionless contact its one force); zeros after them and
+//!   for an excluded contact (`efc_address < 0`). ASSUMPTION: no adhesion (the plant has no
+//!   adhesion actuator, so MuJoCo subtracts 0 from the normal force);
 //! * the contact frame's rows are (normal, tangent 1, tangent 2); `frameᵀ f` is summed in row
 //!   order, `(a0 b0 + a1 b1) + a2 b2` (what numpy's small matrix-vector product gives);
 //! * `sign` is +1 when the plate is `geom2`, -1 when it is `geom1` (the force acts on geom2).
 //!
-//! A pyramidal cone needs MuJoCo's pyramid decoding: the caller takes its own path then.
+//! Sums holding a NaN (a diverged state) keep their NaN: the foot-frame numbers are NaN
+//! where numpy's would be, with this module's NaN bits.
 //!
 //! [`PlateContactModel::measure`] goes on to the foot-frame numbers of `_contact_result`
 //! (`-(Rᵀ Σf)`, `-(Rᵀ Στ)`, the ZMP `Rᵀ (Σ|f_n| r / Σ|f_n|)`) and [`yaw_about`] is
 //! `_yaw_about`: the products `Rᵀ v` and the dot products summed in index order, as numpy's
-//! small products do (the tests compare the bits against the numpy forms).
+//! small products do (the tests compare the bits against a numpy derivation).
 
 /// One row of MuJoCo's contact list (the fields the sums read).
 #[derive(Debug, Clone, Copy)]
@@ -32,6 +36,8 @@ pub struct ContactRow {
     pub efc_address: i32,
     /// `contact.dim` (1, 3, 4 or 6).
     pub dim: i32,
+    /// `contact.friction` (tangent 1, tangent 2, spin, roll 1, roll 2): a pyramidal cone's mu.
+    pub friction: [f64; 5],
 }
 
 /// What the plate's contacts sum to (world axes, moments about `origin`).
@@ -177,12 +183,14 @@ impl PlateContactModel {
         })
     }
 
-    /// Sum the plate's contacts of `rows` (in list order), moments about `origin`.
+    /// Sum the plate's contacts of `rows` (in list order), moments about `origin`;
+    /// `pyramidal`: the model's friction cone is pyramidal (`opt.cone`).
     pub fn sums(
         &self,
         rows: impl IntoIterator<Item = ContactRow>,
         efc_force: &[f64],
         origin: [f64; 3],
+        pyramidal: bool,
     ) -> Result<PlateContactSums, PlateContactError> {
         let [o0, o1, o2] = origin;
         let mut s = PlateContactSums::default();
@@ -194,7 +202,7 @@ impl PlateContactModel {
             let Some(sign) = self.sign(i, row.geom)? else {
                 continue;
             };
-            let buf = contact_force(i, &row, efc_force)?;
+            let buf = contact_force(i, &row, efc_force, pyramidal)?;
             let (frame, pos) = (&row.frame, &row.pos);
             let [f0, f1, f2] = rotate_back(frame, [buf[0], buf[1], buf[2]]);
             let [t0, t1, t2] = rotate_back(frame, [buf[3], buf[4], buf[5]]);
@@ -221,25 +229,16 @@ impl PlateContactModel {
     }
 
     /// [`Self::sums`], then the foot-frame numbers in the plate frame `rot` (row-major,
-    /// `data.xmat` of the plate). `Ok(None)` when a sum is NaN (the caller's array form
-    /// decides the NaN payloads).
+    /// `data.xmat` of the plate).
     pub fn measure(
         &self,
         rows: impl IntoIterator<Item = ContactRow>,
         efc_force: &[f64],
         origin: [f64; 3],
         rot: &[f64; 9],
-    ) -> Result<Option<PlateMeasure>, PlateContactError> {
-        let s = self.sums(rows, efc_force, origin)?;
-        let all = s
-            .force
-            .iter()
-            .chain(&s.torque)
-            .chain(&s.cop_numerator)
-            .chain([&s.normal_sum]);
-        if all.into_iter().any(|v| v.is_nan()) {
-            return Ok(None);
-        }
+        pyramidal: bool,
+    ) -> Result<PlateMeasure, PlateContactError> {
+        let s = self.sums(rows, efc_force, origin, pyramidal)?;
         let neg = |v: [f64; 3]| [-v[0], -v[1], -v[2]];
         let zmp = if s.normal_sum > 0.0 {
             let n = s.normal_sum;
@@ -249,21 +248,22 @@ impl PlateContactModel {
         } else {
             [f64::NAN; 2]
         };
-        Ok(Some(PlateMeasure {
+        Ok(PlateMeasure {
             points: s.points,
             force: neg(rotate_back(rot, s.force)),
             torque: neg(rotate_back(rot, s.torque)),
             zmp,
-        }))
+        })
     }
 }
 
-/// `mj_contactForce` for an elliptic or frictionless cone: the contact's `dim` constraint
-/// forces, zero-padded to 6; all zeros for an excluded contact.
+/// `mj_contactForce`: an elliptic cone's `dim` constraint forces, or a pyramidal cone's
+/// forces decoded (`mju_decodePyramid`), zero-padded to 6; all zeros for an excluded contact.
 fn contact_force(
     contact: usize,
     row: &ContactRow,
     efc_force: &[f64],
+    pyramidal: bool,
 ) -> Result<[f64; 6], PlateContactError> {
     let mut buf = [0.0; 6];
     if row.efc_address < 0 {
@@ -275,11 +275,29 @@ fn contact_force(
         return Err(bad());
     }
     let start = usize::try_from(row.efc_address).map_err(|_| bad())?;
+    // a pyramidal contact has 2 (dim - 1) rows (a frictionless one its one row)
+    let rows = if pyramidal && dim > 1 {
+        2 * (dim - 1)
+    } else {
+        dim
+    };
     let forces = start
-        .checked_add(dim)
+        .checked_add(rows)
         .and_then(|end| efc_force.get(start..end))
         .ok_or_else(bad)?;
-    buf[..dim].copy_from_slice(forces);
+    if !pyramidal || dim == 1 {
+        buf[..dim].copy_from_slice(forces);
+        return Ok(buf);
+    }
+    let mut normal = 0.0;
+    for p in forces {
+        normal += p;
+    }
+    buf[0] = normal;
+    for i in 0..dim - 1 {
+        buf[i + 1] =
+            (forces[2 * i] - forces[2 * i + 1]) * row.friction.get(i).copied().unwrap_or(0.0);
+    }
     Ok(buf)
 }
 
@@ -293,6 +311,7 @@ mod tests {
     }
 
     const IDENTITY: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    const MU: [f64; 5] = [1.0, 1.0, 0.005, 0.0001, 0.0001];
 
     #[test]
     fn a_normal_push_sums_to_its_force_moment_and_centre_of_pressure() {
@@ -302,9 +321,10 @@ mod tests {
             pos: [0.1, 0.0, 1.6],
             efc_address: 0,
             dim: 4,
+            friction: MU,
         }];
         let s = model()
-            .sums(rows, &[5.0, 0.5, -0.25, 0.01], [0.0, 0.0, 1.6])
+            .sums(rows, &[5.0, 0.5, -0.25, 0.01], [0.0, 0.0, 1.6], false)
             .unwrap();
         assert_eq!(s.points, 1);
         assert_eq!(s.force, [5.0, 0.5, -0.25]);
@@ -322,9 +342,10 @@ mod tests {
             pos: [0.0; 3],
             efc_address: 0,
             dim: 1,
+            friction: MU,
         };
         let s = model()
-            .sums([row([1, 0]), row([2, 0])], &[3.0], [0.0; 3])
+            .sums([row([1, 0]), row([2, 0])], &[3.0], [0.0; 3], false)
             .unwrap();
         assert_eq!(s.points, 1);
         assert_eq!(s.force, [-3.0, -0.0, -0.0]);
@@ -339,13 +360,14 @@ mod tests {
             pos: [0.0; 3],
             efc_address: -1,
             dim: 3,
+            friction: MU,
         }];
-        let s = model().sums(rows, &[], [0.0; 3]).unwrap();
+        let s = model().sums(rows, &[], [0.0; 3], true).unwrap();
         assert_eq!((s.points, s.normal_sum, s.force), (1, 0.0, [0.0; 3]));
     }
 
     #[test]
-    fn the_measure_is_in_the_plate_frame_and_nan_sums_are_declined() {
+    fn the_measure_is_in_the_plate_frame_and_nan_sums_stay_nan() {
         let m = model();
         let row = ContactRow {
             geom: [0, 1],
@@ -353,22 +375,48 @@ mod tests {
             pos: [0.1, 0.0, 1.6],
             efc_address: 0,
             dim: 1,
+            friction: MU,
         };
         // plate turned 90 deg about z: world x is the plate's -y
         let rot = [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
         let out = m
-            .measure([row], &[4.0], [0.0, 0.0, 1.6], &rot)
-            .unwrap()
+            .measure([row], &[4.0], [0.0, 0.0, 1.6], &rot, false)
             .unwrap();
         assert_eq!(out.points, 1);
         assert_eq!(out.force, [-0.0, 4.0, -0.0]);
         assert_eq!(out.zmp, [0.0, -0.1]);
-        assert!(m
-            .measure([row], &[f64::NAN], [0.0; 3], &rot)
-            .unwrap()
-            .is_none());
-        let none = m.measure([], &[], [0.0; 3], &rot).unwrap().unwrap();
+        let nan = m
+            .measure([row], &[f64::NAN], [0.0; 3], &rot, false)
+            .unwrap();
+        assert!(nan.force[1].is_nan() && nan.zmp.iter().all(|z| z.is_nan()));
+        let none = m.measure([], &[], [0.0; 3], &rot, false).unwrap();
         assert!(none.zmp.iter().all(|z| z.is_nan()) && none.points == 0);
+    }
+
+    #[test]
+    fn a_pyramidal_contact_is_decoded() {
+        // dim 3: pyramid rows (p0, p1, p2, p3); normal p0 + p1 + p2 + p3 in order,
+        // tangent i = (p[2i] - p[2i+1]) mu_i
+        let row = ContactRow {
+            geom: [0, 1],
+            frame: IDENTITY,
+            pos: [0.0, 0.0, 1.6],
+            efc_address: 1,
+            dim: 3,
+            friction: [0.5, 0.25, 0.0, 0.0, 0.0],
+        };
+        let efc = [9.0, 1.0, 2.0, 3.0, 5.0];
+        let s = model().sums([row], &efc, [0.0, 0.0, 1.6], true).unwrap();
+        assert_eq!(s.force, [11.0, (1.0 - 2.0) * 0.5, (3.0 - 5.0) * 0.25]);
+        // the rows past dim are read: a short efc_force is an error
+        assert_eq!(
+            model().sums([row], &efc[..4], [0.0; 3], true).unwrap_err(),
+            PlateContactError::BadForceRows { contact: 0 }
+        );
+        // a frictionless pyramidal contact is its one force
+        let one = ContactRow { dim: 1, ..row };
+        let s = model().sums([one], &efc, [0.0, 0.0, 1.6], true).unwrap();
+        assert_eq!(s.force, [1.0, 0.0, 0.0]);
     }
 
     #[test]
@@ -391,9 +439,10 @@ mod tests {
             pos: [0.0; 3],
             efc_address,
             dim,
+            friction: MU,
         };
         let m = model();
-        let err = |r| m.sums([r], &[1.0, 2.0], [0.0; 3]).unwrap_err();
+        let err = |r| m.sums([r], &[1.0, 2.0], [0.0; 3], false).unwrap_err();
         assert_eq!(
             err(row([0, 7], 0, 1)),
             PlateContactError::GeomOutOfRange {
@@ -418,7 +467,9 @@ mod tests {
         );
         // a contact that is not the plate's is skipped before its rows are read
         assert_eq!(
-            m.sums([row([2, 0], 5, 9)], &[], [0.0; 3]).unwrap().points,
+            m.sums([row([2, 0], 5, 9)], &[], [0.0; 3], false)
+                .unwrap()
+                .points,
             0
         );
     }
