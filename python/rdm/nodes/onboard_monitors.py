@@ -23,6 +23,14 @@ voltage more than ``cell_sag_v`` x cells below its highest of the last ``sag_win
 trips ``battery_sag``. ASSUMPTION: the thresholds (:class:`MonitorLimits`); a load step
 (take-off, a climb) sags the pack by the pack's resistance times the current step, below
 the threshold (JSK's hover sag compensation: 0.05 ohm x 22 A = 1.1 V).
+
+Battery reserve (``battery_reserve``, the node lands; latched): the pack voltage below the one
+at which the heaviest-loaded rotor's hover thrust (the model's, given each tick) is more than
+``reserve_thrust_fraction`` of its thrust at full duty (``motor_info``'s ``max_thrust`` at its
+voltage, times (V / that voltage)^2). ASSUMPTION: 0.9, the rest of the thrust kept for the
+attitude loop and the landing while the pack sags on (:class:`MonitorLimits`). A level on the
+cell voltage alone (``battery_low``) ignores what the robot needs: 3.5 V/cell is below the
+mission robot's hover limit.
 """
 
 from __future__ import annotations
@@ -62,11 +70,12 @@ class MonitorLimits:
     #: than this many V per cell below its highest of the last ``sag_window_s`` trips
     #: ``battery_sag`` (the node lands). ASSUMPTION: 0.2 V/cell (1.2 V for 6S), above a load
     #: step's sag (JSK's hover compensation example: 0.05 ohm x 22 A = 1.1 V from rest to
-    #: hover) and 34 times a 6S pack's discharge over the window in a 4 min flight (25.2 to
-    #: 21 V: 0.035 V in 2 s); a 1 V/s sag trips 1.45-1.52 s after it starts (the mission).
+    #: hover) and 13 times a 6S pack's discharge over the window in a 4 min flight (25.2 to
+    #: 21 V: 0.0875 V in 5 s); a 1 V/s sag trips 1.45-1.52 s after it starts (the mission).
     cell_sag_v: float = 0.2
-    #: ... the window, s: sags slower than ``cell_sag_v`` x cells per ``sag_window_s`` (0.6
-    #: V/s for 6S) are left to ``battery_low``. ASSUMPTION: 2 s.
+    #: ... the window, s: sags slower than ``cell_sag_v`` x cells per ``sag_window_s`` (0.24
+    #: V/s for 6S) are left to ``battery_reserve``. ASSUMPTION: 5 s (a 0.3 V/s sag trips at about
+    #: 23.9 V, 8.4 s before the hover's limit; the mission's landing takes 3.5-4 s).
     sag_window_s: float = 5.0
     #: Battery reserve (``battery_reserve``, the node lands): the heaviest-loaded rotor's
     #: hover thrust (the model's static allocation) more than this fraction of the thrust
@@ -75,7 +84,7 @@ class MonitorLimits:
     #: 0.9: 10 % of the thrust left for the attitude loop and the landing's deceleration; for
     #: the mission's robot (14.4 N of 20 N at 25.2 V) the reserve is 22.5 V (3.76 V/cell),
     #: the hover's limit 21.4 V: a sag slower than ``battery_sag``'s 0.24 V/s leaves at
-    #: least 4.6 s from the trip to it.
+    #: least 4.8 s from the trip to it.
     reserve_thrust_fraction: float = 0.9
     #: What losing the ground station does while perched: "hold" (stay perched) or "land".
     ground_loss_perched: str = "hold"
