@@ -27,7 +27,7 @@ the threshold (JSK's hover sag compensation: 0.05 ohm x 22 A = 1.1 V).
 Battery reserve (``battery_reserve``, the node lands; latched): the pack voltage below the one
 at which the heaviest-loaded rotor's hover thrust (the model's, given each tick) is more than
 ``reserve_thrust_fraction`` of its thrust at full duty (``motor_info``'s ``max_thrust`` at its
-voltage, times (V / that voltage)^2). ASSUMPTION: 0.9, the rest of the thrust kept for the
+voltage, times (V / that voltage)^2). ASSUMPTION: 0.93, the rest of the thrust kept for the
 attitude loop and the landing while the pack sags on (:class:`MonitorLimits`). A level on the
 cell voltage alone (``battery_low``) ignores what the robot needs: 3.5 V/cell is below the
 mission robot's hover limit.
@@ -81,11 +81,13 @@ class MonitorLimits:
     #: hover thrust (the model's static allocation) more than this fraction of the thrust
     #: its motor gives at full duty at the pack voltage (``motor_info``'s ``max_thrust`` x
     #: (V / its reference voltage)^2, the firmware's SQRT-mode voltage factor). ASSUMPTION:
-    #: 0.9: 10 % of the thrust left for the attitude loop and the landing's deceleration; for
-    #: the mission's robot (14.4 N of 20 N at 25.2 V) the reserve is 22.5 V (3.76 V/cell),
+    #: 0.93: 7 % of the thrust left for the attitude loop and the landing's deceleration; for
+    #: the mission's robot (14.4 N of 20 N at 25.2 V) the reserve is 22.2 V (3.70 V/cell),
     #: the hover's limit 21.4 V: a sag slower than ``battery_sag``'s 0.24 V/s leaves at
-    #: least 4.8 s from the trip to it.
-    reserve_thrust_fraction: float = 0.9
+    #: least 3.3 s from the trip to it (the mission's landing: 3.5 s, its duty below the
+    #: maximum at 0.15-0.2 V/s). 0.9 lands the robustness campaign's perching runs at its
+    #: lowest pack (22.8 V, the perching posture's 14.9 N hover: 90.4 %).
+    reserve_thrust_fraction: float = 0.93
     #: What losing the ground station does while perched: "hold" (stay perched) or "land".
     ground_loss_perched: str = "hold"
     #: Joint tracking: a joint whose present angle (``servo/states``) stays further than
@@ -420,13 +422,21 @@ class Monitors:
             f"{self.voltage} V below {self.limits.cell_low * self.cells:.2f} V",
         )
 
-    def arm_refusal(self) -> str | None:
-        """Why arming is refused now (None: allowed)."""
+    def arm_refusal(self, hover_thrust: float = math.nan) -> str | None:
+        """Why arming is refused now (None: allowed): no plausible reading, a reading below
+        ``cell_arm_min`` or below :meth:`reserve_voltage` of the heaviest-loaded rotor's hover
+        thrust ``hover_thrust`` (NaN: the model not known yet, not checked)."""
         if self.counts["battery_implausible"] and self.voltage is None:
             return "no plausible battery reading"
         if self.voltage is not None and self.voltage < self.limits.cell_arm_min * self.cells:
             return (
                 f"battery {self.voltage:.2f} V below {self.limits.cell_arm_min * self.cells:.2f} V"
+            )
+        floor = self.reserve_voltage(hover_thrust)
+        if self.voltage is not None and floor is not None and self.voltage < floor:
+            return (
+                f"battery {self.voltage:.2f} V below the {floor:.2f} V reserve of the hover's"
+                f" {hover_thrust:.2f} N"
             )
         return None
 

@@ -69,7 +69,6 @@ FAULTS = (
     "battery-sag",  # the battery sags 1 V/s from where it is (the node lands by itself)
     "battery-sag-0.5",  # ... 0.5 V/s (battery_sag's rate rule)
     "battery-sag-0.3",  # ... 0.3 V/s
-    "battery-sag-0.15",  # ... 0.15 V/s (slower than battery_sag's 0.24 V/s in 5 s)
     "foot-sensor-loss",  # the foot sensor's cable is cut once perched (the node holds)
     "imu-spikes",  # IMU samples beyond the sensor's range, about 3 a second (both drop them)
     "dead-esc",  # rotor DEAD_ROTOR gives no thrust from the fault on (the node cuts, it falls)
@@ -102,7 +101,6 @@ SAG_RATES = {
     "battery-sag": SAG_V_PER_S,
     "battery-sag-0.5": 0.5,
     "battery-sag-0.3": 0.3,
-    "battery-sag-0.15": 0.15,
 }
 #: Faults injected once perched (the others: once hovering after take-off).
 PERCHED_FAULTS = ("foot-sensor-loss", "stuck-servo", "infeasible-qp")
@@ -288,7 +286,6 @@ _DETECTED_BY: dict[str, tuple[str, str | tuple[str, ...]]] = {
     "battery-sag": ("monitors", _BATTERY_MONITORS),
     "battery-sag-0.5": ("monitors", _BATTERY_MONITORS),
     "battery-sag-0.3": ("monitors", _BATTERY_MONITORS),
-    "battery-sag-0.15": ("monitors", _BATTERY_MONITORS),
     "foot-sensor-loss": ("monitors", "foot_stale"),
     # each outlier dropped by Spinal's estimator (``out_of_range``); its accelerometer value
     # reaches the node on ``imu``, which refuses it
