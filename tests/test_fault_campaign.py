@@ -229,7 +229,7 @@ def test_the_help_names_every_fault() -> None:
     add_arguments(parser)
     # (a name wrapped at one of its hyphens is joined again)
     text = " ".join(re.sub(r"-\n\s*", "-", parser.format_help()).split())
-    named = set(re.findall(r"[a-z]+(?:-[a-z0-9]+)+", text))
+    named = set(re.findall(r"[a-z]+(?:-[a-z0-9]+(?:\.[0-9]+)?)+", text))
     assert set(FAULTS) - {"none"} <= named
 
 

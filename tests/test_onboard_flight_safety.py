@@ -255,7 +255,14 @@ def test_takeoff_is_refused_on_a_low_battery_and_nothing_arms(flight) -> None:
     flight.run(1.0)
     assert not flight.spinal.core.armed and flight.node.flight.mode.value == "ground"
     assert not any(m.cmd == 0 for _, m in flight.rig.by_topic["flight_config_cmd"])
-    flight.rig.battery_v = 21.7  # 3.62 V per cell: allowed
+    flight.rig.battery_v = 21.7  # 3.62 V per cell: above the floor, below the hover's reserve
+    flight.run(0.3)
+    reason = flight.node.takeoff(1.0)
+    assert reason is not None and "reserve" in reason
+    # the reserve: the hover's largest rotor thrust is 93 % of 20 N x (V / 25.2)^2 there
+    hover = float(np.max(flight.node.control.terms.hover_thrust))
+    assert f"{25.2 * np.sqrt(hover / (0.93 * 20.0)):.2f} V reserve" in reason
+    flight.rig.battery_v = 22.3  # above the reserve (22.15 V): allowed
     flight.run(0.3)
     assert flight.node.takeoff(1.0) is None
     flight.run_until(lambda: flight.spinal.core.armed, 2.0)

@@ -81,7 +81,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="mission only: inject one fault once the robot hovers (heartbeat-loss, "
         "mocap-loss, uart-cut, low-battery, bad-adc-scale, uart-noise-1e-4, uart-noise-1e-3, "
-        "battery-sag, imu-spikes, dead-esc, can-loss-1e-2, can-loss-1e-1, can-bus-off, "
+        "battery-sag, battery-sag-0.5, battery-sag-0.3, imu-spikes, dead-esc, "
+        "can-loss-1e-2, can-loss-1e-1, can-bus-off, "
         "neuron-reset) or "
         "once perched (foot-sensor-loss, stuck-servo, "
         "infeasible-qp); with --seeds "

@@ -138,10 +138,12 @@ class OnboardNode(OnboardOperator, OnboardReceive, OnboardStep, OnboardSend):
         )
         #: the operator layer (take-off, go-to, landing, touchdown) and the health monitors
         self.flight = FlightSupervisor(config.flight)
+        top = max(config.pwm_info.motor_info, key=lambda r: float(r[0]))
         self.monitors = Monitors(
             config.monitors,
             config.monitors.battery_cells
             or battery_cells([float(r[0]) for r in config.pwm_info.motor_info]),
+            (float(top[0]), float(top[1])),
         )
         self._flight_setpoint: Setpoint | None = None
         #: the CoG state from marker poses (:meth:`set_mocap_pose`)

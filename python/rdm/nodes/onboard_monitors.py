@@ -23,6 +23,14 @@ voltage more than ``cell_sag_v`` x cells below its highest of the last ``sag_win
 trips ``battery_sag``. ASSUMPTION: the thresholds (:class:`MonitorLimits`); a load step
 (take-off, a climb) sags the pack by the pack's resistance times the current step, below
 the threshold (JSK's hover sag compensation: 0.05 ohm x 22 A = 1.1 V).
+
+Battery reserve (``battery_reserve``, the node lands; latched): the pack voltage below the one
+at which the heaviest-loaded rotor's hover thrust (the model's, given each tick) is more than
+``reserve_thrust_fraction`` of its thrust at full duty (``motor_info``'s ``max_thrust`` at its
+voltage, times (V / that voltage)^2). ASSUMPTION: 0.93, the rest of the thrust kept for the
+attitude loop and the landing while the pack sags on (:class:`MonitorLimits`). A level on the
+cell voltage alone (``battery_low``) ignores what the robot needs: 3.5 V/cell is below the
+mission robot's hover limit.
 """
 
 from __future__ import annotations
@@ -62,12 +70,24 @@ class MonitorLimits:
     #: than this many V per cell below its highest of the last ``sag_window_s`` trips
     #: ``battery_sag`` (the node lands). ASSUMPTION: 0.2 V/cell (1.2 V for 6S), above a load
     #: step's sag (JSK's hover compensation example: 0.05 ohm x 22 A = 1.1 V from rest to
-    #: hover) and 34 times a 6S pack's discharge over the window in a 4 min flight (25.2 to
-    #: 21 V: 0.035 V in 2 s); a 1 V/s sag trips 1.45-1.52 s after it starts (the mission).
+    #: hover) and 13 times a 6S pack's discharge over the window in a 4 min flight (25.2 to
+    #: 21 V: 0.0875 V in 5 s); a 1 V/s sag trips 1.45-1.52 s after it starts (the mission).
     cell_sag_v: float = 0.2
-    #: ... the window, s: sags slower than ``cell_sag_v`` x cells per ``sag_window_s`` (0.6
-    #: V/s for 6S) are left to ``battery_low``. ASSUMPTION: 2 s.
-    sag_window_s: float = 2.0
+    #: ... the window, s: sags slower than ``cell_sag_v`` x cells per ``sag_window_s`` (0.24
+    #: V/s for 6S) are left to ``battery_reserve``. ASSUMPTION: 5 s (a 0.3 V/s sag trips at about
+    #: 23.9 V, 8.4 s before the hover's limit; the mission's landing takes 3.5-4 s).
+    sag_window_s: float = 5.0
+    #: Battery reserve (``battery_reserve``, the node lands): the heaviest-loaded rotor's
+    #: hover thrust (the model's static allocation) more than this fraction of the thrust
+    #: its motor gives at full duty at the pack voltage (``motor_info``'s ``max_thrust`` x
+    #: (V / its reference voltage)^2, the firmware's SQRT-mode voltage factor). ASSUMPTION:
+    #: 0.93: 7 % of the thrust left for the attitude loop and the landing's deceleration; for
+    #: the mission's robot (14.4 N of 20 N at 25.2 V) the reserve is 22.2 V (3.70 V/cell),
+    #: the hover's limit 21.4 V: a sag slower than ``battery_sag``'s 0.24 V/s leaves at
+    #: least 3.3 s from the trip to it (the mission's landing: 3.5 s, its duty below the
+    #: maximum at 0.15-0.2 V/s). 0.9 lands the robustness campaign's perching runs at its
+    #: lowest pack (22.8 V, the perching posture's 14.9 N hover: 90.4 %).
+    reserve_thrust_fraction: float = 0.93
     #: What losing the ground station does while perched: "hold" (stay perched) or "land".
     ground_loss_perched: str = "hold"
     #: Joint tracking: a joint whose present angle (``servo/states``) stays further than
@@ -172,6 +192,7 @@ class MonitorLimits:
             "low_battery_s",
             "cell_sag_v",
             "sag_window_s",
+            "reserve_thrust_fraction",
             "joint_tracking_rad",
             "joint_tracking_s",
             "perch_qp_fail_s",
@@ -203,6 +224,11 @@ class MonitorLimits:
             raise ValueError(
                 "MonitorLimits: need 0 < cell_plausible[0] < cell_low < cell_arm_min "
                 "<= cell_plausible[1]"
+            )
+        if self.reserve_thrust_fraction > 1.0:
+            raise ValueError(
+                f"MonitorLimits.reserve_thrust_fraction={self.reserve_thrust_fraction!r} must"
+                " be <= 1 (above it the hover needs more thrust than the motors give)"
             )
         if self.battery_cells is not None and not (
             isinstance(self.battery_cells, int) and 1 <= self.battery_cells <= 24
@@ -252,9 +278,14 @@ IMU_PUB_INTERVAL_S = 0.005
 class Monitors:
     """Trip counters, the event list and the battery state (see the module doc)."""
 
-    def __init__(self, limits: MonitorLimits, cells: int) -> None:
+    def __init__(
+        self, limits: MonitorLimits, cells: int, max_thrust_at: tuple[float, float] | None = None
+    ) -> None:
         self.limits = limits
         self.cells = cells
+        #: (reference voltage, the motor's thrust at full duty there), ``motor_info``'s row of
+        #: the highest voltage; None: ``battery_reserve`` is not watched
+        self.max_thrust_at = max_thrust_at
         self.counts: Counter[str] = Counter()
         #: The latest trips and notes, for the status line (``counts`` counts every one and
         #: each is logged). ASSUMPTION: 32 is enough to see how a flight ended while keeping
@@ -343,6 +374,41 @@ class Monitors:
             f" {self.limits.sag_window_s:g} s (more than {bound:.3f} V)",
         )
 
+    def max_thrust(self, volts: float) -> float:
+        """The motor's thrust at full duty at the pack voltage ``volts``, N (0 without
+        ``max_thrust_at``)."""
+        if self.max_thrust_at is None:
+            return 0.0
+        v_ref, thrust = self.max_thrust_at
+        return thrust * (volts / v_ref) ** 2
+
+    def reserve_voltage(self, hover_thrust: float) -> float | None:
+        """The pack voltage below which a rotor hovering at ``hover_thrust`` N needs more than
+        ``reserve_thrust_fraction`` of its thrust at full duty (None: not watched)."""
+        if self.max_thrust_at is None or not (math.isfinite(hover_thrust) and hover_thrust > 0):
+            return None
+        v_ref, thrust = self.max_thrust_at
+        return v_ref * math.sqrt(hover_thrust / (self.limits.reserve_thrust_fraction * thrust))
+
+    def battery_reserve(self, now: float, hover_thrust: float) -> bool:
+        """Whether the pack voltage (the latest of :func:`pack_voltage`, Spinal's reading
+        before there is one) is below :meth:`reserve_voltage` of the heaviest-loaded rotor's
+        hover thrust ``hover_thrust``. Latched: once tripped it holds (a pack does not
+        recharge in flight; the hover thrust moving with the posture would trip it again)."""
+        floor = self.reserve_voltage(hover_thrust)
+        volts = self._pack[-1][1] if self._pack else self.voltage
+        if floor is None or volts is None:
+            return self.stale("battery_reserve", False, now, "")
+        share = hover_thrust / max(self.max_thrust(volts), 1e-9)
+        return self.stale(
+            "battery_reserve",
+            volts < floor or self.active("battery_reserve"),
+            now,
+            f"pack {volts:.2f} V below {floor:.2f} V: the hover's {hover_thrust:.2f} N is"
+            f" {share:.0%} of the thrust at full duty (at most"
+            f" {self.limits.reserve_thrust_fraction:.0%})",
+        )
+
     def battery_low(self, now: float) -> bool:
         """Whether the voltage stayed below ``cell_low`` for ``low_battery_s`` (trips once)."""
         low = (
@@ -356,13 +422,21 @@ class Monitors:
             f"{self.voltage} V below {self.limits.cell_low * self.cells:.2f} V",
         )
 
-    def arm_refusal(self) -> str | None:
-        """Why arming is refused now (None: allowed)."""
+    def arm_refusal(self, hover_thrust: float = math.nan) -> str | None:
+        """Why arming is refused now (None: allowed): no plausible reading, a reading below
+        ``cell_arm_min`` or below :meth:`reserve_voltage` of the heaviest-loaded rotor's hover
+        thrust ``hover_thrust`` (NaN: the model not known yet, not checked)."""
         if self.counts["battery_implausible"] and self.voltage is None:
             return "no plausible battery reading"
         if self.voltage is not None and self.voltage < self.limits.cell_arm_min * self.cells:
             return (
                 f"battery {self.voltage:.2f} V below {self.limits.cell_arm_min * self.cells:.2f} V"
+            )
+        floor = self.reserve_voltage(hover_thrust)
+        if self.voltage is not None and floor is not None and self.voltage < floor:
+            return (
+                f"battery {self.voltage:.2f} V below the {floor:.2f} V reserve of the hover's"
+                f" {hover_thrust:.2f} N"
             )
         return None
 

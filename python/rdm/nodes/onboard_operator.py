@@ -271,7 +271,9 @@ class OnboardOperator:
 
     def arm(self) -> str | None:
         """Start the arming sequence; the refusal reason (battery) or None."""
-        refusal = self.monitors.arm_refusal()
+        t = self.control.terms
+        hover = float(np.max(t.hover_thrust)) if t is not None else math.nan
+        refusal = self.monitors.arm_refusal(hover)
         if refusal is not None:
             self.monitors.trip("arm_refused", refusal, self._now)
             return refusal

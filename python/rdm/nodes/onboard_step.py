@@ -401,6 +401,10 @@ class OnboardStep:
                 self._react("battery_low", now)
             if m.battery_sag(now):
                 self._react("battery_sag", now)
+            t = self.control.terms
+            hover = float(np.max(t.hover_thrust)) if t is not None else float("nan")
+            if m.battery_reserve(now, hover):
+                self._react("battery_reserve", now)
         if self.foot is not None and self.control.perching:
             missing = self.foot.latest(now, self.config.foot_timeout_s) is None
             m.stale("foot_stale", missing, now, "no foot-sensor sample while perched")

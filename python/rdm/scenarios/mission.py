@@ -67,6 +67,8 @@ FAULTS = (
     "uart-noise-1e-4",  # each byte on the Spinal UART flipped / lost / repeated at p = 1e-4
     "uart-noise-1e-3",  # ... at p = 1e-3 (about one damaged frame in 30)
     "battery-sag",  # the battery sags 1 V/s from where it is (the node lands by itself)
+    "battery-sag-0.5",  # ... 0.5 V/s (battery_sag's rate rule)
+    "battery-sag-0.3",  # ... 0.3 V/s
     "foot-sensor-loss",  # the foot sensor's cable is cut once perched (the node holds)
     "imu-spikes",  # IMU samples beyond the sensor's range, about 3 a second (both drop them)
     "dead-esc",  # rotor DEAD_ROTOR gives no thrust from the fault on (the node cuts, it falls)
@@ -93,6 +95,13 @@ RESET_BOARD = 0
 #: The sag of ``battery-sag``, V/s (ASSUMPTION: a failing cell under hover load), down to
 #: 3.0 V per cell. The operator then holds at the goal: the node must land by itself.
 SAG_V_PER_S = 1.0
+#: The sag of each battery-sag fault, V/s: the slow ones are left by ``battery_sag``'s rate
+#: rule to ``battery_reserve`` (the pack below what the hover needs with a margin).
+SAG_RATES = {
+    "battery-sag": SAG_V_PER_S,
+    "battery-sag-0.5": 0.5,
+    "battery-sag-0.3": 0.3,
+}
 #: Faults injected once perched (the others: once hovering after take-off).
 PERCHED_FAULTS = ("foot-sensor-loss", "stuck-servo", "infeasible-qp")
 #: Perched faults injected as the arm motion starts (the others: once settled).
@@ -142,7 +151,7 @@ class MissionScript:
             self.start = np.asarray(node.flight.hold_position)
             self._say(now, "goto", node.goto(self.start + GOTO_OFFSET, 0.0))
             self.phase = "goto"
-        elif self.phase == "goto" and self.fault == "battery-sag":
+        elif self.phase == "goto" and self.fault in SAG_RATES:
             pass  # hold at the goal: the node's battery monitor must land the robot
         elif self.phase == "goto" and self._arrived(node, now, HOLD_AT_GOAL_S):
             if self.quick or self.fault_at is not None:
@@ -225,9 +234,10 @@ class MissionScript:
             seed = int(stack.plant.seed)
             for k, end in enumerate((stack.spinal_link, stack.onboard_link)):
                 end.link = CorruptingLink(end.link, UART_NOISE[self.fault], 1000 * seed + k)
-        elif self.fault == "battery-sag":
+        elif self.fault in SAG_RATES:
             v0, floor = stack.spinal.battery_input, 3.0 * stack.onboard.monitors.cells
-            stack.bridge.set_battery(lambda t: max(floor, v0 - SAG_V_PER_S * (t - now)))
+            rate = SAG_RATES[self.fault]
+            stack.bridge.set_battery(lambda t: max(floor, v0 - rate * (t - now)))
         elif self.fault == "foot-sensor-loss":  # the sensor's cable cut at the PC
             foot = stack.onboard.foot
             foot.link = DroppableLink(foot.link)
@@ -262,7 +272,7 @@ def _can_wire(stack: Stack) -> Any:
 
 #: The node's battery monitors: a level held (``battery_low``) and a sag (``battery_sag``);
 #: either detects a battery fault (a step down to 3.4 V/cell trips the sag rule first).
-_BATTERY_MONITORS = ("battery_low", "battery_sag")
+_BATTERY_MONITORS = ("battery_low", "battery_sag", "battery_reserve")
 #: Which monitor or counter (or which of several monitors) shows that the node noticed each
 #: fault.
 _DETECTED_BY: dict[str, tuple[str, str | tuple[str, ...]]] = {
@@ -274,6 +284,8 @@ _DETECTED_BY: dict[str, tuple[str, str | tuple[str, ...]]] = {
     "uart-noise-1e-4": ("parser", "bad_frames"),
     "uart-noise-1e-3": ("parser", "bad_frames"),
     "battery-sag": ("monitors", _BATTERY_MONITORS),
+    "battery-sag-0.5": ("monitors", _BATTERY_MONITORS),
+    "battery-sag-0.3": ("monitors", _BATTERY_MONITORS),
     "foot-sensor-loss": ("monitors", "foot_stale"),
     # each outlier dropped by Spinal's estimator (``out_of_range``); its accelerometer value
     # reaches the node on ``imu``, which refuses it
