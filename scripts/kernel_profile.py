@@ -5,7 +5,7 @@ Builds the ``rdm sim hover`` stack (seed 0, in-process wires, logs to a temporar
 runs 1 simulated s, then ``SECONDS`` more with the kernel's profile mode: wall us per
 simulated ms of every node on its fast path ("fast") and in Python ("py", the flush and plan
 re-reads around it included), and of the physics steps, with the tick counts.
-With ``perching FROM_S``: the ``rdm sim perching`` stack instead, profiled from ``FROM_S``
+With ``perching FROM_S``: the ``rdm sim perching-hanging`` stack instead, profiled from ``FROM_S``
 (e.g. ``6 perching 16``: the perched joint motion, docs/sim.md "Speed").
 """
 

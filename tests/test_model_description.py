@@ -15,7 +15,7 @@ from rdm.protocol import leptrino as lp
 
 @pytest.mark.parametrize(
     "desc", descriptions.shipped_descriptions(), ids=lambda d: d.name
-)  # rdm, rcm, rdm_foot10 (the foot unit at the plate: perching-foot-at-plate)
+)  # rdm, rcm, rdm_foot10 (the foot unit at the plate: perching)
 def test_shipped_files_equal_generator_output(desc: descriptions.Description) -> None:
     with shipped_robot_files(desc.name) as (urdf, toml):
         assert urdf.read_text() == desc.urdf, "run `python -m rdm.descriptions`"

@@ -1,4 +1,4 @@
-"""``rdm sim perching --randomize N``: the draws stay in their documented ranges and are
+"""``rdm sim perching-hanging --randomize N``: the draws stay in their documented ranges and are
 reproducible; the MuJoCo model a draw builds carries its friction, masses and CoG (read back
 from the compiled model against a nominal one); the campaign's counts are the run folders'
 own ``summary.json`` verdicts (read back with ``json.loads``), its JSON valid, its PNG a PNG."""
@@ -53,7 +53,8 @@ def test_a_draw_changes_the_compiled_model():
 
 def test_campaign_counts_are_the_runs_verdicts(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(Path(rdm.__file__).resolve().parent.parent))
-    cmd = [sys.executable, "-m", "rdm.cli", "sim", "perching", "--randomize", "2", "--seed", "3"]
+    cmd = [sys.executable, "-m", "rdm.cli", "sim", "perching-hanging", "--randomize", "2"]
+    cmd += ["--seed", "3"]
     cmd += ["--duration", "17", "--workers", "2", "--out", str(tmp_path), "--json"]
     out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
     assert out.returncode in (0, 1), out.stderr

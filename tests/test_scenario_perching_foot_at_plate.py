@@ -1,9 +1,9 @@
-"""``perching-foot-at-plate`` end to end: the robot flown is the foot-at-plate description, the
-perching QP runs with Table VII's parameters, and every metric row is recomputed here from the
-raw per-tick records (MuJoCo ground truth and the scenario's rotor probe) with numpy written
-apart from the scenario's code, and the perch's measured state is held against the figures of
-docs/scenarios.md with margins a regression crosses. One default run (64 s simulated,
-``log=False``)."""
+"""``perching`` (the paper's posture, the default scenario) end to end: the robot flown is
+the foot-at-plate description, the perching QP runs with Table VII's parameters, and every
+metric row is recomputed here from the raw per-tick records (MuJoCo ground truth and the
+scenario's rotor probe) with numpy written apart from the scenario's code, and the perch's
+measured state is held against the figures of docs/scenarios.md with margins a regression
+crosses. One default run (64 s simulated, ``log=False``)."""
 
 from __future__ import annotations
 
@@ -30,11 +30,12 @@ def run(tmp_path_factory):
     return res, rows, res.script.arrays(), truth_arrays(res.stack)
 
 
-def test_registered_next_to_perching():
-    """Bug caught: the registry pointing at the hanging scenario's run (same name prefix)."""
-    sc = SCENARIOS["perching-foot-at-plate"]
+def test_registered_as_perching_beside_the_hanging_variant():
+    """Bug caught: ``perching`` pointing at the hanging scenario's run, or the two swapped."""
+    sc = SCENARIOS["perching"]
     assert sc.run is fp.run
     assert sc.default_duration == fp.DEFAULT_DURATION
+    assert SCENARIOS["perching-hanging"].run is perching.run
 
 
 def test_arm_motion_has_the_hanging_goals_at_fig10_timing():

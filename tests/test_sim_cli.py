@@ -83,7 +83,7 @@ def test_rdm_sim_perching_imports_only_what_it_runs():
         [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120
     )
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["30.0", "rdm.scenarios.perching", "[]"]
+    assert out.stdout.split() == ["64.0", "rdm.scenarios.perching_foot_at_plate", "[]"]
 
 
 def test_every_registered_scenario_resolves_to_its_module():
@@ -102,16 +102,15 @@ def test_every_registered_scenario_resolves_to_its_module():
         wall_perching,
     )
 
-    assert DEFAULT_SCENARIO in SCENARIOS
+    # the paper's posture (Sec. VII-B, Table VII) is the default perching run
+    assert DEFAULT_SCENARIO == "perching" and perching_foot_at_plate.NAME == "perching"
+    assert perching.NAME == "perching-hanging"
     expect = {
         "hover": (hover.run, hover.DEFAULT_DURATION),
         "flight": (flight.run, flight.DEFAULT_DURATION),
         "mission": (mission.run, mission.DEFAULT_DURATION),
-        "perching": (perching.run, perching.DEFAULT_DURATION),
-        "perching-foot-at-plate": (
-            perching_foot_at_plate.run,
-            perching_foot_at_plate.DEFAULT_DURATION,
-        ),
+        "perching": (perching_foot_at_plate.run, perching_foot_at_plate.DEFAULT_DURATION),
+        "perching-hanging": (perching.run, perching.DEFAULT_DURATION),
         "wall-perching": (wall_perching.run, wall_perching.DEFAULT_DURATION),
         "push": (push.run, push.DEFAULT_DURATION),
         "push-paper-forces": (push_paper.run, push_paper.DEFAULT_DURATION),

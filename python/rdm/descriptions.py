@@ -438,7 +438,7 @@ def shipped_directory() -> Path:
 #: Where the foot unit sits along the root link (fraction from the plate) in the shipped
 #: ``rdm_foot10`` description: 0.04 m from the q1 axis, its rotor plane 0.06 m under the
 #: ceiling when the root link hangs from it (the "foot at plate" perching candidate of
-#: :mod:`rdm.scenarios.perch_envelope`; docs/scenarios.md "perching-foot-at-plate").
+#: :mod:`rdm.scenarios.perch_envelope`; docs/scenarios.md "perching").
 #: ASSUMPTION: the paper's "tip of the root link" read as its root end (at the foot plate).
 FOOT_AT_PLATE = 0.1
 

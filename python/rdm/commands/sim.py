@@ -105,8 +105,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=positive_int,
         default=None,
         metavar="N",
-        help="perching only: N runs over randomized conditions (friction, mass, CoG, servo "
-        "stiffness, mocap latency and noise, battery; seeds SEED..SEED+N-1): success rate, "
+        help="perching-hanging only: N runs over randomized conditions (friction, mass, CoG, "
+        "servo stiffness, mocap latency and noise, battery; seeds SEED..SEED+N-1): success rate, "
         "margins, OUT/robustness-perching.json and .png (docs/scenarios.md)",
     )
     parser.add_argument(
@@ -389,7 +389,8 @@ def _campaign(args: argparse.Namespace, faults: list[str], seeds: list[int], ex)
 
 
 def _randomized(args: argparse.Namespace) -> int:
-    """``--randomize N``: the perching experiment over randomized conditions; exit 0 when
+    """``--randomize N``: the hanging-posture perching experiment (``perching-hanging``, the
+    posture the robustness campaign flies) over randomized conditions; exit 0 when
     every run succeeded, 1 otherwise, 2 on bad input."""
     from concurrent.futures import ProcessPoolExecutor
 
@@ -397,10 +398,10 @@ def _randomized(args: argparse.Namespace) -> int:
     from rdm.scenarios.robustness import plot, randomized, summarize
 
     others = args.seeds, args.fault, args.wire_mcap or None, args.servo_lead, args.quick or None
-    if args.scenario != "perching" or any(v is not None for v in others):
+    if args.scenario != "perching-hanging" or any(v is not None for v in others):
         print(
-            "rdm sim: --randomize is for the perching scenario and takes --duration, --seed, "
-            "--out, --replace, --workers, --json",
+            "rdm sim: --randomize is for the perching-hanging scenario and takes --duration, "
+            "--seed, --out, --replace, --workers, --json",
             file=sys.stderr,
         )
         return 2
@@ -414,7 +415,7 @@ def _randomized(args: argparse.Namespace) -> int:
 
     def progress(run: dict) -> None:
         state = "succeeded" if run["success"] else f"failed {run.get('error') or ''}".rstrip()
-        print(f"rdm sim perching --randomize: seed {run['seed']} {state}", file=sys.stderr)
+        print(f"rdm sim perching-hanging --randomize: seed {run['seed']} {state}", file=sys.stderr)
 
     with ProcessPoolExecutor(max_workers=args.workers) as ex:
         runs = randomized(

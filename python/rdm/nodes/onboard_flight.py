@@ -114,7 +114,7 @@ class FlightLimits:
     #: How long the foot sensor's fresh normal force must stay above ``contact_fz`` (every
     #: approach tick) before the approach switches to perched, s (>= 0; 0: the first reading
     #: above it). A single noisy reading then does not start the perch with the altitude loop
-    #: held away from the ceiling (docs/scenarios.md "perching-foot-at-plate"). ASSUMPTION.
+    #: held away from the ceiling (docs/scenarios.md "perching"). ASSUMPTION.
     contact_hold_s: float = 0.0
     #: Altitude setpoint above the contact height once perched, m (>= 0). ASSUMPTION.
     press_offset: float = 0.0

@@ -1,5 +1,9 @@
-"""``perching``: approach the ceiling, flight-to-perching transition, joint motion while
-perched (paper Sec. VII-B, Fig. 10). The default scenario of ``rdm sim``.
+"""``perching-hanging``: approach the ceiling, flight-to-perching transition, joint motion
+while perched (paper Sec. VII-B, Fig. 10) in the hanging posture: the foot unit 0.42 m under
+the plate, ``PERCH_PARAMS``' eps_z = 8 N. The tracking, push, task, robustness and
+process-level experiments perch in this posture and build on this module; ``rdm sim
+perching`` (the default scenario) flies the paper's posture,
+:mod:`rdm.scenarios.perching_foot_at_plate`.
 
 Phases (simulated time):
 
@@ -69,6 +73,8 @@ PERCHED_MOTION: tuple[tuple[float, tuple[float, ...]], ...] = (
 SETTLE_S = 1.5  # s perched before the joint motion starts
 PLATE_HALF = (0.05, 0.075)  # m: Table IV foot plate 0.10 x 0.15
 MU = (0.9, 0.9, 0.5)  # Table VII friction (x, y, yaw)
+#: Scenario name (registry, run folder, summary).
+NAME = "perching-hanging"
 DEFAULT_DURATION = 30.0
 #: Position gains for the hanging posture: y by roll (eq. 31, k_phi_d = 1) as well as by the
 #: foot apparatus: with the root link vertical, eqs. (33)-(34) are singular (the apparatus
@@ -319,12 +325,12 @@ def run(
         stack_overrides["onboard"] = onboard_config()
     opts = sim_stack_options(seed, uart, speed=speed, log=log, **stack_overrides)
     script = PerchingScript(motion, timing)
-    stack = build_stack("perching", base, opts, observed(script, observer))
+    stack = build_stack(NAME, base, opts, observed(script, observer))
     wall = run_stack(stack, duration)
     return finish(evaluate(stack, script), duration, wall)
 
 
-def evaluate(stack: Stack, script: PerchingScript, name: str = "perching") -> ScenarioResult:
+def evaluate(stack: Stack, script: PerchingScript, name: str = NAME) -> ScenarioResult:
     """The perching metrics (module docstring) from MuJoCo's ground truth and the onboard
     status records, the figure ``<name>.png``; a :class:`ScenarioResult` named ``name``
     (perching variants, :mod:`rdm.scenarios.perching_foot_at_plate`, add rows to it)."""

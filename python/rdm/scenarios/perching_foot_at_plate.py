@@ -1,9 +1,10 @@
-"""``perching-foot-at-plate``: the perching experiment (paper Sec. VII-B, Fig. 10) flown by the
-RDM whose foot vectoring apparatus sits at the plate end of the root link, with Table VII's
-perching parameters.
+"""``perching``: the perching experiment (paper Sec. VII-B, Fig. 10) flown by the RDM whose
+foot vectoring apparatus sits at the plate end of the root link, with Table VII's perching
+parameters. The default scenario of ``rdm sim``.
 
-Same phases as :mod:`rdm.scenarios.perching` (climb, fold to the hanging posture, approach,
-perch, arm motion, hold) and the same metric rows, with these differences:
+Same phases as :mod:`rdm.scenarios.perching` (``perching-hanging``: climb, fold to the
+hanging posture, approach, perch, arm motion, hold) and the same metric rows, with these
+differences:
 
 * the robot is the shipped ``rdm_foot10`` description
   (``rdm.descriptions.build_description("rdm", foot_unit_position=FOOT_AT_PLATE)``, the
@@ -14,7 +15,7 @@ perch, arm motion, hold) and the same metric rows, with these differences:
   0.5, H 0.04 / 0.07 m), not with ``perching.PERCH_PARAMS``' eps_z = 8 N, and with the
   feedback gain of eq. (38)'s lambda'' (not in Table VII) at :data:`FEEDBACK_GAIN`;
 * the robot rests perched for :data:`SETTLE_S` before the arm motion (Fig. 10's 25 s
-  between the transition and the first joint motion allow it; 1.5 s in ``perching``);
+  between the transition and the first joint motion allow it; 1.5 s in ``perching-hanging``);
 * the perched arm motion is slower (:data:`FOOT_PLATE_MOTION`, 10 s per segment instead of
   3 s, Fig. 10's timing), the run :data:`DEFAULT_DURATION` long.
 * the plant's joint servos follow their goals through the goal smoothing of
@@ -34,7 +35,7 @@ Fig. 10 B) after contact over its flight level, the peak at the transition over 
 level, the ceiling gain and distance of the foot rotors while perched; the time with the ZMP
 on the plate edge split into the arm motion and the rest (settled and hold).
 
-docs/scenarios.md "perching-foot-at-plate" has the figures and what the paper fixes.
+docs/scenarios.md "perching" has the figures and what the paper fixes.
 """
 
 from __future__ import annotations
@@ -64,7 +65,8 @@ from .perching import (
 )
 from .stack import Stack, StackOptions, build_stack
 
-NAME = "perching-foot-at-plate"
+#: Scenario name (registry, run folder, summary): the paper's posture is ``rdm sim perching``.
+NAME = "perching"
 #: The shipped description with the foot unit at the plate (``rdm.descriptions.FOOT_AT_PLATE``).
 ROBOT = "rdm_foot10"
 #: Table VII as printed: eps_z (eq. 39), mu_x, mu_y (eq. 40), mu_z (eq. 41), H_x, H_y (eq. 42).
@@ -92,7 +94,7 @@ FEEDBACK_GAIN = 0.25
 PERCH_PARAMS: dict = {**TABLE_VII_PARAMS, "feedback_gain": FEEDBACK_GAIN}
 #: Seconds perched before the arm motion. ASSUMPTION: Fig. 10 B shows the transition at 27 s
 #: and the first joint motion's thrust fluctuation from 52 s, so the paper's robot rested
-#: perched up to 25 s before moving; 10 s here (1.5 s in ``perching``): the foot thrust has
+#: perched up to 25 s before moving; 10 s here (1.5 s in ``perching-hanging``): the foot thrust has
 #: left the transition when the arm starts (lambda_perch, seed 0: 1.9 N in the first second,
 #: 0.7 N from 2 s on).
 SETTLE_S = 10.0
@@ -121,7 +123,7 @@ SERVO_GOAL_FILTER_S = 0.05
 #: The joint servos of the run: the stack's (:class:`rdm.scenarios.stack.StackOptions`) with
 #: :data:`SERVO_GOAL_FILTER_S`.
 SERVO = replace(StackOptions().servo or ServoParams(), goal_filter_s=SERVO_GOAL_FILTER_S)
-#: The phase machine's timing: ``perching``'s with :data:`SETTLE_S`.
+#: The phase machine's timing: ``perching-hanging``'s with :data:`SETTLE_S`.
 TIMING = PerchTiming(settle_s=SETTLE_S)
 #: Rotors of the foot vectoring apparatus (Table VII's Q_perch = Q(q) diag[1, 1, 0, 0]).
 FOOT_ROTORS = (0, 1)

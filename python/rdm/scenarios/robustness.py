@@ -1,4 +1,4 @@
-"""The perching experiment over randomized conditions (``rdm sim perching --randomize N``).
+"""The perching experiment over randomized conditions (``rdm sim perching-hanging --randomize N``).
 
 Run ``k`` draws its conditions from seed ``k`` (and runs the stack with that seed): what a lab
 cannot know exactly about its robot and room. The plant changes; the onboard node keeps the
@@ -164,7 +164,7 @@ def summarize(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
     succeeded = sum(1 for r in runs if r["success"])
     return nulled(
         {
-            "scenario": "perching",
+            "scenario": "perching-hanging",
             "runs": len(runs),
             "succeeded": succeeded,
             "success_rate": succeeded / len(runs) if runs else None,

@@ -6,7 +6,7 @@ the real-time position/attitude feedback, once flying and once perched, and comp
 end-effector pose errors (Table X). One run, built on the perching scenario's phase machine
 (:class:`rdm.scenarios.push.StagedPerchingScript`, ``perching.py`` unchanged):
 
-1. boot, arm, climb at q = 0 (as ``perching``);
+1. boot, arm, climb at q = 0 (as ``perching-hanging``);
 2. **flight stage** (arm straight, q = 0, the posture Fig. 9 starts its change from): settle,
    then the joints follow the stage's planned path (:mod:`rdm.scenarios.tracking_plan`:
    ``rdm.planner`` in flight mode to where Fig. 9 (A)'s end configuration puts the end
@@ -14,9 +14,9 @@ end-effector pose errors (Table X). One run, built on the perching scenario's ph
    CoG setpoint is streamed so that the *planned* configuration keeps the root at a fixed
    point, ``p_cog,ref(t) = p_root,ref + cog_in_foot(q_plan(t))`` (the flight scenario's
    reference);
-3. fold to the hanging posture, approach, perch, settle (as ``perching``);
+3. fold to the hanging posture, approach, perch, settle (as ``perching-hanging``);
 4. **perched stage**: the planner in perched mode from ``PERCH_POSTURE`` to the end effector
-   of Fig. 10's arm pose, the root on the ceiling, the setpoint held (as ``perching``).
+   of Fig. 10's arm pose, the root on the ceiling, the setpoint held (as ``perching-hanging``).
 
 ``motion=`` (joint offsets from each stage's base posture, the same in both stages) replaces
 the planned paths by hand-chosen ones (the flight-envelope study of docs/scenarios.md).

@@ -8,8 +8,8 @@ perch rotors of Table VII, at the root link's tip) at the height of that face. T
 foot unit's pitch joint beta1 to ``WALL_BETA1`` turns their thrust ``WALL_TILT`` from vertical
 toward -x: the wall-push posture. The horizontal thrust then acts 2 cm from the line of the
 wall's reaction, so pressing puts almost no pitch moment on the robot (in the hanging posture
-of ``perching`` the foot rotors are 0.42 m below the foot: a 15 N press there needs ~6 N m of
-pitch moment, beyond the rotors' differential; docs/scenarios.md).
+of ``perching-hanging`` the foot rotors are 0.42 m below the foot: a 15 N press there needs
+~6 N m of pitch moment, beyond the rotors' differential; docs/scenarios.md).
 
 Phases (simulated time):
 
