@@ -113,14 +113,15 @@ def test_scenario_threshold_is_above_one_encoder_count_per_window():
 
 
 def test_hold_is_off_where_it_made_the_run_worse():
-    """Drilling flies with the hold; the valve and the two paintings and the foot-at-plate
-    robot do not (docs/scenarios.md, "Where the integral comes from"). Bug caught: a task or
-    the foot-at-plate variant flown with the perching default."""
+    """Drilling and the paper-posture perching (``perching_foot_at_plate``, where the integral
+    wound up during the fold presses the plate onto one edge) fly with the hold; the valve and
+    the two paintings do not (docs/scenarios.md, "Where the integral comes from"). Bug caught:
+    a task flown with the perching default, or the paper-posture perching flown without it."""
     from rdm.scenarios import tasks
 
     assert tasks.task_onboard_config("drilling").rp_integration_hold_rate == HOLD_RATE
     for task in ("valve", "painting", "painting-panel"):
         assert tasks.task_onboard_config(task).rp_integration_hold_rate is None
-    assert fp.RP_INTEGRATION_HOLD_RATE is None
+    assert fp.RP_INTEGRATION_HOLD_RATE == HOLD_RATE
     with pytest.raises(ValueError, match="task"):
         tasks.task_onboard_config("sawing")
