@@ -3,7 +3,8 @@
 
 * :func:`diverging_axis`: trips only when the error is beyond the angle **and** the gyro turns
   it further beyond the rate (catches a dropped sign test: a swing back to the target is no
-  fault; a dropped rate test: a slow lean is none either).
+  fault; a dropped rate test: a slow lean is none either); with the previous target, only
+  past both (the attitude loop following a jumping target is no fault).
 * :func:`lost_rotor` on the shipped robot against scipy's ``solve_ivp`` of Euler's rigid-body
   equations (the full inertia, I_xz included): each rotor's hover thrust removed, the body
   rates 20 ms later name that rotor, in the class its thrust puts it in (catches a sign
@@ -48,6 +49,27 @@ def test_diverging_needs_angle_rate_and_the_same_sign() -> None:
     assert diverging_axis(TILT, RATE, (-0.004, 0.0), (0.0, 0.0), (-6.0, 0.0)) is None
     # the error counts against the target, not against level
     assert diverging_axis(TILT, RATE, (0.3, 0.0), (0.3, 0.0), (6.0, 0.0)) is None
+
+
+def test_a_light_rotor_diverges_past_both_of_the_last_two_targets() -> None:
+    """The light rotor's rule (1 deg, 1.5 rad/s) on ticks of simulated runs (deg, rad/s):
+    the robustness campaign's seed 36 at 3.55 s, fault-free, follows a roll target that
+    jumped from -1.17 to +1.15 deg (noisy motion capture), 1.5 deg off the newest turning
+    away from it towards the older one; a dead rotor 2 (mission seed 0, +45 ms) rolls 2 deg
+    past both. Catches the previous target ignored, and min/max swapped."""
+    light = LIM.rotor_loss_light_tilt_rad
+    d = math.radians
+    follow = ((d(-0.36), d(-0.54)), (d(1.15), d(-1.54)), (-1.64, -0.02), (d(-1.17), d(-0.51)))
+    assert diverging_axis(light, RATE, *follow[:3]) == "roll"  # the newest target alone
+    assert diverging_axis(light, RATE, *follow) is None
+    dead = ((d(2.14), d(0.16)), (d(0.14), d(0.27)), (1.60, 0.14), (d(-0.49), d(0.64)))
+    assert diverging_axis(light, RATE, *dead) == "roll"
+    # the mirror image: below both targets, turning further down
+    mirror = ((d(-2.14), d(0.16)), (d(-0.14), d(0.27)), (-1.60, 0.14), (d(0.49), d(0.64)))
+    assert diverging_axis(light, RATE, *mirror) == "roll"
+    # past the newest only (between the two): the loop still on its way to the older one
+    between = ((d(1.74), 0.0), (d(0.27), 0.0), (1.82, 0.0), (d(3.0), 0.0))
+    assert diverging_axis(light, RATE, *between) is None
 
 
 def _robot_rotors() -> tuple[np.ndarray, np.ndarray, float]:

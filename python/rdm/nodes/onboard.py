@@ -178,6 +178,9 @@ class OnboardNode(OnboardOperator, OnboardReceive, OnboardStep, OnboardSend):
         self._imu_gyro: np.ndarray | None = None
         self.battery_voltage: float | None = None
         self.last_command: ControlCommand | None = None
+        #: the command before ``last_command`` (a light rotor's loss is measured past both
+        #: targets: :func:`rdm.nodes.onboard_rotor_loss.diverging_axis`)
+        self.previous_command: ControlCommand | None = None
         #: when a lost rotor was detected (None: not lost, or disarmed since)
         self.rotor_lost_at: float | None = None
         #: which rotor the last detection named (:func:`rdm.nodes.onboard_rotor_loss.

@@ -152,8 +152,9 @@ class MonitorLimits:
     #: quick missions never turn faster than 0.75 rad/s away from their target.
     rotor_loss_early_rate_rad_s: float = 0.5
     #: A lighter rotor (rotor 2 or 3, 3.8 N: the specific force barely drops): roll or pitch
-    #: off its target by more than this, rad, turning further faster than
-    #: ``rotor_loss_rate_rad_s``. ASSUMPTION: 0.0175 (1 deg); a dead rotor 2 or 3 shows
+    #: past both of the last two targets sent by more than this, rad, turning further faster
+    #: than ``rotor_loss_rate_rad_s`` (a body following a jumping target is no lost rotor).
+    #: ASSUMPTION: 0.0175 (1 deg); a dead rotor 2 or 3 shows
     #: 1.5-2.7 deg at 1.6-1.9 rad/s 45 ms after the fault, the fault-free missions no tick
     #: turning away from the target faster than 0.75 rad/s.
     rotor_loss_light_tilt_rad: float = 0.0175

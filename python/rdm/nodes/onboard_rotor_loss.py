@@ -26,7 +26,14 @@ Detection (thresholds ``MonitorLimits.rotor_loss_*``), in two classes of rotor:
   the attitude error has its sign);
 * a lighter rotor (rotor 2 or 3): the specific force barely drops (3.8 of 36.4 N): below
   ``rotor_loss_light_specific_force`` (not a touchdown's impact), with roll or pitch
-  diverging beyond ``rotor_loss_light_tilt_rad`` at ``rotor_loss_rate_rad_s``.
+  diverging beyond ``rotor_loss_light_tilt_rad`` at ``rotor_loss_rate_rad_s`` past both
+  of the last two targets sent (``previous`` of :func:`diverging_axis`). Noisy motion
+  capture makes the position loop's roll target jump from one 25 ms tick to the next
+  (2.6 x the nominal noise: 1.2 deg rms), and Spinal's attitude loop follows each jump:
+  the body then turns away from the newest target towards the one before it, 1.3-2.4 deg
+  off the newest at 1.6-2.3 rad/s with the specific force at 8.6-9.5 m/s^2, as a dead
+  light rotor does (docs/flying.md "A lost rotor"). A dead rotor 2 or 3 turns the body
+  past both (1.1-2.8 deg 45-50 ms after the fault; one run 0.4 deg, detected a tick later).
 
 A lost rotor 0 gives the roll axis about 250 rad/s^2 (14.4 N x 0.07 m / 0.004 kg m^2).
 :func:`lost_rotor` names the rotor: of the class the specific force gives, the one whose
@@ -46,11 +53,17 @@ def diverging_axis(
     roll_pitch: tuple[float, float],
     target: tuple[float, float],
     rates: tuple[float, float],
+    previous: tuple[float, float] | None = None,
 ) -> str | None:
     """``"roll"`` or ``"pitch"`` when that axis diverges (see the module doc), else None.
-    ``rates``: the gyro's x and y, rad/s."""
-    for name, angle, goal, rate in zip(("roll", "pitch"), roll_pitch, target, rates, strict=True):
-        error = angle - goal
+    ``rates``: the gyro's x and y, rad/s. ``previous``: the target sent the tick before
+    ``target``; given, the error is the angle's distance beyond both (an angle between
+    them, or turning towards the older one, is the attitude loop following its targets)."""
+    before = target if previous is None else previous
+    for name, angle, goal, old, rate in zip(
+        ("roll", "pitch"), roll_pitch, target, before, rates, strict=True
+    ):
+        error = angle - min(max(angle, min(goal, old)), max(goal, old))
         if abs(error) > tilt_rad and abs(rate) > rate_rad_s and (error > 0) == (rate > 0):
             return name
     return None

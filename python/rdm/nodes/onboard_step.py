@@ -76,6 +76,7 @@ class OnboardStep:
             if self.rotor_lost_at is not None:
                 command = self._fall_command()
         if command is not None:
+            self.previous_command = self.last_command
             self.last_command = command
             self.last_alpha_beta = (command.alpha, command.beta)
             self._command_at = now
@@ -308,8 +309,15 @@ class OnboardStep:
             force < lim.rotor_loss_light_specific_force
             and self.flight.mode in LIGHT_ROTOR_LOSS_MODES
         ):
+            b = self.previous_command
+            previous = target if b is None else (float(b.angles[0]), float(b.angles[1]))
             axis = diverging_axis(
-                lim.rotor_loss_light_tilt_rad, lim.rotor_loss_rate_rad_s, roll_pitch, target, rates
+                lim.rotor_loss_light_tilt_rad,
+                lim.rotor_loss_rate_rad_s,
+                roll_pitch,
+                target,
+                rates,
+                previous,
             )
         else:
             axis = None
