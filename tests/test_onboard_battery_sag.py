@@ -163,8 +163,9 @@ def test_a_load_step_and_a_whole_discharge_do_not_trip(raw) -> None:
 
 @pytest.mark.parametrize("seed", [6, 11, 15])
 def test_the_mission_battery_sag_is_detected_by_the_battery_and_lands(tmp_path, seed) -> None:
-    """Seeds where the lost-rotor cut came first: the sagging pack no longer held the robot
-    5.0-5.1 s after the fault, before ``battery_low`` tripped at 7.15 s."""
+    """The seeds where the sagging pack stops holding the robot earliest (5.0-5.1 s after the
+    fault), ahead of ``battery_low``'s low-passed trip (7.15 s): the battery monitors land it
+    before the lost-rotor rule can see a sinking, tilting body."""
     result = mission.run(
         tmp_path, duration=mission.QUICK_DURATION, seed=seed, fault="battery-sag", quick=True
     )
