@@ -173,10 +173,20 @@ GOLDEN = "lockstep_kernel.json"
 _NOT_DIGESTED = ("spinal_busy",)
 
 
-def _golden(tmp_path: Path, name: str, steps: Steps, make_script_=None, **options) -> dict:
-    """Run ``steps`` with the fast parts; every file and the state against the golden run
-    ``name``; the kernel's stats. ``make_script_()`` gives the scenario script (default:
-    hover); ``options`` go to the stack options."""
+def _golden(
+    tmp_path: Path,
+    name: str,
+    steps: Steps,
+    make_script_=None,
+    *,
+    golden_file: str = GOLDEN,
+    skip: tuple[str, ...] = _NOT_DIGESTED,
+    **options,
+) -> dict:
+    """Run ``steps`` with the fast parts; every file and the state (but the keys in ``skip``)
+    against the golden run ``name`` of ``tests/data/<golden_file>``; the kernel's stats.
+    ``make_script_()`` gives the scenario script (default: hover); ``options`` go to the
+    stack options."""
     script = make_script_() if make_script_ is not None else None
     files, state, stats = _run(tmp_path / "kernel", True, steps, script, **options)
     digests = {f"file:{key}": golden_digests.sha(data) for key, data in files.items()}
@@ -184,10 +194,10 @@ def _golden(tmp_path: Path, name: str, steps: Steps, make_script_=None, **option
         {
             f"state:{key}": golden_digests.sha(repr(value).encode())
             for key, value in state.items()
-            if key not in _NOT_DIGESTED
+            if key not in skip
         }
     )
-    golden_digests.check(GOLDEN, name, digests)
+    golden_digests.check(golden_file, name, digests)
     assert stats is not None
     return stats
 

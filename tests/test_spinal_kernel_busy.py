@@ -21,7 +21,8 @@ from pathlib import Path
 
 import golden_digests
 import numpy as np
-from test_lockstep_kernel import NODES, _fast_counts, _run, _spinal_state
+from test_lockstep_kernel import NODES, _fast_counts, _spinal_state
+from test_lockstep_kernel import _golden as _golden_run
 
 from rdm.protocol.rosserial.timesync import ClientClock
 from rdm.scenarios.hover import HOVER_Z, make_script
@@ -32,18 +33,9 @@ GOLDEN = "spinal_kernel_busy.json"
 
 
 def _golden(tmp_path: Path, name: str, steps, make_script_=None, **options) -> dict:
-    """Run ``steps`` with the kernel; every file and the state against the golden run
-    ``name``; the kernel's stats. ``make_script_()`` gives the scenario script (default:
-    hover); ``options`` go to the stack options."""
-    script = make_script_() if make_script_ is not None else None
-    files, state, stats = _run(tmp_path / "kernel", True, steps, script, **options)
-    digests = {f"file:{key}": golden_digests.sha(data) for key, data in files.items()}
-    digests.update(
-        {f"state:{key}": golden_digests.sha(repr(value).encode()) for key, value in state.items()}
-    )
-    golden_digests.check(GOLDEN, name, digests)
-    assert stats is not None
-    return stats
+    """The lockstep tests' golden run against ``tests/data/spinal_kernel_busy.json``, with
+    every state key digested (``spinal_busy`` included)."""
+    return _golden_run(tmp_path, name, steps, make_script_, golden_file=GOLDEN, skip=(), **options)
 
 
 def test_declined_frames_battery_and_step_events_go_to_python(tmp_path: Path) -> None:
